@@ -1,0 +1,82 @@
+// The kernel library's table: which WGSL files make each kernel and which variants of it are
+// compiled. Included verbatim by build.rs (to compile) and by lib.rs (to name variants), so the
+// two can never disagree.
+
+/// Storage type of a kernel's tensors. Arithmetic is f32 whatever the storage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Dtype {
+    F32,
+    F16,
+}
+
+/// One kernel: its sources, concatenated after a generated prelude, and the values of its
+/// compile-time parameters, each list a separate variant.
+pub struct KernelSpec {
+    pub name: &'static str,
+    pub files: &'static [&'static str],
+    /// Each entry is one variant's parameter set (`const` in the prelude, `override` where naga allows).
+    pub params: &'static [&'static [(&'static str, u32)]],
+}
+
+const NONE: &[&[(&str, u32)]] = &[&[]];
+
+pub const KERNELS: &[KernelSpec] = &[
+    // Register-blocked GEMM for CPU-like devices: workgroup = one subgroup, A shared by shuffles.
+    KernelSpec {
+        name: "gemm_sg",
+        files: &["gemm_common.wgsl", "a_matrix_v4.wgsl", "gemm_sg.wgsl"],
+        params: &[
+            &[("SG", 8), ("TM", 16), ("BT", 0)],
+            &[("SG", 8), ("TM", 16), ("BT", 1)],
+            &[("SG", 8), ("TM", 32), ("BT", 0)],
+            &[("SG", 8), ("TM", 32), ("BT", 1)],
+        ],
+    },
+    KernelSpec {
+        name: "conv_sg",
+        files: &["gemm_common.wgsl", "a_conv_v4.wgsl", "gemm_sg.wgsl"],
+        params: &[&[("SG", 8), ("TM", 16), ("BT", 1)], &[("SG", 8), ("TM", 32), ("BT", 1)]],
+    },
+    // Shared-memory tiled GEMM: any shape, the variant for GPUs.
+    KernelSpec {
+        name: "gemm_tiled",
+        files: &["gemm_common.wgsl", "a_matrix.wgsl", "gemm_tiled.wgsl"],
+        params: &[&[("BT", 0)], &[("BT", 1)]],
+    },
+    KernelSpec {
+        name: "conv_tiled",
+        files: &["gemm_common.wgsl", "a_conv.wgsl", "gemm_tiled.wgsl"],
+        params: &[&[("BT", 1)]],
+    },
+    KernelSpec { name: "group_norm", files: &["reduce.wgsl", "group_norm.wgsl"], params: NONE },
+    KernelSpec { name: "layer_norm", files: &["reduce.wgsl", "layer_norm.wgsl"], params: NONE },
+    KernelSpec { name: "softmax", files: &["reduce.wgsl", "softmax.wgsl"], params: NONE },
+    // Flash attention; DV = vec4 slots of the head per lane, TM = query rows per workgroup.
+    KernelSpec {
+        name: "attention",
+        files: &["attention.wgsl"],
+        params: &[
+            &[("SG", 8), ("DV", 1), ("TM", 16)],
+            &[("SG", 8), ("DV", 2), ("TM", 16)],
+            &[("SG", 8), ("DV", 4), ("TM", 8)],
+            &[("SG", 8), ("DV", 8), ("TM", 4)],
+            &[("SG", 8), ("DV", 16), ("TM", 4)],
+            &[("SG", 16), ("DV", 1), ("TM", 8)],
+            &[("SG", 16), ("DV", 8), ("TM", 4)],
+            &[("SG", 32), ("DV", 1), ("TM", 8)],
+            &[("SG", 32), ("DV", 4), ("TM", 4)],
+            &[("SG", 64), ("DV", 1), ("TM", 4)],
+            &[("SG", 64), ("DV", 2), ("TM", 4)],
+        ],
+    },
+    KernelSpec {
+        name: "unary",
+        files: &["activations.wgsl", "unary.wgsl"],
+        params: &[&[("OP", 0)], &[("OP", 1)], &[("OP", 2)], &[("OP", 3)], &[("OP", 4)]],
+    },
+    KernelSpec { name: "binary", files: &["binary.wgsl"], params: &[&[("OP", 0)], &[("OP", 1)]] },
+    KernelSpec { name: "geglu", files: &["activations.wgsl", "geglu.wgsl"], params: NONE },
+    KernelSpec { name: "upsample_nearest2x", files: &["upsample.wgsl"], params: NONE },
+    KernelSpec { name: "concat_channels", files: &["concat.wgsl"], params: NONE },
+    KernelSpec { name: "timestep_embedding", files: &["timestep.wgsl"], params: NONE },
+];

@@ -1,0 +1,30 @@
+// out = a op b element-wise with b broadcast: b's index is (i / b_outer)·b_inner + i % b_inner,
+// which covers same-shape (b_inner = b_outer = n), a per-channel vector (b_inner = C, b_outer ≥ n)
+// and a per-(batch, channel) vector over pixels (b_inner = C, b_outer = H·W·C). OP: 0 add, 1 mul.
+@group(0) @binding(0) var<storage, read> a: array<S>;
+@group(0) @binding(1) var<storage, read> b: array<S>;
+@group(0) @binding(2) var<storage, read_write> out: array<S>;
+
+struct Params {
+    n: u32,
+    b_inner: u32,
+    b_outer: u32,
+    groups_x: u32,
+}
+
+var<immediate> p: Params;
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = (wg.y * p.groups_x + wg.x) * 64u + lid;
+    if i >= p.n {
+        return;
+    }
+    let x = f32(a[i]);
+    let y = f32(b[(i / p.b_outer) * p.b_inner + i % p.b_inner]);
+    if OP == 0u {
+        out[i] = S(x + y);
+    } else {
+        out[i] = S(x * y);
+    }
+}

@@ -1,0 +1,77 @@
+// GEMM core for CPU-like devices (lavapipe), after toolchain.md §3: a workgroup is one subgroup of
+// SG lanes; each lane owns 8 consecutive output columns for TM rows, reads A once as vec4 along K
+// and hands it to the other lanes by subgroup shuffles, so no shared memory and few loads per FMA.
+// Needs N, K and every stride to be multiples of 4. B is K×N (BT = 0) or N×K (BT = 1).
+@group(0) @binding(1) var<storage, read> b: array<vec4<S>>;
+@group(0) @binding(2) var<storage, read> bias: array<vec4<S>>;
+@group(0) @binding(3) var<storage, read_write> c: array<vec4<S>>;
+
+// Rows k..k+3 of B at columns n..n+7, as [2·row + half].
+fn load_b(boff: u32, k: u32, n: u32) -> array<vec4<f32>, 8> {
+    var r: array<vec4<f32>, 8>;
+    if BT == 0u {
+        let n0 = min(n, p.g.n - 4u);
+        let n1 = min(n + 4u, p.g.n - 4u);
+        for (var i = 0u; i < 4u; i++) {
+            let row = boff + (k + i) * p.g.ldb;
+            r[2u * i] = vec4<f32>(b[(row + n0) / 4u]);
+            r[2u * i + 1u] = vec4<f32>(b[(row + n1) / 4u]);
+        }
+    } else {
+        var col: array<vec4<f32>, 8>;
+        for (var j = 0u; j < 8u; j++) {
+            col[j] = vec4<f32>(b[(boff + min(n + j, p.g.n - 1u) * p.g.ldb + k) / 4u]);
+        }
+        for (var i = 0u; i < 4u; i++) {
+            r[2u * i] = vec4<f32>(col[0][i], col[1][i], col[2][i], col[3][i]);
+            r[2u * i + 1u] = vec4<f32>(col[4][i], col[5][i], col[6][i], col[7][i]);
+        }
+    }
+    return r;
+}
+
+@compute @workgroup_size(SG)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lane: u32) {
+    let n = (wg.x * SG + lane) * 8u;
+    let row0 = wg.y * TM;
+    let batch = wg.z;
+    let boff = batch * p.g.b_batch;
+    var rows: array<RowCtx, TM>;
+    for (var r = 0u; r < TM; r++) {
+        rows[r] = row_ctx(batch, row0 + r);
+    }
+    var acc: array<vec4<f32>, 2u * TM>;
+    for (var k0 = 0u; k0 < p.g.k; k0 += 4u * SG) {
+        let kc = k_ctx(k0 + 4u * lane);
+        var av: array<vec4<f32>, TM>;
+        for (var r = 0u; r < TM; r++) {
+            av[r] = load_a(rows[r], kc);
+        }
+        let steps = min(SG, (p.g.k - k0) / 4u);
+        for (var l = 0u; l < steps; l++) {
+            let bv = load_b(boff, k0 + 4u * l, n);
+            for (var r = 0u; r < TM; r++) {
+                let x = subgroupShuffle(av[r], l);
+                acc[2u * r] += x.x * bv[0] + x.y * bv[2] + x.z * bv[4] + x.w * bv[6];
+                acc[2u * r + 1u] += x.x * bv[1] + x.y * bv[3] + x.z * bv[5] + x.w * bv[7];
+            }
+        }
+    }
+    for (var r = 0u; r < TM; r++) {
+        let row = row0 + r;
+        for (var h = 0u; h < 2u; h++) {
+            let col = n + 4u * h;
+            if row < p.g.m && col < p.g.n {
+                let at = (batch * p.g.c_batch + row * p.g.ldc + col) / 4u;
+                var v = p.g.alpha * acc[2u * r + h];
+                if (p.g.flags & FLAG_BIAS) != 0u {
+                    v += vec4<f32>(bias[col / 4u]);
+                }
+                if (p.g.flags & FLAG_ACCUMULATE) != 0u {
+                    v += vec4<f32>(c[at]);
+                }
+                c[at] = vec4<S>(v);
+            }
+        }
+    }
+}

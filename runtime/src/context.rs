@@ -1,0 +1,165 @@
+//! The device context: logical device, queue, allocator, pipeline cache and memory figures.
+
+use crate::device::{self, DeviceInfo, DeviceKind};
+use crate::error::{Error, Result, VkContext};
+use crate::pipeline::PipelineCache;
+use ash::vk;
+use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+use std::mem::ManuallyDrop;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+/// Which family of GEMM/convolution kernels a context uses (see kernels/src/spec.rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GemmFamily {
+    /// One subgroup per workgroup, A shared by shuffles: fast where loads are scalarised (CPUs).
+    Subgroup,
+    /// Shared-memory tiles: the GPU kernel, and the fallback for shapes `Subgroup` cannot take.
+    Tiled,
+}
+
+pub(crate) struct Shared {
+    _entry: ash::Entry,
+    instance: ash::Instance,
+    pub(crate) device: ash::Device,
+    pub(crate) queue: Mutex<vk::Queue>,
+    pub(crate) queue_family: u32,
+    pub(crate) allocator: ManuallyDrop<Mutex<Allocator>>,
+    pub(crate) info: DeviceInfo,
+    pub(crate) live_bytes: AtomicU64,
+    pub(crate) peak_bytes: AtomicU64,
+    pub(crate) pipelines: PipelineCache,
+    pub(crate) gemm_family: Mutex<GemmFamily>,
+}
+
+impl Drop for Shared {
+    fn drop(&mut self) {
+        // SAFETY: every buffer and recording holds an Arc<Shared>, so none is alive any more.
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            self.pipelines.destroy(&self.device);
+            ManuallyDrop::drop(&mut self.allocator);
+            self.device.destroy_device(None);
+            self.instance.destroy_instance(None);
+        }
+    }
+}
+
+/// A Vulkan device ready to run kernels. Cheap to clone; all clones share one device.
+#[derive(Clone)]
+pub struct Context {
+    pub(crate) shared: Arc<Shared>,
+}
+
+impl Context {
+    /// Opens the device `requested` (or `VKDIFF_DEVICE`, or the best one; see [`device::choose`]).
+    pub fn new(requested: Option<usize>) -> Result<Context> {
+        let entry = device::load_entry()?;
+        let instance = device::create_instance(&entry)?;
+        match Self::open(&instance, requested) {
+            Ok((device, pd, info, queue_family)) => Self::finish(entry, instance, device, pd, info, queue_family),
+            Err(e) => {
+                // SAFETY: nothing created from the instance is alive.
+                unsafe { instance.destroy_instance(None) };
+                Err(e)
+            }
+        }
+    }
+
+    fn open(instance: &ash::Instance, requested: Option<usize>) -> Result<(ash::Device, vk::PhysicalDevice, DeviceInfo, u32)> {
+        // SAFETY: valid instance.
+        let pds = unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
+        let infos: Vec<DeviceInfo> = pds.iter().enumerate().map(|(i, &pd)| device::describe(instance, pd, i)).collect();
+        let index = device::choose(&infos, requested)?;
+        let info = infos[index].clone();
+        let pd = pds[index];
+        let family = info.compute_queue_family.expect("checked by choose");
+        let mut f11 = vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(info.storage_16bit);
+        let mut f12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(info.shader_f16);
+        let size_control = info.subgroup_size_range.is_some();
+        let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
+            .subgroup_size_control(size_control)
+            .compute_full_subgroups(size_control);
+        let priorities = [1.0f32];
+        let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&priorities)];
+        let mut create = vk::DeviceCreateInfo::default().queue_create_infos(&queues).push_next(&mut f11).push_next(&mut f12);
+        if info.api_version >= (1, 3, 0) {
+            create = create.push_next(&mut f13);
+        }
+        // SAFETY: pd belongs to the instance; the create info outlives the call.
+        let device = unsafe { instance.create_device(pd, &create, None) }.vk("vkCreateDevice")?;
+        Ok((device, pd, info, family))
+    }
+
+    fn finish(
+        entry: ash::Entry,
+        instance: ash::Instance,
+        device: ash::Device,
+        pd: vk::PhysicalDevice,
+        info: DeviceInfo,
+        family: u32,
+    ) -> Result<Context> {
+        // SAFETY: index 0 of a family we created one queue in.
+        let queue = unsafe { device.get_device_queue(family, 0) };
+        let allocator = Allocator::new(&AllocatorCreateDesc {
+            instance: instance.clone(),
+            device: device.clone(),
+            physical_device: pd,
+            debug_settings: Default::default(),
+            buffer_device_address: false,
+            allocation_sizes: Default::default(),
+        })
+        .map_err(|e| Error::Memory(e.to_string()))?;
+        let gemm_family = if info.kind == DeviceKind::Cpu && info.can_use_subgroup(8) {
+            GemmFamily::Subgroup
+        } else {
+            GemmFamily::Tiled
+        };
+        let shared = Shared {
+            _entry: entry,
+            instance,
+            device,
+            queue: Mutex::new(queue),
+            queue_family: family,
+            allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            info,
+            live_bytes: AtomicU64::new(0),
+            peak_bytes: AtomicU64::new(0),
+            pipelines: PipelineCache::default(),
+            gemm_family: Mutex::new(gemm_family),
+        };
+        Ok(Context { shared: Arc::new(shared) })
+    }
+
+    pub fn info(&self) -> &DeviceInfo {
+        &self.shared.info
+    }
+
+    /// Bytes of device memory held by live tensors now.
+    pub fn live_bytes(&self) -> u64 {
+        self.shared.live_bytes.load(Ordering::SeqCst)
+    }
+
+    /// The most device memory held at once since the context opened or [`Context::reset_peak`].
+    pub fn peak_bytes(&self) -> u64 {
+        self.shared.peak_bytes.load(Ordering::SeqCst)
+    }
+
+    pub fn reset_peak(&self) {
+        self.shared.peak_bytes.store(self.live_bytes(), Ordering::SeqCst);
+    }
+
+    pub fn gemm_family(&self) -> GemmFamily {
+        *self.shared.gemm_family.lock().unwrap()
+    }
+
+    /// Overrides the per-device choice of GEMM kernels (benchmarks and tests run both).
+    pub fn set_gemm_family(&self, family: GemmFamily) {
+        *self.shared.gemm_family.lock().unwrap() = family;
+    }
+
+    /// Whether this device can pin a kernel to a subgroup of `size` lanes.
+    pub(crate) fn subgroup_ok(&self, size: u32) -> bool {
+        self.shared.info.can_use_subgroup(size)
+    }
+}

@@ -1,0 +1,235 @@
+//! Vulkan instance, physical-device discovery and the choice of device.
+
+use crate::error::{Error, Result, VkContext};
+use ash::vk;
+use std::ffi::CStr;
+
+/// What kind of device this is, in the order vkdiff prefers them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum DeviceKind {
+    Discrete,
+    Integrated,
+    Virtual,
+    Cpu,
+    Other,
+}
+
+impl DeviceKind {
+    fn from_vk(t: vk::PhysicalDeviceType) -> DeviceKind {
+        match t {
+            vk::PhysicalDeviceType::DISCRETE_GPU => DeviceKind::Discrete,
+            vk::PhysicalDeviceType::INTEGRATED_GPU => DeviceKind::Integrated,
+            vk::PhysicalDeviceType::VIRTUAL_GPU => DeviceKind::Virtual,
+            vk::PhysicalDeviceType::CPU => DeviceKind::Cpu,
+            _ => DeviceKind::Other,
+        }
+    }
+
+    pub fn label(self) -> &'static str {
+        match self {
+            DeviceKind::Discrete => "discrete GPU",
+            DeviceKind::Integrated => "integrated GPU",
+            DeviceKind::Virtual => "virtual GPU",
+            DeviceKind::Cpu => "CPU",
+            DeviceKind::Other => "other",
+        }
+    }
+}
+
+/// Everything vkdiff records about a physical device to choose kernels and report on it.
+#[derive(Clone, Debug)]
+pub struct DeviceInfo {
+    pub index: usize,
+    pub name: String,
+    pub kind: DeviceKind,
+    pub vendor_id: u32,
+    pub driver: String,
+    pub api_version: (u32, u32, u32),
+    pub shader_f16: bool,
+    pub storage_16bit: bool,
+    pub subgroup_size: u32,
+    pub subgroup_size_range: Option<(u32, u32)>,
+    pub subgroup_shuffle: bool,
+    pub subgroup_arithmetic: bool,
+    pub cooperative_matrix: bool,
+    pub max_storage_buffer_range: u64,
+    pub max_shared_memory: u32,
+    pub max_workgroup_invocations: u32,
+    pub max_workgroup_count: [u32; 3],
+    pub max_push_constants: u32,
+    pub max_allocation: u64,
+    pub device_local_bytes: u64,
+    pub min_storage_offset_alignment: u64,
+    pub timestamp_period_ns: f32,
+    pub timestamps: bool,
+    pub compute_queue_family: Option<u32>,
+}
+
+impl DeviceInfo {
+    /// Why vkdiff cannot run on this device, if it cannot.
+    pub fn unsupported_reason(&self) -> Option<String> {
+        if self.api_version < (1, 2, 0) {
+            return Some(format!("Vulkan {}.{} < 1.2", self.api_version.0, self.api_version.1));
+        }
+        if self.compute_queue_family.is_none() {
+            return Some("no compute queue".into());
+        }
+        if !self.subgroup_shuffle || !self.subgroup_arithmetic {
+            return Some("no subgroup shuffle/arithmetic operations in compute shaders".into());
+        }
+        None
+    }
+
+    /// Whether f16 storage with f32 arithmetic (`--precision f16`) can run here.
+    pub fn supports_f16(&self) -> bool {
+        self.shader_f16 && self.storage_16bit
+    }
+
+    /// Whether a kernel written for a subgroup of exactly `size` lanes can be pinned to it.
+    pub fn can_use_subgroup(&self, size: u32) -> bool {
+        match self.subgroup_size_range {
+            Some((lo, hi)) => (lo..=hi).contains(&size),
+            None => self.subgroup_size == size,
+        }
+    }
+}
+
+pub(crate) fn load_entry() -> Result<ash::Entry> {
+    // SAFETY: loading the system Vulkan loader; its symbols follow the Vulkan ABI.
+    unsafe { ash::Entry::load() }.map_err(|e| Error::NoLoader(e.to_string()))
+}
+
+pub(crate) fn create_instance(entry: &ash::Entry) -> Result<ash::Instance> {
+    let app = vk::ApplicationInfo::default()
+        .application_name(c"vkdiff")
+        .engine_name(c"vkdiff")
+        .api_version(vk::API_VERSION_1_3);
+    let info = vk::InstanceCreateInfo::default().application_info(&app);
+    // SAFETY: the create info and everything it points to outlive the call.
+    unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance")
+}
+
+fn has_extension(instance: &ash::Instance, pd: vk::PhysicalDevice, name: &CStr) -> bool {
+    // SAFETY: pd comes from this instance.
+    let exts = unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
+    exts.iter().any(|e| e.extension_name_as_c_str() == Ok(name))
+}
+
+pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> DeviceInfo {
+    let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+    let mut size_control = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
+    let mut driver = vk::PhysicalDeviceDriverProperties::default();
+    let mut maintenance3 = vk::PhysicalDeviceMaintenance3Properties::default();
+    let mut props2 = vk::PhysicalDeviceProperties2::default()
+        .push_next(&mut subgroup)
+        .push_next(&mut maintenance3)
+        .push_next(&mut size_control)
+        .push_next(&mut driver);
+    let mut f11 = vk::PhysicalDeviceVulkan11Features::default();
+    let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
+    let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
+    let mut feats2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f11).push_next(&mut f12).push_next(&mut f13);
+    // SAFETY: pd comes from this instance; the chained structs live until the calls return.
+    let (mem, families) = unsafe {
+        instance.get_physical_device_properties2(pd, &mut props2);
+        instance.get_physical_device_features2(pd, &mut feats2);
+        (
+            instance.get_physical_device_memory_properties(pd),
+            instance.get_physical_device_queue_family_properties(pd),
+        )
+    };
+    let p = props2.properties;
+    let v = p.api_version;
+    let api_version = (vk::api_version_major(v), vk::api_version_minor(v), vk::api_version_patch(v));
+    let family = families
+        .iter()
+        .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
+        .map(|i| i as u32);
+    let timestamps = family.is_some_and(|f| families[f as usize].timestamp_valid_bits > 0);
+    let device_local_bytes = mem.memory_heaps[..mem.memory_heap_count as usize]
+        .iter()
+        .filter(|h| h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL))
+        .map(|h| h.size)
+        .max()
+        .unwrap_or(0);
+    let compute = vk::ShaderStageFlags::COMPUTE;
+    let ops = subgroup.supported_operations;
+    let size_range = (f13.subgroup_size_control == vk::TRUE
+        && size_control.required_subgroup_size_stages.contains(compute))
+    .then_some((size_control.min_subgroup_size, size_control.max_subgroup_size));
+    let text = |s: &[std::ffi::c_char]| {
+        // SAFETY: Vulkan strings are NUL-terminated within their fixed arrays.
+        unsafe { CStr::from_ptr(s.as_ptr()) }.to_string_lossy().into_owned()
+    };
+    DeviceInfo {
+        index,
+        name: text(&p.device_name),
+        kind: DeviceKind::from_vk(p.device_type),
+        vendor_id: p.vendor_id,
+        driver: format!("{} {}", text(&driver.driver_name), text(&driver.driver_info)).trim().to_string(),
+        api_version,
+        shader_f16: f12.shader_float16 == vk::TRUE,
+        storage_16bit: f11.storage_buffer16_bit_access == vk::TRUE,
+        subgroup_size: subgroup.subgroup_size,
+        subgroup_size_range: size_range,
+        subgroup_shuffle: subgroup.supported_stages.contains(compute)
+            && ops.contains(vk::SubgroupFeatureFlags::SHUFFLE),
+        subgroup_arithmetic: subgroup.supported_stages.contains(compute)
+            && ops.contains(vk::SubgroupFeatureFlags::ARITHMETIC),
+        cooperative_matrix: has_extension(instance, pd, ash::khr::cooperative_matrix::NAME),
+        max_storage_buffer_range: p.limits.max_storage_buffer_range as u64,
+        max_shared_memory: p.limits.max_compute_shared_memory_size,
+        max_workgroup_invocations: p.limits.max_compute_work_group_invocations,
+        max_workgroup_count: p.limits.max_compute_work_group_count,
+        max_push_constants: p.limits.max_push_constants_size,
+        max_allocation: maintenance3.max_memory_allocation_size,
+        device_local_bytes,
+        min_storage_offset_alignment: p.limits.min_storage_buffer_offset_alignment,
+        timestamp_period_ns: p.limits.timestamp_period,
+        timestamps,
+        compute_queue_family: family,
+    }
+}
+
+/// Every Vulkan device on this machine, described.
+pub fn list_devices() -> Result<Vec<DeviceInfo>> {
+    let entry = load_entry()?;
+    let instance = create_instance(&entry)?;
+    // SAFETY: the instance is valid until destroyed below.
+    let infos = unsafe { instance.enumerate_physical_devices() }
+        .vk("vkEnumeratePhysicalDevices")
+        .map(|pds| pds.iter().enumerate().map(|(i, &pd)| describe(&instance, pd, i)).collect());
+    // SAFETY: nothing created from the instance outlives it.
+    unsafe { instance.destroy_instance(None) };
+    infos
+}
+
+/// Which device to use: `requested` (from `--device`), else `VKDIFF_DEVICE`, else the first
+/// usable discrete GPU, then integrated, virtual, CPU (lavapipe).
+pub fn choose(devices: &[DeviceInfo], requested: Option<usize>) -> Result<usize> {
+    let from_env = std::env::var("VKDIFF_DEVICE").ok().filter(|s| !s.is_empty());
+    let (index, source_name) = match (requested, from_env) {
+        (Some(i), _) => (Some(i), "--device"),
+        (None, Some(s)) => (Some(s.trim().parse().map_err(|_| Error::BadDeviceSpec(format!("VKDIFF_DEVICE={s}")))?), "VKDIFF_DEVICE"),
+        (None, None) => (None, ""),
+    };
+    if devices.is_empty() {
+        return Err(Error::NoDevice);
+    }
+    if let Some(index) = index {
+        let d = devices.get(index).ok_or(Error::BadDeviceIndex { index, count: devices.len(), source_name })?;
+        if let Some(reason) = d.unsupported_reason() {
+            return Err(Error::Unsupported { device: d.name.clone(), reason });
+        }
+        return Ok(index);
+    }
+    devices
+        .iter()
+        .filter(|d| d.unsupported_reason().is_none())
+        .min_by_key(|d| (d.kind, d.index))
+        .map(|d| d.index)
+        .ok_or_else(|| Error::Unsupported {
+            device: devices[0].name.clone(),
+            reason: devices[0].unsupported_reason().unwrap_or_default(),
+        })
+}

@@ -1,0 +1,46 @@
+use ash::vk;
+
+/// Everything the runtime can fail with; each message is one line a user can act on.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("no Vulkan loader found ({0}); install libvulkan1 and a driver (mesa-vulkan-drivers gives the CPU device lavapipe)")]
+    NoLoader(String),
+    #[error("no Vulkan device found; install a driver (mesa-vulkan-drivers gives the CPU device lavapipe)")]
+    NoDevice,
+    #[error("device {index} requested ({source_name}) but only {count} Vulkan device(s) exist; see `vkdiff devices`")]
+    BadDeviceIndex { index: usize, count: usize, source_name: &'static str },
+    #[error("{0} is not a device index (expected a number; see `vkdiff devices`)")]
+    BadDeviceSpec(String),
+    #[error("device `{device}` cannot run vkdiff: {reason}")]
+    Unsupported { device: String, reason: String },
+    #[error("Vulkan call {call} failed: {result}")]
+    Vulkan { call: &'static str, result: vk::Result },
+    #[error("device memory: {0}")]
+    Memory(String),
+    #[error("{0}")]
+    Shape(String),
+    #[error("kernel `{kernel}` has no compiled variant with {want}")]
+    NoVariant { kernel: &'static str, want: String },
+}
+
+pub type Result<T> = std::result::Result<T, Error>;
+
+/// Wraps an `ash` result with the name of the call that produced it.
+pub(crate) trait VkContext<T> {
+    fn vk(self, call: &'static str) -> Result<T>;
+}
+
+impl<T> VkContext<T> for std::result::Result<T, vk::Result> {
+    fn vk(self, call: &'static str) -> Result<T> {
+        self.map_err(|result| Error::Vulkan { call, result })
+    }
+}
+
+/// Fails with a shape error unless `cond` holds.
+pub(crate) fn ensure(cond: bool, message: impl FnOnce() -> String) -> Result<()> {
+    if cond {
+        Ok(())
+    } else {
+        Err(Error::Shape(message()))
+    }
+}

@@ -1,0 +1,77 @@
+//! Device buffers from gpu-allocator, with live and peak byte counts per context.
+
+use crate::context::Shared;
+use crate::error::{Error, Result, VkContext};
+use ash::vk;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex};
+
+/// One Vulkan buffer and its memory; freed (and uncounted) on drop.
+pub struct Buffer {
+    pub(crate) raw: vk::Buffer,
+    pub(crate) size: u64,
+    allocation: Mutex<Option<Allocation>>,
+    /// Device-only buffers count towards the context's memory figures; staging buffers do not.
+    counted: bool,
+    pub(crate) shared: Arc<Shared>,
+}
+
+impl Buffer {
+    pub(crate) fn new(shared: &Arc<Shared>, size: u64, location: MemoryLocation, name: &str) -> Result<Arc<Buffer>> {
+        let size = size.max(4);
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::TRANSFER_SRC
+            | vk::BufferUsageFlags::TRANSFER_DST;
+        let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
+        let device = &shared.device;
+        // SAFETY: valid device and create info.
+        let raw = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
+        // SAFETY: raw was just created on this device.
+        let requirements = unsafe { device.get_buffer_memory_requirements(raw) };
+        let allocation = shared
+            .allocator
+            .lock()
+            .unwrap()
+            .allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            })
+            .map_err(|e| {
+                // SAFETY: the buffer has no memory bound and is not in use.
+                unsafe { device.destroy_buffer(raw, None) };
+                Error::Memory(format!("{e} (asking for {} MiB for `{name}`)", size >> 20))
+            })?;
+        // SAFETY: the allocation satisfies the buffer's requirements and is unused.
+        unsafe { device.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) }.vk("vkBindBufferMemory")?;
+        let counted = location == MemoryLocation::GpuOnly;
+        if counted {
+            let live = shared.live_bytes.fetch_add(size, Ordering::SeqCst) + size;
+            shared.peak_bytes.fetch_max(live, Ordering::SeqCst);
+        }
+        Ok(Arc::new(Buffer { raw, size, allocation: Mutex::new(Some(allocation)), counted, shared: shared.clone() }))
+    }
+
+    /// Runs `f` on the buffer's host mapping, if the memory is host-visible (always on lavapipe).
+    pub(crate) fn with_mapped<R>(&self, f: impl FnOnce(&mut [u8]) -> R) -> Option<R> {
+        let mut guard = self.allocation.lock().unwrap();
+        guard.as_mut()?.mapped_slice_mut().map(f)
+    }
+}
+
+impl Drop for Buffer {
+    fn drop(&mut self) {
+        if let Some(allocation) = self.allocation.lock().unwrap().take() {
+            let _ = self.shared.allocator.lock().unwrap().free(allocation);
+        }
+        if self.counted {
+            self.shared.live_bytes.fetch_sub(self.size, Ordering::SeqCst);
+        }
+        // SAFETY: recordings keep their buffers alive, so no pending work uses this one.
+        unsafe { self.shared.device.destroy_buffer(self.raw, None) };
+    }
+}

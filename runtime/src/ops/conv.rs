@@ -1,0 +1,72 @@
+//! 2-D convolution on NHWC tensors as an implicit GEMM (no im2col buffer).
+
+use super::{f, kernel, same_dtype, u};
+use crate::context::GemmFamily;
+use crate::error::{ensure, Result};
+use crate::recorder::Recorder;
+use crate::tensor::Tensor;
+
+/// Zero padding on each side. Symmetric for the UNet; the VAE's downsampler pads only
+/// bottom and right.
+#[derive(Clone, Copy, Debug)]
+pub struct Padding {
+    pub top: usize,
+    pub left: usize,
+    pub bottom: usize,
+    pub right: usize,
+}
+
+impl Padding {
+    pub fn same(p: usize) -> Padding {
+        Padding { top: p, left: p, bottom: p, right: p }
+    }
+}
+
+/// Re-lays a PyTorch conv weight [out, in, kh, kw] as [out, kh, kw, in], the layout the kernel
+/// reads K = (ky·kw + kx)·in + ci from.
+pub fn oihw_to_ohwi(w: &[f32], cout: usize, cin: usize, kh: usize, kw: usize) -> Vec<f32> {
+    let mut out = vec![0.0; w.len()];
+    for o in 0..cout {
+        for i in 0..cin {
+            for y in 0..kh {
+                for x in 0..kw {
+                    out[((o * kh + y) * kw + x) * cin + i] = w[((o * cin + i) * kh + y) * kw + x];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// out[B, Ho, Wo, Cout] = conv(x[B, H, W, Cin], w[Cout, KH, KW, Cin]) (+ bias), with the output
+/// size implied by stride and padding.
+pub fn conv2d(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor, stride: usize, pad: Padding) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "conv2d", &[x, w, out])?;
+    ensure(x.shape().len() == 4 && w.shape().len() == 4 && out.shape().len() == 4, || {
+        format!("conv2d: want NHWC input, OHWI weight, NHWC output; got {:?}, {:?}, {:?}", x.shape(), w.shape(), out.shape())
+    })?;
+    let [b, h, wd, cin] = [x.shape()[0], x.shape()[1], x.shape()[2], x.shape()[3]];
+    let [cout, kh, kw, wcin] = [w.shape()[0], w.shape()[1], w.shape()[2], w.shape()[3]];
+    ensure(wcin == cin, || format!("conv2d: weight {:?} takes {wcin} channels, input has {cin}", w.shape()))?;
+    ensure(stride > 0 && h + pad.top + pad.bottom >= kh && wd + pad.left + pad.right >= kw, || "conv2d: kernel larger than padded input".into())?;
+    let ho = (h + pad.top + pad.bottom - kh) / stride + 1;
+    let wo = (wd + pad.left + pad.right - kw) / stride + 1;
+    ensure(out.shape() == [b, ho, wo, cout], || format!("conv2d: output {:?}, expected {:?}", out.shape(), [b, ho, wo, cout]))?;
+    if let Some(bias) = bias {
+        ensure(bias.numel() == cout && bias.dtype() == dtype, || format!("conv2d: bias {:?} for {cout} channels", bias.shape()))?;
+    }
+    let (m, n, k) = (b * ho * wo, cout, kh * kw * cin);
+    let push = [
+        u(m), u(n), u(k), u(k), u(n), 0, 0, bias.is_some() as u32, f(1.0),
+        u(h), u(wd), u(cin), u(ho), u(wo), u(kw), u(stride), u(pad.top), u(pad.left),
+    ];
+    let ctx = rec.context().clone();
+    let bias = bias.unwrap_or(out);
+    if ctx.gemm_family() == GemmFamily::Subgroup && ctx.subgroup_ok(8) && cin % 4 == 0 && cout % 4 == 0 {
+        let tm = if m >= 512 { 32 } else { 16 };
+        let kern = kernel(&ctx, "conv_sg", dtype, &[("SG", 8), ("TM", tm)], 4)?;
+        return rec.dispatch(&kern, &[x, w, bias], &[out], &push, [u(n.div_ceil(64)), u(m.div_ceil(tm as usize)), 1]);
+    }
+    let kern = kernel(&ctx, "conv_tiled", dtype, &[], 4)?;
+    rec.dispatch(&kern, &[x, w, bias], &[out], &push, [u(n.div_ceil(64)), u(m.div_ceil(64)), 1])
+}

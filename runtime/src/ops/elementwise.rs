@@ -1,0 +1,130 @@
+//! Element-wise and data-movement operations.
+
+use super::{f, grid, kernel, same_dtype, u};
+use crate::error::{ensure, Result};
+use crate::recorder::Recorder;
+use crate::tensor::{Dtype, Tensor};
+
+/// Unary functions, numbered as in `kernels/wgsl/unary.wgsl`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum UnaryOp {
+    /// alpha · x
+    Scale = 0,
+    Silu = 1,
+    /// GELU with the exact erf form (PyTorch's default).
+    Gelu = 2,
+    /// GELU with the tanh approximation (`approximate="tanh"`).
+    GeluTanh = 3,
+    /// x · sigmoid(1.702 x), as in OpenAI CLIP.
+    QuickGelu = 4,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BinaryOp {
+    Add = 0,
+    Mul = 1,
+}
+
+fn elements(groups_per: usize, n: usize) -> [u32; 3] {
+    grid(n.div_ceil(groups_per))
+}
+
+/// out = op(x), element-wise; `alpha` is used by `Scale`. `out` may be `x`.
+pub fn unary(rec: &mut Recorder, op: UnaryOp, x: &Tensor, out: &Tensor, alpha: f32) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "unary", &[x, out])?;
+    ensure(x.numel() == out.numel(), || format!("{op:?}: {:?} into {:?}", x.shape(), out.shape()))?;
+    let k = kernel(rec.context(), "unary", dtype, &[("OP", op as u32)], 2)?;
+    let g = elements(64, x.numel());
+    rec.dispatch(&k, &[x], &[out], &[u(x.numel()), f(alpha), g[0]], g)
+}
+
+/// out = a op b, where b's flat index is `(i / b_outer)·b_inner + i % b_inner` (see binary.wgsl).
+pub fn binary(rec: &mut Recorder, op: BinaryOp, a: &Tensor, b: &Tensor, out: &Tensor, b_inner: usize, b_outer: usize) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "binary", &[a, b, out])?;
+    let n = a.numel();
+    ensure(out.numel() == n && b_inner > 0 && b_outer > 0, || format!("{op:?}: {:?} into {:?}", a.shape(), out.shape()))?;
+    ensure((n - 1) / b_outer * b_inner + b_inner.min(n) <= b.numel(), || format!("{op:?}: {:?} cannot broadcast over {:?}", b.shape(), a.shape()))?;
+    let k = kernel(rec.context(), "binary", dtype, &[("OP", op as u32)], 3)?;
+    let g = elements(64, n);
+    rec.dispatch(&k, &[a, b], &[out], &[u(n), u(b_inner), u(b_outer), g[0]], g)
+}
+
+/// Broadcasting from the right as NumPy does, for the shapes networks use: b's shape equals a's
+/// trailing dimensions, or is [a.0, 1, ..., 1, C] (a per-batch, per-channel vector).
+fn broadcast(a: &Tensor, b: &Tensor) -> Result<(usize, usize)> {
+    let (sa, sb) = (a.shape(), b.shape());
+    if sb.len() <= sa.len() && sa[sa.len() - sb.len()..] == *sb {
+        return Ok((b.numel(), usize::MAX));
+    }
+    let c = *sa.last().unwrap_or(&1);
+    if sb.len() == sa.len() && sb[0] == sa[0] && sb.last() == Some(&c) && b.numel() == sa[0] * c {
+        return Ok((c, a.numel() / sa[0]));
+    }
+    Err(crate::Error::Shape(format!("cannot broadcast {sb:?} over {sa:?}")))
+}
+
+/// out = a + b with NumPy-style broadcasting of b (see [`broadcast`]).
+pub fn add(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor) -> Result<()> {
+    let (inner, outer) = broadcast(a, b)?;
+    binary(rec, BinaryOp::Add, a, b, out, inner, outer.min(a.numel()).max(inner))
+}
+
+/// out = a · b with NumPy-style broadcasting of b.
+pub fn mul(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor) -> Result<()> {
+    let (inner, outer) = broadcast(a, b)?;
+    binary(rec, BinaryOp::Mul, a, b, out, inner, outer.min(a.numel()).max(inner))
+}
+
+/// GEGLU: x[.., 2F] → out[.., F] = value · GELU(gate), value first.
+pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "geglu", &[x, out])?;
+    let two_f = *x.shape().last().unwrap_or(&0);
+    ensure(two_f % 2 == 0 && two_f > 0 && out.numel() * 2 == x.numel(), || format!("geglu: {:?} into {:?}", x.shape(), out.shape()))?;
+    let k = kernel(rec.context(), "geglu", dtype, &[], 2)?;
+    let g = elements(64, out.numel());
+    rec.dispatch(&k, &[x], &[out], &[u(out.numel()), u(two_f / 2), g[0]], g)
+}
+
+/// Nearest 2× upsampling of x[B, H, W, C] into out[B, 2H, 2W, C].
+pub fn upsample_nearest2x(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "upsample", &[x, out])?;
+    let s = x.shape();
+    ensure(s.len() == 4 && out.shape() == [s[0], 2 * s[1], 2 * s[2], s[3]], || format!("upsample: {:?} into {:?}", s, out.shape()))?;
+    let k = kernel(rec.context(), "upsample_nearest2x", dtype, &[], 2)?;
+    let g = elements(64, out.numel());
+    rec.dispatch(&k, &[x], &[out], &[u(out.numel()), u(s[1]), u(s[2]), u(s[3]), g[0]], g)
+}
+
+/// out[.., C1 + C2] = [a[.., C1], b[.., C2]] along the last (channel) dimension.
+pub fn concat_channels(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "concat", &[a, b, out])?;
+    let (c1, c2) = (*a.shape().last().unwrap_or(&0), *b.shape().last().unwrap_or(&0));
+    let lead = |t: &Tensor| t.shape()[..t.shape().len() - 1].to_vec();
+    ensure(c1 > 0 && c2 > 0 && lead(a) == lead(b) && lead(out) == lead(a) && out.shape().last() == Some(&(c1 + c2)), || {
+        format!("concat: {:?} + {:?} into {:?}", a.shape(), b.shape(), out.shape())
+    })?;
+    let k = kernel(rec.context(), "concat_channels", dtype, &[], 3)?;
+    let g = elements(64, out.numel());
+    rec.dispatch(&k, &[a, b], &[out], &[u(out.numel()), u(c1), u(c2), g[0]], g)
+}
+
+/// diffusers' `Timesteps` settings.
+#[derive(Clone, Copy, Debug)]
+pub struct TimestepEmbedding {
+    pub dim: usize,
+    pub flip_sin_to_cos: bool,
+    pub downscale_freq_shift: f32,
+    pub max_period: f32,
+    pub scale: f32,
+}
+
+/// out[B, dim] = sinusoidal embedding of `timesteps` (f32, [B]).
+pub fn timestep_embedding(rec: &mut Recorder, timesteps: &Tensor, out: &Tensor, e: &TimestepEmbedding) -> Result<()> {
+    ensure(timesteps.dtype() == Dtype::F32, || "timestep_embedding: timesteps must be f32".into())?;
+    let dtype = same_dtype(rec.context(), "timestep_embedding", &[out])?;
+    let b = timesteps.numel();
+    ensure(out.shape() == [b, e.dim], || format!("timestep_embedding: output {:?}, expected [{b}, {}]", out.shape(), e.dim))?;
+    let k = kernel(rec.context(), "timestep_embedding", dtype, &[], 2)?;
+    let push = [u(e.dim), u(b), e.flip_sin_to_cos as u32, f(e.downscale_freq_shift), f(e.max_period.ln()), f(e.scale)];
+    rec.dispatch(&k, &[timesteps], &[out], &push, [u((b * e.dim).div_ceil(64)), 1, 1])
+}

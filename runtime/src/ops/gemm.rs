@@ -1,0 +1,95 @@
+//! Matrix products: batched GEMM with optional bias and accumulation, and `linear`.
+
+use super::{f, kernel, same_dtype, u};
+use crate::context::GemmFamily;
+use crate::error::{ensure, Result};
+use crate::recorder::Recorder;
+use crate::tensor::Tensor;
+
+/// C[i] = alpha · A[i]·B[i] (+ bias) (+ C[i] if `accumulate`) for i < batch, row-major with the
+/// given leading dimensions and batch strides (0 shares an operand across the batch). With
+/// `b_transposed`, B is stored N×K (a PyTorch weight) and ldb is its row stride.
+#[derive(Clone, Debug)]
+pub struct Matmul {
+    pub batch: usize,
+    pub m: usize,
+    pub n: usize,
+    pub k: usize,
+    pub lda: usize,
+    pub ldb: usize,
+    pub ldc: usize,
+    pub a_batch: usize,
+    pub b_batch: usize,
+    pub c_batch: usize,
+    pub b_transposed: bool,
+    pub alpha: f32,
+    pub accumulate: bool,
+}
+
+impl Matmul {
+    /// A dense (M×K)·(K×N) product, or (M×K)·(N×K)ᵀ when `b_transposed`.
+    pub fn dense(m: usize, n: usize, k: usize, b_transposed: bool) -> Matmul {
+        Matmul {
+            batch: 1,
+            m,
+            n,
+            k,
+            lda: k,
+            ldb: if b_transposed { k } else { n },
+            ldc: n,
+            a_batch: m * k,
+            b_batch: 0,
+            c_batch: m * n,
+            b_transposed,
+            alpha: 1.0,
+            accumulate: false,
+        }
+    }
+
+    fn fits_vec4(&self) -> bool {
+        [self.n, self.k, self.lda, self.ldb, self.ldc, self.a_batch, self.b_batch, self.c_batch].iter().all(|x| x % 4 == 0)
+    }
+
+    /// Highest element index + 1 an operand is read or written at.
+    fn extent(batch: usize, batch_stride: usize, rows: usize, ld: usize, cols: usize) -> usize {
+        (batch - 1) * batch_stride + (rows - 1) * ld + cols
+    }
+}
+
+/// Records C = alpha·A·B (+ bias) (+ C) as described by `spec`.
+pub fn matmul(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>, c: &Tensor, spec: &Matmul) -> Result<()> {
+    let s = spec;
+    ensure(s.batch > 0 && s.m > 0 && s.n > 0 && s.k > 0, || format!("matmul: empty shape {s:?}"))?;
+    let dtype = same_dtype(rec.context(), "matmul", &[a, b, c])?;
+    let (b_rows, b_cols) = if s.b_transposed { (s.n, s.k) } else { (s.k, s.n) };
+    ensure(a.numel() >= Matmul::extent(s.batch, s.a_batch, s.m, s.lda, s.k), || format!("matmul: A {:?} too small for {s:?}", a.shape()))?;
+    ensure(b.numel() >= Matmul::extent(s.batch, s.b_batch, b_rows, s.ldb, b_cols), || format!("matmul: B {:?} too small for {s:?}", b.shape()))?;
+    ensure(c.numel() >= Matmul::extent(s.batch, s.c_batch, s.m, s.ldc, s.n), || format!("matmul: C {:?} too small for {s:?}", c.shape()))?;
+    if let Some(bias) = bias {
+        ensure(bias.numel() >= s.n && bias.dtype() == dtype, || format!("matmul: bias {:?} for N = {}", bias.shape(), s.n))?;
+    }
+    let flags = bias.is_some() as u32 | (s.accumulate as u32) << 1;
+    let common = [u(s.m), u(s.n), u(s.k), u(s.ldb), u(s.ldc), u(s.b_batch), u(s.c_batch), flags, f(s.alpha), u(s.lda), u(s.a_batch)];
+    let bt = s.b_transposed as u32;
+    let ctx = rec.context().clone();
+    // Without a bias the kernel never reads binding 2; C stands in for it.
+    let bias = bias.unwrap_or(c);
+    if ctx.gemm_family() == GemmFamily::Subgroup && ctx.subgroup_ok(8) && s.fits_vec4() {
+        let tm = if s.m >= 512 { 32 } else { 16 };
+        let k = kernel(&ctx, "gemm_sg", dtype, &[("SG", 8), ("TM", tm), ("BT", bt)], 4)?;
+        let groups = [u(s.n.div_ceil(64)), u(s.m.div_ceil(tm as usize)), u(s.batch)];
+        return rec.dispatch(&k, &[a, b, bias], &[c], &common, groups);
+    }
+    let k = kernel(&ctx, "gemm_tiled", dtype, &[("BT", bt)], 4)?;
+    rec.dispatch(&k, &[a, b, bias], &[c], &common, [u(s.n.div_ceil(64)), u(s.m.div_ceil(64)), u(s.batch)])
+}
+
+/// A PyTorch `Linear`: out[.., N] = x[.., K] · wᵀ (+ bias), w stored [N, K].
+pub fn linear(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor) -> Result<()> {
+    ensure(w.shape().len() == 2, || format!("linear: weight must be [out, in], got {:?}", w.shape()))?;
+    let (n, k) = (w.shape()[0], w.shape()[1]);
+    ensure(x.shape().last() == Some(&k), || format!("linear: input {:?} does not end in {k}", x.shape()))?;
+    let m = x.numel() / k;
+    ensure(out.numel() == m * n, || format!("linear: output {:?} is not {m}×{n}", out.shape()))?;
+    matmul(rec, x, w, bias, out, &Matmul::dense(m, n, k, true))
+}

@@ -1,0 +1,58 @@
+//! Typed operations: each checks its tensors, picks the kernel variant for the device and shape,
+//! and records one dispatch. Networks are compositions of these.
+
+mod attention;
+mod conv;
+mod elementwise;
+mod gemm;
+mod norm;
+
+pub use attention::{attention, AttentionLayout};
+pub use conv::{conv2d, oihw_to_ohwi, Padding};
+pub use elementwise::{add, binary, concat_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x, BinaryOp, TimestepEmbedding, UnaryOp};
+pub use gemm::{linear, matmul, Matmul};
+pub use norm::{group_norm, layer_norm, softmax};
+
+use crate::context::Context;
+use crate::error::{ensure, Error, Result};
+use crate::pipeline::Kernel;
+use crate::tensor::{Dtype, Tensor};
+use std::sync::Arc;
+
+/// The pipeline of the variant of `kernel` whose parameters include `want`.
+fn kernel(ctx: &Context, name: &'static str, dtype: Dtype, want: &[(&str, u32)], bindings: u32) -> Result<Arc<Kernel>> {
+    let variant = vkdiff_kernels::find(name, dtype, want)
+        .ok_or_else(|| Error::NoVariant { kernel: name, want: format!("{dtype:?} {want:?}") })?;
+    ctx.kernel(variant, bindings)
+}
+
+/// All tensors share one storage dtype, which the device supports.
+fn same_dtype(ctx: &Context, op: &str, tensors: &[&Tensor]) -> Result<Dtype> {
+    let dtype = tensors[0].dtype();
+    ensure(tensors.iter().all(|t| t.dtype() == dtype), || format!("{op}: tensors mix f32 and f16"))?;
+    ensure(dtype == Dtype::F32 || ctx.info().supports_f16(), || format!("{op}: device `{}` has no f16 storage", ctx.info().name))?;
+    Ok(dtype)
+}
+
+/// Splits `groups` workgroups over x and y so neither passes the 65535 guaranteed by Vulkan;
+/// kernels rebuild the linear index as `y · groups_x + x` and bounds-check it.
+fn grid(groups: usize) -> [u32; 3] {
+    let gx = groups.clamp(1, 65535);
+    [gx as u32, groups.div_ceil(gx) as u32, 1]
+}
+
+/// Push-constant words of a u32 field list with floats stored as their bits.
+fn f(x: f32) -> u32 {
+    x.to_bits()
+}
+
+fn u(x: usize) -> u32 {
+    x as u32
+}
+
+/// A tensor whose last dimension is `c` and leading dimensions multiply to the rest.
+fn rows_of(t: &Tensor, what: &str) -> Result<(usize, usize)> {
+    let c = *t.shape().last().ok_or_else(|| Error::Shape(format!("{what}: scalar tensor")))?;
+    ensure(c > 0, || format!("{what}: empty last dimension"))?;
+    Ok((t.numel() / c, c))
+}

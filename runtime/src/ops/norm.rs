@@ -1,0 +1,38 @@
+//! Normalisations and softmax over NHWC / row-major tensors, accumulated in f32.
+
+use super::{f, grid, kernel, rows_of, same_dtype, u};
+use crate::error::{ensure, Result};
+use crate::recorder::Recorder;
+use crate::tensor::Tensor;
+
+/// GroupNorm of x[B, ..., C] (channels last) with `groups` groups, optionally followed by SiLU.
+pub fn group_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor, out: &Tensor, groups: usize, eps: f32, silu: bool) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "group_norm", &[x, gamma, beta, out])?;
+    ensure(x.shape().len() >= 2, || format!("group_norm: want [B, ..., C], got {:?}", x.shape()))?;
+    let (b, c) = (x.shape()[0], *x.shape().last().unwrap());
+    ensure(groups > 0 && c % groups == 0, || format!("group_norm: {c} channels do not split into {groups} groups"))?;
+    ensure(gamma.numel() == c && beta.numel() == c && out.shape() == x.shape(), || "group_norm: affine or output shape mismatch".into())?;
+    let hw = x.numel() / (b * c);
+    let k = kernel(rec.context(), "group_norm", dtype, &[], 4)?;
+    rec.dispatch(&k, &[x, gamma, beta], &[out], &[u(hw), u(c), u(groups), f(eps), silu as u32], [u(groups), u(b), 1])
+}
+
+/// LayerNorm over the last dimension with affine weight and bias.
+pub fn layer_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor, out: &Tensor, eps: f32) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "layer_norm", &[x, gamma, beta, out])?;
+    let (rows, c) = rows_of(x, "layer_norm")?;
+    ensure(gamma.numel() == c && beta.numel() == c && out.shape() == x.shape(), || "layer_norm: affine or output shape mismatch".into())?;
+    let k = kernel(rec.context(), "layer_norm", dtype, &[], 4)?;
+    let g = grid(rows);
+    rec.dispatch(&k, &[x, gamma, beta], &[out], &[u(c), f(eps), g[0]], g)
+}
+
+/// Softmax of scale·x over the last dimension.
+pub fn softmax(rec: &mut Recorder, x: &Tensor, out: &Tensor, scale: f32) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "softmax", &[x, out])?;
+    let (rows, c) = rows_of(x, "softmax")?;
+    ensure(out.shape() == x.shape(), || "softmax: output shape mismatch".into())?;
+    let k = kernel(rec.context(), "softmax", dtype, &[], 2)?;
+    let g = grid(rows);
+    rec.dispatch(&k, &[x], &[out], &[u(c), f(scale), g[0]], g)
+}

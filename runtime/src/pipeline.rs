@@ -1,0 +1,97 @@
+//! Compute pipelines, created once per kernel variant and cached for the context's lifetime.
+
+use crate::context::Context;
+use crate::error::{Result, VkContext};
+use ash::vk;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use vkdiff_kernels::Variant;
+
+/// Push constants every kernel may use; the guaranteed minimum of `maxPushConstantsSize`.
+pub const PUSH_BYTES: u32 = 128;
+
+/// A kernel variant ready to dispatch: `bindings` storage buffers at set 0, push constants.
+pub struct Kernel {
+    pub name: &'static str,
+    pub(crate) pipeline: vk::Pipeline,
+    pub(crate) layout: vk::PipelineLayout,
+    pub(crate) set_layout: vk::DescriptorSetLayout,
+    pub(crate) bindings: u32,
+}
+
+#[derive(Default)]
+pub(crate) struct PipelineCache {
+    kernels: Mutex<HashMap<usize, Arc<Kernel>>>,
+}
+
+impl PipelineCache {
+    /// SAFETY: the device must be idle and no kernel used again.
+    pub(crate) unsafe fn destroy(&self, device: &ash::Device) {
+        for (_, k) in self.kernels.lock().unwrap().drain() {
+            device.destroy_pipeline(k.pipeline, None);
+            device.destroy_pipeline_layout(k.layout, None);
+            device.destroy_descriptor_set_layout(k.set_layout, None);
+        }
+    }
+}
+
+impl Context {
+    /// The pipeline for `variant`, created on first use.
+    pub fn kernel(&self, variant: &'static Variant, bindings: u32) -> Result<Arc<Kernel>> {
+        let key = variant as *const Variant as usize;
+        let mut cache = self.shared.pipelines.kernels.lock().unwrap();
+        if let Some(k) = cache.get(&key) {
+            return Ok(k.clone());
+        }
+        let kernel = Arc::new(self.create_kernel(variant, bindings)?);
+        cache.insert(key, kernel.clone());
+        Ok(kernel)
+    }
+
+    fn create_kernel(&self, variant: &'static Variant, bindings: u32) -> Result<Kernel> {
+        let device = &self.shared.device;
+        let layout_bindings: Vec<_> = (0..bindings)
+            .map(|b| {
+                vk::DescriptorSetLayoutBinding::default()
+                    .binding(b)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
+            })
+            .collect();
+        let words = variant.words();
+        // SAFETY: all create infos point at locals that outlive the calls; handles are destroyed
+        // with the cache or right here when pipeline creation fails.
+        unsafe {
+            let set_layout = device
+                .create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&layout_bindings), None)
+                .vk("vkCreateDescriptorSetLayout")?;
+            let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).size(PUSH_BYTES)];
+            let set_layouts = [set_layout];
+            let layout = device
+                .create_pipeline_layout(
+                    &vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&ranges),
+                    None,
+                )
+                .vk("vkCreatePipelineLayout")?;
+            let module = device
+                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+                .vk("vkCreateShaderModule")?;
+            let mut required = vk::PipelineShaderStageRequiredSubgroupSizeCreateInfo::default();
+            let mut stage = vk::PipelineShaderStageCreateInfo::default()
+                .stage(vk::ShaderStageFlags::COMPUTE)
+                .module(module)
+                .name(c"main");
+            // Kernels built for a subgroup width are pinned to it where the device allows.
+            if let (Some(sg), Some(_)) = (variant.param("SG"), self.shared.info.subgroup_size_range) {
+                required = required.required_subgroup_size(sg);
+                stage = stage.flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS).push_next(&mut required);
+            }
+            let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
+            let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
+            device.destroy_shader_module(module, None);
+            let pipeline = created.map_err(|(_, e)| e).vk("vkCreateComputePipelines")?[0];
+            Ok(Kernel { name: variant.kernel, pipeline, layout, set_layout, bindings })
+        }
+    }
+}

@@ -1,0 +1,281 @@
+//! Records many dispatches into one command buffer, with barriers only where a dispatch touches
+//! a buffer an earlier one wrote (or writes one an earlier one read), and replays it.
+
+use crate::context::Context;
+use crate::error::{ensure, Result, VkContext};
+use crate::memory::Buffer;
+use crate::pipeline::{Kernel, PUSH_BYTES};
+use crate::submit::submit_and_wait;
+use crate::tensor::Tensor;
+use ash::vk;
+use std::collections::HashSet;
+use std::sync::Arc;
+
+const SETS_PER_POOL: u32 = 256;
+const MAX_BINDINGS: u32 = 8;
+const QUERIES_PER_POOL: u32 = 512;
+
+/// Time one dispatch took on the device.
+#[derive(Clone, Debug)]
+pub struct Timing {
+    pub kernel: &'static str,
+    pub nanos: f64,
+}
+
+/// Command buffer under construction. [`Recorder::finish`] turns it into a replayable
+/// [`Recording`].
+pub struct Recorder {
+    ctx: Context,
+    res: Resources,
+    cmd: vk::CommandBuffer,
+    sets_left: u32,
+    written: HashSet<vk::Buffer>,
+    read: HashSet<vk::Buffer>,
+    profile: bool,
+}
+
+/// Vulkan objects owned by a recording, destroyed with it.
+struct Resources {
+    ctx: Context,
+    command_pool: vk::CommandPool,
+    descriptor_pools: Vec<vk::DescriptorPool>,
+    query_pools: Vec<vk::QueryPool>,
+    labels: Vec<&'static str>,
+    buffers: Vec<Arc<Buffer>>,
+    kernels: Vec<Arc<Kernel>>,
+}
+
+impl Drop for Resources {
+    fn drop(&mut self) {
+        let device = &self.ctx.shared.device;
+        // SAFETY: recordings are only run synchronously, so nothing is pending.
+        unsafe {
+            for &p in &self.descriptor_pools {
+                device.destroy_descriptor_pool(p, None);
+            }
+            for &q in &self.query_pools {
+                device.destroy_query_pool(q, None);
+            }
+            device.destroy_command_pool(self.command_pool, None);
+        }
+    }
+}
+
+impl Recorder {
+    /// Starts a recording; with `profile`, every dispatch is timed with timestamp queries.
+    pub fn new(ctx: &Context, profile: bool) -> Result<Recorder> {
+        ensure(!profile || ctx.info().timestamps, || format!("device `{}` has no timestamp queries to profile with", ctx.info().name))?;
+        let device = &ctx.shared.device;
+        // SAFETY: plain object creation on a valid device; Resources destroys them.
+        unsafe {
+            let command_pool = device
+                .create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(ctx.shared.queue_family), None)
+                .vk("vkCreateCommandPool")?;
+            let res = Resources {
+                ctx: ctx.clone(),
+                command_pool,
+                descriptor_pools: Vec::new(),
+                query_pools: Vec::new(),
+                labels: Vec::new(),
+                buffers: Vec::new(),
+                kernels: Vec::new(),
+            };
+            let cmd = device
+                .allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(command_pool).command_buffer_count(1))
+                .vk("vkAllocateCommandBuffers")?[0];
+            device.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default()).vk("vkBeginCommandBuffer")?;
+            Ok(Recorder { ctx: ctx.clone(), res, cmd, sets_left: 0, written: HashSet::new(), read: HashSet::new(), profile })
+        }
+    }
+
+    pub fn context(&self) -> &Context {
+        &self.ctx
+    }
+
+    /// Records one dispatch of `kernel` over `groups` workgroups. Bindings are `reads` then
+    /// `writes`, in the kernel's binding order; `push` fills its push constants.
+    pub fn dispatch(&mut self, kernel: &Arc<Kernel>, reads: &[&Tensor], writes: &[&Tensor], push: &[u32], groups: [u32; 3]) -> Result<()> {
+        let info = &self.ctx.shared.info;
+        ensure(reads.len() + writes.len() == kernel.bindings as usize, || format!("kernel `{}` takes {} bindings", kernel.name, kernel.bindings))?;
+        ensure(push.len() * 4 <= PUSH_BYTES as usize, || format!("kernel `{}`: push constants too large", kernel.name))?;
+        for (g, max) in groups.iter().zip(info.max_workgroup_count) {
+            ensure(*g <= max, || format!("kernel `{}`: {groups:?} workgroups exceed the device limit {:?}", kernel.name, info.max_workgroup_count))?;
+        }
+        for t in reads.iter().chain(writes) {
+            ensure(t.bytes() <= info.max_storage_buffer_range, || {
+                format!("kernel `{}`: a {} MiB tensor exceeds the device's {} MiB storage binding limit", kernel.name, t.bytes() >> 20, info.max_storage_buffer_range >> 20)
+            })?;
+        }
+        if groups.contains(&0) {
+            return Ok(());
+        }
+        let hazard = reads.iter().any(|t| self.written.contains(&t.buf.raw))
+            || writes.iter().any(|t| self.written.contains(&t.buf.raw) || self.read.contains(&t.buf.raw));
+        let set = self.allocate_set(kernel)?;
+        let timed = if self.profile { Some(self.query_slot()?) } else { None };
+        let ctx = self.ctx.clone();
+        let device = &ctx.shared.device;
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = reads
+            .iter()
+            .chain(writes)
+            .map(|t| [vk::DescriptorBufferInfo { buffer: t.buf.raw, offset: t.offset, range: t.bytes().max(4) }])
+            .collect();
+        let descriptor_writes: Vec<_> = infos
+            .iter()
+            .enumerate()
+            .map(|(i, info)| {
+                vk::WriteDescriptorSet::default()
+                    .dst_set(set)
+                    .dst_binding(i as u32)
+                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                    .buffer_info(info)
+            })
+            .collect();
+        // SAFETY: the command buffer is recording; every handle is kept alive by `res`.
+        unsafe {
+            device.update_descriptor_sets(&descriptor_writes, &[]);
+            if hazard {
+                self.barrier(vk::AccessFlags::SHADER_WRITE, vk::PipelineStageFlags::COMPUTE_SHADER, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
+                self.written.clear();
+                self.read.clear();
+            }
+            if let Some((pool, q)) = timed {
+                device.cmd_write_timestamp(self.cmd, vk::PipelineStageFlags::TOP_OF_PIPE, pool, q);
+            }
+            device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, kernel.pipeline);
+            device.cmd_bind_descriptor_sets(self.cmd, vk::PipelineBindPoint::COMPUTE, kernel.layout, 0, &[set], &[]);
+            if !push.is_empty() {
+                device.cmd_push_constants(self.cmd, kernel.layout, vk::ShaderStageFlags::COMPUTE, 0, bytemuck::cast_slice(push));
+            }
+            device.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]);
+            if let Some((pool, q)) = timed {
+                device.cmd_write_timestamp(self.cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, pool, q + 1);
+                self.res.labels.push(kernel.name);
+            }
+        }
+        self.read.extend(reads.iter().map(|t| t.buf.raw));
+        self.written.extend(writes.iter().map(|t| t.buf.raw));
+        self.res.buffers.extend(reads.iter().chain(writes).map(|t| t.buf.clone()));
+        if !self.res.kernels.iter().any(|k| Arc::ptr_eq(k, kernel)) {
+            self.res.kernels.push(kernel.clone());
+        }
+        Ok(())
+    }
+
+    /// SAFETY: the command buffer must be recording.
+    unsafe fn barrier(&self, src: vk::AccessFlags, dst_stage: vk::PipelineStageFlags, dst: vk::AccessFlags) {
+        let barrier = [vk::MemoryBarrier::default().src_access_mask(src).dst_access_mask(dst)];
+        self.ctx.shared.device.cmd_pipeline_barrier(
+            self.cmd,
+            vk::PipelineStageFlags::COMPUTE_SHADER,
+            dst_stage,
+            vk::DependencyFlags::empty(),
+            &barrier,
+            &[],
+            &[],
+        );
+    }
+
+    fn allocate_set(&mut self, kernel: &Kernel) -> Result<vk::DescriptorSet> {
+        let device = &self.ctx.shared.device;
+        // SAFETY: pools and layouts are valid; pools are destroyed with the recording.
+        unsafe {
+            if self.sets_left == 0 {
+                let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: SETS_PER_POOL * MAX_BINDINGS }];
+                let pool = device
+                    .create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(SETS_PER_POOL).pool_sizes(&sizes), None)
+                    .vk("vkCreateDescriptorPool")?;
+                self.res.descriptor_pools.push(pool);
+                self.sets_left = SETS_PER_POOL;
+            }
+            self.sets_left -= 1;
+            let layouts = [kernel.set_layout];
+            let pool = *self.res.descriptor_pools.last().unwrap();
+            Ok(device
+                .allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))
+                .vk("vkAllocateDescriptorSets")?[0])
+        }
+    }
+
+    /// The query pool and first of two query indices for the next timed dispatch.
+    fn query_slot(&mut self) -> Result<(vk::QueryPool, u32)> {
+        let used = 2 * self.res.labels.len() as u32;
+        let within = used % QUERIES_PER_POOL;
+        if within == 0 {
+            let device = &self.ctx.shared.device;
+            // SAFETY: plain creation; the reset is recorded before the pool's first use.
+            unsafe {
+                let pool = device
+                    .create_query_pool(&vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(QUERIES_PER_POOL), None)
+                    .vk("vkCreateQueryPool")?;
+                device.cmd_reset_query_pool(self.cmd, pool, 0, QUERIES_PER_POOL);
+                self.res.query_pools.push(pool);
+            }
+        }
+        Ok((*self.res.query_pools.last().unwrap(), within))
+    }
+
+    /// Ends recording; results are visible to the host and to transfers once a run returns.
+    pub fn finish(self) -> Result<Recording> {
+        // SAFETY: the command buffer is recording.
+        unsafe {
+            self.barrier(
+                vk::AccessFlags::SHADER_WRITE,
+                vk::PipelineStageFlags::HOST | vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::HOST_READ | vk::AccessFlags::TRANSFER_READ,
+            );
+            self.ctx.shared.device.end_command_buffer(self.cmd).vk("vkEndCommandBuffer")?;
+        }
+        Ok(Recording { ctx: self.ctx, cmd: self.cmd, res: self.res })
+    }
+}
+
+/// A finished command buffer that can be run any number of times.
+pub struct Recording {
+    ctx: Context,
+    cmd: vk::CommandBuffer,
+    res: Resources,
+}
+
+impl Recording {
+    /// Runs the recording to completion.
+    pub fn run(&self) -> Result<()> {
+        submit_and_wait(&self.ctx, self.cmd)
+    }
+
+    /// Runs the recording and returns each dispatch's device time (recorded with `profile`).
+    pub fn run_profiled(&self) -> Result<Vec<Timing>> {
+        self.run()?;
+        let n = self.res.labels.len();
+        let mut stamps = vec![0u64; 2 * n];
+        for (i, chunk) in stamps.chunks_mut(QUERIES_PER_POOL as usize).enumerate() {
+            // SAFETY: the run has finished, so every query in range is available.
+            unsafe {
+                self.ctx.shared.device.get_query_pool_results(self.res.query_pools[i], 0, chunk, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT)
+            }
+            .vk("vkGetQueryPoolResults")?;
+        }
+        let period = self.ctx.info().timestamp_period_ns as f64;
+        Ok(self
+            .res
+            .labels
+            .iter()
+            .zip(stamps.chunks_exact(2))
+            .map(|(&kernel, t)| Timing { kernel, nanos: t[1].saturating_sub(t[0]) as f64 * period })
+            .collect())
+    }
+
+    /// Number of timed dispatches.
+    pub fn dispatches(&self) -> usize {
+        self.res.labels.len()
+    }
+}
+
+impl Context {
+    /// Records with `f`, then runs the recording once.
+    pub fn run(&self, f: impl FnOnce(&mut Recorder) -> Result<()>) -> Result<()> {
+        let mut rec = Recorder::new(self, false)?;
+        f(&mut rec)?;
+        rec.finish()?.run()
+    }
+}

@@ -1,0 +1,145 @@
+//! `Tensor`: a shape and a storage dtype over a range of a device buffer.
+
+use crate::context::Context;
+use crate::error::{ensure, Error, Result};
+use crate::memory::Buffer;
+use crate::submit::submit_once;
+use ash::vk;
+use gpu_allocator::MemoryLocation;
+use half::f16;
+use std::sync::Arc;
+pub use vkdiff_kernels::Dtype;
+
+/// Bytes per element of a storage dtype.
+pub fn dtype_size(dtype: Dtype) -> usize {
+    match dtype {
+        Dtype::F32 => 4,
+        Dtype::F16 => 2,
+    }
+}
+
+/// A dense, row-major tensor in device memory. Clones and views share the buffer.
+#[derive(Clone)]
+pub struct Tensor {
+    pub(crate) buf: Arc<Buffer>,
+    pub(crate) offset: u64,
+    shape: Vec<usize>,
+    dtype: Dtype,
+}
+
+impl Tensor {
+    pub fn shape(&self) -> &[usize] {
+        &self.shape
+    }
+
+    pub fn dtype(&self) -> Dtype {
+        self.dtype
+    }
+
+    pub fn numel(&self) -> usize {
+        self.shape.iter().product()
+    }
+
+    pub fn bytes(&self) -> u64 {
+        (self.numel() * dtype_size(self.dtype)) as u64
+    }
+
+    /// The same elements under another shape.
+    pub fn reshape(&self, shape: &[usize]) -> Result<Tensor> {
+        let n: usize = shape.iter().product();
+        ensure(n == self.numel(), || format!("cannot reshape {:?} to {shape:?}", self.shape))?;
+        Ok(Tensor { shape: shape.to_vec(), ..self.clone() })
+    }
+
+    /// Rows `start..start + len` of the first dimension, without copying. The start must fall on
+    /// the device's storage-binding alignment, as kernels bind views directly.
+    pub fn narrow(&self, start: usize, len: usize) -> Result<Tensor> {
+        let rows = *self.shape.first().unwrap_or(&1);
+        ensure(start + len <= rows, || format!("rows {start}..{} out of range for {:?}", start + len, self.shape))?;
+        let row_bytes = (self.numel() / rows.max(1) * dtype_size(self.dtype)) as u64;
+        let offset = self.offset + start as u64 * row_bytes;
+        let align = self.buf.shared.info.min_storage_offset_alignment.max(4);
+        ensure(offset % align == 0, || format!("view at byte {offset} breaks the device's {align}-byte binding alignment"))?;
+        let mut shape = self.shape.clone();
+        shape[0] = len;
+        Ok(Tensor { buf: self.buf.clone(), offset, shape, dtype: self.dtype })
+    }
+
+    /// Overwrites the tensor with `data` (converted to the storage dtype).
+    pub fn write(&self, data: &[f32]) -> Result<()> {
+        ensure(data.len() == self.numel(), || format!("writing {} values into a tensor of shape {:?}", data.len(), self.shape))?;
+        let bytes = encode(data, self.dtype);
+        let (offset, len) = (self.offset as usize, bytes.len());
+        if self.buf.with_mapped(|m| m[offset..offset + len].copy_from_slice(&bytes)).is_some() {
+            return Ok(());
+        }
+        let ctx = Context { shared: self.buf.shared.clone() };
+        let staging = Buffer::new(&ctx.shared, len as u64, MemoryLocation::CpuToGpu, "upload staging")?;
+        staging.with_mapped(|m| m[..len].copy_from_slice(&bytes)).ok_or_else(|| Error::Memory("staging buffer is not host-visible".into()))?;
+        submit_once(&ctx, |device, cmd| {
+            let region = [vk::BufferCopy { src_offset: 0, dst_offset: self.offset, size: len as u64 }];
+            // SAFETY: both buffers are alive and large enough.
+            unsafe { device.cmd_copy_buffer(cmd, staging.raw, self.buf.raw, &region) };
+        })
+    }
+
+    /// The tensor's values as f32.
+    pub fn download(&self) -> Result<Vec<f32>> {
+        let len = self.bytes() as usize;
+        let offset = self.offset as usize;
+        if let Some(bytes) = self.buf.with_mapped(|m| m[offset..offset + len].to_vec()) {
+            return Ok(decode(&bytes, self.dtype));
+        }
+        let ctx = Context { shared: self.buf.shared.clone() };
+        let staging = Buffer::new(&ctx.shared, len as u64, MemoryLocation::GpuToCpu, "download staging")?;
+        submit_once(&ctx, |device, cmd| {
+            let region = [vk::BufferCopy { src_offset: self.offset, dst_offset: 0, size: len as u64 }];
+            // SAFETY: both buffers are alive and large enough.
+            unsafe { device.cmd_copy_buffer(cmd, self.buf.raw, staging.raw, &region) };
+        })?;
+        staging
+            .with_mapped(|m| decode(&m[..len], self.dtype))
+            .ok_or_else(|| Error::Memory("staging buffer is not host-visible".into()))
+    }
+}
+
+fn encode(data: &[f32], dtype: Dtype) -> Vec<u8> {
+    match dtype {
+        Dtype::F32 => bytemuck::cast_slice(data).to_vec(),
+        Dtype::F16 => data.iter().flat_map(|&x| f16::from_f32(x).to_le_bytes()).collect(),
+    }
+}
+
+fn decode(bytes: &[u8], dtype: Dtype) -> Vec<f32> {
+    match dtype {
+        Dtype::F32 => bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
+        Dtype::F16 => bytes.chunks_exact(2).map(|c| f16::from_le_bytes([c[0], c[1]]).to_f32()).collect(),
+    }
+}
+
+impl Context {
+    /// A zero-filled tensor.
+    pub fn zeros(&self, shape: &[usize], dtype: Dtype) -> Result<Tensor> {
+        let numel: usize = shape.iter().product();
+        let size = (numel * dtype_size(dtype)) as u64;
+        let buf = Buffer::new(&self.shared, size, MemoryLocation::GpuOnly, "tensor")?;
+        if buf.with_mapped(|m| m.fill(0)).is_none() {
+            submit_once(self, |device, cmd| {
+                // SAFETY: the buffer is alive; fill size is whole buffer.
+                unsafe { device.cmd_fill_buffer(cmd, buf.raw, 0, vk::WHOLE_SIZE, 0) };
+            })?;
+        }
+        Ok(Tensor { buf, offset: 0, shape: shape.to_vec(), dtype })
+    }
+
+    /// A tensor holding `data` (row-major, converted to `dtype`).
+    pub fn upload(&self, shape: &[usize], dtype: Dtype, data: &[f32]) -> Result<Tensor> {
+        let numel: usize = shape.iter().product();
+        ensure(numel == data.len(), || format!("{} values for shape {shape:?}", data.len()))?;
+        let size = (numel * dtype_size(dtype)) as u64;
+        let buf = Buffer::new(&self.shared, size, MemoryLocation::GpuOnly, "tensor")?;
+        let t = Tensor { buf, offset: 0, shape: shape.to_vec(), dtype };
+        t.write(data)?;
+        Ok(t)
+    }
+}

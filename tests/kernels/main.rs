@@ -1,0 +1,5 @@
+//! Every kernel against an f64 CPU reference on the Vulkan device (lavapipe in CI), for f32 and
+//! f16 storage, with the tolerance each test states.
+
+mod common;
+mod gemm;
