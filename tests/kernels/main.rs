@@ -1,5 +1,9 @@
 //! Every kernel against an f64 CPU reference on the Vulkan device (lavapipe in CI), for f32 and
 //! f16 storage, with the tolerance each test states.
 
+mod attention;
 mod common;
+mod conv;
+mod elementwise;
 mod gemm;
+mod norm;
