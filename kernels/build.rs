@@ -54,9 +54,63 @@ fn fail(message: &str) -> ! {
     exit(1)
 }
 
+/// Expands `// #unroll NAME COUNT` … `// #end` blocks: the body repeated COUNT times (a number
+/// or a parameter) with the whole word NAME replaced by `0u`, `1u`, …. The Vulkan drivers we
+/// target do not unroll loops over register arrays (lavapipe spills them to memory), so hot
+/// loops are unrolled here. Innermost blocks go first, and each expansion is written on one
+/// line followed by blank ones, so error lines still point into the file.
+fn unroll(text: &str, params: &[(&str, u32)]) -> String {
+    let lines: Vec<&str> = text.lines().collect();
+    let is = |i: usize, tag: &str| lines[i].trim_start().starts_with(tag);
+    let Some(end) = (0..lines.len()).find(|&i| is(i, "// #end")) else {
+        return text.to_string();
+    };
+    let start = (0..end)
+        .rev()
+        .find(|&i| is(i, "// #unroll "))
+        .unwrap_or_else(|| fail(&format!("`// #end` without `// #unroll` at generated line {}", end + 1)));
+    let words: Vec<&str> = lines[start].split_whitespace().collect();
+    let (name, count) = (words[2], words[3]);
+    let count: u32 = count
+        .parse()
+        .ok()
+        .or_else(|| params.iter().find(|(p, _)| *p == count).map(|(_, v)| *v))
+        .unwrap_or_else(|| fail(&format!("`// #unroll {name} {count}`: count is neither a number nor a parameter")));
+    // Comments would swallow the rest of the joined line.
+    let body: Vec<&str> = lines[start + 1..end].iter().map(|l| l.split("//").next().unwrap()).collect();
+    let body = body.join(" ");
+    let copies: Vec<String> = (0..count).map(|i| replace_word(&body, name, &format!("{i}u"))).collect();
+    let mut out: Vec<String> = lines[..start].iter().map(|s| s.to_string()).collect();
+    out.push(copies.join(" "));
+    out.extend(std::iter::repeat_n(String::new(), end - start));
+    out.extend(lines[end + 1..].iter().map(|s| s.to_string()));
+    unroll(&out.join("\n"), params)
+}
+
+/// Replaces whole-word occurrences of `word` (identifier boundaries) in `text`.
+fn replace_word(text: &str, word: &str, with: &str) -> String {
+    let is_ident = |c: char| c.is_alphanumeric() || c == '_';
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(i) = rest.find(word) {
+        let before = rest[..i].chars().next_back();
+        let after = rest[i + word.len()..].chars().next();
+        out.push_str(&rest[..i]);
+        if before.is_some_and(is_ident) || after.is_some_and(is_ident) {
+            out.push_str(word);
+        } else {
+            out.push_str(with);
+        }
+        rest = &rest[i + word.len()..];
+    }
+    out.push_str(rest);
+    out
+}
+
 fn compile(spec: &KernelSpec, dtype: Dtype, params: &[(&str, u32)]) -> Vec<u32> {
     use naga::{back::spv, valid};
-    let src = Source::new(spec, dtype, params);
+    let mut src = Source::new(spec, dtype, params);
+    src.text = unroll(&src.text, params);
     let what = format!("kernel `{}` ({dtype:?}, {params:?})", spec.name);
     let module = naga::front::wgsl::parse_str(&src.text).unwrap_or_else(|e| {
         let at = e.location(&src.text).map(|l| src.locate(l.line_number as usize));

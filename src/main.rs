@@ -1,18 +1,34 @@
 //! `vkdiff`: command-line parsing and nothing else; every subcommand lives in its own module.
 
+mod bench;
+mod devices_cmd;
+
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "vkdiff", version, about = "Procedural scenes to photorealistic, exactly annotated training images")]
+#[command(name = "vkdiff", version, about = "Procedural scenes to photorealistic, exactly annotated training images, on any Vulkan GPU")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// List every Vulkan device and what vkdiff would use on it.
+    Devices(devices_cmd::DevicesArgs),
+    /// Measure speed: kernels, networks, scene generation.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
 
-fn main() -> anyhow::Result<()> {
+fn main() {
     let cli = Cli::parse();
-    match cli.command {}
+    let result = match cli.command {
+        Command::Devices(args) => devices_cmd::run(&args),
+        Command::Bench(cmd) => bench::run(cmd),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
 }

@@ -12,20 +12,19 @@ fn load_b(boff: u32, k: u32, n: u32) -> array<vec4<f32>, 8> {
     if BT == 0u {
         let n0 = min(n, p.g.n - 4u);
         let n1 = min(n + 4u, p.g.n - 4u);
-        for (var i = 0u; i < 4u; i++) {
-            let row = boff + (k + i) * p.g.ldb;
-            r[2u * i] = vec4<f32>(b[(row + n0) / 4u]);
-            r[2u * i + 1u] = vec4<f32>(b[(row + n1) / 4u]);
-        }
+        // #unroll I 4
+        r[2u * I] = vec4<f32>(b[(boff + (k + I) * p.g.ldb + n0) / 4u]);
+        r[2u * I + 1u] = vec4<f32>(b[(boff + (k + I) * p.g.ldb + n1) / 4u]);
+        // #end
     } else {
         var col: array<vec4<f32>, 8>;
-        for (var j = 0u; j < 8u; j++) {
-            col[j] = vec4<f32>(b[(boff + min(n + j, p.g.n - 1u) * p.g.ldb + k) / 4u]);
-        }
-        for (var i = 0u; i < 4u; i++) {
-            r[2u * i] = vec4<f32>(col[0][i], col[1][i], col[2][i], col[3][i]);
-            r[2u * i + 1u] = vec4<f32>(col[4][i], col[5][i], col[6][i], col[7][i]);
-        }
+        // #unroll J 8
+        col[J] = vec4<f32>(b[(boff + min(n + J, p.g.n - 1u) * p.g.ldb + k) / 4u]);
+        // #end
+        // #unroll I 4
+        r[2u * I] = vec4<f32>(col[0][I], col[1][I], col[2][I], col[3][I]);
+        r[2u * I + 1u] = vec4<f32>(col[4][I], col[5][I], col[6][I], col[7][I]);
+        // #end
     }
     return r;
 }
@@ -37,41 +36,47 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let batch = wg.z;
     let boff = batch * p.g.b_batch;
     var rows: array<RowCtx, TM>;
-    for (var r = 0u; r < TM; r++) {
-        rows[r] = row_ctx(batch, row0 + r);
-    }
+    // #unroll R TM
+    rows[R] = row_ctx(batch, row0 + R);
+    // #end
     var acc: array<vec4<f32>, 2u * TM>;
     for (var k0 = 0u; k0 < p.g.k; k0 += 4u * SG) {
         let kc = k_ctx(k0 + 4u * lane);
         var av: array<vec4<f32>, TM>;
-        for (var r = 0u; r < TM; r++) {
-            av[r] = load_a(rows[r], kc);
-        }
-        let steps = min(SG, (p.g.k - k0) / 4u);
-        for (var l = 0u; l < steps; l++) {
-            let bv = load_b(boff, k0 + 4u * l, n);
-            for (var r = 0u; r < TM; r++) {
-                let x = subgroupShuffle(av[r], l);
-                acc[2u * r] += x.x * bv[0] + x.y * bv[2] + x.z * bv[4] + x.w * bv[6];
-                acc[2u * r + 1u] += x.x * bv[1] + x.y * bv[3] + x.z * bv[5] + x.w * bv[7];
+        // #unroll R TM
+        av[R] = load_a(rows[R], kc);
+        // #end
+        let left = p.g.k - k0;
+        // #unroll L SG
+        if 4u * L < left {
+            let bv = load_b(boff, k0 + 4u * L, n);
+            // #unroll R TM
+            {
+                let x = subgroupShuffle(av[R], L);
+                acc[2u * R] += x.x * bv[0] + x.y * bv[2] + x.z * bv[4] + x.w * bv[6];
+                acc[2u * R + 1u] += x.x * bv[1] + x.y * bv[3] + x.z * bv[5] + x.w * bv[7];
             }
+            // #end
+        }
+        // #end
+    }
+    // #unroll R TM
+    // #unroll H 2
+    {
+        let row = row0 + R;
+        let col = n + 4u * H;
+        if row < p.g.m && col < p.g.n {
+            let at = (batch * p.g.c_batch + row * p.g.ldc + col) / 4u;
+            var v = p.g.alpha * acc[2u * R + H];
+            if (p.g.flags & FLAG_BIAS) != 0u {
+                v += vec4<f32>(bias[col / 4u]);
+            }
+            if (p.g.flags & FLAG_ACCUMULATE) != 0u {
+                v += vec4<f32>(c[at]);
+            }
+            c[at] = vec4<S>(v);
         }
     }
-    for (var r = 0u; r < TM; r++) {
-        let row = row0 + r;
-        for (var h = 0u; h < 2u; h++) {
-            let col = n + 4u * h;
-            if row < p.g.m && col < p.g.n {
-                let at = (batch * p.g.c_batch + row * p.g.ldc + col) / 4u;
-                var v = p.g.alpha * acc[2u * r + h];
-                if (p.g.flags & FLAG_BIAS) != 0u {
-                    v += vec4<f32>(bias[col / 4u]);
-                }
-                if (p.g.flags & FLAG_ACCUMULATE) != 0u {
-                    v += vec4<f32>(c[at]);
-                }
-                c[at] = vec4<S>(v);
-            }
-        }
-    }
+    // #end
+    // #end
 }

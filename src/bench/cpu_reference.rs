@@ -1,0 +1,45 @@
+//! The CPU's practical GEMM peak (numpy → OpenBLAS, float32), measured by running
+//! `tools/cpu_gemm_peak.py` with python3 in the same benchmark run.
+
+use std::process::Command;
+
+const SCRIPT: &str = include_str!("../../tools/cpu_gemm_peak.py");
+
+/// One measured shape.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CpuGemm {
+    pub m: usize,
+    pub n: usize,
+    pub k: usize,
+    pub gflops: f64,
+    pub library: String,
+}
+
+/// GFLOP/s for each (M, N, K), or why it could not be measured (no python3 or numpy).
+pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String> {
+    let args: Vec<String> = shapes.iter().flat_map(|&(m, n, k)| [m, n, k]).map(|x| x.to_string()).collect();
+    let out = Command::new("python3")
+        .arg("-c")
+        .arg(SCRIPT)
+        .args(&args)
+        .output()
+        .map_err(|e| format!("python3 not runnable ({e})"))?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        return Err(format!("numpy reference failed: {}", err.lines().last().unwrap_or("")));
+    }
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|line| {
+            let v: serde_json::Value = serde_json::from_str(line).map_err(|e| e.to_string())?;
+            let get = |k: &str| v[k].as_u64().unwrap_or(0) as usize;
+            Ok(CpuGemm {
+                m: get("m"),
+                n: get("n"),
+                k: get("k"),
+                gflops: v["gflops"].as_f64().unwrap_or(0.0),
+                library: format!("numpy {} / {}", v["numpy"].as_str().unwrap_or("?"), v["blas"].as_str().unwrap_or("?")),
+            })
+        })
+        .collect()
+}

@@ -1,0 +1,245 @@
+//! `vkdiff bench kernels`: each kernel on SDXL-sized shapes, timed on the device.
+
+use super::cpu_reference::{self, CpuGemm};
+use anyhow::Result;
+use std::time::{Duration, Instant};
+use vkdiff_runtime::ops::{self, AttentionLayout, Matmul, Padding, UnaryOp};
+use vkdiff_runtime::{Context, Dtype, Recorder, Tensor};
+
+#[derive(clap::Args)]
+pub struct KernelsArgs {
+    /// Vulkan device index (see `vkdiff devices`); default: VKDIFF_DEVICE, else the best device.
+    #[arg(long)]
+    device: Option<usize>,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Only run kernels whose name contains this.
+    #[arg(long)]
+    filter: Option<String>,
+    /// Timed samples per kernel; the best is reported.
+    #[arg(long, default_value_t = 3)]
+    samples: usize,
+    /// Skip the numpy/OpenBLAS reference.
+    #[arg(long)]
+    no_cpu_reference: bool,
+}
+
+/// What one run of a case does, for the throughput figure.
+#[derive(Clone, Copy)]
+enum Work {
+    Flops(f64),
+    Bytes(f64),
+}
+
+struct Case {
+    name: &'static str,
+    shape: String,
+    work: Work,
+    /// The GEMM shape to hold against the CPU, if any.
+    gemm: Option<(usize, usize, usize)>,
+    tensors: Vec<Tensor>,
+    record: fn(&mut Recorder, &[Tensor]) -> vkdiff_runtime::Result<()>,
+}
+
+#[derive(serde::Serialize)]
+struct Row {
+    kernel: &'static str,
+    dtype: String,
+    shape: String,
+    ms: f64,
+    gflops: Option<f64>,
+    gbps: Option<f64>,
+    cpu_gflops: Option<f64>,
+    ratio_to_cpu: Option<f64>,
+}
+
+fn dtype_name(d: Dtype) -> &'static str {
+    match d {
+        Dtype::F32 => "f32",
+        Dtype::F16 => "f16",
+    }
+}
+
+fn rand_tensor(ctx: &Context, shape: &[usize], dtype: Dtype, seed: u32) -> vkdiff_runtime::Result<Tensor> {
+    let n: usize = shape.iter().product();
+    let data: Vec<f32> = (0..n).map(|i| (((i as u32).wrapping_mul(2654435761).wrapping_add(seed) >> 8) as f32 / (1u32 << 24) as f32) - 0.5).collect();
+    ctx.upload(shape, dtype, &data)
+}
+
+fn gemm_case(ctx: &Context, dtype: Dtype, m: usize, n: usize, k: usize, linear: bool) -> vkdiff_runtime::Result<Case> {
+    let b_shape = if linear { [n, k] } else { [k, n] };
+    Ok(Case {
+        name: if linear { "linear (B = weight, N×K)" } else { "gemm" },
+        shape: format!("M={m} N={n} K={k}"),
+        work: Work::Flops(2.0 * (m * n * k) as f64),
+        gemm: Some((m, n, k)),
+        tensors: vec![rand_tensor(ctx, &[m, k], dtype, 1)?, rand_tensor(ctx, &b_shape, dtype, 2)?, ctx.zeros(&[m, n], dtype)?],
+        record: if linear {
+            |rec, t| ops::linear(rec, &t[0], &t[1], None, &t[2])
+        } else {
+            |rec, t| {
+                let (m, k, n) = (t[0].shape()[0], t[0].shape()[1], t[1].shape()[1]);
+                ops::matmul(rec, &t[0], &t[1], None, &t[2], &Matmul::dense(m, n, k, false))
+            }
+        },
+    })
+}
+
+fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
+    let bytes = |n: usize| (n * vkdiff_runtime::dtype_size(dtype)) as f64;
+    let (hw, c) = (64 * 64, 640);
+    Ok(vec![
+        gemm_case(ctx, dtype, 1024, 1024, 1024, false)?,
+        gemm_case(ctx, dtype, 4096, 640, 640, false)?,
+        gemm_case(ctx, dtype, 4096, 640, 640, true)?,
+        Case {
+            name: "conv2d 3x3",
+            shape: "64x64, 640->640, stride 1".into(),
+                work: Work::Flops(2.0 * (hw * c * 9 * c) as f64),
+            gemm: None,
+            tensors: vec![rand_tensor(ctx, &[1, 64, 64, c], dtype, 3)?, rand_tensor(ctx, &[c, 3, 3, c], dtype, 4)?, rand_tensor(ctx, &[c], dtype, 5)?, ctx.zeros(&[1, 64, 64, c], dtype)?],
+            record: |rec, t| ops::conv2d(rec, &t[0], &t[1], Some(&t[2]), &t[3], 1, Padding::same(1)),
+        },
+        Case {
+            name: "attention",
+            shape: "4096 tokens, 10 heads x 64".into(),
+                work: Work::Flops(4.0 * 4096.0 * 4096.0 * 64.0 * 10.0),
+            gemm: None,
+            tensors: (0..4).map(|i| rand_tensor(ctx, &[1, 4096, 640], dtype, 6 + i)).collect::<vkdiff_runtime::Result<_>>()?,
+            record: |rec, t| {
+                let l = AttentionLayout::dense(1, 10, 64, 4096, 4096);
+                ops::attention(rec, &t[0], &t[1], &t[2], &t[3], &l, 0.125)
+            },
+        },
+        Case {
+            name: "cross-attention",
+            shape: "4096 x 77 tokens, 10 heads x 64".into(),
+                work: Work::Flops(4.0 * 4096.0 * 77.0 * 64.0 * 10.0),
+            gemm: None,
+            tensors: vec![rand_tensor(ctx, &[1, 4096, 640], dtype, 10)?, rand_tensor(ctx, &[1, 77, 640], dtype, 11)?, rand_tensor(ctx, &[1, 77, 640], dtype, 12)?, ctx.zeros(&[1, 4096, 640], dtype)?],
+            record: |rec, t| {
+                let l = AttentionLayout::dense(1, 10, 64, 4096, 77);
+                ops::attention(rec, &t[0], &t[1], &t[2], &t[3], &l, 0.125)
+            },
+        },
+        Case {
+            name: "group_norm + SiLU",
+            shape: "64x64x640, 32 groups".into(),
+                work: Work::Bytes(4.0 * bytes(hw * c)),
+            gemm: None,
+            tensors: vec![rand_tensor(ctx, &[1, hw, c], dtype, 13)?, rand_tensor(ctx, &[c], dtype, 14)?, rand_tensor(ctx, &[c], dtype, 15)?, ctx.zeros(&[1, hw, c], dtype)?],
+            record: |rec, t| ops::group_norm(rec, &t[0], &t[1], &t[2], &t[3], 32, 1e-5, true),
+        },
+        Case {
+            name: "layer_norm",
+            shape: "4096 x 640".into(),
+                work: Work::Bytes(4.0 * bytes(hw * c)),
+            gemm: None,
+            tensors: vec![rand_tensor(ctx, &[hw, c], dtype, 16)?, rand_tensor(ctx, &[c], dtype, 17)?, rand_tensor(ctx, &[c], dtype, 18)?, ctx.zeros(&[hw, c], dtype)?],
+            record: |rec, t| ops::layer_norm(rec, &t[0], &t[1], &t[2], &t[3], 1e-5),
+        },
+        Case {
+            name: "silu",
+            shape: "64x64x640".into(),
+                work: Work::Bytes(2.0 * bytes(hw * c)),
+            gemm: None,
+            tensors: vec![rand_tensor(ctx, &[hw * c], dtype, 19)?, ctx.zeros(&[hw * c], dtype)?],
+            record: |rec, t| ops::unary(rec, UnaryOp::Silu, &t[0], &t[1], 1.0),
+        },
+        Case {
+            name: "geglu",
+            shape: "4096 x 2x2560".into(),
+                work: Work::Bytes(3.0 * bytes(hw * 2560)),
+            gemm: None,
+            tensors: vec![rand_tensor(ctx, &[hw, 5120], dtype, 20)?, ctx.zeros(&[hw, 2560], dtype)?],
+            record: |rec, t| ops::geglu(rec, &t[0], &t[1]),
+        },
+    ])
+}
+
+/// Best time of one case per repetition: a warm-up (the driver JITs on first dispatch), then
+/// `samples` runs of a recording that repeats the case enough to last about half a second.
+fn time_case(ctx: &Context, case: &Case, samples: usize) -> Result<Duration> {
+    let once = |reps: usize| -> Result<Duration> {
+        let mut rec = Recorder::new(ctx, false)?;
+        for _ in 0..reps {
+            (case.record)(&mut rec, &case.tensors)?;
+        }
+        let recording = rec.finish()?;
+        recording.run()?;
+        let mut best = Duration::MAX;
+        for _ in 0..samples.max(1) {
+            let t = Instant::now();
+            recording.run()?;
+            best = best.min(t.elapsed());
+        }
+        Ok(best / reps as u32)
+    };
+    let first = once(1)?;
+    let reps = (0.5 / first.as_secs_f64().max(1e-6)).clamp(1.0, 200.0) as usize;
+    Ok(if reps > 1 { once(reps)? } else { first })
+}
+
+pub fn run(args: &KernelsArgs) -> Result<()> {
+    let ctx = Context::new(args.device)?;
+    let info = ctx.info().clone();
+    let dtypes: Vec<Dtype> = if info.supports_f16() { vec![Dtype::F32, Dtype::F16] } else { vec![Dtype::F32] };
+    let mut rows = Vec::new();
+    let mut gemm_shapes = Vec::new();
+    if !args.json {
+        println!("device: {} ({}, {}), GEMM kernels: {:?}", info.name, info.kind.label(), info.driver, ctx.gemm_family());
+        println!("{:<26} {:<5} {:<32} {:>10} {:>9} {:>8}", "kernel", "dtype", "shape", "ms", "GFLOP/s", "GB/s");
+    }
+    for dtype in dtypes {
+        for case in cases(&ctx, dtype)? {
+            if args.filter.as_ref().is_some_and(|f| !case.name.contains(f.as_str())) {
+                continue;
+            }
+            let t = time_case(&ctx, &case, args.samples)?.as_secs_f64();
+            let (gflops, gbps) = match case.work {
+                Work::Flops(f) => (Some(f / t / 1e9), None),
+                Work::Bytes(b) => (None, Some(b / t / 1e9)),
+            };
+            if let Some(g) = case.gemm {
+                gemm_shapes.push(g);
+            }
+            let row = Row { kernel: case.name, dtype: dtype_name(dtype).into(), shape: case.shape.clone(), ms: t * 1e3, gflops, gbps, cpu_gflops: None, ratio_to_cpu: None };
+            if !args.json {
+                let show = |x: Option<f64>| x.map_or(String::from("-"), |v| format!("{v:.1}"));
+                println!("{:<26} {:<5} {:<32} {:>10.3} {:>9} {:>8}", row.kernel, row.dtype, row.shape, row.ms, show(row.gflops), show(row.gbps));
+            }
+            rows.push((row, case.gemm));
+        }
+    }
+    gemm_shapes.dedup();
+    let cpu: Result<Vec<CpuGemm>, String> = if args.no_cpu_reference || gemm_shapes.is_empty() { Ok(vec![]) } else { cpu_reference::measure(&gemm_shapes) };
+    if let Ok(cpu) = &cpu {
+        for (row, gemm) in &mut rows {
+            if let Some(c) = cpu.iter().find(|c| Some((c.m, c.n, c.k)) == *gemm) {
+                row.cpu_gflops = Some(c.gflops);
+                row.ratio_to_cpu = row.gflops.map(|g| g / c.gflops);
+            }
+        }
+    }
+    if args.json {
+        let out = serde_json::json!({
+            "device": info.name, "driver": info.driver, "kind": info.kind.label(), "gemm_family": format!("{:?}", ctx.gemm_family()),
+            "kernels": rows.iter().map(|(r, _)| r).collect::<Vec<_>>(),
+            "cpu_reference": cpu.as_ref().map(|c| serde_json::to_value(c).unwrap()).unwrap_or_else(|e| serde_json::Value::String(e.clone())),
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    match cpu {
+        Ok(cpu) if !cpu.is_empty() => {
+            println!("\nagainst the CPU's float32 GEMM ({}), measured just now on this machine:", cpu[0].library);
+            for (row, _) in rows.iter().filter(|(r, _)| r.ratio_to_cpu.is_some()) {
+                println!("  {:<26} {:<5} {:<18} {:>7.1} GFLOP/s vs {:>7.1} = {:.2}x", row.kernel, row.dtype, row.shape, row.gflops.unwrap(), row.cpu_gflops.unwrap(), row.ratio_to_cpu.unwrap());
+            }
+        }
+        Ok(_) => {}
+        Err(e) => println!("\nCPU reference not measured: {e} (needs python3 with numpy)"),
+    }
+    Ok(())
+}
