@@ -24,7 +24,7 @@ pub const KERNELS: &[KernelSpec] = &[
     // Register-blocked GEMM for CPU-like devices: workgroup = one subgroup, A shared by shuffles.
     KernelSpec {
         name: "gemm_sg",
-        files: &["gemm_common.wgsl", "a_matrix_v4.wgsl", "gemm_sg.wgsl"],
+        files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "gemm_sg.wgsl"],
         params: &[
             &[("SG", 8), ("TM", 16), ("BT", 0)],
             &[("SG", 8), ("TM", 16), ("BT", 1)],
@@ -34,18 +34,18 @@ pub const KERNELS: &[KernelSpec] = &[
     },
     KernelSpec {
         name: "conv_sg",
-        files: &["gemm_common.wgsl", "a_conv_v4.wgsl", "gemm_sg.wgsl"],
+        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "gemm_sg.wgsl"],
         params: &[&[("SG", 8), ("TM", 16), ("BT", 1)], &[("SG", 8), ("TM", 32), ("BT", 1)]],
     },
     // Shared-memory tiled GEMM: any shape, the variant for GPUs.
     KernelSpec {
         name: "gemm_tiled",
-        files: &["gemm_common.wgsl", "a_matrix.wgsl", "gemm_tiled.wgsl"],
+        files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix.wgsl", "gemm_tiled.wgsl"],
         params: &[&[("BT", 0)], &[("BT", 1)]],
     },
     KernelSpec {
         name: "conv_tiled",
-        files: &["gemm_common.wgsl", "a_conv.wgsl", "gemm_tiled.wgsl"],
+        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv.wgsl", "gemm_tiled.wgsl"],
         params: &[&[("BT", 1)]],
     },
     KernelSpec { name: "group_norm", files: &["reduce.wgsl", "group_norm.wgsl"], params: NONE },
@@ -71,12 +71,12 @@ pub const KERNELS: &[KernelSpec] = &[
     },
     KernelSpec {
         name: "unary",
-        files: &["activations.wgsl", "unary.wgsl"],
+        files: &["grid.wgsl", "activations.wgsl", "unary.wgsl"],
         params: &[&[("OP", 0)], &[("OP", 1)], &[("OP", 2)], &[("OP", 3)], &[("OP", 4)]],
     },
-    KernelSpec { name: "binary", files: &["binary.wgsl"], params: &[&[("OP", 0)], &[("OP", 1)]] },
-    KernelSpec { name: "geglu", files: &["activations.wgsl", "geglu.wgsl"], params: NONE },
-    KernelSpec { name: "upsample_nearest2x", files: &["upsample.wgsl"], params: NONE },
-    KernelSpec { name: "concat_channels", files: &["concat.wgsl"], params: NONE },
+    KernelSpec { name: "binary", files: &["grid.wgsl", "binary.wgsl"], params: &[&[("OP", 0)], &[("OP", 1)]] },
+    KernelSpec { name: "geglu", files: &["grid.wgsl", "activations.wgsl", "geglu.wgsl"], params: NONE },
+    KernelSpec { name: "upsample_nearest2x", files: &["grid.wgsl", "upsample.wgsl"], params: NONE },
+    KernelSpec { name: "concat_channels", files: &["grid.wgsl", "concat.wgsl"], params: NONE },
     KernelSpec { name: "timestep_embedding", files: &["timestep.wgsl"], params: NONE },
 ];

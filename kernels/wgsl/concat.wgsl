@@ -14,7 +14,7 @@ var<immediate> p: Params;
 
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
-    let i = (wg.y * p.groups_x + wg.x) * 64u + lid;
+    let i = element_index(wg, lid);
     if i >= p.n {
         return;
     }
