@@ -233,3 +233,61 @@ pub fn choose(devices: &[DeviceInfo], requested: Option<usize>) -> Result<usize>
             reason: devices[0].unsupported_reason().unwrap_or_default(),
         })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn device(index: usize, kind: DeviceKind, usable: bool) -> DeviceInfo {
+        DeviceInfo {
+            index,
+            name: format!("dev{index}"),
+            kind,
+            vendor_id: 0,
+            driver: String::new(),
+            api_version: (1, 3, 0),
+            shader_f16: true,
+            storage_16bit: true,
+            subgroup_size: 32,
+            subgroup_size_range: None,
+            subgroup_shuffle: usable,
+            subgroup_arithmetic: true,
+            cooperative_matrix: false,
+            max_storage_buffer_range: 1 << 27,
+            max_shared_memory: 32768,
+            max_workgroup_invocations: 1024,
+            max_workgroup_count: [65535; 3],
+            max_push_constants: 128,
+            max_allocation: 1 << 31,
+            device_local_bytes: 1 << 31,
+            min_storage_offset_alignment: 16,
+            timestamp_period_ns: 1.0,
+            timestamps: true,
+            compute_queue_family: Some(0),
+        }
+    }
+
+    #[test]
+    fn prefers_discrete_then_integrated_then_cpu() {
+        // Run without VKDIFF_DEVICE influence: only `requested` paths read it after None.
+        let devs = [device(0, DeviceKind::Cpu, true), device(1, DeviceKind::Integrated, true), device(2, DeviceKind::Discrete, true)];
+        assert_eq!(choose(&devs, Some(0)).unwrap(), 0);
+        if std::env::var("VKDIFF_DEVICE").is_err() {
+            assert_eq!(choose(&devs, None).unwrap(), 2);
+            assert_eq!(choose(&devs[..2], None).unwrap(), 1);
+            assert_eq!(choose(&devs[..1], None).unwrap(), 0);
+        }
+    }
+
+    #[test]
+    fn skips_unusable_devices_and_rejects_them_when_asked() {
+        let devs = [device(0, DeviceKind::Discrete, false), device(1, DeviceKind::Cpu, true)];
+        if std::env::var("VKDIFF_DEVICE").is_err() {
+            assert_eq!(choose(&devs, None).unwrap(), 1);
+        }
+        let err = choose(&devs, Some(0)).unwrap_err().to_string();
+        assert!(err.contains("dev0") && err.contains("subgroup"), "{err}");
+        assert!(choose(&devs, Some(5)).unwrap_err().to_string().contains("only 2"));
+        assert!(matches!(choose(&[], None), Err(Error::NoDevice)));
+    }
+}

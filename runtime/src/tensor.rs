@@ -27,6 +27,12 @@ pub struct Tensor {
     dtype: Dtype,
 }
 
+impl std::fmt::Debug for Tensor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Tensor({:?}, {:?}, byte offset {})", self.shape, self.dtype, self.offset)
+    }
+}
+
 impl Tensor {
     pub fn shape(&self) -> &[usize] {
         &self.shape

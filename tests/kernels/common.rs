@@ -59,14 +59,15 @@ pub fn assert_within(what: &str, got: &[f32], want: &[f64], bound: impl Fn(usize
     assert_eq!(got.len(), want.len(), "{what}: length");
     let mut worst = (0usize, 0.0f64);
     for (i, (&g, &w)) in got.iter().zip(want).enumerate() {
-        let excess = (g as f64 - w).abs() / bound(i);
-        assert!(excess.is_finite(), "{what}: element {i} is {g}, want {w}");
+        let diff = (g as f64 - w).abs();
+        assert!(diff.is_finite(), "{what}: element {i} is {g}, want {w}");
+        let excess = if diff == 0.0 { 0.0 } else { diff / bound(i) };
         if excess > worst.1 {
             worst = (i, excess);
         }
     }
     let i = worst.0;
-    assert!(worst.1 <= 1.0, "{what}: element {i} is {}, want {} (error {:.3e} > bound {:.3e})", got[i], want[i], (got[i] as f64 - want[i]).abs(), bound(i));
+    assert!(worst.1 <= 1.0 && worst.1.is_finite(), "{what}: element {i} is {}, want {} (error {:.3e} > bound {:.3e})", got[i], want[i], (got[i] as f64 - want[i]).abs(), bound(i));
 }
 
 /// `assert_within` with |err| ≤ atol + rtol·|want|.

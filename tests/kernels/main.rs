@@ -7,3 +7,4 @@ mod conv;
 mod elementwise;
 mod gemm;
 mod norm;
+mod runtime;

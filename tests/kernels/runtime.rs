@@ -1,0 +1,100 @@
+//! The runtime around the kernels: replay, barriers between dependent dispatches, profiling,
+//! memory accounting, views and device errors.
+
+use crate::common::*;
+use vkdiff_runtime::ops::{self, UnaryOp};
+use vkdiff_runtime::{Context, Dtype, Recorder};
+
+#[test]
+fn recording_replays_with_new_inputs() {
+    let ctx = ctx();
+    let x = ctx.upload(&[256], Dtype::F32, &random(256, 71)).unwrap();
+    let y = ctx.zeros(&[256], Dtype::F32).unwrap();
+    let mut rec = Recorder::new(&ctx, false).unwrap();
+    ops::unary(&mut rec, UnaryOp::Scale, &x, &y, 3.0).unwrap();
+    let recording = rec.finish().unwrap();
+    for seed in [72, 73] {
+        let data = random(256, seed);
+        x.write(&data).unwrap();
+        recording.run().unwrap();
+        let want: Vec<f64> = data.iter().map(|&v| 3.0 * v as f64).collect();
+        assert_close("replay", &y.download().unwrap(), &want, 0.0, 1e-7);
+    }
+}
+
+#[test]
+fn dependent_dispatches_see_each_other() {
+    // A chain of 40 in-place updates on one buffer plus a ping-pong between two: any missing
+    // barrier lets a dispatch read stale data on a parallel device.
+    let ctx = ctx();
+    let n = 100_000;
+    let a = ctx.upload(&[n], Dtype::F32, &vec![1.0; n]).unwrap();
+    let b = ctx.zeros(&[n], Dtype::F32).unwrap();
+    ctx.run(|rec| {
+        for _ in 0..20 {
+            ops::unary(rec, UnaryOp::Scale, &a, &b, 2.0)?;
+            ops::add(rec, &b, &a, &a)?;
+        }
+        Ok(())
+    })
+    .unwrap();
+    // a ← a + 2a = 3a, twenty times.
+    let want = vec![3f64.powi(20); n];
+    assert_close("chain", &a.download().unwrap(), &want, 0.0, 1e-6);
+}
+
+#[test]
+fn profiling_times_every_dispatch() {
+    let ctx = ctx();
+    let x = ctx.upload(&[4096], Dtype::F32, &random(4096, 74)).unwrap();
+    let mut rec = Recorder::new(&ctx, true).unwrap();
+    for _ in 0..300 {
+        ops::unary(&mut rec, UnaryOp::Silu, &x, &x, 0.0).unwrap();
+    }
+    let recording = rec.finish().unwrap();
+    let timings = recording.run_profiled().unwrap();
+    assert_eq!(timings.len(), 300, "one timing per dispatch, across query pools");
+    assert!(timings.iter().all(|t| t.kernel == "unary" && t.nanos > 0.0), "{:?}", &timings[..3]);
+}
+
+#[test]
+fn memory_accounting_tracks_live_and_peak() {
+    // A private context: other tests allocate concurrently on the shared one.
+    let ctx = Context::new(None).unwrap();
+    let before = ctx.live_bytes();
+    let t = ctx.zeros(&[1 << 20], Dtype::F32).unwrap();
+    let h = ctx.zeros(&[1 << 20], Dtype::F16).unwrap();
+    assert_eq!(ctx.live_bytes() - before, (4 << 20) + (2 << 20));
+    drop(t);
+    assert_eq!(ctx.live_bytes() - before, 2 << 20);
+    assert!(ctx.peak_bytes() >= before + (6 << 20));
+    ctx.reset_peak();
+    assert_eq!(ctx.peak_bytes(), ctx.live_bytes());
+    drop(h);
+    assert_eq!(ctx.live_bytes(), before);
+}
+
+#[test]
+fn views_and_uploads_round_trip() {
+    let ctx = ctx();
+    let data = random(8 * 32, 75);
+    for dtype in DTYPES {
+        let t = ctx.upload(&[8, 32], dtype, &data).unwrap();
+        let rows = t.narrow(2, 3).unwrap();
+        let want: Vec<f64> = stored(&data[64..160], dtype).iter().map(|&v| v as f64).collect();
+        assert_close("narrow", &rows.download().unwrap(), &want, 0.0, 0.0);
+        // Writing through a view changes only its rows.
+        rows.write(&vec![0.5; 96]).unwrap();
+        let all = t.download().unwrap();
+        assert!(all[64..160].iter().all(|&v| v == 0.5) && all[..64] == stored(&data[..64], dtype)[..]);
+    }
+    let t = ctx.zeros(&[3, 5], Dtype::F32).unwrap();
+    assert!(t.narrow(1, 1).unwrap_err().to_string().contains("alignment"));
+    assert!(t.reshape(&[4, 4]).is_err());
+}
+
+#[test]
+fn bad_device_index_is_one_clear_error() {
+    let err = Context::new(Some(99)).err().expect("device 99 should not exist").to_string();
+    assert!(err.contains("device 99") && err.contains("vkdiff devices"), "{err}");
+}
