@@ -30,12 +30,14 @@ pub const KERNELS: &[KernelSpec] = &[
             &[("SG", 8), ("TM", 16), ("BT", 1)],
             &[("SG", 8), ("TM", 32), ("BT", 0)],
             &[("SG", 8), ("TM", 32), ("BT", 1)],
+            &[("SG", 8), ("TM", 64), ("BT", 0)],
+            &[("SG", 8), ("TM", 64), ("BT", 1)],
         ],
     },
     KernelSpec {
         name: "conv_sg",
         files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "gemm_sg.wgsl"],
-        params: &[&[("SG", 8), ("TM", 16), ("BT", 1)], &[("SG", 8), ("TM", 32), ("BT", 1)]],
+        params: &[&[("SG", 8), ("TM", 16), ("BT", 1)], &[("SG", 8), ("TM", 32), ("BT", 1)], &[("SG", 8), ("TM", 64), ("BT", 1)]],
     },
     // Shared-memory tiled GEMM: any shape, the variant for GPUs.
     KernelSpec {

@@ -35,62 +35,75 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let batch = wg.z;
     let row0 = wg.x * TM;
     let slots = p.d / 4u;
+    let last = slots - 1u;
     var qs: array<vec4<f32>, TM * DV>;
     var acc: array<vec4<f32>, TM * DV>;
     var m: array<f32, TM>;
     var l: array<f32, TM>;
-    for (var r = 0u; r < TM; r++) {
-        let base = (batch * p.q_batch + min(row0 + r, p.nq - 1u) * p.q_ld + head * p.d) / 4u;
-        for (var s = 0u; s < DV; s++) {
-            let slot = s * SG + lane;
-            qs[r * DV + s] = select(vec4<f32>(0.0), p.scale * vec4<f32>(q[base + min(slot, slots - 1u)]), slot < slots);
-        }
-        m[r] = NEG;
+    // Slots past the head are zero in Q, so clamped K and V reads there contribute nothing.
+    // #unroll R TM
+    {
+        let base = (batch * p.q_batch + min(row0 + R, p.nq - 1u) * p.q_ld + head * p.d) / 4u;
+        // #unroll V DV
+        qs[R * DV + V] = select(vec4<f32>(0.0), p.scale * vec4<f32>(q[base + min(V * SG + lane, last)]), V * SG + lane < slots);
+        // #end
+        m[R] = NEG;
     }
+    // #end
     for (var j0 = 0u; j0 < p.nk; j0 += SG) {
+        // Scores of key j0 + lane against every query row; keys past the end are masked.
         let key = j0 + lane;
         let kbase = (batch * p.k_batch + min(key, p.nk - 1u) * p.k_ld + head * p.d) / 4u;
         var score: array<f32, TM>;
-        for (var s = 0u; s < DV; s++) {
-            let owners = min(SG, slots - min(slots, s * SG));
-            for (var src = 0u; src < owners; src++) {
-                let kv = vec4<f32>(k[kbase + s * SG + src]);
-                for (var r = 0u; r < TM; r++) {
-                    score[r] += dot(subgroupShuffle(qs[r * DV + s], src), kv);
-                }
-            }
+        // #unroll V DV
+        // #unroll SRC SG
+        {
+            let kv = vec4<f32>(k[kbase + min(V * SG + SRC, last)]);
+            // #unroll R TM
+            score[R] += dot(subgroupBroadcast(qs[R * DV + V], SRC), kv);
+            // #end
         }
-        for (var r = 0u; r < TM; r++) {
-            let sc = select(NEG, score[r], key < p.nk);
-            let m_new = max(m[r], subgroupMax(sc));
-            let correction = exp(m[r] - m_new);
+        // #end
+        // #end
+        // #unroll R TM
+        {
+            let sc = select(NEG, score[R], key < p.nk);
+            let m_new = max(m[R], subgroupMax(sc));
+            let correction = exp(m[R] - m_new);
             let pr = exp(sc - m_new);
-            l[r] = l[r] * correction + subgroupAdd(pr);
-            m[r] = m_new;
-            score[r] = pr;
-            for (var s = 0u; s < DV; s++) {
-                acc[r * DV + s] *= correction;
-            }
+            l[R] = l[R] * correction + subgroupAdd(pr);
+            m[R] = m_new;
+            score[R] = pr;
+            // #unroll V DV
+            acc[R * DV + V] *= correction;
+            // #end
         }
-        let keys = min(SG, p.nk - j0);
-        for (var src = 0u; src < keys; src++) {
-            let vbase = (batch * p.v_batch + (j0 + src) * p.v_ld + head * p.d) / 4u;
-            for (var s = 0u; s < DV; s++) {
-                let vv = vec4<f32>(v[vbase + min(s * SG + lane, slots - 1u)]);
-                for (var r = 0u; r < TM; r++) {
-                    acc[r * DV + s] += subgroupShuffle(score[r], src) * vv;
-                }
+        // #end
+        // Each lane accumulates its own output slots over the chunk's keys (clamped past the end,
+        // where the probability is zero).
+        // #unroll SRC SG
+        {
+            let vbase = (batch * p.v_batch + min(j0 + SRC, p.nk - 1u) * p.v_ld + head * p.d) / 4u;
+            // #unroll V DV
+            {
+                let vv = vec4<f32>(v[vbase + min(V * SG + lane, last)]);
+                // #unroll R TM
+                acc[R * DV + V] += subgroupBroadcast(score[R], SRC) * vv;
+                // #end
             }
+            // #end
+        }
+        // #end
+    }
+    // #unroll R TM
+    // #unroll V DV
+    {
+        let row = row0 + R;
+        let slot = V * SG + lane;
+        if row < p.nq && slot < slots {
+            o[(batch * p.o_batch + row * p.o_ld + head * p.d) / 4u + slot] = vec4<S>(acc[R * DV + V] / l[R]);
         }
     }
-    for (var r = 0u; r < TM; r++) {
-        let row = row0 + r;
-        let base = (batch * p.o_batch + row * p.o_ld + head * p.d) / 4u;
-        for (var s = 0u; s < DV; s++) {
-            let slot = s * SG + lane;
-            if row < p.nq && slot < slots {
-                o[base + slot] = vec4<S>(acc[r * DV + s] / l[r]);
-            }
-        }
-    }
+    // #end
+    // #end
 }

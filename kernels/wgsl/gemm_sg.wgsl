@@ -6,8 +6,10 @@
 @group(0) @binding(2) var<storage, read> bias: array<vec4<S>>;
 @group(0) @binding(3) var<storage, read_write> c: array<vec4<S>>;
 
-// Rows k..k+3 of B at columns n..n+7, as [2·row + half].
-fn load_b(boff: u32, k: u32, n: u32) -> array<vec4<f32>, 8> {
+// Rows k..k+3 of B at columns n..n+7, as [2·row + half]. Rows past K are clamped to real
+// ones: the A values they meet are zero.
+fn load_b(boff: u32, k_in: u32, n: u32) -> array<vec4<f32>, 8> {
+    let k = min(k_in, p.g.k - 4u);
     var r: array<vec4<f32>, 8>;
     if BT == 0u {
         let n0 = min(n, p.g.n - 4u);
@@ -41,18 +43,20 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     // #end
     var acc: array<vec4<f32>, 2u * TM>;
     for (var k0 = 0u; k0 < p.g.k; k0 += 4u * SG) {
-        let kc = k_ctx(k0 + 4u * lane);
+        // The last chunk may run past K: those lanes hold zeros, so no step needs a branch
+        // (llvmpipe masks every branch, which costs more than the wasted FMAs).
+        let ka = k0 + 4u * lane;
+        let kc = k_ctx(ka);
         var av: array<vec4<f32>, TM>;
         // #unroll R TM
-        av[R] = load_a(rows[R], kc);
+        av[R] = select(vec4<f32>(0.0), load_a(rows[R], kc), ka < p.g.k);
         // #end
-        let left = p.g.k - k0;
         // #unroll L SG
-        if 4u * L < left {
+        {
             let bv = load_b(boff, k0 + 4u * L, n);
             // #unroll R TM
             {
-                let x = subgroupShuffle(av[R], L);
+                let x = subgroupBroadcast(av[R], L);
                 acc[2u * R] += x.x * bv[0] + x.y * bv[2] + x.z * bv[4] + x.w * bv[6];
                 acc[2u * R + 1u] += x.x * bv[1] + x.y * bv[3] + x.z * bv[5] + x.w * bv[7];
             }

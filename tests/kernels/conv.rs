@@ -89,6 +89,13 @@ fn conv3x3_stride2_vae_padding() {
 }
 
 #[test]
+fn conv_large_images_take_the_large_row_tiles() {
+    // 34×34 = 1156 and 2·13·13 = 338 output pixels select the 64- and 32-row variants.
+    all(Case { b: 1, h: 34, w: 34, cin: 8, cout: 12, k: 3, stride: 1, pad: Padding::same(1) }, 26);
+    all(Case { b: 2, h: 13, w: 13, cin: 4, cout: 8, k: 3, stride: 1, pad: Padding::same(1) }, 27);
+}
+
+#[test]
 fn conv1x1() {
     all(Case { b: 2, h: 6, w: 5, cin: 40, cout: 20, k: 1, stride: 1, pad: Padding::same(0) }, 24);
 }

@@ -75,6 +75,13 @@ fn square_and_rectangular() {
 }
 
 #[test]
+fn tall_shapes_take_the_large_row_tiles() {
+    // M ≥ 256 and ≥ 1024 select the 32- and 64-row subgroup variants; M off their multiples.
+    both(Matmul::dense(300, 68, 36, true), true, 8);
+    both(Matmul::dense(1030, 40, 44, false), false, 9);
+}
+
+#[test]
 fn shapes_off_the_vec4_grid() {
     // N, K not multiples of 4: the subgroup family must fall back to the tiled kernel.
     both(Matmul::dense(17, 13, 27, false), true, 4);

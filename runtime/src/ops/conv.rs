@@ -63,7 +63,7 @@ pub fn conv2d(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>,
     let ctx = rec.context().clone();
     let bias = bias.unwrap_or(out);
     if ctx.gemm_family() == GemmFamily::Subgroup && ctx.subgroup_ok(8) && cin % 4 == 0 && cout % 4 == 0 {
-        let tm = if m >= 512 { 32 } else { 16 };
+        let tm = if m >= 1024 { 64 } else if m >= 256 { 32 } else { 16 };
         let kern = kernel(&ctx, "conv_sg", dtype, &[("SG", 8), ("TM", tm)], 4)?;
         return rec.dispatch(&kern, &[x, w, bias], &[out], &push, [u(n.div_ceil(64)), u(m.div_ceil(tm as usize)), 1]);
     }

@@ -75,7 +75,7 @@ pub fn matmul(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>,
     // Without a bias the kernel never reads binding 2; C stands in for it.
     let bias = bias.unwrap_or(c);
     if ctx.gemm_family() == GemmFamily::Subgroup && ctx.subgroup_ok(8) && s.fits_vec4() {
-        let tm = if s.m >= 512 { 32 } else { 16 };
+        let tm = if s.m >= 1024 { 64 } else if s.m >= 256 { 32 } else { 16 };
         let k = kernel(&ctx, "gemm_sg", dtype, &[("SG", 8), ("TM", tm), ("BT", bt)], 4)?;
         let groups = [u(s.n.div_ceil(64)), u(s.m.div_ceil(tm as usize)), u(s.batch)];
         return rec.dispatch(&k, &[a, b, bias], &[c], &common, groups);
