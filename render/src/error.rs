@@ -1,0 +1,34 @@
+//! Errors of the render library: each names the flag, value or file that is wrong, in one line.
+
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// A user-supplied setting is out of range; `flag` is the command-line spelling.
+    #[error("{flag} {value}: {reason}")]
+    InvalidArgument { flag: &'static str, value: String, reason: String },
+
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+
+    #[error("{path}: output exists already (pass --force to replace it)")]
+    OutputExists { path: PathBuf },
+
+    #[error("{visible} visible instances do not fit the 16-bit instances.png (at most 65535); lower --density")]
+    TooManyInstances { visible: usize },
+
+    #[error("PNG encoding of {path}: {message}")]
+    Png { path: PathBuf, message: String },
+}
+
+impl RenderError {
+    pub fn invalid(flag: &'static str, value: impl ToString, reason: impl Into<String>) -> Self {
+        RenderError::InvalidArgument { flag, value: value.to_string(), reason: reason.into() }
+    }
+
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        RenderError::Io { path: path.into(), source }
+    }
+}
+
+pub type Result<T> = std::result::Result<T, RenderError>;

@@ -1,0 +1,10 @@
+//! vkdiff-render: procedural white button mushroom beds and a CPU rasterizer that turns them into
+//! training annotations (metric depth, instance masks, COCO), with no GPU anywhere.
+
+pub mod error;
+pub mod math;
+pub mod mesh;
+pub mod mushroom;
+pub mod rng;
+
+pub use error::{RenderError, Result};
