@@ -5,6 +5,7 @@ pub mod error;
 pub mod math;
 pub mod mesh;
 pub mod mushroom;
+pub mod poisson;
 pub mod rng;
 
 pub use error::{RenderError, Result};
