@@ -1,10 +1,13 @@
 //! vkdiff-render: procedural white button mushroom beds and a CPU rasterizer that turns them into
 //! training annotations (metric depth, instance masks, COCO), with no GPU anywhere.
 
+pub mod camera;
 pub mod error;
+pub mod ground;
 pub mod math;
 pub mod mesh;
 pub mod mushroom;
+pub mod noise;
 pub mod poisson;
 pub mod rng;
 
