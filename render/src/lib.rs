@@ -1,6 +1,7 @@
 //! vkdiff-render: procedural white button mushroom beds and a CPU rasterizer that turns them into
 //! training annotations (metric depth, instance masks, COCO), with no GPU anywhere.
 
+pub mod bed;
 pub mod camera;
 pub mod error;
 pub mod ground;

@@ -97,7 +97,9 @@ pub fn place_disks(proposals: &[(f64, f64, f64)], region: Rect) -> Vec<Placed> {
     let mut order: Vec<usize> = (0..proposals.len()).collect();
     order.sort_by(|&a, &b| proposals[b].2.total_cmp(&proposals[a].2).then(a.cmp(&b)));
     let max_radius = proposals.iter().map(|p| p.2).fold(0.0, f64::max);
-    let mut grid = Grid::new(region, 2.0 * max_radius.max(1e-6));
+    // Cells no finer than 1/1024 of the region keep the grid small whatever the radii.
+    let extent = (region.x1 - region.x0).max(region.y1 - region.y0);
+    let mut grid = Grid::new(region, (2.0 * max_radius).max(extent / 1024.0));
     let mut placed: Vec<Placed> = Vec::new();
     for index in order {
         let (mut x, mut y, radius) = proposals[index];
