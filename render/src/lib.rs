@@ -10,6 +10,7 @@ pub mod mesh;
 pub mod mushroom;
 pub mod noise;
 pub mod poisson;
+pub mod raster;
 pub mod rng;
 
 pub use error::{RenderError, Result};
