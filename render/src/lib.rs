@@ -4,6 +4,7 @@
 pub mod bed;
 pub mod camera;
 pub mod error;
+pub mod frame;
 pub mod ground;
 pub mod math;
 pub mod mesh;
@@ -11,6 +12,8 @@ pub mod mushroom;
 pub mod noise;
 pub mod poisson;
 pub mod raster;
+pub mod rle;
 pub mod rng;
+pub mod scene;
 
 pub use error::{RenderError, Result};

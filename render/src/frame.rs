@@ -1,0 +1,95 @@
+//! A labelled frame: planar depth, instance ids 1..K in the order of the bed (0 = background),
+//! and what each instance is. Mushrooms with no visible pixel get no id, so ids match the COCO
+//! annotation ids one to one.
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::camera::Camera;
+use crate::error::{RenderError, Result};
+use crate::raster::RasterImage;
+use crate::scene::Scene;
+
+/// What an instance is, written next to its mask in the COCO annotation.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct InstanceInfo {
+    /// Index of the mushroom in the bed: the same mushroom has the same index in the full frame
+    /// and in every crop.
+    pub bed_index: usize,
+    pub age: f64,
+    pub cap_diameter_mm: f64,
+    /// Where the stem meets the compost, world coordinates in metres (see camera.json).
+    pub position_m: [f64; 3],
+    pub yaw_deg: f64,
+    pub tilt_deg: [f64; 2],
+    /// Growth row (one seed each) and stage of the variant this instance was drawn from.
+    pub variant_row: usize,
+    pub variant_stage: usize,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    pub camera: Camera,
+    /// Planar depth in metres, row-major; +∞ where nothing was drawn.
+    pub depth: Vec<f32>,
+    /// 0 = background, k = `instances[k - 1]`.
+    pub ids: Vec<u16>,
+    pub instances: Vec<InstanceInfo>,
+}
+
+impl Frame {
+    pub fn width(&self) -> usize {
+        self.camera.width as usize
+    }
+
+    pub fn height(&self) -> usize {
+        self.camera.height as usize
+    }
+
+    /// Keeps the visible mushrooms of `raster` (raster id = bed index + 1), numbered 1..K in bed
+    /// order.
+    pub fn from_raster(raster: RasterImage, scene: &Scene) -> Result<Frame> {
+        let counts = pixel_counts(&raster.ids, scene.bed.instances.len() + 1);
+        let visible = counts.iter().skip(1).filter(|&&c| c > 0).count();
+        if visible > u16::MAX as usize {
+            return Err(RenderError::TooManyInstances { visible });
+        }
+        let mut renumber = vec![0u16; counts.len()];
+        let mut instances = Vec::with_capacity(visible);
+        for (raw, _) in counts.iter().enumerate().skip(1).filter(|&(_, &c)| c > 0) {
+            instances.push(instance_info(scene, raw - 1));
+            renumber[raw] = instances.len() as u16;
+        }
+        let ids = raster.ids.par_iter().map(|&raw| renumber[raw as usize]).collect();
+        Ok(Frame { camera: scene.camera.clone(), depth: raster.depth, ids, instances })
+    }
+}
+
+/// Pixels per id for ids below `labels`.
+pub fn pixel_counts<T: Copy + Into<u32> + Sync>(ids: &[T], labels: usize) -> Vec<u64> {
+    ids.par_chunks(1 << 16)
+        .map(|chunk| {
+            let mut counts = vec![0u64; labels];
+            chunk.iter().for_each(|&id| counts[id.into() as usize] += 1);
+            counts
+        })
+        .reduce(|| vec![0u64; labels], |mut a, b| {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+            a
+        })
+}
+
+fn instance_info(scene: &Scene, bed_index: usize) -> InstanceInfo {
+    let instance = &scene.bed.instances[bed_index];
+    let variant = &scene.bed.variants[instance.variant];
+    InstanceInfo {
+        bed_index,
+        age: variant.params.age,
+        cap_diameter_mm: variant.params.cap_diameter() * 1e3,
+        position_m: instance.base.to_array(),
+        yaw_deg: instance.yaw.to_degrees(),
+        tilt_deg: [instance.tilt.0.to_degrees(), instance.tilt.1.to_degrees()],
+        variant_row: variant.row,
+        variant_stage: variant.stage,
+    }
+}
