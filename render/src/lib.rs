@@ -3,7 +3,9 @@
 
 pub mod bed;
 pub mod camera;
+pub mod coco;
 pub mod error;
+pub mod exr;
 pub mod frame;
 pub mod ground;
 pub mod math;
