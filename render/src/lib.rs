@@ -4,6 +4,7 @@
 pub mod bed;
 pub mod camera;
 pub mod coco;
+pub mod control;
 pub mod error;
 pub mod exr;
 pub mod frame;
@@ -12,7 +13,9 @@ pub mod math;
 pub mod mesh;
 pub mod mushroom;
 pub mod noise;
+pub mod png_out;
 pub mod poisson;
+pub mod preview;
 pub mod raster;
 pub mod rle;
 pub mod rng;
