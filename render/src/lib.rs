@@ -5,6 +5,7 @@ pub mod bed;
 pub mod camera;
 pub mod coco;
 pub mod control;
+pub mod crops;
 pub mod error;
 pub mod exr;
 pub mod frame;
@@ -20,5 +21,6 @@ pub mod raster;
 pub mod rle;
 pub mod rng;
 pub mod scene;
+pub mod staging;
 
 pub use error::{RenderError, Result};
