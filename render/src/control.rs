@@ -34,7 +34,8 @@ pub fn control_image(depth: &[f32], mode: ControlDepth) -> Vec<u8> {
             let level = if !valid(z) {
                 0
             } else if range > 0.0 {
-                (255.0 * (value(z) - lo) / range).round() as u8
+                // + 0.5 and truncation: rounding of a non-negative value, without a libm call.
+                (255.0 * (value(z) - lo) / range + 0.5) as u8
             } else {
                 255
             };

@@ -14,11 +14,8 @@ pub enum RenderError {
     #[error("{path}: output exists already (pass --force to replace it)")]
     OutputExists { path: PathBuf },
 
-    #[error("{visible} visible instances do not fit the 16-bit instances.png (at most 65535); lower --density")]
-    TooManyInstances { visible: usize },
-
-    #[error("PNG encoding of {path}: {message}")]
-    Png { path: PathBuf, message: String },
+    #[error("the bed holds {count} mushrooms, more than the 65534 ids of a 16-bit instances.png; lower --density")]
+    TooManyInstances { count: usize },
 }
 
 impl RenderError {

@@ -16,7 +16,7 @@ const VERSION: [u8; 4] = [2, 0, 0, 0];
 const ZIP_COMPRESSION: u8 = 3;
 const LINES_PER_BLOCK: usize = 16;
 const PIXEL_TYPE_FLOAT: i32 = 2;
-const ZLIB_LEVEL: u8 = 4;
+const ZLIB_LEVEL: u8 = 2;
 
 /// A complete EXR file holding `values` (row-major, `width`×`height`) as channel `channel`.
 pub fn encode_single_channel(width: u32, height: u32, channel: &str, values: &[f32]) -> Vec<u8> {

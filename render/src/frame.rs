@@ -6,7 +6,6 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::camera::Camera;
-use crate::error::{RenderError, Result};
 use crate::raster::RasterImage;
 use crate::scene::Scene;
 
@@ -48,29 +47,26 @@ impl Frame {
 
     /// Keeps the visible mushrooms of `raster` (raster id = bed index + 1), numbered 1..K in bed
     /// order.
-    pub fn from_raster(raster: RasterImage, scene: &Scene) -> Result<Frame> {
+    pub fn from_raster(raster: RasterImage, scene: &Scene) -> Frame {
         let counts = pixel_counts(&raster.ids, scene.bed.instances.len() + 1);
-        let visible = counts.iter().skip(1).filter(|&&c| c > 0).count();
-        if visible > u16::MAX as usize {
-            return Err(RenderError::TooManyInstances { visible });
-        }
         let mut renumber = vec![0u16; counts.len()];
-        let mut instances = Vec::with_capacity(visible);
+        let mut instances = Vec::new();
         for (raw, _) in counts.iter().enumerate().skip(1).filter(|&(_, &c)| c > 0) {
             instances.push(instance_info(scene, raw - 1));
             renumber[raw] = instances.len() as u16;
         }
-        let ids = raster.ids.par_iter().map(|&raw| renumber[raw as usize]).collect();
-        Ok(Frame { camera: scene.camera.clone(), depth: raster.depth, ids, instances })
+        let mut ids = raster.ids;
+        ids.par_iter_mut().for_each(|id| *id = renumber[*id as usize]);
+        Frame { camera: scene.camera.clone(), depth: raster.depth, ids, instances }
     }
 }
 
 /// Pixels per id for ids below `labels`.
-pub fn pixel_counts<T: Copy + Into<u32> + Sync>(ids: &[T], labels: usize) -> Vec<u64> {
+pub fn pixel_counts(ids: &[u16], labels: usize) -> Vec<u64> {
     ids.par_chunks(1 << 16)
         .map(|chunk| {
             let mut counts = vec![0u64; labels];
-            chunk.iter().for_each(|&id| counts[id.into() as usize] += 1);
+            chunk.iter().for_each(|&id| counts[id as usize] += 1);
             counts
         })
         .reduce(|| vec![0u64; labels], |mut a, b| {

@@ -2,13 +2,15 @@
 //! crumbly clods), meshed on a grid whose spacing follows the pixel size, so the depth map shows
 //! the texture of the casing without spending triangles finer than a pixel.
 
+use rayon::prelude::*;
+
 use crate::math::Vec3;
 use crate::mesh::Mesh;
 use crate::noise::GradientNoise;
 use crate::poisson::Rect;
 
 /// Grid spacing of the ground mesh in pixels of the camera looking at it.
-pub const GROUND_CELL_PX: f64 = 4.0;
+pub const GROUND_CELL_PX: f64 = 6.0;
 
 #[derive(Clone, Copy, Debug)]
 pub struct Compost {
@@ -39,14 +41,14 @@ impl Compost {
         let columns = ((region.x1 - region.x0) / spacing).ceil() as usize + 1;
         let rows = ((region.y1 - region.y0) / spacing).ceil() as usize + 1;
         let (dx, dy) = ((region.x1 - region.x0) / (columns - 1) as f64, (region.y1 - region.y0) / (rows - 1) as f64);
-        let mut mesh = Mesh { positions: Vec::with_capacity(rows * columns), triangles: Vec::with_capacity(2 * rows * columns) };
-        for r in 0..rows {
-            let y = region.y0 + r as f64 * dy;
-            for c in 0..columns {
-                let x = region.x0 + c as f64 * dx;
-                mesh.positions.push(Vec3::new(x, y, self.height(x, y)));
-            }
-        }
+        let positions = (0..rows * columns)
+            .into_par_iter()
+            .map(|i| {
+                let (x, y) = (region.x0 + (i % columns) as f64 * dx, region.y0 + (i / columns) as f64 * dy);
+                Vec3::new(x, y, self.height(x, y))
+            })
+            .collect();
+        let mut mesh = Mesh { positions, triangles: Vec::with_capacity(2 * rows * columns) };
         let at = |r: usize, c: usize| (r * columns + c) as u32;
         for r in 0..rows - 1 {
             for c in 0..columns - 1 {

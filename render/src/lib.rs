@@ -2,6 +2,7 @@
 //! training annotations (metric depth, instance masks, COCO), with no GPU anywhere.
 
 pub mod bed;
+pub mod bench;
 pub mod camera;
 pub mod coco;
 pub mod control;
@@ -14,6 +15,7 @@ pub mod math;
 pub mod mesh;
 pub mod mushroom;
 pub mod noise;
+pub mod output;
 pub mod png_out;
 pub mod poisson;
 pub mod preview;
@@ -24,3 +26,9 @@ pub mod scene;
 pub mod staging;
 
 pub use error::{RenderError, Result};
+
+/// Runs `work` on a pool of `threads` workers (0: one per core). Outputs never depend on the
+/// count; it only sets how many cores the work may use.
+pub fn with_threads<R: Send>(threads: usize, work: impl FnOnce() -> R + Send) -> std::result::Result<R, rayon::ThreadPoolBuildError> {
+    Ok(rayon::ThreadPoolBuilder::new().num_threads(threads).build()?.install(work))
+}

@@ -8,7 +8,7 @@ use crate::frame::Frame;
 
 const COMPOST: [f64; 3] = [92.0, 72.0, 54.0];
 const MUSHROOM: [f64; 3] = [238.0, 234.0, 224.0];
-const TINT: f64 = 0.35;
+const TINT: f64 = 0.25;
 
 pub fn preview_image(frame: &Frame) -> Vec<u8> {
     let (w, h) = (frame.width(), frame.height());

@@ -22,20 +22,22 @@ const BAND_ROWS: usize = 32;
 /// Nothing closer than this to the camera is drawn (the scene never comes near it).
 const NEAR_M: f64 = 1e-3;
 
-/// A front-facing triangle in screen space, clockwise on the y-down screen.
+/// A front-facing triangle in screen space, clockwise on the y-down screen (48 bytes: a frame
+/// holds a few hundred thousand).
 #[derive(Clone, Copy, Debug)]
 pub struct ScreenTriangle {
-    /// Fixed-point vertex coordinates.
-    x: [i64; 3],
-    y: [i64; 3],
+    /// Fixed-point vertex coordinates (|coordinate| < 2^28, see `project_vertices`).
+    x: [i32; 3],
+    y: [i32; 3],
     /// Inclusive pixel bounds, clipped to the image.
-    px: (u32, u32),
-    py: (u32, u32),
-    /// 1/z at pixel (px.0, py.0) and its steps per pixel in x and y.
-    inv_z: f64,
-    inv_z_dx: f64,
-    inv_z_dy: f64,
-    id: u32,
+    px: (u16, u16),
+    py: (u16, u16),
+    /// 1/z at pixel (px.0, py.0) and its steps per pixel in x and y. In f32, 1/z ≈ 1 carries
+    /// about 1e-7 relative error, a tenth of a micrometre of depth at 1 m.
+    inv_z: f32,
+    inv_z_dx: f32,
+    inv_z_dy: f32,
+    id: u16,
 }
 
 /// Depth (metres, +∞ where nothing was drawn) and id (0 where nothing was drawn) per pixel,
@@ -45,28 +47,64 @@ pub struct RasterImage {
     pub width: u32,
     pub height: u32,
     pub depth: Vec<f32>,
-    pub ids: Vec<u32>,
+    pub ids: Vec<u16>,
 }
 
-/// Projects a world-space mesh and sets up its visible triangles, tagged with `id`.
-pub fn project_mesh(camera: &Camera, positions: &[Vec3], triangles: &[[u32; 3]], id: u32, out: &mut Vec<ScreenTriangle>) {
-    let projected: Vec<Option<(i64, i64, f64)>> = positions
-        .iter()
-        .map(|&p| {
-            let (u, v, z) = camera.project(p);
-            // A bound far outside any image keeps the fixed-point products inside i64.
-            let inside = z > NEAR_M && u.abs() < 1e6 && v.abs() < 1e6;
-            inside.then(|| ((u * ONE as f64).round() as i64, (v * ONE as f64).round() as i64, 1.0 / z))
-        })
-        .collect();
-    for tri in triangles {
-        let [Some(a), Some(b), Some(c)] = tri.map(|i| projected[i as usize]) else { continue };
-        // Counter-clockwise in the world is counter-clockwise on screen, i.e. negative doubled
-        // area in y-down coordinates; swapping two vertices makes it clockwise-positive.
-        if let Some(t) = setup(camera, a, c, b, id) {
-            out.push(t);
-        }
+/// Triangles per list when a large mesh (the ground) is set up in parallel.
+const CHUNK: usize = 8192;
+
+/// Projects a world-space mesh and sets up its visible triangles, tagged with `id`: lists of
+/// triangles whose concatenation keeps the order of `triangles`.
+pub fn project_mesh(camera: &Camera, positions: &[Vec3], triangles: &[[u32; 3]], id: u16) -> Vec<Vec<ScreenTriangle>> {
+    let vertices = project_vertices(camera, positions);
+    let setup_all = |tris: &[[u32; 3]]| -> Vec<ScreenTriangle> {
+        tris.iter()
+            .filter_map(|tri| {
+                let [Some(a), Some(b), Some(c)] = tri.map(|i| vertices[i as usize]) else { return None };
+                // Counter-clockwise in the world is counter-clockwise on screen, i.e. negative
+                // doubled area in y-down coordinates; swapping two vertices makes it positive.
+                setup(camera, a, c, b, id)
+            })
+            .collect()
+    };
+    if triangles.len() > CHUNK {
+        triangles.par_chunks(CHUNK).map(setup_all).collect()
+    } else {
+        vec![setup_all(triangles)]
     }
+}
+
+/// Fixed-point screen position and 1/z of a vertex.
+#[derive(Clone, Copy, Debug)]
+struct Vertex {
+    x: i64,
+    y: i64,
+    inv_z: f64,
+}
+
+/// Vertices behind the near plane or far outside any image (2^20 px) become None, which keeps
+/// fixed-point values below 2^28 and edge products inside i64.
+fn project_vertices(camera: &Camera, positions: &[Vec3]) -> Vec<Option<Vertex>> {
+    let project = |&p: &Vec3| {
+        let (u, v, z) = camera.project(p);
+        let bound = (1 << 20) as f64;
+        (z > NEAR_M && u.abs() < bound && v.abs() < bound).then(|| Vertex {
+            x: round_to_i64(u * ONE as f64),
+            y: round_to_i64(v * ONE as f64),
+            inv_z: 1.0 / z,
+        })
+    };
+    if positions.len() > CHUNK {
+        positions.par_iter().map(project).collect()
+    } else {
+        positions.iter().map(project).collect()
+    }
+}
+
+/// Rounds half away from zero, like `f64::round`, without the libm call that baseline x86-64
+/// makes of it.
+fn round_to_i64(v: f64) -> i64 {
+    (v + 0.5f64.copysign(v)) as i64
 }
 
 /// Doubled signed area of the edge p→q against point s; positive on the inside of a clockwise
@@ -75,77 +113,80 @@ fn edge(p: (i64, i64), q: (i64, i64), s: (i64, i64)) -> i64 {
     (q.0 - p.0) * (s.1 - p.1) - (q.1 - p.1) * (s.0 - p.0)
 }
 
-fn setup(camera: &Camera, a: (i64, i64, f64), b: (i64, i64, f64), c: (i64, i64, f64), id: u32) -> Option<ScreenTriangle> {
-    let (pa, pb, pc) = ((a.0, a.1), (b.0, b.1), (c.0, c.1));
-    let area = edge(pa, pb, pc);
+fn setup(camera: &Camera, a: Vertex, b: Vertex, c: Vertex, id: u16) -> Option<ScreenTriangle> {
+    let area = edge((a.x, a.y), (b.x, b.y), (c.x, c.y));
     if area <= 0 {
         return None; // back-facing or degenerate
     }
     let ceil_px = |v: i64| (v + ONE - 1).div_euclid(ONE);
     let floor_px = |v: i64| v.div_euclid(ONE);
-    let x0 = ceil_px(a.0.min(b.0).min(c.0)).max(0);
-    let x1 = floor_px(a.0.max(b.0).max(c.0)).min(camera.width as i64 - 1);
-    let y0 = ceil_px(a.1.min(b.1).min(c.1)).max(0);
-    let y1 = floor_px(a.1.max(b.1).max(c.1)).min(camera.height as i64 - 1);
+    let x0 = ceil_px(a.x.min(b.x).min(c.x)).max(0);
+    let x1 = floor_px(a.x.max(b.x).max(c.x)).min(camera.width as i64 - 1);
+    let y0 = ceil_px(a.y.min(b.y).min(c.y)).max(0);
+    let y1 = floor_px(a.y.max(b.y).max(c.y)).min(camera.height as i64 - 1);
     if x0 > x1 || y0 > y1 {
         return None;
     }
-    // 1/z as a plane over the screen, from the barycentric weights (edge functions over area).
-    let area_f = area as f64;
-    let weight_at = |s: (i64, i64)| [edge(pb, pc, s) as f64, edge(pc, pa, s) as f64, edge(pa, pb, s) as f64];
-    let plane = |w: [f64; 3]| (w[0] * a.2 + w[1] * b.2 + w[2] * c.2) / area_f;
-    let origin = (x0 * ONE, y0 * ONE);
-    let inv_z = plane(weight_at(origin));
+    // 1/z is the barycentric blend of the vertices' 1/z; the weights are the edge functions
+    // over the area, so its gradient follows from the edges' slopes.
+    let scale = ONE as f64 / area as f64;
+    let dx = -((c.y - b.y) as f64 * a.inv_z + (a.y - c.y) as f64 * b.inv_z + (b.y - a.y) as f64 * c.inv_z) * scale;
+    let dy = ((c.x - b.x) as f64 * a.inv_z + (a.x - c.x) as f64 * b.inv_z + (b.x - a.x) as f64 * c.inv_z) * scale;
+    let (ox, oy) = (x0 as f64 - a.x as f64 / ONE as f64, y0 as f64 - a.y as f64 / ONE as f64);
     Some(ScreenTriangle {
-        x: [a.0, b.0, c.0],
-        y: [a.1, b.1, c.1],
-        px: (x0 as u32, x1 as u32),
-        py: (y0 as u32, y1 as u32),
-        inv_z,
-        inv_z_dx: plane(weight_at((origin.0 + ONE, origin.1))) - inv_z,
-        inv_z_dy: plane(weight_at((origin.0, origin.1 + ONE))) - inv_z,
+        x: [a.x as i32, b.x as i32, c.x as i32],
+        y: [a.y as i32, b.y as i32, c.y as i32],
+        px: (x0 as u16, x1 as u16),
+        py: (y0 as u16, y1 as u16),
+        inv_z: (a.inv_z + dx * ox + dy * oy) as f32,
+        inv_z_dx: dx as f32,
+        inv_z_dy: dy as f32,
         id,
     })
 }
 
-/// Draws `triangles` in order into a `width`×`height` image.
-pub fn rasterize(width: u32, height: u32, triangles: &[ScreenTriangle]) -> RasterImage {
+/// Draws the triangles of `lists`, list by list and in order within each, into a
+/// `width`×`height` image (at most `MAX_SIDE` pixels a side).
+pub fn rasterize(width: u32, height: u32, lists: &[Vec<ScreenTriangle>]) -> RasterImage {
     let (w, h) = (width as usize, height as usize);
     let bands = h.div_ceil(BAND_ROWS);
-    let band_lists = bin_by_band(triangles, bands);
-    let mut inv_depth = vec![0f32; w * h];
-    let mut ids = vec![0u32; w * h];
-    inv_depth.par_chunks_mut(BAND_ROWS * w).zip(ids.par_chunks_mut(BAND_ROWS * w)).zip(band_lists.par_iter()).enumerate().for_each(
+    let band_lists = bin_by_band(lists, bands);
+    // The buffer holds 1/z while drawing and becomes z in place afterwards.
+    let mut depth = vec![0f32; w * h];
+    let mut ids = vec![0u16; w * h];
+    depth.par_chunks_mut(BAND_ROWS * w).zip(ids.par_chunks_mut(BAND_ROWS * w)).zip(band_lists.par_iter()).enumerate().for_each(
         |(band, ((inv_depth, ids), list))| {
             let rows = (band * BAND_ROWS) as u32..((band + 1) * BAND_ROWS).min(h) as u32;
-            for &t in list {
-                draw(&triangles[t as usize], rows.clone(), w, inv_depth, ids);
+            for &(l, t) in list {
+                draw(&lists[l as usize][t as usize], rows.clone(), w, inv_depth, ids);
             }
+            inv_depth.iter_mut().for_each(|v| *v = if *v > 0.0 { 1.0 / *v } else { f32::INFINITY });
         },
     );
-    let depth = inv_depth.par_iter().map(|&iz| if iz > 0.0 { 1.0 / iz } else { f32::INFINITY }).collect();
     RasterImage { width, height, depth, ids }
 }
 
-/// Triangle indices per band of rows, each list in submission order (a counting sort).
-fn bin_by_band(triangles: &[ScreenTriangle], bands: usize) -> Vec<Vec<u32>> {
+/// (list, triangle) indices per band of rows, each in submission order (a counting sort).
+fn bin_by_band(lists: &[Vec<ScreenTriangle>], bands: usize) -> Vec<Vec<(u32, u32)>> {
     let span = |t: &ScreenTriangle| t.py.0 as usize / BAND_ROWS..=t.py.1 as usize / BAND_ROWS;
     let mut counts = vec![0usize; bands];
-    triangles.iter().for_each(|t| span(t).for_each(|b| counts[b] += 1));
-    let mut lists: Vec<Vec<u32>> = counts.into_iter().map(Vec::with_capacity).collect();
-    for (i, t) in triangles.iter().enumerate() {
-        span(t).for_each(|b| lists[b].push(i as u32));
+    lists.iter().flatten().for_each(|t| span(t).for_each(|b| counts[b] += 1));
+    let mut bins: Vec<Vec<(u32, u32)>> = counts.into_iter().map(Vec::with_capacity).collect();
+    for (l, list) in lists.iter().enumerate() {
+        for (i, t) in list.iter().enumerate() {
+            span(t).for_each(|b| bins[b].push((l as u32, i as u32)));
+        }
     }
-    lists
+    bins
 }
 
 /// Rasterizes one triangle into the rows `rows` of the image; the slices hold exactly those rows.
-fn draw(t: &ScreenTriangle, rows: std::ops::Range<u32>, width: usize, inv_depth: &mut [f32], ids: &mut [u32]) {
-    let (y0, y1) = (t.py.0.max(rows.start), t.py.1.min(rows.end - 1));
+fn draw(t: &ScreenTriangle, rows: std::ops::Range<u32>, width: usize, inv_depth: &mut [f32], ids: &mut [u16]) {
+    let (y0, y1) = ((t.py.0 as u32).max(rows.start), (t.py.1 as u32).min(rows.end - 1));
     if y0 > y1 {
         return;
     }
-    let v = |i: usize| (t.x[i], t.y[i]);
+    let v = |i: usize| (t.x[i] as i64, t.y[i] as i64);
     // Edge k is opposite vertex k. Top-left rule: a centre exactly on an edge belongs to the
     // triangle only for top edges (horizontal, interior below) and left edges (going up).
     let edges = [(v(1), v(2)), (v(2), v(0)), (v(0), v(1))];
@@ -162,21 +203,22 @@ fn draw(t: &ScreenTriangle, rows: std::ops::Range<u32>, width: usize, inv_depth:
     let row_base = rows.start as usize;
     for y in y0..=y1 {
         let mut e = row_e;
-        let mut inv_z = t.inv_z + t.inv_z_dy * (y - t.py.0) as f64;
+        // Evaluated afresh at each pixel rather than accumulated, so f32 rounding never builds
+        // up along a row.
+        let row_inv_z = t.inv_z + t.inv_z_dy * (y - t.py.0 as u32) as f32;
         let line = (y as usize - row_base) * width;
         for x in t.px.0..=t.px.1 {
             if (e[0] | e[1] | e[2]) >= 0 {
                 let i = line + x as usize;
-                let iz = inv_z as f32;
-                if iz > inv_depth[i] {
-                    inv_depth[i] = iz;
+                let inv_z = row_inv_z + t.inv_z_dx * (x - t.px.0) as f32;
+                if inv_z > inv_depth[i] {
+                    inv_depth[i] = inv_z;
                     ids[i] = t.id;
                 }
             }
             for k in 0..3 {
                 e[k] += step_x[k];
             }
-            inv_z += t.inv_z_dx;
         }
         for k in 0..3 {
             row_e[k] += step_y[k];
@@ -216,26 +258,22 @@ mod tests {
         mesh
     }
 
-    fn render(cam: &Camera, meshes: &[(&Mesh, u32)]) -> RasterImage {
-        let mut tris = Vec::new();
-        for (mesh, id) in meshes {
-            project_mesh(cam, &mesh.positions, &mesh.triangles, *id, &mut tris);
-        }
-        rasterize(cam.width, cam.height, &tris)
+    fn render(cam: &Camera, meshes: &[(&Mesh, u16)]) -> RasterImage {
+        let lists: Vec<Vec<ScreenTriangle>> = meshes.iter().flat_map(|(mesh, id)| project_mesh(cam, &mesh.positions, &mesh.triangles, *id)).collect();
+        rasterize(cam.width, cam.height, &lists)
     }
 
     #[test]
     fn shared_edges_are_watertight_and_each_pixel_drawn_once() {
         let cam = camera(97, 61);
         let mesh = plane(&cam, 0.0, 9);
-        let mut tris = Vec::new();
-        project_mesh(&cam, &mesh.positions, &mesh.triangles, 1, &mut tris);
+        let tris: Vec<ScreenTriangle> = project_mesh(&cam, &mesh.positions, &mesh.triangles, 1).concat();
         // Give every triangle its own id and count how many triangles cover each pixel when
         // the z-test cannot hide anything (coplanar, equal depth: the first one keeps it).
         let mut coverage = vec![0u32; 97 * 61];
         for t in &tris {
             let mut depth = vec![0f32; 97 * 61];
-            let mut ids = vec![0u32; 97 * 61];
+            let mut ids = vec![0u16; 97 * 61];
             let rows = 0..61;
             draw(t, rows, 97, &mut depth, &mut ids);
             ids.iter().zip(&mut coverage).for_each(|(&id, c)| *c += u32::from(id != 0));

@@ -11,7 +11,7 @@ use crate::math::Vec3;
 use crate::raster::{project_mesh, rasterize, ScreenTriangle};
 
 /// Raster id of the compost: the same as "nothing drawn", since both are background.
-pub const GROUND_ID: u32 = 0;
+pub const GROUND_ID: u16 = 0;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct SceneConfig {
@@ -57,32 +57,33 @@ pub struct Scene {
 }
 
 impl Scene {
-    pub fn build(seed: u64, config: &SceneConfig) -> Scene {
+    /// The scene of `seed`; fails only when the bed holds more mushrooms than 16-bit ids.
+    pub fn build(seed: u64, config: &SceneConfig) -> Result<Scene> {
         let camera = config.camera();
         let bed = Bed::generate(seed, &config.bed, &camera);
-        Scene { seed, camera, bed }
+        if bed.instances.len() >= u16::MAX as usize {
+            return Err(RenderError::TooManyInstances { count: bed.instances.len() });
+        }
+        Ok(Scene { seed, camera, bed })
     }
 
     /// Screen triangles of the ground, then of every mushroom in bed order (raster id = bed
-    /// index + 1). Mushrooms are projected in parallel and concatenated in order.
-    pub fn project(&self) -> Vec<ScreenTriangle> {
-        let mut triangles = Vec::new();
-        project_mesh(&self.camera, &self.bed.ground.positions, &self.bed.ground.triangles, GROUND_ID, &mut triangles);
-        let per_instance: Vec<Vec<ScreenTriangle>> = (0..self.bed.instances.len())
+    /// index + 1), as lists whose concatenation is the drawing order.
+    pub fn project(&self) -> Vec<Vec<ScreenTriangle>> {
+        let mut lists = project_mesh(&self.camera, &self.bed.ground.positions, &self.bed.ground.triangles, GROUND_ID);
+        let mushrooms: Vec<Vec<ScreenTriangle>> = (0..self.bed.instances.len())
             .into_par_iter()
-            .map(|i| {
+            .flat_map_iter(|i| {
                 let mesh = &self.bed.variants[self.bed.instances[i].variant].mesh;
-                let mut out = Vec::with_capacity(mesh.triangles.len() / 2);
-                project_mesh(&self.camera, &self.bed.instance_positions(i), &mesh.triangles, i as u32 + 1, &mut out);
-                out
+                project_mesh(&self.camera, &self.bed.instance_positions(i), &mesh.triangles, i as u16 + 1)
             })
             .collect();
-        per_instance.into_iter().for_each(|t| triangles.extend(t));
-        triangles
+        lists.extend(mushrooms);
+        lists
     }
 
     /// The whole pipeline: project, rasterize, label.
-    pub fn render(&self) -> Result<Frame> {
+    pub fn render(&self) -> Frame {
         let raster = rasterize(self.camera.width, self.camera.height, &self.project());
         Frame::from_raster(raster, self)
     }
