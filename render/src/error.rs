@@ -8,8 +8,9 @@ pub enum RenderError {
     #[error("{flag} {value}: {reason}")]
     InvalidArgument { flag: &'static str, value: String, reason: String },
 
-    #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    /// `error` is deliberately not a `#[source]`: its text is already in the one line.
+    #[error("cannot {action} {path}: {error}")]
+    Io { action: &'static str, path: PathBuf, error: std::io::Error },
 
     #[error("{path}: output exists already (pass --force to replace it)")]
     OutputExists { path: PathBuf },
@@ -23,8 +24,8 @@ impl RenderError {
         RenderError::InvalidArgument { flag, value: value.to_string(), reason: reason.into() }
     }
 
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        RenderError::Io { path: path.into(), source }
+    pub fn io(action: &'static str, path: impl Into<PathBuf>, error: std::io::Error) -> Self {
+        RenderError::Io { action, path: path.into(), error }
     }
 }
 

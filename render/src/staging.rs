@@ -31,8 +31,8 @@ impl StagingDir {
         }
         let staging = sibling(target, "partial")?;
         let parent = staging.parent().unwrap_or(Path::new("."));
-        std::fs::create_dir_all(parent).map_err(|e| RenderError::io(parent, e))?;
-        std::fs::create_dir(&staging).map_err(|e| RenderError::io(parent, e))?;
+        std::fs::create_dir_all(parent).map_err(|e| RenderError::io("create folder", parent, e))?;
+        std::fs::create_dir(&staging).map_err(|e| RenderError::io("write into folder", parent, e))?;
         Ok(StagingDir { staging, target: target.to_path_buf(), committed: false })
     }
 
@@ -40,9 +40,9 @@ impl StagingDir {
     pub fn write(&self, relative: &str, bytes: &[u8]) -> Result<()> {
         let path = self.staging.join(relative);
         if let Some(dir) = path.parent() {
-            std::fs::create_dir_all(dir).map_err(|e| RenderError::io(dir, e))?;
+            std::fs::create_dir_all(dir).map_err(|e| RenderError::io("create folder", dir, e))?;
         }
-        std::fs::write(&path, bytes).map_err(|e| RenderError::io(self.target.join(relative), e))
+        std::fs::write(&path, bytes).map_err(|e| RenderError::io("write", self.target.join(relative), e))
     }
 
     /// Moves the folder into place; an existing target (allowed by `replace`) is moved aside
@@ -50,15 +50,15 @@ impl StagingDir {
     pub fn commit(mut self) -> Result<()> {
         let old = if self.target.exists() {
             let aside = sibling(&self.target, "old")?;
-            std::fs::rename(&self.target, &aside).map_err(|e| RenderError::io(&self.target, e))?;
+            std::fs::rename(&self.target, &aside).map_err(|e| RenderError::io("move aside", &self.target, e))?;
             Some(aside)
         } else {
             None
         };
-        std::fs::rename(&self.staging, &self.target).map_err(|e| RenderError::io(&self.target, e))?;
+        std::fs::rename(&self.staging, &self.target).map_err(|e| RenderError::io("move into place", &self.target, e))?;
         self.committed = true;
         if let Some(old) = old {
-            std::fs::remove_dir_all(&old).map_err(|e| RenderError::io(&old, e))?;
+            std::fs::remove_dir_all(&old).map_err(|e| RenderError::io("remove the replaced", &old, e))?;
         }
         Ok(())
     }
