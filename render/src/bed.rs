@@ -153,9 +153,10 @@ fn place_instances(seed: u64, config: &BedConfig, region: Rect, variants: &[Vari
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::SceneConfig;
 
     fn camera() -> Camera {
-        Camera::top_down(1920, 1080, 50.0, 36.0, Vec3::new(0.0, 0.0, 1.0))
+        SceneConfig::default().camera()
     }
 
     #[test]
