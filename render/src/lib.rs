@@ -1,5 +1,17 @@
 //! vkdiff-render: procedural white button mushroom beds and a CPU rasterizer that turns them into
 //! training annotations (metric depth, instance masks, COCO), with no GPU anywhere.
+//!
+//! The pipeline, one module per step:
+//! - the scene: [`mushroom`] (one *Agaricus bisporus* from age, randomness, seed) revolved into a
+//!   [`mesh`]; [`bed`] (80 growth-stage variants, placed by [`poisson`] on the [`ground`] made
+//!   from [`noise`]), all seen by the [`camera`] — gathered in [`scene`];
+//! - the picture: [`raster`] (z-buffer: planar depth and an id per pixel), [`frame`] (ids
+//!   renumbered 1..K over the visible mushrooms), [`crops`];
+//! - the files: [`exr`] (depth.exr), [`png_out`] (instances.png, control.png, preview.png from
+//!   [`control`] and [`preview`]), [`coco`] with [`rle`] (annotations.json), written atomically by
+//!   [`output`] through [`staging`];
+//! - [`bench`] times the stages. Randomness comes from [`rng`] only, seeded per scene and per
+//!   stream, so the bytes depend on the seed and the settings, never on threads.
 
 pub mod bed;
 pub mod bench;

@@ -51,7 +51,6 @@ impl SceneConfig {
 
 #[derive(Clone, Debug)]
 pub struct Scene {
-    pub seed: u64,
     pub camera: Camera,
     pub bed: Bed,
 }
@@ -64,7 +63,7 @@ impl Scene {
         if bed.instances.len() >= u16::MAX as usize {
             return Err(RenderError::TooManyInstances { count: bed.instances.len() });
         }
-        Ok(Scene { seed, camera, bed })
+        Ok(Scene { camera, bed })
     }
 
     /// Screen triangles of the ground, then of every mushroom in bed order (raster id = bed
