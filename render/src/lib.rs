@@ -10,7 +10,7 @@
 //! - the files: [`exr`] (depth.exr), [`png_out`] (instances.png, control.png, preview.png from
 //!   [`control`] and [`preview`]), [`coco`] with [`rle`] (annotations.json), written atomically by
 //!   [`output`] through [`staging`];
-//! - [`bench`] times the stages. Randomness comes from [`rng`] only, seeded per scene and per
+//! - [`bench`](mod@bench) times the stages. Randomness comes from [`rng`] only, seeded per scene and per
 //!   stream, so the bytes depend on the seed and the settings, never on threads.
 
 pub mod bed;

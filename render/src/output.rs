@@ -1,5 +1,5 @@
 //! What `vkdiff scene` writes: one folder per scene with depth.exr, instances.png,
-//! annotations.json, camera.json, control.png and preview.png, plus crops/<k>/ with the same
+//! annotations.json, camera.json, control.png and preview.png, plus `crops/<k>/` with the same
 //! files (but the preview) for each crop. Files are produced in memory and the folder appears
 //! atomically; the bytes depend on the seed and the settings only.
 
