@@ -4,9 +4,10 @@
 //! Why our own writer rather than the `exr` crate: the layout needed is fixed and small (about
 //! a hundred lines against a crate with a dozen dependencies), its bytes are ours to keep stable
 //! (same seed, same file), and blocks compress in parallel on the pool the scene already uses.
-//! ZIP because it is lossless, Blender's default EXR codec, read by every OpenEXR reader, and
-//! roughly halves a depth map. The tests read our files back with the `exr` crate, an
-//! independent implementation.
+//! ZIP because it is lossless, Blender's default EXR codec and read by every OpenEXR reader; on a
+//! 1920×1080 depth map it saves about a quarter (8.3 → 6.1 MB: the low mantissa bits of float
+//! depth are noise to any coder). The tests read our files back with the `exr` crate, and
+//! tools/exr_check.py with the OpenEXR library itself: two independent implementations.
 
 use rayon::prelude::*;
 
@@ -16,6 +17,8 @@ const VERSION: [u8; 4] = [2, 0, 0, 0];
 const ZIP_COMPRESSION: u8 = 3;
 const LINES_PER_BLOCK: usize = 16;
 const PIXEL_TYPE_FLOAT: i32 = 2;
+/// Measured on 1920×1080 depth: level 1 gives 7.2 MB in 47 ms, level 2 6.1 MB in 100 ms,
+/// level 4 6.0 MB in 290 ms (one core). Level 2 is the knee.
 const ZLIB_LEVEL: u8 = 2;
 
 /// A complete EXR file holding `values` (row-major, `width`×`height`) as channel `channel`.

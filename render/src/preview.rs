@@ -13,6 +13,7 @@ const TINT: f64 = 0.25;
 pub fn preview_image(frame: &Frame) -> Vec<u8> {
     let (w, h) = (frame.width(), frame.height());
     let light = normalize([-0.45, -0.55, -1.0]); // towards the light, camera axes (z forward)
+    let tints: Vec<[f64; 3]> = (0..=frame.instances.len()).map(|id| instance_colour(id as u16)).collect();
     let mut rgb = vec![0u8; w * h * 3];
     rgb.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
         for x in 0..w {
@@ -36,7 +37,7 @@ pub fn preview_image(frame: &Frame) -> Vec<u8> {
             let id = frame.ids[i];
             let mut colour = if id == 0 { COMPOST } else { MUSHROOM }.map(|c| c * shade);
             if id != 0 {
-                let tint = instance_colour(id);
+                let tint = tints[id as usize];
                 let edge = [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
                     let (xx, yy) = (x as isize + dx, y as isize + dy);
                     xx >= 0 && yy >= 0 && (xx as usize) < w && (yy as usize) < h && frame.ids[yy as usize * w + xx as usize] != id
@@ -44,7 +45,8 @@ pub fn preview_image(frame: &Frame) -> Vec<u8> {
                 let alpha = if edge { 0.9 } else { TINT };
                 colour = [0, 1, 2].map(|c| colour[c] * (1.0 - alpha) + tint[c] * alpha * if edge { 1.0 } else { shade });
             }
-            row[x * 3..x * 3 + 3].copy_from_slice(&colour.map(|c| c.round().clamp(0.0, 255.0) as u8));
+            // + 0.5 and a saturating cast: rounding without the libm call.
+            row[x * 3..x * 3 + 3].copy_from_slice(&colour.map(|c| (c + 0.5) as u8));
         }
     });
     rgb
