@@ -188,6 +188,18 @@ mod tests {
     }
 
     #[test]
+    fn placed_mushrooms_keep_the_poisson_distance_of_their_caps() {
+        let bed = Bed::generate(6, &BedConfig::default(), &camera());
+        let radius = |i: &Instance| bed.variants[i.variant].morphology.cap_radius;
+        for (n, a) in bed.instances.iter().enumerate() {
+            for b in &bed.instances[n + 1..] {
+                let d = (a.base.x - b.base.x).hypot(a.base.y - b.base.y);
+                assert!(d >= crate::poisson::min_distance(radius(a), radius(b)), "{a:?} and {b:?}");
+            }
+        }
+    }
+
+    #[test]
     fn density_scales_the_count_and_zero_is_an_empty_bed() {
         let count = |density: f64| Bed::generate(8, &BedConfig { density, ..BedConfig::default() }, &camera()).instances.len();
         assert_eq!(count(0.0), 0);
