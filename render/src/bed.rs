@@ -27,7 +27,7 @@ pub struct BedConfig {
 impl Default for BedConfig {
     fn default() -> Self {
         BedConfig {
-            density: 560.0,
+            density: 552.0,
             clumping: Clumping { clustered_fraction: 0.8, clusters_per_m2: 40.0, cluster_sigma: 0.03 },
             rows: 4,
             stages: 20,
