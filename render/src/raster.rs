@@ -150,34 +150,37 @@ fn setup(camera: &Camera, a: Vertex, b: Vertex, c: Vertex, id: u16) -> Option<Sc
 pub fn rasterize(width: u32, height: u32, lists: &[Vec<ScreenTriangle>]) -> RasterImage {
     let (w, h) = (width as usize, height as usize);
     let bands = h.div_ceil(BAND_ROWS);
-    let band_lists = bin_by_band(lists, bands);
+    let bins = bin_by_band(lists, bands);
     // The buffer holds 1/z while drawing and becomes z in place afterwards.
     let mut depth = vec![0f32; w * h];
     let mut ids = vec![0u16; w * h];
-    depth.par_chunks_mut(BAND_ROWS * w).zip(ids.par_chunks_mut(BAND_ROWS * w)).zip(band_lists.par_iter()).enumerate().for_each(
-        |(band, ((inv_depth, ids), list))| {
-            let rows = (band * BAND_ROWS) as u32..((band + 1) * BAND_ROWS).min(h) as u32;
-            for &(l, t) in list {
-                draw(&lists[l as usize][t as usize], rows.clone(), w, inv_depth, ids);
+    depth.par_chunks_mut(BAND_ROWS * w).zip(ids.par_chunks_mut(BAND_ROWS * w)).enumerate().for_each(|(band, (inv_depth, ids))| {
+        let rows = (band * BAND_ROWS) as u32..((band + 1) * BAND_ROWS).min(h) as u32;
+        for (list, list_bins) in lists.iter().zip(&bins) {
+            for &t in &list_bins[band] {
+                draw(&list[t as usize], rows.clone(), w, inv_depth, ids);
             }
-            inv_depth.iter_mut().for_each(|v| *v = if *v > 0.0 { 1.0 / *v } else { f32::INFINITY });
-        },
-    );
+        }
+        inv_depth.iter_mut().for_each(|v| *v = if *v > 0.0 { 1.0 / *v } else { f32::INFINITY });
+    });
     RasterImage { width, height, depth, ids }
 }
 
-/// (list, triangle) indices per band of rows, each in submission order (a counting sort).
-fn bin_by_band(lists: &[Vec<ScreenTriangle>], bands: usize) -> Vec<Vec<(u32, u32)>> {
-    let span = |t: &ScreenTriangle| t.py.0 as usize / BAND_ROWS..=t.py.1 as usize / BAND_ROWS;
-    let mut counts = vec![0usize; bands];
-    lists.iter().flatten().for_each(|t| span(t).for_each(|b| counts[b] += 1));
-    let mut bins: Vec<Vec<(u32, u32)>> = counts.into_iter().map(Vec::with_capacity).collect();
-    for (l, list) in lists.iter().enumerate() {
-        for (i, t) in list.iter().enumerate() {
-            span(t).for_each(|b| bins[b].push((l as u32, i as u32)));
-        }
-    }
-    bins
+/// For each list, the indices of its triangles that reach each band of rows, in order; lists
+/// are binned in parallel.
+fn bin_by_band(lists: &[Vec<ScreenTriangle>], bands: usize) -> Vec<Vec<Vec<u32>>> {
+    lists
+        .par_iter()
+        .map(|list| {
+            let mut bins = vec![Vec::new(); bands];
+            for (i, t) in list.iter().enumerate() {
+                for band in t.py.0 as usize / BAND_ROWS..=t.py.1 as usize / BAND_ROWS {
+                    bins[band].push(i as u32);
+                }
+            }
+            bins
+        })
+        .collect()
 }
 
 /// Rasterizes one triangle into the rows `rows` of the image; the slices hold exactly those rows.
