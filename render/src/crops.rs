@@ -4,7 +4,7 @@
 //! camera (principal point shifted by the window's offset).
 
 use crate::error::{RenderError, Result};
-use crate::frame::{pixel_counts, Frame};
+use crate::frame::{pixel_counts, renumber, Frame};
 use crate::rng::{Rng, Stream};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -35,25 +35,14 @@ pub fn crop_windows(seed: u64, count: usize, size: u32, width: u32, height: u32)
 pub fn crop_frame(frame: &Frame, window: CropWindow, min_fraction: f64) -> Frame {
     let (w, s) = (frame.width(), window.size as usize);
     let rows = (window.y0 as usize..window.y0 as usize + s).map(|y| y * w + window.x0 as usize..y * w + window.x0 as usize + s);
-    let full_ids: Vec<u16> = rows.clone().flat_map(|r| frame.ids[r].iter().copied()).collect();
+    let mut ids: Vec<u16> = rows.clone().flat_map(|r| frame.ids[r].iter().copied()).collect();
     let depth: Vec<f32> = rows.flat_map(|r| frame.depth[r].iter().copied()).collect();
     let labels = frame.instances.len() + 1;
     let in_frame = pixel_counts(&frame.ids, labels);
-    let in_crop = pixel_counts(&full_ids, labels);
-    let mut renumber = vec![0u16; labels];
-    let mut instances = Vec::new();
-    for id in 1..labels {
-        if in_crop[id] > 0 && in_crop[id] as f64 >= min_fraction * in_frame[id] as f64 {
-            instances.push(frame.instances[id - 1].clone());
-            renumber[id] = instances.len() as u16;
-        }
-    }
-    Frame {
-        camera: frame.camera.crop(window.x0, window.y0, window.size, window.size),
-        depth,
-        ids: full_ids.iter().map(|&id| renumber[id as usize]).collect(),
-        instances,
-    }
+    let in_crop = pixel_counts(&ids, labels);
+    let kept = renumber(&mut ids, labels, |id| in_crop[id] > 0 && in_crop[id] as f64 >= min_fraction * in_frame[id] as f64);
+    let instances = kept.iter().map(|&id| frame.instances[id - 1].clone()).collect();
+    Frame { camera: frame.camera.crop(window.x0, window.y0, window.size, window.size), depth, ids, instances }
 }
 
 pub fn validate_min_fraction(min_fraction: f64) -> Result<()> {

@@ -49,16 +49,21 @@ impl Frame {
     /// order.
     pub fn from_raster(raster: RasterImage, scene: &Scene) -> Frame {
         let counts = pixel_counts(&raster.ids, scene.bed.instances.len() + 1);
-        let mut renumber = vec![0u16; counts.len()];
-        let mut instances = Vec::new();
-        for (raw, _) in counts.iter().enumerate().skip(1).filter(|&(_, &c)| c > 0) {
-            instances.push(instance_info(scene, raw - 1));
-            renumber[raw] = instances.len() as u16;
-        }
         let mut ids = raster.ids;
-        ids.par_iter_mut().for_each(|id| *id = renumber[*id as usize]);
+        let kept = renumber(&mut ids, counts.len(), |raw| counts[raw] > 0);
+        let instances = kept.iter().map(|&raw| instance_info(scene, raw - 1)).collect();
         Frame { camera: scene.camera.clone(), depth: raster.depth, ids, instances }
     }
+}
+
+/// Renumbers the labels 1..`labels` that `keep` accepts to 1..K in order, in place (0 and the
+/// labels dropped become 0); returns the labels kept, in order.
+pub fn renumber(ids: &mut [u16], labels: usize, keep: impl Fn(usize) -> bool) -> Vec<usize> {
+    let kept: Vec<usize> = (1..labels).filter(|&label| keep(label)).collect();
+    let mut map = vec![0u16; labels];
+    kept.iter().enumerate().for_each(|(k, &label)| map[label] = k as u16 + 1);
+    ids.par_iter_mut().for_each(|id| *id = map[*id as usize]);
+    kept
 }
 
 /// Pixels per id for ids below `labels`.
