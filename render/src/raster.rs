@@ -174,9 +174,8 @@ fn bin_by_band(lists: &[Vec<ScreenTriangle>], bands: usize) -> Vec<Vec<Vec<u32>>
         .map(|list| {
             let mut bins = vec![Vec::new(); bands];
             for (i, t) in list.iter().enumerate() {
-                for band in t.py.0 as usize / BAND_ROWS..=t.py.1 as usize / BAND_ROWS {
-                    bins[band].push(i as u32);
-                }
+                let span = t.py.0 as usize / BAND_ROWS..=t.py.1 as usize / BAND_ROWS;
+                bins[span].iter_mut().for_each(|bin| bin.push(i as u32));
             }
             bins
         })
