@@ -133,6 +133,9 @@ pub fn scene_folder_name(seed: u64) -> String {
 /// Scenes `first_seed..first_seed + count` into numbered subfolders of `dir`, in parallel.
 pub fn write_dataset(dir: &Path, first_seed: u64, count: u64, config: &SceneConfig, options: &OutputOptions) -> Result<DatasetReport> {
     validate(config, options)?;
+    if count == 0 {
+        return Err(RenderError::invalid("--count", count, "must be at least 1"));
+    }
     if first_seed.checked_add(count).is_none() {
         return Err(RenderError::invalid("--count", count, format!("runs past the largest seed from --seed {first_seed}")));
     }

@@ -51,6 +51,16 @@ fn negative_density_and_out_of_range_settings_are_refused() {
 }
 
 #[test]
+fn a_dataset_needs_scenes_and_seeds() {
+    let root = common::scratch("count");
+    let err = write_dataset(&root.join("beds"), 0, 0, &small(), &OutputOptions::default()).unwrap_err();
+    assert_eq!(err.to_string(), "--count 0: must be at least 1");
+    let err = write_dataset(&root.join("beds"), u64::MAX, 2, &small(), &OutputOptions::default()).unwrap_err();
+    assert!(err.to_string().starts_with("--count 2: runs past the largest seed"), "{err}");
+    assert!(entries(&root).is_empty());
+}
+
+#[test]
 fn an_unwritable_folder_is_named_and_nothing_is_written() {
     let root = common::scratch("unwritable");
     // A folder cannot be made inside a file (permissions would not stop root).
