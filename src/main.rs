@@ -2,6 +2,7 @@
 
 mod bench;
 mod devices_cmd;
+mod scene_cmd;
 
 use clap::{Parser, Subcommand};
 
@@ -14,6 +15,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Render procedural mushroom beds: metric depth (EXR), instance masks, COCO, control images.
+    Scene(scene_cmd::SceneArgs),
     /// List every Vulkan device and what vkdiff would use on it.
     Devices(devices_cmd::DevicesArgs),
     /// Measure speed: kernels, networks, scene generation.
@@ -24,6 +27,7 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Scene(args) => scene_cmd::run_scene(args),
         Command::Devices(args) => devices_cmd::run(&args),
         Command::Bench(cmd) => bench::run(cmd),
     };

@@ -1,0 +1,134 @@
+//! COCO instance segmentation for a frame: one category (`mushroom`, id 1), annotation id = the
+//! instance id in instances.png (1..K), compressed RLE masks, `area` = mask pixel count, `bbox`
+//! from the mask, `iscrowd` 0, and what each mushroom is as extra fields.
+
+use rayon::prelude::*;
+use serde::Serialize;
+use serde_json::Value;
+
+use crate::frame::{Frame, InstanceInfo};
+use crate::rle::{PixelBox, Rle};
+
+/// Where the frame's annotations point for the picture itself: the control image, the one image
+/// of the folder that exists for every frame (the photoreal stage writes its own file_name).
+pub const IMAGE_FILE: &str = "control.png";
+
+/// The mask of one instance and the numbers COCO derives from it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InstanceMask {
+    pub rle: Rle,
+    pub bbox: PixelBox,
+    pub area: u64,
+}
+
+/// Masks of instances 1..=K, computed in parallel; each reads only its own bounding box.
+pub fn instance_masks(frame: &Frame) -> Vec<InstanceMask> {
+    let (w, h) = (frame.camera.width, frame.camera.height);
+    let bounds = instance_bounds(&frame.ids, w as usize, frame.instances.len());
+    bounds
+        .par_iter()
+        .enumerate()
+        .map(|(k, b)| {
+            let bbox = b.expect("every instance of a frame has a visible pixel");
+            let rle = Rle::from_labels(&frame.ids, w, h, k as u16 + 1, bbox);
+            InstanceMask { area: rle.area(), rle, bbox }
+        })
+        .collect()
+}
+
+/// Bounding box of each id 1..=count, by rows in parallel.
+fn instance_bounds(ids: &[u16], width: usize, count: usize) -> Vec<Option<PixelBox>> {
+    let merge = |a: Option<PixelBox>, b: Option<PixelBox>| match (a, b) {
+        (Some(a), Some(b)) => Some(PixelBox { x0: a.x0.min(b.x0), y0: a.y0.min(b.y0), x1: a.x1.max(b.x1), y1: a.y1.max(b.y1) }),
+        (a, b) => a.or(b),
+    };
+    ids.par_chunks(width)
+        .enumerate()
+        .fold(
+            || vec![None; count + 1],
+            |mut acc: Vec<Option<PixelBox>>, (y, row)| {
+                for (x, &id) in row.iter().enumerate() {
+                    if id != 0 {
+                        let p = Some(PixelBox { x0: x as u32, y0: y as u32, x1: x as u32, y1: y as u32 });
+                        acc[id as usize] = merge(acc[id as usize], p);
+                    }
+                }
+                acc
+            },
+        )
+        .reduce(|| vec![None; count + 1], |a, b| a.into_iter().zip(b).map(|(a, b)| merge(a, b)).collect())
+        .split_off(1)
+}
+
+#[derive(Serialize)]
+struct CocoFile<'a> {
+    info: Value,
+    images: [Image; 1],
+    annotations: Vec<Annotation<'a>>,
+    categories: [Category; 1],
+    licenses: [(); 0],
+}
+
+#[derive(Serialize)]
+struct Image {
+    id: u32,
+    file_name: &'static str,
+    width: u32,
+    height: u32,
+}
+
+#[derive(Serialize)]
+struct Category {
+    id: u32,
+    name: &'static str,
+    supercategory: &'static str,
+}
+
+#[derive(Serialize)]
+struct Segmentation {
+    size: [u32; 2],
+    counts: String,
+}
+
+#[derive(Serialize)]
+struct Annotation<'a> {
+    id: usize,
+    image_id: u32,
+    category_id: u32,
+    segmentation: Segmentation,
+    area: u64,
+    bbox: [u32; 4],
+    iscrowd: u8,
+    #[serde(flatten)]
+    instance: &'a InstanceInfo,
+}
+
+/// annotations.json for `frame`, whose masks are `masks`; `info` records where it came from.
+pub fn coco_json(frame: &Frame, masks: &[InstanceMask], info: Value) -> String {
+    let (w, h) = (frame.camera.width, frame.camera.height);
+    let annotations = masks
+        .iter()
+        .zip(&frame.instances)
+        .enumerate()
+        .map(|(k, (mask, instance))| Annotation {
+            id: k + 1,
+            image_id: 1,
+            category_id: 1,
+            segmentation: Segmentation { size: [h, w], counts: mask.rle.to_coco_string() },
+            area: mask.area,
+            bbox: mask.bbox.to_xywh(),
+            iscrowd: 0,
+            instance,
+        })
+        .collect();
+    let file = CocoFile {
+        info,
+        images: [Image { id: 1, file_name: IMAGE_FILE, width: w, height: h }],
+        annotations,
+        categories: [Category { id: 1, name: "mushroom", supercategory: "mushroom" }],
+        licenses: [],
+    };
+    let mut text = serde_json::to_string(&file).expect("COCO structures always serialise");
+    text.push('\n');
+    text
+}

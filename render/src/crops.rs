@@ -1,0 +1,73 @@
+//! Square crops of a frame, as the paper cut three 1024×1024 images out of each 1920×1080
+//! render: windows inside the frame at positions drawn from the scene seed, each with its own
+//! depth, masks (instances clipped to the window, slivers dropped, ids renumbered 1..n) and
+//! camera (principal point shifted by the window's offset).
+
+use crate::error::{RenderError, Result};
+use crate::frame::{pixel_counts, renumber, Frame};
+use crate::rng::{Rng, Stream};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CropWindow {
+    pub x0: u32,
+    pub y0: u32,
+    pub size: u32,
+}
+
+/// `count` windows of `size`² inside a `width`×`height` frame, from the scene seed alone.
+pub fn crop_windows(seed: u64, count: usize, size: u32, width: u32, height: u32) -> Result<Vec<CropWindow>> {
+    if count > 0 && (size == 0 || size > width || size > height) {
+        return Err(RenderError::invalid("--crop-size", size, format!("must lie in [1, {}] to fit the {width}×{height} frame", width.min(height))));
+    }
+    let mut rng = Rng::stream(seed, Stream::Crops);
+    Ok((0..count)
+        .map(|_| CropWindow {
+            x0: rng.below((width - size + 1) as u64) as u32,
+            y0: rng.below((height - size + 1) as u64) as u32,
+            size,
+        })
+        .collect())
+}
+
+/// The part of `frame` under `window`. An instance stays when at least `min_fraction` of its
+/// visible pixels in the full frame fall inside the window (SAHI's `min_area_ratio`, 0.1 by
+/// default); the pixels of dropped slivers become background.
+pub fn crop_frame(frame: &Frame, window: CropWindow, min_fraction: f64) -> Frame {
+    let (w, s) = (frame.width(), window.size as usize);
+    let rows = (window.y0 as usize..window.y0 as usize + s).map(|y| y * w + window.x0 as usize..y * w + window.x0 as usize + s);
+    let mut ids: Vec<u16> = rows.clone().flat_map(|r| frame.ids[r].iter().copied()).collect();
+    let depth: Vec<f32> = rows.flat_map(|r| frame.depth[r].iter().copied()).collect();
+    let labels = frame.instances.len() + 1;
+    let in_frame = pixel_counts(&frame.ids, labels);
+    let in_crop = pixel_counts(&ids, labels);
+    let kept = renumber(&mut ids, labels, |id| in_crop[id] > 0 && in_crop[id] as f64 >= min_fraction * in_frame[id] as f64);
+    let instances = kept.iter().map(|&id| frame.instances[id - 1].clone()).collect();
+    Frame { camera: frame.camera.crop(window.x0, window.y0, window.size, window.size), depth, ids, instances }
+}
+
+pub fn validate_min_fraction(min_fraction: f64) -> Result<()> {
+    if (0.0..=1.0).contains(&min_fraction) {
+        Ok(())
+    } else {
+        Err(RenderError::invalid("--crop-min-fraction", min_fraction, "must lie in [0, 1]"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn windows_fit_the_frame_and_follow_the_seed() {
+        for seed in 0..50 {
+            let windows = crop_windows(seed, 3, 1024, 1920, 1080).unwrap();
+            assert_eq!(windows, crop_windows(seed, 3, 1024, 1920, 1080).unwrap());
+            assert!(windows.iter().all(|c| c.x0 + 1024 <= 1920 && c.y0 + 1024 <= 1080));
+        }
+        assert_ne!(crop_windows(1, 3, 512, 1920, 1080).unwrap(), crop_windows(2, 3, 512, 1920, 1080).unwrap());
+        assert_eq!(crop_windows(0, 1, 1080, 1920, 1080).unwrap()[0].y0, 0);
+        let err = crop_windows(0, 3, 2000, 1920, 1080).unwrap_err().to_string();
+        assert!(err.contains("--crop-size 2000"), "{err}");
+        assert!(crop_windows(0, 0, 2000, 1920, 1080).unwrap().is_empty(), "no crops, nothing to check");
+    }
+}

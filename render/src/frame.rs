@@ -1,0 +1,96 @@
+//! A labelled frame: planar depth, instance ids 1..K in the order of the bed (0 = background),
+//! and what each instance is. Mushrooms with no visible pixel get no id, so ids match the COCO
+//! annotation ids one to one.
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::camera::Camera;
+use crate::raster::RasterImage;
+use crate::scene::Scene;
+
+/// What an instance is, written next to its mask in the COCO annotation.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct InstanceInfo {
+    /// Index of the mushroom in the bed: the same mushroom has the same index in the full frame
+    /// and in every crop.
+    pub bed_index: usize,
+    pub age: f64,
+    pub cap_diameter_mm: f64,
+    /// Where the stem meets the compost, world coordinates in metres (see camera.json).
+    pub position_m: [f64; 3],
+    pub yaw_deg: f64,
+    pub tilt_deg: [f64; 2],
+    /// Growth row (one seed each) and stage of the variant this instance was drawn from.
+    pub variant_row: usize,
+    pub variant_stage: usize,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Frame {
+    pub camera: Camera,
+    /// Planar depth in metres, row-major; +∞ where nothing was drawn.
+    pub depth: Vec<f32>,
+    /// 0 = background, k = `instances[k - 1]`.
+    pub ids: Vec<u16>,
+    pub instances: Vec<InstanceInfo>,
+}
+
+impl Frame {
+    pub fn width(&self) -> usize {
+        self.camera.width as usize
+    }
+
+    pub fn height(&self) -> usize {
+        self.camera.height as usize
+    }
+
+    /// Keeps the visible mushrooms of `raster` (raster id = bed index + 1), numbered 1..K in bed
+    /// order.
+    pub fn from_raster(raster: RasterImage, scene: &Scene) -> Frame {
+        let counts = pixel_counts(&raster.ids, scene.bed.instances.len() + 1);
+        let mut ids = raster.ids;
+        let kept = renumber(&mut ids, counts.len(), |raw| counts[raw] > 0);
+        let instances = kept.iter().map(|&raw| instance_info(scene, raw - 1)).collect();
+        Frame { camera: scene.camera.clone(), depth: raster.depth, ids, instances }
+    }
+}
+
+/// Renumbers the labels 1..`labels` that `keep` accepts to 1..K in order, in place (0 and the
+/// labels dropped become 0); returns the labels kept, in order.
+pub fn renumber(ids: &mut [u16], labels: usize, keep: impl Fn(usize) -> bool) -> Vec<usize> {
+    let kept: Vec<usize> = (1..labels).filter(|&label| keep(label)).collect();
+    let mut map = vec![0u16; labels];
+    kept.iter().enumerate().for_each(|(k, &label)| map[label] = k as u16 + 1);
+    ids.par_iter_mut().for_each(|id| *id = map[*id as usize]);
+    kept
+}
+
+/// Pixels per id for ids below `labels`.
+pub fn pixel_counts(ids: &[u16], labels: usize) -> Vec<u64> {
+    ids.par_chunks(1 << 16)
+        .map(|chunk| {
+            let mut counts = vec![0u64; labels];
+            chunk.iter().for_each(|&id| counts[id as usize] += 1);
+            counts
+        })
+        .reduce(|| vec![0u64; labels], |mut a, b| {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+            a
+        })
+}
+
+fn instance_info(scene: &Scene, bed_index: usize) -> InstanceInfo {
+    let instance = &scene.bed.instances[bed_index];
+    let variant = &scene.bed.variants[instance.variant];
+    InstanceInfo {
+        bed_index,
+        age: variant.params.age,
+        cap_diameter_mm: variant.params.cap_diameter() * 1e3,
+        position_m: instance.base.to_array(),
+        yaw_deg: instance.yaw.to_degrees(),
+        tilt_deg: [instance.tilt.0.to_degrees(), instance.tilt.1.to_degrees()],
+        variant_row: variant.row,
+        variant_stage: variant.stage,
+    }
+}
