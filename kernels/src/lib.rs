@@ -36,3 +36,46 @@ pub fn variants(kernel: &str, dtype: Dtype) -> impl Iterator<Item = &'static Var
 pub fn find(kernel: &str, dtype: Dtype, want: &[(&str, u32)]) -> Option<&'static Variant> {
     variants(kernel, dtype).find(|v| want.iter().all(|(n, x)| v.param(n) == Some(*x)))
 }
+
+/// The build-time compiler, tested on sources written to fail.
+#[cfg(test)]
+mod compile_tests {
+    include!("../compile.rs");
+
+    fn one_file(body: &str) -> Source {
+        Source::new(&prelude(false, &[("N", 2)]), &[("a.wgsl".into(), "// line 1\n".into()), ("broken.wgsl".into(), body.into())])
+    }
+
+    #[test]
+    fn parse_errors_name_the_file_and_line() {
+        let err = compile(one_file("@compute @workgroup_size(1)\nfn main() {\n    let x = ;\n}\n"), &[], "kernel `t`").unwrap_err();
+        assert!(err.starts_with("kernels/wgsl/broken.wgsl:3: kernel `t`"), "{err}");
+    }
+
+    #[test]
+    fn validation_errors_name_the_file_and_line() {
+        let body = "@compute @workgroup_size(1)\nfn main() {\n    var x: u32 = 1u;\n    x = 1.5 + x;\n}\n";
+        let err = compile(one_file(body), &[], "kernel `t`").unwrap_err();
+        assert!(err.starts_with("kernels/wgsl/broken.wgsl:4:"), "{err}");
+    }
+
+    #[test]
+    fn unrolled_blocks_keep_line_numbers() {
+        let body = "var<workgroup> w: array<u32, 4>;\n@compute @workgroup_size(1)\nfn main() {\n    // #unroll I N\n    w[I] = I; // a comment\n    // #end\n    let y = ;\n}\n";
+        let err = compile(one_file(body), &[("N", 2)], "kernel `t`").unwrap_err();
+        assert!(err.starts_with("kernels/wgsl/broken.wgsl:7:"), "{err}");
+    }
+
+    #[test]
+    fn unroll_substitutes_whole_words_only() {
+        let text = "a\n// #unroll R 2\nx[R] = RR + R;\n// #end\nb";
+        assert_eq!(unroll(text, &[]).unwrap(), "a\nx[0u] = RR + 0u; x[1u] = RR + 1u;\n\n\nb");
+        assert!(unroll("// #unroll R Q\n// #end", &[]).unwrap_err().contains("neither a number nor a parameter"));
+    }
+
+    #[test]
+    fn a_valid_kernel_compiles_to_spirv() {
+        let words = compile(one_file("@compute @workgroup_size(N)\nfn main() {}\n"), &[], "kernel `t`").unwrap();
+        assert_eq!(words[0], 0x0723_0203, "SPIR-V magic number");
+    }
+}
