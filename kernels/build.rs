@@ -13,19 +13,14 @@ fn fail(message: &str) -> ! {
     exit(1)
 }
 
-/// The kernel's files, `{dtype}` resolved, read from `wgsl/`.
-fn read_files(spec: &KernelSpec, dtype: Dtype) -> Vec<(String, String)> {
-    let name = match dtype {
-        Dtype::F32 => "f32",
-        Dtype::F16 => "f16",
-    };
+/// The kernel's files, read from `wgsl/`.
+fn read_files(spec: &KernelSpec) -> Vec<(String, String)> {
     spec.files
         .iter()
         .map(|file| {
-            let file = file.replace("{dtype}", name);
-            let path = Path::new("wgsl").join(&file);
+            let path = Path::new("wgsl").join(file);
             let body = fs::read_to_string(&path).unwrap_or_else(|e| fail(&format!("{}: {e}", path.display())));
-            (file, body)
+            (file.to_string(), body)
         })
         .collect()
 }
@@ -37,8 +32,8 @@ fn main() {
     let out = env::var("OUT_DIR").unwrap();
     let mut table = String::from("pub static VARIANTS: &[Variant] = &[\n");
     for spec in KERNELS {
+        let files = read_files(spec);
         for dtype in [Dtype::F32, Dtype::F16] {
-            let files = read_files(spec, dtype);
             for (i, params) in spec.params.iter().enumerate() {
                 let src = Source::new(&prelude(dtype == Dtype::F16, params), &files);
                 let what = format!("kernel `{}` ({dtype:?}, {params:?})", spec.name);

@@ -31,7 +31,7 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
         format!("    kind: {}, Vulkan {}.{}.{}, driver: {}", d.kind.label(), d.api_version.0, d.api_version.1, d.api_version.2, d.driver),
         format!("    f16 storage+arith: {}, subgroup size: {sizes}, shuffle: {}, arithmetic: {}, cooperative matrix: {}", yes(d.supports_f16()), yes(d.subgroup_shuffle), yes(d.subgroup_arithmetic), yes(d.cooperative_matrix)),
         format!("    device memory: {}, max allocation: {}, max storage binding: {}, shared memory: {} KiB", mib(d.device_local_bytes), mib(d.max_allocation), mib(d.max_storage_buffer_range), d.max_shared_memory / 1024),
-        format!("    vkdiff uses: {} storage, GEMM/conv kernels: {gemm}, timestamps: {}", if d.supports_f16() { "f16 (f32 on request)" } else { "f32" }, yes(d.timestamps)),
+        format!("    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, timestamps: {}", if d.supports_f16() { "f16 and f32" } else { "f32 only" }, yes(d.timestamps)),
     ]
     .join("\n")
 }
