@@ -79,14 +79,9 @@ impl Tensor {
         if self.buf.with_mapped(|m| m[offset..offset + len].copy_from_slice(&bytes)).is_some() {
             return Ok(());
         }
-        let ctx = Context { shared: self.buf.shared.clone() };
-        let staging = Buffer::new(&ctx.shared, len as u64, MemoryLocation::CpuToGpu, "upload staging")?;
-        staging.with_mapped(|m| m[..len].copy_from_slice(&bytes)).ok_or_else(|| Error::Memory("staging buffer is not host-visible".into()))?;
-        submit_once(&ctx, |device, cmd| {
-            let region = [vk::BufferCopy { src_offset: 0, dst_offset: self.offset, size: len as u64 }];
-            // SAFETY: both buffers are alive and large enough.
-            unsafe { device.cmd_copy_buffer(cmd, staging.raw, self.buf.raw, &region) };
-        })
+        let staging = Buffer::new(&self.buf.shared, len as u64, MemoryLocation::CpuToGpu, "upload staging")?;
+        staging.with_mapped(|m| m[..len].copy_from_slice(&bytes)).ok_or_else(not_host_visible)?;
+        copy(&staging, 0, &self.buf, self.offset, len as u64)
     }
 
     /// The tensor's values as f32.
@@ -96,17 +91,24 @@ impl Tensor {
         if let Some(bytes) = self.buf.with_mapped(|m| m[offset..offset + len].to_vec()) {
             return Ok(decode(&bytes, self.dtype));
         }
-        let ctx = Context { shared: self.buf.shared.clone() };
-        let staging = Buffer::new(&ctx.shared, len as u64, MemoryLocation::GpuToCpu, "download staging")?;
-        submit_once(&ctx, |device, cmd| {
-            let region = [vk::BufferCopy { src_offset: self.offset, dst_offset: 0, size: len as u64 }];
-            // SAFETY: both buffers are alive and large enough.
-            unsafe { device.cmd_copy_buffer(cmd, self.buf.raw, staging.raw, &region) };
-        })?;
-        staging
-            .with_mapped(|m| decode(&m[..len], self.dtype))
-            .ok_or_else(|| Error::Memory("staging buffer is not host-visible".into()))
+        let staging = Buffer::new(&self.buf.shared, len as u64, MemoryLocation::GpuToCpu, "download staging")?;
+        copy(&self.buf, self.offset, &staging, 0, len as u64)?;
+        staging.with_mapped(|m| decode(&m[..len], self.dtype)).ok_or_else(not_host_visible)
     }
+}
+
+fn not_host_visible() -> Error {
+    Error::Memory("staging buffer is not host-visible".into())
+}
+
+/// Copies `size` bytes between buffers of one context on the device, waiting for it.
+fn copy(src: &Buffer, src_offset: u64, dst: &Buffer, dst_offset: u64, size: u64) -> Result<()> {
+    let ctx = Context { shared: src.shared.clone() };
+    submit_once(&ctx, |device, cmd| {
+        let region = [vk::BufferCopy { src_offset, dst_offset, size }];
+        // SAFETY: both buffers are alive and large enough.
+        unsafe { device.cmd_copy_buffer(cmd, src.raw, dst.raw, &region) };
+    })
 }
 
 fn encode(data: &[f32], dtype: Dtype) -> Vec<u8> {

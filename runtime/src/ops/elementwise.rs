@@ -1,6 +1,6 @@
 //! Element-wise and data-movement operations.
 
-use super::{f, grid, kernel, same_dtype, u};
+use super::{dispatch_flat, f, kernel, same_dtype, u};
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
@@ -25,8 +25,9 @@ pub enum BinaryOp {
     Mul = 1,
 }
 
-fn elements(groups_per: usize, n: usize) -> [u32; 3] {
-    grid(n.div_ceil(groups_per))
+/// Workgroups for `n` elements, 64 per workgroup (kernels/wgsl/grid.wgsl).
+fn element_groups(n: usize) -> usize {
+    n.div_ceil(64)
 }
 
 /// out = op(x), element-wise; `alpha` is used by `Scale`. `out` may be `x`.
@@ -34,8 +35,7 @@ pub fn unary(rec: &mut Recorder, op: UnaryOp, x: &Tensor, out: &Tensor, alpha: f
     let dtype = same_dtype(rec.context(), "unary", &[x, out])?;
     ensure(x.numel() == out.numel(), || format!("{op:?}: {:?} into {:?}", x.shape(), out.shape()))?;
     let k = kernel(rec.context(), "unary", dtype, &[("OP", op as u32)], 2)?;
-    let g = elements(64, x.numel());
-    rec.dispatch(&k, &[x], &[out], &[u(x.numel()), f(alpha), g[0]], g)
+    dispatch_flat(rec, &k, &[x], &[out], &[u(x.numel()), f(alpha)], element_groups(x.numel()))
 }
 
 /// out = a op b, where b's flat index is `(i / b_outer)·b_inner + i % b_inner` (see binary.wgsl).
@@ -45,16 +45,16 @@ pub fn binary(rec: &mut Recorder, op: BinaryOp, a: &Tensor, b: &Tensor, out: &Te
     ensure(out.numel() == n && b_inner > 0 && b_outer > 0, || format!("{op:?}: {:?} into {:?}", a.shape(), out.shape()))?;
     ensure((n - 1) / b_outer * b_inner + b_inner.min(n) <= b.numel(), || format!("{op:?}: {:?} cannot broadcast over {:?}", b.shape(), a.shape()))?;
     let k = kernel(rec.context(), "binary", dtype, &[("OP", op as u32)], 3)?;
-    let g = elements(64, n);
-    rec.dispatch(&k, &[a, b], &[out], &[u(n), u(b_inner), u(b_outer), g[0]], g)
+    dispatch_flat(rec, &k, &[a, b], &[out], &[u(n), u(b_inner), u(b_outer)], element_groups(n))
 }
 
-/// Broadcasting from the right as NumPy does, for the shapes networks use: b's shape equals a's
-/// trailing dimensions, or is [a.0, 1, ..., 1, C] (a per-batch, per-channel vector).
+/// `binary`'s (b_inner, b_outer) for NumPy-style broadcasting of b over a, in the shapes
+/// networks use: b's shape equals a's trailing dimensions, or is [a.0, 1, ..., 1, C] (a
+/// per-batch, per-channel vector).
 fn broadcast(a: &Tensor, b: &Tensor) -> Result<(usize, usize)> {
     let (sa, sb) = (a.shape(), b.shape());
     if sb.len() <= sa.len() && sa[sa.len() - sb.len()..] == *sb {
-        return Ok((b.numel(), usize::MAX));
+        return Ok((b.numel(), a.numel()));
     }
     let c = *sa.last().unwrap_or(&1);
     if sb.len() == sa.len() && sb[0] == sa[0] && sb.last() == Some(&c) && b.numel() == sa[0] * c {
@@ -66,13 +66,13 @@ fn broadcast(a: &Tensor, b: &Tensor) -> Result<(usize, usize)> {
 /// out = a + b with NumPy-style broadcasting of b (see [`broadcast`]).
 pub fn add(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor) -> Result<()> {
     let (inner, outer) = broadcast(a, b)?;
-    binary(rec, BinaryOp::Add, a, b, out, inner, outer.min(a.numel()).max(inner))
+    binary(rec, BinaryOp::Add, a, b, out, inner, outer)
 }
 
-/// out = a · b with NumPy-style broadcasting of b.
+/// out = a · b with NumPy-style broadcasting of b (see [`broadcast`]).
 pub fn mul(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor) -> Result<()> {
     let (inner, outer) = broadcast(a, b)?;
-    binary(rec, BinaryOp::Mul, a, b, out, inner, outer.min(a.numel()).max(inner))
+    binary(rec, BinaryOp::Mul, a, b, out, inner, outer)
 }
 
 /// GEGLU: x[.., 2F] → out[.., F] = value · GELU(gate), value first.
@@ -81,8 +81,7 @@ pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
     let two_f = *x.shape().last().unwrap_or(&0);
     ensure(two_f % 2 == 0 && two_f > 0 && out.numel() * 2 == x.numel(), || format!("geglu: {:?} into {:?}", x.shape(), out.shape()))?;
     let k = kernel(rec.context(), "geglu", dtype, &[], 2)?;
-    let g = elements(64, out.numel());
-    rec.dispatch(&k, &[x], &[out], &[u(out.numel()), u(two_f / 2), g[0]], g)
+    dispatch_flat(rec, &k, &[x], &[out], &[u(out.numel()), u(two_f / 2)], element_groups(out.numel()))
 }
 
 /// Nearest 2× upsampling of x[B, H, W, C] into out[B, 2H, 2W, C].
@@ -91,8 +90,7 @@ pub fn upsample_nearest2x(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Resul
     let s = x.shape();
     ensure(s.len() == 4 && out.shape() == [s[0], 2 * s[1], 2 * s[2], s[3]], || format!("upsample: {:?} into {:?}", s, out.shape()))?;
     let k = kernel(rec.context(), "upsample_nearest2x", dtype, &[], 2)?;
-    let g = elements(64, out.numel());
-    rec.dispatch(&k, &[x], &[out], &[u(out.numel()), u(s[1]), u(s[2]), u(s[3]), g[0]], g)
+    dispatch_flat(rec, &k, &[x], &[out], &[u(out.numel()), u(s[1]), u(s[2]), u(s[3])], element_groups(out.numel()))
 }
 
 /// out[.., C1 + C2] = [a[.., C1], b[.., C2]] along the last (channel) dimension.
@@ -104,8 +102,7 @@ pub fn concat_channels(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor)
         format!("concat: {:?} + {:?} into {:?}", a.shape(), b.shape(), out.shape())
     })?;
     let k = kernel(rec.context(), "concat_channels", dtype, &[], 3)?;
-    let g = elements(64, out.numel());
-    rec.dispatch(&k, &[a, b], &[out], &[u(out.numel()), u(c1), u(c2), g[0]], g)
+    dispatch_flat(rec, &k, &[a, b], &[out], &[u(out.numel()), u(c1), u(c2)], element_groups(out.numel()))
 }
 
 /// diffusers' `Timesteps` settings.

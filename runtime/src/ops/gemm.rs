@@ -4,7 +4,7 @@ use super::{f, kernel, same_dtype, u};
 use crate::context::GemmFamily;
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
-use crate::tensor::Tensor;
+use crate::tensor::{Dtype, Tensor};
 
 /// C[i] = alpha · A[i]·B[i] (+ bias) (+ C[i] if `accumulate`) for i < batch, row-major with the
 /// given leading dimensions and batch strides (0 shares an operand across the batch). With
@@ -70,18 +70,43 @@ pub fn matmul(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>,
     }
     let flags = bias.is_some() as u32 | (s.accumulate as u32) << 1;
     let common = [u(s.m), u(s.n), u(s.k), u(s.ldb), u(s.ldc), u(s.b_batch), u(s.c_batch), flags, f(s.alpha), u(s.lda), u(s.a_batch)];
-    let bt = s.b_transposed as u32;
-    let ctx = rec.context().clone();
     // Without a bias the kernel never reads binding 2; C stands in for it.
     let bias = bias.unwrap_or(c);
-    if ctx.gemm_family() == GemmFamily::Subgroup && ctx.subgroup_ok(8) && s.fits_vec4() {
-        let tm = if s.m >= 1024 { 64 } else if s.m >= 256 { 32 } else { 16 };
-        let k = kernel(&ctx, "gemm_sg", dtype, &[("SG", 8), ("TM", tm), ("BT", bt)], 4)?;
-        let groups = [u(s.n.div_ceil(64)), u(s.m.div_ceil(tm as usize)), u(s.batch)];
-        return rec.dispatch(&k, &[a, b, bias], &[c], &common, groups);
+    let shape = GemmShape { m: s.m, n: s.n, batch: s.batch, fits_subgroup: s.fits_vec4() };
+    let kernels = (("gemm_sg", "gemm_tiled"), dtype, &[("BT", s.b_transposed as u32)][..]);
+    dispatch_gemm_family(rec, kernels, &shape, &[a, b, bias], c, &common)
+}
+
+/// What the GEMM-family dispatch needs to know of a matrix product or implicit-GEMM convolution.
+pub(super) struct GemmShape {
+    pub m: usize,
+    pub n: usize,
+    pub batch: usize,
+    /// Whether the subgroup kernel can take the operands (vec4-aligned sizes and strides).
+    pub fits_subgroup: bool,
+}
+
+/// Records a GEMM-shaped kernel: the subgroup variant (`names.0`) where the device prefers it
+/// and the shape fits, with more rows per workgroup for taller products, else the tiled one
+/// (`names.1`). `params` are the variant parameters both share; bindings are `reads` then `out`.
+pub(super) fn dispatch_gemm_family(
+    rec: &mut Recorder,
+    (names, dtype, params): ((&'static str, &'static str), Dtype, &[(&str, u32)]),
+    s: &GemmShape,
+    reads: &[&Tensor],
+    out: &Tensor,
+    push: &[u32],
+) -> Result<()> {
+    let ctx = rec.context().clone();
+    let columns = u(s.n.div_ceil(64));
+    if ctx.gemm_family() == GemmFamily::Subgroup && ctx.subgroup_ok(8) && s.fits_subgroup {
+        let tm: u32 = if s.m >= 1024 { 64 } else if s.m >= 256 { 32 } else { 16 };
+        let want: Vec<(&str, u32)> = [("SG", 8), ("TM", tm)].into_iter().chain(params.iter().copied()).collect();
+        let k = kernel(&ctx, names.0, dtype, &want, 4)?;
+        return rec.dispatch(&k, reads, &[out], push, [columns, u(s.m.div_ceil(tm as usize)), u(s.batch)]);
     }
-    let k = kernel(&ctx, "gemm_tiled", dtype, &[("BT", bt)], 4)?;
-    rec.dispatch(&k, &[a, b, bias], &[c], &common, [u(s.n.div_ceil(64)), u(s.m.div_ceil(64)), u(s.batch)])
+    let k = kernel(&ctx, names.1, dtype, params, 4)?;
+    rec.dispatch(&k, reads, &[out], push, [columns, u(s.m.div_ceil(64)), u(s.batch)])
 }
 
 /// A PyTorch `Linear`: out[.., N] = x[.., K] · wᵀ (+ bias), w stored [N, K].

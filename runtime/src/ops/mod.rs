@@ -16,6 +16,7 @@ pub use norm::{group_norm, layer_norm, softmax};
 use crate::context::Context;
 use crate::error::{ensure, Error, Result};
 use crate::pipeline::Kernel;
+use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 use std::sync::Arc;
 
@@ -34,11 +35,13 @@ fn same_dtype(ctx: &Context, op: &str, tensors: &[&Tensor]) -> Result<Dtype> {
     Ok(dtype)
 }
 
-/// Splits `groups` workgroups over x and y so neither passes the 65535 guaranteed by Vulkan;
-/// kernels rebuild the linear index as `y · groups_x + x` and bounds-check it.
-fn grid(groups: usize) -> [u32; 3] {
+/// Records `groups` workgroups of a kernel whose linear workgroup index is `y · groups_x + x`
+/// (element-wise and row kernels): they are spread over x and y so neither passes the 65535
+/// Vulkan guarantees, and `groups_x` is appended as the last push-constant word.
+fn dispatch_flat(rec: &mut Recorder, k: &Arc<Kernel>, reads: &[&Tensor], writes: &[&Tensor], push: &[u32], groups: usize) -> Result<()> {
     let gx = groups.clamp(1, 65535);
-    [gx as u32, groups.div_ceil(gx) as u32, 1]
+    let words: Vec<u32> = push.iter().copied().chain([gx as u32]).collect();
+    rec.dispatch(k, reads, writes, &words, [gx as u32, groups.div_ceil(gx) as u32, 1])
 }
 
 /// Push-constant words of a u32 field list with floats stored as their bits.

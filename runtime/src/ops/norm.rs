@@ -1,6 +1,6 @@
 //! Normalisations and softmax over NHWC / row-major tensors, accumulated in f32.
 
-use super::{f, grid, kernel, rows_of, same_dtype, u};
+use super::{dispatch_flat, f, kernel, rows_of, same_dtype, u};
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
 use crate::tensor::Tensor;
@@ -23,8 +23,7 @@ pub fn layer_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor,
     let (rows, c) = rows_of(x, "layer_norm")?;
     ensure(gamma.numel() == c && beta.numel() == c && out.shape() == x.shape(), || "layer_norm: affine or output shape mismatch".into())?;
     let k = kernel(rec.context(), "layer_norm", dtype, &[], 4)?;
-    let g = grid(rows);
-    rec.dispatch(&k, &[x, gamma, beta], &[out], &[u(c), f(eps), g[0]], g)
+    dispatch_flat(rec, &k, &[x, gamma, beta], &[out], &[u(c), f(eps)], rows)
 }
 
 /// Softmax of scale·x over the last dimension.
@@ -33,6 +32,5 @@ pub fn softmax(rec: &mut Recorder, x: &Tensor, out: &Tensor, scale: f32) -> Resu
     let (rows, c) = rows_of(x, "softmax")?;
     ensure(out.shape() == x.shape(), || "softmax: output shape mismatch".into())?;
     let k = kernel(rec.context(), "softmax", dtype, &[], 2)?;
-    let g = grid(rows);
-    rec.dispatch(&k, &[x], &[out], &[u(c), f(scale), g[0]], g)
+    dispatch_flat(rec, &k, &[x], &[out], &[u(c), f(scale)], rows)
 }
