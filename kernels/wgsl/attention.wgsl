@@ -4,7 +4,8 @@
 // query and output row. For each chunk of SG keys, lane l scores key j0 + l against all TM
 // queries (query slots arrive by shuffles), the chunk's softmax statistics are subgroup
 // reductions, and each lane accumulates its own output slots from the chunk's V rows.
-// Layout: element (b, token, head, d) at b·batch + token·ld + head·D + d; D % 4 = 0.
+// Layout: element (b, token, head, d) at off + b·batch + token·ld + head·D + d; D and every
+// stride and offset % 4 = 0.
 @group(0) @binding(0) var<storage, read> q: array<vec4<S>>;
 @group(0) @binding(1) var<storage, read> k: array<vec4<S>>;
 @group(0) @binding(2) var<storage, read> v: array<vec4<S>>;
@@ -23,6 +24,9 @@ struct Params {
     v_batch: u32,
     o_batch: u32,
     scale: f32,
+    q_off: u32,
+    k_off: u32,
+    v_off: u32,
 }
 
 var<immediate> p: Params;
@@ -43,7 +47,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     // Slots past the head are zero in Q, so clamped K and V reads there contribute nothing.
     // #unroll R TM
     {
-        let base = (batch * p.q_batch + min(row0 + R, p.nq - 1u) * p.q_ld + head * p.d) / 4u;
+        let base = (p.q_off + batch * p.q_batch + min(row0 + R, p.nq - 1u) * p.q_ld + head * p.d) / 4u;
         // #unroll V DV
         qs[R * DV + V] = select(vec4<f32>(0.0), p.scale * vec4<f32>(q[base + min(V * SG + lane, last)]), V * SG + lane < slots);
         // #end
@@ -53,7 +57,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     for (var j0 = 0u; j0 < p.nk; j0 += SG) {
         // Scores of key j0 + lane against every query row; keys past the end are masked.
         let key = j0 + lane;
-        let kbase = (batch * p.k_batch + min(key, p.nk - 1u) * p.k_ld + head * p.d) / 4u;
+        let kbase = (p.k_off + batch * p.k_batch + min(key, p.nk - 1u) * p.k_ld + head * p.d) / 4u;
         var score: array<f32, TM>;
         // #unroll V DV
         // #unroll SRC SG
@@ -83,7 +87,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         // where the probability is zero).
         // #unroll SRC SG
         {
-            let vbase = (batch * p.v_batch + min(j0 + SRC, p.nk - 1u) * p.v_ld + head * p.d) / 4u;
+            let vbase = (p.v_off + batch * p.v_batch + min(j0 + SRC, p.nk - 1u) * p.v_ld + head * p.d) / 4u;
             // #unroll V DV
             {
                 let vv = vec4<f32>(v[vbase + min(V * SG + lane, last)]);

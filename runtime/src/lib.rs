@@ -1,6 +1,7 @@
 //! vkdiff's Vulkan runtime: device choice, memory, tensors, cached kernel pipelines, command
 //! recording with barriers and profiling, and the typed operations networks are built from.
 
+mod arena;
 mod context;
 mod device;
 mod error;
@@ -11,6 +12,7 @@ mod recorder;
 mod submit;
 mod tensor;
 
+pub use arena::Arena;
 pub use context::{Context, GemmFamily};
 pub use device::{choose, list_devices, DeviceInfo, DeviceKind};
 pub use error::{Error, Result};

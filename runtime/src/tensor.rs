@@ -1,5 +1,6 @@
 //! `Tensor`: a shape and a storage dtype over a range of a device buffer.
 
+use crate::arena::Lease;
 use crate::context::Context;
 use crate::error::{ensure, Error, Result};
 use crate::memory::Buffer;
@@ -25,6 +26,8 @@ pub struct Tensor {
     pub(crate) offset: u64,
     shape: Vec<usize>,
     dtype: Dtype,
+    /// Set for arena tensors: hands the buffer back when the last view goes.
+    _lease: Option<Arc<Lease>>,
 }
 
 impl std::fmt::Debug for Tensor {
@@ -34,12 +37,25 @@ impl std::fmt::Debug for Tensor {
 }
 
 impl Tensor {
+    fn owned(buf: Arc<Buffer>, shape: &[usize], dtype: Dtype) -> Tensor {
+        Tensor { buf, offset: 0, shape: shape.to_vec(), dtype, _lease: None }
+    }
+
+    pub(crate) fn leased(buf: Arc<Buffer>, lease: Arc<Lease>, shape: &[usize], dtype: Dtype) -> Tensor {
+        Tensor { buf, offset: 0, shape: shape.to_vec(), dtype, _lease: Some(lease) }
+    }
+
     pub fn shape(&self) -> &[usize] {
         &self.shape
     }
 
     pub fn dtype(&self) -> Dtype {
         self.dtype
+    }
+
+    /// The context whose device holds the tensor.
+    pub fn context(&self) -> Context {
+        Context { shared: self.buf.shared.clone() }
     }
 
     pub fn numel(&self) -> usize {
@@ -68,19 +84,22 @@ impl Tensor {
         ensure(offset % align == 0, || format!("view at byte {offset} breaks the device's {align}-byte binding alignment"))?;
         let mut shape = self.shape.clone();
         shape[0] = len;
-        Ok(Tensor { buf: self.buf.clone(), offset, shape, dtype: self.dtype })
+        Ok(Tensor { offset, shape, ..self.clone() })
     }
 
     /// Overwrites the tensor with `data` (converted to the storage dtype).
     pub fn write(&self, data: &[f32]) -> Result<()> {
         ensure(data.len() == self.numel(), || format!("writing {} values into a tensor of shape {:?}", data.len(), self.shape))?;
-        let bytes = encode(data, self.dtype);
+        self.write_bytes(&encode(data, self.dtype))
+    }
+
+    fn write_bytes(&self, bytes: &[u8]) -> Result<()> {
         let (offset, len) = (self.offset as usize, bytes.len());
-        if self.buf.with_mapped(|m| m[offset..offset + len].copy_from_slice(&bytes)).is_some() {
+        if self.buf.with_mapped(|m| m[offset..offset + len].copy_from_slice(bytes)).is_some() {
             return Ok(());
         }
         let staging = Buffer::new(&self.buf.shared, len as u64, MemoryLocation::CpuToGpu, "upload staging")?;
-        staging.with_mapped(|m| m[..len].copy_from_slice(&bytes)).ok_or_else(not_host_visible)?;
+        staging.with_mapped(|m| m[..len].copy_from_slice(bytes)).ok_or_else(not_host_visible)?;
         copy(&staging, 0, &self.buf, self.offset, len as u64)
     }
 
@@ -137,7 +156,7 @@ impl Context {
                 unsafe { device.cmd_fill_buffer(cmd, buf.raw, 0, vk::WHOLE_SIZE, 0) };
             })?;
         }
-        Ok(Tensor { buf, offset: 0, shape: shape.to_vec(), dtype })
+        Ok(Tensor::owned(buf, shape, dtype))
     }
 
     /// A tensor holding `data` (row-major, converted to `dtype`).
@@ -146,8 +165,18 @@ impl Context {
         ensure(numel == data.len(), || format!("{} values for shape {shape:?}", data.len()))?;
         let size = (numel * dtype_size(dtype)) as u64;
         let buf = Buffer::new(&self.shared, size, MemoryLocation::GpuOnly, "tensor")?;
-        let t = Tensor { buf, offset: 0, shape: shape.to_vec(), dtype };
+        let t = Tensor::owned(buf, shape, dtype);
         t.write(data)?;
+        Ok(t)
+    }
+
+    /// A tensor holding `bytes`, already encoded in `dtype` (weights streamed from a file).
+    pub fn upload_bytes(&self, shape: &[usize], dtype: Dtype, bytes: &[u8]) -> Result<Tensor> {
+        let numel: usize = shape.iter().product();
+        ensure(numel * dtype_size(dtype) == bytes.len(), || format!("{} bytes for {dtype:?} shape {shape:?}", bytes.len()))?;
+        let buf = Buffer::new(&self.shared, bytes.len() as u64, MemoryLocation::GpuOnly, "tensor")?;
+        let t = Tensor::owned(buf, shape, dtype);
+        t.write_bytes(bytes)?;
         Ok(t)
     }
 }

@@ -3,7 +3,7 @@
 use super::cpu_reference::{self, CpuGemm};
 use anyhow::Result;
 use std::time::{Duration, Instant};
-use vkdiff_runtime::ops::{self, AttentionLayout, Matmul, Padding, UnaryOp};
+use vkdiff_runtime::ops::{self, AttentionLayout, ConvParams, Matmul, UnaryOp};
 use vkdiff_runtime::{Context, Dtype, Recorder, Tensor};
 
 #[derive(clap::Args)]
@@ -99,7 +99,7 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
                 work: Work::Flops(2.0 * (hw * c * 9 * c) as f64),
             gemm: None,
             tensors: vec![rand_tensor(ctx, &[1, 64, 64, c], dtype, 3)?, rand_tensor(ctx, &[c, 3, 3, c], dtype, 4)?, rand_tensor(ctx, &[c], dtype, 5)?, ctx.zeros(&[1, 64, 64, c], dtype)?],
-            record: |rec, t| ops::conv2d(rec, &t[0], &t[1], Some(&t[2]), &t[3], 1, Padding::same(1)),
+            record: |rec, t| ops::conv2d(rec, &t[0], &t[1], Some(&t[2]), &t[3], &ConvParams::new(1, 1)),
         },
         Case {
             name: "attention",

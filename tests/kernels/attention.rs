@@ -11,16 +11,16 @@ fn reference(q: &[f32], k: &[f32], v: &[f32], l: &AttentionLayout, scale: f64) -
     for b in 0..l.batch {
         for h in 0..l.heads {
             for i in 0..l.q_tokens {
-                let qi = &q[b * l.q_batch + i * l.q_ld + h * d..][..d];
+                let qi = &q[l.q_offset + b * l.q_batch + i * l.q_ld + h * d..][..d];
                 for (j, s) in scores.iter_mut().enumerate() {
-                    let kj = &k[b * l.k_batch + j * l.k_ld + h * d..][..d];
+                    let kj = &k[l.k_offset + b * l.k_batch + j * l.k_ld + h * d..][..d];
                     *s = scale * qi.iter().zip(kj).map(|(&x, &y)| x as f64 * y as f64).sum::<f64>();
                 }
                 let m = scores.iter().cloned().fold(f64::MIN, f64::max);
                 let total: f64 = scores.iter().map(|s| (s - m).exp()).sum();
                 for (j, s) in scores.iter().enumerate() {
                     let p = (s - m).exp() / total;
-                    let vj = &v[b * l.v_batch + j * l.v_ld + h * d..][..d];
+                    let vj = &v[l.v_offset + b * l.v_batch + j * l.v_ld + h * d..][..d];
                     for (e, &vv) in vj.iter().enumerate() {
                         out[((b * l.q_tokens + i) * l.heads + h) * d + e] += p * vv as f64;
                     }
@@ -34,10 +34,10 @@ fn reference(q: &[f32], k: &[f32], v: &[f32], l: &AttentionLayout, scale: f64) -
 /// Runs attention on random Q, K, V laid out as `l` (output dense) and compares.
 fn check(dtype: Dtype, l: &AttentionLayout, seed: u64) {
     let ctx = ctx();
-    let extent = |ld: usize, bs: usize, n: usize| (l.batch - 1) * bs + (n - 1) * ld + l.heads * l.head_dim;
-    let q = stored(&random(extent(l.q_ld, l.q_batch, l.q_tokens), seed), dtype);
-    let k = stored(&random(extent(l.k_ld, l.k_batch, l.kv_tokens), seed + 1), dtype);
-    let v = stored(&random(extent(l.v_ld, l.v_batch, l.kv_tokens), seed + 2), dtype);
+    let extent = |off: usize, ld: usize, bs: usize, n: usize| off + (l.batch - 1) * bs + (n - 1) * ld + l.heads * l.head_dim;
+    let q = stored(&random(extent(l.q_offset, l.q_ld, l.q_batch, l.q_tokens), seed), dtype);
+    let k = stored(&random(extent(l.k_offset, l.k_ld, l.k_batch, l.kv_tokens), seed + 1), dtype);
+    let v = stored(&random(extent(l.v_offset, l.v_ld, l.v_batch, l.kv_tokens), seed + 2), dtype);
     let tq = ctx.upload(&[q.len()], dtype, &q).unwrap();
     let tk = ctx.upload(&[k.len()], dtype, &k).unwrap();
     let tv = ctx.upload(&[v.len()], dtype, &v).unwrap();
@@ -86,7 +86,8 @@ fn head_sizes() {
 
 #[test]
 fn strided_operands_from_a_fused_projection() {
-    // Q, K, V as column blocks of one [B, N, 3·H·D] projection, batch strides included.
+    // Q, K, V as column blocks of [B, N, 3·H·D] projections (at column offsets 0, H·D and 2·H·D),
+    // batch strides included.
     let (b, h, d, n) = (2, 3, 64, 70);
     let w = h * d;
     let mut l = AttentionLayout::dense(b, h, d, n, n);
@@ -96,6 +97,8 @@ fn strided_operands_from_a_fused_projection() {
     l.q_batch = n * 3 * w;
     l.k_batch = n * 3 * w;
     l.v_batch = n * 3 * w;
+    l.k_offset = w;
+    l.v_offset = 2 * w;
     for dtype in DTYPES {
         check(dtype, &l, 50);
     }

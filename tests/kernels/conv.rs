@@ -1,7 +1,7 @@
 //! conv2d (implicit GEMM, NHWC) against an f64 direct convolution.
 
 use crate::common::*;
-use vkdiff_runtime::ops::{conv2d, oihw_to_ohwi, Padding};
+use vkdiff_runtime::ops::{conv2d, oihw_to_ohwi, ConvParams, Padding};
 use vkdiff_runtime::{Dtype, GemmFamily};
 
 struct Case {
@@ -13,6 +13,8 @@ struct Case {
     k: usize,
     stride: usize,
     pad: Padding,
+    /// Adds into an output that already holds values (a fused residual).
+    accumulate: bool,
 }
 
 fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) {
@@ -26,15 +28,18 @@ fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) {
     let tx = ctx.upload(&[c.b, c.h, c.w, c.cin], dtype, &x).unwrap();
     let tw = ctx.upload(&[c.cout, c.k, c.k, c.cin], dtype, &oihw_to_ohwi(&w_oihw, c.cout, c.cin, c.k, c.k)).unwrap();
     let tb = ctx.upload(&[c.cout], dtype, &bias).unwrap();
-    let out = ctx.zeros(&[c.b, ho, wo, c.cout], dtype).unwrap();
-    ctx.run(|rec| conv2d(rec, &tx, &tw, Some(&tb), &out, c.stride, c.pad)).unwrap();
+    let prior = if c.accumulate { stored(&random(c.b * ho * wo * c.cout, seed + 3), dtype) } else { vec![0.0; c.b * ho * wo * c.cout] };
+    let out = ctx.upload(&[c.b, ho, wo, c.cout], dtype, &prior).unwrap();
+    let params = ConvParams { stride: c.stride, pad: c.pad, accumulate: c.accumulate };
+    ctx.run(|rec| conv2d(rec, &tx, &tw, Some(&tb), &out, &params)).unwrap();
     let mut want = vec![0.0f64; out.numel()];
     let mut mag = vec![0.0f64; out.numel()];
     for n in 0..c.b {
         for oy in 0..ho {
             for ox in 0..wo {
                 for o in 0..c.cout {
-                    let (mut acc, mut abs) = (bias[o] as f64, bias[o].abs() as f64);
+                    let before = prior[((n * ho + oy) * wo + ox) * c.cout + o] as f64;
+                    let (mut acc, mut abs) = (bias[o] as f64 + before, bias[o].abs() as f64 + before.abs());
                     for ky in 0..c.k {
                         for kx in 0..c.k {
                             let iy = (oy * c.stride + ky) as isize - c.pad.top as isize;
@@ -58,7 +63,7 @@ fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) {
         }
     }
     let rtol = storage_rtol(dtype);
-    let what = format!("{family:?} {dtype:?} {}x{}x{}x{} -> {} k{} s{} {:?}", c.b, c.h, c.w, c.cin, c.cout, c.k, c.stride, c.pad);
+    let what = format!("{family:?} {dtype:?} {}x{}x{}x{} -> {} k{} s{} {:?} accumulate {}", c.b, c.h, c.w, c.cin, c.cout, c.k, c.stride, c.pad, c.accumulate);
     // Same bound as GEMM: 1e-5 of Σ|x·w| for f32 accumulation, plus output storage rounding.
     assert_within(&what, &out.download().unwrap(), &want, |i| 1e-6 + 1e-5 * mag[i] + rtol * want[i].abs());
 }
@@ -73,35 +78,35 @@ fn all(c: Case, seed: u64) {
 
 #[test]
 fn conv3x3_stride1_pad1() {
-    all(Case { b: 2, h: 9, w: 7, cin: 16, cout: 24, k: 3, stride: 1, pad: Padding::same(1) }, 21);
+    all(Case { b: 2, h: 9, w: 7, cin: 16, cout: 24, k: 3, stride: 1, pad: Padding::same(1), accumulate: true }, 21);
 }
 
 #[test]
 fn conv3x3_stride2_pad1() {
-    all(Case { b: 1, h: 10, w: 12, cin: 8, cout: 36, k: 3, stride: 2, pad: Padding::same(1) }, 22);
+    all(Case { b: 1, h: 10, w: 12, cin: 8, cout: 36, k: 3, stride: 2, pad: Padding::same(1), accumulate: false }, 22);
 }
 
 #[test]
 fn conv3x3_stride2_vae_padding() {
     // diffusers' VAE Downsample2D pads (0, 1, 0, 1) then convolves with stride 2, no padding.
     let pad = Padding { top: 0, left: 0, bottom: 1, right: 1 };
-    all(Case { b: 1, h: 8, w: 8, cin: 12, cout: 8, k: 3, stride: 2, pad }, 23);
+    all(Case { b: 1, h: 8, w: 8, cin: 12, cout: 8, k: 3, stride: 2, pad, accumulate: false }, 23);
 }
 
 #[test]
 fn conv_large_images_take_the_large_row_tiles() {
     // 34×34 = 1156 and 2·13·13 = 338 output pixels select the 64- and 32-row variants.
-    all(Case { b: 1, h: 34, w: 34, cin: 8, cout: 12, k: 3, stride: 1, pad: Padding::same(1) }, 26);
-    all(Case { b: 2, h: 13, w: 13, cin: 4, cout: 8, k: 3, stride: 1, pad: Padding::same(1) }, 27);
+    all(Case { b: 1, h: 34, w: 34, cin: 8, cout: 12, k: 3, stride: 1, pad: Padding::same(1), accumulate: false }, 26);
+    all(Case { b: 2, h: 13, w: 13, cin: 4, cout: 8, k: 3, stride: 1, pad: Padding::same(1), accumulate: false }, 27);
 }
 
 #[test]
 fn conv1x1() {
-    all(Case { b: 2, h: 6, w: 5, cin: 40, cout: 20, k: 1, stride: 1, pad: Padding::same(0) }, 24);
+    all(Case { b: 2, h: 6, w: 5, cin: 40, cout: 20, k: 1, stride: 1, pad: Padding::same(0), accumulate: true }, 24);
 }
 
 #[test]
 fn conv_rgb_input_any_channel_count() {
     // Cin = 3 (the VAE encoder's conv_in) and Cout = 5 take the scalar path on every device.
-    all(Case { b: 1, h: 7, w: 6, cin: 3, cout: 5, k: 3, stride: 1, pad: Padding::same(1) }, 25);
+    all(Case { b: 1, h: 7, w: 6, cin: 3, cout: 5, k: 3, stride: 1, pad: Padding::same(1), accumulate: true }, 25);
 }

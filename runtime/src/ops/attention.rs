@@ -6,8 +6,8 @@ use crate::recorder::Recorder;
 use crate::tensor::Tensor;
 
 /// Where attention's operands live. Element (b, token, head, d) of each is at
-/// `b·batch + token·ld + head·head_dim + d`, so Q, K and V can be column slices of one fused
-/// projection (row stride 3·heads·head_dim).
+/// `offset + b·batch + token·ld + head·head_dim + d`, so Q, K and V can be column slices of one
+/// fused projection (row stride 3·heads·head_dim, offsets 0, C and 2C).
 #[derive(Clone, Debug)]
 pub struct AttentionLayout {
     pub batch: usize,
@@ -23,6 +23,9 @@ pub struct AttentionLayout {
     pub k_batch: usize,
     pub v_batch: usize,
     pub o_batch: usize,
+    pub q_offset: usize,
+    pub k_offset: usize,
+    pub v_offset: usize,
 }
 
 impl AttentionLayout {
@@ -43,6 +46,9 @@ impl AttentionLayout {
             k_batch: kv_tokens * w,
             v_batch: kv_tokens * w,
             o_batch: q_tokens * w,
+            q_offset: 0,
+            k_offset: 0,
+            v_offset: 0,
         }
     }
 }
@@ -54,12 +60,13 @@ const WIDTHS: [u32; 4] = [8, 16, 32, 64];
 pub fn attention(rec: &mut Recorder, q: &Tensor, k: &Tensor, v: &Tensor, out: &Tensor, l: &AttentionLayout, scale: f32) -> Result<()> {
     let dtype = same_dtype(rec.context(), "attention", &[q, k, v, out])?;
     ensure(l.batch > 0 && l.heads > 0 && l.q_tokens > 0 && l.kv_tokens > 0, || format!("attention: empty layout {l:?}"))?;
-    let strides = [l.head_dim, l.q_ld, l.k_ld, l.v_ld, l.o_ld, l.q_batch, l.k_batch, l.v_batch, l.o_batch];
+    let strides = [l.head_dim, l.q_ld, l.k_ld, l.v_ld, l.o_ld, l.q_batch, l.k_batch, l.v_batch, l.o_batch, l.q_offset, l.k_offset, l.v_offset];
     ensure(strides.iter().all(|s| s % 4 == 0), || format!("attention: head dim and strides must be multiples of 4, got {l:?}"))?;
     let need = |ld: usize, bs: usize, tokens: usize| (l.batch - 1) * bs + (tokens - 1) * ld + l.heads * l.head_dim;
-    ensure(q.numel() >= need(l.q_ld, l.q_batch, l.q_tokens), || format!("attention: Q {:?} too small", q.shape()))?;
-    ensure(k.numel() >= need(l.k_ld, l.k_batch, l.kv_tokens), || format!("attention: K {:?} too small", k.shape()))?;
-    ensure(v.numel() >= need(l.v_ld, l.v_batch, l.kv_tokens), || format!("attention: V {:?} too small", v.shape()))?;
+    let need_at = |off: usize, ld: usize, bs: usize, tokens: usize| off + need(ld, bs, tokens);
+    ensure(q.numel() >= need_at(l.q_offset, l.q_ld, l.q_batch, l.q_tokens), || format!("attention: Q {:?} too small", q.shape()))?;
+    ensure(k.numel() >= need_at(l.k_offset, l.k_ld, l.k_batch, l.kv_tokens), || format!("attention: K {:?} too small", k.shape()))?;
+    ensure(v.numel() >= need_at(l.v_offset, l.v_ld, l.v_batch, l.kv_tokens), || format!("attention: V {:?} too small", v.shape()))?;
     ensure(out.numel() >= need(l.o_ld, l.o_batch, l.q_tokens), || format!("attention: output {:?} too small", out.shape()))?;
     let ctx = rec.context().clone();
     let native = ctx.info().subgroup_size;
@@ -80,7 +87,7 @@ pub fn attention(rec: &mut Recorder, q: &Tensor, k: &Tensor, v: &Tensor, out: &T
     let kern = kernel(&ctx, "attention", dtype, &[("SG", sg), ("DV", variant.param("DV").unwrap()), ("TM", tm as u32)], 4)?;
     let push = [
         u(l.q_tokens), u(l.kv_tokens), u(l.head_dim), u(l.q_ld), u(l.k_ld), u(l.v_ld), u(l.o_ld),
-        u(l.q_batch), u(l.k_batch), u(l.v_batch), u(l.o_batch), f(scale),
+        u(l.q_batch), u(l.k_batch), u(l.v_batch), u(l.o_batch), f(scale), u(l.q_offset), u(l.k_offset), u(l.v_offset),
     ];
     rec.dispatch(&kern, &[q, k, v], &[out], &push, [u(l.q_tokens.div_ceil(tm)), u(l.heads), u(l.batch)])
 }

@@ -22,6 +22,22 @@ impl Padding {
     }
 }
 
+/// How a convolution walks its input and treats its output.
+#[derive(Clone, Copy, Debug)]
+pub struct ConvParams {
+    pub stride: usize,
+    pub pad: Padding,
+    /// Adds the result to what `out` holds (a fused residual connection).
+    pub accumulate: bool,
+}
+
+impl ConvParams {
+    /// Stride `stride`, symmetric padding `pad`, output overwritten.
+    pub fn new(stride: usize, pad: usize) -> ConvParams {
+        ConvParams { stride, pad: Padding::same(pad), accumulate: false }
+    }
+}
+
 /// Re-lays a PyTorch conv weight [out, in, kh, kw] as [out, kh, kw, in], the layout the kernel
 /// reads K = (ky·kw + kx)·in + ci from.
 pub fn oihw_to_ohwi(w: &[f32], cout: usize, cin: usize, kh: usize, kw: usize) -> Vec<f32> {
@@ -38,9 +54,10 @@ pub fn oihw_to_ohwi(w: &[f32], cout: usize, cin: usize, kh: usize, kw: usize) ->
     out
 }
 
-/// out[B, Ho, Wo, Cout] = conv(x[B, H, W, Cin], w[Cout, KH, KW, Cin]) (+ bias), with the output
-/// size implied by stride and padding.
-pub fn conv2d(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor, stride: usize, pad: Padding) -> Result<()> {
+/// out[B, Ho, Wo, Cout] = conv(x[B, H, W, Cin], w[Cout, KH, KW, Cin]) (+ bias) (+ out), with the
+/// output size implied by stride and padding.
+pub fn conv2d(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor, p: &ConvParams) -> Result<()> {
+    let (stride, pad) = (p.stride, p.pad);
     let dtype = same_dtype(rec.context(), "conv2d", &[x, w, out])?;
     ensure(x.shape().len() == 4 && w.shape().len() == 4 && out.shape().len() == 4, || {
         format!("conv2d: want NHWC input, OHWI weight, NHWC output; got {:?}, {:?}, {:?}", x.shape(), w.shape(), out.shape())
@@ -57,7 +74,7 @@ pub fn conv2d(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>,
     }
     let (m, n, k) = (b * ho * wo, cout, kh * kw * cin);
     let push = [
-        u(m), u(n), u(k), u(k), u(n), 0, 0, bias.is_some() as u32, f(1.0),
+        u(m), u(n), u(k), u(k), u(n), 0, 0, bias.is_some() as u32 | (p.accumulate as u32) << 1, f(1.0),
         u(h), u(wd), u(cin), u(ho), u(wo), u(kw), u(stride), u(pad.top), u(pad.left),
     ];
     // Without a bias the kernel never reads binding 2; the output stands in for it.

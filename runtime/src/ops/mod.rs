@@ -8,7 +8,7 @@ mod gemm;
 mod norm;
 
 pub use attention::{attention, AttentionLayout};
-pub use conv::{conv2d, oihw_to_ohwi, Padding};
+pub use conv::{conv2d, oihw_to_ohwi, ConvParams, Padding};
 pub use elementwise::{add, binary, concat_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x, BinaryOp, TimestepEmbedding, UnaryOp};
 pub use gemm::{linear, matmul, Matmul};
 pub use norm::{group_norm, layer_norm, softmax};

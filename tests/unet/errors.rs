@@ -1,0 +1,1 @@
+//! Broken checkpoints and inputs: one error naming what is wrong.

@@ -1,0 +1,307 @@
+//! Checkpoints: safetensors files (or random weights, for benchmarks) seen through the names of
+//! the diffusers module tree. Each module asks a [`Weights`] view scoped to its own prefix for its
+//! tensors; the single-file layout is a renaming at this level, not a second path through the
+//! networks.
+
+use crate::config::UNetConfig;
+use crate::error::{Error, Result};
+use crate::ldm_names::{infer_unet_config, OriginalNames};
+use crate::safetensors::{decode, SafeTensors, SourceDtype};
+use std::collections::{BTreeSet, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use vkdiff_runtime::ops::oihw_to_ohwi;
+use vkdiff_runtime::{Context, Dtype, Tensor};
+
+/// Prefix of the UNet's tensors in an original (sgm / ComfyUI / A1111) single-file checkpoint.
+const SINGLE_FILE_UNET: &str = "model.diffusion_model.";
+
+enum Source {
+    Files {
+        files: Vec<SafeTensors>,
+        /// Stored name → index into `files`.
+        index: HashMap<String, usize>,
+        /// Prefix stored names carry below the requested ones.
+        prefix: String,
+        /// Renaming from diffusers names to the original layout's, for single files.
+        original: Option<OriginalNames>,
+        describe: String,
+    },
+    /// Every tensor drawn on request with a fan-in scale: full-size networks for benchmarks.
+    Random { seed: u64 },
+}
+
+/// Weights for one network, converted to the run precision as they are uploaded.
+pub struct Checkpoint {
+    ctx: Context,
+    dtype: Dtype,
+    source: Source,
+    used: Mutex<BTreeSet<String>>,
+}
+
+impl Checkpoint {
+    /// A UNet from `path`: a diffusers model folder (holding `unet/` or being it, with
+    /// `config.json` and `diffusion_pytorch_model[.fp16].safetensors`, sharded or not) or an
+    /// original single-file checkpoint, whose config is inferred from tensor shapes.
+    pub fn unet(ctx: &Context, path: &Path, dtype: Dtype) -> Result<(UNetConfig, Checkpoint)> {
+        if path.is_dir() {
+            let dir = if path.join("unet").join("config.json").is_file() { path.join("unet") } else { path.to_path_buf() };
+            let config_path = dir.join("config.json");
+            if !config_path.is_file() {
+                return Err(Error::Checkpoint(format!("{}: no config.json (expected a diffusers model folder or its unet/ subfolder)", path.display())));
+            }
+            let config = UNetConfig::from_file(&config_path)?;
+            let files = diffusers_weight_files(&dir, "diffusion_pytorch_model", dtype)?;
+            let ckpt = Checkpoint::from_files(ctx, dtype, files, "", None, format!("{} (diffusers layout)", dir.display()))?;
+            return Ok((config, ckpt));
+        }
+        let file = SafeTensors::open(path)?;
+        if !file.entries.keys().any(|k| k.starts_with(SINGLE_FILE_UNET)) {
+            return Err(Error::Checkpoint(format!(
+                "{}: no `{SINGLE_FILE_UNET}*` tensors; not an original-layout SDXL checkpoint (for a diffusers model pass its folder)",
+                path.display()
+            )));
+        }
+        let shapes: HashMap<&str, &[usize]> =
+            file.entries.iter().filter_map(|(k, e)| Some((k.strip_prefix(SINGLE_FILE_UNET)?, e.shape.as_slice()))).collect();
+        let config = infer_unet_config(&shapes).map_err(|e| Error::Checkpoint(format!("{}: {e}", path.display())))?;
+        Self::single_file_unet(ctx, file, config, dtype)
+    }
+
+    /// A single-file UNet with a config given by the caller (for models whose head counts or norm
+    /// groups differ from SDXL's conventions, which shapes cannot tell).
+    pub fn single_file_unet_with_config(ctx: &Context, path: &Path, config: UNetConfig, dtype: Dtype) -> Result<(UNetConfig, Checkpoint)> {
+        config.validate()?;
+        Self::single_file_unet(ctx, SafeTensors::open(path)?, config, dtype)
+    }
+
+    fn single_file_unet(ctx: &Context, file: SafeTensors, config: UNetConfig, dtype: Dtype) -> Result<(UNetConfig, Checkpoint)> {
+        let names = OriginalNames::unet(&config)?;
+        let describe = format!("{} (single-file layout)", file.path.display());
+        let ckpt = Checkpoint::from_files(ctx, dtype, vec![file], SINGLE_FILE_UNET, Some(names), describe)?;
+        Ok((config, ckpt))
+    }
+
+    /// Random weights of whatever shapes the network asks for (benchmarks of full-size models).
+    pub fn random(ctx: &Context, dtype: Dtype, seed: u64) -> Checkpoint {
+        Checkpoint { ctx: ctx.clone(), dtype, source: Source::Random { seed }, used: Mutex::default() }
+    }
+
+    fn from_files(ctx: &Context, dtype: Dtype, files: Vec<SafeTensors>, prefix: &str, original: Option<OriginalNames>, describe: String) -> Result<Checkpoint> {
+        let mut index = HashMap::new();
+        for (i, f) in files.iter().enumerate() {
+            for name in f.entries.keys() {
+                index.insert(name.clone(), i);
+            }
+        }
+        let source = Source::Files { files, index, prefix: prefix.into(), original, describe };
+        Ok(Checkpoint { ctx: ctx.clone(), dtype, source, used: Mutex::default() })
+    }
+
+    /// The whole checkpoint as a view.
+    pub fn root(&self) -> Weights<'_> {
+        Weights { ckpt: self, prefix: String::new() }
+    }
+
+    /// The run precision weights are converted to.
+    pub fn dtype(&self) -> Dtype {
+        self.dtype
+    }
+
+    pub fn context(&self) -> &Context {
+        &self.ctx
+    }
+
+    /// Stored tensors under the network's prefix that no module asked for.
+    pub fn unused(&self) -> Vec<String> {
+        let Source::Files { index, prefix, .. } = &self.source else { return Vec::new() };
+        let used = self.used.lock().unwrap();
+        let mut out: Vec<String> = index.keys().filter(|k| k.starts_with(prefix.as_str()) && !used.contains(*k)).cloned().collect();
+        out.sort();
+        out
+    }
+
+    /// The stored name of a diffusers-named tensor.
+    fn stored_name(&self, name: &str) -> Option<String> {
+        match &self.source {
+            Source::Files { prefix, original, .. } => {
+                let renamed = match original {
+                    Some(o) => o.rename(name)?,
+                    None => name.to_string(),
+                };
+                Some(format!("{prefix}{renamed}"))
+            }
+            Source::Random { .. } => Some(name.to_string()),
+        }
+    }
+
+    fn describe_missing(&self, name: &str) -> String {
+        match (&self.source, self.stored_name(name)) {
+            (Source::Files { describe, .. }, Some(stored)) if stored != name => format!("tensor `{stored}` (diffusers `{name}`) is missing from {describe}"),
+            (Source::Files { describe, .. }, _) => format!("tensor `{name}` is missing from {describe}"),
+            (Source::Random { .. }, _) => format!("tensor `{name}` is missing"),
+        }
+    }
+
+    fn has(&self, name: &str) -> bool {
+        match &self.source {
+            Source::Files { index, .. } => self.stored_name(name).is_some_and(|s| index.contains_key(&s)),
+            Source::Random { .. } => true,
+        }
+    }
+
+    /// The stored bytes of `name`, checked against the expected shape (trailing 1-sized
+    /// dimensions are ignored, so a 1×1 conv and a linear weight read the same).
+    fn stored(&self, name: &str, shape: &[usize]) -> Result<Option<(SourceDtype, &[u8])>> {
+        let Source::Files { files, index, .. } = &self.source else { return Ok(None) };
+        let stored = self.stored_name(name).filter(|s| index.contains_key(s)).ok_or_else(|| Error::Checkpoint(self.describe_missing(name)))?;
+        let file = &files[index[&stored]];
+        let entry = &file.entries[&stored];
+        let trim = |s: &[usize]| s.iter().rposition(|&d| d != 1).map_or(0, |i| i + 1);
+        if entry.shape[..trim(&entry.shape)] != shape[..trim(shape)] {
+            return Err(Error::Checkpoint(format!(
+                "tensor `{stored}` in {} has shape {:?}; the config expects {shape:?}",
+                file.path.display(),
+                entry.shape
+            )));
+        }
+        if let SourceDtype::Other(what) = entry.dtype {
+            return Err(Error::Checkpoint(format!("tensor `{stored}` in {} is {what}; vkdiff reads F32, F16 and BF16", file.path.display())));
+        }
+        self.used.lock().unwrap().insert(stored);
+        Ok(Some((entry.dtype, file.bytes(entry))))
+    }
+
+    /// Values of `name` as f32 on the host.
+    fn host(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>> {
+        Ok(match self.stored(name, shape)? {
+            Some((dtype, bytes)) => decode(dtype, bytes).expect("dtype checked by Checkpoint::stored"),
+            None => {
+                let Source::Random { seed } = self.source else { unreachable!() };
+                random_values(seed, name, shape)
+            }
+        })
+    }
+
+    /// `name` on the device in the run precision; bytes already in it are streamed unconverted.
+    fn tensor(&self, name: &str, shape: &[usize]) -> Result<Tensor> {
+        if let Some((src, bytes)) = self.stored(name, shape)? {
+            if matches!((src, self.dtype), (SourceDtype::F16, Dtype::F16) | (SourceDtype::F32, Dtype::F32)) {
+                return Ok(self.ctx.upload_bytes(shape, self.dtype, bytes)?);
+            }
+        }
+        self.upload(shape, &self.host(name, shape)?)
+    }
+
+    fn upload(&self, shape: &[usize], data: &[f32]) -> Result<Tensor> {
+        Ok(self.ctx.upload(shape, self.dtype, data)?)
+    }
+}
+
+/// A checkpoint seen from one module: names are relative to its prefix.
+#[derive(Clone)]
+pub struct Weights<'a> {
+    ckpt: &'a Checkpoint,
+    prefix: String,
+}
+
+impl<'a> Weights<'a> {
+    /// The view of a child module (`w.sub("down_blocks.1").sub("resnets.0")`).
+    pub fn sub(&self, name: &str) -> Weights<'a> {
+        Weights { ckpt: self.ckpt, prefix: self.path(name) }
+    }
+
+    fn path(&self, name: &str) -> String {
+        if self.prefix.is_empty() {
+            name.to_string()
+        } else {
+            format!("{}.{name}", self.prefix)
+        }
+    }
+
+    pub fn has(&self, name: &str) -> bool {
+        self.ckpt.has(&self.path(name))
+    }
+
+    pub fn checkpoint(&self) -> &'a Checkpoint {
+        self.ckpt
+    }
+
+    /// A tensor as stored, in the run precision.
+    pub fn tensor(&self, name: &str, shape: &[usize]) -> Result<Tensor> {
+        self.ckpt.tensor(&self.path(name), shape)
+    }
+
+    /// A tensor's values on the host, as f32.
+    pub fn host(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>> {
+        self.ckpt.host(&self.path(name), shape)
+    }
+
+    /// A PyTorch conv weight [out, in, kh, kw] re-laid out as the kernels read it, [out, kh, kw, in].
+    pub fn conv_weight(&self, name: &str, [o, i, kh, kw]: [usize; 4]) -> Result<Tensor> {
+        let oihw = self.host(name, &[o, i, kh, kw])?;
+        self.ckpt.upload(&[o, kh, kw, i], &oihw_to_ohwi(&oihw, o, i, kh, kw))
+    }
+
+    /// Several [rows_k, cols] weights stacked into one [Σ rows_k, cols] tensor (fused projections).
+    pub fn stacked(&self, names: &[&str], rows: usize, cols: usize) -> Result<Tensor> {
+        let mut data = Vec::with_capacity(names.len() * rows * cols);
+        for n in names {
+            data.extend(self.host(n, &[rows, cols])?);
+        }
+        self.ckpt.upload(&[names.len() * rows, cols], &data)
+    }
+}
+
+/// The weight files of a diffusers component: one file or shards listed by an index, preferring
+/// the fp16 variant for f16 runs and the full-precision one for f32 runs.
+fn diffusers_weight_files(dir: &Path, stem: &str, dtype: Dtype) -> Result<Vec<SafeTensors>> {
+    let plain = [format!("{stem}.safetensors"), format!("{stem}.safetensors.index.json")];
+    let fp16 = [format!("{stem}.fp16.safetensors"), format!("{stem}.safetensors.index.fp16.json")];
+    let order = if dtype == Dtype::F16 { [fp16, plain] } else { [plain, fp16] };
+    for [single, index] in &order {
+        if dir.join(single).is_file() {
+            return Ok(vec![SafeTensors::open(&dir.join(single))?]);
+        }
+        if dir.join(index).is_file() {
+            return shards(&dir.join(index));
+        }
+    }
+    Err(Error::Checkpoint(format!("{}: no {stem}[.fp16].safetensors or sharded index", dir.display())))
+}
+
+fn shards(index_path: &Path) -> Result<Vec<SafeTensors>> {
+    let bad = |why: String| Error::Format { path: index_path.to_path_buf(), why };
+    let text = std::fs::read_to_string(index_path).map_err(|e| Error::Io { path: index_path.to_path_buf(), source: e })?;
+    let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
+    let map = json.get("weight_map").and_then(|m| m.as_object()).ok_or_else(|| bad("no `weight_map`".into()))?;
+    let names: BTreeSet<&str> = map.values().filter_map(|v| v.as_str()).collect();
+    let dir: PathBuf = index_path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let files = names.iter().map(|n| SafeTensors::open(&dir.join(n))).collect::<Result<Vec<_>>>()?;
+    for (tensor, file) in map {
+        let f = files.iter().find(|f| f.path.file_name().and_then(|s| s.to_str()) == file.as_str());
+        if !f.is_some_and(|f| f.entries.contains_key(tensor)) {
+            return Err(bad(format!("tensor `{tensor}` is listed in {file} but that shard does not hold it")));
+        }
+    }
+    Ok(files)
+}
+
+/// Deterministic per-name values: U(−1, 1)/√fan_in for weights, 1 ± 0.1 for norm scales,
+/// ±0.1 for biases, so a random full-size network stays in f16 range.
+fn random_values(seed: u64, name: &str, shape: &[usize]) -> Vec<f32> {
+    let mut state = name.bytes().fold(seed ^ 0xcbf2_9ce4_8422_2325, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3)) | 1;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+    };
+    let numel: usize = shape.iter().product();
+    let (base, scale) = match shape.len() {
+        1 if name.ends_with("weight") => (1.0, 0.1),
+        1 => (0.0, 0.1),
+        _ => (0.0, 1.0 / ((numel / shape[0]) as f32).sqrt()),
+    };
+    (0..numel).map(|_| base + scale * next()).collect()
+}
