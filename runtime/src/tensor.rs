@@ -81,7 +81,7 @@ impl Tensor {
         let row_bytes = (self.numel() / rows.max(1) * dtype_size(self.dtype)) as u64;
         let offset = self.offset + start as u64 * row_bytes;
         let align = self.buf.shared.info.min_storage_offset_alignment.max(4);
-        ensure(offset % align == 0, || format!("view at byte {offset} breaks the device's {align}-byte binding alignment"))?;
+        ensure(offset.is_multiple_of(align), || format!("view at byte {offset} breaks the device's {align}-byte binding alignment"))?;
         let mut shape = self.shape.clone();
         shape[0] = len;
         Ok(Tensor { offset, shape, ..self.clone() })

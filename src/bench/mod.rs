@@ -2,6 +2,7 @@
 
 mod cpu_reference;
 mod kernels;
+mod unet;
 
 use anyhow::Result;
 
@@ -11,11 +12,15 @@ pub enum BenchCommand {
     Kernels(kernels::KernelsArgs),
     /// Frames per second of depth + masks + COCO at 1920×1080, against the paper's Blender.
     Scene(crate::scene_cmd::BenchSceneArgs),
+    /// Milliseconds per SDXL UNet evaluation (real architecture, random weights) and peak memory,
+    /// against diffusers on the CPU.
+    Unet(unet::UnetArgs),
 }
 
 pub fn run(cmd: BenchCommand) -> Result<()> {
     match cmd {
         BenchCommand::Kernels(args) => kernels::run(&args),
         BenchCommand::Scene(args) => crate::scene_cmd::run_bench_scene(args),
+        BenchCommand::Unet(args) => unet::run(&args),
     }
 }

@@ -3,7 +3,7 @@
 
 use crate::common::*;
 use vkdiff_runtime::ops::{self, UnaryOp};
-use vkdiff_runtime::{Context, Dtype, Recorder};
+use vkdiff_runtime::{Arena, Context, Dtype, Recorder};
 
 #[test]
 fn recording_replays_with_new_inputs() {
@@ -97,4 +97,31 @@ fn views_and_uploads_round_trip() {
 fn bad_device_index_is_one_clear_error() {
     let err = Context::new(Some(99)).err().expect("device 99 should not exist").to_string();
     assert!(err.contains("device 99") && err.contains("vkdiff devices"), "{err}");
+}
+
+#[test]
+fn arena_reuses_a_dropped_buffer_within_one_recording() {
+    // x → a = 2x (arena) → y = a + 1·a … then a is dropped, b takes its buffer and is written
+    // while the recording still has to order it after a's last read (a WAR hazard).
+    let ctx = Context::new(None).unwrap();
+    let x: Vec<f32> = (0..1000).map(|i| i as f32).collect();
+    let tx = ctx.upload(&[1000], Dtype::F32, &x).unwrap();
+    let ty = ctx.zeros(&[1000], Dtype::F32).unwrap();
+    let tz = ctx.zeros(&[1000], Dtype::F32).unwrap();
+    let arena = Arena::new(&ctx);
+    let mut rec = Recorder::new(&ctx, false).unwrap();
+    let a = arena.tensor(&[1000], Dtype::F32).unwrap();
+    ops::unary(&mut rec, UnaryOp::Scale, &tx, &a, 2.0).unwrap();
+    ops::add(&mut rec, &a, &a, &ty).unwrap();
+    let live = ctx.live_bytes();
+    drop(a);
+    let b = arena.tensor(&[900], Dtype::F32).unwrap();
+    assert_eq!(ctx.live_bytes(), live, "a similar-sized request takes the dropped buffer");
+    assert_eq!(arena.idle_bytes(), 0);
+    ops::unary(&mut rec, UnaryOp::Scale, &tx.narrow(0, 900).unwrap(), &b, -1.0).unwrap();
+    ops::add(&mut rec, &b, &b, &tz.narrow(0, 900).unwrap()).unwrap();
+    rec.finish().unwrap().run().unwrap();
+    assert_eq!(ty.download().unwrap(), x.iter().map(|v| 4.0 * v).collect::<Vec<_>>());
+    let z = tz.download().unwrap();
+    assert_eq!(&z[..900], &x[..900].iter().map(|v| -2.0 * v).collect::<Vec<_>>()[..]);
 }

@@ -109,7 +109,25 @@ pub struct Level {
     pub heads: usize,
 }
 
+/// `stabilityai/stable-diffusion-xl-base-1.0`'s unet/config.json (reference/sdxl.md §1.1).
+pub const SDXL_BASE_CONFIG: &str = r#"{
+    "in_channels": 4, "out_channels": 4, "block_out_channels": [320, 640, 1280],
+    "down_block_types": ["DownBlock2D", "CrossAttnDownBlock2D", "CrossAttnDownBlock2D"],
+    "up_block_types": ["CrossAttnUpBlock2D", "CrossAttnUpBlock2D", "UpBlock2D"],
+    "mid_block_type": "UNetMidBlock2DCrossAttn", "layers_per_block": 2,
+    "transformer_layers_per_block": [1, 2, 10], "attention_head_dim": [5, 10, 20],
+    "cross_attention_dim": 2048, "use_linear_projection": true, "norm_num_groups": 32, "norm_eps": 1e-5,
+    "flip_sin_to_cos": true, "freq_shift": 0, "addition_embed_type": "text_time",
+    "addition_time_embed_dim": 256, "projection_class_embeddings_input_dim": 2816,
+    "act_fn": "silu", "sample_size": 128
+}"#;
+
 impl UNetConfig {
+    /// SDXL base 1.0's UNet (2.57 B parameters).
+    pub fn sdxl_base() -> UNetConfig {
+        serde_json::from_str(SDXL_BASE_CONFIG).expect("built-in config parses")
+    }
+
     pub fn from_file(path: &Path) -> Result<UNetConfig> {
         let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
         let config: UNetConfig =

@@ -16,7 +16,7 @@ mod unet_2d_blocks;
 mod unet_2d_condition;
 
 pub use checkpoint::{Checkpoint, Weights};
-pub use config::UNetConfig;
+pub use config::{UNetConfig, SDXL_BASE_CONFIG};
 pub use error::{Error, Result};
 pub use layout::{nchw_to_nhwc, nhwc_to_nchw};
 pub use safetensors::{SafeTensors, SourceDtype};

@@ -184,7 +184,7 @@ impl UNet {
             return bad(format!("UNet sample must be [B, H, W, {}] (channels last), got {s:?}", c.in_channels));
         }
         let multiple = 1 << (c.block_out_channels.len() - 1);
-        if s[1] % multiple != 0 || s[2] % multiple != 0 {
+        if !s[1].is_multiple_of(multiple) || !s[2].is_multiple_of(multiple) {
             return bad(format!("latent size {}×{} must be a multiple of {multiple} ({} pixels) for this UNet", s[1], s[2], 8 * multiple));
         }
         let b = s[0];

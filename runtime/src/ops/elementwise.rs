@@ -79,7 +79,7 @@ pub fn mul(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor) -> Result<(
 pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
     let dtype = same_dtype(rec.context(), "geglu", &[x, out])?;
     let two_f = *x.shape().last().unwrap_or(&0);
-    ensure(two_f % 2 == 0 && two_f > 0 && out.numel() * 2 == x.numel(), || format!("geglu: {:?} into {:?}", x.shape(), out.shape()))?;
+    ensure(two_f.is_multiple_of(2) && two_f > 0 && out.numel() * 2 == x.numel(), || format!("geglu: {:?} into {:?}", x.shape(), out.shape()))?;
     let k = kernel(rec.context(), "geglu", dtype, &[], 2)?;
     dispatch_flat(rec, &k, &[x], &[out], &[u(out.numel()), u(two_f / 2)], element_groups(out.numel()))
 }

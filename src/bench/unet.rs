@@ -1,0 +1,181 @@
+//! `vkdiff bench unet`: one SDXL UNet evaluation (the real architecture, random weights) per
+//! latent size, timed on the device, beside diffusers on this machine's CPU in the same run.
+
+use anyhow::{Context as _, Result};
+use std::process::Command;
+use std::time::Instant;
+use vkdiff_runtime::{Context, Dtype, Tensor};
+use vkdiff_unet::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
+
+const REFERENCE: &str = include_str!("../../tools/unet_cpu_reference.py");
+
+#[derive(clap::Args)]
+pub struct UnetArgs {
+    /// Vulkan device index (see `vkdiff devices`); default: VKDIFF_DEVICE, else the best device.
+    #[arg(long)]
+    device: Option<usize>,
+    /// Image sizes in pixels (square); the latent is 1/8 of it.
+    #[arg(long, value_delimiter = ',', default_values_t = [512, 1024])]
+    size: Vec<usize>,
+    /// Batch (2 = one classifier-free-guidance step).
+    #[arg(long, default_value_t = 2)]
+    batch: usize,
+    #[arg(long, value_enum, default_value_t = Precision::F16)]
+    precision: Precision,
+    /// Timed evaluations per size; the best is reported.
+    #[arg(long, default_value_t = 1)]
+    samples: usize,
+    /// Skip diffusers on the CPU (needs python with torch and diffusers: $VKDIFF_REFERENCE_PYTHON or python3).
+    #[arg(long)]
+    no_cpu_reference: bool,
+    /// Print JSON lines instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum Precision {
+    F16,
+    F32,
+}
+
+#[derive(serde::Serialize)]
+struct Row {
+    device: String,
+    size: usize,
+    batch: usize,
+    precision: &'static str,
+    load_s: f64,
+    record_s: f64,
+    ms: f64,
+    weights_mib: f64,
+    peak_mib: f64,
+    cpu_reference_ms: Option<f64>,
+    cpu_reference_peak_mib: Option<f64>,
+    cpu_reference: String,
+    ratio_to_cpu: Option<f64>,
+}
+
+pub fn run(args: &UnetArgs) -> Result<()> {
+    let dtype = match args.precision {
+        Precision::F16 => Dtype::F16,
+        Precision::F32 => Dtype::F32,
+    };
+    let config = UNetConfig::sdxl_base();
+    for &size in &args.size {
+        anyhow::ensure!(size % 32 == 0 && size > 0, "--size {size}: SDXL needs a multiple of 32 pixels");
+        let mut row = measure(args, &config, dtype, size)?;
+        if !args.no_cpu_reference {
+            match reference(size / 8, args.batch, args.samples) {
+                Ok(r) => {
+                    row.ratio_to_cpu = Some(r.ms / row.ms);
+                    (row.cpu_reference_ms, row.cpu_reference_peak_mib, row.cpu_reference) = (Some(r.ms), Some(r.peak_mib), r.what);
+                }
+                Err(why) => row.cpu_reference = format!("unavailable: {why}"),
+            }
+        }
+        if args.json {
+            println!("{}", serde_json::to_string(&row)?);
+        } else {
+            println!(
+                "{} | SDXL UNet {size}² batch {} {}: {:.0} ms/eval (load {:.1} s, record {:.2} s), weights {:.0} MiB, peak {:.0} MiB | diffusers CPU f32: {} | speed-up {}",
+                row.device,
+                row.batch,
+                row.precision,
+                row.ms,
+                row.load_s,
+                row.record_s,
+                row.weights_mib,
+                row.peak_mib,
+                row.cpu_reference_ms.map_or(row.cpu_reference.clone(), |ms| format!(
+                    "{ms:.0} ms, peak RSS {:.0} MiB ({})",
+                    row.cpu_reference_peak_mib.unwrap_or(0.0),
+                    row.cpu_reference
+                )),
+                row.ratio_to_cpu.map_or("-".into(), |r| format!("{r:.2}×")),
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Our evaluation; the device and every buffer are released before the reference runs.
+fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> Result<Row> {
+    let ctx = Context::new(args.device)?;
+    let start = Instant::now();
+    let ckpt = Checkpoint::random(&ctx, dtype, 0);
+    let unet = UNet::load(config, &ckpt)?;
+    let load_s = start.elapsed().as_secs_f64();
+    let weights = ctx.live_bytes();
+    let (b, h) = (args.batch, size / 8);
+    let random = |shape: &[usize], dtype: Dtype| -> Result<Tensor> {
+        let n: usize = shape.iter().product();
+        Ok(ctx.upload(shape, dtype, &(0..n).map(|i| ((i * 7919 % 1000) as f32 / 500.0) - 1.0).collect::<Vec<_>>())?)
+    };
+    let sample = random(&[b, h, h, config.in_channels], dtype)?;
+    let timesteps = ctx.upload(&[b], Dtype::F32, &vec![500.0; b])?;
+    let context = random(&[b, 77, config.cross_attention_dim], dtype)?;
+    let text = random(&[b, 1280], dtype)?;
+    let px = size as f32;
+    let ids = ctx.upload(&[b, 6], Dtype::F32, &[px, px, 0.0, 0.0, px, px].repeat(b))?;
+    let start = Instant::now();
+    let pass = unet.record(&UNetInputs {
+        sample: &sample,
+        timesteps: &timesteps,
+        encoder_hidden_states: &context,
+        added: Some((&text, &ids)),
+        control: None,
+        ip: &[],
+    })?;
+    let record_s = start.elapsed().as_secs_f64();
+    let mut best = f64::INFINITY;
+    for _ in 0..args.samples.max(1) {
+        let start = Instant::now();
+        pass.run()?;
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    let out = pass.output.download()?;
+    anyhow::ensure!(out.iter().all(|v| v.is_finite()), "the UNet output holds NaN or infinity");
+    let mib = |b: u64| b as f64 / (1 << 20) as f64;
+    Ok(Row {
+        device: ctx.info().name.clone(),
+        size,
+        batch: b,
+        precision: if dtype == Dtype::F16 { "f16" } else { "f32" },
+        load_s,
+        record_s,
+        ms: best * 1e3,
+        weights_mib: mib(weights),
+        peak_mib: mib(ctx.peak_bytes()),
+        cpu_reference_ms: None,
+        cpu_reference_peak_mib: None,
+        cpu_reference: String::new(),
+        ratio_to_cpu: None,
+    })
+}
+
+/// diffusers on the CPU: best milliseconds per evaluation, the process's peak resident memory,
+/// and what ran it.
+struct Reference {
+    ms: f64,
+    peak_mib: f64,
+    what: String,
+}
+
+fn reference(latent: usize, batch: usize, samples: usize) -> std::result::Result<Reference, String> {
+    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
+    let out = Command::new(&python)
+        .arg("-c")
+        .arg(REFERENCE)
+        .args([SDXL_BASE_CONFIG.to_string(), latent.to_string(), latent.to_string(), batch.to_string(), samples.max(1).to_string()])
+        .output()
+        .map_err(|e| format!("{python} not runnable ({e})"))?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        return Err(format!("{python}: {}", err.lines().last().unwrap_or("failed")));
+    }
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).map_err(|e| e.to_string())?;
+    let ms = v["ms"].as_f64().context("no ms").map_err(|e| e.to_string())?;
+    let what = format!("torch {} / diffusers {}, {} threads", v["torch"].as_str().unwrap_or("?"), v["diffusers"].as_str().unwrap_or("?"), v["threads"]);
+    Ok(Reference { ms, peak_mib: v["peak_mib"].as_f64().unwrap_or(0.0), what })
+}
