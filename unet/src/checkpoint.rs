@@ -52,7 +52,7 @@ impl Checkpoint {
             }
             let config = UNetConfig::from_file(&config_path)?;
             let files = diffusers_weight_files(&dir, "diffusion_pytorch_model", dtype)?;
-            let ckpt = Checkpoint::from_files(ctx, dtype, files, "", None, format!("{} (diffusers layout)", dir.display()))?;
+            let ckpt = Checkpoint::from_files(ctx, dtype, files, "", None, format!("{} (diffusers layout)", dir.display()));
             return Ok((config, ckpt));
         }
         let file = SafeTensors::open(path)?;
@@ -78,7 +78,7 @@ impl Checkpoint {
     fn single_file_unet(ctx: &Context, file: SafeTensors, config: UNetConfig, dtype: Dtype) -> Result<(UNetConfig, Checkpoint)> {
         let names = OriginalNames::unet(&config)?;
         let describe = format!("{} (single-file layout)", file.path.display());
-        let ckpt = Checkpoint::from_files(ctx, dtype, vec![file], SINGLE_FILE_UNET, Some(names), describe)?;
+        let ckpt = Checkpoint::from_files(ctx, dtype, vec![file], SINGLE_FILE_UNET, Some(names), describe);
         Ok((config, ckpt))
     }
 
@@ -87,7 +87,7 @@ impl Checkpoint {
         Checkpoint { ctx: ctx.clone(), dtype, source: Source::Random { seed }, used: Mutex::default() }
     }
 
-    fn from_files(ctx: &Context, dtype: Dtype, files: Vec<SafeTensors>, prefix: &str, original: Option<OriginalNames>, describe: String) -> Result<Checkpoint> {
+    fn from_files(ctx: &Context, dtype: Dtype, files: Vec<SafeTensors>, prefix: &str, original: Option<OriginalNames>, describe: String) -> Checkpoint {
         let mut index = HashMap::new();
         for (i, f) in files.iter().enumerate() {
             for name in f.entries.keys() {
@@ -95,7 +95,7 @@ impl Checkpoint {
             }
         }
         let source = Source::Files { files, index, prefix: prefix.into(), original, describe };
-        Ok(Checkpoint { ctx: ctx.clone(), dtype, source, used: Mutex::default() })
+        Checkpoint { ctx: ctx.clone(), dtype, source, used: Mutex::default() }
     }
 
     /// The whole checkpoint as a view.
@@ -106,10 +106,6 @@ impl Checkpoint {
     /// The run precision weights are converted to.
     pub fn dtype(&self) -> Dtype {
         self.dtype
-    }
-
-    pub fn context(&self) -> &Context {
-        &self.ctx
     }
 
     /// Stored tensors under the network's prefix that no module asked for.
@@ -221,10 +217,6 @@ impl<'a> Weights<'a> {
 
     pub fn has(&self, name: &str) -> bool {
         self.ckpt.has(&self.path(name))
-    }
-
-    pub fn checkpoint(&self) -> &'a Checkpoint {
-        self.ckpt
     }
 
     /// A tensor as stored, in the run precision.

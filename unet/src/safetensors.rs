@@ -19,28 +19,17 @@ pub enum SourceDtype {
 }
 
 impl SourceDtype {
-    fn parse(name: &str) -> SourceDtype {
+    /// The dtype named in a header, and its bytes per element where fixed.
+    fn parse(name: &str) -> (SourceDtype, Option<usize>) {
         match name {
-            "F32" => SourceDtype::F32,
-            "F16" => SourceDtype::F16,
-            "BF16" => SourceDtype::BF16,
-            "F64" => SourceDtype::Other("F64"),
-            "I64" => SourceDtype::Other("I64"),
-            "I32" => SourceDtype::Other("I32"),
-            "I8" | "U8" | "BOOL" => SourceDtype::Other("8-bit"),
-            _ => SourceDtype::Other("an unknown dtype"),
-        }
-    }
-
-    /// Bytes per element, for the types with a fixed width.
-    fn size(self) -> Option<usize> {
-        match self {
-            SourceDtype::F32 => Some(4),
-            SourceDtype::F16 | SourceDtype::BF16 => Some(2),
-            SourceDtype::Other("F64" | "I64") => Some(8),
-            SourceDtype::Other("I32") => Some(4),
-            SourceDtype::Other("8-bit") => Some(1),
-            SourceDtype::Other(_) => None,
+            "F32" => (SourceDtype::F32, Some(4)),
+            "F16" => (SourceDtype::F16, Some(2)),
+            "BF16" => (SourceDtype::BF16, Some(2)),
+            "F64" => (SourceDtype::Other("F64"), Some(8)),
+            "I64" => (SourceDtype::Other("I64"), Some(8)),
+            "I32" => (SourceDtype::Other("I32"), Some(4)),
+            "I8" | "U8" | "BOOL" => (SourceDtype::Other("8-bit"), Some(1)),
+            _ => (SourceDtype::Other("an unknown dtype"), None),
         }
     }
 }
@@ -50,6 +39,7 @@ impl SourceDtype {
 pub struct Entry {
     pub dtype: SourceDtype,
     pub shape: Vec<usize>,
+    element_size: Option<usize>,
     start: usize,
     end: usize,
 }
@@ -91,10 +81,8 @@ impl SafeTensors {
                 return Err(bad(format!("tensor `{name}` ends at byte {} but the file holds {data_len} bytes of data (truncated?)", entry.end)));
             }
             let numel: usize = entry.shape.iter().product();
-            if let Some(size) = entry.dtype.size() {
-                if entry.end - entry.start != numel * size {
-                    return Err(bad(format!("tensor `{name}`: {} bytes for shape {:?}", entry.end - entry.start, entry.shape)));
-                }
+            if entry.element_size.is_some_and(|size| entry.end - entry.start != numel * size) {
+                return Err(bad(format!("tensor `{name}`: {} bytes for shape {:?}", entry.end - entry.start, entry.shape)));
             }
             entries.insert(name, entry);
         }
@@ -126,9 +114,9 @@ pub fn decode(dtype: SourceDtype, bytes: &[u8]) -> Option<Vec<f32>> {
 }
 
 fn parse_entry(v: &Value) -> Option<Entry> {
-    let dtype = SourceDtype::parse(v.get("dtype")?.as_str()?);
+    let (dtype, element_size) = SourceDtype::parse(v.get("dtype")?.as_str()?);
     let shape = v.get("shape")?.as_array()?.iter().map(|d| d.as_u64().map(|d| d as usize)).collect::<Option<Vec<_>>>()?;
     let offsets = v.get("data_offsets")?.as_array()?;
     let (start, end) = (offsets.first()?.as_u64()? as usize, offsets.get(1)?.as_u64()? as usize);
-    (start <= end).then_some(Entry { dtype, shape, start, end })
+    (start <= end).then_some(Entry { dtype, shape, element_size, start, end })
 }
