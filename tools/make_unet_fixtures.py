@@ -9,9 +9,9 @@ safetensors 0.8.0. Setup:
 Each config gets a folder with:
   unet/config.json + weights in the diffusers layout (sdxl3: fp16 variant, sharded with an index;
       heads: bfloat16, one file),
-  sd_xl_single_file.safetensors (sdxl3 only): the same weights under the original
-      `model.diffusion_model.*` names in float16, as sd_xl_base_1.0 ships; the names are checked
-      by running diffusers' own single-file converter over them,
+  sd_xl_single_file.safetensors: the same weights under the original `model.diffusion_model.*`
+      names (sdxl3: float16, as sd_xl_base_1.0 ships; heads: bfloat16); the names are checked by
+      running diffusers' own single-file converter over them,
   ip_adapter.safetensors: random decoupled-attention weights `ip_adapter.N.to_k_ip/to_v_ip.weight`
       in the h94 layout, N numbered over diffusers' attention processors,
   io.safetensors: inputs (NCHW float32) and diffusers' float32 outputs for a batch of 2 with
@@ -61,7 +61,7 @@ CONFIGS = {
             projection_class_embeddings_input_dim=40 + 6 * 16, flip_sin_to_cos=True, freq_shift=0,
         ),
         latent=(12, 20), tokens=10, text_embeds=40, ip_tokens=16,
-        layouts=dict(diffusers="bf16"),
+        layouts=dict(diffusers="bf16", single_file=torch.bfloat16),
     ),
 }
 

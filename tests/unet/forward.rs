@@ -4,7 +4,7 @@ use crate::common::ctx;
 use crate::fixture;
 use std::path::Path;
 use vkdiff_runtime::{Context, Dtype, Tensor};
-use vkdiff_unet::{nchw_to_nhwc, nhwc_to_nchw, Checkpoint, ControlResiduals, IpAdapterInput, IpLayer, Linear, SafeTensors, UNet, UNetInputs};
+use vkdiff_unet::{nchw_to_nhwc, nhwc_to_nchw, Checkpoint, ControlResiduals, IpAdapterInput, IpLayer, Linear, SafeTensors, UNet, UNetConfig, UNetInputs};
 
 /// The recorded inputs of one fixture, on the device.
 struct Inputs {
@@ -48,9 +48,12 @@ fn errors(got: &[f32], want: &[f32]) -> (f64, f64) {
 /// tensor) and the error compounds over ~150 stored tensors along the deepest path; measured
 /// relative L2 errors are ~2e-3, and 1e-2 is the bound.
 fn check(fixture_name: &str, model: &Path, dtype: Dtype) {
+    check_loaded(fixture_name, model, dtype, Checkpoint::unet(&ctx(), model, dtype).unwrap());
+}
+
+fn check_loaded(fixture_name: &str, model: &Path, dtype: Dtype, (config, ckpt): (UNetConfig, Checkpoint)) {
     let ctx = ctx();
     let io = SafeTensors::open(&fixture(&format!("{fixture_name}/io.safetensors"))).unwrap();
-    let (config, ckpt) = Checkpoint::unet(&ctx, model, dtype).unwrap();
     let unet = UNet::load(&config, &ckpt).unwrap();
     assert_eq!(ckpt.unused(), Vec::<String>::new(), "{}: tensors the UNet never read", model.display());
     let inputs = Inputs {
@@ -137,4 +140,22 @@ fn other_head_counts_bf16_weights_f32() {
 #[test]
 fn other_head_counts_bf16_weights_f16() {
     check("heads", &fixture("heads/unet"), Dtype::F16);
+}
+
+/// Head counts (2 and 8) and norm groups (8) off SDXL's conventions cannot be read from shapes:
+/// the single file is loaded with the config given explicitly.
+fn heads_single_file(dtype: Dtype) {
+    let path = fixture("heads/sd_xl_single_file.safetensors");
+    let config = UNetConfig::from_file(&fixture("heads/unet/config.json")).unwrap();
+    check_loaded("heads", &path, dtype, Checkpoint::single_file_unet_with_config(&ctx(), &path, config, dtype).unwrap());
+}
+
+#[test]
+fn other_head_counts_single_file_with_config_f32() {
+    heads_single_file(Dtype::F32);
+}
+
+#[test]
+fn other_head_counts_single_file_with_config_f16() {
+    heads_single_file(Dtype::F16);
 }
