@@ -163,11 +163,7 @@ impl Context {
     pub fn upload(&self, shape: &[usize], dtype: Dtype, data: &[f32]) -> Result<Tensor> {
         let numel: usize = shape.iter().product();
         ensure(numel == data.len(), || format!("{} values for shape {shape:?}", data.len()))?;
-        let size = (numel * dtype_size(dtype)) as u64;
-        let buf = Buffer::new(&self.shared, size, MemoryLocation::GpuOnly, "tensor")?;
-        let t = Tensor::owned(buf, shape, dtype);
-        t.write(data)?;
-        Ok(t)
+        self.upload_bytes(shape, dtype, &encode(data, dtype))
     }
 
     /// A tensor holding `bytes`, already encoded in `dtype` (weights streamed from a file).

@@ -54,14 +54,14 @@ struct Row {
     ratio_to_cpu: Option<f64>,
 }
 
-fn dtype_name(d: Dtype) -> &'static str {
+pub(super) fn dtype_name(d: Dtype) -> &'static str {
     match d {
         Dtype::F32 => "f32",
         Dtype::F16 => "f16",
     }
 }
 
-fn rand_tensor(ctx: &Context, shape: &[usize], dtype: Dtype, seed: u32) -> vkdiff_runtime::Result<Tensor> {
+pub(super) fn rand_tensor(ctx: &Context, shape: &[usize], dtype: Dtype, seed: u32) -> vkdiff_runtime::Result<Tensor> {
     let n: usize = shape.iter().product();
     let data: Vec<f32> = (0..n).map(|i| (((i as u32).wrapping_mul(2654435761).wrapping_add(seed) >> 8) as f32 / (1u32 << 24) as f32) - 0.5).collect();
     ctx.upload(shape, dtype, &data)

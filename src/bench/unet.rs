@@ -4,7 +4,8 @@
 use anyhow::{Context as _, Result};
 use std::process::Command;
 use std::time::Instant;
-use vkdiff_runtime::{Context, Dtype, Tensor};
+use super::kernels::{dtype_name, rand_tensor};
+use vkdiff_runtime::{Context, Dtype};
 use vkdiff_unet::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
 
 const REFERENCE: &str = include_str!("../../tools/unet_cpu_reference.py");
@@ -108,14 +109,11 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
     let load_s = start.elapsed().as_secs_f64();
     let weights = ctx.live_bytes();
     let (b, h) = (args.batch, size / 8);
-    let random = |shape: &[usize], dtype: Dtype| -> Result<Tensor> {
-        let n: usize = shape.iter().product();
-        Ok(ctx.upload(shape, dtype, &(0..n).map(|i| ((i * 7919 % 1000) as f32 / 500.0) - 1.0).collect::<Vec<_>>())?)
-    };
-    let sample = random(&[b, h, h, config.in_channels], dtype)?;
+    let sample = rand_tensor(&ctx, &[b, h, h, config.in_channels], dtype, 1)?;
     let timesteps = ctx.upload(&[b], Dtype::F32, &vec![500.0; b])?;
-    let context = random(&[b, 77, config.cross_attention_dim], dtype)?;
-    let text = random(&[b, 1280], dtype)?;
+    let context = rand_tensor(&ctx, &[b, 77, config.cross_attention_dim], dtype, 2)?;
+    let text_dim = config.projection_class_embeddings_input_dim.unwrap_or(0) - 6 * config.addition_time_embed_dim.unwrap_or(0);
+    let text = rand_tensor(&ctx, &[b, text_dim], dtype, 3)?;
     let px = size as f32;
     let ids = ctx.upload(&[b, 6], Dtype::F32, &[px, px, 0.0, 0.0, px, px].repeat(b))?;
     let start = Instant::now();
@@ -141,7 +139,7 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
         device: ctx.info().name.clone(),
         size,
         batch: b,
-        precision: if dtype == Dtype::F16 { "f16" } else { "f32" },
+        precision: dtype_name(dtype),
         load_s,
         record_s,
         ms: best * 1e3,
