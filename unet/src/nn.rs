@@ -1,7 +1,7 @@
 //! The recording context networks are built in, and the layers with weights they are made of.
 
 use crate::checkpoint::Weights;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use vkdiff_runtime::ops::{self, ConvParams, Matmul};
 use vkdiff_runtime::{Arena, Context, Dtype, Recorder, Tensor};
 
@@ -59,6 +59,9 @@ impl Linear {
     /// out = alpha·x·Wᵀ + bias (+ out when `accumulate`: a fused residual add).
     pub fn forward_into(&self, g: &mut Graph, x: &Tensor, out: &Tensor, accumulate: bool, alpha: f32) -> Result<()> {
         let (n, k) = (self.weight.shape()[0], self.weight.shape()[1]);
+        if x.shape().last() != Some(&k) {
+            return Err(Error::Config(format!("linear layer takes {k} features, input is {:?}", x.shape())));
+        }
         let mut spec = Matmul::dense(x.numel() / k, n, k, true);
         spec.accumulate = accumulate;
         spec.alpha = alpha;
