@@ -1,4 +1,4 @@
-// Fused multi-head attention, O = softmax(scale·Q·Kᵀ)·V, streaming over keys with an online
+// Fused multi-head attention, O = softmax(scale·Q·Kᵀ)·V (optionally causal), streaming over keys with an online
 // softmax so no Nq×Nk matrix ever exists. One workgroup = one subgroup of SG lanes handles TM
 // query rows of one head. Head slots are vec4s: lane l owns slots v·SG + l (v < DV) of every
 // query and output row. For each chunk of SG keys, lane l scores key j0 + l against all TM
@@ -27,6 +27,7 @@ struct Params {
     q_off: u32,
     k_off: u32,
     v_off: u32,
+    causal: u32,
 }
 
 var<immediate> p: Params;
@@ -71,7 +72,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         // #end
         // #unroll R TM
         {
-            let sc = select(NEG, score[R], key < p.nk);
+            // Past the end, or (causal) past the query row. Key 0 is never masked, so every
+            // row's running maximum is real after the first chunk and masked keys weigh 0.
+            let sc = select(NEG, score[R], key < p.nk && (p.causal == 0u || key <= row0 + R));
             let m_new = max(m[R], subgroupMax(sc));
             let correction = exp(m[R] - m_new);
             let pr = exp(sc - m_new);

@@ -30,6 +30,7 @@ pub(crate) struct Shared {
     pub(crate) peak_bytes: AtomicU64,
     pub(crate) pipelines: PipelineCache,
     pub(crate) gemm_family: Mutex<GemmFamily>,
+    pub(crate) binding_limit: AtomicU64,
 }
 
 impl Drop for Shared {
@@ -122,11 +123,12 @@ impl Context {
             queue: Mutex::new(queue),
             queue_family: family,
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
-            info,
             live_bytes: AtomicU64::new(0),
             peak_bytes: AtomicU64::new(0),
             pipelines: PipelineCache::default(),
             gemm_family: Mutex::new(gemm_family),
+            binding_limit: AtomicU64::new(info.max_storage_buffer_range),
+            info,
         };
         Ok(Context { shared: Arc::new(shared) })
     }
@@ -156,6 +158,17 @@ impl Context {
     /// Overrides the per-device choice of GEMM kernels (benchmarks and tests run both).
     pub fn set_gemm_family(&self, family: GemmFamily) {
         *self.shared.gemm_family.lock().unwrap() = family;
+    }
+
+    /// The most bytes one kernel binding may span; ops split larger tensors into bands below it.
+    pub fn binding_limit(&self) -> u64 {
+        self.shared.binding_limit.load(Ordering::SeqCst)
+    }
+
+    /// Lowers the binding limit below the device's own (tests exercise the splitting paths with
+    /// small tensors); values above the device limit are clamped to it.
+    pub fn set_binding_limit(&self, bytes: u64) {
+        self.shared.binding_limit.store(bytes.min(self.shared.info.max_storage_buffer_range), Ordering::SeqCst);
     }
 
     /// Whether this device can pin a kernel to a subgroup of `size` lanes.

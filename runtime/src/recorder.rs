@@ -101,9 +101,10 @@ impl Recorder {
         for (g, max) in groups.iter().zip(info.max_workgroup_count) {
             ensure(*g <= max, || format!("kernel `{}`: {groups:?} workgroups exceed the device limit {:?}", kernel.name, info.max_workgroup_count))?;
         }
+        let limit = self.ctx.binding_limit();
         for t in reads.iter().chain(writes) {
-            ensure(t.bytes() <= info.max_storage_buffer_range, || {
-                format!("kernel `{}`: a {} MiB tensor exceeds the device's {} MiB storage binding limit", kernel.name, t.bytes() >> 20, info.max_storage_buffer_range >> 20)
+            ensure(t.bytes() <= limit, || {
+                format!("kernel `{}`: a {} tensor exceeds the {} storage binding limit", kernel.name, human_bytes(t.bytes()), human_bytes(limit))
             })?;
         }
         if groups.contains(&0) {
@@ -268,6 +269,15 @@ impl Recording {
     /// Number of timed dispatches.
     pub fn dispatches(&self) -> usize {
         self.res.labels.len()
+    }
+}
+
+/// "3 MiB" from 1 MiB up, else "2048 bytes".
+fn human_bytes(n: u64) -> String {
+    if n >= 1 << 20 {
+        format!("{} MiB", n >> 20)
+    } else {
+        format!("{n} bytes")
     }
 }
 

@@ -13,6 +13,10 @@ fn reference(q: &[f32], k: &[f32], v: &[f32], l: &AttentionLayout, scale: f64) -
             for i in 0..l.q_tokens {
                 let qi = &q[l.q_offset + b * l.q_batch + i * l.q_ld + h * d..][..d];
                 for (j, s) in scores.iter_mut().enumerate() {
+                    if l.causal && j > i {
+                        *s = f64::NEG_INFINITY;
+                        continue;
+                    }
                     let kj = &k[l.k_offset + b * l.k_batch + j * l.k_ld + h * d..][..d];
                     *s = scale * qi.iter().zip(kj).map(|(&x, &y)| x as f64 * y as f64).sum::<f64>();
                 }
@@ -101,5 +105,17 @@ fn strided_operands_from_a_fused_projection() {
     l.v_offset = 2 * w;
     for dtype in DTYPES {
         check(dtype, &l, 50);
+    }
+}
+
+#[test]
+fn causal_self_attention_like_clip_text() {
+    // 77 tokens (CLIP's context) over chunk and row-tile edges, plus a longer sequence.
+    for (n, d) in [(77, 64), (150, 16)] {
+        let mut l = AttentionLayout::dense(2, 2, d, n, n);
+        l.causal = true;
+        for dtype in DTYPES {
+            check(dtype, &l, 60 + n as u64);
+        }
     }
 }

@@ -2,6 +2,7 @@
 //! f16 storage, with the tolerance each test states.
 
 mod attention;
+mod bands;
 mod common;
 mod conv;
 mod elementwise;

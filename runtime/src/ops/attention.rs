@@ -26,6 +26,8 @@ pub struct AttentionLayout {
     pub q_offset: usize,
     pub k_offset: usize,
     pub v_offset: usize,
+    /// Query i attends to keys 0..=i only (CLIP's text transformer).
+    pub causal: bool,
 }
 
 impl AttentionLayout {
@@ -49,6 +51,7 @@ impl AttentionLayout {
             q_offset: 0,
             k_offset: 0,
             v_offset: 0,
+            causal: false,
         }
     }
 }
@@ -60,6 +63,7 @@ const WIDTHS: [u32; 4] = [8, 16, 32, 64];
 pub fn attention(rec: &mut Recorder, q: &Tensor, k: &Tensor, v: &Tensor, out: &Tensor, l: &AttentionLayout, scale: f32) -> Result<()> {
     let dtype = same_dtype(rec.context(), "attention", &[q, k, v, out])?;
     ensure(l.batch > 0 && l.heads > 0 && l.q_tokens > 0 && l.kv_tokens > 0, || format!("attention: empty layout {l:?}"))?;
+    ensure(!l.causal || l.q_tokens == l.kv_tokens, || format!("attention: a causal mask needs as many queries as keys, got {l:?}"))?;
     let strides = [l.head_dim, l.q_ld, l.k_ld, l.v_ld, l.o_ld, l.q_batch, l.k_batch, l.v_batch, l.o_batch, l.q_offset, l.k_offset, l.v_offset];
     ensure(strides.iter().all(|s| s % 4 == 0), || format!("attention: head dim and strides must be multiples of 4, got {l:?}"))?;
     let need = |ld: usize, bs: usize, tokens: usize| (l.batch - 1) * bs + (tokens - 1) * ld + l.heads * l.head_dim;
@@ -88,6 +92,7 @@ pub fn attention(rec: &mut Recorder, q: &Tensor, k: &Tensor, v: &Tensor, out: &T
     let push = [
         u(l.q_tokens), u(l.kv_tokens), u(l.head_dim), u(l.q_ld), u(l.k_ld), u(l.v_ld), u(l.o_ld),
         u(l.q_batch), u(l.k_batch), u(l.v_batch), u(l.o_batch), f(scale), u(l.q_offset), u(l.k_offset), u(l.v_offset),
+        l.causal as u32,
     ];
     rec.dispatch(&kern, &[q, k, v], &[out], &push, [u(l.q_tokens.div_ceil(tm)), u(l.heads), u(l.batch)])
 }

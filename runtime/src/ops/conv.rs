@@ -1,5 +1,6 @@
 //! 2-D convolution on NHWC tensors as an implicit GEMM (no im2col buffer).
 
+use super::bands::{bands, elem, fit, image_rows, rows_per_band};
 use super::gemm::{dispatch_gemm_family, GemmShape};
 use super::{f, same_dtype, u};
 use crate::error::{ensure, Result};
@@ -55,8 +56,35 @@ pub fn oihw_to_ohwi(w: &[f32], cout: usize, cin: usize, kh: usize, kw: usize) ->
 }
 
 /// out[B, Ho, Wo, Cout] = conv(x[B, H, W, Cin], w[Cout, KH, KW, Cin]) (+ bias) (+ out), with the
-/// output size implied by stride and padding.
+/// output size implied by stride and padding. Input or output past the binding limit is
+/// convolved in bands of output rows, each reading its input rows plus the kernel's halo.
 pub fn conv2d(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor, p: &ConvParams) -> Result<()> {
+    if fit(rec.context(), &[x, out]) || x.shape().len() != 4 || out.shape().len() != 4 || w.shape().len() != 4 {
+        return conv2d_whole(rec, x, w, bias, out, p);
+    }
+    let [b, h, wd, cin] = [x.shape()[0], x.shape()[1], x.shape()[2], x.shape()[3]];
+    let [ho, wo, cout] = [out.shape()[1], out.shape()[2], out.shape()[3]];
+    let (kh, kw, s) = (w.shape()[1], w.shape()[2], p.stride.max(1));
+    let expect = [b, (h + p.pad.top + p.pad.bottom).saturating_sub(kh) / s + 1, (wd + p.pad.left + p.pad.right).saturating_sub(kw) / s + 1, w.shape()[0]];
+    ensure(out.shape() == expect, || format!("conv2d: output {:?}, expected {expect:?}", out.shape()))?;
+    let ctx = rec.context().clone();
+    let by_out = rows_per_band(&ctx, "conv2d", wo * cout * elem(out), 0, 1)?;
+    let by_in = (rows_per_band(&ctx, "conv2d", wd * cin * elem(x), kh, 1)? - 1) / s + 1;
+    for image in 0..b {
+        for rows in bands(ho, by_out.min(by_in)) {
+            // Input rows this band reads, before clipping to the image: the clipped part is padding.
+            let first = (rows.start * s) as isize - p.pad.top as isize;
+            let end = ((rows.end - 1) * s + kh) as isize - p.pad.top as isize;
+            let (lo, hi) = (first.max(0) as usize, (end.min(h as isize)) as usize);
+            let pad = Padding { top: (lo as isize - first) as usize, bottom: (end - hi as isize) as usize, ..p.pad };
+            let band = ConvParams { pad, ..*p };
+            conv2d_whole(rec, &image_rows(x, image, lo..hi)?, w, bias, &image_rows(out, image, rows)?, &band)?;
+        }
+    }
+    Ok(())
+}
+
+fn conv2d_whole(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor, p: &ConvParams) -> Result<()> {
     let (stride, pad) = (p.stride, p.pad);
     let dtype = same_dtype(rec.context(), "conv2d", &[x, w, out])?;
     ensure(x.shape().len() == 4 && w.shape().len() == 4 && out.shape().len() == 4, || {

@@ -1,5 +1,6 @@
 //! Element-wise and data-movement operations.
 
+use super::bands::{bands, elem, fit, image_rows, row_view, rows_per_band};
 use super::{dispatch_flat, f, kernel, same_dtype, u};
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
@@ -75,22 +76,40 @@ pub fn mul(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor) -> Result<(
     binary(rec, BinaryOp::Mul, a, b, out, inner, outer)
 }
 
-/// GEGLU: x[.., 2F] → out[.., F] = value · GELU(gate), value first.
+/// GEGLU: x[.., 2F] → out[.., F] = value · GELU(gate), value first; in bands of rows past the
+/// binding limit.
 pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
     let dtype = same_dtype(rec.context(), "geglu", &[x, out])?;
     let two_f = *x.shape().last().unwrap_or(&0);
     ensure(two_f.is_multiple_of(2) && two_f > 0 && out.numel() * 2 == x.numel(), || format!("geglu: {:?} into {:?}", x.shape(), out.shape()))?;
     let k = kernel(rec.context(), "geglu", dtype, &[], 2)?;
-    dispatch_flat(rec, &k, &[x], &[out], &[u(out.numel()), u(two_f / 2)], element_groups(out.numel()))
+    let rows = x.numel() / two_f;
+    let per = if fit(rec.context(), &[x, out]) { rows } else { rows_per_band(rec.context(), "geglu", two_f * elem(x), 0, 64)? };
+    for band in bands(rows, per) {
+        let (xs, ys) = (row_view(x, two_f, band.clone())?, row_view(out, two_f / 2, band)?);
+        dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(ys.numel()), u(two_f / 2)], element_groups(ys.numel()))?;
+    }
+    Ok(())
 }
 
-/// Nearest 2× upsampling of x[B, H, W, C] into out[B, 2H, 2W, C].
+/// Nearest 2× upsampling of x[B, H, W, C] into out[B, 2H, 2W, C]; in bands of rows past the
+/// binding limit.
 pub fn upsample_nearest2x(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
     let dtype = same_dtype(rec.context(), "upsample", &[x, out])?;
-    let s = x.shape();
+    let s = x.shape().to_vec();
     ensure(s.len() == 4 && out.shape() == [s[0], 2 * s[1], 2 * s[2], s[3]], || format!("upsample: {:?} into {:?}", s, out.shape()))?;
     let k = kernel(rec.context(), "upsample_nearest2x", dtype, &[], 2)?;
-    dispatch_flat(rec, &k, &[x], &[out], &[u(out.numel()), u(s[1]), u(s[2]), u(s[3])], element_groups(out.numel()))
+    if fit(rec.context(), &[x, out]) {
+        return dispatch_flat(rec, &k, &[x], &[out], &[u(out.numel()), u(s[1]), u(s[2]), u(s[3])], element_groups(out.numel()));
+    }
+    let per = rows_per_band(rec.context(), "upsample", 2 * out.shape()[2] * s[3] * elem(out), 0, 1)?;
+    for image in 0..s[0] {
+        for rows in bands(s[1], per) {
+            let (xs, ys) = (image_rows(x, image, rows.clone())?, image_rows(out, image, 2 * rows.start..2 * rows.end)?);
+            dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(ys.numel()), u(rows.len()), u(s[2]), u(s[3])], element_groups(ys.numel()))?;
+        }
+    }
+    Ok(())
 }
 
 /// out[.., C1 + C2] = [a[.., C1], b[.., C2]] along the last (channel) dimension.

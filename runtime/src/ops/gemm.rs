@@ -1,5 +1,6 @@
 //! Matrix products: batched GEMM with optional bias and accumulation, and `linear`.
 
+use super::bands::{bands, elem, fit, row_view, rows_per_band};
 use super::{f, kernel, same_dtype, u};
 use crate::context::GemmFamily;
 use crate::error::{ensure, Result};
@@ -56,8 +57,25 @@ impl Matmul {
     }
 }
 
-/// Records C = alpha·A·B (+ bias) (+ C) as described by `spec`.
+/// Records C = alpha·A·B (+ bias) (+ C) as described by `spec`. A single product whose A or C
+/// passes the binding limit runs in bands of rows, each a product of its own.
 pub fn matmul(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>, c: &Tensor, spec: &Matmul) -> Result<()> {
+    if fit(rec.context(), &[a, c]) || spec.batch != 1 || spec.lda == 0 || spec.ldc == 0 {
+        return matmul_whole(rec, a, b, bias, c, spec);
+    }
+    let rows_of = |t: &Tensor, ld: usize| t.numel().is_multiple_of(ld).then(|| t.numel() / ld);
+    ensure(rows_of(a, spec.lda) >= Some(spec.m) && rows_of(c, spec.ldc) >= Some(spec.m), || {
+        format!("matmul: A {:?} or C {:?} pass the binding limit and are not whole rows of {spec:?}", a.shape(), c.shape())
+    })?;
+    let per = rows_per_band(rec.context(), "matmul", spec.lda.max(spec.ldc) * elem(a), 0, 64)?;
+    for rows in bands(spec.m, per) {
+        let band = Matmul { m: rows.len(), a_batch: rows.len() * spec.lda, c_batch: rows.len() * spec.ldc, ..spec.clone() };
+        matmul_whole(rec, &row_view(a, spec.lda, rows.clone())?, b, bias, &row_view(c, spec.ldc, rows)?, &band)?;
+    }
+    Ok(())
+}
+
+fn matmul_whole(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>, c: &Tensor, spec: &Matmul) -> Result<()> {
     let s = spec;
     ensure(s.batch > 0 && s.m > 0 && s.n > 0 && s.k > 0, || format!("matmul: empty shape {s:?}"))?;
     let dtype = same_dtype(rec.context(), "matmul", &[a, b, c])?;

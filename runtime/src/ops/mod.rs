@@ -2,6 +2,7 @@
 //! and records one dispatch. Networks are compositions of these.
 
 mod attention;
+mod bands;
 mod conv;
 mod elementwise;
 mod gemm;

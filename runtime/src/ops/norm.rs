@@ -1,6 +1,8 @@
 //! Normalisations and softmax over NHWC / row-major tensors, accumulated in f32.
 
+use super::bands::{bands, elem, fit, row_view, rows_per_band};
 use super::{dispatch_flat, f, kernel, rows_of, same_dtype, u};
+use crate::tensor::Dtype;
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
 use crate::tensor::Tensor;
@@ -13,8 +15,37 @@ pub fn group_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor,
     ensure(groups > 0 && c % groups == 0, || format!("group_norm: {c} channels do not split into {groups} groups"))?;
     ensure(gamma.numel() == c && beta.numel() == c && out.shape() == x.shape(), || "group_norm: affine or output shape mismatch".into())?;
     let hw = x.numel() / (b * c);
+    if !fit(rec.context(), &[x, out]) {
+        return group_norm_banded(rec, [x, gamma, beta, out], (b, hw, c), groups, eps, silu);
+    }
     let k = kernel(rec.context(), "group_norm", dtype, &[], 4)?;
     rec.dispatch(&k, &[x, gamma, beta], &[out], &[u(hw), u(c), u(groups), f(eps), silu as u32], [u(groups), u(b), 1])
+}
+
+/// GroupNorm over bands of pixels: every band's statistics first, then each band normalised
+/// with its image's merged statistics, so the result equals the whole-tensor one.
+fn group_norm_banded(rec: &mut Recorder, [x, gamma, beta, out]: [&Tensor; 4], (b, hw, c): (usize, usize, usize), groups: usize, eps: f32, silu: bool) -> Result<()> {
+    let ctx = rec.context().clone();
+    let per = rows_per_band(&ctx, "group_norm", c * elem(x), 0, 64)?;
+    let parts = hw.div_ceil(per);
+    let stats = ctx.zeros(&[b * parts * groups * 3], Dtype::F32)?;
+    let pixels = |image: usize, band: &std::ops::Range<usize>| image * hw + band.start..image * hw + band.end;
+    let k = kernel(&ctx, "group_norm_stats", x.dtype(), &[], 2)?;
+    for image in 0..b {
+        for (i, band) in bands(hw, per).enumerate() {
+            let push = [u(band.len()), u(c), u(groups), u(image * parts + i)];
+            rec.dispatch(&k, &[&row_view(x, c, pixels(image, &band))?], &[&stats], &push, [u(groups), 1, 1])?;
+        }
+    }
+    let k = kernel(&ctx, "group_norm_apply", x.dtype(), &[], 5)?;
+    for image in 0..b {
+        for band in bands(hw, per) {
+            let push = [u(band.len()), u(c), u(groups), f(eps), silu as u32, u(image * parts), u(parts)];
+            let (xs, ys) = (row_view(x, c, pixels(image, &band))?, row_view(out, c, pixels(image, &band))?);
+            rec.dispatch(&k, &[&xs, gamma, beta, &stats], &[&ys], &push, [u(groups), 1, 1])?;
+        }
+    }
+    Ok(())
 }
 
 /// LayerNorm over the last dimension with affine weight and bias.

@@ -1,0 +1,48 @@
+// GroupNorm of one band from the partial statistics of all bands of its image (slots
+// first..first + parts, merged with Chan's parallel-variance formula), then the affine map and
+// optional SiLU, as group_norm does for tensors that fit one binding.
+@group(0) @binding(0) var<storage, read> x: array<S>;
+@group(0) @binding(1) var<storage, read> gamma: array<S>;
+@group(0) @binding(2) var<storage, read> beta: array<S>;
+@group(0) @binding(3) var<storage, read> stats: array<f32>;
+@group(0) @binding(4) var<storage, read_write> y: array<S>;
+
+struct Params {
+    hw: u32,
+    c: u32,
+    groups: u32,
+    eps: f32,
+    silu: u32,
+    first: u32,
+    parts: u32,
+}
+
+var<immediate> p: Params;
+
+@compute @workgroup_size(WG)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let cg = p.c / p.groups;
+    let c0 = wg.x * cg;
+    var n = 0.0;
+    var mean = 0.0;
+    var m2 = 0.0;
+    for (var i = 0u; i < p.parts; i++) {
+        let at = ((p.first + i) * p.groups + wg.x) * 3u;
+        let nb = stats[at];
+        let d = stats[at + 1u] - mean;
+        let total = n + nb;
+        mean += d * nb / total;
+        m2 += stats[at + 2u] + d * d * n * nb / total;
+        n = total;
+    }
+    let rstd = inverseSqrt(m2 / n + p.eps);
+    for (var e = lid; e < p.hw * cg; e += WG) {
+        let at = (e / cg) * p.c + c0 + e % cg;
+        let ch = c0 + e % cg;
+        var v = (f32(x[at]) - mean) * rstd * f32(gamma[ch]) + f32(beta[ch]);
+        if p.silu != 0u {
+            v = v / (1.0 + exp(-v));
+        }
+        y[at] = S(v);
+    }
+}
