@@ -27,7 +27,7 @@ fn upload(ctx: &Context, io: &SafeTensors, name: &str, dtype: Dtype) -> Tensor {
 }
 
 /// Relative L2 error of `got` against `want`, and the largest error in units of want's RMS.
-fn errors(got: &[f32], want: &[f32]) -> (f64, f64) {
+pub fn errors(got: &[f32], want: &[f32]) -> (f64, f64) {
     let (mut diff, mut norm, mut worst) = (0.0f64, 0.0f64, 0.0f64);
     for (&g, &w) in got.iter().zip(want) {
         let d = (g as f64 - w as f64).abs();

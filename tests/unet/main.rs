@@ -7,6 +7,7 @@ mod common;
 
 mod errors;
 mod forward;
+mod text_and_vae;
 
 use std::path::PathBuf;
 

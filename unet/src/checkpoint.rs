@@ -5,7 +5,7 @@
 
 use crate::config::UNetConfig;
 use crate::error::{Error, Result};
-use crate::ldm_names::{infer_unet_config, OriginalNames};
+use crate::ldm_names::{infer_unet_config, OriginalNames, StoredAs};
 use crate::safetensors::{decode, SafeTensors, SourceDtype};
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
@@ -82,6 +82,24 @@ impl Checkpoint {
         Ok((config, ckpt))
     }
 
+    /// A component folder of a diffusers pipeline (`dir/sub` when it exists, else `dir` itself):
+    /// its config.json path and its weights `stem[.fp16].safetensors`, sharded or not.
+    pub(crate) fn diffusers_component(ctx: &Context, dir: &Path, sub: &str, stem: &str, dtype: Dtype) -> Result<(PathBuf, Checkpoint)> {
+        let dir = if dir.join(sub).join("config.json").is_file() { dir.join(sub) } else { dir.to_path_buf() };
+        let config = dir.join("config.json");
+        if !config.is_file() {
+            return Err(Error::Checkpoint(format!("{}: no {sub}/config.json (expected a diffusers model folder)", dir.display())));
+        }
+        let files = diffusers_weight_files(&dir, stem, dtype)?;
+        Ok((config, Checkpoint::from_files(ctx, dtype, files, "", None, format!("{} (diffusers layout)", dir.display()))))
+    }
+
+    /// The tensors under `prefix` of an original single-file checkpoint, renamed by `names`.
+    pub(crate) fn single_file_part(ctx: &Context, file: SafeTensors, prefix: &str, names: Option<OriginalNames>, dtype: Dtype) -> Checkpoint {
+        let describe = format!("{} (single-file layout)", file.path.display());
+        Checkpoint::from_files(ctx, dtype, vec![file], prefix, names, describe)
+    }
+
     /// Random weights of whatever shapes the network asks for (benchmarks of full-size models).
     pub fn random(ctx: &Context, dtype: Dtype, seed: u64) -> Checkpoint {
         Checkpoint { ctx: ctx.clone(), dtype, source: Source::Random { seed }, used: Mutex::default() }
@@ -117,23 +135,24 @@ impl Checkpoint {
         out
     }
 
-    /// The stored name of a diffusers-named tensor.
-    fn stored_name(&self, name: &str) -> Option<String> {
+    /// Where a diffusers-named tensor is stored.
+    fn stored_as(&self, name: &str) -> Option<StoredAs> {
         match &self.source {
             Source::Files { prefix, original, .. } => {
-                let renamed = match original {
+                let mut s = match original {
                     Some(o) => o.rename(name)?,
-                    None => name.to_string(),
+                    None => StoredAs::plain(name.to_string()),
                 };
-                Some(format!("{prefix}{renamed}"))
+                s.name = format!("{prefix}{}", s.name);
+                Some(s)
             }
-            Source::Random { .. } => Some(name.to_string()),
+            Source::Random { .. } => Some(StoredAs::plain(name.to_string())),
         }
     }
 
     fn describe_missing(&self, name: &str) -> String {
-        match (&self.source, self.stored_name(name)) {
-            (Source::Files { describe, .. }, Some(stored)) if stored != name => format!("tensor `{stored}` (diffusers `{name}`) is missing from {describe}"),
+        match (&self.source, self.stored_as(name)) {
+            (Source::Files { describe, .. }, Some(s)) if s.name != name => format!("tensor `{}` (diffusers `{name}`) is missing from {describe}", s.name),
             (Source::Files { describe, .. }, _) => format!("tensor `{name}` is missing from {describe}"),
             (Source::Random { .. }, _) => format!("tensor `{name}` is missing"),
         }
@@ -141,37 +160,54 @@ impl Checkpoint {
 
     fn has(&self, name: &str) -> bool {
         match &self.source {
-            Source::Files { index, .. } => self.stored_name(name).is_some_and(|s| index.contains_key(&s)),
+            Source::Files { index, .. } => self.stored_as(name).is_some_and(|s| index.contains_key(&s.name)),
             Source::Random { .. } => true,
         }
     }
 
-    /// The stored bytes of `name`, checked against the expected shape (trailing 1-sized
-    /// dimensions are ignored, so a 1×1 conv and a linear weight read the same).
-    fn stored(&self, name: &str, shape: &[usize]) -> Result<Option<(SourceDtype, &[u8])>> {
+    /// The stored bytes of `name` (its rows, for a part of a fused tensor), checked against the
+    /// expected shape (trailing 1-sized dimensions are ignored, so a 1×1 conv and a linear weight
+    /// read the same), and whether they hold the transpose.
+    fn stored(&self, name: &str, shape: &[usize]) -> Result<Option<(SourceDtype, &[u8], bool)>> {
         let Source::Files { files, index, .. } = &self.source else { return Ok(None) };
-        let stored = self.stored_name(name).filter(|s| index.contains_key(s)).ok_or_else(|| Error::Checkpoint(self.describe_missing(name)))?;
-        let file = &files[index[&stored]];
-        let entry = &file.entries[&stored];
-        let trim = |s: &[usize]| s.iter().rposition(|&d| d != 1).map_or(0, |i| i + 1);
-        if entry.shape[..trim(&entry.shape)] != shape[..trim(shape)] {
+        let at = self.stored_as(name).filter(|s| index.contains_key(&s.name)).ok_or_else(|| Error::Checkpoint(self.describe_missing(name)))?;
+        let file = &files[index[&at.name]];
+        let entry = &file.entries[&at.name];
+        let trim = |s: &[usize]| s[..s.iter().rposition(|&d| d != 1).map_or(0, |i| i + 1)].to_vec();
+        let mut want = trim(shape);
+        if at.transposed {
+            want.reverse();
+        }
+        if let (Some((_, parts)), Some(first)) = (at.rows, want.first_mut()) {
+            *first *= parts;
+        }
+        if trim(&entry.shape) != want {
             return Err(Error::Checkpoint(format!(
-                "tensor `{stored}` in {} has shape {:?}; the config expects {shape:?}",
+                "tensor `{}` in {} has shape {:?}; the config expects {want:?}",
+                at.name,
                 file.path.display(),
                 entry.shape
             )));
         }
         if let SourceDtype::Other(what) = entry.dtype {
-            return Err(Error::Checkpoint(format!("tensor `{stored}` in {} is {what}; vkdiff reads F32, F16 and BF16", file.path.display())));
+            return Err(Error::Checkpoint(format!("tensor `{}` in {} is {what}; vkdiff reads F32, F16 and BF16", at.name, file.path.display())));
         }
-        self.used.lock().unwrap().insert(stored);
-        Ok(Some((entry.dtype, file.bytes(entry))))
+        let mut bytes = file.bytes(entry);
+        if let Some((part, parts)) = at.rows {
+            let len = bytes.len() / parts;
+            bytes = &bytes[part * len..(part + 1) * len];
+        }
+        self.used.lock().unwrap().insert(at.name);
+        Ok(Some((entry.dtype, bytes, at.transposed)))
     }
 
     /// Values of `name` as f32 on the host.
     fn host(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>> {
         Ok(match self.stored(name, shape)? {
-            Some((dtype, bytes)) => decode(dtype, bytes).expect("dtype checked by Checkpoint::stored"),
+            Some((dtype, bytes, transposed)) => {
+                let values = decode(dtype, bytes).expect("dtype checked by Checkpoint::stored");
+                if transposed { transpose(&values, shape[1], shape[0]) } else { values }
+            }
             None => {
                 let Source::Random { seed } = self.source else { unreachable!() };
                 random_values(seed, name, shape)
@@ -181,7 +217,7 @@ impl Checkpoint {
 
     /// `name` on the device in the run precision; bytes already in it are streamed unconverted.
     fn tensor(&self, name: &str, shape: &[usize]) -> Result<Tensor> {
-        if let Some((src, bytes)) = self.stored(name, shape)? {
+        if let Some((src, bytes, false)) = self.stored(name, shape)? {
             if matches!((src, self.dtype), (SourceDtype::F16, Dtype::F16) | (SourceDtype::F32, Dtype::F32)) {
                 return Ok(self.ctx.upload_bytes(shape, self.dtype, bytes)?);
             }
@@ -277,6 +313,11 @@ fn shards(index_path: &Path) -> Result<Vec<SafeTensors>> {
         }
     }
     Ok(files)
+}
+
+/// The transpose of a row-major [rows, cols] matrix.
+fn transpose(values: &[f32], rows: usize, cols: usize) -> Vec<f32> {
+    (0..cols * rows).map(|i| values[(i % rows) * cols + i / rows]).collect()
 }
 
 /// Deterministic per-name values: U(−1, 1)/√fan_in for weights, 1 ± 0.1 for norm scales,

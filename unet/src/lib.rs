@@ -1,7 +1,11 @@
-//! vkdiff's networks as graphs of Vulkan runtime ops, built from diffusers configs, with weights
+//! vkdiff's networks (SDXL UNet, CLIP text encoders, VAE) as graphs of Vulkan runtime ops, built from diffusers configs, with weights
 //! found by path in safetensors checkpoints of the diffusers or the original single-file layout.
 
 mod attention;
+mod autoencoder_kl;
+mod biased_attention;
+mod clip;
+mod clip_names;
 mod checkpoint;
 mod config;
 mod embeddings;
@@ -14,8 +18,12 @@ mod safetensors;
 mod transformer_2d;
 mod unet_2d_blocks;
 mod unet_2d_condition;
+mod vae_names;
 
+pub use autoencoder_kl::{AutoencoderKl, VaeConfig};
 pub use checkpoint::{Checkpoint, Weights};
+pub use clip::{ClipTextConfig, ClipTextModel, TextEncoding};
+pub use clip_names::TextEncoderSlot;
 pub use config::{UNetConfig, SDXL_BASE_CONFIG};
 pub use error::{Error, Result};
 pub use layout::{nchw_to_nhwc, nhwc_to_nchw};

@@ -2,7 +2,7 @@
 
 use crate::checkpoint::Weights;
 use crate::error::{Error, Result};
-use vkdiff_runtime::ops::{self, ConvParams, Matmul};
+use vkdiff_runtime::ops::{self, ConvParams, Matmul, Padding};
 use vkdiff_runtime::{Arena, Context, Dtype, Recorder, Tensor};
 
 /// A network forward under construction: the recorder its dispatches go to and the arena its
@@ -74,25 +74,30 @@ pub struct Conv2d {
     weight: Tensor,
     bias: Tensor,
     stride: usize,
-    pad: usize,
+    pad: Padding,
 }
 
 impl Conv2d {
     pub fn load(w: &Weights, name: &str, inputs: usize, outputs: usize, kernel: usize, stride: usize, pad: usize) -> Result<Conv2d> {
         let w = w.sub(name);
-        Ok(Conv2d { weight: w.conv_weight("weight", [outputs, inputs, kernel, kernel])?, bias: w.tensor("bias", &[outputs])?, stride, pad })
+        Ok(Conv2d { weight: w.conv_weight("weight", [outputs, inputs, kernel, kernel])?, bias: w.tensor("bias", &[outputs])?, stride, pad: Padding::same(pad) })
+    }
+
+    /// The same convolution with other (asymmetric) padding.
+    pub fn with_padding(self, pad: Padding) -> Conv2d {
+        Conv2d { pad, ..self }
     }
 
     fn params(&self, accumulate: bool) -> ConvParams {
-        ConvParams { accumulate, ..ConvParams::new(self.stride, self.pad) }
+        ConvParams { stride: self.stride, pad: self.pad, accumulate }
     }
 
     /// x[B, H, W, in] → [B, H', W', out].
     pub fn forward(&self, g: &mut Graph, x: &Tensor) -> Result<Tensor> {
         let [b, h, w, _] = [x.shape()[0], x.shape()[1], x.shape()[2], x.shape()[3]];
         let k = self.weight.shape()[1];
-        let size = |n: usize| (n + 2 * self.pad - k) / self.stride + 1;
-        let out = g.alloc(&[b, size(h), size(w), self.weight.shape()[0]])?;
+        let size = |n: usize, pads: usize| (n + pads - k) / self.stride + 1;
+        let out = g.alloc(&[b, size(h, self.pad.top + self.pad.bottom), size(w, self.pad.left + self.pad.right), self.weight.shape()[0]])?;
         self.forward_into(g, x, &out, false)?;
         Ok(out)
     }

@@ -1,15 +1,15 @@
-//! diffusers `ResnetBlock2D` (time embedding added, not FiLM) and the UNet's resamplers.
+//! diffusers `ResnetBlock2D` (time embedding added, not FiLM; none in the VAE) and the resamplers.
 
 use crate::checkpoint::Weights;
 use crate::error::Result;
 use crate::nn::{Conv2d, Graph, GroupNorm, Linear};
-use vkdiff_runtime::ops;
+use vkdiff_runtime::ops::{self, Padding};
 use vkdiff_runtime::Tensor;
 
 pub struct ResnetBlock2D {
     norm1: GroupNorm,
     conv1: Conv2d,
-    time_emb_proj: Linear,
+    time_emb_proj: Option<Linear>,
     norm2: GroupNorm,
     conv2: Conv2d,
     conv_shortcut: Option<Conv2d>,
@@ -23,12 +23,12 @@ pub struct NormSpec {
 }
 
 impl ResnetBlock2D {
-    pub fn load(w: &Weights, inputs: usize, outputs: usize, temb: usize, norm: NormSpec) -> Result<ResnetBlock2D> {
+    pub fn load(w: &Weights, inputs: usize, outputs: usize, temb: Option<usize>, norm: NormSpec) -> Result<ResnetBlock2D> {
         let conv_shortcut = if inputs != outputs { Some(Conv2d::load(w, "conv_shortcut", inputs, outputs, 1, 1, 0)?) } else { None };
         Ok(ResnetBlock2D {
             norm1: GroupNorm::load(w, "norm1", inputs, norm.groups, norm.eps)?,
             conv1: Conv2d::load(w, "conv1", inputs, outputs, 3, 1, 1)?,
-            time_emb_proj: Linear::load(w, "time_emb_proj", temb, outputs, true)?,
+            time_emb_proj: temb.map(|t| Linear::load(w, "time_emb_proj", t, outputs, true)).transpose()?,
             norm2: GroupNorm::load(w, "norm2", outputs, norm.groups, norm.eps)?,
             conv2: Conv2d::load(w, "conv2", outputs, outputs, 3, 1, 1)?,
             conv_shortcut,
@@ -36,12 +36,14 @@ impl ResnetBlock2D {
     }
 
     /// x[B, H, W, in], `emb_silu` = SiLU(time embedding) [B, temb] → [B, H, W, out].
-    pub fn forward(&self, g: &mut Graph, x: &Tensor, emb_silu: &Tensor) -> Result<Tensor> {
+    pub fn forward(&self, g: &mut Graph, x: &Tensor, emb_silu: Option<&Tensor>) -> Result<Tensor> {
         let h = self.norm1.forward(g, x, true)?;
         let h = self.conv1.forward(g, &h)?;
-        let t = self.time_emb_proj.forward(g, emb_silu)?;
-        let c = t.shape()[1];
-        ops::add(&mut g.rec, &h, &t.reshape(&[t.shape()[0], 1, 1, c])?, &h)?;
+        if let (Some(proj), Some(emb)) = (&self.time_emb_proj, emb_silu) {
+            let t = proj.forward(g, emb)?;
+            let c = t.shape()[1];
+            ops::add(&mut g.rec, &h, &t.reshape(&[t.shape()[0], 1, 1, c])?, &h)?;
+        }
         let h = self.norm2.forward(g, &h, true)?;
         let out = match &self.conv_shortcut {
             Some(shortcut) => shortcut.forward(g, x)?,
@@ -56,12 +58,14 @@ impl ResnetBlock2D {
     }
 }
 
-/// `Downsample2D`: 3×3 convolution, stride 2, padding 1.
+/// `Downsample2D`: 3×3 convolution, stride 2, padding 1; with padding 0 (the VAE) diffusers
+/// pads only the bottom and right by one.
 pub struct Downsample2D(Conv2d);
 
 impl Downsample2D {
     pub fn load(w: &Weights, channels: usize, padding: usize) -> Result<Downsample2D> {
-        Ok(Downsample2D(Conv2d::load(w, "conv", channels, channels, 3, 2, padding)?))
+        let pad = if padding == 0 { Padding { top: 0, left: 0, bottom: 1, right: 1 } } else { Padding::same(padding) };
+        Ok(Downsample2D(Conv2d::load(w, "conv", channels, channels, 3, 2, 0)?.with_padding(pad)))
     }
 
     pub fn forward(&self, g: &mut Graph, x: &Tensor) -> Result<Tensor> {

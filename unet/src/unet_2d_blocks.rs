@@ -51,7 +51,7 @@ impl DownBlock {
         let resnets = (0..shape.layers)
             .map(|j| {
                 let inputs = if j == 0 { shape.inputs } else { shape.outputs };
-                ResnetBlock2D::load(&w.sub(&format!("resnets.{j}")), inputs, shape.outputs, spec.temb, spec.norm)
+                ResnetBlock2D::load(&w.sub(&format!("resnets.{j}")), inputs, shape.outputs, Some(spec.temb), spec.norm)
             })
             .collect::<Result<Vec<_>>>()?;
         let attentions = load_attentions(w, shape, spec, crosses)?;
@@ -62,7 +62,7 @@ impl DownBlock {
     /// Runs the block, pushing every layer's output (and the downsampler's) onto `skips`.
     pub fn forward(&self, g: &mut Graph, mut h: Tensor, cond: &Conditioning, skips: &mut Vec<Tensor>) -> Result<Tensor> {
         for (j, resnet) in self.resnets.iter().enumerate() {
-            h = resnet.forward(g, &h, cond.emb_silu)?;
+            h = resnet.forward(g, &h, Some(cond.emb_silu))?;
             if let Some(attn) = self.attentions.get(j) {
                 h = attn.forward_consuming(g, h, cond.context, cond.ip)?;
             }
@@ -86,16 +86,16 @@ impl MidBlock {
     pub fn load(w: &Weights, channels: usize, depth: usize, heads: usize, spec: &BlockSpec, crosses: &mut Vec<usize>) -> Result<MidBlock> {
         let attn = AttentionSpec { heads, context: spec.context, groups: spec.norm.groups };
         Ok(MidBlock {
-            resnet_0: ResnetBlock2D::load(&w.sub("resnets.0"), channels, channels, spec.temb, spec.norm)?,
+            resnet_0: ResnetBlock2D::load(&w.sub("resnets.0"), channels, channels, Some(spec.temb), spec.norm)?,
             attention: Transformer2DModel::load(&w.sub("attentions.0"), channels, depth, &attn, crosses)?,
-            resnet_1: ResnetBlock2D::load(&w.sub("resnets.1"), channels, channels, spec.temb, spec.norm)?,
+            resnet_1: ResnetBlock2D::load(&w.sub("resnets.1"), channels, channels, Some(spec.temb), spec.norm)?,
         })
     }
 
     pub fn forward(&self, g: &mut Graph, h: &Tensor, cond: &Conditioning) -> Result<Tensor> {
-        let h = self.resnet_0.forward(g, h, cond.emb_silu)?;
+        let h = self.resnet_0.forward(g, h, Some(cond.emb_silu))?;
         let h = self.attention.forward_consuming(g, h, cond.context, cond.ip)?;
-        self.resnet_1.forward(g, &h, cond.emb_silu)
+        self.resnet_1.forward(g, &h, Some(cond.emb_silu))
     }
 }
 
@@ -113,7 +113,7 @@ impl UpBlock {
             .map(|j| {
                 let skip = if j + 1 == shape.layers { shape.inputs } else { shape.outputs };
                 let hidden = if j == 0 { prev } else { shape.outputs };
-                ResnetBlock2D::load(&w.sub(&format!("resnets.{j}")), hidden + skip, shape.outputs, spec.temb, spec.norm)
+                ResnetBlock2D::load(&w.sub(&format!("resnets.{j}")), hidden + skip, shape.outputs, Some(spec.temb), spec.norm)
             })
             .collect::<Result<Vec<_>>>()?;
         let attentions = load_attentions(w, shape, spec, crosses)?;
@@ -129,7 +129,7 @@ impl UpBlock {
             let joined = g.alloc(&[s[0], s[1], s[2], s[3] + skip.shape()[3]])?;
             ops::concat_channels(&mut g.rec, &h, &skip, &joined)?;
             drop(skip);
-            h = resnet.forward(g, &joined, cond.emb_silu)?;
+            h = resnet.forward(g, &joined, Some(cond.emb_silu))?;
             if let Some(attn) = self.attentions.get(j) {
                 h = attn.forward_consuming(g, h, cond.context, cond.ip)?;
             }

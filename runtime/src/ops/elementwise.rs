@@ -31,12 +31,19 @@ fn element_groups(n: usize) -> usize {
     n.div_ceil(64)
 }
 
-/// out = op(x), element-wise; `alpha` is used by `Scale`. `out` may be `x`.
+/// out = op(x), element-wise; `alpha` is used by `Scale`. `out` may be `x`. Past the binding
+/// limit, in consecutive runs of elements.
 pub fn unary(rec: &mut Recorder, op: UnaryOp, x: &Tensor, out: &Tensor, alpha: f32) -> Result<()> {
     let dtype = same_dtype(rec.context(), "unary", &[x, out])?;
     ensure(x.numel() == out.numel(), || format!("{op:?}: {:?} into {:?}", x.shape(), out.shape()))?;
     let k = kernel(rec.context(), "unary", dtype, &[("OP", op as u32)], 2)?;
-    dispatch_flat(rec, &k, &[x], &[out], &[u(x.numel()), f(alpha)], element_groups(x.numel()))
+    let n = x.numel();
+    let per = if fit(rec.context(), &[x, out]) { n } else { rows_per_band(rec.context(), "unary", elem(x), 0, 64)? };
+    for run in bands(n, per) {
+        let (xs, ys) = (row_view(x, 1, run.clone())?, row_view(out, 1, run.clone())?);
+        dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(run.len()), f(alpha)], element_groups(run.len()))?;
+    }
+    Ok(())
 }
 
 /// out = a op b, where b's flat index is `(i / b_outer)·b_inner + i % b_inner` (see binary.wgsl).
