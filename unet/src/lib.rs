@@ -27,7 +27,7 @@ pub use clip_names::TextEncoderSlot;
 pub use config::{UNetConfig, SDXL_BASE_CONFIG};
 pub use error::{Error, Result};
 pub use layout::{nchw_to_nhwc, nhwc_to_nchw};
-pub use safetensors::{SafeTensors, SourceDtype};
+pub use safetensors::{write_f32 as write_safetensors_f32, SafeTensors, SourceDtype};
 pub use attention::{IpAdapterInput, IpLayer};
 pub use nn::Linear;
 pub use unet_2d_condition::{ControlResiduals, UNet, UNetInputs, UNetPass};

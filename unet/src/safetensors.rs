@@ -120,3 +120,30 @@ fn parse_entry(v: &Value) -> Option<Entry> {
     let (start, end) = (offsets.first()?.as_u64()? as usize, offsets.get(1)?.as_u64()? as usize);
     (start <= end).then_some(Entry { dtype, shape, element_size, start, end })
 }
+
+/// Writes f32 tensors as a safetensors file with string metadata, atomically (a temporary file
+/// renamed into place), so an interrupted run leaves no truncated file.
+pub fn write_f32(path: &Path, tensors: &[(&str, &[usize], &[f32])], metadata: &BTreeMap<String, String>) -> Result<()> {
+    let mut header = serde_json::Map::new();
+    if !metadata.is_empty() {
+        header.insert("__metadata__".into(), serde_json::to_value(metadata).expect("strings serialise"));
+    }
+    let mut offset = 0;
+    for (name, shape, data) in tensors {
+        let end = offset + 4 * data.len();
+        header.insert((*name).into(), serde_json::json!({ "dtype": "F32", "shape": shape, "data_offsets": [offset, end] }));
+        offset = end;
+    }
+    let mut json = serde_json::to_vec(&Value::Object(header)).expect("header serialises");
+    // The data starts 8-byte aligned, as the format's writers pad the header with spaces.
+    json.resize(json.len().div_ceil(8) * 8, b' ');
+    let mut bytes = (json.len() as u64).to_le_bytes().to_vec();
+    bytes.extend(json);
+    for (_, _, data) in tensors {
+        bytes.extend(data.iter().flat_map(|v| v.to_le_bytes()));
+    }
+    let tmp = path.with_extension("safetensors.partial");
+    let io = |e| Error::Io { path: path.to_path_buf(), source: e };
+    std::fs::write(&tmp, &bytes).map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(io)
+}

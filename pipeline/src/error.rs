@@ -1,0 +1,20 @@
+use std::path::PathBuf;
+
+/// What driving the networks can fail with; each message is one line naming the file or setting
+/// at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("{}: {source}", path.display())]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{}: {why}", path.display())]
+    Format { path: PathBuf, why: String },
+    /// A setting (sampler, scheduler, size, …) that cannot be used as given.
+    #[error("{0}")]
+    Config(String),
+    #[error(transparent)]
+    Network(#[from] vkdiff_unet::Error),
+    #[error(transparent)]
+    Runtime(#[from] vkdiff_runtime::Error),
+}
+
+pub type Result<T> = std::result::Result<T, Error>;

@@ -1,0 +1,76 @@
+//! diffusers `EulerDiscreteScheduler` without churn: x ← x + (x − x₀)/σ · (σ_next − σ).
+
+use super::config::{Prediction, SchedulerConfig, Spacing};
+use super::{denoised, euler_init_noise_sigma, interp, karras_sigmas, log_sigmas, scale_by_sigma, sigma_to_t, spaced_timesteps, train_sigmas, Solver};
+use crate::rng::TorchCpuRng;
+use crate::Result;
+
+pub(super) struct EulerDiscrete {
+    timesteps: Vec<f32>,
+    sigmas: Vec<f32>,
+    init_noise_sigma: f32,
+    prediction: Prediction,
+}
+
+impl EulerDiscrete {
+    pub(super) fn new(config: &SchedulerConfig, karras: bool, steps: usize) -> Result<EulerDiscrete> {
+        config.only("interpolation_type", &["linear".into()])?;
+        config.only("use_exponential_sigmas", &[false.into()])?;
+        config.only("use_beta_sigmas", &[false.into()])?;
+        let prediction = config.prediction()?;
+        if prediction == Prediction::V {
+            // Continuous timesteps change what the UNet is fed only for v-prediction.
+            config.only("timestep_type", &["discrete".into()])?;
+        }
+        let spacing = config.spacing("linspace")?;
+        let (timesteps, sigmas) = sigma_schedule(config, spacing, steps, karras, config.final_sigma_is_min()?)?;
+        let init_noise_sigma = euler_init_noise_sigma(&sigmas, spacing);
+        Ok(EulerDiscrete { timesteps, sigmas, init_noise_sigma, prediction })
+    }
+}
+
+/// The timesteps and σ's (with the final one appended) of `EulerDiscreteScheduler.set_timesteps`;
+/// Euler-ancestral's are the same without Karras or a `sigma_min` end.
+pub(super) fn sigma_schedule(config: &SchedulerConfig, spacing: Spacing, steps: usize, karras: bool, final_sigma_min: bool) -> Result<(Vec<f32>, Vec<f32>)> {
+    let train = train_sigmas(&config.alphas_cumprod()?);
+    let mut timesteps: Vec<f32> = spaced_timesteps(spacing, steps, train.len(), config.steps_offset()?).iter().map(|&t| t as f32).collect();
+    // σ linearly interpolated in t (numpy, float64) at the float32 timesteps.
+    let mut sigmas: Vec<f64> = timesteps.iter().map(|&t| interp(f64::from(t), &train)).collect();
+    if karras {
+        // Re-spaced between the ends of that interpolated range, and fed to the UNet as the
+        // fractional timesteps of those σ's.
+        let (sigma_min, sigma_max) = config.karras_range()?;
+        sigmas = karras_sigmas(sigma_min.unwrap_or(sigmas[sigmas.len() - 1]), sigma_max.unwrap_or(sigmas[0]), steps);
+        let logs = log_sigmas(&train);
+        timesteps = sigmas.iter().map(|&s| sigma_to_t(s, &logs) as f32).collect();
+    }
+    let last = if final_sigma_min { train[0] } else { 0.0 };
+    Ok((timesteps, sigmas.iter().map(|&s| s as f32).chain([last]).collect()))
+}
+
+impl Solver for EulerDiscrete {
+    fn timesteps(&self) -> &[f32] {
+        &self.timesteps
+    }
+
+    fn sigmas(&self) -> Option<&[f32]> {
+        Some(&self.sigmas)
+    }
+
+    fn init_noise_sigma(&self) -> f32 {
+        self.init_noise_sigma
+    }
+
+    fn scale_model_input(&self, step: usize, x: &[f32]) -> Vec<f32> {
+        scale_by_sigma(x, self.sigmas[step])
+    }
+
+    fn step(&mut self, step: usize, eps: &[f32], x: &mut [f32], _rng: &mut TorchCpuRng) {
+        let sigma = self.sigmas[step];
+        let dt = self.sigmas[step + 1] - sigma;
+        for (x, &eps) in x.iter_mut().zip(eps) {
+            let derivative = (*x - denoised(self.prediction, sigma, *x, eps)) / sigma;
+            *x += derivative * dt;
+        }
+    }
+}

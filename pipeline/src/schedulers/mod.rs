@@ -1,0 +1,227 @@
+//! diffusers' schedulers, reproduced to float32 rounding: the timesteps the UNet sees, the noise
+//! levels, and the update of the latent at each step.
+//!
+//! Each sampler follows its diffusers class op for op, in the precision diffusers computes in:
+//! training schedules in float32 torch ops, inference σ's in float64 numpy then float32, and the
+//! per-step update in float32 with the same operation order.
+
+mod config;
+mod ddim;
+mod dpmsolver_multistep;
+mod euler_ancestral_discrete;
+mod euler_discrete;
+
+pub use config::SchedulerConfig;
+
+use crate::rng::TorchCpuRng;
+use crate::{Error, Result};
+use config::{Prediction, Spacing};
+use std::fmt;
+use std::str::FromStr;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SamplerKind {
+    Euler,
+    EulerAncestral,
+    DpmSolver2M,
+    Ddim,
+}
+
+const NAMES: [(&str, SamplerKind); 4] = [
+    ("euler", SamplerKind::Euler),
+    ("euler_a", SamplerKind::EulerAncestral),
+    ("dpmpp_2m", SamplerKind::DpmSolver2M),
+    ("ddim", SamplerKind::Ddim),
+];
+
+impl FromStr for SamplerKind {
+    type Err = Error;
+    fn from_str(name: &str) -> Result<SamplerKind> {
+        NAMES.iter().find(|(n, _)| *n == name).map(|&(_, kind)| kind).ok_or_else(|| {
+            let valid: Vec<&str> = NAMES.iter().map(|(n, _)| *n).collect();
+            Error::Config(format!("unknown sampler `{name}` (valid: {})", valid.join(", ")))
+        })
+    }
+}
+
+impl fmt::Display for SamplerKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(NAMES.iter().find(|(_, k)| k == self).map_or("?", |(n, _)| n))
+    }
+}
+
+/// What each diffusers scheduler class provides.
+trait Solver {
+    fn timesteps(&self) -> &[f32];
+    fn sigmas(&self) -> Option<&[f32]>;
+    fn init_noise_sigma(&self) -> f32;
+    fn scale_model_input(&self, step: usize, x: &[f32]) -> Vec<f32>;
+    fn step(&mut self, step: usize, eps: &[f32], x: &mut [f32], rng: &mut TorchCpuRng);
+}
+
+/// A configured scheduler with its timesteps set.
+pub struct Sampler {
+    solver: Box<dyn Solver>,
+}
+
+impl Sampler {
+    /// What diffusers gives for `XScheduler.from_config(config, use_karras_sigmas=karras)` then
+    /// `set_timesteps(steps)`, X = EulerDiscreteScheduler / EulerAncestralDiscreteScheduler /
+    /// DPMSolverMultistepScheduler (dpmsolver++, order 2, midpoint, lower_order_final) / DDIMScheduler.
+    /// Like diffusers, trailing spacing can yield one timestep more than `steps` (61 steps → 62).
+    pub fn new(kind: SamplerKind, config: &SchedulerConfig, karras: bool, steps: usize) -> Result<Sampler> {
+        if steps == 0 {
+            return Err(Error::Config(format!("{kind} needs at least 1 step")));
+        }
+        if karras && matches!(kind, SamplerKind::EulerAncestral | SamplerKind::Ddim) {
+            // diffusers' DDIM has no Karras option, and its Euler-ancestral silently ignores it.
+            return Err(Error::Config(format!("Karras sigmas are not available with {kind} (use euler or dpmpp_2m)")));
+        }
+        let solver: Box<dyn Solver> = match kind {
+            SamplerKind::Euler => Box::new(euler_discrete::EulerDiscrete::new(config, karras, steps)?),
+            SamplerKind::EulerAncestral => Box::new(euler_ancestral_discrete::EulerAncestralDiscrete::new(config, steps)?),
+            SamplerKind::DpmSolver2M => Box::new(dpmsolver_multistep::DpmSolverMultistep::new(config, karras, steps)?),
+            SamplerKind::Ddim => Box::new(ddim::Ddim::new(config, steps)?),
+        };
+        // diffusers starts at the second occurrence of a repeated first timestep and then runs
+        // past the end of its schedule.
+        if let [first, second, ..] = solver.timesteps() {
+            if first == second {
+                return Err(Error::Config(format!("{steps} steps are too many for {kind}: its first timestep {first} repeats")));
+            }
+        }
+        Ok(Sampler { solver })
+    }
+
+    /// The value the UNet receives at each step (diffusers' timesteps, as float32).
+    pub fn timesteps(&self) -> &[f32] {
+        self.solver.timesteps()
+    }
+
+    /// The noise levels, one more than the timesteps, for the samplers that have them.
+    pub fn sigmas(&self) -> Option<&[f32]> {
+        self.solver.sigmas()
+    }
+
+    /// What the initial unit-variance noise is multiplied by.
+    pub fn init_noise_sigma(&self) -> f32 {
+        self.solver.init_noise_sigma()
+    }
+
+    /// The UNet's input for latent `x` at `step`.
+    pub fn scale_model_input(&self, step: usize, x: &[f32]) -> Vec<f32> {
+        self.solver.scale_model_input(step, x)
+    }
+
+    /// One `scheduler.step(eps, t, x, generator)`: `eps` is the (guidance-combined) model output,
+    /// `x` the flat NCHW latent, updated in place; ancestral noise is drawn from `rng` as diffusers
+    /// draws it (a randn of x's shape at every step, the last included).
+    pub fn step(&mut self, step: usize, eps: &[f32], x: &mut [f32], rng: &mut TorchCpuRng) {
+        assert_eq!(eps.len(), x.len(), "model output and latent sizes differ");
+        assert!(step < self.timesteps().len(), "step {step} is past the last of {} timesteps", self.timesteps().len());
+        self.solver.step(step, eps, x, rng);
+    }
+}
+
+/// Euler-family timesteps (`EulerDiscreteScheduler.set_timesteps`), in float64 before their cast.
+fn spaced_timesteps(spacing: Spacing, steps: usize, train: usize, offset: u64) -> Vec<f64> {
+    match spacing {
+        Spacing::Leading => {
+            let ratio = (train / steps) as f64;
+            (0..steps).rev().map(|k| k as f64 * ratio + offset as f64).collect()
+        }
+        Spacing::Trailing => trailing_timesteps(train, steps),
+        Spacing::Linspace => numpy_linspace(0.0, (train - 1) as f64, steps).into_iter().rev().collect(),
+    }
+}
+
+/// `np.arange(train, 0, -train / steps).round() - 1`, with numpy's float arange: its length is
+/// `ceil(train / step)` (one more than `steps` when that rounds up) and element i is
+/// `start + i·((start + step) − start)`.
+fn trailing_timesteps(train: usize, steps: usize) -> Vec<f64> {
+    let start = train as f64;
+    let step = -(start / steps as f64);
+    let len = ((0.0 - start) / step).ceil() as usize;
+    let delta = (start + step) - start;
+    (0..len)
+        .map(|i| match i {
+            0 => start,
+            1 => start + step,
+            _ => start + i as f64 * delta,
+        })
+        .map(|t| t.round_ties_even() - 1.0)
+        .collect()
+}
+
+/// `np.linspace(start, stop, num)`: `i·step + start`, the last point exactly `stop`.
+fn numpy_linspace(start: f64, stop: f64, num: usize) -> Vec<f64> {
+    let step = (stop - start) / num.saturating_sub(1) as f64;
+    (0..num).map(|i| if i + 1 == num && num > 1 { stop } else if i == 0 { start } else { i as f64 * step + start }).collect()
+}
+
+/// σ_t = √((1 − ᾱ_t)/ᾱ_t) for every training timestep, in float32 as torch computes it.
+fn train_sigmas(alphas_cumprod: &[f32]) -> Vec<f32> {
+    alphas_cumprod.iter().map(|a| ((1.0 - a) / a).sqrt()).collect()
+}
+
+/// `np.log` of float32 σ's, kept in float32.
+fn log_sigmas(sigmas: &[f32]) -> Vec<f32> {
+    sigmas.iter().map(|&s| f64::from(s).ln() as f32).collect()
+}
+
+/// `np.interp(t, arange(len), ys)`: linear in t, clamped at both ends.
+fn interp(t: f64, ys: &[f32]) -> f64 {
+    let last = ys.len() - 1;
+    if t <= 0.0 {
+        return f64::from(ys[0]);
+    }
+    let j = t.floor() as usize;
+    if j >= last {
+        return f64::from(ys[last]);
+    }
+    let (y0, y1) = (f64::from(ys[j]), f64::from(ys[j + 1]));
+    (y1 - y0) * (t - j as f64) + y0
+}
+
+/// Karras et al. (2022) σ's with ρ = 7 from `sigma_max` down to `sigma_min`, in float64.
+fn karras_sigmas(sigma_min: f64, sigma_max: f64, steps: usize) -> Vec<f64> {
+    const RHO: f64 = 7.0;
+    let (min_inv_rho, max_inv_rho) = (sigma_min.powf(1.0 / RHO), sigma_max.powf(1.0 / RHO));
+    numpy_linspace(0.0, 1.0, steps).iter().map(|ramp| (max_inv_rho + ramp * (min_inv_rho - max_inv_rho)).powf(RHO)).collect()
+}
+
+/// The fractional training timestep of `sigma`: log-σ interpolation between its neighbours
+/// (`_sigma_to_t`; the neighbour differences are float32 like diffusers' `log_sigmas`).
+fn sigma_to_t(sigma: f64, log_sigmas: &[f32]) -> f64 {
+    let log_sigma = sigma.max(1e-10).ln();
+    let low = log_sigmas.iter().rposition(|&l| log_sigma - f64::from(l) >= 0.0).unwrap_or(0).min(log_sigmas.len() - 2);
+    let (lo, hi) = (log_sigmas[low], log_sigmas[low + 1]);
+    let w = ((f64::from(lo) - log_sigma) / f64::from(lo - hi)).clamp(0.0, 1.0);
+    (1.0 - w) * low as f64 + w * (low + 1) as f64
+}
+
+/// x₀ predicted at noise level σ on a variance-exploding latent (Euler family).
+fn denoised(prediction: Prediction, sigma: f32, x: f32, eps: f32) -> f32 {
+    match prediction {
+        Prediction::Epsilon => x - sigma * eps,
+        Prediction::V => {
+            let c_out = -sigma / (sigma * sigma + 1.0).sqrt();
+            eps * c_out + x / (sigma * sigma + 1.0)
+        }
+    }
+}
+
+/// `x / √(σ² + 1)`, the Euler family's model input.
+fn scale_by_sigma(x: &[f32], sigma: f32) -> Vec<f32> {
+    let scale = (sigma * sigma + 1.0).sqrt();
+    x.iter().map(|v| v / scale).collect()
+}
+
+/// `init_noise_sigma` of the Euler family: σ_max, or √(σ_max² + 1) for leading spacing.
+fn euler_init_noise_sigma(sigmas: &[f32], spacing: Spacing) -> f32 {
+    let max = sigmas.iter().copied().fold(f32::MIN, f32::max);
+    match spacing {
+        Spacing::Leading => (max * max + 1.0).sqrt(),
+        Spacing::Trailing | Spacing::Linspace => max,
+    }
+}

@@ -1,0 +1,102 @@
+//! An SDXL model on the device: both tokenizers and text encoders, the UNet, the VAE and the
+//! scheduler config, from a diffusers folder or an original single file.
+
+use crate::error::{Error, Result};
+use crate::schedulers::SchedulerConfig;
+use crate::tokenizer::ClipTokenizer;
+use std::path::Path;
+use vkdiff_runtime::{Context, Dtype};
+use vkdiff_unet::{AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig};
+
+pub struct Sdxl {
+    pub(crate) ctx: Context,
+    pub(crate) dtype: Dtype,
+    pub(crate) tokenizers: [ClipTokenizer; 2],
+    pub(crate) text_encoders: [ClipTextModel; 2],
+    pub(crate) unet_config: UNetConfig,
+    pub(crate) unet: UNet,
+    pub(crate) vae: AutoencoderKl,
+    pub(crate) scheduler: SchedulerConfig,
+    /// model_index.json's `force_zeros_for_empty_prompt`: no negative prompt means zero
+    /// negative conditioning rather than the encoding of "".
+    pub(crate) force_zeros_for_empty_prompt: bool,
+}
+
+impl Sdxl {
+    /// Loads every component, reporting each by name to `progress` before it loads.
+    pub fn load(ctx: &Context, path: &Path, dtype: Dtype, progress: &mut dyn FnMut(&str)) -> Result<Sdxl> {
+        if !path.exists() {
+            return Err(Error::Config(format!("{}: no such model folder or file", path.display())));
+        }
+        let folder = path.is_dir().then_some(path);
+        progress("tokenizers");
+        let tokenizer = |sub: &str, pad: &str| match folder.map(|d| d.join(sub)).filter(|d| d.join("vocab.json").is_file()) {
+            Some(dir) => ClipTokenizer::from_dir(&dir),
+            None => ClipTokenizer::builtin(pad),
+        };
+        let tokenizers = [tokenizer("tokenizer", "<|endoftext|>")?, tokenizer("tokenizer_2", "!")?];
+        progress("text encoders");
+        let text_encoders = [
+            ClipTextModel::load_sdxl(ctx, path, TextEncoderSlot::ClipL, dtype)?,
+            ClipTextModel::load_sdxl(ctx, path, TextEncoderSlot::BigG, dtype)?,
+        ];
+        progress("UNet");
+        let (unet_config, ckpt) = Checkpoint::unet(ctx, path, dtype)?;
+        let unet = UNet::load(&unet_config, &ckpt)?;
+        progress("VAE");
+        let vae = AutoencoderKl::load_sdxl(ctx, path, dtype)?;
+        let scheduler = match folder.map(|d| d.join("scheduler/scheduler_config.json")).filter(|p| p.is_file()) {
+            Some(p) => SchedulerConfig::load(&p)?,
+            None => SchedulerConfig::sdxl_base(),
+        };
+        let force_zeros_for_empty_prompt = match folder.map(|d| d.join("model_index.json")).filter(|p| p.is_file()) {
+            Some(p) => read_force_zeros(&p)?,
+            None => true,
+        };
+        let model = Sdxl { ctx: ctx.clone(), dtype, tokenizers, text_encoders, unet_config, unet, vae, scheduler, force_zeros_for_empty_prompt };
+        model.check_widths()?;
+        Ok(model)
+    }
+
+    /// The text encoders' widths must be what the UNet was trained on.
+    fn check_widths(&self) -> Result<()> {
+        let [a, b] = [self.text_encoders[0].config(), self.text_encoders[1].config()];
+        let context = a.hidden_size + b.hidden_size;
+        if context != self.unet_config.cross_attention_dim {
+            return Err(Error::Config(format!(
+                "text encoders give {context}-wide context ({} + {}), the UNet attends to {}",
+                a.hidden_size, b.hidden_size, self.unet_config.cross_attention_dim
+            )));
+        }
+        let pooled = b.projection_dim.unwrap_or(0);
+        let time_ids = 6 * self.unet_config.addition_time_embed_dim.unwrap_or(0);
+        if self.unet_config.projection_class_embeddings_input_dim != Some(pooled + time_ids) {
+            return Err(Error::Config(format!(
+                "the UNet's added conditioning takes {:?} features; pooled text ({pooled}) + time ids ({time_ids}) give {}",
+                self.unet_config.projection_class_embeddings_input_dim,
+                pooled + time_ids
+            )));
+        }
+        Ok(())
+    }
+
+    /// Pixels per latent along each side.
+    pub fn vae_scale(&self) -> usize {
+        self.vae.config().downscale()
+    }
+
+    /// Latent sides must be multiples of this (each UNet level halves them).
+    pub fn latent_multiple(&self) -> usize {
+        1 << (self.unet_config.block_out_channels.len() - 1)
+    }
+
+    pub fn dtype(&self) -> Dtype {
+        self.dtype
+    }
+}
+
+fn read_force_zeros(path: &Path) -> Result<bool> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
+    let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("not JSON: {e}") })?;
+    Ok(json.get("force_zeros_for_empty_prompt").and_then(|v| v.as_bool()).unwrap_or(true))
+}

@@ -1,0 +1,164 @@
+//! The torch-compatible RNG and the schedulers against torch 2.15 / diffusers 0.42.1
+//! (tests/fixtures/pipeline/samplers.*, written by tools/make_sampler_fixtures.py).
+
+use serde_json::Value;
+use vkdiff_pipeline::{Error, Sampler, SamplerKind, SchedulerConfig, TorchCpuRng};
+use vkdiff_unet::SafeTensors;
+
+const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/pipeline/samplers");
+
+/// Worst relative L2 error of a denoising loop's final latent; measured ≤ 2e-7 (see the table).
+const LOOP_TOLERANCE: f64 = 1e-6;
+
+fn fixtures() -> (SafeTensors, Value) {
+    let tensors = SafeTensors::open(format!("{FIXTURES}.safetensors").as_ref()).unwrap();
+    let listing = serde_json::from_str(&std::fs::read_to_string(format!("{FIXTURES}.json")).unwrap()).unwrap();
+    (tensors, listing)
+}
+
+fn values(tensors: &SafeTensors, name: &str) -> Vec<f32> {
+    tensors.values(name).unwrap().1
+}
+
+#[test]
+fn randn_matches_torch_bit_for_bit() {
+    let (tensors, listing) = fixtures();
+    for case in listing["rng"].as_array().unwrap() {
+        let name = case["name"].as_str().unwrap();
+        let got = TorchCpuRng::new(case["seed"].as_u64().unwrap()).randn(case["n"].as_u64().unwrap() as usize);
+        let want = values(&tensors, name);
+        assert_eq!(got.len(), want.len(), "{name}");
+        let differing = got.iter().zip(&want).filter(|(g, w)| g.to_bits() != w.to_bits()).count();
+        assert_eq!(differing, 0, "{name}: {differing} of {} values differ", want.len());
+    }
+}
+
+#[test]
+fn consecutive_randn_calls_continue_torchs_stream() {
+    let (tensors, listing) = fixtures();
+    for case in listing["rng_sequences"].as_array().unwrap() {
+        let name = case["name"].as_str().unwrap();
+        let mut rng = TorchCpuRng::new(case["seed"].as_u64().unwrap());
+        let got: Vec<u32> = case["sizes"].as_array().unwrap().iter().flat_map(|n| rng.randn(n.as_u64().unwrap() as usize)).map(f32::to_bits).collect();
+        let want: Vec<u32> = values(&tensors, name).iter().map(|v| v.to_bits()).collect();
+        assert_eq!(got, want, "{name}");
+    }
+}
+
+fn sampler(case: &Value) -> Result<Sampler, Error> {
+    let kind: SamplerKind = case["kind"].as_str().unwrap().parse().unwrap();
+    let config = SchedulerConfig::from_json(&case["config"].to_string()).unwrap();
+    Sampler::new(kind, &config, case["karras"].as_bool().unwrap(), case["steps"].as_u64().unwrap() as usize)
+}
+
+fn cases(listing: &Value, errors: bool) -> impl Iterator<Item = &Value> {
+    listing["samplers"].as_array().unwrap().iter().filter(move |c| c["error"].as_bool().unwrap() == errors)
+}
+
+fn assert_close(name: &str, what: &str, got: &[f32], want: &[f32]) {
+    assert_eq!(got.len(), want.len(), "{name} {what}: {got:?} vs {want:?}");
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        assert!((g - w).abs() <= 1e-6 * w.abs(), "{name} {what}[{i}]: {g} vs diffusers {w}");
+    }
+}
+
+#[test]
+fn schedules_match_diffusers() {
+    let (tensors, listing) = fixtures();
+    for case in cases(&listing, false) {
+        let name = case["name"].as_str().unwrap();
+        let sampler = sampler(case).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_close(name, "timesteps", sampler.timesteps(), &values(&tensors, &format!("{name}/timesteps")));
+        let sigmas = tensors.values(&format!("{name}/sigmas")).ok().map(|(_, v)| v);
+        assert_eq!(sampler.sigmas().is_some(), sigmas.is_some(), "{name}: sigmas");
+        if let (Some(got), Some(want)) = (sampler.sigmas(), sigmas) {
+            assert_close(name, "sigmas", got, &want);
+        }
+        assert_close(name, "init_noise_sigma", &[sampler.init_noise_sigma()], &values(&tensors, &format!("{name}/init_noise_sigma")));
+    }
+}
+
+/// The fixture's synthetic ε-model, from IEEE-exact float32 operations only.
+fn model(x_in: &[f32], t: f32) -> Vec<f32> {
+    x_in.iter().map(|x| x / (1.0 + x.abs()) * 0.5 + t / 5000.0).collect()
+}
+
+fn relative_l2(got: &[f32], want: &[f32]) -> f64 {
+    let diff: f64 = got.iter().zip(want).map(|(&g, &w)| (f64::from(g) - f64::from(w)).powi(2)).sum();
+    let norm: f64 = want.iter().map(|&w| f64::from(w).powi(2)).sum();
+    (diff / norm).sqrt()
+}
+
+#[test]
+fn denoising_loops_match_diffusers() {
+    let (tensors, listing) = fixtures();
+    let mut worst: Vec<(String, f64)> = Vec::new();
+    for case in cases(&listing, false) {
+        let name = case["name"].as_str().unwrap();
+        let mut sampler = sampler(case).unwrap();
+        let mut rng = TorchCpuRng::new(case["seed"].as_u64().unwrap());
+        let mut x: Vec<f32> = rng.randn(4 * 8 * 8).iter().map(|v| v * sampler.init_noise_sigma()).collect();
+        let per_step = tensors.values(&format!("{name}/latents")).ok().map(|(_, v)| v);
+        let mut error = 0.0f64;
+        for step in 0..sampler.timesteps().len() {
+            let eps = model(&sampler.scale_model_input(step, &x), sampler.timesteps()[step]);
+            sampler.step(step, &eps, &mut x, &mut rng);
+            if let Some(per_step) = &per_step {
+                error = error.max(relative_l2(&x, &per_step[step * x.len()..][..x.len()]));
+            }
+        }
+        error = error.max(relative_l2(&x, &values(&tensors, &format!("{name}/final"))));
+        let kind = case["kind"].as_str().unwrap().to_string();
+        match worst.iter_mut().find(|(k, _)| *k == kind) {
+            Some((_, e)) => *e = e.max(error),
+            None => worst.push((kind, error)),
+        }
+        assert!(error <= LOOP_TOLERANCE, "{name}: relative L2 error {error:e}");
+    }
+    for (kind, error) in worst {
+        println!("{kind:>9}: worst relative L2 error {error:.2e}");
+    }
+}
+
+#[test]
+fn refused_settings_are_one_line_errors() {
+    let (_, listing) = fixtures();
+    for case in cases(&listing, true) {
+        let name = case["name"].as_str().unwrap();
+        let message = sampler(case).err().unwrap_or_else(|| panic!("{name} should be refused")).to_string();
+        assert!(matches!(sampler(case), Err(Error::Config(_))) && !message.contains('\n'), "{name}: {message}");
+    }
+    let sdxl = |edit: &str| {
+        let mut config: Value = serde_json::from_str(r#"{"beta_schedule": "scaled_linear", "beta_start": 0.00085, "beta_end": 0.012}"#).unwrap();
+        config.as_object_mut().unwrap().extend(serde_json::from_str::<serde_json::Map<String, Value>>(edit).unwrap());
+        SchedulerConfig::from_json(&config.to_string()).unwrap()
+    };
+    for (kind, edit, key) in [
+        (SamplerKind::Euler, r#"{"beta_schedule": "squaredcos_cap_v2"}"#, "beta_schedule"),
+        (SamplerKind::Euler, r#"{"rescale_betas_zero_snr": true}"#, "rescale_betas_zero_snr"),
+        (SamplerKind::Ddim, r#"{"prediction_type": "sample"}"#, "prediction_type"),
+        (SamplerKind::EulerAncestral, r#"{"timestep_spacing": "uniform"}"#, "timestep_spacing"),
+        (SamplerKind::Euler, r#"{"interpolation_type": "log_linear"}"#, "interpolation_type"),
+        (SamplerKind::DpmSolver2M, r#"{"algorithm_type": "sde-dpmsolver++"}"#, "algorithm_type"),
+        (SamplerKind::DpmSolver2M, r#"{"solver_order": 3}"#, "solver_order"),
+        (SamplerKind::Ddim, r#"{"thresholding": true}"#, "thresholding"),
+        (SamplerKind::Euler, r#"{"steps_offset": "one"}"#, "steps_offset"),
+    ] {
+        let message = match Sampler::new(kind, &sdxl(edit), false, 10) {
+            Err(Error::Config(message)) => message,
+            other => panic!("{edit}: {:?}", other.err()),
+        };
+        assert!(message.contains(key) && !message.contains('\n'), "{edit}: {message}");
+    }
+    assert!(Sampler::new(SamplerKind::Euler, &SchedulerConfig::sdxl_base(), false, 0).is_err());
+    let message = "heun".parse::<SamplerKind>().unwrap_err().to_string();
+    assert!(message.contains("euler, euler_a, dpmpp_2m, ddim"), "{message}");
+}
+
+#[test]
+fn sdxl_base_config_gives_the_documented_schedule() {
+    let sampler = Sampler::new(SamplerKind::Euler, &SchedulerConfig::sdxl_base(), false, 30).unwrap();
+    assert_eq!(&sampler.timesteps()[..3], [958.0, 925.0, 892.0]);
+    assert_eq!(sampler.timesteps()[29], 1.0);
+    assert!((sampler.init_noise_sigma() - 11.5203).abs() < 1e-4);
+}

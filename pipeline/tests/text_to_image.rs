@@ -1,0 +1,95 @@
+//! `Sdxl::text_to_image` against diffusers' StableDiffusionXLPipeline on the tiny SDXL
+//! (tools/make_pipeline_fixtures.py): final latents and 8-bit images, every sampler, with and
+//! without guidance and negative prompts, in f32 and f16, from the folder and the single file.
+
+use serde_json::Value;
+use std::path::PathBuf;
+use std::sync::OnceLock;
+use vkdiff_pipeline::{Sdxl, TextToImage};
+use vkdiff_runtime::{Context, Dtype};
+use vkdiff_unet::SafeTensors;
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/pipeline").join(name)
+}
+
+fn ctx() -> Context {
+    static CTX: OnceLock<Context> = OnceLock::new();
+    CTX.get_or_init(|| {
+        Context::new(None).unwrap_or_else(|e| panic!("pipeline tests need a Vulkan device and found none usable: {e}\n(on Debian: apt-get install -y mesa-vulkan-drivers libvulkan1)"))
+    })
+    .clone()
+}
+
+fn cases() -> Vec<Value> {
+    let json: Value = serde_json::from_str(&std::fs::read_to_string(fixture("records.json")).unwrap()).unwrap();
+    json["gen"].as_array().unwrap().clone()
+}
+
+fn job(case: &Value) -> TextToImage {
+    TextToImage {
+        prompt: case["prompt"].as_str().unwrap().into(),
+        negative_prompt: case["negative_prompt"].as_str().map(String::from),
+        seed: case["seed"].as_u64().unwrap(),
+        steps: case["steps"].as_u64().unwrap() as usize,
+        guidance_scale: case["guidance_scale"].as_f64().unwrap() as f32,
+        sampler: case["sampler"].as_str().unwrap().parse().unwrap(),
+        karras: case["karras"].as_bool().unwrap(),
+        width: case["width"].as_u64().unwrap() as usize,
+        height: case["height"].as_u64().unwrap() as usize,
+    }
+}
+
+fn relative_l2(got: &[f32], want: &[f32]) -> f64 {
+    let diff: f64 = got.iter().zip(want).map(|(&g, &w)| (g as f64 - w as f64).powi(2)).sum();
+    let norm: f64 = want.iter().map(|&w| (w as f64).powi(2)).sum();
+    (diff / norm).sqrt()
+}
+
+/// PSNR in dB of 8-bit pixels against diffusers' [0, 1] CHW image rounded the way it saves PNGs.
+fn psnr(pixels: &[u8], chw: &[f32], [c, h, w]: [usize; 3]) -> f64 {
+    let mut mse = 0.0;
+    for y in 0..h {
+        for x in 0..w {
+            for ch in 0..c {
+                let want = (chw[(ch * h + y) * w + x] * 255.0).round() as f64;
+                mse += (pixels[(y * w + x) * c + ch] as f64 - want).powi(2);
+            }
+        }
+    }
+    mse /= (c * h * w) as f64;
+    if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64 * 255.0 / mse).log10() }
+}
+
+/// Runs every recorded case on `model` in `dtype`; latents within `tol` (relative L2), images
+/// above `min_psnr`.
+fn check(model: &str, dtype: Dtype, tol: f64, min_psnr: f64, only: Option<usize>) {
+    let records = SafeTensors::open(&fixture("records.safetensors")).unwrap();
+    let sdxl = Sdxl::load(&ctx(), &fixture(model), dtype, &mut |_| {}).unwrap();
+    for (i, case) in cases().iter().enumerate().filter(|(i, _)| only.is_none_or(|o| o == *i)) {
+        let name = case["name"].as_str().unwrap();
+        let out = sdxl.text_to_image(&job(case), &mut |_, _| {}).unwrap();
+        let (_, want) = records.values(&format!("gen.{i}.latents")).unwrap();
+        let rel = relative_l2(&out.latents, &want);
+        assert!(rel <= tol, "{model} {dtype:?} case {i} ({name}): latents relative L2 error {rel:.2e} > {tol:.0e}");
+        let (s, image) = records.values(&format!("gen.{i}.image")).unwrap();
+        let p = psnr(&out.image.pixels, &image, [s[1], s[2], s[3]]);
+        assert!(p >= min_psnr, "{model} {dtype:?} case {i} ({name}): image PSNR {p:.1} dB < {min_psnr} dB");
+        eprintln!("{model} {dtype:?} {name}: latents rel L2 {rel:.2e}, image PSNR {p:.1} dB");
+    }
+}
+
+#[test]
+fn every_sampler_matches_diffusers_in_f32() {
+    check("tiny-sdxl", Dtype::F32, 1e-4, 50.0, None);
+}
+
+#[test]
+fn every_sampler_matches_diffusers_in_f16() {
+    check("tiny-sdxl", Dtype::F16, 2e-2, 30.0, None);
+}
+
+#[test]
+fn single_file_matches_diffusers() {
+    check("tiny-sdxl.safetensors", Dtype::F32, 1e-4, 50.0, Some(3));
+}
