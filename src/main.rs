@@ -2,6 +2,8 @@
 
 mod bench;
 mod devices_cmd;
+mod gen_cmd;
+mod progress;
 mod scene_cmd;
 
 use clap::{Parser, Subcommand};
@@ -17,6 +19,8 @@ struct Cli {
 enum Command {
     /// Render procedural mushroom beds: metric depth (EXR), instance masks, COCO, control images.
     Scene(scene_cmd::SceneArgs),
+    /// Text-to-image with an SDXL model: prompt in, PNG (with its settings) out.
+    Gen(gen_cmd::GenArgs),
     /// List every Vulkan device and what vkdiff would use on it.
     Devices(devices_cmd::DevicesArgs),
     /// Measure speed: kernels, networks, scene generation.
@@ -28,6 +32,7 @@ fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Scene(args) => scene_cmd::run_scene(args),
+        Command::Gen(args) => gen_cmd::run(&args),
         Command::Devices(args) => devices_cmd::run(&args),
         Command::Bench(cmd) => bench::run(cmd),
     };

@@ -1,0 +1,82 @@
+//! `vkdiff gen` as a user runs it, on the tiny SDXL pipeline (tools/make_pipeline_fixtures.py):
+//! the PNG and latents files, their metadata, and one-line errors that write nothing.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn vkdiff(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vkdiff")).args(args).env("RUST_BACKTRACE", "0").output().unwrap()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("gen-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn fixture(name: &str) -> String {
+    format!("{}/tests/fixtures/pipeline/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Recorded case 1 of records.json: euler, seed 42, 5 steps, cfg 7.5, 96×64, a negative prompt.
+const CASE: [&str; 14] = [
+    "--prompt", "a red bicycle leaning on a brick wall, golden hour", "--negative-prompt", "blurry, low quality", "--seed", "42", "--steps", "5", "--cfg", "7.5", "--width", "96", "--height", "64",
+];
+
+#[test]
+fn gen_writes_the_image_and_latents_diffusers_wrote() {
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(fixture("records.json")).unwrap()).unwrap();
+    let case = &json["gen"][1];
+    assert_eq!((case["prompt"].as_str(), case["negative_prompt"].as_str(), case["seed"].as_u64()), (Some(CASE[1]), Some(CASE[3]), Some(42)), "fixture case 1 changed");
+    let dir = scratch("case");
+    let (png, lat) = (dir.join("bike.png"), dir.join("bike.safetensors"));
+    let model = fixture("tiny-sdxl");
+    let args = [&["gen", "--model", &model, "--precision", "f32", "--out", png.to_str().unwrap(), "--latents-out", lat.to_str().unwrap()][..], &CASE].concat();
+    let result = vkdiff(&args);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    assert!(String::from_utf8_lossy(&result.stderr).contains("5/5"), "no progress shown");
+
+    let records = vkdiff_unet::SafeTensors::open(Path::new(&fixture("records.safetensors"))).unwrap();
+    let written = vkdiff_unet::SafeTensors::open(&lat).unwrap();
+    let (shape, got) = written.values("latents").unwrap();
+    let (want_shape, want) = records.values("gen.1.latents").unwrap();
+    assert_eq!(shape, want_shape);
+    let err: f64 = got.iter().zip(&want).map(|(&g, &w)| (g as f64 - w as f64).powi(2)).sum::<f64>().sqrt()
+        / want.iter().map(|&w| (w as f64).powi(2)).sum::<f64>().sqrt();
+    assert!(err < 1e-4, "latents relative L2 error {err:.2e}");
+
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+    let reader = decoder.read_info().unwrap();
+    let info = reader.info();
+    assert_eq!((info.width, info.height, info.color_type), (96, 64, png::ColorType::Rgb));
+    let text: Vec<(String, String)> = info.utf8_text.iter().map(|t| (t.keyword.clone(), t.get_text().unwrap())).collect();
+    let get = |k: &str| text.iter().find(|(key, _)| key == k).map(|(_, v)| v.clone()).unwrap_or_else(|| panic!("no `{k}` text chunk"));
+    assert!(get("parameters").starts_with(&format!("{}\nNegative prompt: {}\nSteps: 5, Sampler: euler, CFG scale: 7.5, Seed: 42, Size: 96x64", CASE[1], CASE[3])), "{}", get("parameters"));
+    assert_eq!((get("seed"), get("sampler"), get("negative_prompt")), ("42".into(), "euler".into(), CASE[3].into()));
+    assert!(!dir.join("bike.png.partial").exists());
+}
+
+#[test]
+fn bad_gen_arguments_print_one_error_line_and_write_nothing() {
+    let dir = scratch("bad");
+    let out = dir.join("x.png");
+    let out_arg = out.to_str().unwrap();
+    let model = fixture("tiny-sdxl");
+    let missing = dir.join("missing");
+    for (args, message) in [
+        (vec!["--model", missing.to_str().unwrap()], "no such model folder or file"),
+        (vec!["--model", &model, "--width", "100"], "--width 100 must be a positive multiple of 32 for this model"),
+        (vec!["--model", &model, "--sampler", "dpmpp_2m_sde"], "unknown sampler `dpmpp_2m_sde`"),
+        (vec!["--model", &model, "--sampler", "ddim", "--scheduler", "karras"], "Karras sigmas are not available with ddim"),
+        (vec!["--model", &model, "--steps", "0"], "needs at least 1 step"),
+    ] {
+        let result = vkdiff(&[&["gen", "--prompt", "x", "--out", out_arg][..], &args].concat());
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+        assert!(!result.status.success() && errors.len() == 1 && errors[0].contains(message), "{args:?}: {stderr}");
+        assert!(!out.exists(), "{args:?} wrote {out_arg}");
+    }
+    let result = vkdiff(&["gen", "--model", &model, "--prompt", "x", "--out", dir.join("x.jpg").to_str().unwrap()]);
+    assert!(String::from_utf8_lossy(&result.stderr).contains("give a .png path"));
+}
