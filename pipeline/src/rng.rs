@@ -42,16 +42,19 @@ impl TorchCpuRng {
 
     /// torch's `normal_distribution<double>`: one Box–Muller pair, the sine half kept for the next call.
     fn normal_f64(&mut self) -> f64 {
-        if let Some(z) = self.cached_normal.take() {
-            return z;
-        }
-        let u1 = self.uniform_f64();
-        let u2 = self.uniform_f64();
-        let r = (-2.0 * (-u2).ln_1p()).sqrt();
-        let theta = 2.0 * std::f64::consts::PI * u1;
-        self.cached_normal = Some(r * theta.sin());
-        // `* std + mean` in torch (1 and 0): only turns −0.0 into +0.0.
-        r * theta.cos() + 0.0
+        let z = match self.cached_normal.take() {
+            Some(z) => z,
+            None => {
+                let u1 = self.uniform_f64();
+                let u2 = self.uniform_f64();
+                let r = (-2.0 * (-u2).ln_1p()).sqrt();
+                let theta = 2.0 * std::f64::consts::PI * u1;
+                self.cached_normal = Some(r * theta.sin());
+                r * theta.cos()
+            }
+        };
+        // `z · std + mean` in torch (1 and 0): only turns −0.0 into +0.0.
+        z + 0.0
     }
 }
 
@@ -69,16 +72,8 @@ fn box_muller_16(u: &mut [f32]) {
 /// Cephes `log256_ps` for a normal positive `x`, with the fused multiply-adds the compiled kernel has.
 fn log_f32(x: f32) -> f32 {
     const SQRT_HALF: f32 = 0.707_106_77;
-    const POLY: [f32; 8] = [
-        -1.151_461e-1,
-        1.167_699_84e-1,
-        -1.242_014_1e-1,
-        1.424_932_3e-1,
-        -1.666_805_8e-1,
-        2.000_071_4e-1,
-        -2.499_999_4e-1,
-        3.333_333e-1,
-    ];
+    const POLY: [f32; 8] =
+        [-1.151_461e-1, 1.167_699_84e-1, -1.242_014_1e-1, 1.424_932_3e-1, -1.666_805_8e-1, 2.000_071_4e-1, -2.499_999_4e-1, 3.333_333e-1];
     let bits = x.to_bits();
     let mut e = ((bits >> 23) as i32 - 127) as f32 + 1.0;
     let m = f32::from_bits((bits & 0x807F_FFFF) | 0x3F00_0000);
@@ -94,6 +89,7 @@ fn log_f32(x: f32) -> f32 {
         y = y.mul_add(t, p);
     }
     y *= t;
+    // ln 2 enters in two parts, 0.693359375 − 2.12194440e-4, for precision.
     y = y.mul_add(z, e * -2.121_944_4e-4);
     y = (-z).mul_add(0.5, y);
     e.mul_add(0.693_359_4, t + y)

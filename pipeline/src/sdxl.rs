@@ -6,7 +6,7 @@ use crate::schedulers::SchedulerConfig;
 use crate::tokenizer::ClipTokenizer;
 use std::path::Path;
 use vkdiff_runtime::{Context, Dtype};
-use vkdiff_unet::{AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig};
+use vkdiff_unet::{AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig, VaeConfig, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
 
 pub struct Sdxl {
     pub(crate) ctx: Context,
@@ -58,6 +58,22 @@ impl Sdxl {
         Ok(model)
     }
 
+    /// SDXL base's architecture with random weights (benchmarks: real sizes, no download).
+    pub fn random_sdxl_base(ctx: &Context, dtype: Dtype) -> Result<Sdxl> {
+        let text_encoders = [
+            ClipTextModel::load(ctx, builtin(SDXL_CLIP_L_CONFIG), &Checkpoint::random(ctx, dtype, 1), false)?,
+            ClipTextModel::load(ctx, builtin(SDXL_BIGG_CONFIG), &Checkpoint::random(ctx, dtype, 2), true)?,
+        ];
+        let unet_config = UNetConfig::sdxl_base();
+        let unet = UNet::load(&unet_config, &Checkpoint::random(ctx, dtype, 3))?;
+        let vae_config: VaeConfig = builtin(SDXL_VAE_CONFIG);
+        let vae_dtype = if vae_config.force_upcast { Dtype::F32 } else { dtype };
+        let vae = AutoencoderKl::load(ctx, vae_config, &Checkpoint::random(ctx, vae_dtype, 4))?;
+        let tokenizers = [ClipTokenizer::builtin("<|endoftext|>")?, ClipTokenizer::builtin("!")?];
+        let scheduler = SchedulerConfig::sdxl_base();
+        Ok(Sdxl { ctx: ctx.clone(), dtype, tokenizers, text_encoders, unet_config, unet, vae, scheduler, force_zeros_for_empty_prompt: true })
+    }
+
     /// The text encoders' widths must be what the UNet was trained on.
     fn check_widths(&self) -> Result<()> {
         let [a, b] = [self.text_encoders[0].config(), self.text_encoders[1].config()];
@@ -93,6 +109,10 @@ impl Sdxl {
     pub fn dtype(&self) -> Dtype {
         self.dtype
     }
+}
+
+fn builtin<T: serde::de::DeserializeOwned>(text: &str) -> T {
+    serde_json::from_str(text).expect("built-in config parses")
 }
 
 fn read_force_zeros(path: &Path) -> Result<bool> {

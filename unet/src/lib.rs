@@ -20,9 +20,9 @@ mod unet_2d_blocks;
 mod unet_2d_condition;
 mod vae_names;
 
-pub use autoencoder_kl::{AutoencoderKl, VaeConfig};
+pub use autoencoder_kl::{AutoencoderKl, VaeConfig, SDXL_VAE_CONFIG};
 pub use checkpoint::{Checkpoint, Weights};
-pub use clip::{ClipTextConfig, ClipTextModel, TextEncoding};
+pub use clip::{ClipTextConfig, ClipTextModel, TextEncoding, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG};
 pub use clip_names::TextEncoderSlot;
 pub use config::{UNetConfig, SDXL_BASE_CONFIG};
 pub use error::{Error, Result};

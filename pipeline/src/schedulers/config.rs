@@ -195,3 +195,20 @@ fn torch_linspace(start: f32, end: f32, n: usize) -> Vec<f32> {
     let step = (end - start) / (n - 1) as f32;
     (0..n).map(|i| if i < n / 2 { step.mul_add(i as f32, start) } else { (-step).mul_add((n - 1 - i) as f32, end) }).collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn python_minus_infinity_reads_as_the_default() {
+        let config = SchedulerConfig::from_json(r#"{"lambda_min_clipped": -Infinity, "solver_order": 2}"#).unwrap();
+        assert!(config.value("lambda_min_clipped").is_none());
+    }
+
+    #[test]
+    fn missing_file_is_an_io_error_naming_it() {
+        let err = SchedulerConfig::load(Path::new("/nonexistent/scheduler_config.json")).unwrap_err();
+        assert!(matches!(err, Error::Io { .. }) && err.to_string().contains("/nonexistent/scheduler_config.json"));
+    }
+}

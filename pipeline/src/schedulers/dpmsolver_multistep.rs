@@ -3,7 +3,7 @@
 //! λ = ln(α/σ_vp), first-order on the first step and, under `lower_order_final`, on the last.
 
 use super::config::{Prediction, SchedulerConfig, Spacing};
-use super::{interp, karras_sigmas, log_sigmas, numpy_linspace, sigma_to_t, train_sigmas, trailing_timesteps, Solver};
+use super::{interp, karras_sigmas, log_sigmas, numpy_linspace, sigma_to_t, trailing_timesteps, train_sigmas, Solver};
 use crate::rng::TorchCpuRng;
 use crate::Result;
 use serde_json::Value;
@@ -31,23 +31,25 @@ impl DpmSolverMultistep {
         }
         let prediction = config.prediction()?;
         let final_sigma_min = config.final_sigma_is_min()?;
+        // Read even when Karras σ's replace the spaced timesteps, as diffusers does.
+        let spacing = config.spacing("linspace")?;
         let train = train_sigmas(&config.alphas_cumprod()?);
         let (timesteps, sigmas): (Vec<f32>, Vec<f64>) = if karras {
             // The full training range (unless overridden), timesteps rounded to integers.
             let (sigma_min, sigma_max) = config.karras_range()?;
-            let sigmas = karras_sigmas(sigma_min.unwrap_or(f64::from(train[0])), sigma_max.unwrap_or(f64::from(train[train.len() - 1])), steps);
+            let sigmas =
+                karras_sigmas(sigma_min.unwrap_or(f64::from(train[0])), sigma_max.unwrap_or(f64::from(train[train.len() - 1])), steps);
             let logs = log_sigmas(&train);
             (sigmas.iter().map(|&s| sigma_to_t(s, &logs).round_ties_even() as f32).collect(), sigmas)
         } else {
-            let timesteps = dpm_timesteps(config.spacing("linspace")?, steps, train.len(), config.steps_offset()?);
+            let timesteps = dpm_timesteps(spacing, steps, train.len(), config.steps_offset()?);
             let sigmas = timesteps.iter().map(|&t| interp(f64::from(t), &train)).collect();
             (timesteps, sigmas)
         };
         let last = if final_sigma_min { train[0] } else { 0.0 };
         let sigmas: Vec<f32> = sigmas.iter().map(|&s| s as f32).chain([last]).collect();
-        let first_order_final = config.flag("euler_at_final", false)?
-            || (config.flag("lower_order_final", true)? && timesteps.len() < 15)
-            || !final_sigma_min;
+        let first_order_final =
+            config.flag("euler_at_final", false)? || (config.flag("lower_order_final", true)? && timesteps.len() < 15) || !final_sigma_min;
         Ok(DpmSolverMultistep { timesteps, sigmas, prediction, first_order_final, previous: None })
     }
 }

@@ -1,7 +1,9 @@
 //! diffusers `EulerDiscreteScheduler` without churn: x ← x + (x − x₀)/σ · (σ_next − σ).
 
 use super::config::{Prediction, SchedulerConfig, Spacing};
-use super::{denoised, euler_init_noise_sigma, interp, karras_sigmas, log_sigmas, scale_by_sigma, sigma_to_t, spaced_timesteps, train_sigmas, Solver};
+use super::{
+    denoised, euler_init_noise_sigma, interp, karras_sigmas, log_sigmas, scale_by_sigma, sigma_to_t, spaced_timesteps, train_sigmas, Solver,
+};
 use crate::rng::TorchCpuRng;
 use crate::Result;
 
@@ -31,7 +33,13 @@ impl EulerDiscrete {
 
 /// The timesteps and σ's (with the final one appended) of `EulerDiscreteScheduler.set_timesteps`;
 /// Euler-ancestral's are the same without Karras or a `sigma_min` end.
-pub(super) fn sigma_schedule(config: &SchedulerConfig, spacing: Spacing, steps: usize, karras: bool, final_sigma_min: bool) -> Result<(Vec<f32>, Vec<f32>)> {
+pub(super) fn sigma_schedule(
+    config: &SchedulerConfig,
+    spacing: Spacing,
+    steps: usize,
+    karras: bool,
+    final_sigma_min: bool,
+) -> Result<(Vec<f32>, Vec<f32>)> {
     let train = train_sigmas(&config.alphas_cumprod()?);
     let mut timesteps: Vec<f32> = spaced_timesteps(spacing, steps, train.len(), config.steps_offset()?).iter().map(|&t| t as f32).collect();
     // σ linearly interpolated in t (numpy, float64) at the float32 timesteps.

@@ -19,6 +19,7 @@ use config::{Prediction, Spacing};
 use std::fmt;
 use std::str::FromStr;
 
+/// The samplers vkdiff offers, named `euler`, `euler_a`, `dpmpp_2m` and `ddim`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SamplerKind {
     Euler,
@@ -115,7 +116,8 @@ impl Sampler {
 
     /// One `scheduler.step(eps, t, x, generator)`: `eps` is the (guidance-combined) model output,
     /// `x` the flat NCHW latent, updated in place; ancestral noise is drawn from `rng` as diffusers
-    /// draws it (a randn of x's shape at every step, the last included).
+    /// draws it (a randn of x's shape at every step, the last included). Steps go in order from 0:
+    /// DPM-Solver keeps the previous step's prediction.
     pub fn step(&mut self, step: usize, eps: &[f32], x: &mut [f32], rng: &mut TorchCpuRng) {
         assert_eq!(eps.len(), x.len(), "model output and latent sizes differ");
         assert!(step < self.timesteps().len(), "step {step} is past the last of {} timesteps", self.timesteps().len());
@@ -156,7 +158,17 @@ fn trailing_timesteps(train: usize, steps: usize) -> Vec<f64> {
 /// `np.linspace(start, stop, num)`: `i·step + start`, the last point exactly `stop`.
 fn numpy_linspace(start: f64, stop: f64, num: usize) -> Vec<f64> {
     let step = (stop - start) / num.saturating_sub(1) as f64;
-    (0..num).map(|i| if i + 1 == num && num > 1 { stop } else if i == 0 { start } else { i as f64 * step + start }).collect()
+    (0..num)
+        .map(|i| {
+            if i + 1 == num && num > 1 {
+                stop
+            } else if i == 0 {
+                start
+            } else {
+                i as f64 * step + start
+            }
+        })
+        .collect()
 }
 
 /// σ_t = √((1 − ᾱ_t)/ᾱ_t) for every training timestep, in float32 as torch computes it.
@@ -223,5 +235,25 @@ fn euler_init_noise_sigma(sigmas: &[f32], spacing: Spacing) -> f32 {
     match spacing {
         Spacing::Leading => (max * max + 1.0).sqrt(),
         Spacing::Trailing | Spacing::Linspace => max,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sampler_names_round_trip() {
+        for (name, kind) in NAMES {
+            assert_eq!(name.parse::<SamplerKind>().unwrap(), kind);
+            assert_eq!(kind.to_string(), name);
+        }
+    }
+
+    #[test]
+    fn numpy_arange_adds_a_trailing_timestep_for_some_step_counts() {
+        let timesteps = trailing_timesteps(1000, 61);
+        assert_eq!((timesteps.len(), timesteps[0], timesteps[1], timesteps[61]), (62, 999.0, 983.0, -1.0));
+        assert_eq!(trailing_timesteps(1000, 30).len(), 30);
     }
 }
