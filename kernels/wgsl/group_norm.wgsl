@@ -21,24 +21,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let count = p.hw * cg;
     let c0 = wg.x * cg;
     let base = wg.y * p.hw * p.c + c0;
-    var s = 0.0;
-    for (var e = lid; e < count; e += WG) {
-        s += f32(x[base + (e / cg) * p.c + e % cg]);
-    }
-    let mean = workgroup_sum(s, lid) / f32(count);
-    var q = 0.0;
-    for (var e = lid; e < count; e += WG) {
-        let d = f32(x[base + (e / cg) * p.c + e % cg]) - mean;
-        q += d * d;
-    }
-    let rstd = inverseSqrt(workgroup_sum(q, lid) / f32(count) + p.eps);
-    for (var e = lid; e < count; e += WG) {
-        let at = base + (e / cg) * p.c + e % cg;
-        let ch = c0 + e % cg;
-        var v = (f32(x[at]) - mean) * rstd * f32(gamma[ch]) + f32(beta[ch]);
-        if p.silu != 0u {
-            v = v / (1.0 + exp(-v));
-        }
-        y[at] = S(v);
-    }
+    let m = group_moments(base, count, cg, p.c, lid);
+    group_apply(base, count, cg, p.c, c0, m.x, inverseSqrt(m.y / f32(count) + p.eps), p.silu != 0u, lid);
 }

@@ -35,14 +35,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         m2 += stats[at + 2u] + d * d * n * nb / total;
         n = total;
     }
-    let rstd = inverseSqrt(m2 / n + p.eps);
-    for (var e = lid; e < p.hw * cg; e += WG) {
-        let at = (e / cg) * p.c + c0 + e % cg;
-        let ch = c0 + e % cg;
-        var v = (f32(x[at]) - mean) * rstd * f32(gamma[ch]) + f32(beta[ch]);
-        if p.silu != 0u {
-            v = v / (1.0 + exp(-v));
-        }
-        y[at] = S(v);
-    }
+    group_apply(c0, p.hw * cg, cg, p.c, c0, mean, inverseSqrt(m2 / n + p.eps), p.silu != 0u, lid);
 }

@@ -17,22 +17,11 @@ var<immediate> p: Params;
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let cg = p.c / p.groups;
     let count = p.hw * cg;
-    let c0 = wg.x * cg;
-    var s = 0.0;
-    for (var e = lid; e < count; e += WG) {
-        s += f32(x[(e / cg) * p.c + c0 + e % cg]);
-    }
-    let mean = workgroup_sum(s, lid) / f32(count);
-    var q = 0.0;
-    for (var e = lid; e < count; e += WG) {
-        let d = f32(x[(e / cg) * p.c + c0 + e % cg]) - mean;
-        q += d * d;
-    }
-    let m2 = workgroup_sum(q, lid);
+    let m = group_moments(wg.x * cg, count, cg, p.c, lid);
     if lid == 0u {
         let at = (p.slot * p.groups + wg.x) * 3u;
         stats[at] = f32(count);
-        stats[at + 1u] = mean;
-        stats[at + 2u] = m2;
+        stats[at + 1u] = m.x;
+        stats[at + 2u] = m.y;
     }
 }

@@ -1,6 +1,7 @@
 //! `vkdiff bench …`: speed figures, with the device named and a reference measured in the same run.
 
 mod cpu_reference;
+mod gen;
 mod kernels;
 mod unet;
 
@@ -15,6 +16,9 @@ pub enum BenchCommand {
     /// Milliseconds per SDXL UNet evaluation (real architecture, random weights) and peak memory,
     /// against diffusers on the CPU.
     Unet(unet::UnetArgs),
+    /// Seconds per text-to-image stage (text encoders, UNet steps, VAE) with SDXL base's
+    /// architecture and random weights, against diffusers' pipeline on the CPU.
+    Gen(gen::GenArgs),
 }
 
 pub fn run(cmd: BenchCommand) -> Result<()> {
@@ -22,5 +26,6 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Kernels(args) => kernels::run(&args),
         BenchCommand::Scene(args) => crate::scene_cmd::run_bench_scene(args),
         BenchCommand::Unet(args) => unet::run(&args),
+        BenchCommand::Gen(args) => gen::run(&args),
     }
 }

@@ -1,0 +1,131 @@
+//! `vkdiff bench gen`: a whole text-to-image run with SDXL base's architecture and random
+//! weights (text encoders, UNet, VAE), timed by stage on the device, beside diffusers'
+//! StableDiffusionXLPipeline on this machine's CPU in the same run.
+
+use anyhow::{Context as _, Result};
+use std::process::Command;
+use std::time::Instant;
+use vkdiff_pipeline::{SamplerKind, Sdxl, TextToImage};
+use vkdiff_runtime::{Context, Dtype};
+use vkdiff_unet::{SDXL_BASE_CONFIG, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
+
+const REFERENCE: &str = include_str!("../../tools/gen_cpu_reference.py");
+/// The CLIP vocabulary in the layout transformers reads, for the reference's tokenizers.
+const TOKENIZERS: &str = "tests/fixtures/pipeline/clip-tokenizer";
+
+#[derive(clap::Args)]
+pub struct GenArgs {
+    /// Vulkan device index (see `vkdiff devices`).
+    #[arg(long)]
+    device: Option<usize>,
+    /// Image sizes in pixels (square).
+    #[arg(long, value_delimiter = ',', default_values_t = [512, 1024])]
+    size: Vec<usize>,
+    #[arg(long, default_value_t = 4)]
+    steps: usize,
+    #[arg(long, value_enum, default_value_t = super::unet::Precision::F16)]
+    precision: super::unet::Precision,
+    /// Skip diffusers on the CPU (needs python with torch, diffusers and transformers).
+    #[arg(long)]
+    no_cpu_reference: bool,
+    /// Print JSON lines instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(serde::Serialize, Default)]
+struct Row {
+    device: String,
+    size: usize,
+    steps: usize,
+    precision: String,
+    load_s: f64,
+    text_s: f64,
+    record_s: f64,
+    step_s: f64,
+    vae_s: f64,
+    total_s: f64,
+    peak_mib: f64,
+    cpu_reference: Option<serde_json::Value>,
+    step_ratio_to_cpu: Option<f64>,
+}
+
+pub fn run(args: &GenArgs) -> Result<()> {
+    let dtype = match args.precision {
+        super::unet::Precision::F16 => Dtype::F16,
+        super::unet::Precision::F32 => Dtype::F32,
+    };
+    for &size in &args.size {
+        let mut row = measure(args, dtype, size)?;
+        if !args.no_cpu_reference {
+            let r = reference(size, args.steps);
+            row.step_ratio_to_cpu = r.as_ref().ok().and_then(|v| v["step_s"].as_f64()).map(|cpu| cpu / row.step_s);
+            row.cpu_reference = Some(r.unwrap_or_else(|why| serde_json::json!({ "unavailable": why })));
+        }
+        if args.json {
+            println!("{}", serde_json::to_string(&row)?);
+        } else {
+            println!(
+                "{} | SDXL gen {size}² {} steps {}: text {:.2} s, {:.1} s/step, VAE {:.1} s, total {:.1} s (load {:.1} s, record {:.1} s), peak {:.0} MiB | diffusers CPU f32: {} | step speed-up {}",
+                row.device, row.steps, row.precision, row.text_s, row.step_s, row.vae_s, row.total_s, row.load_s, row.record_s, row.peak_mib,
+                row.cpu_reference.as_ref().map_or("-".into(), |v| v.to_string()),
+                row.step_ratio_to_cpu.map_or("-".into(), |r| format!("{r:.2}×")),
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Our run; the device and every buffer are released before the reference runs.
+fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
+    let ctx = Context::new(args.device)?;
+    let start = Instant::now();
+    let model = Sdxl::random_sdxl_base(&ctx, dtype)?;
+    let load_s = start.elapsed().as_secs_f64();
+    let job = TextToImage {
+        prompt: "white button mushrooms on brown compost, top-down photo".into(),
+        negative_prompt: None,
+        seed: 0,
+        steps: args.steps,
+        guidance_scale: 5.0,
+        sampler: SamplerKind::Euler,
+        karras: false,
+        width: size,
+        height: size,
+    };
+    let start = Instant::now();
+    let out = model.text_to_image(&job, &mut |done, total| eprintln!("{size}²: step {done}/{total}"))?;
+    let total_s = start.elapsed().as_secs_f64();
+    let t = &out.timings;
+    let steps: f64 = t.steps.iter().map(|d| d.as_secs_f64()).sum();
+    Ok(Row {
+        device: ctx.info().name.clone(),
+        size,
+        steps: t.steps.len(),
+        precision: super::kernels::dtype_name(dtype).into(),
+        load_s,
+        text_s: t.text_encoding.as_secs_f64(),
+        record_s: t.record.as_secs_f64(),
+        step_s: steps / t.steps.len().max(1) as f64,
+        vae_s: t.vae.as_secs_f64(),
+        total_s,
+        peak_mib: ctx.peak_bytes() as f64 / (1 << 20) as f64,
+        ..Row::default()
+    })
+}
+
+fn reference(size: usize, steps: usize) -> std::result::Result<serde_json::Value, String> {
+    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
+    let out = Command::new(&python)
+        .arg("-c")
+        .arg(REFERENCE)
+        .args([SDXL_BASE_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_BIGG_CONFIG, SDXL_VAE_CONFIG, TOKENIZERS])
+        .args([size.to_string(), steps.to_string()])
+        .output()
+        .map_err(|e| format!("{python} not runnable ({e})"))?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        return Err(format!("{python}: {}", err.lines().last().unwrap_or("failed")));
+    }
+    serde_json::from_slice(&out.stdout).context("reference output is not JSON").map_err(|e| e.to_string())
+}
