@@ -28,6 +28,10 @@ def random(module_fn):
     with torch.no_grad():
         for p in m.parameters():
             p.normal_(0.0, 0.02)
+        # to_empty leaves buffers uninitialised; CLIP's position ids must be 0..76 again.
+        for name, b in m.named_buffers():
+            if name.endswith("position_ids"):
+                b.copy_(torch.arange(b.shape[-1]).expand_as(b))
     return m
 
 

@@ -67,7 +67,7 @@ impl Sdxl {
         let unet_config = UNetConfig::sdxl_base();
         let unet = UNet::load(&unet_config, &Checkpoint::random(ctx, dtype, 3))?;
         let vae_config: VaeConfig = builtin(SDXL_VAE_CONFIG);
-        let vae_dtype = if vae_config.force_upcast { Dtype::F32 } else { dtype };
+        let vae_dtype = AutoencoderKl::run_dtype(&vae_config, dtype);
         let vae = AutoencoderKl::load(ctx, vae_config, &Checkpoint::random(ctx, vae_dtype, 4))?;
         let tokenizers = [ClipTokenizer::builtin("<|endoftext|>")?, ClipTokenizer::builtin("!")?];
         let scheduler = SchedulerConfig::sdxl_base();

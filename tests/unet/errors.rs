@@ -100,3 +100,24 @@ fn latent_size_off_the_grid_is_rejected_before_recording() {
     let err = unet.record(&inputs).err().expect("recorded a 7×8 latent").to_string();
     assert_one_line(&err, &["7×8", "multiple of 2"]);
 }
+
+#[test]
+fn a_unet_only_file_has_no_text_encoders_or_vae() {
+    let path = fixture("sdxl3/sd_xl_single_file.safetensors");
+    let te = vkdiff_unet::ClipTextModel::load_sdxl(&ctx(), &path, vkdiff_unet::TextEncoderSlot::BigG, Dtype::F32).err().unwrap().to_string();
+    assert_one_line(&te, &["sd_xl_single_file.safetensors", "conditioner.embedders.1.model.token_embedding.weight", "both text encoders"]);
+    let vae = vkdiff_unet::AutoencoderKl::load_sdxl(&ctx(), &path, Dtype::F32).err().unwrap().to_string();
+    assert_one_line(&vae, &["sd_xl_single_file.safetensors", "first_stage_model.", "with a VAE"]);
+}
+
+#[test]
+fn a_text_encoder_of_the_wrong_width_names_the_tensor() {
+    // text_encoder_2's weights under text_encoder's config: the first shape check names both.
+    let dir = scratch("te-width");
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pipeline/tiny-sdxl");
+    std::fs::create_dir_all(dir.join("text_encoder")).unwrap();
+    std::fs::copy(src.join("text_encoder/config.json"), dir.join("text_encoder/config.json")).unwrap();
+    std::fs::copy(src.join("text_encoder_2/model.safetensors"), dir.join("text_encoder/model.safetensors")).unwrap();
+    let err = vkdiff_unet::ClipTextModel::load_sdxl(&ctx(), &dir, vkdiff_unet::TextEncoderSlot::ClipL, Dtype::F32).err().unwrap().to_string();
+    assert_one_line(&err, &["token_embedding.weight", "has shape [49408, 128]", "expects [49408, 64]"]);
+}

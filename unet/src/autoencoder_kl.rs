@@ -194,7 +194,8 @@ impl AutoencoderKl {
         Self::load(ctx, config, &ckpt)
     }
 
-    fn run_dtype(config: &VaeConfig, dtype: Dtype) -> Dtype {
+    /// The precision a VAE with `config` runs in when the run asks for `dtype`.
+    pub fn run_dtype(config: &VaeConfig, dtype: Dtype) -> Dtype {
         if config.force_upcast {
             Dtype::F32
         } else {
