@@ -109,10 +109,11 @@ pub fn run(args: &GenArgs) -> Result<()> {
         t.vae.as_secs_f64(),
         ctx.peak_bytes() >> 20
     );
+    let settings = settings(args);
     if let Some(path) = &args.latents_out {
-        vkdiff_unet::write_safetensors_f32(path, &[("latents", &out.latent_shape, &out.latents)], &settings(args))?;
+        vkdiff_unet::write_safetensors_f32(path, &[("latents", &out.latent_shape, &out.latents)], &settings)?;
     }
-    write_png(&args.out, &out, &settings(args))?;
+    write_png(&args.out, &out, &settings)?;
     eprintln!("wrote {}", args.out.display());
     Ok(())
 }

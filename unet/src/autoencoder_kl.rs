@@ -3,7 +3,8 @@
 //! 1024² decode) run in exact bands inside the ops, so no tiling seams appear.
 
 use crate::biased_attention::BiasedSelfAttention;
-use crate::checkpoint::{Checkpoint, Weights};
+use crate::checkpoint::{component_folder, Checkpoint, Weights};
+use crate::config::read_config;
 use crate::error::{Error, Result};
 use crate::nn::{Conv2d, Graph, GroupNorm};
 use crate::resnet::{Downsample2D, NormSpec, ResnetBlock2D, Upsample2D};
@@ -179,12 +180,10 @@ impl AutoencoderKl {
     /// (`first_stage_model.*`). It runs in f32 when the config forces upcasting, else in `dtype`.
     pub fn load_sdxl(ctx: &Context, path: &Path, dtype: Dtype) -> Result<AutoencoderKl> {
         if path.is_dir() {
-            let (config_path, _) = Checkpoint::diffusers_component(ctx, path, "vae", "diffusion_pytorch_model", Dtype::F32)?;
-            let text = std::fs::read_to_string(&config_path).map_err(|e| Error::Io { path: config_path.clone(), source: e })?;
-            let config: VaeConfig =
-                serde_json::from_str(&text).map_err(|e| Error::Format { path: config_path.clone(), why: format!("not an AutoencoderKL config: {e}") })?;
-            let run = Self::run_dtype(&config, dtype);
-            let (_, ckpt) = Checkpoint::diffusers_component(ctx, path, "vae", "diffusion_pytorch_model", run)?;
+            // The config first: it decides the precision, and so which weight variant to open.
+            let folder = component_folder(path, "vae")?;
+            let config: VaeConfig = read_config(&folder.join("config.json"), "an AutoencoderKL")?;
+            let ckpt = Checkpoint::diffusers(ctx, &folder, "diffusion_pytorch_model", Self::run_dtype(&config, dtype))?;
             return Self::load(ctx, config, &ckpt);
         }
         let file = SafeTensors::open(path)?;

@@ -45,15 +45,9 @@ impl Checkpoint {
     /// original single-file checkpoint, whose config is inferred from tensor shapes.
     pub fn unet(ctx: &Context, path: &Path, dtype: Dtype) -> Result<(UNetConfig, Checkpoint)> {
         if path.is_dir() {
-            let dir = if path.join("unet").join("config.json").is_file() { path.join("unet") } else { path.to_path_buf() };
-            let config_path = dir.join("config.json");
-            if !config_path.is_file() {
-                return Err(Error::Checkpoint(format!("{}: no config.json (expected a diffusers model folder or its unet/ subfolder)", path.display())));
-            }
-            let config = UNetConfig::from_file(&config_path)?;
-            let files = diffusers_weight_files(&dir, "diffusion_pytorch_model", dtype)?;
-            let ckpt = Checkpoint::from_files(ctx, dtype, files, "", None, format!("{} (diffusers layout)", dir.display()));
-            return Ok((config, ckpt));
+            let dir = component_folder(path, "unet")?;
+            let config = UNetConfig::from_file(&dir.join("config.json"))?;
+            return Ok((config, Checkpoint::diffusers(ctx, &dir, "diffusion_pytorch_model", dtype)?));
         }
         let file = SafeTensors::open(path)?;
         if !file.entries.keys().any(|k| k.starts_with(SINGLE_FILE_UNET)) {
@@ -82,16 +76,10 @@ impl Checkpoint {
         Ok((config, ckpt))
     }
 
-    /// A component folder of a diffusers pipeline (`dir/sub` when it exists, else `dir` itself):
-    /// its config.json path and its weights `stem[.fp16].safetensors`, sharded or not.
-    pub(crate) fn diffusers_component(ctx: &Context, dir: &Path, sub: &str, stem: &str, dtype: Dtype) -> Result<(PathBuf, Checkpoint)> {
-        let dir = if dir.join(sub).join("config.json").is_file() { dir.join(sub) } else { dir.to_path_buf() };
-        let config = dir.join("config.json");
-        if !config.is_file() {
-            return Err(Error::Checkpoint(format!("{}: no {sub}/config.json (expected a diffusers model folder)", dir.display())));
-        }
-        let files = diffusers_weight_files(&dir, stem, dtype)?;
-        Ok((config, Checkpoint::from_files(ctx, dtype, files, "", None, format!("{} (diffusers layout)", dir.display()))))
+    /// The weights `stem[.fp16].safetensors` (sharded or not) of a diffusers component folder.
+    pub(crate) fn diffusers(ctx: &Context, folder: &Path, stem: &str, dtype: Dtype) -> Result<Checkpoint> {
+        let files = diffusers_weight_files(folder, stem, dtype)?;
+        Ok(Checkpoint::from_files(ctx, dtype, files, "", None, format!("{} (diffusers layout)", folder.display())))
     }
 
     /// The tensors under `prefix` of an original single-file checkpoint, renamed by `names`.
@@ -279,6 +267,16 @@ impl<'a> Weights<'a> {
         }
         self.ckpt.upload(&[names.len() * rows, cols], &data)
     }
+}
+
+/// The folder of pipeline component `sub` (`dir/sub`, or `dir` itself when it is the component),
+/// which must hold a config.json.
+pub(crate) fn component_folder(dir: &Path, sub: &str) -> Result<PathBuf> {
+    let folder = if dir.join(sub).join("config.json").is_file() { dir.join(sub) } else { dir.to_path_buf() };
+    if !folder.join("config.json").is_file() {
+        return Err(Error::Checkpoint(format!("{}: no config.json (expected a diffusers model folder or its {sub}/ subfolder)", dir.display())));
+    }
+    Ok(folder)
 }
 
 /// The weight files of a diffusers component: one file or shards listed by an index, preferring

@@ -3,7 +3,8 @@
 //! states and, with a projection, the pooled EOS feature projected.
 
 use crate::biased_attention::BiasedSelfAttention;
-use crate::checkpoint::{Checkpoint, Weights};
+use crate::checkpoint::{component_folder, Checkpoint, Weights};
+use crate::config::read_config;
 use crate::clip_names::{infer_text_config, open_clip_names, TextEncoderSlot};
 use crate::error::{Error, Result};
 use crate::nn::{Graph, LayerNorm, Linear};
@@ -137,11 +138,9 @@ impl ClipTextModel {
     pub fn load_sdxl(ctx: &Context, path: &Path, slot: TextEncoderSlot, dtype: Dtype) -> Result<ClipTextModel> {
         let pooled = slot == TextEncoderSlot::BigG;
         if path.is_dir() {
-            let (config_path, ckpt) = Checkpoint::diffusers_component(ctx, path, slot.folder(), "model", dtype)?;
-            let text = std::fs::read_to_string(&config_path).map_err(|e| Error::Io { path: config_path.clone(), source: e })?;
-            let config: ClipTextConfig =
-                serde_json::from_str(&text).map_err(|e| Error::Format { path: config_path.clone(), why: format!("not a CLIP text config: {e}") })?;
-            return Self::load(ctx, config, &ckpt, pooled);
+            let folder = component_folder(path, slot.folder())?;
+            let config: ClipTextConfig = read_config(&folder.join("config.json"), "a CLIP text")?;
+            return Self::load(ctx, config, &Checkpoint::diffusers(ctx, &folder, "model", dtype)?, pooled);
         }
         let file = SafeTensors::open(path)?;
         let config = infer_text_config(&file, slot)?;
@@ -196,7 +195,6 @@ impl ClipTextModel {
         let act = self.config.activation()?;
         let penultimate_at = self.config.num_hidden_layers - 1;
         let penultimate = g.alloc(&[b, n, h])?;
-        let mut normed = None;
         for (i, layer) in self.layers.iter().enumerate() {
             if i == penultimate_at {
                 ops::unary(&mut g.rec, UnaryOp::Scale, &x, &penultimate, 1.0)?;
@@ -206,9 +204,7 @@ impl ClipTextModel {
         if self.layers.len() == penultimate_at {
             ops::unary(&mut g.rec, UnaryOp::Scale, &x, &penultimate, 1.0)?;
         }
-        if let Some(ln) = &self.final_layer_norm {
-            normed = Some(ln.forward(&mut g, &x)?);
-        }
+        let normed = self.final_layer_norm.as_ref().map(|ln| ln.forward(&mut g, &x)).transpose()?;
         g.rec.finish()?.run()?;
         let pooled = match (normed, &self.projection) {
             (Some(normed), Some(proj)) => Some(self.pool(ids, &normed.download()?, proj)),

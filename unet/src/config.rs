@@ -129,9 +129,7 @@ impl UNetConfig {
     }
 
     pub fn from_file(path: &Path) -> Result<UNetConfig> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
-        let config: UNetConfig =
-            serde_json::from_str(&text).map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("not a UNet config: {e}") })?;
+        let config: UNetConfig = read_config(path, "a UNet")?;
         config.validate()?;
         Ok(config)
     }
@@ -227,4 +225,10 @@ impl UNetConfig {
     pub fn time_embed_dim(&self) -> usize {
         self.time_embedding_dim.unwrap_or(4 * self.block_out_channels[0])
     }
+}
+
+/// A diffusers/transformers config.json as `T`; `what` names the model kind in the error.
+pub(crate) fn read_config<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
+    serde_json::from_str(&text).map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("not {what} config: {e}") })
 }
