@@ -1,5 +1,6 @@
 //! `vkdiff gen`: text-to-image with an SDXL model, written as a PNG that carries its settings.
 
+use crate::gen_guides::GuideArgs;
 use crate::progress::Progress;
 use anyhow::{bail, Context as _, Result};
 use clap::{Args, ValueEnum};
@@ -65,6 +66,8 @@ pub struct GenArgs {
     /// Output PNG.
     #[arg(long)]
     out: PathBuf,
+    #[command(flatten)]
+    guides: GuideArgs,
 }
 
 pub fn run(args: &GenArgs) -> Result<()> {
@@ -77,6 +80,7 @@ pub fn run(args: &GenArgs) -> Result<()> {
     if args.out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() != Some("png") {
         bail!("--out {}: the image is written as PNG; give a .png path", args.out.display());
     }
+    args.guides.check()?;
     let dtype = match args.precision {
         Precision::F16 => Dtype::F16,
         Precision::F32 => Dtype::F32,
@@ -95,10 +99,13 @@ pub fn run(args: &GenArgs) -> Result<()> {
     let ctx = Context::new(args.device)?;
     eprintln!("device: {}", ctx.info().name);
     let start = std::time::Instant::now();
-    let model = Sdxl::load(&ctx, &args.model, dtype, &mut |part| eprintln!("loading {part}"))?;
+    let mut model = Sdxl::load(&ctx, &args.model, dtype, &mut |part| eprintln!("loading {part}"))?;
+    let loaded = args.guides.load(&ctx, &model)?;
+    loaded.merge_loras(&mut model)?;
     eprintln!("loaded in {:.1} s", start.elapsed().as_secs_f64());
+    let guides = loaded.guides(&args.guides);
     let progress = Progress::new("denoising", "step");
-    let out = model.text_to_image(&job, &mut |done, total| progress.update(done, total))?;
+    let out = model.text_to_image(&job, &guides, &mut |done, total| progress.update(done, total))?;
     let t = &out.timings;
     let steps: f64 = t.steps.iter().map(|d| d.as_secs_f64()).sum();
     eprintln!(
@@ -124,8 +131,18 @@ fn settings(a: &GenArgs) -> BTreeMap<String, String> {
     let negative = a.negative_prompt.as_deref().map(|n| format!("\nNegative prompt: {n}")).unwrap_or_default();
     let schedule = if a.scheduler == Schedule::Karras { " Karras" } else { "" };
     let parameters = format!(
-        "{}{negative}\nSteps: {}, Sampler: {}{schedule}, CFG scale: {}, Seed: {}, Size: {}x{}, Model: {}, RNG: {}, Precision: {:?}",
-        a.prompt, a.steps, a.sampler, a.cfg, a.seed, a.width, a.height, a.model.display(), a.rng, a.precision
+        "{}{negative}\nSteps: {}, Sampler: {}{schedule}, CFG scale: {}, Seed: {}, Size: {}x{}, Model: {}, RNG: {}, Precision: {:?}{}",
+        a.prompt,
+        a.steps,
+        a.sampler,
+        a.cfg,
+        a.seed,
+        a.width,
+        a.height,
+        a.model.display(),
+        a.rng,
+        a.precision,
+        a.guides.summary()
     );
     let mut m = BTreeMap::from([
         ("parameters".to_string(), parameters),
@@ -145,6 +162,7 @@ fn settings(a: &GenArgs) -> BTreeMap<String, String> {
     if let Some(n) = &a.negative_prompt {
         m.insert("negative_prompt".into(), n.clone());
     }
+    a.guides.settings(&mut m);
     m
 }
 

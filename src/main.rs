@@ -3,6 +3,7 @@
 mod bench;
 mod devices_cmd;
 mod gen_cmd;
+mod gen_guides;
 mod progress;
 mod scene_cmd;
 
@@ -20,7 +21,7 @@ enum Command {
     /// Render procedural mushroom beds: metric depth (EXR), instance masks, COCO, control images.
     Scene(scene_cmd::SceneArgs),
     /// Text-to-image with an SDXL model: prompt in, PNG (with its settings) out.
-    Gen(gen_cmd::GenArgs),
+    Gen(Box<gen_cmd::GenArgs>),
     /// List every Vulkan device and what vkdiff would use on it.
     Devices(devices_cmd::DevicesArgs),
     /// Measure speed: kernels, networks, scene generation.

@@ -41,11 +41,20 @@ impl SceneSettings {
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
-enum ControlMode {
+pub(crate) enum ControlMode {
     /// Per-image min–max of 1/z (as MiDaS-style depth estimators give), near = bright.
     Inverse,
     /// Per-image min–max of z, reversed so near = bright.
     Linear,
+}
+
+impl From<ControlMode> for ControlDepth {
+    fn from(mode: ControlMode) -> ControlDepth {
+        match mode {
+            ControlMode::Inverse => ControlDepth::Inverse,
+            ControlMode::Linear => ControlDepth::Linear,
+        }
+    }
 }
 
 /// Render procedural mushroom beds: depth.exr, instances.png, COCO annotations, camera,
@@ -83,10 +92,7 @@ pub fn run_scene(args: SceneArgs) -> anyhow::Result<()> {
         crops: args.crops,
         crop_size: args.crop_size,
         crop_min_fraction: args.crop_min_fraction,
-        control: match args.control_depth {
-            ControlMode::Inverse => ControlDepth::Inverse,
-            ControlMode::Linear => ControlDepth::Linear,
-        },
+        control: args.control_depth.into(),
         replace: args.force,
     };
     let seed = args.settings.seed;

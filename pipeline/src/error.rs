@@ -14,6 +14,8 @@ pub enum Error {
     #[error(transparent)]
     Network(#[from] vkdiff_unet::Error),
     #[error(transparent)]
+    Lora(#[from] vkdiff_lora::Error),
+    #[error(transparent)]
     Runtime(#[from] vkdiff_runtime::Error),
 }
 

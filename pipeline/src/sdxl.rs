@@ -5,6 +5,7 @@ use crate::error::{Error, Result};
 use crate::schedulers::SchedulerConfig;
 use crate::tokenizer::ClipTokenizer;
 use std::path::Path;
+use vkdiff_lora::{LoraFile, LoraMerger, Summary, Targets};
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_unet::{AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig, VaeConfig, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
 
@@ -20,6 +21,8 @@ pub struct Sdxl {
     /// model_index.json's `force_zeros_for_empty_prompt`: no negative prompt means zero
     /// negative conditioning rather than the encoding of "".
     pub(crate) force_zeros_for_empty_prompt: bool,
+    /// The LoRAs merged into the weights, and the originals to restore.
+    loras: LoraMerger,
 }
 
 impl Sdxl {
@@ -53,7 +56,7 @@ impl Sdxl {
             Some(p) => read_force_zeros(&p)?,
             None => true,
         };
-        let model = Sdxl { ctx: ctx.clone(), dtype, tokenizers, text_encoders, unet_config, unet, vae, scheduler, force_zeros_for_empty_prompt };
+        let model = Sdxl { ctx: ctx.clone(), dtype, tokenizers, text_encoders, unet_config, unet, vae, scheduler, force_zeros_for_empty_prompt, loras: LoraMerger::new() };
         model.check_widths()?;
         Ok(model)
     }
@@ -71,7 +74,7 @@ impl Sdxl {
         let vae = AutoencoderKl::load(ctx, vae_config, &Checkpoint::random(ctx, vae_dtype, 4))?;
         let tokenizers = [ClipTokenizer::builtin("<|endoftext|>")?, ClipTokenizer::builtin("!")?];
         let scheduler = SchedulerConfig::sdxl_base();
-        Ok(Sdxl { ctx: ctx.clone(), dtype, tokenizers, text_encoders, unet_config, unet, vae, scheduler, force_zeros_for_empty_prompt: true })
+        Ok(Sdxl { ctx: ctx.clone(), dtype, tokenizers, text_encoders, unet_config, unet, vae, scheduler, force_zeros_for_empty_prompt: true, loras: LoraMerger::new() })
     }
 
     /// The text encoders' widths must be what the UNet was trained on.
@@ -108,6 +111,25 @@ impl Sdxl {
 
     pub fn dtype(&self) -> Dtype {
         self.dtype
+    }
+
+    pub fn unet_config(&self) -> &UNetConfig {
+        &self.unet_config
+    }
+
+    pub fn unet(&self) -> &UNet {
+        &self.unet
+    }
+
+    /// Merges `loras` (file, strength) into the UNet and text encoders on the device, replacing
+    /// whatever set was merged before; an empty list restores the original weights exactly.
+    pub fn set_loras(&mut self, loras: &[(&LoraFile, f32)]) -> Result<Option<Summary>> {
+        if loras.is_empty() {
+            self.loras.restore()?;
+            return Ok(None);
+        }
+        let targets = Targets::sdxl(&self.unet, &self.text_encoders[0], &self.text_encoders[1]);
+        Ok(Some(self.loras.apply(&targets, loras)?))
     }
 }
 

@@ -2,13 +2,15 @@
 //! initial noise and any ancestral noise drawn from one torch-compatible generator, classifier-free
 //! guidance on a batch of [negative, positive], the scheduler's steps, then the VAE.
 
+use crate::controlnet_guide::{ControlGuide, ControlRun, SharedInputs};
 use crate::error::{Error, Result};
+use crate::ip_adapter_guide::ImageGuide;
 use crate::rng::TorchCpuRng;
 use crate::schedulers::{Sampler, SamplerKind};
 use crate::sdxl::Sdxl;
 use std::time::{Duration, Instant};
 use vkdiff_runtime::Dtype;
-use vkdiff_unet::{nchw_to_nhwc, nhwc_to_nchw, UNetInputs};
+use vkdiff_unet::{nchw_to_nhwc, nhwc_to_nchw, IpAdapterInput, UNetInputs};
 
 /// One image's settings (the `vkdiff gen` flags).
 #[derive(Clone, Debug)]
@@ -26,6 +28,7 @@ pub struct TextToImage {
 }
 
 /// 8-bit RGB, row-major.
+#[derive(Clone, Debug, PartialEq)]
 pub struct RgbImage {
     pub width: usize,
     pub height: usize,
@@ -50,9 +53,16 @@ pub struct Generated {
     pub timings: Timings,
 }
 
+/// What steers a generation beyond the prompt.
+#[derive(Default)]
+pub struct Guides<'a> {
+    pub control: Option<ControlGuide<'a>>,
+    pub image: Option<ImageGuide<'a>>,
+}
+
 impl Sdxl {
     /// Generates one image; `on_step(done, total)` is called after every denoising step.
-    pub fn text_to_image(&self, job: &TextToImage, on_step: &mut dyn FnMut(usize, usize)) -> Result<Generated> {
+    pub fn text_to_image(&self, job: &TextToImage, guides: &Guides, on_step: &mut dyn FnMut(usize, usize)) -> Result<Generated> {
         let (scale, multiple) = (self.vae_scale(), self.latent_multiple());
         for (flag, v) in [("--width", job.width), ("--height", job.height)] {
             if v == 0 || !v.is_multiple_of(scale * multiple) {
@@ -84,13 +94,16 @@ impl Sdxl {
         let (hh, ww) = (job.height as f32, job.width as f32);
         let time_ids: Vec<f32> = (0..batch).flat_map(|_| [hh, ww, 0.0, 0.0, hh, ww]).collect();
         let time_ids = ctx.upload(&[batch, 6], Dtype::F32, &time_ids)?;
+        let shared = SharedInputs { sample: &sample, timesteps: &timesteps, context: &context_t, added: (&pooled_t, &time_ids) };
+        let control = guides.control.as_ref().map(|g| ControlRun::record(g, &shared, job.width, job.height, dt)).transpose()?;
+        let ip: Vec<IpAdapterInput> = guides.image.iter().map(|g| g.unet_input(guided)).collect::<Result<_>>()?;
         let inputs = UNetInputs {
             sample: &sample,
             timesteps: &timesteps,
             encoder_hidden_states: &context_t,
             added: Some((&pooled_t, &time_ids)),
-            control: None,
-            ip: &[],
+            control: control.as_ref().map(ControlRun::residuals),
+            ip: &ip,
         };
         let pass = self.unet.record(&inputs)?;
         timings.record = start.elapsed();
@@ -109,6 +122,9 @@ impl Sdxl {
             }
             sample.write(&x_batch)?;
             timesteps.write(&vec![sampler.timesteps()[step]; batch])?;
+            if let Some(control) = &control {
+                control.step(step, total)?;
+            }
             pass.run()?;
             let out = pass.output.download()?;
             let n = out.len() / batch;

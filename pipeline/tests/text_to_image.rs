@@ -5,7 +5,7 @@
 use serde_json::Value;
 use std::path::PathBuf;
 use std::sync::OnceLock;
-use vkdiff_pipeline::{Sdxl, TextToImage};
+use vkdiff_pipeline::{Guides, Sdxl, TextToImage};
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_unet::SafeTensors;
 
@@ -68,7 +68,7 @@ fn check(model: &str, dtype: Dtype, tol: f64, min_psnr: f64, only: Option<usize>
     let sdxl = Sdxl::load(&ctx(), &fixture(model), dtype, &mut |_| {}).unwrap();
     for (i, case) in cases().iter().enumerate().filter(|(i, _)| only.is_none_or(|o| o == *i)) {
         let name = case["name"].as_str().unwrap();
-        let out = sdxl.text_to_image(&job(case), &mut |_, _| {}).unwrap();
+        let out = sdxl.text_to_image(&job(case), &Guides::default(), &mut |_, _| {}).unwrap();
         let (_, want) = records.values(&format!("gen.{i}.latents")).unwrap();
         let rel = relative_l2(&out.latents, &want);
         assert!(rel <= tol, "{model} {dtype:?} case {i} ({name}): latents relative L2 error {rel:.2e} > {tol:.0e}");

@@ -5,7 +5,7 @@
 use anyhow::{Context as _, Result};
 use std::process::Command;
 use std::time::Instant;
-use vkdiff_pipeline::{SamplerKind, Sdxl, TextToImage};
+use vkdiff_pipeline::{Guides, SamplerKind, Sdxl, TextToImage};
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_unet::{SDXL_BASE_CONFIG, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
 
@@ -94,7 +94,7 @@ fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
         height: size,
     };
     let start = Instant::now();
-    let out = model.text_to_image(&job, &mut |done, total| eprintln!("{size}²: step {done}/{total}"))?;
+    let out = model.text_to_image(&job, &Guides::default(), &mut |done, total| eprintln!("{size}²: step {done}/{total}"))?;
     let total_s = start.elapsed().as_secs_f64();
     let t = &out.timings;
     let steps: f64 = t.steps.iter().map(|d| d.as_secs_f64()).sum();

@@ -5,8 +5,10 @@
 #[allow(dead_code)]
 mod common;
 
+mod controlnet;
 mod errors;
 mod forward;
+mod ip_adapter;
 mod text_and_vae;
 
 use std::path::PathBuf;

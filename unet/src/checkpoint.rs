@@ -6,6 +6,7 @@
 use crate::config::UNetConfig;
 use crate::error::{Error, Result};
 use crate::ldm_names::{infer_unet_config, OriginalNames, StoredAs};
+use crate::parameters::{ParamLayout, Parameter, Parameters};
 use crate::safetensors::{decode, SafeTensors, SourceDtype};
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
@@ -37,6 +38,7 @@ pub struct Checkpoint {
     dtype: Dtype,
     source: Source,
     used: Mutex<BTreeSet<String>>,
+    placed: Mutex<Parameters>,
 }
 
 impl Checkpoint {
@@ -90,7 +92,7 @@ impl Checkpoint {
 
     /// Random weights of whatever shapes the network asks for (benchmarks of full-size models).
     pub fn random(ctx: &Context, dtype: Dtype, seed: u64) -> Checkpoint {
-        Checkpoint { ctx: ctx.clone(), dtype, source: Source::Random { seed }, used: Mutex::default() }
+        Checkpoint { ctx: ctx.clone(), dtype, source: Source::Random { seed }, used: Mutex::default(), placed: Mutex::default() }
     }
 
     fn from_files(ctx: &Context, dtype: Dtype, files: Vec<SafeTensors>, prefix: &str, original: Option<OriginalNames>, describe: String) -> Checkpoint {
@@ -101,7 +103,7 @@ impl Checkpoint {
             }
         }
         let source = Source::Files { files, index, prefix: prefix.into(), original, describe };
-        Checkpoint { ctx: ctx.clone(), dtype, source, used: Mutex::default() }
+        Checkpoint { ctx: ctx.clone(), dtype, source, used: Mutex::default(), placed: Mutex::default() }
     }
 
     /// The whole checkpoint as a view.
@@ -112,6 +114,16 @@ impl Checkpoint {
     /// The run precision weights are converted to.
     pub fn dtype(&self) -> Dtype {
         self.dtype
+    }
+
+    /// Every weight uploaded so far, by diffusers name: after a network is built from this
+    /// checkpoint, its parameters on the device.
+    pub fn parameters(&self) -> Parameters {
+        self.placed.lock().unwrap().clone()
+    }
+
+    fn place(&self, name: String, tensor: Tensor, torch_shape: &[usize], layout: ParamLayout) {
+        self.placed.lock().unwrap().insert(name, Parameter { tensor, torch_shape: torch_shape.to_vec(), layout });
     }
 
     /// Stored tensors under the network's prefix that no module asked for.
@@ -143,6 +155,17 @@ impl Checkpoint {
             (Source::Files { describe, .. }, Some(s)) if s.name != name => format!("tensor `{}` (diffusers `{name}`) is missing from {describe}", s.name),
             (Source::Files { describe, .. }, _) => format!("tensor `{name}` is missing from {describe}"),
             (Source::Random { .. }, _) => format!("tensor `{name}` is missing"),
+        }
+    }
+
+    /// The stored shape of a diffusers-named tensor, if the checkpoint has it.
+    pub(crate) fn stored_shape(&self, name: &str) -> Option<Vec<usize>> {
+        match &self.source {
+            Source::Files { files, index, .. } => {
+                let at = self.stored_as(name)?;
+                Some(files[*index.get(&at.name)?].entries[&at.name].shape.clone())
+            }
+            Source::Random { .. } => None,
         }
     }
 
@@ -245,7 +268,9 @@ impl<'a> Weights<'a> {
 
     /// A tensor as stored, in the run precision.
     pub fn tensor(&self, name: &str, shape: &[usize]) -> Result<Tensor> {
-        self.ckpt.tensor(&self.path(name), shape)
+        let t = self.ckpt.tensor(&self.path(name), shape)?;
+        self.ckpt.place(self.path(name), t.clone(), shape, ParamLayout::AsStored);
+        Ok(t)
     }
 
     /// A tensor's values on the host, as f32.
@@ -256,16 +281,26 @@ impl<'a> Weights<'a> {
     /// A PyTorch conv weight [out, in, kh, kw] re-laid out as the kernels read it, [out, kh, kw, in].
     pub fn conv_weight(&self, name: &str, [o, i, kh, kw]: [usize; 4]) -> Result<Tensor> {
         let oihw = self.host(name, &[o, i, kh, kw])?;
-        self.ckpt.upload(&[o, kh, kw, i], &oihw_to_ohwi(&oihw, o, i, kh, kw))
+        let t = self.ckpt.upload(&[o, kh, kw, i], &oihw_to_ohwi(&oihw, o, i, kh, kw))?;
+        self.ckpt.place(self.path(name), t.clone(), &[o, i, kh, kw], ParamLayout::ConvOhwi);
+        Ok(t)
     }
 
     /// Several [rows_k, cols] weights stacked into one [Σ rows_k, cols] tensor (fused projections).
+    /// Each part is placed as its row range where the device can bind it on its own.
     pub fn stacked(&self, names: &[&str], rows: usize, cols: usize) -> Result<Tensor> {
         let mut data = Vec::with_capacity(names.len() * rows * cols);
         for n in names {
             data.extend(self.host(n, &[rows, cols])?);
         }
-        self.ckpt.upload(&[names.len() * rows, cols], &data)
+        let t = self.ckpt.upload(&[names.len() * rows, cols], &data)?;
+        for (k, n) in names.iter().enumerate() {
+            if let Ok(part) = t.narrow(k * rows, rows) {
+                let shape = if cols == 1 { vec![rows] } else { vec![rows, cols] };
+                self.ckpt.place(self.path(n), part, &shape, ParamLayout::AsStored);
+            }
+        }
+        Ok(t)
     }
 }
 

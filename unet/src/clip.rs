@@ -8,6 +8,7 @@ use crate::config::read_config;
 use crate::clip_names::{infer_text_config, open_clip_names, TextEncoderSlot};
 use crate::error::{Error, Result};
 use crate::nn::{Graph, LayerNorm, Linear};
+use crate::parameters::Parameters;
 use crate::safetensors::SafeTensors;
 use serde::Deserialize;
 use std::path::Path;
@@ -85,7 +86,7 @@ pub struct TextEncoding {
     pub pooled: Option<Vec<f32>>,
 }
 
-struct EncoderLayer {
+pub(crate) struct EncoderLayer {
     layer_norm1: LayerNorm,
     self_attn: BiasedSelfAttention,
     layer_norm2: LayerNorm,
@@ -94,22 +95,23 @@ struct EncoderLayer {
 }
 
 impl EncoderLayer {
-    fn load(w: &Weights, c: &ClipTextConfig) -> Result<EncoderLayer> {
-        let (h, eps) = (c.hidden_size, c.layer_norm_eps);
+    /// One `CLIPEncoderLayer` of `hidden` channels over `heads` heads and an MLP of `intermediate`;
+    /// shared by the text and the vision towers.
+    pub(crate) fn load(w: &Weights, hidden: usize, intermediate: usize, heads: usize, eps: f32) -> Result<EncoderLayer> {
         let names = ["self_attn.q_proj", "self_attn.k_proj", "self_attn.v_proj", "self_attn.out_proj"];
         Ok(EncoderLayer {
-            layer_norm1: LayerNorm::load(w, "layer_norm1", h, eps)?,
-            self_attn: BiasedSelfAttention::load(w, names, h, c.num_attention_heads)?,
-            layer_norm2: LayerNorm::load(w, "layer_norm2", h, eps)?,
-            fc1: Linear::load(w, "mlp.fc1", h, c.intermediate_size, true)?,
-            fc2: Linear::load(w, "mlp.fc2", c.intermediate_size, h, true)?,
+            layer_norm1: LayerNorm::load(w, "layer_norm1", hidden, eps)?,
+            self_attn: BiasedSelfAttention::load(w, names, hidden, heads)?,
+            layer_norm2: LayerNorm::load(w, "layer_norm2", hidden, eps)?,
+            fc1: Linear::load(w, "mlp.fc1", hidden, intermediate, true)?,
+            fc2: Linear::load(w, "mlp.fc2", intermediate, hidden, true)?,
         })
     }
 
-    /// Pre-LN block on the residual stream `x` [B, N, C], in place, causal as CLIP's text tower is.
-    fn forward(&self, g: &mut Graph, x: &Tensor, act: UnaryOp) -> Result<()> {
+    /// Pre-LN block on the residual stream `x` [B, N, C], in place; `causal` for the text tower.
+    pub(crate) fn forward(&self, g: &mut Graph, x: &Tensor, act: UnaryOp, causal: bool) -> Result<()> {
         let h = self.layer_norm1.forward(g, x)?;
-        self.self_attn.forward_residual(g, &h, x, true)?;
+        self.self_attn.forward_residual(g, &h, x, causal)?;
         let h = self.layer_norm2.forward(g, x)?;
         let f = self.fc1.forward(g, &h)?;
         ops::unary(&mut g.rec, act, &f, &f, 1.0)?;
@@ -130,6 +132,7 @@ pub struct ClipTextModel {
     final_layer_norm: Option<LayerNorm>,
     /// [projection_dim, hidden] on the host: applied to B rows only.
     projection: Option<Vec<f32>>,
+    parameters: Parameters,
 }
 
 impl ClipTextModel {
@@ -158,18 +161,29 @@ impl ClipTextModel {
         let token_embedding = emb.host("token_embedding.weight", &[config.vocab_size, h])?;
         let position_embedding = emb.host("position_embedding.weight", &[config.max_position_embeddings, h])?;
         let used = if pooled { config.num_hidden_layers } else { config.num_hidden_layers - 1 };
-        let layers = (0..used).map(|i| EncoderLayer::load(&w.sub("encoder.layers").sub(&i.to_string()), &config)).collect::<Result<_>>()?;
+        let (mlp, heads, eps) = (config.intermediate_size, config.num_attention_heads, config.layer_norm_eps);
+        let layers = (0..used).map(|i| EncoderLayer::load(&w.sub("encoder.layers").sub(&i.to_string()), h, mlp, heads, eps)).collect::<Result<_>>()?;
         let (final_layer_norm, projection) = if pooled {
             let proj = config.projection_dim.ok_or_else(|| Error::Config("text encoder 2 has no `projection_dim`; SDXL needs CLIPTextModelWithProjection".into()))?;
             (Some(LayerNorm::load(&w, "final_layer_norm", h, config.layer_norm_eps)?), Some(ckpt.root().host("text_projection.weight", &[proj, h])?))
         } else {
             (None, None)
         };
-        Ok(ClipTextModel { config, ctx: ctx.clone(), dtype: ckpt.dtype(), token_embedding, position_embedding, layers, final_layer_norm, projection })
+        let mut parameters = ckpt.parameters();
+        if !pooled {
+            parameters.mark_not_run(format!("text_model.encoder.layers.{used}."));
+            parameters.mark_not_run("text_model.final_layer_norm.".into());
+        }
+        Ok(ClipTextModel { config, ctx: ctx.clone(), dtype: ckpt.dtype(), token_embedding, position_embedding, layers, final_layer_norm, projection, parameters })
     }
 
     pub fn config(&self) -> &ClipTextConfig {
         &self.config
+    }
+
+    /// The weights on the device by transformers name (`text_model.encoder.layers.0.mlp.fc1.weight`).
+    pub fn parameters(&self) -> &Parameters {
+        &self.parameters
     }
 
     /// Encodes a batch of token sequences, all of one length.
@@ -199,7 +213,7 @@ impl ClipTextModel {
             if i == penultimate_at {
                 ops::unary(&mut g.rec, UnaryOp::Scale, &x, &penultimate, 1.0)?;
             }
-            layer.forward(&mut g, &x, act)?;
+            layer.forward(&mut g, &x, act, true)?;
         }
         if self.layers.len() == penultimate_at {
             ops::unary(&mut g.rec, UnaryOp::Scale, &x, &penultimate, 1.0)?;

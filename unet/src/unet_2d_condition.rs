@@ -4,11 +4,11 @@
 use crate::attention::IpAdapterInput;
 use crate::checkpoint::Checkpoint;
 use crate::config::UNetConfig;
-use crate::embeddings::Embeddings;
+use crate::down_path::{DownConditioning, DownOutput, DownPath};
 use crate::error::{Error, Result};
 use crate::nn::{Conv2d, Graph, GroupNorm};
-use crate::resnet::NormSpec;
-use crate::unet_2d_blocks::{BlockShape, BlockSpec, Conditioning, DownBlock, MidBlock, UpBlock};
+use crate::parameters::Parameters;
+use crate::unet_2d_blocks::{BlockShape, Conditioning, MidBlock, UpBlock};
 use vkdiff_runtime::ops;
 use vkdiff_runtime::{Arena, Dtype, Recording, Tensor};
 
@@ -52,15 +52,14 @@ impl UNetPass {
 pub struct UNet {
     config: UNetConfig,
     dtype: Dtype,
-    conv_in: Conv2d,
-    embeddings: Embeddings,
-    down: Vec<DownBlock>,
+    down: DownPath,
     mid: MidBlock,
     up: Vec<UpBlock>,
     norm_out: GroupNorm,
     conv_out: Conv2d,
     /// Channels of each cross-attention, in diffusers' attention-processor order.
     crosses: Vec<usize>,
+    parameters: Parameters,
 }
 
 impl UNet {
@@ -70,21 +69,8 @@ impl UNet {
         let w = ckpt.root();
         let levels = config.levels()?;
         let n = levels.len();
-        let norm = NormSpec { groups: config.norm_num_groups, eps: config.norm_eps };
-        let spec = BlockSpec { temb: config.time_embed_dim(), norm, context: config.cross_attention_dim };
-        let c0 = config.block_out_channels[0];
         let mut crosses = Vec::new();
-        let mut down = Vec::new();
-        for (i, level) in levels.iter().enumerate() {
-            let shape = BlockShape {
-                inputs: if i == 0 { c0 } else { levels[i - 1].channels },
-                outputs: level.channels,
-                layers: config.layers_per_block,
-                attention: level.cross_attention.then_some((level.depth, level.heads)),
-                resample: i + 1 < n,
-            };
-            down.push(DownBlock::load(&w.sub(&format!("down_blocks.{i}")), &shape, &spec, 1, &mut crosses)?);
-        }
+        let down = DownPath::load(&w, config, &mut crosses)?;
         // diffusers registers up_blocks before mid_block, which fixes the processor order.
         let up_depths = config.up_depths()?;
         let mut up = Vec::new();
@@ -99,27 +85,31 @@ impl UNet {
                 attention: cross.then_some((up_depths[i], level.heads)),
                 resample: i + 1 < n,
             };
-            up.push(UpBlock::load(&w.sub(&format!("up_blocks.{i}")), &shape, prev, &spec, &mut crosses)?);
+            up.push(UpBlock::load(&w.sub(&format!("up_blocks.{i}")), &shape, prev, &down.spec, &mut crosses)?);
             prev = level.channels;
         }
-        let last = &levels[n - 1];
-        let mid = MidBlock::load(&w.sub("mid_block"), last.channels, last.depth, last.heads, &spec, &mut crosses)?;
+        let mid = down.load_mid(&w, config, &mut crosses)?;
+        let c0 = config.block_out_channels[0];
         Ok(UNet {
             config: config.clone(),
             dtype: ckpt.dtype(),
-            conv_in: Conv2d::load(&w, "conv_in", config.in_channels, c0, 3, 1, 1)?,
-            embeddings: Embeddings::load(&w, config)?,
             down,
             mid,
             up,
             norm_out: GroupNorm::load(&w, "conv_norm_out", c0, config.norm_num_groups, config.norm_eps)?,
             conv_out: Conv2d::load(&w, "conv_out", c0, config.out_channels, 3, 1, 1)?,
             crosses,
+            parameters: ckpt.parameters(),
         })
     }
 
     pub fn config(&self) -> &UNetConfig {
         &self.config
+    }
+
+    /// The weights on the device by diffusers name.
+    pub fn parameters(&self) -> &Parameters {
+        &self.parameters
     }
 
     /// Channels of every cross-attention in diffusers' `attn_processors` order. Cross-attention k
@@ -150,13 +140,9 @@ impl UNet {
         self.check(inputs)?;
         let ctx = inputs.sample.context();
         let mut g = Graph::new(&ctx, self.dtype)?;
-        let emb_silu = self.embeddings.forward(&mut g, inputs.timesteps, inputs.added)?;
+        let down_cond = DownConditioning { context: inputs.encoder_hidden_states, ip: inputs.ip, hint: None };
+        let DownOutput { h, mut skips, emb_silu } = self.down.forward(&mut g, inputs.sample, inputs.timesteps, inputs.added, &down_cond)?;
         let cond = Conditioning { emb_silu: &emb_silu, context: inputs.encoder_hidden_states, ip: inputs.ip };
-        let mut h = self.conv_in.forward(&mut g, inputs.sample)?;
-        let mut skips = vec![h.clone()];
-        for block in &self.down {
-            h = block.forward(&mut g, h, &cond, &mut skips)?;
-        }
         let mut h = self.mid.forward(&mut g, &h, &cond)?;
         if let Some(control) = inputs.control {
             // After the mid block has read the down path's output, which is also the last skip.
@@ -200,7 +186,7 @@ impl UNet {
         if e.len() != 3 || e[0] != b || e[2] != c.cross_attention_dim {
             return bad(format!("encoder_hidden_states must be [{b}, tokens, {}], got {e:?}", c.cross_attention_dim));
         }
-        if let (Some(dim), Some((text, ids))) = (self.embeddings.text_embeds_dim(), i.added) {
+        if let (Some(dim), Some((text, ids))) = (self.down.text_embeds_dim(), i.added) {
             if text.shape() != [b, dim] || text.dtype() != self.dtype {
                 return bad(format!("text_embeds must be [{b}, {dim}] {:?}, got {:?} {:?}", self.dtype, text.shape(), text.dtype()));
             }

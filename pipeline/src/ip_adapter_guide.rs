@@ -1,0 +1,61 @@
+//! IP-Adapter style images as diffusers' SDXL pipeline feeds them: every image through the CLIP
+//! preprocessing and vision encoder, projected to image tokens laid one after another for the one
+//! adapter, and for guidance the negative tokens diffusers makes (zero embeds, or the encoder's
+//! output for zero pixels).
+
+use crate::error::{Error, Result};
+use crate::images::ClipPreprocess;
+use crate::RgbImage;
+use vkdiff_unet::{ClipVisionModelWithProjection, ImageFeature, IpAdapter, IpAdapterInput};
+
+/// The `--ip-adapter` settings of one generation.
+pub struct ImageGuide<'a> {
+    pub adapter: &'a IpAdapter,
+    pub encoder: &'a ClipVisionModelWithProjection,
+    pub preprocess: &'a ClipPreprocess,
+    /// The style images, all for the one adapter.
+    pub images: &'a [RgbImage],
+    pub scale: f32,
+}
+
+impl ImageGuide<'_> {
+    /// The UNet's image-token input for a batch of [negative, positive] (`guided`) or [positive].
+    pub(crate) fn unet_input(&self, guided: bool) -> Result<IpAdapterInput> {
+        if self.images.is_empty() {
+            return Err(Error::Config("--ip-adapter needs at least one --ip-image".into()));
+        }
+        if !self.scale.is_finite() {
+            return Err(Error::Config(format!("--ip-scale {} is not a number", self.scale)));
+        }
+        let feature = self.adapter.kind().feature();
+        let mut pixels = Vec::new();
+        let mut size = [0; 4];
+        for image in self.images {
+            let (values, shape) = self.preprocess.apply(image);
+            pixels.extend(values);
+            size = shape;
+        }
+        let n = self.images.len();
+        let positive = self.tokens(&pixels, n, feature)?;
+        let mut tokens = Vec::new();
+        if guided {
+            let negative = match feature {
+                ImageFeature::ImageEmbeds => {
+                    let width = self.encoder.config().projection_dim;
+                    self.adapter.image_tokens(&vec![0.0; n * width], &[n, width])?
+                }
+                ImageFeature::Penultimate => self.tokens(&vec![0.0; n * size[1] * size[2] * size[3]], n, feature)?,
+            };
+            tokens.extend(negative);
+        }
+        tokens.extend(positive);
+        Ok(self.adapter.unet_input(&tokens, if guided { 2 } else { 1 }, self.scale)?)
+    }
+
+    /// The image tokens of `n` preprocessed images, one image's after another.
+    fn tokens(&self, pixels: &[f32], n: usize, feature: ImageFeature) -> Result<Vec<f32>> {
+        let encoding = self.encoder.encode(pixels, n, &[feature])?;
+        let (features, shape) = encoding.get(feature).expect("the encoder computes what it is asked for");
+        Ok(self.adapter.image_tokens(features, &shape)?)
+    }
+}
