@@ -18,12 +18,7 @@ pub struct CpuGemm {
 /// GFLOP/s for each (M, N, K), or why it could not be measured (no python3 or numpy).
 pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String> {
     let args: Vec<String> = shapes.iter().flat_map(|&(m, n, k)| [m, n, k]).map(|x| x.to_string()).collect();
-    let out = Command::new("python3")
-        .arg("-c")
-        .arg(SCRIPT)
-        .args(&args)
-        .output()
-        .map_err(|e| format!("python3 not runnable ({e})"))?;
+    let out = Command::new("python3").arg("-c").arg(SCRIPT).args(&args).output().map_err(|e| format!("python3 not runnable ({e})"))?;
     if !out.status.success() {
         let err = String::from_utf8_lossy(&out.stderr);
         return Err(format!("numpy reference failed: {}", err.lines().last().unwrap_or("")));

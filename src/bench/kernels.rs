@@ -96,15 +96,20 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
         Case {
             name: "conv2d 3x3",
             shape: "64x64, 640->640, stride 1".into(),
-                work: Work::Flops(2.0 * (hw * c * 9 * c) as f64),
+            work: Work::Flops(2.0 * (hw * c * 9 * c) as f64),
             gemm: None,
-            tensors: vec![rand_tensor(ctx, &[1, 64, 64, c], dtype, 3)?, rand_tensor(ctx, &[c, 3, 3, c], dtype, 4)?, rand_tensor(ctx, &[c], dtype, 5)?, ctx.zeros(&[1, 64, 64, c], dtype)?],
+            tensors: vec![
+                rand_tensor(ctx, &[1, 64, 64, c], dtype, 3)?,
+                rand_tensor(ctx, &[c, 3, 3, c], dtype, 4)?,
+                rand_tensor(ctx, &[c], dtype, 5)?,
+                ctx.zeros(&[1, 64, 64, c], dtype)?,
+            ],
             record: |rec, t| ops::conv2d(rec, &t[0], &t[1], Some(&t[2]), &t[3], &ConvParams::new(1, 1)),
         },
         Case {
             name: "attention",
             shape: "4096 tokens, 10 heads x 64".into(),
-                work: Work::Flops(4.0 * 4096.0 * 4096.0 * 64.0 * 10.0),
+            work: Work::Flops(4.0 * 4096.0 * 4096.0 * 64.0 * 10.0),
             gemm: None,
             tensors: (0..4).map(|i| rand_tensor(ctx, &[1, 4096, 640], dtype, 6 + i)).collect::<vkdiff_runtime::Result<_>>()?,
             record: |rec, t| {
@@ -115,9 +120,14 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
         Case {
             name: "cross-attention",
             shape: "4096 x 77 tokens, 10 heads x 64".into(),
-                work: Work::Flops(4.0 * 4096.0 * 77.0 * 64.0 * 10.0),
+            work: Work::Flops(4.0 * 4096.0 * 77.0 * 64.0 * 10.0),
             gemm: None,
-            tensors: vec![rand_tensor(ctx, &[1, 4096, 640], dtype, 10)?, rand_tensor(ctx, &[1, 77, 640], dtype, 11)?, rand_tensor(ctx, &[1, 77, 640], dtype, 12)?, ctx.zeros(&[1, 4096, 640], dtype)?],
+            tensors: vec![
+                rand_tensor(ctx, &[1, 4096, 640], dtype, 10)?,
+                rand_tensor(ctx, &[1, 77, 640], dtype, 11)?,
+                rand_tensor(ctx, &[1, 77, 640], dtype, 12)?,
+                ctx.zeros(&[1, 4096, 640], dtype)?,
+            ],
             record: |rec, t| {
                 let l = AttentionLayout::dense(1, 10, 64, 4096, 77);
                 ops::attention(rec, &t[0], &t[1], &t[2], &t[3], &l, 0.125)
@@ -126,23 +136,33 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
         Case {
             name: "group_norm + SiLU",
             shape: "64x64x640, 32 groups".into(),
-                work: Work::Bytes(4.0 * bytes(hw * c)),
+            work: Work::Bytes(4.0 * bytes(hw * c)),
             gemm: None,
-            tensors: vec![rand_tensor(ctx, &[1, hw, c], dtype, 13)?, rand_tensor(ctx, &[c], dtype, 14)?, rand_tensor(ctx, &[c], dtype, 15)?, ctx.zeros(&[1, hw, c], dtype)?],
+            tensors: vec![
+                rand_tensor(ctx, &[1, hw, c], dtype, 13)?,
+                rand_tensor(ctx, &[c], dtype, 14)?,
+                rand_tensor(ctx, &[c], dtype, 15)?,
+                ctx.zeros(&[1, hw, c], dtype)?,
+            ],
             record: |rec, t| ops::group_norm(rec, &t[0], &t[1], &t[2], &t[3], 32, 1e-5, true),
         },
         Case {
             name: "layer_norm",
             shape: "4096 x 640".into(),
-                work: Work::Bytes(4.0 * bytes(hw * c)),
+            work: Work::Bytes(4.0 * bytes(hw * c)),
             gemm: None,
-            tensors: vec![rand_tensor(ctx, &[hw, c], dtype, 16)?, rand_tensor(ctx, &[c], dtype, 17)?, rand_tensor(ctx, &[c], dtype, 18)?, ctx.zeros(&[hw, c], dtype)?],
+            tensors: vec![
+                rand_tensor(ctx, &[hw, c], dtype, 16)?,
+                rand_tensor(ctx, &[c], dtype, 17)?,
+                rand_tensor(ctx, &[c], dtype, 18)?,
+                ctx.zeros(&[hw, c], dtype)?,
+            ],
             record: |rec, t| ops::layer_norm(rec, &t[0], &t[1], &t[2], &t[3], 1e-5),
         },
         Case {
             name: "silu",
             shape: "64x64x640".into(),
-                work: Work::Bytes(2.0 * bytes(hw * c)),
+            work: Work::Bytes(2.0 * bytes(hw * c)),
             gemm: None,
             tensors: vec![rand_tensor(ctx, &[hw * c], dtype, 19)?, ctx.zeros(&[hw * c], dtype)?],
             record: |rec, t| ops::unary(rec, UnaryOp::Silu, &t[0], &t[1], 1.0),
@@ -150,7 +170,7 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
         Case {
             name: "geglu",
             shape: "4096 x 2x2560".into(),
-                work: Work::Bytes(3.0 * bytes(hw * 2560)),
+            work: Work::Bytes(3.0 * bytes(hw * 2560)),
             gemm: None,
             tensors: vec![rand_tensor(ctx, &[hw, 5120], dtype, 20)?, ctx.zeros(&[hw, 2560], dtype)?],
             record: |rec, t| ops::geglu(rec, &t[0], &t[1]),
@@ -204,7 +224,16 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             if let Some(g) = case.gemm {
                 gemm_shapes.push(g);
             }
-            let row = Row { kernel: case.name, dtype: dtype_name(dtype).into(), shape: case.shape.clone(), ms: t * 1e3, gflops, gbps, cpu_gflops: None, ratio_to_cpu: None };
+            let row = Row {
+                kernel: case.name,
+                dtype: dtype_name(dtype).into(),
+                shape: case.shape.clone(),
+                ms: t * 1e3,
+                gflops,
+                gbps,
+                cpu_gflops: None,
+                ratio_to_cpu: None,
+            };
             if !args.json {
                 let show = |x: Option<f64>| x.map_or(String::from("-"), |v| format!("{v:.1}"));
                 println!("{:<26} {:<5} {:<32} {:>10.3} {:>9} {:>8}", row.kernel, row.dtype, row.shape, row.ms, show(row.gflops), show(row.gbps));
@@ -235,7 +264,15 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
         Ok(cpu) if !cpu.is_empty() => {
             println!("\nagainst the CPU's float32 GEMM ({}), measured just now on this machine:", cpu[0].library);
             for (row, _) in rows.iter().filter(|(r, _)| r.ratio_to_cpu.is_some()) {
-                println!("  {:<26} {:<5} {:<18} {:>7.1} GFLOP/s vs {:>7.1} = {:.2}x", row.kernel, row.dtype, row.shape, row.gflops.unwrap(), row.cpu_gflops.unwrap(), row.ratio_to_cpu.unwrap());
+                println!(
+                    "  {:<26} {:<5} {:<18} {:>7.1} GFLOP/s vs {:>7.1} = {:.2}x",
+                    row.kernel,
+                    row.dtype,
+                    row.shape,
+                    row.gflops.unwrap(),
+                    row.cpu_gflops.unwrap(),
+                    row.ratio_to_cpu.unwrap()
+                );
             }
         }
         Ok(_) => {}

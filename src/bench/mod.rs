@@ -3,7 +3,9 @@
 mod cpu_reference;
 mod gen;
 mod kernels;
+mod lora;
 mod unet;
+mod workflow;
 
 use anyhow::Result;
 
@@ -19,6 +21,12 @@ pub enum BenchCommand {
     /// Seconds per text-to-image stage (text encoders, UNet steps, VAE) with SDXL base's
     /// architecture and random weights, against diffusers' pipeline on the CPU.
     Gen(gen::GenArgs),
+    /// Seconds to merge and restore a rank-r LoRA over SDXL base's UNet (random weights) on the
+    /// device, against the same merge in torch on the CPU.
+    Lora(lora::LoraArgs),
+    /// Seconds per step of the paper's workflow (SDXL + depth ControlNet + IP-Adapter + two
+    /// merged LoRAs, random full-size weights) against a plain step measured in the same run.
+    Workflow(workflow::WorkflowArgs),
 }
 
 pub fn run(cmd: BenchCommand) -> Result<()> {
@@ -27,5 +35,7 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Scene(args) => crate::scene_cmd::run_bench_scene(args),
         BenchCommand::Unet(args) => unet::run(&args),
         BenchCommand::Gen(args) => gen::run(&args),
+        BenchCommand::Lora(args) => lora::run(&args),
+        BenchCommand::Workflow(args) => workflow::run(&args),
     }
 }

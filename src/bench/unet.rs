@@ -1,10 +1,10 @@
 //! `vkdiff bench unet`: one SDXL UNet evaluation (the real architecture, random weights) per
 //! latent size, timed on the device, beside diffusers on this machine's CPU in the same run.
 
+use super::kernels::{dtype_name, rand_tensor};
 use anyhow::{Context as _, Result};
 use std::process::Command;
 use std::time::Instant;
-use super::kernels::{dtype_name, rand_tensor};
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_unet::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
 

@@ -3,7 +3,7 @@
 //! and the per-cross-attention `to_k_ip`/`to_v_ip` weights the UNet's decoupled attention uses.
 
 use crate::attention::{IpAdapterInput, IpLayer};
-use crate::checkpoint::Checkpoint;
+use crate::checkpoint::{Checkpoint, Weights};
 use crate::clip_vision::ImageFeature;
 use crate::error::{Error, Result};
 use crate::nn::{Graph, LayerNorm, Linear};
@@ -40,6 +40,25 @@ struct ImageProjModel {
     embed_dim: usize,
     tokens: usize,
     dim: usize,
+}
+
+impl ImageProjModel {
+    fn load(w: &Weights, embed_dim: usize, tokens: usize, dim: usize) -> Result<ImageProjModel> {
+        let proj = Linear::load(w, "proj", embed_dim, tokens * dim, true)?;
+        Ok(ImageProjModel { proj, norm: LayerNorm::load(w, "norm", dim, 1e-5)?, embed_dim, tokens, dim })
+    }
+}
+
+/// (to_k_ip, to_v_ip) of processor N = 2k + 1 for each cross-attention k of `unet`.
+fn load_layers(ckpt: &Checkpoint, unet: &UNet) -> Result<Vec<(Tensor, Tensor)>> {
+    let dim = unet.config().cross_attention_dim;
+    let w = ckpt.root().sub("ip_adapter");
+    (unet.cross_attention_channels().iter().enumerate())
+        .map(|(k, &c)| {
+            let l = w.sub(&(2 * k + 1).to_string());
+            Ok((l.tensor("to_k_ip.weight", &[c, dim])?, l.tensor("to_v_ip.weight", &[c, dim])?))
+        })
+        .collect()
 }
 
 enum Projection {
@@ -90,26 +109,27 @@ impl IpAdapter {
             if !s[0].is_multiple_of(dim) {
                 return Err(Error::Checkpoint(format!("{at}: `image_proj.proj.weight` {s:?} is not whole tokens of the UNet's cross_attention_dim {dim}")));
             }
-            let (tokens, embed_dim) = (s[0] / dim, s[1]);
-            let proj = Linear::load(&w, "proj", embed_dim, tokens * dim, true)?;
-            Projection::Plain(ImageProjModel { proj, norm: LayerNorm::load(&w, "norm", dim, 1e-5)?, embed_dim, tokens, dim })
+            Projection::Plain(ImageProjModel::load(&w, s[1], s[0] / dim, dim)?)
         } else {
             return Err(Error::Checkpoint(format!(
                 "{at}: no `image_proj.latents` (Plus) or `image_proj.proj.weight` (plain) tensor; other IP-Adapter variants (Full, FaceID) are not supported"
             )));
         };
-        let layers = (0..unet.cross_attention_channels().len())
-            .map(|k| {
-                let l = ckpt.root().sub("ip_adapter").sub(&(2 * k + 1).to_string());
-                let c = unet.cross_attention_channels()[k];
-                Ok((l.tensor("to_k_ip.weight", &[c, dim])?, l.tensor("to_v_ip.weight", &[c, dim])?))
-            })
-            .collect::<Result<_>>()?;
+        let layers = load_layers(&ckpt, unet)?;
         let unused = ckpt.unused();
         if !unused.is_empty() {
             return Err(Error::Checkpoint(format!("{at}: tensors this IP-Adapter kind does not have: {}", unused.join(", "))));
         }
         Ok(IpAdapter { ctx: ctx.clone(), dtype, projection, layers })
+    }
+
+    /// A plain adapter of `tokens` tokens over `embed_dim`-wide image embeds with random
+    /// weights for `unet` (benchmarks of full-size models).
+    pub fn random_plain(ctx: &Context, unet: &UNet, embed_dim: usize, tokens: usize, dtype: Dtype) -> Result<IpAdapter> {
+        let ckpt = Checkpoint::random(ctx, dtype, 5);
+        let dim = unet.config().cross_attention_dim;
+        let projection = Projection::Plain(ImageProjModel::load(&ckpt.root().sub("image_proj"), embed_dim, tokens, dim)?);
+        Ok(IpAdapter { ctx: ctx.clone(), dtype, projection, layers: load_layers(&ckpt, unet)? })
     }
 
     pub fn kind(&self) -> IpAdapterKind {

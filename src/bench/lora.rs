@@ -1,0 +1,124 @@
+//! `vkdiff bench lora`: merging a rank-r kohya LoRA over SDXL base's 722 transformer linears
+//! (random weights) on the device, restoring, and re-merging, beside the same merge arithmetic
+//! in torch on this machine's CPU in the same run.
+
+use anyhow::{Context as _, Result};
+use std::io::Write as _;
+use std::process::{Command, Stdio};
+use std::time::Instant;
+use vkdiff_lora::{LoraFile, LoraMerger, Targets};
+use vkdiff_runtime::{Context, Dtype};
+use vkdiff_unet::{Checkpoint, UNet, UNetConfig};
+
+const REFERENCE: &str = include_str!("../../tools/lora_merge_cpu_reference.py");
+
+#[derive(clap::Args)]
+pub struct LoraArgs {
+    /// Vulkan device index (see `vkdiff devices`).
+    #[arg(long)]
+    device: Option<usize>,
+    #[arg(long, default_value_t = 32)]
+    rank: usize,
+    #[arg(long, value_enum, default_value_t = super::unet::Precision::F16)]
+    precision: super::unet::Precision,
+    /// Skip torch on the CPU (needs python with torch: $VKDIFF_REFERENCE_PYTHON or python3).
+    #[arg(long)]
+    no_cpu_reference: bool,
+}
+
+pub fn run(args: &LoraArgs) -> Result<()> {
+    let dtype = match args.precision {
+        super::unet::Precision::F16 => Dtype::F16,
+        super::unet::Precision::F32 => Dtype::F32,
+    };
+    let ctx = Context::new(args.device)?;
+    let unet = UNet::load(&UNetConfig::sdxl_base(), &Checkpoint::random(&ctx, dtype, 0))?;
+    let shapes = transformer_linears(&unet);
+    let path = std::env::temp_dir().join(format!("vkdiff-bench-lora-{}.safetensors", std::process::id()));
+    write_lora(&path, &shapes, args.rank, 0)?;
+    let lora = LoraFile::open(&path);
+    std::fs::remove_file(&path)?;
+    let lora = lora?;
+    let targets = Targets::unet_only(&unet);
+    let mut merger = LoraMerger::new();
+    let start = Instant::now();
+    let first = merger.apply(&targets, &[(&lora, 0.8)])?;
+    let first_s = start.elapsed().as_secs_f64();
+    let again = merger.apply(&targets, &[(&lora, 0.5)])?;
+    let start = Instant::now();
+    merger.restore()?;
+    let restore_s = start.elapsed().as_secs_f64();
+    let params: usize = shapes.iter().map(|(_, [o, i])| o * i).sum();
+    println!(
+        "{} | rank-{} LoRA on {} SDXL UNet linears ({:.2} G weights, {}): first merge {:.2} s (with host backups), merge {:.2} s, restore {:.2} s",
+        ctx.info().name,
+        args.rank,
+        first.weights,
+        params as f64 / 1e9,
+        super::kernels::dtype_name(dtype),
+        first_s,
+        again.seconds,
+        restore_s
+    );
+    if !args.no_cpu_reference {
+        match reference(&shapes, args.rank) {
+            Ok(cpu) => println!("torch CPU f32 merge: {cpu:.2} s | merge speed-up {:.2}×", cpu / again.seconds),
+            Err(why) => println!("torch CPU reference unavailable: {why}"),
+        }
+    }
+    Ok(())
+}
+
+/// The Linear weights inside the UNet's transformers (kohya's SDXL LoRA targets) and their shapes.
+pub(super) fn transformer_linears(unet: &UNet) -> Vec<(String, [usize; 2])> {
+    let params = unet.parameters();
+    params
+        .names()
+        .into_iter()
+        .filter(|n| n.contains(".attentions.") && n.ends_with(".weight"))
+        .filter_map(|n| match params.get(n)?.torch_shape[..] {
+            [o, i] => Some((n.to_string(), [o, i])),
+            _ => None,
+        })
+        .collect()
+}
+
+/// A kohya file in diffusers module names: small random factors, alpha 16.
+pub(super) fn write_lora(path: &std::path::Path, shapes: &[(String, [usize; 2])], r: usize, seed: u64) -> Result<()> {
+    let mut state = 0x2545_f491_4f6c_dd1du64 ^ seed.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        ((state >> 40) as f32 / (1u64 << 24) as f32 - 0.5) * 0.02
+    };
+    let mut tensors: Vec<(String, Vec<usize>, Vec<f32>)> = Vec::new();
+    for (name, [o, i]) in shapes {
+        let key = format!("lora_unet_{}", name.trim_end_matches(".weight").replace('.', "_"));
+        tensors.push((format!("{key}.lora_down.weight"), vec![r, *i], (0..r * i).map(|_| next()).collect()));
+        tensors.push((format!("{key}.lora_up.weight"), vec![*o, r], (0..o * r).map(|_| next()).collect()));
+        tensors.push((format!("{key}.alpha"), vec![], vec![16.0]));
+    }
+    let refs: Vec<(&str, &[usize], &[f32])> = tensors.iter().map(|(n, s, v)| (n.as_str(), s.as_slice(), v.as_slice())).collect();
+    Ok(vkdiff_unet::write_safetensors_f32(path, &refs, &Default::default())?)
+}
+
+fn reference(shapes: &[(String, [usize; 2])], rank: usize) -> std::result::Result<f64, String> {
+    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
+    let job = serde_json::json!({ "rank": rank, "shapes": shapes.iter().map(|(_, s)| s).collect::<Vec<_>>() });
+    let mut child = Command::new(&python)
+        .arg("-c")
+        .arg(REFERENCE)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(|e| format!("{python} not runnable ({e})"))?;
+    child.stdin.take().expect("piped").write_all(job.to_string().as_bytes()).map_err(|e| e.to_string())?;
+    let out = child.wait_with_output().map_err(|e| e.to_string())?;
+    if !out.status.success() {
+        return Err(format!("{python}: {}", String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or("failed")));
+    }
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).context("reference output is not JSON").map_err(|e| e.to_string())?;
+    v["merge_s"].as_f64().ok_or_else(|| "no merge_s in the reference output".into())
+}
