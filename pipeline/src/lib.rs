@@ -18,5 +18,5 @@ pub use rng::TorchCpuRng;
 pub use schedulers::{Sampler, SamplerKind, SchedulerConfig};
 pub use sdxl::Sdxl;
 pub use controlnet_guide::{check_control_settings, ControlGuide};
-pub use text_to_image::{Generated, Guides, RgbImage, TextToImage, Timings};
+pub use text_to_image::{Denoised, Generated, Guides, RgbImage, TextToImage, Timings};
 pub use tokenizer::ClipTokenizer;

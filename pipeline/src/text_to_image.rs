@@ -60,9 +60,27 @@ pub struct Guides<'a> {
     pub image: Option<ImageGuide<'a>>,
 }
 
+/// The denoising loop's result, before the VAE.
+pub struct Denoised {
+    /// NCHW [1, C, h, w], as the sampler leaves them (before VAE scaling).
+    pub latents: Vec<f32>,
+    pub latent_shape: [usize; 4],
+    /// Every stage but the VAE.
+    pub timings: Timings,
+}
+
 impl Sdxl {
     /// Generates one image; `on_step(done, total)` is called after every denoising step.
     pub fn text_to_image(&self, job: &TextToImage, guides: &Guides, on_step: &mut dyn FnMut(usize, usize)) -> Result<Generated> {
+        let Denoised { latents, latent_shape, mut timings } = self.denoise(job, guides, on_step)?;
+        let start = Instant::now();
+        let image = self.decode(&latents, latent_shape)?;
+        timings.vae = start.elapsed();
+        Ok(Generated { latents, latent_shape, image, timings })
+    }
+
+    /// The latents of one generation, without decoding them.
+    pub fn denoise(&self, job: &TextToImage, guides: &Guides, on_step: &mut dyn FnMut(usize, usize)) -> Result<Denoised> {
         let (scale, multiple) = (self.vae_scale(), self.latent_multiple());
         for (flag, v) in [("--width", job.width), ("--height", job.height)] {
             if v == 0 || !v.is_multiple_of(scale * multiple) {
@@ -139,11 +157,7 @@ impl Sdxl {
             timings.steps.push(start.elapsed());
             on_step(step + 1, total);
         }
-
-        let start = Instant::now();
-        let image = self.decode(&latents, shape)?;
-        timings.vae = start.elapsed();
-        Ok(Generated { latents, latent_shape: shape, image, timings })
+        Ok(Denoised { latents, latent_shape: shape, timings })
     }
 }
 

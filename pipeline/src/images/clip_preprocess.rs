@@ -218,7 +218,7 @@ impl ClipPreprocess {
     /// `pixel_values` of `processor(image, return_tensors="pt")`: NCHW [1, 3, H, W] float32,
     /// with the shape.
     pub fn apply(&self, image: &RgbImage) -> (Vec<f32>, [usize; 4]) {
-        let mut img = copy(image);
+        let mut img = image.clone();
         if self.do_resize {
             let (h, w) = self.resized_size(img.height, img.width);
             if (h, w) != (img.height, img.width) {
@@ -248,18 +248,10 @@ impl ClipPreprocess {
     }
 }
 
-fn copy(image: &RgbImage) -> RgbImage {
-    RgbImage {
-        width: image.width,
-        height: image.height,
-        pixels: image.pixels.clone(),
-    }
-}
-
 /// torchvision's centre crop: zero padding (left/top get the smaller half) when the crop is
 /// larger than the image, then offsets `int((size - crop) / 2.0)`.
 pub fn center_crop(image: &RgbImage, crop_h: usize, crop_w: usize) -> RgbImage {
-    let (mut img, mut off_y, mut off_x) = (copy(image), 0usize, 0usize);
+    let (mut img, mut off_y, mut off_x) = (image.clone(), 0usize, 0usize);
     if crop_w > img.width || crop_h > img.height {
         let pad_l = crop_w.saturating_sub(img.width) / 2;
         let pad_t = crop_h.saturating_sub(img.height) / 2;
