@@ -55,12 +55,4 @@ impl Parameters {
         names.sort_unstable();
         names
     }
-
-    pub fn len(&self) -> usize {
-        self.by_name.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.by_name.is_empty()
-    }
 }
