@@ -2,48 +2,22 @@
 //! (tools/make_pipeline_fixtures.py): final latents and 8-bit images, every sampler, with and
 //! without guidance and negative prompts, in f32 and f16, from the folder and the single file.
 
+mod common;
+
+use common::{ctx, job, relative_l2};
 use serde_json::Value;
 use std::path::PathBuf;
-use std::sync::OnceLock;
-use vkdiff_pipeline::{Guides, Sdxl, TextToImage};
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_pipeline::{Guides, Sdxl};
+use vkdiff_runtime::Dtype;
 use vkdiff_unet::SafeTensors;
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/pipeline").join(name)
 }
 
-fn ctx() -> Context {
-    static CTX: OnceLock<Context> = OnceLock::new();
-    CTX.get_or_init(|| {
-        Context::new(None).unwrap_or_else(|e| panic!("pipeline tests need a Vulkan device and found none usable: {e}\n(on Debian: apt-get install -y mesa-vulkan-drivers libvulkan1)"))
-    })
-    .clone()
-}
-
 fn cases() -> Vec<Value> {
     let json: Value = serde_json::from_str(&std::fs::read_to_string(fixture("records.json")).unwrap()).unwrap();
     json["gen"].as_array().unwrap().clone()
-}
-
-fn job(case: &Value) -> TextToImage {
-    TextToImage {
-        prompt: case["prompt"].as_str().unwrap().into(),
-        negative_prompt: case["negative_prompt"].as_str().map(String::from),
-        seed: case["seed"].as_u64().unwrap(),
-        steps: case["steps"].as_u64().unwrap() as usize,
-        guidance_scale: case["guidance_scale"].as_f64().unwrap() as f32,
-        sampler: case["sampler"].as_str().unwrap().parse().unwrap(),
-        karras: case["karras"].as_bool().unwrap(),
-        width: case["width"].as_u64().unwrap() as usize,
-        height: case["height"].as_u64().unwrap() as usize,
-    }
-}
-
-fn relative_l2(got: &[f32], want: &[f32]) -> f64 {
-    let diff: f64 = got.iter().zip(want).map(|(&g, &w)| (g as f64 - w as f64).powi(2)).sum();
-    let norm: f64 = want.iter().map(|&w| (w as f64).powi(2)).sum();
-    (diff / norm).sqrt()
 }
 
 /// PSNR in dB of 8-bit pixels against diffusers' [0, 1] CHW image rounded the way it saves PNGs.

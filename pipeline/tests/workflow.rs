@@ -3,48 +3,20 @@
 //! and all together, in f32 and f16. One model serves every case: LoRA sets are switched by
 //! restoring and merging in place, never by reloading.
 
+mod common;
+
+use common::{ctx, job, relative_l2};
 use serde_json::Value;
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::OnceLock;
 use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::images::{read_image, ClipPreprocess};
-use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, Sdxl, TextToImage};
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, Sdxl};
+use vkdiff_runtime::Dtype;
 use vkdiff_unet::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter, SafeTensors};
 
 fn workflow(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/workflow").join(name)
-}
-
-fn ctx() -> Context {
-    static CTX: OnceLock<Context> = OnceLock::new();
-    CTX.get_or_init(|| {
-        Context::new(None).unwrap_or_else(|e| {
-            panic!("pipeline tests need a Vulkan device and found none usable: {e}\n(on Debian: apt-get install -y mesa-vulkan-drivers libvulkan1)")
-        })
-    })
-    .clone()
-}
-
-fn job(case: &Value) -> TextToImage {
-    TextToImage {
-        prompt: case["prompt"].as_str().unwrap().into(),
-        negative_prompt: case["negative_prompt"].as_str().map(String::from),
-        seed: case["seed"].as_u64().unwrap(),
-        steps: case["steps"].as_u64().unwrap() as usize,
-        guidance_scale: case["guidance_scale"].as_f64().unwrap() as f32,
-        sampler: case["sampler"].as_str().unwrap().parse().unwrap(),
-        karras: false,
-        width: case["width"].as_u64().unwrap() as usize,
-        height: case["height"].as_u64().unwrap() as usize,
-    }
-}
-
-fn relative_l2(got: &[f32], want: &[f32]) -> f64 {
-    let diff: f64 = got.iter().zip(want).map(|(&g, &w)| (g as f64 - w as f64).powi(2)).sum();
-    let norm: f64 = want.iter().map(|&w| (w as f64).powi(2)).sum();
-    (diff / norm).sqrt()
 }
 
 fn psnr(got: &[u8], want: &[f32]) -> f64 {

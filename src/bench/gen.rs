@@ -82,17 +82,7 @@ fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
     let start = Instant::now();
     let model = Sdxl::random_sdxl_base(&ctx, dtype)?;
     let load_s = start.elapsed().as_secs_f64();
-    let job = TextToImage {
-        prompt: "white button mushrooms on brown compost, top-down photo".into(),
-        negative_prompt: None,
-        seed: 0,
-        steps: args.steps,
-        guidance_scale: 5.0,
-        sampler: SamplerKind::Euler,
-        karras: false,
-        width: size,
-        height: size,
-    };
+    let job = bench_job(size, args.steps);
     let start = Instant::now();
     let out = model.text_to_image(&job, &Guides::default(), &mut |done, total| eprintln!("{size}²: step {done}/{total}"))?;
     let total_s = start.elapsed().as_secs_f64();
@@ -112,6 +102,21 @@ fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
         peak_mib: ctx.peak_bytes() as f64 / (1 << 20) as f64,
         ..Row::default()
     })
+}
+
+/// The benchmarks' generation: one prompt, no negative prompt, Euler, guidance 5, square.
+pub(super) fn bench_job(size: usize, steps: usize) -> TextToImage {
+    TextToImage {
+        prompt: "white button mushrooms on brown compost, top-down photo".into(),
+        negative_prompt: None,
+        seed: 0,
+        steps,
+        guidance_scale: 5.0,
+        sampler: SamplerKind::Euler,
+        karras: false,
+        width: size,
+        height: size,
+    }
 }
 
 fn reference(size: usize, steps: usize) -> std::result::Result<serde_json::Value, String> {

@@ -7,7 +7,7 @@ use anyhow::Result;
 use std::time::Instant;
 use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::images::ClipPreprocess;
-use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, RgbImage, SamplerKind, Sdxl, TextToImage};
+use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, RgbImage, Sdxl};
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_unet::{Checkpoint, ClipVisionConfig, ClipVisionModelWithProjection, ControlNetConfig, ControlNetModel, IpAdapter, SDXL_CONTROLNET_CONFIG};
 
@@ -50,17 +50,7 @@ pub fn run(args: &WorkflowArgs) -> Result<()> {
     let preprocess = ClipPreprocess::square(encoder.config().image_size);
     let styles = [gradient(300, 200, 1), gradient(180, 260, 2)];
     for &size in &args.size {
-        let job = TextToImage {
-            prompt: "white button mushroom, compost mycelium, top-down photo".into(),
-            negative_prompt: None,
-            seed: 0,
-            steps: args.steps,
-            guidance_scale: 5.0,
-            sampler: SamplerKind::Euler,
-            karras: false,
-            width: size,
-            height: size,
-        };
+        let job = super::gen::bench_job(size, args.steps);
         model.set_loras(&[])?;
         let base = model.denoise(&job, &Guides::default(), &mut |done, total| eprintln!("{size}² base: step {done}/{total}"))?;
         let base_step = mean_step(&base.timings.steps);

@@ -1,0 +1,35 @@
+//! What the generation tests share: the device, a recorded case as a job, the error measure.
+
+use serde_json::Value;
+use std::sync::OnceLock;
+use vkdiff_pipeline::TextToImage;
+use vkdiff_runtime::Context;
+
+pub fn ctx() -> Context {
+    static CTX: OnceLock<Context> = OnceLock::new();
+    CTX.get_or_init(|| {
+        Context::new(None).unwrap_or_else(|e| panic!("pipeline tests need a Vulkan device and found none usable: {e}\n(on Debian: apt-get install -y mesa-vulkan-drivers libvulkan1)"))
+    })
+    .clone()
+}
+
+/// A recorded case's settings (`karras` absent means false).
+pub fn job(case: &Value) -> TextToImage {
+    TextToImage {
+        prompt: case["prompt"].as_str().unwrap().into(),
+        negative_prompt: case["negative_prompt"].as_str().map(String::from),
+        seed: case["seed"].as_u64().unwrap(),
+        steps: case["steps"].as_u64().unwrap() as usize,
+        guidance_scale: case["guidance_scale"].as_f64().unwrap() as f32,
+        sampler: case["sampler"].as_str().unwrap().parse().unwrap(),
+        karras: case["karras"].as_bool().unwrap_or(false),
+        width: case["width"].as_u64().unwrap() as usize,
+        height: case["height"].as_u64().unwrap() as usize,
+    }
+}
+
+pub fn relative_l2(got: &[f32], want: &[f32]) -> f64 {
+    let diff: f64 = got.iter().zip(want).map(|(&g, &w)| (g as f64 - w as f64).powi(2)).sum();
+    let norm: f64 = want.iter().map(|&w| (w as f64).powi(2)).sum();
+    (diff / norm).sqrt()
+}
