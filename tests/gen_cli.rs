@@ -1,19 +1,10 @@
 //! `vkdiff gen` as a user runs it, on the tiny SDXL pipeline (tools/make_pipeline_fixtures.py):
 //! the PNG and latents files, their metadata, and one-line errors that write nothing.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod cli;
 
-fn vkdiff(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vkdiff")).args(args).env("RUST_BACKTRACE", "0").output().unwrap()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("gen-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use cli::{scratch, vkdiff};
+use std::path::Path;
 
 fn fixture(name: &str) -> String {
     format!("{}/tests/fixtures/pipeline/{name}", env!("CARGO_MANIFEST_DIR"))

@@ -1,18 +1,8 @@
 //! `vkdiff scene` and `vkdiff bench scene` as a user runs them.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod cli;
 
-fn vkdiff(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vkdiff")).args(args).env("RUST_BACKTRACE", "0").output().unwrap()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use cli::{scratch, vkdiff};
 
 const SMALL: [&str; 4] = ["--width", "320", "--height", "180"];
 

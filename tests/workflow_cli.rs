@@ -2,19 +2,10 @@
 //! IP-Adapter over two style images and two LoRAs, held to diffusers' latents
 //! (tools/make_workflow_fixtures.py, case `full`), and the guide flags' one-line errors.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod cli;
 
-fn vkdiff(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vkdiff")).args(args).env("RUST_BACKTRACE", "0").output().unwrap()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("workflow-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use cli::{scratch, vkdiff};
+use std::path::Path;
 
 fn fixture(name: &str) -> String {
     format!("{}/tests/fixtures/{name}", env!("CARGO_MANIFEST_DIR"))

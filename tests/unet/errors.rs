@@ -21,7 +21,7 @@ fn load_error(path: &Path) -> String {
     }
 }
 
-fn assert_one_line(message: &str, wants: &[&str]) {
+pub fn assert_one_line(message: &str, wants: &[&str]) {
     assert!(!message.contains('\n'), "not one line: {message}");
     for want in wants {
         assert!(message.contains(want), "`{message}` does not mention `{want}`");

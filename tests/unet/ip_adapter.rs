@@ -3,6 +3,7 @@
 
 use crate::common::{ctx, random};
 use crate::forward::errors;
+use crate::errors::assert_one_line;
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -83,12 +84,6 @@ fn load_error(path: &Path, unet: &UNet) -> String {
     }
 }
 
-fn assert_one_line(message: &str, wants: &[&str]) {
-    assert!(!message.contains('\n'), "not one line: {message}");
-    for want in wants {
-        assert!(message.contains(want), "`{message}` does not mention `{want}`");
-    }
-}
 
 /// LayerNorm(reshape(W·e + b)) on the host, in f64.
 fn plain_reference(w: &[f32], b: &[f32], gamma: &[f32], beta: &[f32], e: &[f32], d: usize) -> Vec<f32> {

@@ -1,0 +1,16 @@
+//! What the command-line tests share: running the binary and a scratch folder per test.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub fn vkdiff(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_vkdiff")).args(args).env("RUST_BACKTRACE", "0").output().unwrap()
+}
+
+/// An empty folder under the target's temporary directory, unique to this test process.
+pub fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
