@@ -1,73 +1,46 @@
 //! `vkdiff gen`: text-to-image with an SDXL model, written as a PNG that carries its settings.
 
-use crate::gen_guides::GuideArgs;
+use crate::model_args::{ModelArgs, SamplingArgs};
 use crate::progress::Progress;
-use anyhow::{bail, Context as _, Result};
-use clap::{Args, ValueEnum};
-use std::collections::BTreeMap;
+use anyhow::{bail, Result};
+use clap::Args;
 use std::path::{Path, PathBuf};
-use vkdiff_pipeline::{Generated, SamplerKind, Sdxl, TextToImage};
-use vkdiff_runtime::{Context, Dtype};
-
-#[derive(Clone, Copy, Debug, ValueEnum)]
-pub enum Precision {
-    /// f16 storage, f32 arithmetic (the VAE stays f32 where it would overflow).
-    F16,
-    F32,
-}
-
-#[derive(Clone, Copy, Debug, ValueEnum, PartialEq)]
-enum Schedule {
-    /// The model's scheduler_config.json as it is.
-    Default,
-    /// Karras et al. noise levels (euler, dpmpp_2m).
-    Karras,
-}
+use vkdiff_pipeline::files::{png_bytes, write_atomic};
+use vkdiff_pipeline::{GenSettings, Sdxl, TextToImage, WorkflowModels};
+use vkdiff_runtime::Context;
 
 /// Text-to-image with an SDXL model (diffusers folder or single .safetensors file).
 #[derive(Args, Debug)]
 pub struct GenArgs {
-    /// SDXL model: a diffusers folder or an original single-file checkpoint.
-    #[arg(long)]
-    model: PathBuf,
+    #[command(flatten)]
+    model: ModelArgs,
     #[arg(long)]
     prompt: String,
-    /// Without it, the negative conditioning is zeros (diffusers' SDXL default).
-    #[arg(long)]
-    negative_prompt: Option<String>,
     /// torch.Generator("cpu").manual_seed(seed): diffusers gives the same noise for the same seed.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    #[arg(long, default_value_t = 30)]
-    steps: usize,
-    /// Classifier-free guidance scale; 1 or less runs without the negative pass.
-    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
-    cfg: f32,
-    /// euler, euler_a, dpmpp_2m or ddim.
-    #[arg(long, default_value = "euler")]
-    sampler: SamplerKind,
-    #[arg(long, value_enum, default_value_t = Schedule::Default)]
-    scheduler: Schedule,
-    #[arg(long, default_value_t = 1024)]
-    width: usize,
-    #[arg(long, default_value_t = 1024)]
-    height: usize,
-    #[arg(long, value_enum, default_value_t = Precision::F16)]
-    precision: Precision,
-    /// Noise generator: torch-cpu reproduces torch.randn on a CPU generator bit for bit.
-    #[arg(long, default_value = "torch-cpu", value_parser = ["torch-cpu"])]
-    rng: String,
+    #[command(flatten)]
+    sampling: SamplingArgs,
+    /// Image width [default: the --depth image's, else 1024].
+    #[arg(long)]
+    width: Option<usize>,
+    /// Image height [default: the --depth image's, else 1024].
+    #[arg(long)]
+    height: Option<usize>,
+    /// The ControlNet's input: a metric-depth EXR (channel Z, <layer>.Depth.Z, V or R), turned
+    /// into an image as `vkdiff scene` writes control.png, or an image used as it is.
+    #[arg(long, requires = "controlnet")]
+    depth: Option<PathBuf>,
+    /// A style image for --ip-adapter; repeat it for several, whose tokens are joined as
+    /// diffusers joins several images given to one adapter.
+    #[arg(long, requires = "ip_adapter")]
+    ip_image: Vec<PathBuf>,
     /// Also write the final latents (before VAE scaling), NCHW float32, tensor `latents`.
     #[arg(long)]
     latents_out: Option<PathBuf>,
-    /// Vulkan device index (see `vkdiff devices`).
-    #[arg(long)]
-    device: Option<usize>,
     /// Output PNG.
     #[arg(long)]
     out: PathBuf,
-    #[command(flatten)]
-    guides: GuideArgs,
 }
 
 pub fn run(args: &GenArgs) -> Result<()> {
@@ -80,32 +53,32 @@ pub fn run(args: &GenArgs) -> Result<()> {
     if args.out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() != Some("png") {
         bail!("--out {}: the image is written as PNG; give a .png path", args.out.display());
     }
-    args.guides.check()?;
-    let dtype = match args.precision {
-        Precision::F16 => Dtype::F16,
-        Precision::F32 => Dtype::F32,
+    let mut settings = GenSettings {
+        models: args.model.settings(),
+        job: TextToImage {
+            prompt: args.prompt.clone(),
+            negative_prompt: args.sampling.negative_prompt.clone(),
+            seed: args.seed,
+            sampling: args.sampling.sampling(0, 0),
+        },
+        depth: args.depth.clone(),
+        ip_images: args.ip_image.clone(),
     };
-    let job = TextToImage {
-        prompt: args.prompt.clone(),
-        negative_prompt: args.negative_prompt.clone(),
-        seed: args.seed,
-        steps: args.steps,
-        guidance_scale: args.cfg,
-        sampler: args.sampler,
-        karras: args.scheduler == Schedule::Karras,
-        width: args.width,
-        height: args.height,
-    };
-    let ctx = Context::new(args.device)?;
+    settings.models.check()?;
+    let inputs = settings.read_inputs()?;
+    // A depth map sets the size unless it is given: the image then lines up with the depth.
+    let (depth_w, depth_h) = inputs.control.as_ref().filter(|_| args.depth.is_some()).map_or((1024, 1024), |c| (c.width, c.height));
+    settings.job.sampling = args.sampling.sampling(args.width.unwrap_or(depth_w), args.height.unwrap_or(depth_h));
+    settings.job.sampling.check()?;
+    settings.job.sampling.check_size(Sdxl::probe_pixel_multiple(&settings.models.model)?)?;
+
+    let ctx = Context::new(args.model.device)?;
     eprintln!("device: {}", ctx.info().name);
     let start = std::time::Instant::now();
-    let mut model = Sdxl::load(&ctx, &args.model, dtype, &mut |part| eprintln!("loading {part}"))?;
-    let loaded = args.guides.load(&ctx, &model)?;
-    loaded.merge_loras(&mut model)?;
+    let models = WorkflowModels::load(&ctx, &settings.models, &mut |line| eprintln!("{line}"))?;
     eprintln!("loaded in {:.1} s", start.elapsed().as_secs_f64());
-    let guides = loaded.guides(&args.guides);
     let progress = Progress::new("denoising", "step");
-    let out = model.text_to_image(&job, &guides, &mut |done, total| progress.update(done, total))?;
+    let out = models.sdxl.text_to_image(&settings.job, &models.guides(&inputs), &mut |done, total| progress.update(done, total))?;
     let t = &out.timings;
     let steps: f64 = t.steps.iter().map(|d| d.as_secs_f64()).sum();
     eprintln!(
@@ -116,73 +89,11 @@ pub fn run(args: &GenArgs) -> Result<()> {
         t.vae.as_secs_f64(),
         ctx.peak_bytes() >> 20
     );
-    let settings = settings(args);
+    let text = settings.png_text();
     if let Some(path) = &args.latents_out {
-        vkdiff_unet::write_safetensors_f32(path, &[("latents", &out.latent_shape, &out.latents)], &settings)?;
+        vkdiff_unet::write_safetensors_f32(path, &[("latents", &out.latent_shape, &out.latents)], &text)?;
     }
-    write_png(&args.out, &out, &settings)?;
+    write_atomic(&args.out, &png_bytes(&out.image, &text)?)?;
     eprintln!("wrote {}", args.out.display());
-    Ok(())
-}
-
-/// The settings as PNG text chunks and safetensors metadata: `parameters` in the A1111 form
-/// that image browsers parse, plus every flag under its own key.
-fn settings(a: &GenArgs) -> BTreeMap<String, String> {
-    let negative = a.negative_prompt.as_deref().map(|n| format!("\nNegative prompt: {n}")).unwrap_or_default();
-    let schedule = if a.scheduler == Schedule::Karras { " Karras" } else { "" };
-    let parameters = format!(
-        "{}{negative}\nSteps: {}, Sampler: {}{schedule}, CFG scale: {}, Seed: {}, Size: {}x{}, Model: {}, RNG: {}, Precision: {:?}{}",
-        a.prompt,
-        a.steps,
-        a.sampler,
-        a.cfg,
-        a.seed,
-        a.width,
-        a.height,
-        a.model.display(),
-        a.rng,
-        a.precision,
-        a.guides.summary()
-    );
-    let mut m = BTreeMap::from([
-        ("parameters".to_string(), parameters),
-        ("prompt".into(), a.prompt.clone()),
-        ("seed".into(), a.seed.to_string()),
-        ("steps".into(), a.steps.to_string()),
-        ("cfg".into(), a.cfg.to_string()),
-        ("sampler".into(), a.sampler.to_string()),
-        ("scheduler".into(), format!("{:?}", a.scheduler).to_lowercase()),
-        ("width".into(), a.width.to_string()),
-        ("height".into(), a.height.to_string()),
-        ("precision".into(), format!("{:?}", a.precision).to_lowercase()),
-        ("rng".into(), a.rng.clone()),
-        ("model".into(), a.model.display().to_string()),
-        ("software".into(), format!("vkdiff {}", env!("CARGO_PKG_VERSION"))),
-    ]);
-    if let Some(n) = &a.negative_prompt {
-        m.insert("negative_prompt".into(), n.clone());
-    }
-    a.guides.settings(&mut m);
-    m
-}
-
-/// 8-bit RGB PNG with international text chunks (prompts may be any language), written to a
-/// temporary file and renamed, so an interrupted run leaves no half image.
-fn write_png(path: &Path, out: &Generated, text: &BTreeMap<String, String>) -> Result<()> {
-    let img = &out.image;
-    let mut bytes = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut bytes, img.width as u32, img.height as u32);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        for (k, v) in text {
-            enc.add_itxt_chunk(k.clone(), v.clone())?;
-        }
-        let mut w = enc.write_header()?;
-        w.write_image_data(&img.pixels)?;
-    }
-    let tmp = path.with_extension("png.partial");
-    std::fs::write(&tmp, &bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }

@@ -3,7 +3,7 @@
 mod bench;
 mod devices_cmd;
 mod gen_cmd;
-mod gen_guides;
+mod model_args;
 mod progress;
 mod scene_cmd;
 

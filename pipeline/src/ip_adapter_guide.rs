@@ -6,7 +6,7 @@
 use crate::error::{Error, Result};
 use crate::images::ClipPreprocess;
 use crate::RgbImage;
-use vkdiff_unet::{ClipVisionModelWithProjection, ImageFeature, IpAdapter, IpAdapterInput};
+use vkdiff_unet::{ClipVisionModelWithProjection, ImageFeature, IpAdapter};
 
 /// The `--ip-adapter` settings of one generation.
 pub struct ImageGuide<'a> {
@@ -19,13 +19,11 @@ pub struct ImageGuide<'a> {
 }
 
 impl ImageGuide<'_> {
-    /// The UNet's image-token input for a batch of [negative, positive] (`guided`) or [positive].
-    pub(crate) fn unet_input(&self, guided: bool) -> Result<IpAdapterInput> {
+    /// The image tokens [rows, images · tokens per image, width] of the rows [negative, positive]
+    /// (`guided`) or [positive], row-major.
+    pub fn tokens(&self, guided: bool) -> Result<Vec<f32>> {
         if self.images.is_empty() {
             return Err(Error::Config("--ip-adapter needs at least one --ip-image".into()));
-        }
-        if !self.scale.is_finite() {
-            return Err(Error::Config(format!("--ip-scale {} is not a number", self.scale)));
         }
         let feature = self.adapter.kind().feature();
         let mut pixels = Vec::new();
@@ -36,7 +34,7 @@ impl ImageGuide<'_> {
             size = shape;
         }
         let n = self.images.len();
-        let positive = self.tokens(&pixels, n, feature)?;
+        let positive = self.encode_tokens(&pixels, n, feature)?;
         let mut tokens = Vec::new();
         if guided {
             let negative = match feature {
@@ -44,16 +42,16 @@ impl ImageGuide<'_> {
                     let width = self.encoder.config().projection_dim;
                     self.adapter.image_tokens(&vec![0.0; n * width], &[n, width])?
                 }
-                ImageFeature::Penultimate => self.tokens(&vec![0.0; n * size[1] * size[2] * size[3]], n, feature)?,
+                ImageFeature::Penultimate => self.encode_tokens(&vec![0.0; n * size[1] * size[2] * size[3]], n, feature)?,
             };
             tokens.extend(negative);
         }
         tokens.extend(positive);
-        Ok(self.adapter.unet_input(&tokens, if guided { 2 } else { 1 }, self.scale)?)
+        Ok(tokens)
     }
 
     /// The image tokens of `n` preprocessed images, one image's after another.
-    fn tokens(&self, pixels: &[f32], n: usize, feature: ImageFeature) -> Result<Vec<f32>> {
+    fn encode_tokens(&self, pixels: &[f32], n: usize, feature: ImageFeature) -> Result<Vec<f32>> {
         let encoding = self.encoder.encode(pixels, n, &[feature])?;
         let (features, shape) = encoding.get(feature).expect("the encoder computes what it is asked for");
         Ok(self.adapter.image_tokens(features, &shape)?)

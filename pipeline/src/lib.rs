@@ -2,7 +2,10 @@
 //! schedulers, and text-to-image.
 
 mod controlnet_guide;
+mod denoiser;
 mod error;
+pub mod files;
+mod gen_settings;
 mod ip_adapter_guide;
 pub mod images;
 mod prompt_encoding;
@@ -11,12 +14,17 @@ mod schedulers;
 mod sdxl;
 mod text_to_image;
 mod tokenizer;
+mod workflow_models;
 
 pub use error::{Error, Result};
 pub use ip_adapter_guide::ImageGuide;
 pub use rng::TorchCpuRng;
 pub use schedulers::{Sampler, SamplerKind, SchedulerConfig};
 pub use sdxl::Sdxl;
-pub use controlnet_guide::{check_control_settings, ControlGuide};
-pub use text_to_image::{Denoised, Generated, Guides, RgbImage, TextToImage, Timings};
+pub use controlnet_guide::{check_control_settings, ControlGuide, ControlNetUse};
+pub use denoiser::{BatchOutput, Denoiser, IpAdapterUse, ItemInputs};
+pub use prompt_encoding::Conditioning;
+pub use text_to_image::{Denoised, Generated, Guides, RgbImage, Sampling, TextToImage, Timings};
 pub use tokenizer::ClipTokenizer;
+pub use gen_settings::{control_depth_name, precision_name, ControlNetSettings, GenSettings, IpAdapterSettings, LoraSetting, ModelSettings, RNG};
+pub use workflow_models::{read_images, GuideInputs, StyleModels, WorkflowModels};

@@ -3,18 +3,27 @@
 
 use crate::error::{Error, Result};
 use crate::sdxl::Sdxl;
-use crate::text_to_image::TextToImage;
+
+/// One prompt's conditioning for the UNet, rows [negative, positive] with guidance, else
+/// [positive].
+#[derive(Clone, Debug)]
+pub struct Conditioning {
+    /// [rows, tokens, cross_attention_dim], row-major.
+    pub context: Vec<f32>,
+    /// [rows, pooled width].
+    pub pooled: Vec<f32>,
+}
 
 impl Sdxl {
-    /// (context [B, tokens, width], pooled [B, pooled width]) for the batch [negative, positive]
-    /// when `guided`, else [positive].
-    pub(crate) fn conditioning(&self, job: &TextToImage, guided: bool) -> Result<(Vec<f32>, Vec<f32>)> {
-        let zero_negative = job.negative_prompt.is_none() && self.force_zeros_for_empty_prompt;
+    /// Encodes `prompt` (and `negative`, or zeros where the model asks for them when it is
+    /// `None`) with both text encoders.
+    pub fn encode_prompt(&self, prompt: &str, negative: Option<&str>, guided: bool) -> Result<Conditioning> {
+        let zero_negative = negative.is_none() && self.force_zeros_for_empty_prompt;
         let mut prompts = Vec::new();
         if guided && !zero_negative {
-            prompts.push(job.negative_prompt.as_deref().unwrap_or(""));
+            prompts.push(negative.unwrap_or(""));
         }
-        prompts.push(job.prompt.as_str());
+        prompts.push(prompt);
         let encoded: Vec<_> = self
             .tokenizers
             .iter()
@@ -30,6 +39,6 @@ impl Sdxl {
             context.splice(0..0, std::iter::repeat_n(0.0, context.len()));
             pooled.splice(0..0, std::iter::repeat_n(0.0, pooled.len()));
         }
-        Ok((context, pooled))
+        Ok(Conditioning { context, pooled })
     }
 }

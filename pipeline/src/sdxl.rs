@@ -109,6 +109,25 @@ impl Sdxl {
         1 << (self.unet_config.block_out_channels.len() - 1)
     }
 
+    /// Image sides must be multiples of this: the VAE's scale times the UNet's latent multiple.
+    pub fn pixel_multiple(&self) -> usize {
+        self.vae_scale() * self.latent_multiple()
+    }
+
+    /// [`Sdxl::pixel_multiple`] of the model at `path`, read from its configs or tensor shapes
+    /// without loading any weight (to check sizes before the long load).
+    pub fn probe_pixel_multiple(path: &Path) -> Result<usize> {
+        if !path.exists() {
+            return Err(Error::Config(format!("{}: no such model folder or file", path.display())));
+        }
+        let unet = Checkpoint::unet_config(path)?;
+        let vae = AutoencoderKl::sdxl_config(path)?;
+        if unet.block_out_channels.is_empty() || vae.block_out_channels.is_empty() {
+            return Err(Error::Config(format!("{}: a UNet or VAE config without block_out_channels", path.display())));
+        }
+        Ok(vae.downscale() << (unet.block_out_channels.len() - 1))
+    }
+
     pub fn dtype(&self) -> Dtype {
         self.dtype
     }

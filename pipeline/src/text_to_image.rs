@@ -1,16 +1,62 @@
 //! Text-to-image as diffusers' `StableDiffusionXLPipeline` runs it: both prompts encoded, the
 //! initial noise and any ancestral noise drawn from one torch-compatible generator, classifier-free
-//! guidance on a batch of [negative, positive], the scheduler's steps, then the VAE.
+//! guidance on a batch of [negative, positive], the scheduler's steps, then the VAE. One image is a
+//! batch of one through [`Denoiser`].
 
-use crate::controlnet_guide::{ControlGuide, ControlRun, SharedInputs};
+use crate::controlnet_guide::{ControlGuide, ControlNetUse};
+use crate::denoiser::{Denoiser, IpAdapterUse, ItemInputs};
 use crate::error::{Error, Result};
 use crate::ip_adapter_guide::ImageGuide;
-use crate::rng::TorchCpuRng;
-use crate::schedulers::{Sampler, SamplerKind};
+use crate::schedulers::{Sampler, SamplerKind, SchedulerConfig};
 use crate::sdxl::Sdxl;
 use std::time::{Duration, Instant};
-use vkdiff_runtime::Dtype;
-use vkdiff_unet::{nchw_to_nhwc, nhwc_to_nchw, IpAdapterInput, UNetInputs};
+use vkdiff_unet::nchw_to_nhwc;
+
+/// How every image of a run is sampled: the settings a batch shares.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sampling {
+    pub steps: usize,
+    pub guidance_scale: f32,
+    pub sampler: SamplerKind,
+    pub karras: bool,
+    pub width: usize,
+    pub height: usize,
+}
+
+impl Sampling {
+    /// Classifier-free guidance runs a negative row beside each positive one.
+    pub fn guided(&self) -> bool {
+        self.guidance_scale > 1.0
+    }
+
+    /// What is wrong whatever the model: the guidance scale, the step count, a noise schedule
+    /// the sampler does not have.
+    pub fn check(&self) -> Result<()> {
+        if !self.guidance_scale.is_finite() {
+            return Err(Error::Config(format!("--cfg {} is not a number", self.guidance_scale)));
+        }
+        Sampler::new(self.sampler, &SchedulerConfig::sdxl_base(), self.karras, self.steps).map(|_| ())
+    }
+
+    /// The size must be a positive multiple of the model's `multiple` ([`Sdxl::pixel_multiple`]).
+    pub fn check_size(&self, multiple: usize) -> Result<()> {
+        for (flag, v) in [("--width", self.width), ("--height", self.height)] {
+            if v == 0 || !v.is_multiple_of(multiple) {
+                return Err(Error::Config(format!("{flag} {v} must be a positive multiple of {multiple} for this model")));
+            }
+        }
+        Ok(())
+    }
+
+    /// UNet rows per image: 2 with guidance ([negative, positive]), else 1.
+    pub fn rows_per_image(&self) -> usize {
+        if self.guided() {
+            2
+        } else {
+            1
+        }
+    }
+}
 
 /// One image's settings (the `vkdiff gen` flags).
 #[derive(Clone, Debug)]
@@ -19,12 +65,7 @@ pub struct TextToImage {
     /// `None`: zero negative conditioning where the model asks for it (diffusers' default).
     pub negative_prompt: Option<String>,
     pub seed: u64,
-    pub steps: usize,
-    pub guidance_scale: f32,
-    pub sampler: SamplerKind,
-    pub karras: bool,
-    pub width: usize,
-    pub height: usize,
+    pub sampling: Sampling,
 }
 
 /// 8-bit RGB, row-major.
@@ -39,7 +80,7 @@ pub struct RgbImage {
 #[derive(Clone, Debug, Default)]
 pub struct Timings {
     pub text_encoding: Duration,
-    /// Recording the UNet pass once.
+    /// Preparing the guides (image tokens, ControlNet hint) and recording the passes.
     pub record: Duration,
     pub steps: Vec<Duration>,
     pub vae: Duration,
@@ -81,89 +122,35 @@ impl Sdxl {
 
     /// The latents of one generation, without decoding them.
     pub fn denoise(&self, job: &TextToImage, guides: &Guides, on_step: &mut dyn FnMut(usize, usize)) -> Result<Denoised> {
-        let (scale, multiple) = (self.vae_scale(), self.latent_multiple());
-        for (flag, v) in [("--width", job.width), ("--height", job.height)] {
-            if v == 0 || !v.is_multiple_of(scale * multiple) {
-                return Err(Error::Config(format!("{flag} {v} must be a positive multiple of {} for this model", scale * multiple)));
-            }
-        }
-        if !job.guidance_scale.is_finite() {
-            return Err(Error::Config(format!("--cfg {} is not a number", job.guidance_scale)));
-        }
-        let mut sampler = Sampler::new(job.sampler, &self.scheduler, job.karras, job.steps)?;
+        let sampling = &job.sampling;
+        self.check_sampling(sampling)?;
         let mut timings = Timings::default();
-        let (h, w) = (job.height / scale, job.width / scale);
-        let channels = self.unet_config.in_channels;
-        let guided = job.guidance_scale > 1.0;
-        let batch = if guided { 2 } else { 1 };
-
         let start = Instant::now();
-        let (context, pooled) = self.conditioning(job, guided)?;
+        let text = self.encode_prompt(&job.prompt, job.negative_prompt.as_deref(), sampling.guided())?;
         timings.text_encoding = start.elapsed();
 
         let start = Instant::now();
-        let dt = self.dtype;
-        let ctx = &self.ctx;
-        let sample = ctx.zeros(&[batch, h, w, channels], dt)?;
-        let timesteps = ctx.zeros(&[batch], Dtype::F32)?;
-        let width = self.unet_config.cross_attention_dim;
-        let context_t = ctx.upload(&[batch, context.len() / (batch * width), width], dt, &context)?;
-        let pooled_t = ctx.upload(&[batch, pooled.len() / batch], dt, &pooled)?;
-        let (hh, ww) = (job.height as f32, job.width as f32);
-        let time_ids: Vec<f32> = (0..batch).flat_map(|_| [hh, ww, 0.0, 0.0, hh, ww]).collect();
-        let time_ids = ctx.upload(&[batch, 6], Dtype::F32, &time_ids)?;
-        let shared = SharedInputs { sample: &sample, timesteps: &timesteps, context: &context_t, added: (&pooled_t, &time_ids) };
-        let control = guides.control.as_ref().map(|g| ControlRun::record(g, &shared, job.width, job.height, dt)).transpose()?;
-        let ip: Vec<IpAdapterInput> = guides.image.iter().map(|g| g.unet_input(guided)).collect::<Result<_>>()?;
-        let inputs = UNetInputs {
-            sample: &sample,
-            timesteps: &timesteps,
-            encoder_hidden_states: &context_t,
-            added: Some((&pooled_t, &time_ids)),
-            control: control.as_ref().map(ControlRun::residuals),
-            ip: &ip,
-        };
-        let pass = self.unet.record(&inputs)?;
+        let ip_tokens = guides.image.as_ref().map(|g| g.tokens(sampling.guided())).transpose()?;
+        let control = guides.control.as_ref().map(|g| ControlNetUse { net: g.net, scale: g.scale, start: g.start, end: g.end });
+        let ip = guides.image.as_ref().map(|g| IpAdapterUse { adapter: g.adapter, scale: g.scale, images: g.images.len() });
+        let denoiser = Denoiser::record(self, sampling, control, ip, 1)?;
         timings.record = start.elapsed();
-
-        let shape = [1, channels, h, w];
-        let mut rng = TorchCpuRng::new(job.seed);
-        let sigma = sampler.init_noise_sigma();
-        let mut latents: Vec<f32> = rng.randn(channels * h * w).into_iter().map(|v| v * sigma).collect();
-        let total = sampler.timesteps().len();
-        for step in 0..total {
-            let start = Instant::now();
-            let x_in = nchw_to_nhwc(&sampler.scale_model_input(step, &latents), shape);
-            let mut x_batch = x_in.clone();
-            if guided {
-                x_batch.extend_from_slice(&x_in);
-            }
-            sample.write(&x_batch)?;
-            timesteps.write(&vec![sampler.timesteps()[step]; batch])?;
-            if let Some(control) = &control {
-                control.step(step, total)?;
-            }
-            pass.run()?;
-            let out = pass.output.download()?;
-            let n = out.len() / batch;
-            let eps_nhwc: Vec<f32> = if guided {
-                let g = job.guidance_scale;
-                out[..n].iter().zip(&out[n..]).map(|(&u, &c)| u + g * (c - u)).collect()
-            } else {
-                out
-            };
-            let eps = nhwc_to_nchw(&eps_nhwc, [1, h, w, channels]);
-            sampler.step(step, &eps, &mut latents, &mut rng);
-            timings.steps.push(start.elapsed());
-            on_step(step + 1, total);
-        }
-        Ok(Denoised { latents, latent_shape: shape, timings })
+        let item = ItemInputs { seed: job.seed, text: &text, control_image: guides.control.as_ref().map(|g| g.image), ip_tokens: ip_tokens.as_deref() };
+        let out = denoiser.run(&[item], on_step)?;
+        timings.record += out.prepare;
+        timings.steps = out.steps;
+        let latents = out.latents.into_iter().next().expect("one latent per item");
+        Ok(Denoised { latents, latent_shape: denoiser.latent_shape(), timings })
     }
-}
 
-impl Sdxl {
+    /// Sizes and guidance that this model can sample, checked before any work.
+    pub fn check_sampling(&self, sampling: &Sampling) -> Result<()> {
+        sampling.check()?;
+        sampling.check_size(self.pixel_multiple())
+    }
+
     /// diffusers' image: the decoder's output mapped from [-1, 1], clamped, and rounded to 8 bits.
-    fn decode(&self, latents: &[f32], [b, c, h, w]: [usize; 4]) -> Result<RgbImage> {
+    pub fn decode(&self, latents: &[f32], [b, c, h, w]: [usize; 4]) -> Result<RgbImage> {
         let factor = self.vae.config().scaling_factor;
         let scaled: Vec<f32> = latents.iter().map(|v| v / factor).collect();
         let (out, [_, height, width, channels]) = self.vae.decode(&nchw_to_nhwc(&scaled, [b, c, h, w]), [b, h, w, c])?;

@@ -14,7 +14,8 @@ use unicode_normalization::UnicodeNormalization;
 
 const BOS: &str = "<|startoftext|>";
 const EOS: &str = "<|endoftext|>";
-const CONTEXT: usize = 77;
+/// Token positions of every encoded prompt.
+pub const CONTEXT: usize = 77;
 const END_OF_WORD: &str = "</w>";
 
 /// CLIP's word pattern. The special-token literals only matter when typed in another case, since

@@ -103,10 +103,10 @@ struct Annotation<'a> {
     instance: &'a InstanceInfo,
 }
 
-/// annotations.json for `frame`, whose masks are `masks`; `info` records where it came from.
-pub fn coco_json(frame: &Frame, masks: &[InstanceMask], info: Value) -> String {
+/// The annotations of `frame`, id k for the instance with id k in the mask, image id 1.
+fn annotations<'a>(frame: &'a Frame, masks: &[InstanceMask]) -> Vec<Annotation<'a>> {
     let (w, h) = (frame.camera.width, frame.camera.height);
-    let annotations = masks
+    masks
         .iter()
         .zip(&frame.instances)
         .enumerate()
@@ -120,12 +120,30 @@ pub fn coco_json(frame: &Frame, masks: &[InstanceMask], info: Value) -> String {
             iscrowd: 0,
             instance,
         })
-        .collect();
+        .collect()
+}
+
+/// The annotations of `frame` as JSON objects, as annotations.json holds them (id = the
+/// instance's id in the mask, image id 1), for writers that combine frames.
+pub fn annotation_values(frame: &Frame, masks: &[InstanceMask]) -> Vec<Value> {
+    annotations(frame, masks).iter().map(|a| serde_json::to_value(a).expect("COCO structures always serialise")).collect()
+}
+
+/// The COCO category every annotation belongs to.
+pub fn categories() -> Value {
+    serde_json::to_value([CATEGORY]).expect("COCO structures always serialise")
+}
+
+const CATEGORY: Category = Category { id: 1, name: "mushroom", supercategory: "mushroom" };
+
+/// annotations.json for `frame`, whose masks are `masks`; `info` records where it came from.
+pub fn coco_json(frame: &Frame, masks: &[InstanceMask], info: Value) -> String {
+    let (w, h) = (frame.camera.width, frame.camera.height);
     let file = CocoFile {
         info,
         images: [Image { id: 1, file_name: IMAGE_FILE, width: w, height: h }],
-        annotations,
-        categories: [Category { id: 1, name: "mushroom", supercategory: "mushroom" }],
+        annotations: annotations(frame, masks),
+        categories: [CATEGORY],
         licenses: [],
     };
     let mut text = serde_json::to_string(&file).expect("COCO structures always serialise");

@@ -11,7 +11,19 @@ use crate::rng::{Rng, Stream};
 pub struct CropWindow {
     pub x0: u32,
     pub y0: u32,
-    pub size: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// The largest window of a `width`×`height` frame whose sides are multiples of `multiple`,
+/// centred (odd leftovers go to the right and bottom): whole frames cut to a size a model can
+/// make, rather than stretched.
+pub fn centered_window(width: u32, height: u32, multiple: u32) -> Result<CropWindow> {
+    let (w, h) = (width - width % multiple.max(1), height - height % multiple.max(1));
+    if w == 0 || h == 0 {
+        return Err(RenderError::invalid("--width/--height", format!("{width}×{height}"), format!("the model needs sides of at least {multiple} pixels")));
+    }
+    Ok(CropWindow { x0: (width - w) / 2, y0: (height - h) / 2, width: w, height: h })
 }
 
 /// `count` windows of `size`² inside a `width`×`height` frame, from the scene seed alone.
@@ -24,7 +36,8 @@ pub fn crop_windows(seed: u64, count: usize, size: u32, width: u32, height: u32)
         .map(|_| CropWindow {
             x0: rng.below((width - size + 1) as u64) as u32,
             y0: rng.below((height - size + 1) as u64) as u32,
-            size,
+            width: size,
+            height: size,
         })
         .collect())
 }
@@ -33,8 +46,8 @@ pub fn crop_windows(seed: u64, count: usize, size: u32, width: u32, height: u32)
 /// visible pixels in the full frame fall inside the window (SAHI's `min_area_ratio`, 0.1 by
 /// default); the pixels of dropped slivers become background.
 pub fn crop_frame(frame: &Frame, window: CropWindow, min_fraction: f64) -> Frame {
-    let (w, s) = (frame.width(), window.size as usize);
-    let rows = (window.y0 as usize..window.y0 as usize + s).map(|y| y * w + window.x0 as usize..y * w + window.x0 as usize + s);
+    let (w, cw) = (frame.width(), window.width as usize);
+    let rows = (window.y0 as usize..(window.y0 + window.height) as usize).map(|y| y * w + window.x0 as usize..y * w + window.x0 as usize + cw);
     let mut ids: Vec<u16> = rows.clone().flat_map(|r| frame.ids[r].iter().copied()).collect();
     let depth: Vec<f32> = rows.flat_map(|r| frame.depth[r].iter().copied()).collect();
     let labels = frame.instances.len() + 1;
@@ -42,7 +55,7 @@ pub fn crop_frame(frame: &Frame, window: CropWindow, min_fraction: f64) -> Frame
     let in_crop = pixel_counts(&ids, labels);
     let kept = renumber(&mut ids, labels, |id| in_crop[id] > 0 && in_crop[id] as f64 >= min_fraction * in_frame[id] as f64);
     let instances = kept.iter().map(|&id| frame.instances[id - 1].clone()).collect();
-    Frame { camera: frame.camera.crop(window.x0, window.y0, window.size, window.size), depth, ids, instances }
+    Frame { camera: frame.camera.crop(window.x0, window.y0, window.width, window.height), depth, ids, instances }
 }
 
 pub fn validate_min_fraction(min_fraction: f64) -> Result<()> {
@@ -69,5 +82,12 @@ mod tests {
         let err = crop_windows(0, 3, 2000, 1920, 1080).unwrap_err().to_string();
         assert!(err.contains("--crop-size 2000"), "{err}");
         assert!(crop_windows(0, 0, 2000, 1920, 1080).unwrap().is_empty(), "no crops, nothing to check");
+    }
+
+    #[test]
+    fn centered_windows_are_the_largest_multiple_and_centred() {
+        assert_eq!(centered_window(1920, 1080, 32).unwrap(), CropWindow { x0: 0, y0: 12, width: 1920, height: 1056 });
+        assert_eq!(centered_window(101, 64, 32).unwrap(), CropWindow { x0: 2, y0: 0, width: 96, height: 64 });
+        assert!(centered_window(20, 64, 32).unwrap_err().to_string().contains("at least 32"));
     }
 }

@@ -65,7 +65,7 @@ pub fn scene_files(seed: u64, config: &SceneConfig, options: &OutputOptions) -> 
         .map(|(k, &window)| {
             let crop = crop_frame(&frame, window, options.crop_min_fraction);
             let mut info = info.clone();
-            info["crop"] = json!({"index": k, "offset_px": [window.x0, window.y0], "size_px": window.size, "min_fraction": options.crop_min_fraction});
+            info["crop"] = json!({"index": k, "offset_px": [window.x0, window.y0], "size_px": window.width, "min_fraction": options.crop_min_fraction});
             frame_files(&crop, info, options.control, &format!("crops/{k}/"))
         })
         .collect();

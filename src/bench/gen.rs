@@ -5,7 +5,7 @@
 use anyhow::{Context as _, Result};
 use std::process::Command;
 use std::time::Instant;
-use vkdiff_pipeline::{Guides, SamplerKind, Sdxl, TextToImage};
+use vkdiff_pipeline::{Guides, SamplerKind, Sampling, Sdxl, TextToImage};
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_unet::{SDXL_BASE_CONFIG, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
 
@@ -23,8 +23,8 @@ pub struct GenArgs {
     size: Vec<usize>,
     #[arg(long, default_value_t = 4)]
     steps: usize,
-    #[arg(long, value_enum, default_value_t = super::unet::Precision::F16)]
-    precision: super::unet::Precision,
+    #[arg(long, value_enum, default_value_t = crate::model_args::Precision::F16)]
+    precision: crate::model_args::Precision,
     /// Skip diffusers on the CPU (needs python with torch, diffusers and transformers).
     #[arg(long)]
     no_cpu_reference: bool,
@@ -51,10 +51,7 @@ struct Row {
 }
 
 pub fn run(args: &GenArgs) -> Result<()> {
-    let dtype = match args.precision {
-        super::unet::Precision::F16 => Dtype::F16,
-        super::unet::Precision::F32 => Dtype::F32,
-    };
+    let dtype = args.precision.dtype();
     for &size in &args.size {
         let mut row = measure(args, dtype, size)?;
         if !args.no_cpu_reference {
@@ -110,12 +107,7 @@ pub(super) fn bench_job(size: usize, steps: usize) -> TextToImage {
         prompt: "white button mushrooms on brown compost, top-down photo".into(),
         negative_prompt: None,
         seed: 0,
-        steps,
-        guidance_scale: 5.0,
-        sampler: SamplerKind::Euler,
-        karras: false,
-        width: size,
-        height: size,
+        sampling: Sampling { steps, guidance_scale: 5.0, sampler: SamplerKind::Euler, karras: false, width: size, height: size },
     }
 }
 

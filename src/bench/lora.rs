@@ -7,7 +7,7 @@ use std::io::Write as _;
 use std::process::{Command, Stdio};
 use std::time::Instant;
 use vkdiff_lora::{LoraFile, LoraMerger, Targets};
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_runtime::Context;
 use vkdiff_unet::{Checkpoint, UNet, UNetConfig};
 
 const REFERENCE: &str = include_str!("../../tools/lora_merge_cpu_reference.py");
@@ -19,18 +19,15 @@ pub struct LoraArgs {
     device: Option<usize>,
     #[arg(long, default_value_t = 32)]
     rank: usize,
-    #[arg(long, value_enum, default_value_t = super::unet::Precision::F16)]
-    precision: super::unet::Precision,
+    #[arg(long, value_enum, default_value_t = crate::model_args::Precision::F16)]
+    precision: crate::model_args::Precision,
     /// Skip torch on the CPU (needs python with torch: $VKDIFF_REFERENCE_PYTHON or python3).
     #[arg(long)]
     no_cpu_reference: bool,
 }
 
 pub fn run(args: &LoraArgs) -> Result<()> {
-    let dtype = match args.precision {
-        super::unet::Precision::F16 => Dtype::F16,
-        super::unet::Precision::F32 => Dtype::F32,
-    };
+    let dtype = args.precision.dtype();
     let ctx = Context::new(args.device)?;
     let unet = UNet::load(&UNetConfig::sdxl_base(), &Checkpoint::random(&ctx, dtype, 0))?;
     let shapes = transformer_linears(&unet);

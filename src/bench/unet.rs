@@ -1,6 +1,7 @@
 //! `vkdiff bench unet`: one SDXL UNet evaluation (the real architecture, random weights) per
 //! latent size, timed on the device, beside diffusers on this machine's CPU in the same run.
 
+use crate::model_args::Precision;
 use super::kernels::{dtype_name, rand_tensor};
 use anyhow::{Context as _, Result};
 use std::process::Command;
@@ -34,12 +35,6 @@ pub struct UnetArgs {
     json: bool,
 }
 
-#[derive(Clone, Copy, clap::ValueEnum)]
-pub enum Precision {
-    F16,
-    F32,
-}
-
 #[derive(serde::Serialize)]
 struct Row {
     device: String,
@@ -58,10 +53,7 @@ struct Row {
 }
 
 pub fn run(args: &UnetArgs) -> Result<()> {
-    let dtype = match args.precision {
-        Precision::F16 => Dtype::F16,
-        Precision::F32 => Dtype::F32,
-    };
+    let dtype = args.precision.dtype();
     let config = UNetConfig::sdxl_base();
     for &size in &args.size {
         anyhow::ensure!(size % 32 == 0 && size > 0, "--size {size}: SDXL needs a multiple of 32 pixels");

@@ -8,7 +8,7 @@ use std::time::Instant;
 use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::images::ClipPreprocess;
 use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, RgbImage, Sdxl};
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_runtime::Context;
 use vkdiff_unet::{Checkpoint, ClipVisionConfig, ClipVisionModelWithProjection, ControlNetConfig, ControlNetModel, IpAdapter, SDXL_CONTROLNET_CONFIG};
 
 /// h94's `models/image_encoder` (OpenCLIP ViT-H/14 vision tower, 632 M parameters), the encoder of
@@ -28,15 +28,12 @@ pub struct WorkflowArgs {
     steps: usize,
     #[arg(long, default_value_t = 32)]
     lora_rank: usize,
-    #[arg(long, value_enum, default_value_t = super::unet::Precision::F16)]
-    precision: super::unet::Precision,
+    #[arg(long, value_enum, default_value_t = crate::model_args::Precision::F16)]
+    precision: crate::model_args::Precision,
 }
 
 pub fn run(args: &WorkflowArgs) -> Result<()> {
-    let dtype = match args.precision {
-        super::unet::Precision::F16 => Dtype::F16,
-        super::unet::Precision::F32 => Dtype::F32,
-    };
+    let dtype = args.precision.dtype();
     let ctx = Context::new(args.device)?;
     let start = Instant::now();
     let mut model = Sdxl::random_sdxl_base(&ctx, dtype)?;

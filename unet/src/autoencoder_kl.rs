@@ -181,9 +181,8 @@ impl AutoencoderKl {
     pub fn load_sdxl(ctx: &Context, path: &Path, dtype: Dtype) -> Result<AutoencoderKl> {
         if path.is_dir() {
             // The config first: it decides the precision, and so which weight variant to open.
-            let folder = component_folder(path, "vae")?;
-            let config: VaeConfig = read_config(&folder.join("config.json"), "an AutoencoderKL")?;
-            let ckpt = Checkpoint::diffusers(ctx, &folder, "diffusion_pytorch_model", Self::run_dtype(&config, dtype))?;
+            let config = Self::sdxl_config(path)?;
+            let ckpt = Checkpoint::diffusers(ctx, &component_folder(path, "vae")?, "diffusion_pytorch_model", Self::run_dtype(&config, dtype))?;
             return Self::load(ctx, config, &ckpt);
         }
         let file = SafeTensors::open(path)?;
@@ -191,6 +190,15 @@ impl AutoencoderKl {
         let names = vae_names(&config);
         let ckpt = Checkpoint::single_file_part(ctx, file, SINGLE_FILE_VAE, Some(names), Self::run_dtype(&config, dtype));
         Self::load(ctx, config, &ckpt)
+    }
+
+    /// The config of the VAE [`AutoencoderKl::load_sdxl`] would load from `path`, without its weights.
+    pub fn sdxl_config(path: &Path) -> Result<VaeConfig> {
+        if path.is_dir() {
+            read_config(&component_folder(path, "vae")?.join("config.json"), "an AutoencoderKL")
+        } else {
+            infer_vae_config(&SafeTensors::open(path)?)
+        }
     }
 
     /// The precision a VAE with `config` runs in when the run asks for `dtype`.

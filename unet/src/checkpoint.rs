@@ -52,16 +52,16 @@ impl Checkpoint {
             return Ok((config, Checkpoint::diffusers(ctx, &dir, "diffusion_pytorch_model", dtype)?));
         }
         let file = SafeTensors::open(path)?;
-        if !file.entries.keys().any(|k| k.starts_with(SINGLE_FILE_UNET)) {
-            return Err(Error::Checkpoint(format!(
-                "{}: no `{SINGLE_FILE_UNET}*` tensors; not an original-layout SDXL checkpoint (for a diffusers model pass its folder)",
-                path.display()
-            )));
-        }
-        let shapes: HashMap<&str, &[usize]> =
-            file.entries.iter().filter_map(|(k, e)| Some((k.strip_prefix(SINGLE_FILE_UNET)?, e.shape.as_slice()))).collect();
-        let config = infer_unet_config(&shapes).map_err(|e| Error::Checkpoint(format!("{}: {e}", path.display())))?;
+        let config = single_file_unet_config(&file)?;
         Self::single_file_unet(ctx, file, config, dtype)
+    }
+
+    /// The config of the UNet at `path` (as [`Checkpoint::unet`] reads it), without its weights.
+    pub fn unet_config(path: &Path) -> Result<UNetConfig> {
+        if path.is_dir() {
+            return UNetConfig::from_file(&component_folder(path, "unet")?.join("config.json"));
+        }
+        single_file_unet_config(&SafeTensors::open(path)?)
     }
 
     /// A single-file UNet with a config given by the caller (for models whose head counts or norm
@@ -306,6 +306,19 @@ impl<'a> Weights<'a> {
 
 /// The folder of pipeline component `sub` (`dir/sub`, or `dir` itself when it is the component),
 /// which must hold a config.json.
+/// A single file's UNet config, inferred from its tensor shapes.
+fn single_file_unet_config(file: &SafeTensors) -> Result<UNetConfig> {
+    if !file.entries.keys().any(|k| k.starts_with(SINGLE_FILE_UNET)) {
+        return Err(Error::Checkpoint(format!(
+            "{}: no `{SINGLE_FILE_UNET}*` tensors; not an original-layout SDXL checkpoint (for a diffusers model pass its folder)",
+            file.path.display()
+        )));
+    }
+    let shapes: HashMap<&str, &[usize]> =
+        file.entries.iter().filter_map(|(k, e)| Some((k.strip_prefix(SINGLE_FILE_UNET)?, e.shape.as_slice()))).collect();
+    infer_unet_config(&shapes).map_err(|e| Error::Checkpoint(format!("{}: {e}", file.path.display())))
+}
+
 pub(crate) fn component_folder(dir: &Path, sub: &str) -> Result<PathBuf> {
     let folder = if dir.join(sub).join("config.json").is_file() { dir.join(sub) } else { dir.to_path_buf() };
     if !folder.join("config.json").is_file() {

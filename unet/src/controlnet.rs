@@ -139,7 +139,29 @@ impl ControlNetModel {
     /// Encodes the conditioning image(s) [B, H, W, 3] (RGB in [0, 1], run precision; H and W a
     /// multiple of the encoder's downscale) once: the hint every evaluation adds after conv_in.
     pub fn encode_condition(&self, image: &Tensor) -> Result<Tensor> {
-        let s = image.shape();
+        let out = image.context().zeros(&self.hint_shape(image.shape())?, self.dtype)?;
+        self.encode_condition_into(image, &out)?;
+        Ok(out)
+    }
+
+    /// [`ControlNetModel::encode_condition`] into an existing hint tensor, so that a recorded
+    /// pass reading `out` sees the new image.
+    pub fn encode_condition_into(&self, image: &Tensor, out: &Tensor) -> Result<()> {
+        let want = self.hint_shape(image.shape())?;
+        if out.shape() != want || out.dtype() != self.dtype {
+            return Err(Error::Config(format!("ControlNet hint tensor is {:?}, the image {:?} needs {want:?}", out.shape(), image.shape())));
+        }
+        let ctx = image.context();
+        let mut g = Graph::new(&ctx, self.dtype)?;
+        let image = if self.config.bgr { self.reversed_channels(image)? } else { image.clone() };
+        self.embedding.forward_into(&mut g, &image, out)?;
+        g.rec.finish()?.run()?;
+        Ok(())
+    }
+
+    /// The hint's shape for a conditioning image of shape `s`, which must be [B, H, W, channels]
+    /// with sides a multiple of the encoder's downscale.
+    fn hint_shape(&self, s: &[usize]) -> Result<[usize; 4]> {
         let down = self.config.downscale();
         if s.len() != 4 || s[3] != self.config.conditioning_channels || !s[1].is_multiple_of(down) || !s[2].is_multiple_of(down) {
             return Err(Error::Config(format!(
@@ -147,13 +169,7 @@ impl ControlNetModel {
                 self.config.conditioning_channels
             )));
         }
-        let ctx = image.context();
-        let mut g = Graph::new(&ctx, self.dtype)?;
-        let image = if self.config.bgr { self.reversed_channels(image)? } else { image.clone() };
-        let out = ctx.zeros(&[s[0], s[1] / down, s[2] / down, self.config.encoder.block_out_channels[0]], self.dtype)?;
-        self.embedding.forward_into(&mut g, &image, &out)?;
-        g.rec.finish()?.run()?;
-        Ok(out)
+        Ok([s[0], s[1] / down, s[2] / down, self.config.encoder.block_out_channels[0]])
     }
 
     fn reversed_channels(&self, image: &Tensor) -> Result<Tensor> {

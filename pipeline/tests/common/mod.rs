@@ -2,7 +2,7 @@
 
 use serde_json::Value;
 use std::sync::OnceLock;
-use vkdiff_pipeline::TextToImage;
+use vkdiff_pipeline::{Sampling, TextToImage};
 use vkdiff_runtime::Context;
 
 pub fn ctx() -> Context {
@@ -19,12 +19,14 @@ pub fn job(case: &Value) -> TextToImage {
         prompt: case["prompt"].as_str().unwrap().into(),
         negative_prompt: case["negative_prompt"].as_str().map(String::from),
         seed: case["seed"].as_u64().unwrap(),
-        steps: case["steps"].as_u64().unwrap() as usize,
-        guidance_scale: case["guidance_scale"].as_f64().unwrap() as f32,
-        sampler: case["sampler"].as_str().unwrap().parse().unwrap(),
-        karras: case["karras"].as_bool().unwrap_or(false),
-        width: case["width"].as_u64().unwrap() as usize,
-        height: case["height"].as_u64().unwrap() as usize,
+        sampling: Sampling {
+            steps: case["steps"].as_u64().unwrap() as usize,
+            guidance_scale: case["guidance_scale"].as_f64().unwrap() as f32,
+            sampler: case["sampler"].as_str().unwrap().parse().unwrap(),
+            karras: case["karras"].as_bool().unwrap_or(false),
+            width: case["width"].as_u64().unwrap() as usize,
+            height: case["height"].as_u64().unwrap() as usize,
+        },
     }
 }
 

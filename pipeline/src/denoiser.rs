@@ -1,0 +1,210 @@
+//! Batched denoising: B images per UNet pass (2B rows with guidance, laid out as diffusers
+//! concatenates them: every negative row, then every positive row). The UNet and ControlNet are
+//! recorded once per batch shape; each batch writes its inputs into the recorded tensors and
+//! replays the passes. Each image keeps its own generator, sampler state and latents, so an
+//! image's result does not depend on the images beside it.
+
+use crate::controlnet_guide::{ControlNetUse, ControlRun, SharedInputs};
+use crate::error::{Error, Result};
+use crate::prompt_encoding::Conditioning;
+use crate::rng::TorchCpuRng;
+use crate::schedulers::Sampler;
+use crate::sdxl::Sdxl;
+use crate::text_to_image::{RgbImage, Sampling};
+use crate::tokenizer::CONTEXT;
+use std::time::{Duration, Instant};
+use vkdiff_runtime::{Dtype, Tensor};
+use vkdiff_unet::{nchw_to_nhwc, nhwc_to_nchw, IpAdapter, IpAdapterInput, UNetInputs, UNetPass};
+
+/// An IP-Adapter and its weight, for images that each have `images` style images.
+#[derive(Clone, Copy)]
+pub struct IpAdapterUse<'a> {
+    pub adapter: &'a IpAdapter,
+    pub scale: f32,
+    pub images: usize,
+}
+
+/// One image's inputs, prepared on the host.
+pub struct ItemInputs<'a> {
+    /// Seed of the image's own `torch.Generator("cpu")`.
+    pub seed: u64,
+    pub text: &'a Conditioning,
+    /// The ControlNet's conditioning image, when the batch has a ControlNet.
+    pub control_image: Option<&'a RgbImage>,
+    /// The image tokens of its rows ([`crate::ImageGuide::tokens`]), when it has an IP-Adapter.
+    pub ip_tokens: Option<&'a [f32]>,
+}
+
+/// A batch's latents and where its time went.
+pub struct BatchOutput {
+    /// NCHW [1, C, h, w] per image, as the sampler leaves them (before VAE scaling).
+    pub latents: Vec<Vec<f32>>,
+    /// Writing the inputs and encoding the ControlNet hint.
+    pub prepare: Duration,
+    pub steps: Vec<Duration>,
+}
+
+/// The UNet (and ControlNet) recorded for `batch` images of one size.
+pub struct Denoiser<'m> {
+    model: &'m Sdxl,
+    sampling: Sampling,
+    batch: usize,
+    /// Latent height, width, channels.
+    latent: [usize; 3],
+    sample: Tensor,
+    timesteps: Tensor,
+    context: Tensor,
+    pooled: Tensor,
+    _time_ids: Tensor,
+    control: Option<ControlRun<'m>>,
+    ip: Vec<IpAdapterInput>,
+    pass: UNetPass,
+}
+
+impl<'m> Denoiser<'m> {
+    /// Records the passes for `batch` images sampled as `sampling` says, steered by `control`
+    /// and `ip` when given.
+    pub fn record(model: &'m Sdxl, sampling: &Sampling, control: Option<ControlNetUse<'m>>, ip: Option<IpAdapterUse<'m>>, batch: usize) -> Result<Denoiser<'m>> {
+        model.check_sampling(sampling)?;
+        if batch == 0 {
+            return Err(Error::Config("--batch must be at least 1".into()));
+        }
+        let scale = model.vae_scale();
+        let latent = [sampling.height / scale, sampling.width / scale, model.unet_config.in_channels];
+        let rows = batch * sampling.rows_per_image();
+        let (ctx, dt) = (&model.ctx, model.dtype);
+        let sample = ctx.zeros(&[rows, latent[0], latent[1], latent[2]], dt)?;
+        let timesteps = ctx.zeros(&[rows], Dtype::F32)?;
+        let context = ctx.zeros(&[rows, CONTEXT, model.unet_config.cross_attention_dim], dt)?;
+        let pooled_width = model.text_encoders[1].config().projection_dim.unwrap_or(0);
+        let pooled = ctx.zeros(&[rows, pooled_width], dt)?;
+        let (h, w) = (sampling.height as f32, sampling.width as f32);
+        let time_ids: Vec<f32> = (0..rows).flat_map(|_| [h, w, 0.0, 0.0, h, w]).collect();
+        let time_ids = ctx.upload(&[rows, 6], Dtype::F32, &time_ids)?;
+        let shared = SharedInputs { sample: &sample, timesteps: &timesteps, context: &context, added: (&pooled, &time_ids) };
+        let control = control.map(|c| ControlRun::record(c, &shared)).transpose()?;
+        let ip = match ip {
+            Some(use_) => {
+                if !use_.scale.is_finite() {
+                    return Err(Error::Config(format!("--ip-scale {} is not a number", use_.scale)));
+                }
+                let width = model.unet_config.cross_attention_dim;
+                let zeros = vec![0.0; rows * use_.images * use_.adapter.num_tokens() * width];
+                vec![use_.adapter.unet_input(&zeros, rows, use_.scale)?]
+            }
+            None => Vec::new(),
+        };
+        let inputs = UNetInputs {
+            sample: &sample,
+            timesteps: &timesteps,
+            encoder_hidden_states: &context,
+            added: Some((&pooled, &time_ids)),
+            control: control.as_ref().map(ControlRun::residuals),
+            ip: &ip,
+        };
+        let pass = model.unet.record(&inputs)?;
+        Ok(Denoiser { model, sampling: sampling.clone(), batch, latent, sample, timesteps, context, pooled, _time_ids: time_ids, control, ip, pass })
+    }
+
+    /// Images per pass.
+    pub fn batch(&self) -> usize {
+        self.batch
+    }
+
+    /// NCHW shape of one image's latents.
+    pub fn latent_shape(&self) -> [usize; 4] {
+        let [h, w, c] = self.latent;
+        [1, c, h, w]
+    }
+
+    /// Denoises exactly [`Denoiser::batch`] images; `on_step(done, total)` after every step.
+    pub fn run(&self, items: &[ItemInputs], on_step: &mut dyn FnMut(usize, usize)) -> Result<BatchOutput> {
+        if items.len() != self.batch {
+            return Err(Error::Config(format!("{} images for a pass recorded for {}", items.len(), self.batch)));
+        }
+        let start = Instant::now();
+        self.write_conditioning(items)?;
+        let prepare = start.elapsed();
+
+        let [h, w, c] = self.latent;
+        let n = c * h * w;
+        let mut samplers = Vec::with_capacity(items.len());
+        let mut rngs = Vec::with_capacity(items.len());
+        let mut latents = Vec::with_capacity(items.len());
+        for item in items {
+            let sampler = Sampler::new(self.sampling.sampler, &self.model.scheduler, self.sampling.karras, self.sampling.steps)?;
+            let mut rng = TorchCpuRng::new(item.seed);
+            let sigma = sampler.init_noise_sigma();
+            latents.push(rng.randn(n).into_iter().map(|v| v * sigma).collect::<Vec<f32>>());
+            samplers.push(sampler);
+            rngs.push(rng);
+        }
+        let timesteps = samplers[0].timesteps().to_vec();
+        let total = timesteps.len();
+        let guided = self.sampling.guided();
+        let mut steps = Vec::with_capacity(total);
+        for (step, &t) in timesteps.iter().enumerate() {
+            let start = Instant::now();
+            let mut x_batch = Vec::with_capacity(self.sample.numel());
+            for (sampler, x) in samplers.iter().zip(&latents) {
+                x_batch.extend(nchw_to_nhwc(&sampler.scale_model_input(step, x), [1, c, h, w]));
+            }
+            if guided {
+                x_batch.extend_from_within(..);
+            }
+            self.sample.write(&x_batch)?;
+            self.timesteps.write(&vec![t; self.timesteps.numel()])?;
+            if let Some(control) = &self.control {
+                control.step(step, total)?;
+            }
+            self.pass.run()?;
+            let out = self.pass.output.download()?;
+            for (i, ((sampler, x), rng)) in samplers.iter_mut().zip(&mut latents).zip(&mut rngs).enumerate() {
+                let eps_nhwc: Vec<f32> = if guided {
+                    let g = self.sampling.guidance_scale;
+                    let (u, p) = (&out[i * n..(i + 1) * n], &out[(self.batch + i) * n..(self.batch + i + 1) * n]);
+                    u.iter().zip(p).map(|(&u, &p)| u + g * (p - u)).collect()
+                } else {
+                    out[i * n..(i + 1) * n].to_vec()
+                };
+                sampler.step(step, &nhwc_to_nchw(&eps_nhwc, [1, h, w, c]), x, rng);
+            }
+            steps.push(start.elapsed());
+            on_step(step + 1, total);
+        }
+        Ok(BatchOutput { latents, prepare, steps })
+    }
+
+    /// Text, image tokens and control images of every row: all negatives, then all positives.
+    fn write_conditioning(&self, items: &[ItemInputs]) -> Result<()> {
+        let per_image = self.sampling.rows_per_image();
+        let row = |t: &Tensor| t.numel() / t.shape()[0];
+        self.context.write(&by_row(items, per_image, row(&self.context), |i| Some(&i.text.context), "prompt encoding")?)?;
+        self.pooled.write(&by_row(items, per_image, row(&self.pooled), |i| Some(&i.text.pooled), "pooled prompt encoding")?)?;
+        if let Some(ip) = self.ip.first() {
+            ip.tokens.write(&by_row(items, per_image, row(&ip.tokens), |i| i.ip_tokens, "IP-Adapter image tokens")?)?;
+        }
+        if let Some(control) = &self.control {
+            let images = items.iter().map(|i| i.control_image.ok_or_else(|| Error::Config("an image of the batch has no ControlNet image".into()))).collect::<Result<Vec<_>>>()?;
+            let rows: Vec<&RgbImage> = (0..per_image).flat_map(|_| images.iter().copied()).collect();
+            control.set_images(&rows, self.sampling.width, self.sampling.height)?;
+        }
+        Ok(())
+    }
+}
+
+/// Rows of `row_len` values from every item's `per_image` rows: first row of every item, then the
+/// second row of every item.
+fn by_row<'a>(items: &'a [ItemInputs<'a>], per_image: usize, row_len: usize, values: impl Fn(&'a ItemInputs<'a>) -> Option<&'a [f32]>, what: &str) -> Result<Vec<f32>> {
+    let mut out = Vec::with_capacity(row_len * per_image * items.len());
+    for r in 0..per_image {
+        for item in items {
+            let v = values(item).ok_or_else(|| Error::Config(format!("an image of the batch has no {what}")))?;
+            if v.len() != row_len * per_image {
+                return Err(Error::Config(format!("{what}: {} values where the recorded pass takes {}", v.len(), row_len * per_image)));
+            }
+            out.extend_from_slice(&v[r * row_len..(r + 1) * row_len]);
+        }
+    }
+    Ok(out)
+}

@@ -1,0 +1,51 @@
+//! Output files that appear whole or not at all: written under a hidden temporary name beside
+//! their place, flushed to the disk, then renamed. A crash, a kill or a power cut leaves the old
+//! file or the new one, never a part, and at worst a hidden `.NAME.partial-PID` that a later run
+//! removes.
+
+use crate::error::{Error, Result};
+use crate::text_to_image::RgbImage;
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// The temporary name `path` is written under by this process.
+pub fn partial_path(path: &Path) -> PathBuf {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    path.with_file_name(format!(".{name}{PARTIAL}{}", std::process::id()))
+}
+
+/// What marks a temporary file: `.NAME.partial-PID`.
+pub const PARTIAL: &str = ".partial-";
+
+/// Writes `bytes` to `path` atomically and durably; on failure nothing is left behind.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = partial_path(path);
+    let io = |e| Error::Io { path: path.to_path_buf(), source: e };
+    let written = (|| {
+        let mut file = std::fs::File::create(&tmp)?;
+        file.write_all(bytes)?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written.map_err(io)
+}
+
+/// An 8-bit RGB PNG carrying `text` as international text chunks (prompts may be any language).
+pub fn png_bytes(image: &RgbImage, text: &BTreeMap<String, String>) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    let failed = |e: png::EncodingError| Error::Config(format!("encoding a PNG: {e}"));
+    let mut enc = png::Encoder::new(&mut bytes, image.width as u32, image.height as u32);
+    enc.set_color(png::ColorType::Rgb);
+    enc.set_depth(png::BitDepth::Eight);
+    for (k, v) in text {
+        enc.add_itxt_chunk(k.clone(), v.clone()).map_err(failed)?;
+    }
+    let mut w = enc.write_header().map_err(failed)?;
+    w.write_image_data(&image.pixels).map_err(failed)?;
+    w.finish().map_err(failed)?;
+    Ok(bytes)
+}

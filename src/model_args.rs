@@ -1,0 +1,131 @@
+//! The flags `vkdiff gen` and `vkdiff dataset` share: the model with its guides and LoRAs, and
+//! how images are sampled.
+
+use crate::scene_cmd::ControlMode;
+use clap::{Args, ValueEnum};
+use std::path::PathBuf;
+use vkdiff_pipeline::{ControlNetSettings, IpAdapterSettings, LoraSetting, ModelSettings, SamplerKind, Sampling};
+use vkdiff_runtime::Dtype;
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum Precision {
+    /// f16 storage, f32 arithmetic (the VAE stays f32 where it would overflow).
+    F16,
+    F32,
+}
+
+impl Precision {
+    pub fn dtype(self) -> Dtype {
+        match self {
+            Precision::F16 => Dtype::F16,
+            Precision::F32 => Dtype::F32,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum, PartialEq)]
+enum Schedule {
+    /// The model's scheduler_config.json as it is.
+    Default,
+    /// Karras et al. noise levels (euler, dpmpp_2m).
+    Karras,
+}
+
+/// The model, its guides and LoRAs: what loads once.
+#[derive(Args, Debug)]
+pub struct ModelArgs {
+    /// SDXL model: a diffusers folder or an original single-file checkpoint.
+    #[arg(long)]
+    model: PathBuf,
+    #[arg(long, value_enum, default_value_t = Precision::F16)]
+    precision: Precision,
+    /// Vulkan device index (see `vkdiff devices`).
+    #[arg(long)]
+    pub device: Option<usize>,
+    /// Depth ControlNet: a diffusers folder, or one .safetensors in the diffusers or original
+    /// (cldm) layout.
+    #[arg(long)]
+    controlnet: Option<PathBuf>,
+    /// How a depth EXR maps to brightness (near is bright either way).
+    #[arg(long, value_enum, default_value_t = ControlMode::Inverse)]
+    control_depth: ControlMode,
+    /// Multiplies the ControlNet's residuals (diffusers' controlnet_conditioning_scale).
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    control_scale: f32,
+    /// Fraction of the steps before which the ControlNet is off.
+    #[arg(long, default_value_t = 0.0)]
+    control_start: f64,
+    /// Fraction of the steps after which the ControlNet is off.
+    #[arg(long, default_value_t = 1.0)]
+    control_end: f64,
+    /// IP-Adapter for SDXL (h94 layout, .safetensors, plain or plus): style images steer the look.
+    #[arg(long, requires = "image_encoder")]
+    ip_adapter: Option<PathBuf>,
+    /// The adapter's CLIP vision encoder: a folder with config.json and model.safetensors
+    /// (and preprocessor_config.json, else CLIP's defaults at the encoder's image size).
+    #[arg(long, requires = "ip_adapter")]
+    image_encoder: Option<PathBuf>,
+    /// Weight of the image tokens' attention.
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
+    ip_scale: f32,
+    /// A LoRA (kohya or diffusers/PEFT .safetensors) as FILE or FILE:STRENGTH (default 1);
+    /// repeat it for several. Merged into the weights on the device.
+    #[arg(long, value_parser = parse_lora)]
+    lora: Vec<LoraSetting>,
+}
+
+/// `FILE[:STRENGTH]`; a colon whose tail is not a number belongs to the path.
+fn parse_lora(text: &str) -> Result<LoraSetting, String> {
+    let (path, strength) = match text.rsplit_once(':').map(|(p, s)| (p, s.parse::<f32>())) {
+        Some((p, Ok(s))) if s.is_finite() => (p, s),
+        _ => (text, 1.0),
+    };
+    if path.is_empty() {
+        return Err("expected FILE or FILE:STRENGTH".into());
+    }
+    Ok(LoraSetting { path: path.into(), strength })
+}
+
+impl ModelArgs {
+    pub fn settings(&self) -> ModelSettings {
+        let controlnet = self.controlnet.as_ref().map(|model| ControlNetSettings {
+            model: model.clone(),
+            depth_mode: self.control_depth.into(),
+            scale: self.control_scale,
+            start: self.control_start,
+            end: self.control_end,
+        });
+        let ip_adapter = match (&self.ip_adapter, &self.image_encoder) {
+            (Some(adapter), Some(encoder)) => Some(IpAdapterSettings { adapter: adapter.clone(), encoder: encoder.clone(), scale: self.ip_scale }),
+            _ => None,
+        };
+        ModelSettings { model: self.model.clone(), precision: self.precision.dtype(), controlnet, ip_adapter, loras: self.lora.clone() }
+    }
+}
+
+/// How every image is sampled.
+#[derive(Args, Debug)]
+pub struct SamplingArgs {
+    /// Without it, the negative conditioning is zeros (diffusers' SDXL default).
+    #[arg(long)]
+    pub negative_prompt: Option<String>,
+    #[arg(long, default_value_t = 30)]
+    steps: usize,
+    /// Classifier-free guidance scale; 1 or less runs without the negative pass.
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
+    cfg: f32,
+    /// euler, euler_a, dpmpp_2m or ddim.
+    #[arg(long, default_value = "euler")]
+    sampler: SamplerKind,
+    #[arg(long, value_enum, default_value_t = Schedule::Default)]
+    scheduler: Schedule,
+    /// Noise generator: torch-cpu reproduces torch.randn on a CPU generator bit for bit.
+    #[arg(long, default_value = vkdiff_pipeline::RNG, value_parser = [vkdiff_pipeline::RNG])]
+    rng: String,
+}
+
+impl SamplingArgs {
+    pub fn sampling(&self, width: usize, height: usize) -> Sampling {
+        Sampling { steps: self.steps, guidance_scale: self.cfg, sampler: self.sampler, karras: self.scheduler == Schedule::Karras, width, height }
+    }
+}
