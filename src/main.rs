@@ -1,6 +1,7 @@
 //! `vkdiff`: command-line parsing and nothing else; every subcommand lives in its own module.
 
 mod bench;
+mod dataset_cmd;
 mod devices_cmd;
 mod gen_cmd;
 mod model_args;
@@ -22,6 +23,8 @@ enum Command {
     Scene(scene_cmd::SceneArgs),
     /// Text-to-image with an SDXL model: prompt in, PNG (with its settings) out.
     Gen(Box<gen_cmd::GenArgs>),
+    /// Scenes made into photoreal, exactly annotated training images: sharded, resumable.
+    Dataset(Box<dataset_cmd::DatasetArgs>),
     /// List every Vulkan device and what vkdiff would use on it.
     Devices(devices_cmd::DevicesArgs),
     /// Measure speed: kernels, networks, scene generation.
@@ -34,6 +37,7 @@ fn main() {
     let result = match cli.command {
         Command::Scene(args) => scene_cmd::run_scene(args),
         Command::Gen(args) => gen_cmd::run(&args),
+        Command::Dataset(args) => dataset_cmd::run(&args),
         Command::Devices(args) => devices_cmd::run(&args),
         Command::Bench(cmd) => bench::run(cmd),
     };

@@ -87,6 +87,11 @@ fn parse_lora(text: &str) -> Result<LoraSetting, String> {
 }
 
 impl ModelArgs {
+    /// How depth becomes a control image.
+    pub fn control_depth(&self) -> vkdiff_pipeline::images::ControlDepth {
+        self.control_depth.into()
+    }
+
     pub fn settings(&self) -> ModelSettings {
         let controlnet = self.controlnet.as_ref().map(|model| ControlNetSettings {
             model: model.clone(),

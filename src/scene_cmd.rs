@@ -16,7 +16,7 @@ use vkdiff_render::with_threads;
 pub struct SceneSettings {
     /// Seed of the (first) scene; the same seed and settings give byte-identical files.
     #[arg(long, default_value_t = 0)]
-    seed: u64,
+    pub seed: u64,
     #[arg(long, default_value_t = 1920)]
     width: u32,
     #[arg(long, default_value_t = 1080)]
@@ -29,11 +29,11 @@ pub struct SceneSettings {
     clumping: f64,
     /// Worker threads (0: one per core). Output does not depend on it.
     #[arg(long, default_value_t = 0)]
-    threads: usize,
+    pub threads: usize,
 }
 
 impl SceneSettings {
-    fn config(&self) -> SceneConfig {
+    pub fn config(&self) -> SceneConfig {
         let mut bed = BedConfig { density: self.density, ..BedConfig::default() };
         bed.clumping.clustered_fraction = self.clumping;
         SceneConfig { width: self.width, height: self.height, bed, ..SceneConfig::default() }

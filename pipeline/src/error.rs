@@ -19,6 +19,8 @@ pub enum Error {
     #[error(transparent)]
     Lora(#[from] vkdiff_lora::Error),
     #[error(transparent)]
+    Render(#[from] vkdiff_render::RenderError),
+    #[error(transparent)]
     Runtime(#[from] vkdiff_runtime::Error),
 }
 

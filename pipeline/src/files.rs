@@ -20,18 +20,23 @@ pub const PARTIAL: &str = ".partial-";
 
 /// Writes `bytes` to `path` atomically and durably; on failure nothing is left behind.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    write_atomic_with(path, &mut |w| w.write_all(bytes))
+}
+
+/// [`write_atomic`] of what `fill` writes (for files too large to hold in memory whole).
+pub fn write_atomic_with(path: &Path, fill: &mut dyn FnMut(&mut dyn Write) -> std::io::Result<()>) -> Result<()> {
     let tmp = partial_path(path);
-    let io = |e| Error::Io { path: path.to_path_buf(), source: e };
     let written = (|| {
-        let mut file = std::fs::File::create(&tmp)?;
-        file.write_all(bytes)?;
+        let mut file = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+        fill(&mut file)?;
+        let file = file.into_inner().map_err(|e| e.into_error())?;
         file.sync_all()?;
         std::fs::rename(&tmp, path)
     })();
     if written.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
-    written.map_err(io)
+    written.map_err(|e| Error::Io { path: path.to_path_buf(), source: e })
 }
 
 /// An 8-bit RGB PNG carrying `text` as international text chunks (prompts may be any language).

@@ -2,6 +2,7 @@
 //! schedulers, and text-to-image.
 
 mod controlnet_guide;
+pub mod dataset;
 mod denoiser;
 mod error;
 pub mod files;

@@ -1,0 +1,17 @@
+//! `vkdiff dataset`: procedural scenes turned into an annotated training set, one folder holding
+//! the generated images, each image's depth, control image and instance mask, and COCO
+//! annotations. Resumable image by image, sharded by scene over any number of processes sharing
+//! the folder, and merged into one `annotations.json` at the end.
+
+mod folder;
+mod merge;
+mod plan;
+mod run;
+mod scenes;
+mod settings;
+
+pub use folder::{Dataset, ImageRecord, Pending, ANNOTATIONS, MANIFEST};
+pub use merge::{merge, Merged};
+pub use plan::{choose, image_seed, Choice, ImageFiles, Shard};
+pub use run::{generate, Progress, Report, RunOptions, StageTimes};
+pub use settings::{Crops, DatasetSettings};

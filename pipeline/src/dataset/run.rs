@@ -1,0 +1,270 @@
+//! The dataset loop: scenes from the renderer thread, batched through one recorded denoiser,
+//! decoded, and handed to a writer thread that encodes and writes each image's files and then
+//! its record. Prompts and style-image sets are encoded once each and reused.
+
+use super::folder::{Dataset, Pending};
+use super::plan::{choose, image_seed, Choice};
+use super::scenes::{render_scenes, SceneImage};
+use super::settings::DatasetSettings;
+use crate::denoiser::{Denoiser, ItemInputs};
+use crate::error::{Error, Result};
+use crate::files::png_bytes;
+use crate::gen_settings::GenSettings;
+use crate::prompt_encoding::Conditioning;
+use crate::text_to_image::{RgbImage, TextToImage};
+use crate::workflow_models::WorkflowModels;
+use serde_json::{json, Value};
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+pub struct RunOptions {
+    /// Images per UNet pass.
+    pub batch: usize,
+    /// Scene-rendering threads (0: one per core).
+    pub threads: usize,
+}
+
+/// What the loop tells its caller as it goes.
+pub enum Progress {
+    /// `done` of the shard's `total` images are made (`done` counts earlier runs' too).
+    Images { done: u64, total: u64 },
+    /// Step `step` of `steps` of the batch being denoised.
+    Step { step: usize, steps: usize },
+}
+
+/// Seconds spent per stage. The scene and write stages run on their own threads, beside the
+/// others; `waiting` is the time the denoiser waited for scenes.
+#[derive(Clone, Debug, Default)]
+pub struct StageTimes {
+    pub scene: Duration,
+    pub guides: Duration,
+    pub denoise: Duration,
+    pub vae: Duration,
+    pub write: Duration,
+    pub waiting: Duration,
+}
+
+pub struct Report {
+    pub made: u64,
+    pub times: StageTimes,
+}
+
+/// An image to write: everything the writer thread needs, nothing it must compute on the GPU.
+struct Finished {
+    index: u64,
+    scene: SceneImage,
+    image: RgbImage,
+    text: std::collections::BTreeMap<String, String>,
+    entry: Value,
+}
+
+/// One image on its way through the denoiser.
+struct Item {
+    scene: SceneImage,
+    seed: u64,
+    prompt: usize,
+    style: Option<usize>,
+}
+
+/// Makes the `pending` images of `dataset` with `models`; `styles` are the loaded images of each
+/// of `settings.ip_sets`.
+pub fn generate(
+    dataset: &Dataset,
+    settings: &DatasetSettings,
+    models: &WorkflowModels,
+    styles: &[Vec<RgbImage>],
+    pending: Pending,
+    options: &RunOptions,
+    on_progress: &mut dyn FnMut(Progress),
+) -> Result<Report> {
+    if options.batch == 0 {
+        return Err(Error::Config("--batch must be at least 1".into()));
+    }
+    let total = pending.done + pending.images();
+    let stream = render_scenes(settings, pending.scenes, options.threads, 2 * options.batch);
+    let (to_writer, writer) = start_writer(dataset.clone(), options.batch);
+    let mut run = Loop { settings, models, styles, texts: HashMap::new(), tokens: HashMap::new(), times: StageTimes::default(), denoiser: None };
+    let made = run.all(&stream.images, &to_writer, pending.done, total, options.batch, on_progress);
+    drop(to_writer);
+    drop(stream.images);
+    let written = writer.join().map_err(|_| Error::Config("the writer thread panicked".into()))?;
+    run.times.scene = stream.thread.join().unwrap_or_default();
+    // A failed write is the first failure when the loop stopped because it could not hand over.
+    let made = match (made, written) {
+        (_, Err(e)) => return Err(e),
+        (Err(e), _) => return Err(e),
+        (Ok(made), Ok(write)) => {
+            run.times.write = write;
+            made
+        }
+    };
+    Ok(Report { made, times: run.times })
+}
+
+struct Loop<'a> {
+    settings: &'a DatasetSettings,
+    models: &'a WorkflowModels,
+    styles: &'a [Vec<RgbImage>],
+    texts: HashMap<usize, Conditioning>,
+    tokens: HashMap<usize, Vec<f32>>,
+    times: StageTimes,
+    /// The recorded denoiser and the (batch, style images per image) it was recorded for.
+    denoiser: Option<(Denoiser<'a>, (usize, usize))>,
+}
+
+impl<'a> Loop<'a> {
+    fn all(&mut self, images: &Receiver<Result<SceneImage>>, to_writer: &SyncSender<Finished>, mut done: u64, total: u64, batch: usize, on_progress: &mut dyn FnMut(Progress)) -> Result<u64> {
+        let mut made = 0;
+        let mut next: Option<Item> = None;
+        loop {
+            let mut items: Vec<Item> = next.take().into_iter().collect();
+            while items.len() < batch {
+                let start = Instant::now();
+                let Ok(scene) = images.recv() else { break };
+                self.times.waiting += start.elapsed();
+                let item = self.item(scene?);
+                // A batch shares one recorded pass, so its images have as many style images each.
+                if items.first().is_some_and(|first| self.style_images(first) != self.style_images(&item)) {
+                    next = Some(item);
+                    break;
+                }
+                items.push(item);
+            }
+            if items.is_empty() {
+                return Ok(made);
+            }
+            for finished in self.batch(items, on_progress)? {
+                to_writer.send(finished).map_err(|_| Error::Config("the writer stopped".into()))?;
+                made += 1;
+                done += 1;
+                on_progress(Progress::Images { done, total });
+            }
+        }
+    }
+
+    fn item(&self, scene: SceneImage) -> Item {
+        let seed = image_seed(self.settings.seed, scene.index);
+        let prompt = choose(seed, Choice::Prompt, self.settings.prompts.len());
+        let style = (!self.settings.ip_sets.is_empty()).then(|| choose(seed, Choice::StyleSet, self.settings.ip_sets.len()));
+        Item { scene, seed, prompt, style }
+    }
+
+    fn style_images(&self, item: &Item) -> usize {
+        item.style.map_or(0, |s| self.settings.ip_sets[s].len())
+    }
+
+    /// Denoises and decodes one batch.
+    fn batch(&mut self, items: Vec<Item>, on_progress: &mut dyn FnMut(Progress)) -> Result<Vec<Finished>> {
+        let start = Instant::now();
+        let sampling = &self.settings.sampling;
+        for item in &items {
+            if !self.texts.contains_key(&item.prompt) {
+                let text = self.models.sdxl.encode_prompt(&self.settings.prompts[item.prompt], self.settings.negative_prompt.as_deref(), sampling.guided())?;
+                self.texts.insert(item.prompt, text);
+            }
+            if let Some(style) = item.style.filter(|s| !self.tokens.contains_key(s)) {
+                let guide = self.models.image_guide(&self.styles[style]).ok_or_else(|| Error::Config("style images without an IP-Adapter".into()))?;
+                self.tokens.insert(style, guide.tokens(sampling.guided())?);
+            }
+        }
+        let key = (items.len(), self.style_images(&items[0]));
+        if self.denoiser.as_ref().is_none_or(|(_, k)| *k != key) {
+            self.denoiser = None; // the old recording's memory goes before the new one's comes
+            let ip = self.models.ip_use(key.1).filter(|_| key.1 > 0);
+            self.denoiser = Some((Denoiser::record(&self.models.sdxl, sampling, self.models.control_use(), ip, key.0)?, key));
+        }
+        let (denoiser, _) = self.denoiser.as_ref().expect("recorded above");
+        let inputs: Vec<ItemInputs> = items
+            .iter()
+            .map(|item| ItemInputs {
+                seed: item.seed,
+                text: &self.texts[&item.prompt],
+                control_image: Some(&item.scene.control),
+                ip_tokens: item.style.map(|s| self.tokens[&s].as_slice()),
+            })
+            .collect();
+        self.times.guides += start.elapsed();
+        let out = denoiser.run(&inputs, &mut |step, steps| on_progress(Progress::Step { step, steps }))?;
+        self.times.guides += out.prepare;
+        self.times.denoise += out.steps.iter().sum::<Duration>();
+        let shape = denoiser.latent_shape();
+        let mut finished = Vec::with_capacity(items.len());
+        for (item, latents) in items.into_iter().zip(out.latents) {
+            let start = Instant::now();
+            let image = self.models.sdxl.decode(&latents, shape)?;
+            self.times.vae += start.elapsed();
+            finished.push(self.finish(item, image));
+        }
+        Ok(finished)
+    }
+
+    /// The image's PNG text (as `vkdiff gen` would write it for the same settings) and its COCO
+    /// entry.
+    fn finish(&self, item: Item, image: RgbImage) -> Finished {
+        let s = self.settings;
+        let index = item.scene.index;
+        let files = super::plan::ImageFiles::new(index, s.images());
+        let ip_images: Vec<PathBuf> = item.style.map(|k| s.ip_sets[k].clone()).unwrap_or_default();
+        let gen = GenSettings {
+            models: s.models.clone(),
+            job: TextToImage { prompt: s.prompts[item.prompt].clone(), negative_prompt: s.negative_prompt.clone(), seed: item.seed, sampling: s.sampling.clone() },
+            depth: s.models.controlnet.as_ref().map(|_| PathBuf::from(&files.depth)),
+            ip_images: ip_images.clone(),
+        };
+        let mut entry = json!({
+            "id": index + 1,
+            "file_name": files.image,
+            "width": image.width,
+            "height": image.height,
+            "seed": item.seed,
+            "prompt": gen.job.prompt,
+            "negative_prompt": s.negative_prompt,
+            "depth_file": files.depth,
+            "control_file": files.control,
+            "mask_file": files.mask,
+            "scene_seed": item.scene.scene_seed,
+            "crop": item.scene.window,
+            "camera": item.scene.camera,
+        });
+        entry["crop"]["index"] = json!(item.scene.crop);
+        if item.style.is_some() {
+            entry["ip_images"] = json!(ip_images.iter().map(|p| p.display().to_string()).collect::<Vec<_>>());
+        }
+        Finished { index, text: gen.png_text(), scene: item.scene, image, entry }
+    }
+}
+
+/// The writer thread: PNG encoding and every file write happen here, off the denoiser's path.
+fn start_writer(dataset: Dataset, batch: usize) -> (SyncSender<Finished>, JoinHandle<Result<Duration>>) {
+    let (send, receive) = sync_channel::<Finished>(2 * batch);
+    let thread = std::thread::spawn(move || {
+        let mut busy = Duration::ZERO;
+        for f in receive {
+            let start = Instant::now();
+            let files = dataset.files(f.index);
+            let png = png_bytes(&f.image, &f.text)?;
+            let image_id = f.index + 1;
+            let annotations = f
+                .scene
+                .annotations
+                .into_iter()
+                .map(|mut a| {
+                    let object = a.as_object_mut().expect("annotations are objects");
+                    let mask_id = object.remove("id").unwrap_or(Value::Null);
+                    object.insert("mask_id".into(), mask_id);
+                    object.insert("image_id".into(), json!(image_id));
+                    a
+                })
+                .collect();
+            let outputs: [(&str, &[u8]); 4] =
+                [(&files.depth, &f.scene.depth_exr), (&files.control, &f.scene.control_png), (&files.mask, &f.scene.mask_png), (&files.image, &png)];
+            dataset.write_image(f.index, &outputs, f.entry, annotations)?;
+            busy += start.elapsed();
+        }
+        Ok(busy)
+    });
+    (send, thread)
+}

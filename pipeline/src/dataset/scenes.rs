@@ -1,0 +1,105 @@
+//! Scenes rendered on the CPU while the GPU denoises: a thread renders the pending scenes in
+//! order and cuts each into its images (depth, control image, mask, annotations, files encoded),
+//! a few scenes ahead of the denoiser and no more.
+
+use super::settings::DatasetSettings;
+use crate::error::{Error, Result};
+use crate::text_to_image::RgbImage;
+use serde_json::{json, Value};
+use std::sync::mpsc::{sync_channel, Receiver};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+use vkdiff_render::coco::{annotation_values, instance_masks};
+use vkdiff_render::control::control_image;
+use vkdiff_render::crops::crop_frame;
+use vkdiff_render::exr::encode_single_channel;
+use vkdiff_render::png_out::{gray16, rgb8};
+use vkdiff_render::scene::Scene;
+
+/// One image's share of its scene, ready to be denoised and written.
+pub struct SceneImage {
+    pub index: u64,
+    pub scene_seed: u64,
+    /// The crop number, for images cut from a frame by `--crops`.
+    pub crop: Option<usize>,
+    /// Where the image lies in the frame, as the COCO image entry records it.
+    pub window: Value,
+    pub camera: Value,
+    /// The ControlNet's input: the depth as `vkdiff scene` writes control.png.
+    pub control: RgbImage,
+    pub depth_exr: Vec<u8>,
+    pub control_png: Vec<u8>,
+    pub mask_png: Vec<u8>,
+    /// COCO annotations, ids = the instance ids in the mask.
+    pub annotations: Vec<Value>,
+}
+
+/// The renderer thread: images arrive in the order of `scenes`; the thread's busy time is
+/// returned when it is joined.
+pub struct SceneStream {
+    pub images: Receiver<Result<SceneImage>>,
+    pub thread: JoinHandle<Duration>,
+}
+
+/// Starts rendering `scenes` (scene number, the indices of its images to make) on `threads`
+/// worker threads (0: one per core), at most `ahead` images ahead of the reader.
+pub fn render_scenes(settings: &DatasetSettings, scenes: Vec<(u64, Vec<u64>)>, threads: usize, ahead: usize) -> SceneStream {
+    let (send, images) = sync_channel(ahead.max(1));
+    let settings = settings.clone();
+    let thread = std::thread::spawn(move || {
+        let mut busy = Duration::ZERO;
+        let render = || {
+            for (scene, indices) in scenes {
+                let start = Instant::now();
+                let made = scene_images(&settings, scene, &indices);
+                busy += start.elapsed();
+                let items: Vec<Result<SceneImage>> = match made {
+                    Ok(images) => images.into_iter().map(Ok).collect(),
+                    Err(e) => vec![Err(e)],
+                };
+                for item in items {
+                    if send.send(item).is_err() {
+                        return;
+                    }
+                }
+            }
+        };
+        if let Err(e) = vkdiff_render::with_threads(threads, render) {
+            let _ = send.send(Err(Error::Config(format!("starting the scene threads: {e}"))));
+        }
+        busy
+    });
+    SceneStream { images, thread }
+}
+
+/// The images `indices` of scene number `scene`.
+fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Result<Vec<SceneImage>> {
+    let seed = settings.seed + scene;
+    let frame = Scene::build(seed, &settings.scene)?.render();
+    let windows = settings.windows(seed)?;
+    let per = settings.images_per_scene();
+    let cropped = settings.crops.count > 0;
+    Ok(indices
+        .iter()
+        .map(|&index| {
+            let k = (index % per) as usize;
+            let window = windows[k];
+            let part = crop_frame(&frame, window, settings.crops.min_fraction);
+            let (w, h) = (part.camera.width, part.camera.height);
+            let pixels = control_image(&part.depth, settings.control_depth);
+            let camera = part.camera.to_json();
+            SceneImage {
+                index,
+                scene_seed: seed,
+                crop: cropped.then_some(k),
+                window: json!({"offset_px": [window.x0, window.y0], "size_px": [window.width, window.height]}),
+                camera: json!({"K": camera["K"], "crop_offset_px": camera["crop_offset_px"], "T_world_camera_opencv": camera["T_world_camera_opencv"]["matrix"]}),
+                depth_exr: encode_single_channel(w, h, "Z", &part.depth),
+                control_png: rgb8(w, h, &pixels),
+                mask_png: gray16(w, h, &part.ids),
+                annotations: annotation_values(&part, &instance_masks(&part)),
+                control: RgbImage { width: w as usize, height: h as usize, pixels },
+            }
+        })
+        .collect())
+}

@@ -1,0 +1,194 @@
+//! A dataset's settings: the scenes (`vkdiff scene`'s flags), the images (`vkdiff gen`'s), and the
+//! per-image variety (prompts, style-image sets). They are recorded in `dataset.json` under the
+//! flag names, so a run with other settings into the same folder is refused naming the flag.
+
+use crate::error::{Error, Result};
+use crate::gen_settings::{control_depth_name, precision_name, ModelSettings, RNG};
+use crate::text_to_image::Sampling;
+use serde_json::{json, Map, Value};
+use std::path::PathBuf;
+use vkdiff_render::control::ControlDepth;
+use vkdiff_render::crops::{centered_window, validate_min_fraction, CropWindow};
+use vkdiff_render::scene::SceneConfig;
+
+/// How each scene's frame is cut into images.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Crops {
+    /// Square crops per scene; 0: one image per scene, the whole frame cut to the model's multiple.
+    pub count: usize,
+    pub size: u32,
+    /// An instance stays in a crop when this share of its visible pixels falls inside.
+    pub min_fraction: f64,
+}
+
+#[derive(Clone, Debug)]
+pub struct DatasetSettings {
+    /// Scene `k` has seed `seed + k`; image `i` has seed [`crate::dataset::image_seed`]`(seed, i)`.
+    pub seed: u64,
+    /// Scenes.
+    pub count: u64,
+    pub scene: SceneConfig,
+    pub crops: Crops,
+    pub control_depth: ControlDepth,
+    pub models: ModelSettings,
+    /// One is chosen per image from its seed.
+    pub prompts: Vec<String>,
+    pub negative_prompt: Option<String>,
+    /// Steps, guidance and sampler; the size is the images' (crop size, or the cut frame).
+    pub sampling: Sampling,
+    /// Style-image sets for the IP-Adapter; one is chosen per image from its seed.
+    pub ip_sets: Vec<Vec<PathBuf>>,
+}
+
+impl DatasetSettings {
+    /// Checks every setting and fixes the image size: crops of `crops.size`, or the frame cut to
+    /// sides that are multiples of `pixel_multiple` (the model's; see `Sdxl::pixel_multiple`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        seed: u64,
+        count: u64,
+        scene: SceneConfig,
+        crops: Crops,
+        control_depth: ControlDepth,
+        models: ModelSettings,
+        prompts: Vec<String>,
+        negative_prompt: Option<String>,
+        mut sampling: Sampling,
+        ip_sets: Vec<Vec<PathBuf>>,
+        pixel_multiple: usize,
+    ) -> Result<DatasetSettings> {
+        scene.validate()?;
+        validate_min_fraction(crops.min_fraction)?;
+        if count == 0 {
+            return Err(Error::Config("--count must be at least 1".into()));
+        }
+        if seed.checked_add(count).is_none() {
+            return Err(Error::Config(format!("--count {count} runs past the largest seed from --seed {seed}")));
+        }
+        if prompts.is_empty() || prompts.iter().any(|p| p.trim().is_empty()) {
+            return Err(Error::Config("--prompt (or --prompts FILE) must give at least one prompt, none of them empty".into()));
+        }
+        match (&models.ip_adapter, ip_sets.is_empty()) {
+            (Some(_), true) => return Err(Error::Config("--ip-adapter needs style images: --ip-image (one set) or --ip-set A,B (repeatable)".into())),
+            (None, false) => return Err(Error::Config("--ip-image/--ip-set need --ip-adapter".into())),
+            _ => {}
+        }
+        if ip_sets.iter().any(|set| set.is_empty()) {
+            return Err(Error::Config("--ip-set: a set names no image".into()));
+        }
+        models.check()?;
+        sampling.check()?;
+        let multiple = pixel_multiple as u32;
+        let (width, height) = if crops.count > 0 {
+            if crops.size == 0 || crops.size > scene.width.min(scene.height) {
+                return Err(Error::Config(format!("--crop-size {} must lie in [1, {}] to fit the {}×{} frame", crops.size, scene.width.min(scene.height), scene.width, scene.height)));
+            }
+            if !crops.size.is_multiple_of(multiple) {
+                return Err(Error::Config(format!("--crop-size {} must be a multiple of {multiple}, the sizes this model makes", crops.size)));
+            }
+            (crops.size, crops.size)
+        } else {
+            let w = centered_window(scene.width, scene.height, multiple)?;
+            (w.width, w.height)
+        };
+        sampling.width = width as usize;
+        sampling.height = height as usize;
+        Ok(DatasetSettings { seed, count, scene, crops, control_depth, models, prompts, negative_prompt, sampling, ip_sets })
+    }
+
+    /// Images per scene.
+    pub fn images_per_scene(&self) -> u64 {
+        self.crops.count.max(1) as u64
+    }
+
+    /// Images in the whole dataset.
+    pub fn images(&self) -> u64 {
+        self.count * self.images_per_scene()
+    }
+
+    /// The frame windows of scene `scene_seed`'s images, in crop order.
+    pub fn windows(&self, scene_seed: u64) -> Result<Vec<CropWindow>> {
+        if self.crops.count == 0 {
+            return Ok(vec![self.whole_frame_window()]);
+        }
+        Ok(vkdiff_render::crops::crop_windows(scene_seed, self.crops.count, self.crops.size, self.scene.width, self.scene.height)?)
+    }
+
+    /// The window of the image made from a whole frame: the frame cut to the image size, centred
+    /// as `centered_window` centres it.
+    fn whole_frame_window(&self) -> CropWindow {
+        let (w, h) = (self.sampling.width as u32, self.sampling.height as u32);
+        CropWindow { x0: (self.scene.width - w) / 2, y0: (self.scene.height - h) / 2, width: w, height: h }
+    }
+
+    /// Every setting that shapes the output, under its flag's name.
+    pub fn to_json(&self) -> Value {
+        let s = &self.sampling;
+        let m = &self.models;
+        let mut v = json!({
+            "seed": self.seed,
+            "count": self.count,
+            "width": self.scene.width,
+            "height": self.scene.height,
+            "density": self.scene.bed.density,
+            "clumping": self.scene.bed.clumping.clustered_fraction,
+            "crops": self.crops.count,
+            "crop-size": self.crops.size,
+            "crop-min-fraction": self.crops.min_fraction,
+            "control-depth": control_depth_name(self.control_depth),
+            "image-size": [s.width, s.height],
+            "model": m.model.display().to_string(),
+            "precision": precision_name(m.precision),
+            "prompt": self.prompts,
+            "negative-prompt": self.negative_prompt,
+            "steps": s.steps,
+            "cfg": s.guidance_scale,
+            "sampler": s.sampler.to_string(),
+            "scheduler": if s.karras { "karras" } else { "default" },
+            "rng": RNG,
+            "lora": m.loras.iter().map(|l| format!("{}:{}", l.path.display(), l.strength)).collect::<Vec<_>>(),
+        });
+        let map = v.as_object_mut().expect("an object");
+        if let Some(c) = &m.controlnet {
+            map.extend(object(json!({
+                "controlnet": c.model.display().to_string(),
+                "control-scale": c.scale,
+                "control-start": c.start,
+                "control-end": c.end,
+            })));
+        }
+        if let Some(ip) = &m.ip_adapter {
+            let sets: Vec<Vec<String>> = self.ip_sets.iter().map(|set| set.iter().map(|p| p.display().to_string()).collect()).collect();
+            map.extend(object(json!({
+                "ip-adapter": ip.adapter.display().to_string(),
+                "image-encoder": ip.encoder.display().to_string(),
+                "ip-scale": ip.scale,
+                "ip-set": sets,
+            })));
+        }
+        v
+    }
+}
+
+fn object(v: Value) -> Map<String, Value> {
+    match v {
+        Value::Object(map) => map,
+        _ => unreachable!("built from an object literal"),
+    }
+}
+
+/// The first setting in which `recorded` and `wanted` differ, as a one-line refusal.
+pub fn first_difference(recorded: &Value, wanted: &Value) -> Option<String> {
+    let (a, b) = (recorded.as_object()?, wanted.as_object()?);
+    let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    keys.into_iter().find(|k| a.get(*k) != b.get(*k)).map(|k| {
+        let show = |v: Option<&Value>| v.map_or("(not set)".to_string(), |v| v.to_string());
+        let flag = match k.as_str() {
+            "image-size" => "the image size (from --crop-size, or the frame and the model)".to_string(),
+            "ip-set" => "--ip-image/--ip-set".to_string(),
+            "prompt" => "--prompt/--prompts".to_string(),
+            other => format!("--{other}"),
+        };
+        format!("{flag} was {} there, {} now", show(a.get(k)), show(b.get(k)))
+    })
+}

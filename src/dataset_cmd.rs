@@ -1,0 +1,181 @@
+//! `vkdiff dataset`: scenes made into photoreal, exactly annotated training images; and
+//! `vkdiff dataset merge DIR`.
+
+use crate::model_args::{ModelArgs, SamplingArgs};
+use crate::progress::Progress;
+use crate::scene_cmd::SceneSettings;
+use anyhow::{Context as _, Result};
+use clap::{Args, Subcommand};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use vkdiff_pipeline::dataset::{generate, merge, Crops, Dataset, DatasetSettings, Progress as Event, Report, RunOptions, Shard};
+use vkdiff_pipeline::{read_images, Sdxl, WorkflowModels};
+use vkdiff_runtime::Context;
+
+/// Render scenes and make each into photoreal images with exact masks: one folder with the
+/// images, their depth, control images and instance masks, and COCO annotations. Resumable and
+/// shardable; `vkdiff dataset merge DIR` joins the shards' parts.
+#[derive(Args, Debug)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
+pub struct DatasetArgs {
+    #[command(subcommand)]
+    command: Option<DatasetCommand>,
+    /// Dataset folder; a folder made with the same settings is resumed.
+    #[arg(long, required = true)]
+    out: Option<PathBuf>,
+    /// Scenes (seeds --seed … --seed + count − 1); images = count × max(crops, 1).
+    #[arg(long, default_value_t = 1)]
+    count: u64,
+    #[command(flatten)]
+    scene: SceneSettings,
+    /// Square crops per scene, each one image; 0: one image per scene, the frame cut (centred)
+    /// to the largest size the model makes (sides a multiple of 32 for SDXL: 1920×1080 → 1920×1056).
+    #[arg(long, default_value_t = 0)]
+    crops: usize,
+    #[arg(long, default_value_t = 1024)]
+    crop_size: u32,
+    /// Drop an instance from an image when less than this share of its visible pixels falls inside.
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
+    crop_min_fraction: f64,
+    #[command(flatten)]
+    model: ModelArgs,
+    /// A prompt; repeat it for several, one chosen per image from its seed.
+    #[arg(long)]
+    prompt: Vec<String>,
+    /// A file of prompts, one a line (blank lines skipped), added to any --prompt.
+    #[arg(long)]
+    prompts: Option<PathBuf>,
+    #[command(flatten)]
+    sampling: SamplingArgs,
+    /// A style image for --ip-adapter; repeat it for one set of several.
+    #[arg(long, requires = "ip_adapter")]
+    ip_image: Vec<PathBuf>,
+    /// A set of style images, comma-separated; repeat it for several sets, one chosen per image
+    /// from its seed.
+    #[arg(long, requires = "ip_adapter")]
+    ip_set: Vec<String>,
+    /// Images per UNet pass (2 × batch rows with guidance); results do not depend on it.
+    #[arg(long, default_value_t = 1)]
+    batch: usize,
+    /// This process's part, I/N (0-based): the scenes whose number is I mod N. Without it, a
+    /// Slurm array task or a Kubernetes Indexed Job (with --shards) picks its part.
+    #[arg(long)]
+    shard: Option<String>,
+    /// Shards in a Kubernetes Indexed Job (its completions); the index is JOB_COMPLETION_INDEX.
+    #[arg(long)]
+    shards: Option<u64>,
+}
+
+#[derive(Subcommand, Debug)]
+enum DatasetCommand {
+    /// Join every image's annotations into DIR/annotations.json, once every shard is done.
+    Merge { dir: PathBuf },
+}
+
+pub fn run(args: &DatasetArgs) -> Result<()> {
+    if let Some(DatasetCommand::Merge { dir }) = &args.command {
+        let merged = merge(dir)?;
+        println!("wrote {}: {} images, {} annotations", dir.join("annotations.json").display(), merged.images, merged.annotations);
+        return Ok(());
+    }
+    let out = args.out.as_deref().context("--out DIR is required")?;
+    let settings = settings(args)?;
+    let (shard, source) = Shard::resolve(args.shard.as_deref(), args.shards, &|k| std::env::var(k).ok())?;
+    if args.batch == 0 {
+        anyhow::bail!("--batch must be at least 1");
+    }
+    let styles = settings.ip_sets.iter().map(|set| read_images(set)).collect::<vkdiff_pipeline::Result<Vec<_>>>()?;
+    let dataset = Dataset::open(out, &settings)?;
+    let pending = dataset.pending(shard)?;
+    for why in &pending.redo {
+        eprintln!("making again: {why}");
+    }
+    let todo = pending.images();
+    eprintln!(
+        "{}: {} images of {}×{} from {} scenes; shard {}/{} ({source}): {todo} to make, {} already done",
+        out.display(),
+        settings.images(),
+        settings.sampling.width,
+        settings.sampling.height,
+        settings.count,
+        shard.index,
+        shard.count,
+        pending.done
+    );
+    if todo > 0 {
+        let ctx = Context::new(args.model.device)?;
+        eprintln!("device: {}", ctx.info().name);
+        let start = Instant::now();
+        let models = WorkflowModels::load(&ctx, &settings.models, &mut |line| eprintln!("{line}"))?;
+        eprintln!("loaded in {:.1} s", start.elapsed().as_secs_f64());
+        let done = pending.done as usize;
+        let total = done + todo as usize;
+        let bar = Progress::resuming("images", "image", done);
+        let mut made = done;
+        let options = RunOptions { batch: args.batch, threads: args.scene.threads };
+        let start = Instant::now();
+        let report = generate(&dataset, &settings, &models, &styles, pending, &options, &mut |event| match event {
+            Event::Images { done, .. } => {
+                made = done as usize;
+                bar.show(made, total, "", true);
+            }
+            Event::Step { step, steps } => bar.show(made, total, &format!("  (step {step}/{steps})"), false),
+        })?;
+        eprintln!("{}", closing_line(&report, start.elapsed(), ctx.peak_bytes()));
+    }
+    if shard.count == 1 {
+        let merged = merge(out)?;
+        println!("wrote {}: {} images, {} annotations", out.join("annotations.json").display(), merged.images, merged.annotations);
+    } else {
+        println!("shard {}/{} done; once every shard is: vkdiff dataset merge {}", shard.index, shard.count, out.display());
+    }
+    Ok(())
+}
+
+fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
+    let mut prompts = args.prompt.clone();
+    if let Some(file) = &args.prompts {
+        let text = std::fs::read_to_string(file).with_context(|| format!("--prompts {}", file.display()))?;
+        prompts.extend(text.lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from));
+    }
+    let mut ip_sets = Vec::new();
+    if !args.ip_image.is_empty() {
+        ip_sets.push(args.ip_image.clone());
+    }
+    ip_sets.extend(args.ip_set.iter().map(|set| set.split(',').map(str::trim).filter(|p| !p.is_empty()).map(PathBuf::from).collect()));
+    let models = args.model.settings();
+    let multiple = Sdxl::probe_pixel_multiple(&models.model).with_context(|| format!("--model {}", models.model.display()))?;
+    let crops = Crops { count: args.crops, size: args.crop_size, min_fraction: args.crop_min_fraction };
+    Ok(DatasetSettings::new(
+        args.scene.seed,
+        args.count,
+        args.scene.config(),
+        crops,
+        args.model.control_depth(),
+        models,
+        prompts,
+        args.sampling.negative_prompt.clone(),
+        args.sampling.sampling(0, 0),
+        ip_sets,
+        multiple,
+    )?)
+}
+
+/// Per-stage seconds and peak device memory.
+fn closing_line(report: &Report, elapsed: Duration, peak: u64) -> String {
+    let t = &report.times;
+    let s = |d: Duration| format!("{:.1} s", d.as_secs_f64());
+    format!(
+        "made {} images in {} ({:.2} s/image): scene {} (on its own threads), guides {}, denoise {}, VAE {}, write {} (on its own thread), waited for scenes {}; peak device memory {} MiB",
+        report.made,
+        s(elapsed),
+        elapsed.as_secs_f64() / report.made.max(1) as f64,
+        s(t.scene),
+        s(t.guides),
+        s(t.denoise),
+        s(t.vae),
+        s(t.write),
+        s(t.waiting),
+        peak >> 20
+    )
+}
