@@ -123,11 +123,21 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         })?;
         eprintln!("{}", closing_line(&report, start.elapsed(), ctx.peak_bytes()));
     }
-    if shard.count == 1 {
+    // The process that finds every image done merges: the whole run, or the last shard to finish
+    // (shards finishing together write the same bytes, each file renamed into place whole).
+    let recorded = Dataset::read(out)?.recorded();
+    if recorded == settings.images() {
         let merged = merge(out)?;
         println!("wrote {}: {} images, {} annotations", out.join("annotations.json").display(), merged.images, merged.annotations);
     } else {
-        println!("shard {}/{} done; once every shard is: vkdiff dataset merge {}", shard.index, shard.count, out.display());
+        println!(
+            "shard {}/{} done; {} of {} images are made. Once every shard is: vkdiff dataset merge {}",
+            shard.index,
+            shard.count,
+            recorded,
+            settings.images(),
+            out.display()
+        );
     }
     Ok(())
 }

@@ -35,8 +35,8 @@ enum Schedule {
 #[derive(Args, Debug)]
 pub struct ModelArgs {
     /// SDXL model: a diffusers folder or an original single-file checkpoint.
-    #[arg(long)]
-    model: PathBuf,
+    #[arg(long, required = true)]
+    model: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = Precision::F16)]
     precision: Precision,
     /// Vulkan device index (see `vkdiff devices`).
@@ -104,7 +104,9 @@ impl ModelArgs {
             (Some(adapter), Some(encoder)) => Some(IpAdapterSettings { adapter: adapter.clone(), encoder: encoder.clone(), scale: self.ip_scale }),
             _ => None,
         };
-        ModelSettings { model: self.model.clone(), precision: self.precision.dtype(), controlnet, ip_adapter, loras: self.lora.clone() }
+        // Required by the parser wherever these flags are read (not for `dataset merge`).
+        let model = self.model.clone().unwrap_or_default();
+        ModelSettings { model, precision: self.precision.dtype(), controlnet, ip_adapter, loras: self.lora.clone() }
     }
 }
 

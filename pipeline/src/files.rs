@@ -1,6 +1,6 @@
 //! Output files that appear whole or not at all: written under a hidden temporary name beside
 //! their place, flushed to the disk, then renamed. A crash, a kill or a power cut leaves the old
-//! file or the new one, never a part, and at worst a hidden `.NAME.partial-PID` that a later run
+//! file or the new one, never a part, and at worst a hidden `.NAME.partial-…` that a later run
 //! removes.
 
 use crate::error::{Error, Result};
@@ -9,13 +9,18 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-/// The temporary name `path` is written under by this process.
+/// A temporary name for `path`, unique to this write: processes on several machines may write
+/// the same shared file (the manifest, the merged annotations) at once.
 pub fn partial_path(path: &Path) -> PathBuf {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    path.with_file_name(format!(".{name}{PARTIAL}{}", std::process::id()))
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    let n = WRITES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    path.with_file_name(format!(".{name}{PARTIAL}{}-{nanos:x}-{n}", std::process::id()))
 }
 
-/// What marks a temporary file: `.NAME.partial-PID`.
+static WRITES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// What marks a temporary file: `.NAME.partial-…`.
 pub const PARTIAL: &str = ".partial-";
 
 /// Writes `bytes` to `path` atomically and durably; on failure nothing is left behind.

@@ -120,6 +120,11 @@ impl Dataset {
         ImageFiles::new(index, self.images)
     }
 
+    /// Images whose record is there (whether whole is for [`crate::dataset::merge`] to check).
+    pub fn recorded(&self) -> u64 {
+        (0..self.images).filter(|&i| self.dir.join(self.files(i).record).is_file()).count() as u64
+    }
+
     /// Image `index`'s record if the image is whole; else why not (`None` when there is no record).
     pub fn finished(&self, index: u64) -> std::result::Result<ImageRecord, Option<String>> {
         let files = self.files(index);
