@@ -335,3 +335,56 @@ fn bad_dataset_arguments_print_one_error_line_and_write_nothing() {
     let result = vkdiff(&["dataset", "merge", dir.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&result.stderr).contains("not a vkdiff dataset folder"));
 }
+
+/// The test set's flags as an arguments file, as the deploy scripts read them.
+fn args_file(dir: &Path) -> PathBuf {
+    let flags = dataset_flags(Path::new("unused"));
+    let path = dir.join("dataset.args");
+    std::fs::write(&path, format!("# the test set\n\n{}\n", flags[3..].join("\n"))).unwrap();
+    path
+}
+
+/// `script` run by `shell` with the deploy scripts' variables and `env`.
+fn deploy(shell: &str, script: &[&str], dir: &Path, args: &Path, env: &[(&str, &str)]) -> std::process::Child {
+    let mut command = Command::new(shell);
+    command.args(script).current_dir(env!("CARGO_MANIFEST_DIR"));
+    for var in ["SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_MIN", "SLURM_ARRAY_TASK_COUNT", "SLURM_ARRAY_TASK_STEP", "JOB_COMPLETION_INDEX"] {
+        command.env_remove(var);
+    }
+    command.envs([("VKDIFF", env!("CARGO_BIN_EXE_vkdiff")), ("DATASET_DIR", dir.to_str().unwrap()), ("DATASET_ARGS", args.to_str().unwrap())]);
+    command.envs(env.iter().copied()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap()
+}
+
+fn wait_ok(child: std::process::Child) {
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+}
+
+#[test]
+fn the_slurm_array_and_its_merge_make_the_one_run() {
+    let root = scratch("dataset-slurm");
+    let (dir, args) = (root.join("set"), args_file(&root));
+    for task in ["3", "4"] {
+        let env = [("SLURM_ARRAY_TASK_ID", task), ("SLURM_ARRAY_TASK_MIN", "3"), ("SLURM_ARRAY_TASK_COUNT", "2")];
+        wait_ok(deploy("bash", &["deploy/slurm/dataset.sbatch"], &dir, &args, &env));
+    }
+    std::fs::remove_file(dir.join("annotations.json")).unwrap(); // the last task merged; so must the merge job
+    wait_ok(deploy("bash", &["deploy/slurm/merge.sbatch"], &dir, &args, &[]));
+    assert_same_folder(&dir, reference());
+}
+
+#[test]
+fn the_kubernetes_indexed_job_makes_the_one_run() {
+    let root = scratch("dataset-k8s");
+    let (dir, args) = (root.join("set"), args_file(&root));
+    // The pod's shell script, as the Job's container runs it.
+    let yaml = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/kubernetes/dataset-job.yaml")).unwrap();
+    let lines: Vec<&str> = yaml.lines().collect();
+    let start = lines.iter().position(|l| l.trim() == "- |").expect("the Job runs a script") + 1;
+    let indent = lines[start].len() - lines[start].trim_start().len();
+    let script: Vec<&str> = lines[start..].iter().take_while(|l| l.len() - l.trim_start().len() >= indent).map(|l| &l[indent..]).collect();
+    let script = script.join("\n");
+    let pods: Vec<_> = ["0", "1"].iter().map(|&index| deploy("sh", &["-c", &script], &dir, &args, &[("JOB_COMPLETION_INDEX", index), ("SHARDS", "2")])).collect();
+    pods.into_iter().for_each(wait_ok);
+    assert_same_folder(&dir, reference());
+}
