@@ -3,7 +3,7 @@
 
 use crate::model_args::{ModelArgs, SamplingArgs};
 use crate::progress::Progress;
-use crate::scene_cmd::SceneSettings;
+use crate::scene_cmd::{CropArgs, SceneSettings};
 use anyhow::{Context as _, Result};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
@@ -28,15 +28,8 @@ pub struct DatasetArgs {
     count: u64,
     #[command(flatten)]
     scene: SceneSettings,
-    /// Square crops per scene, each one image; 0: one image per scene, the frame cut (centred)
-    /// to the largest size the model makes (sides a multiple of 32 for SDXL: 1920×1080 → 1920×1056).
-    #[arg(long, default_value_t = 0)]
-    crops: usize,
-    #[arg(long, default_value_t = 1024)]
-    crop_size: u32,
-    /// Drop an instance from an image when less than this share of its visible pixels falls inside.
-    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
-    crop_min_fraction: f64,
+    #[command(flatten)]
+    crops: CropArgs,
     #[command(flatten)]
     model: ModelArgs,
     /// A prompt; repeat it for several, one chosen per image from its seed.
@@ -155,7 +148,7 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
     ip_sets.extend(args.ip_set.iter().map(|set| set.split(',').map(str::trim).filter(|p| !p.is_empty()).map(PathBuf::from).collect()));
     let models = args.model.settings();
     let multiple = Sdxl::probe_pixel_multiple(&models.model).with_context(|| format!("--model {}", models.model.display()))?;
-    let crops = Crops { count: args.crops, size: args.crop_size, min_fraction: args.crop_min_fraction };
+    let crops = Crops { count: args.crops.crops, size: args.crops.crop_size, min_fraction: args.crops.crop_min_fraction };
     Ok(DatasetSettings::new(
         args.scene.seed,
         args.count,
@@ -176,11 +169,12 @@ fn closing_line(report: &Report, elapsed: Duration, peak: u64) -> String {
     let t = &report.times;
     let s = |d: Duration| format!("{:.1} s", d.as_secs_f64());
     format!(
-        "made {} images in {} ({:.2} s/image): scene {} (on its own threads), guides {}, denoise {}, VAE {}, write {} (on its own thread), waited for scenes {}; peak device memory {} MiB",
+        "made {} images in {} ({:.2} s/image): scene {} (on its own threads), prompts/styles/recording {}, guides {}, denoise {}, VAE {}, write {} (on its own thread), waited for scenes {}; peak device memory {} MiB",
         report.made,
         s(elapsed),
         elapsed.as_secs_f64() / report.made.max(1) as f64,
         s(t.scene),
+        s(t.setup),
         s(t.guides),
         s(t.denoise),
         s(t.vae),

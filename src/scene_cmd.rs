@@ -14,7 +14,8 @@ use vkdiff_render::with_threads;
 /// Settings shared by `scene` and `bench scene`.
 #[derive(Args, Debug)]
 pub struct SceneSettings {
-    /// Seed of the (first) scene; the same seed and settings give byte-identical files.
+    /// Seed of the (first) scene (`dataset`: also of every image's seed); the same seed and settings
+    /// give byte-identical files.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     #[arg(long, default_value_t = 1920)]
@@ -38,6 +39,21 @@ impl SceneSettings {
         bed.clumping.clustered_fraction = self.clumping;
         SceneConfig { width: self.width, height: self.height, bed, ..SceneConfig::default() }
     }
+}
+
+/// How each frame is cut into square crops; shared by `scene` and `dataset`.
+#[derive(Args, Debug)]
+pub struct CropArgs {
+    /// Square crops per scene (`scene`: under DIR/crops/<k>/; `dataset`: one image each, and 0
+    /// makes one image of the whole frame, cut centred to the sides the model makes, e.g.
+    /// 1920×1080 → 1920×1056 for SDXL's multiples of 32).
+    #[arg(long, default_value_t = 0)]
+    pub crops: usize,
+    #[arg(long, default_value_t = 1024)]
+    pub crop_size: u32,
+    /// Drop an instance from a crop when less than this share of its visible pixels falls inside.
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
+    pub crop_min_fraction: f64,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -70,14 +86,8 @@ pub struct SceneArgs {
     /// already there are complete (they appear atomically) and are skipped.
     #[arg(long, default_value_t = 1)]
     count: u64,
-    /// Square crops per scene, under DIR/crops/<k>/.
-    #[arg(long, default_value_t = 0)]
-    crops: usize,
-    #[arg(long, default_value_t = 1024)]
-    crop_size: u32,
-    /// Drop an instance from a crop when less than this share of its visible pixels falls inside.
-    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
-    crop_min_fraction: f64,
+    #[command(flatten)]
+    crops: CropArgs,
     /// How control.png maps depth to brightness.
     #[arg(long, value_enum, default_value_t = ControlMode::Inverse)]
     control_depth: ControlMode,
@@ -89,9 +99,9 @@ pub struct SceneArgs {
 pub fn run_scene(args: SceneArgs) -> anyhow::Result<()> {
     let config = args.settings.config();
     let options = OutputOptions {
-        crops: args.crops,
-        crop_size: args.crop_size,
-        crop_min_fraction: args.crop_min_fraction,
+        crops: args.crops.crops,
+        crop_size: args.crops.crop_size,
+        crop_min_fraction: args.crops.crop_min_fraction,
         control: args.control_depth.into(),
         replace: args.force,
     };

@@ -59,3 +59,28 @@ pub fn png_bytes(image: &RgbImage, text: &BTreeMap<String, String>) -> Result<Ve
     w.finish().map_err(failed)?;
     Ok(bytes)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_write_appears_whole_and_a_failed_one_leaves_nothing() {
+        let dir = std::env::temp_dir().join(format!("vkdiff-files-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("a.json");
+        write_atomic(&path, b"one").unwrap();
+        write_atomic(&path, b"two").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"two");
+        let failed = write_atomic_with(&path, &mut |w| {
+            w.write_all(b"half")?;
+            Err(std::io::Error::other("disk full"))
+        });
+        assert!(failed.unwrap_err().to_string().contains("disk full"));
+        assert_eq!(std::fs::read(&path).unwrap(), b"two", "the old file stays");
+        let names: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, vec![std::ffi::OsString::from("a.json")], "no temporary file left");
+        assert_ne!(partial_path(&path), partial_path(&path), "every write has its own temporary name");
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+}

@@ -1,6 +1,7 @@
 //! `vkdiff bench …`: speed figures, with the device named and a reference measured in the same run.
 
 mod cpu_reference;
+mod dataset;
 mod gen;
 mod kernels;
 mod lora;
@@ -27,6 +28,9 @@ pub enum BenchCommand {
     /// Seconds per step of the paper's workflow (SDXL + depth ControlNet + IP-Adapter + two
     /// merged LoRAs, random full-size weights) against a plain step measured in the same run.
     Workflow(workflow::WorkflowArgs),
+    /// Seconds per image of `vkdiff dataset` with the paper's workflow (random full-size
+    /// weights) by stage, against one `vkdiff gen` per image measured in the same run.
+    Dataset(dataset::DatasetArgs),
 }
 
 pub fn run(cmd: BenchCommand) -> Result<()> {
@@ -37,5 +41,6 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Gen(args) => gen::run(&args),
         BenchCommand::Lora(args) => lora::run(&args),
         BenchCommand::Workflow(args) => workflow::run(&args),
+        BenchCommand::Dataset(args) => dataset::run(&args),
     }
 }

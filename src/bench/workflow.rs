@@ -8,7 +8,7 @@ use std::time::Instant;
 use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::images::ClipPreprocess;
 use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, RgbImage, Sdxl};
-use vkdiff_runtime::Context;
+use vkdiff_runtime::{Context, Dtype};
 use vkdiff_unet::{Checkpoint, ClipVisionConfig, ClipVisionModelWithProjection, ControlNetConfig, ControlNetModel, IpAdapter, SDXL_CONTROLNET_CONFIG};
 
 /// h94's `models/image_encoder` (OpenCLIP ViT-H/14 vision tower, 632 M parameters), the encoder of
@@ -37,15 +37,10 @@ pub fn run(args: &WorkflowArgs) -> Result<()> {
     let ctx = Context::new(args.device)?;
     let start = Instant::now();
     let mut model = Sdxl::random_sdxl_base(&ctx, dtype)?;
-    let control_config = ControlNetConfig::from_json(SDXL_CONTROLNET_CONFIG, "built-in ControlNet config")?;
-    let controlnet = ControlNetModel::build(control_config, &Checkpoint::random(&ctx, dtype, 6), model.unet_config())?;
-    let vision_config: ClipVisionConfig = serde_json::from_str(VIT_H_CONFIG)?;
-    let encoder = ClipVisionModelWithProjection::load(&ctx, vision_config, &Checkpoint::random(&ctx, dtype, 7))?;
-    let adapter = IpAdapter::random_plain(&ctx, model.unet(), encoder.config().projection_dim, 4, dtype)?;
+    let RandomGuides { controlnet, encoder, adapter, loras } = RandomGuides::build(&ctx, &model, dtype, args.lora_rank)?;
     let load_s = start.elapsed().as_secs_f64();
-    let loras = [(random_lora(&model, args.lora_rank, 1)?, 0.8), (random_lora(&model, args.lora_rank, 2)?, 0.6)];
     let preprocess = ClipPreprocess::square(encoder.config().image_size);
-    let styles = [gradient(300, 200, 1), gradient(180, 260, 2)];
+    let styles = style_images();
     for &size in &args.size {
         let job = super::gen::bench_job(size, args.steps);
         model.set_loras(&[])?;
@@ -75,6 +70,32 @@ pub fn run(args: &WorkflowArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The paper's guides with full-size architectures and random weights: a depth ControlNet, a
+/// ViT-H image encoder with a plain SDXL IP-Adapter, and two rank-r LoRAs (strengths 0.8, 0.6).
+pub(super) struct RandomGuides {
+    pub controlnet: ControlNetModel,
+    pub encoder: ClipVisionModelWithProjection,
+    pub adapter: IpAdapter,
+    pub loras: [(LoraFile, f32); 2],
+}
+
+impl RandomGuides {
+    pub fn build(ctx: &Context, model: &Sdxl, dtype: Dtype, lora_rank: usize) -> Result<RandomGuides> {
+        let control_config = ControlNetConfig::from_json(SDXL_CONTROLNET_CONFIG, "built-in ControlNet config")?;
+        let controlnet = ControlNetModel::build(control_config, &Checkpoint::random(ctx, dtype, 6), model.unet_config())?;
+        let vision_config: ClipVisionConfig = serde_json::from_str(VIT_H_CONFIG)?;
+        let encoder = ClipVisionModelWithProjection::load(ctx, vision_config, &Checkpoint::random(ctx, dtype, 7))?;
+        let adapter = IpAdapter::random_plain(ctx, model.unet(), encoder.config().projection_dim, 4, dtype)?;
+        let loras = [(random_lora(model, lora_rank, 1)?, 0.8), (random_lora(model, lora_rank, 2)?, 0.6)];
+        Ok(RandomGuides { controlnet, encoder, adapter, loras })
+    }
+}
+
+/// Two style images of other sizes than the encoder's.
+pub(super) fn style_images() -> [RgbImage; 2] {
+    [gradient(300, 200, 1), gradient(180, 260, 2)]
 }
 
 fn mean_step(steps: &[std::time::Duration]) -> f64 {

@@ -58,7 +58,7 @@ pub fn merge(dir: &Path) -> Result<Merged> {
     // Streamed: a large set's annotations need not fit in memory at once.
     write_atomic_with(&dir.join(ANNOTATIONS), &mut |w| {
         let head = serde_json::to_string(&head)?;
-        w.write_all(head[..head.len() - 1].as_bytes())?;
+        w.write_all(&head.as_bytes()[..head.len() - 1])?;
         w.write_all(b",\"images\":")?;
         serde_json::to_writer(&mut *w, &images)?;
         w.write_all(b",\"annotations\":[")?;

@@ -14,9 +14,9 @@ use crate::prompt_encoding::Conditioning;
 use crate::text_to_image::{RgbImage, TextToImage};
 use crate::workflow_models::WorkflowModels;
 use serde_json::{json, Value};
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::path::PathBuf;
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -40,6 +40,9 @@ pub enum Progress {
 #[derive(Clone, Debug, Default)]
 pub struct StageTimes {
     pub scene: Duration,
+    /// Once per prompt, style set and batch shape: encoding them, recording the passes.
+    pub setup: Duration,
+    /// Per batch: the ControlNet's images encoded, the inputs written.
     pub guides: Duration,
     pub denoise: Duration,
     pub vae: Duration,
@@ -60,6 +63,9 @@ struct Finished {
     text: std::collections::BTreeMap<String, String>,
     entry: Value,
 }
+
+/// How many batches' worth of rendered images a batch may be chosen from.
+const LOOKAHEAD: usize = 4;
 
 /// One image on its way through the denoiser.
 struct Item {
@@ -118,24 +124,27 @@ struct Loop<'a> {
 impl<'a> Loop<'a> {
     fn all(&mut self, images: &Receiver<Result<SceneImage>>, to_writer: &SyncSender<Finished>, mut done: u64, total: u64, batch: usize, on_progress: &mut dyn FnMut(Progress)) -> Result<u64> {
         let mut made = 0;
-        let mut next: Option<Item> = None;
+        let mut queue: VecDeque<Item> = VecDeque::new();
+        let mut open = true;
         loop {
-            let mut items: Vec<Item> = next.take().into_iter().collect();
-            while items.len() < batch {
+            // Wait for a batch's worth; look further ahead only at what is already rendered.
+            while open && queue.len() < batch {
                 let start = Instant::now();
-                let Ok(scene) = images.recv() else { break };
-                self.times.waiting += start.elapsed();
-                let item = self.item(scene?);
-                // A batch shares one recorded pass, so its images have as many style images each.
-                if items.first().is_some_and(|first| self.style_images(first) != self.style_images(&item)) {
-                    next = Some(item);
-                    break;
+                match images.recv() {
+                    Ok(scene) => queue.push_back(self.item(scene?)),
+                    Err(_) => open = false,
                 }
-                items.push(item);
+                self.times.waiting += start.elapsed();
             }
-            if items.is_empty() {
-                return Ok(made);
+            while open && queue.len() < LOOKAHEAD * batch {
+                match images.try_recv() {
+                    Ok(scene) => queue.push_back(self.item(scene?)),
+                    Err(TryRecvError::Empty) => break,
+                    Err(TryRecvError::Disconnected) => open = false,
+                }
             }
+            let Some(fallback) = queue.front().map(|first| self.style_images(first)) else { return Ok(made) };
+            let items = self.take_batch(&mut queue, fallback, batch);
             for finished in self.batch(items, on_progress)? {
                 to_writer.send(finished).map_err(|_| Error::Config("the writer stopped".into()))?;
                 made += 1;
@@ -143,6 +152,24 @@ impl<'a> Loop<'a> {
                 on_progress(Progress::Images { done, total });
             }
         }
+    }
+
+    /// Up to `batch` images of the queue for one pass. A pass takes images with the same number
+    /// of style images; the number the denoiser is recorded for is preferred (else `fallback`),
+    /// so sets of different sizes do not make it record again at every batch.
+    fn take_batch(&self, queue: &mut VecDeque<Item>, fallback: usize, batch: usize) -> Vec<Item> {
+        let recorded = self.denoiser.as_ref().map(|(_, (_, styles))| *styles).filter(|&n| queue.iter().any(|i| self.style_images(i) == n));
+        let want = recorded.unwrap_or(fallback);
+        let (mut items, mut rest) = (Vec::with_capacity(batch), VecDeque::with_capacity(queue.len()));
+        for item in queue.drain(..) {
+            if items.len() < batch && self.style_images(&item) == want {
+                items.push(item);
+            } else {
+                rest.push_back(item);
+            }
+        }
+        *queue = rest;
+        items
     }
 
     fn item(&self, scene: SceneImage) -> Item {
@@ -186,7 +213,7 @@ impl<'a> Loop<'a> {
                 ip_tokens: item.style.map(|s| self.tokens[&s].as_slice()),
             })
             .collect();
-        self.times.guides += start.elapsed();
+        self.times.setup += start.elapsed();
         let out = denoiser.run(&inputs, &mut |step, steps| on_progress(Progress::Step { step, steps }))?;
         self.times.guides += out.prepare;
         self.times.denoise += out.steps.iter().sum::<Duration>();

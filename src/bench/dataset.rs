@@ -1,0 +1,156 @@
+//! `vkdiff bench dataset`: the dataset loop with the paper's workflow (SDXL base + depth
+//! ControlNet + IP-Adapter over two style images + two merged LoRAs, full-size architectures,
+//! random weights) on a few scenes, seconds per image by stage. Beside it, in the same run, what
+//! one `vkdiff gen` per image pays: the load and LoRA merge, and a single image with its guides
+//! prepared and its passes recorded on its own.
+
+use super::workflow::{style_images, RandomGuides};
+use anyhow::Result;
+use std::time::{Duration, Instant};
+use vkdiff_pipeline::dataset::{generate, Crops, Dataset, DatasetSettings, RunOptions, Shard};
+use vkdiff_pipeline::images::{ClipPreprocess, ControlDepth};
+use vkdiff_lora::LoraFile;
+use vkdiff_pipeline::{ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, Sampling, SamplerKind, Sdxl, StyleModels, TextToImage, WorkflowModels};
+use vkdiff_render::scene::SceneConfig;
+use vkdiff_runtime::Context;
+
+#[derive(clap::Args)]
+pub struct DatasetArgs {
+    /// Vulkan device index (see `vkdiff devices`).
+    #[arg(long)]
+    device: Option<usize>,
+    /// Image side (square crops of a frame 1920×1080 scaled by size/1024, three per scene).
+    #[arg(long, default_value_t = 512)]
+    size: usize,
+    #[arg(long, default_value_t = 1)]
+    scenes: u64,
+    #[arg(long, default_value_t = 2)]
+    steps: usize,
+    #[arg(long, default_value_t = 1)]
+    batch: usize,
+    #[arg(long, default_value_t = 32)]
+    lora_rank: usize,
+    #[arg(long, value_enum, default_value_t = crate::model_args::Precision::F16)]
+    precision: crate::model_args::Precision,
+    /// Steps per image in production, for the share of time that is not denoising.
+    #[arg(long, default_value_t = 30)]
+    production_steps: usize,
+}
+
+pub fn run(args: &DatasetArgs) -> Result<()> {
+    anyhow::ensure!(args.size.is_multiple_of(32) && args.size >= 64, "--size {} must be a multiple of 32, at least 64", args.size);
+    let dtype = args.precision.dtype();
+    let ctx = Context::new(args.device)?;
+    let start = Instant::now();
+    let sdxl = Sdxl::random_sdxl_base(&ctx, dtype)?;
+    let RandomGuides { controlnet, encoder, adapter, loras } = RandomGuides::build(&ctx, &sdxl, dtype, args.lora_rank)?;
+    let load = start.elapsed();
+    let settings = model_settings(dtype, &loras);
+    let preprocess = ClipPreprocess::square(encoder.config().image_size);
+    let mut models = WorkflowModels { sdxl, controlnet: Some(controlnet), style: Some(StyleModels { adapter, encoder, preprocess }), settings };
+    let refs: Vec<(&LoraFile, f32)> = loras.iter().map(|(f, s)| (f, *s)).collect();
+    let merge = models.sdxl.set_loras(&refs)?.map_or(Duration::ZERO, |s| Duration::from_secs_f64(s.seconds));
+    let load_once = load + merge;
+    eprintln!("models built in {:.1} s, LoRAs merged in {:.1} s", load.as_secs_f64(), merge.as_secs_f64());
+
+    let dataset = dataset_settings(args, &models.settings);
+    let dir = std::env::temp_dir().join(format!("vkdiff-bench-dataset-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let folder = Dataset::open(&dir, &dataset)?;
+    let pending = folder.pending(Shard::ALL)?;
+    let styles = vec![style_images().to_vec()];
+    let images = pending.images();
+    let start = Instant::now();
+    let report = generate(&folder, &dataset, &models, &styles, pending, &RunOptions { batch: args.batch, threads: 0 }, &mut |event| {
+        if let vkdiff_pipeline::dataset::Progress::Images { done, total } = event {
+            eprintln!("{done}/{total} images");
+        }
+    })?;
+    let wall = start.elapsed();
+    std::fs::remove_dir_all(&dir)?;
+
+    // One image as `vkdiff gen` makes it: its own text encoding, guides and recording.
+    let inputs = GuideInputs { control: Some(gradient_depth(args.size)), style: style_images().to_vec() };
+    let job = TextToImage { prompt: dataset.prompts[0].clone(), negative_prompt: None, seed: 0, sampling: dataset.sampling.clone() };
+    let start = Instant::now();
+    let single = models.sdxl.text_to_image(&job, &models.guides(&inputs), &mut |done, total| eprintln!("single image: step {done}/{total}"))?;
+    let single_wall = start.elapsed();
+
+    let per = |d: Duration| d.as_secs_f64() / images.max(1) as f64;
+    let t = &report.times;
+    let step = per(t.denoise) / args.steps as f64;
+    // Steady state: what each further image costs besides its steps (the setup is paid once per
+    // prompt, style set and batch shape, however many images follow).
+    let overhead = per(wall - t.setup - t.denoise);
+    let at = args.production_steps as f64;
+    let single_steps: f64 = single.timings.steps.iter().map(Duration::as_secs_f64).sum();
+    let gen_image = load_once.as_secs_f64() + single_wall.as_secs_f64() - single_steps + at * step;
+    let dataset_image = overhead + at * step;
+    println!(
+        "{} | dataset, SDXL + depth ControlNet + IP-Adapter (ViT-H, 2 images) + 2 rank-{} LoRAs, {}² crops, {} images, {} steps, batch {}, {}: once {:.1} s (prompt, styles, recording); per image {:.1} s = guides {:.2} + denoise {:.1} ({:.1} s/step) + VAE {:.2} + rest {:.2}; beside it per image: scene {:.2}, write {:.2}, waited {:.2} | at {} steps: {:.2} s/image not denoising = {:.2} % | one gen per image at {} steps: load + LoRA merge {:.1} s + {:.1} s not denoising + steps = {:.0} s/image, the dataset {:.0} s/image ({:.2}× faster, {:.0} s saved per image) | peak {} MiB",
+        ctx.info().name,
+        args.lora_rank,
+        args.size,
+        images,
+        args.steps,
+        args.batch,
+        super::kernels::dtype_name(dtype),
+        t.setup.as_secs_f64(),
+        per(wall - t.setup),
+        per(t.guides),
+        per(t.denoise),
+        step,
+        per(t.vae),
+        per(wall - t.setup - t.guides - t.denoise - t.vae),
+        per(t.scene),
+        per(t.write),
+        per(t.waiting),
+        args.production_steps,
+        overhead,
+        100.0 * overhead / dataset_image,
+        args.production_steps,
+        load_once.as_secs_f64(),
+        single_wall.as_secs_f64() - single_steps,
+        gen_image,
+        dataset_image,
+        gen_image / dataset_image,
+        gen_image - dataset_image,
+        ctx.peak_bytes() >> 20,
+    );
+    Ok(())
+}
+
+/// The paths only name the random models in the images' metadata.
+fn model_settings(precision: vkdiff_runtime::Dtype, loras: &[(LoraFile, f32); 2]) -> ModelSettings {
+    ModelSettings {
+        model: "random-sdxl-base".into(),
+        precision,
+        controlnet: Some(ControlNetSettings { model: "random-controlnet-depth".into(), depth_mode: ControlDepth::Inverse, scale: 0.5, start: 0.0, end: 1.0 }),
+        ip_adapter: Some(IpAdapterSettings { adapter: "random-ip-adapter".into(), encoder: "random-vit-h".into(), scale: 0.6 }),
+        loras: loras.iter().enumerate().map(|(k, (_, s))| LoraSetting { path: format!("random-lora-{k}").into(), strength: *s }).collect(),
+    }
+}
+
+/// The paper's set in small: frames of 1920×1080 scaled by size/1024, three crops each.
+fn dataset_settings(args: &DatasetArgs, models: &ModelSettings) -> DatasetSettings {
+    let scale = |v: usize| (v * args.size / 1024) as u32;
+    let sampling = Sampling { steps: args.steps, guidance_scale: 5.0, sampler: SamplerKind::Euler, karras: false, width: args.size, height: args.size };
+    DatasetSettings {
+        seed: 0,
+        count: args.scenes,
+        scene: SceneConfig { width: scale(1920), height: scale(1080), ..SceneConfig::default() },
+        crops: Crops { count: 3, size: args.size as u32, min_fraction: 0.1 },
+        control_depth: ControlDepth::Inverse,
+        models: models.clone(),
+        prompts: vec!["white button mushrooms on dark black soil compost mycelium".into()],
+        negative_prompt: None,
+        sampling,
+        ip_sets: vec![vec!["style-1.png".into(), "style-2.png".into()]],
+    }
+}
+
+/// A depth-like control image for the single `gen` image.
+fn gradient_depth(size: usize) -> vkdiff_pipeline::RgbImage {
+    let pixels = (0..size * size).flat_map(|i| [((i % size) * 255 / size) as u8; 3]).collect();
+    vkdiff_pipeline::RgbImage { width: size, height: size, pixels }
+}
