@@ -155,11 +155,14 @@ impl<'a> Loop<'a> {
     }
 
     /// Up to `batch` images of the queue for one pass. A pass takes images with the same number
-    /// of style images; the number the denoiser is recorded for is preferred (else `fallback`),
-    /// so sets of different sizes do not make it record again at every batch.
+    /// of style images: the number the denoiser is recorded for while a whole batch of it is
+    /// queued, else the most common one (else `fallback`, the first image's), so that style sets
+    /// of other sizes neither make the denoiser record again at every batch nor cut batches short.
     fn take_batch(&self, queue: &mut VecDeque<Item>, fallback: usize, batch: usize) -> Vec<Item> {
-        let recorded = self.denoiser.as_ref().map(|(_, (_, styles))| *styles).filter(|&n| queue.iter().any(|i| self.style_images(i) == n));
-        let want = recorded.unwrap_or(fallback);
+        let queued = |n: usize| queue.iter().filter(|i| self.style_images(i) == n).count();
+        let recorded = self.denoiser.as_ref().map(|(_, (_, styles))| *styles).filter(|&n| queued(n) >= batch);
+        let most = queue.iter().map(|i| self.style_images(i)).max_by_key(|&n| (queued(n), n == fallback));
+        let want = recorded.or(most).unwrap_or(fallback);
         let (mut items, mut rest) = (Vec::with_capacity(batch), VecDeque::with_capacity(queue.len()));
         for item in queue.drain(..) {
             if items.len() < batch && self.style_images(&item) == want {
