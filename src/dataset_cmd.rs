@@ -147,7 +147,8 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
     }
     ip_sets.extend(args.ip_set.iter().map(|set| set.split(',').map(str::trim).filter(|p| !p.is_empty()).map(PathBuf::from).collect()));
     let models = args.model.settings();
-    let multiple = Sdxl::probe_pixel_multiple(&models.model).with_context(|| format!("--model {}", models.model.display()))?;
+    models.check()?;
+    let multiple = Sdxl::probe_pixel_multiple(&models.model)?;
     let crops = Crops { count: args.crops.crops, size: args.crops.crop_size, min_fraction: args.crops.crop_min_fraction };
     Ok(DatasetSettings::new(
         args.scene.seed,
