@@ -84,18 +84,20 @@ impl<'a> ControlRun<'a> {
         Ok(ControlRun { use_, pass, hint })
     }
 
-    /// Encodes one conditioning image per row (resized to `width`×`height` as diffusers does).
-    pub fn set_images(&self, rows: &[&RgbImage], width: usize, height: usize) -> Result<()> {
-        let mut images = Vec::new();
+    /// Encodes one conditioning image per image of the batch (resized to `width`×`height` as
+    /// diffusers does), each prepared once and given to its `rows_per_image` rows (negative,
+    /// positive): every image's first row, then every image's second.
+    pub fn set_images(&self, images: &[&RgbImage], rows_per_image: usize, width: usize, height: usize) -> Result<()> {
+        let mut block = Vec::new();
         let mut size = [0; 4];
-        for image in rows {
+        for image in images {
             let (chw, shape) = control_tensor(image, width, height);
-            images.extend(nchw_to_nhwc(&chw, shape));
+            block.extend(nchw_to_nhwc(&chw, shape));
             size = shape;
         }
         let [_, c, h, w] = size;
-        let ctx = self.hint.context();
-        let tensor = ctx.upload(&[rows.len(), h, w, c], self.hint.dtype(), &images)?;
+        let rows = block.repeat(rows_per_image);
+        let tensor = self.hint.context().upload(&[images.len() * rows_per_image, h, w, c], self.hint.dtype(), &rows)?;
         Ok(self.use_.net.encode_condition_into(&tensor, &self.hint)?)
     }
 

@@ -186,8 +186,7 @@ impl<'m> Denoiser<'m> {
         }
         if let Some(control) = &self.control {
             let images = items.iter().map(|i| i.control_image.ok_or_else(|| Error::Config("an image of the batch has no ControlNet image".into()))).collect::<Result<Vec<_>>>()?;
-            let rows: Vec<&RgbImage> = (0..per_image).flat_map(|_| images.iter().copied()).collect();
-            control.set_images(&rows, self.sampling.width, self.sampling.height)?;
+            control.set_images(&images, per_image, self.sampling.width, self.sampling.height)?;
         }
         Ok(())
     }

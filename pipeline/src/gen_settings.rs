@@ -72,7 +72,7 @@ pub fn control_depth_name(mode: ControlDepth) -> &'static str {
     }
 }
 
-fn schedule_name(sampling: &Sampling) -> &'static str {
+pub fn schedule_name(sampling: &Sampling) -> &'static str {
     if sampling.karras {
         "karras"
     } else {
@@ -85,8 +85,13 @@ fn join_paths(paths: &[PathBuf], separator: &str) -> String {
 }
 
 impl ModelSettings {
+    /// The LoRAs as `--lora` takes them, FILE:STRENGTH.
+    pub fn lora_flags(&self) -> Vec<String> {
+        self.loras.iter().map(|l| format!("{}:{}", l.path.display(), l.strength)).collect()
+    }
+
     fn lora_list(&self, separator: &str) -> String {
-        self.loras.iter().map(|l| format!("{}:{}", l.path.display(), l.strength)).collect::<Vec<_>>().join(separator)
+        self.lora_flags().join(separator)
     }
 }
 

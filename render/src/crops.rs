@@ -23,7 +23,13 @@ pub fn centered_window(width: u32, height: u32, multiple: u32) -> Result<CropWin
     if w == 0 || h == 0 {
         return Err(RenderError::invalid("--width/--height", format!("{width}×{height}"), format!("the model needs sides of at least {multiple} pixels")));
     }
-    Ok(CropWindow { x0: (width - w) / 2, y0: (height - h) / 2, width: w, height: h })
+    Ok(centered(width, height, w, h))
+}
+
+/// The `w`×`h` window in the middle of a `width`×`height` frame (odd leftovers to the right and
+/// bottom).
+pub fn centered(width: u32, height: u32, w: u32, h: u32) -> CropWindow {
+    CropWindow { x0: (width - w) / 2, y0: (height - h) / 2, width: w, height: h }
 }
 
 /// `count` windows of `size`² inside a `width`×`height` frame, from the scene seed alone.

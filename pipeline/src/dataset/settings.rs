@@ -3,12 +3,12 @@
 //! flag names, so a run with other settings into the same folder is refused naming the flag.
 
 use crate::error::{Error, Result};
-use crate::gen_settings::{control_depth_name, precision_name, ModelSettings, RNG};
+use crate::gen_settings::{control_depth_name, precision_name, schedule_name, ModelSettings, RNG};
 use crate::text_to_image::Sampling;
 use serde_json::{json, Map, Value};
 use std::path::PathBuf;
 use vkdiff_render::control::ControlDepth;
-use vkdiff_render::crops::{centered_window, validate_min_fraction, CropWindow};
+use vkdiff_render::crops::{centered, centered_window, validate_min_fraction, CropWindow};
 use vkdiff_render::scene::SceneConfig;
 
 /// How each scene's frame is cut into images.
@@ -114,11 +114,9 @@ impl DatasetSettings {
         Ok(vkdiff_render::crops::crop_windows(scene_seed, self.crops.count, self.crops.size, self.scene.width, self.scene.height)?)
     }
 
-    /// The window of the image made from a whole frame: the frame cut to the image size, centred
-    /// as `centered_window` centres it.
+    /// The window of the image made from a whole frame: the frame cut to the image size, centred.
     fn whole_frame_window(&self) -> CropWindow {
-        let (w, h) = (self.sampling.width as u32, self.sampling.height as u32);
-        CropWindow { x0: (self.scene.width - w) / 2, y0: (self.scene.height - h) / 2, width: w, height: h }
+        centered(self.scene.width, self.scene.height, self.sampling.width as u32, self.sampling.height as u32)
     }
 
     /// Every setting that shapes the output, under its flag's name.
@@ -144,9 +142,9 @@ impl DatasetSettings {
             "steps": s.steps,
             "cfg": s.guidance_scale,
             "sampler": s.sampler.to_string(),
-            "scheduler": if s.karras { "karras" } else { "default" },
+            "scheduler": schedule_name(s),
             "rng": RNG,
-            "lora": m.loras.iter().map(|l| format!("{}:{}", l.path.display(), l.strength)).collect::<Vec<_>>(),
+            "lora": m.lora_flags(),
         });
         let map = v.as_object_mut().expect("an object");
         if let Some(c) = &m.controlnet {
