@@ -5,8 +5,8 @@ use crate::progress::Progress;
 use anyhow::{bail, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
-use vkdiff_pipeline::files::{png_bytes, write_atomic};
-use vkdiff_pipeline::{GenSettings, Sdxl, TextToImage, WorkflowModels};
+use vkdiff_pipeline::files::{png_bytes, write_atomic_all};
+use vkdiff_pipeline::{check_control_shape, GenSettings, Sdxl, TextToImage, WorkflowModels};
 use vkdiff_runtime::Context;
 
 /// Text-to-image with an SDXL model (diffusers folder or single .safetensors file).
@@ -41,6 +41,9 @@ pub struct GenArgs {
     /// Output PNG.
     #[arg(long)]
     out: PathBuf,
+    /// Replace --out (and --latents-out) when they exist.
+    #[arg(long)]
+    force: bool,
 }
 
 pub fn run(args: &GenArgs) -> Result<()> {
@@ -48,6 +51,9 @@ pub fn run(args: &GenArgs) -> Result<()> {
         let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
         if !parent.is_dir() {
             bail!("{flag} {}: folder {} does not exist", path.display(), parent.display());
+        }
+        if path.exists() && !args.force {
+            bail!("{flag} {} exists; give --force to replace it", path.display());
         }
     }
     if args.out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() != Some("png") {
@@ -69,8 +75,13 @@ pub fn run(args: &GenArgs) -> Result<()> {
     // A depth map sets the size unless it is given: the image then lines up with the depth.
     let (depth_w, depth_h) = inputs.control.as_ref().filter(|_| args.depth.is_some()).map_or((1024, 1024), |c| (c.width, c.height));
     settings.job.sampling = args.sampling.sampling(args.width.unwrap_or(depth_w), args.height.unwrap_or(depth_h));
-    settings.job.sampling.check()?;
-    settings.job.sampling.check_size(Sdxl::probe_pixel_multiple(&settings.models.model)?)?;
+    let sampling = &settings.job.sampling;
+    sampling.check()?;
+    let multiple = Sdxl::probe_pixel_multiple(&settings.models.model)?;
+    sampling.check_size(multiple)?;
+    if let Some(control) = &inputs.control {
+        check_control_shape(control, sampling.width, sampling.height, multiple)?;
+    }
 
     let ctx = Context::new(args.model.device)?;
     eprintln!("device: {}", ctx.info().name);
@@ -90,10 +101,12 @@ pub fn run(args: &GenArgs) -> Result<()> {
         ctx.peak_bytes() >> 20
     );
     let text = settings.png_text();
-    if let Some(path) = &args.latents_out {
-        vkdiff_unet::write_safetensors_f32(path, &[("latents", &out.latent_shape, &out.latents)], &text)?;
-    }
-    write_atomic(&args.out, &png_bytes(&out.image, &text)?)?;
+    let png = png_bytes(&out.image, &text)?;
+    // The image and its latents appear together or not at all.
+    let latents = args.latents_out.as_ref().map(|_| vkdiff_unet::safetensors_f32_bytes(&[("latents", &out.latent_shape, &out.latents)], &text));
+    let mut files = vec![(args.out.as_path(), png.as_slice())];
+    files.extend(args.latents_out.as_deref().zip(latents.as_deref()));
+    write_atomic_all(&files)?;
     eprintln!("wrote {}", args.out.display());
     Ok(())
 }

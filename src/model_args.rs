@@ -4,7 +4,7 @@
 use crate::scene_cmd::ControlMode;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
-use vkdiff_pipeline::{ControlNetSettings, IpAdapterSettings, LoraSetting, ModelSettings, SamplerKind, Sampling};
+use vkdiff_pipeline::{ControlNetSettings, IpAdapterSettings, LoraSetting, ModelSettings, SamplerKind, Sampling, SizeConditioning};
 use vkdiff_runtime::Dtype;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -129,10 +129,41 @@ pub struct SamplingArgs {
     /// Noise generator: torch-cpu reproduces torch.randn on a CPU generator bit for bit.
     #[arg(long, default_value = vkdiff_pipeline::RNG, value_parser = [vkdiff_pipeline::RNG])]
     rng: String,
+    /// SDXL size conditioning: the size of the image the model imagines it was cut from, WxH
+    /// (diffusers' original_size) [default: the image size].
+    #[arg(long, value_parser = parse_size)]
+    original_size: Option<(usize, usize)>,
+    /// SDXL crop conditioning: where that cut starts, TOP,LEFT in pixels as diffusers' tuple
+    /// (0,0 asks for a centred, uncut subject).
+    #[arg(long, value_parser = parse_top_left, default_value = "0,0")]
+    crops_coords_top_left: (usize, usize),
+    /// SDXL size conditioning: the size the model aims at, WxH (diffusers' target_size)
+    /// [default: the image size].
+    #[arg(long, value_parser = parse_size)]
+    target_size: Option<(usize, usize)>,
+}
+
+/// `WxH`, both positive.
+fn parse_size(text: &str) -> Result<(usize, usize), String> {
+    let bad = || format!("`{text}` is not WIDTHxHEIGHT (such as 1024x1024)");
+    let (w, h) = text.split_once(['x', 'X']).ok_or_else(bad)?;
+    match (w.trim().parse::<usize>(), h.trim().parse::<usize>()) {
+        (Ok(w), Ok(h)) if w > 0 && h > 0 => Ok((w, h)),
+        _ => Err(bad()),
+    }
+}
+
+/// `TOP,LEFT`.
+fn parse_top_left(text: &str) -> Result<(usize, usize), String> {
+    let bad = || format!("`{text}` is not TOP,LEFT in pixels (such as 0,0)");
+    let (top, left) = text.split_once(',').ok_or_else(bad)?;
+    Ok((top.trim().parse().map_err(|_| bad())?, left.trim().parse().map_err(|_| bad())?))
 }
 
 impl SamplingArgs {
     pub fn sampling(&self, width: usize, height: usize) -> Sampling {
-        Sampling { steps: self.steps, guidance_scale: self.cfg, sampler: self.sampler, karras: self.scheduler == Schedule::Karras, width, height }
+        let size_conditioning =
+            SizeConditioning { original: self.original_size, crop_top_left: self.crops_coords_top_left, target: self.target_size };
+        Sampling { steps: self.steps, guidance_scale: self.cfg, sampler: self.sampler, karras: self.scheduler == Schedule::Karras, width, height, size_conditioning }
     }
 }

@@ -39,10 +39,22 @@ impl PeftConfigs {
             if !json.keys().any(|k| k.starts_with(prefix)) {
                 continue;
             }
-            let lora_alpha = field("lora_alpha").and_then(Value::as_f64).unwrap_or(PEFT_DEFAULT_ALPHA);
-            let use_rslora = field("use_rslora").and_then(Value::as_bool).unwrap_or(false);
+            let wrong = |name: &str, want: &str| bad(format!("`{prefix}{name}` in `{METADATA_KEY}` is {}, not {want}", field(name).map_or(String::new(), Value::to_string)));
+            let lora_alpha = match field("lora_alpha") {
+                None | Some(Value::Null) => PEFT_DEFAULT_ALPHA,
+                Some(v) => v.as_f64().ok_or_else(|| wrong("lora_alpha", "a number"))?,
+            };
+            let use_rslora = match field("use_rslora") {
+                None | Some(Value::Null) => false,
+                Some(v) => v.as_bool().ok_or_else(|| wrong("use_rslora", "true or false"))?,
+            };
+            let patterns = match field("alpha_pattern") {
+                None | Some(Value::Null) => None,
+                Some(Value::Object(p)) => Some(p),
+                Some(_) => return Err(wrong("alpha_pattern", "an object")),
+            };
             let mut alpha_pattern = Vec::new();
-            if let Some(Value::Object(patterns)) = field("alpha_pattern") {
+            if let Some(patterns) = patterns {
                 for (pattern, alpha) in patterns {
                     let alpha = alpha.as_f64().ok_or_else(|| bad(format!("alpha_pattern `{pattern}` of {prefix} is not a number")))?;
                     // PEFT: re.match(rf"(.*\.)?({key})$", module_name).

@@ -32,6 +32,23 @@ pub fn check_control_settings(scale: f32, start: f64, end: f64) -> Result<()> {
     Ok(())
 }
 
+/// A control image must have the image's shape: resized to another, it would be stretched and
+/// no longer line up with the masks made from the same depth. Shapes that differ by less than
+/// one `multiple` of the size (a rounding of the size, not a stretch) pass.
+pub fn check_control_shape(control: &RgbImage, width: usize, height: usize, multiple: usize) -> Result<()> {
+    let (cw, ch) = (control.width as f64, control.height as f64);
+    let fitted_height = width as f64 * ch / cw;
+    if (fitted_height - height as f64).abs() < multiple as f64 {
+        return Ok(());
+    }
+    let suggested = ((fitted_height / multiple as f64).round() as usize).max(1) * multiple;
+    Err(Error::Config(format!(
+        "--depth is {}x{} and the image {width}x{height}: the control image would be stretched against its masks; \
+         give a size of its shape (--width {width} --height {suggested}) or cut the depth to the image's shape first (vkdiff scene --crops)",
+        control.width, control.height
+    )))
+}
+
 /// A ControlNet and how strongly, and when, it steers: what a batch of images shares.
 #[derive(Clone, Copy)]
 pub struct ControlNetUse<'a> {

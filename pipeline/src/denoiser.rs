@@ -5,7 +5,7 @@
 //! image's result does not depend on the images beside it.
 
 use crate::controlnet_guide::{ControlNetUse, ControlRun, SharedInputs};
-use crate::error::{Error, Result};
+use crate::error::{finite, Error, Result};
 use crate::prompt_encoding::Conditioning;
 use crate::rng::TorchCpuRng;
 use crate::schedulers::Sampler;
@@ -78,8 +78,7 @@ impl<'m> Denoiser<'m> {
         let context = ctx.zeros(&[rows, CONTEXT, model.unet_config.cross_attention_dim], dt)?;
         let pooled_width = model.text_encoders[1].config().projection_dim.unwrap_or(0);
         let pooled = ctx.zeros(&[rows, pooled_width], dt)?;
-        let (h, w) = (sampling.height as f32, sampling.width as f32);
-        let time_ids: Vec<f32> = (0..rows).flat_map(|_| [h, w, 0.0, 0.0, h, w]).collect();
+        let time_ids: Vec<f32> = (0..rows).flat_map(|_| sampling.time_ids()).collect();
         let time_ids = ctx.upload(&[rows, 6], Dtype::F32, &time_ids)?;
         let shared = SharedInputs { sample: &sample, timesteps: &timesteps, context: &context, added: (&pooled, &time_ids) };
         let control = control.map(|c| ControlRun::record(c, &shared)).transpose()?;
@@ -159,6 +158,7 @@ impl<'m> Denoiser<'m> {
             }
             self.pass.run()?;
             let out = self.pass.output.download()?;
+            finite(&out, &|| format!("the UNet's output at step {} of {total}", step + 1))?;
             for (i, ((sampler, x), rng)) in samplers.iter_mut().zip(&mut latents).zip(&mut rngs).enumerate() {
                 let eps_nhwc: Vec<f32> = if guided {
                     let g = self.sampling.guidance_scale;

@@ -11,6 +11,9 @@ pub enum Error {
     /// A setting (sampler, scheduler, size, …) that cannot be used as given.
     #[error("{0}")]
     Config(String),
+    /// A network's output that is not a number: never written out as a black image.
+    #[error("{0} holds NaN or infinite values; f16 may have overflowed there: try --precision f32")]
+    NotFinite(String),
     /// An error prefixed by what it happened to (a flag and its file, an image of a dataset).
     #[error("{0}: {1}")]
     Context(String, Box<Error>),
@@ -25,3 +28,12 @@ pub enum Error {
 }
 
 pub type Result<T> = std::result::Result<T, Error>;
+
+/// `values` unchanged, or [`Error::NotFinite`] naming `stage`.
+pub fn finite<'a>(values: &'a [f32], stage: &dyn Fn() -> String) -> Result<&'a [f32]> {
+    if values.iter().all(|v| v.is_finite()) {
+        Ok(values)
+    } else {
+        Err(Error::NotFinite(stage()))
+    }
+}

@@ -25,7 +25,7 @@ pub const PARTIAL: &str = ".partial-";
 
 /// Writes `bytes` to `path` atomically and durably; on failure nothing is left behind.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomic_with(path, &mut |w| w.write_all(bytes))
+    write_atomic_all(&[(path, bytes)])
 }
 
 /// [`write_atomic`] of what `fill` writes (for files too large to hold in memory whole).
@@ -44,7 +44,39 @@ pub fn write_atomic_with(path: &Path, fill: &mut dyn FnMut(&mut dyn Write) -> st
     written.map_err(|e| Error::Io { path: path.to_path_buf(), source: e })
 }
 
-/// An 8-bit RGB PNG carrying `text` as international text chunks (prompts may be any language).
+/// Writes several files that belong together: all or none. Each is written whole under its
+/// temporary name first; only then are they renamed, and a failed rename takes back the files
+/// already renamed.
+pub fn write_atomic_all(files: &[(&Path, &[u8])]) -> Result<()> {
+    let mut temporary = Vec::new();
+    let remove = |paths: &[PathBuf]| paths.iter().for_each(|p| drop(std::fs::remove_file(p)));
+    for (path, bytes) in files {
+        let tmp = partial_path(path);
+        let written = (|| {
+            let mut file = std::fs::File::create(&tmp)?;
+            file.write_all(bytes)?;
+            file.sync_all()
+        })();
+        temporary.push(tmp);
+        if let Err(e) = written {
+            remove(&temporary);
+            return Err(Error::Io { path: path.to_path_buf(), source: e });
+        }
+    }
+    for (i, ((path, _), tmp)) in files.iter().zip(&temporary).enumerate() {
+        if let Err(e) = std::fs::rename(tmp, path) {
+            remove(&temporary[i..]);
+            let placed: Vec<PathBuf> = files[..i].iter().map(|(p, _)| p.to_path_buf()).collect();
+            remove(&placed);
+            return Err(Error::Io { path: path.to_path_buf(), source: e });
+        }
+    }
+    Ok(())
+}
+
+/// An 8-bit RGB PNG carrying `text`: `tEXt` chunks where key and text are ASCII, uncompressed
+/// `iTXt` (UTF-8) otherwise. Not `tEXt` for all of Latin-1: ComfyUI decodes `tEXt` as UTF-8, so
+/// an `é` there would reach it garbled, while every reader takes ASCII either way.
 pub fn png_bytes(image: &RgbImage, text: &BTreeMap<String, String>) -> Result<Vec<u8>> {
     let mut bytes = Vec::new();
     let failed = |e: png::EncodingError| Error::Config(format!("encoding a PNG: {e}"));
@@ -52,7 +84,11 @@ pub fn png_bytes(image: &RgbImage, text: &BTreeMap<String, String>) -> Result<Ve
     enc.set_color(png::ColorType::Rgb);
     enc.set_depth(png::BitDepth::Eight);
     for (k, v) in text {
-        enc.add_itxt_chunk(k.clone(), v.clone()).map_err(failed)?;
+        if k.is_ascii() && v.is_ascii() {
+            enc.add_text_chunk(k.clone(), v.clone()).map_err(failed)?;
+        } else {
+            enc.add_itxt_chunk(k.clone(), v.clone()).map_err(failed)?;
+        }
     }
     let mut w = enc.write_header().map_err(failed)?;
     w.write_image_data(&image.pixels).map_err(failed)?;

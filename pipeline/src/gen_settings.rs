@@ -1,11 +1,15 @@
 //! Every `vkdiff gen` setting as data, shared by `gen` and `dataset`, and the text chunks that
-//! record them in the PNG: `parameters` in the A1111 form image browsers parse, plus every flag
-//! under its own key. The same settings give the same chunks, so a dataset image and `vkdiff gen`
-//! run with its recorded settings write the same file.
+//! record them in the PNG: `parameters` in the A1111 form that image browsers and ComfyUI import,
+//! plus every flag under its own key. The same settings give the same chunks, so a dataset image
+//! and `vkdiff gen` run with its recorded settings write the same file.
+//!
+//! No chunk is named `prompt` or `workflow`: ComfyUI reads those as its graph JSON and refuses
+//! the file when they are not, before it looks at `parameters`.
 
-use crate::text_to_image::{Sampling, TextToImage};
+use crate::schedulers::SamplerKind;
+use crate::text_to_image::{Sampling, SizeConditioning, TextToImage};
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use vkdiff_render::control::ControlDepth;
 use vkdiff_runtime::Dtype;
 
@@ -44,6 +48,15 @@ pub struct ModelSettings {
     pub loras: Vec<LoraSetting>,
 }
 
+/// A value as A1111 writes it: in quotes where a comma or colon would split it.
+fn quoted(value: &str) -> String {
+    if value.contains([',', ':', '"']) {
+        format!("\"{}\"", value.replace('"', "'"))
+    } else {
+        value.to_string()
+    }
+}
+
 /// One `vkdiff gen` run: the models, the image's settings and its input files.
 #[derive(Clone, Debug)]
 pub struct GenSettings {
@@ -80,6 +93,24 @@ pub fn schedule_name(sampling: &Sampling) -> &'static str {
     }
 }
 
+/// A1111's name of a sampler, as its `parameters` text and ComfyUI's importer spell it.
+fn a1111_sampler(kind: SamplerKind) -> &'static str {
+    match kind {
+        SamplerKind::Euler => "Euler",
+        SamplerKind::EulerAncestral => "Euler a",
+        SamplerKind::DpmSolver2M => "DPM++ 2M",
+        SamplerKind::Ddim => "DDIM",
+    }
+}
+
+/// A model's name as A1111 gives it: the file name without its extension, or the folder name
+/// (diffusers folders such as `stable-diffusion-xl-base-1.0` keep their dots).
+fn model_name(path: &Path) -> String {
+    let is_file = path.extension().is_some_and(|e| ["safetensors", "ckpt", "pt", "bin"].iter().any(|x| e.eq_ignore_ascii_case(x)));
+    let name = if is_file { path.file_stem() } else { path.file_name() };
+    name.map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
+
 fn join_paths(paths: &[PathBuf], separator: &str) -> String {
     paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(separator)
 }
@@ -89,34 +120,15 @@ impl ModelSettings {
     pub fn lora_flags(&self) -> Vec<String> {
         self.loras.iter().map(|l| format!("{}:{}", l.path.display(), l.strength)).collect()
     }
-
-    fn lora_list(&self, separator: &str) -> String {
-        self.lora_flags().join(separator)
-    }
 }
 
 impl GenSettings {
     /// The PNG text chunks (and `--latents-out` metadata) of this run.
     pub fn png_text(&self) -> BTreeMap<String, String> {
         let (job, s, m) = (&self.job, &self.job.sampling, &self.models);
-        let negative = job.negative_prompt.as_deref().map(|n| format!("\nNegative prompt: {n}")).unwrap_or_default();
-        let schedule = if s.karras { " Karras" } else { "" };
-        let parameters = format!(
-            "{}{negative}\nSteps: {}, Sampler: {}{schedule}, CFG scale: {}, Seed: {}, Size: {}x{}, Model: {}, RNG: {RNG}, Precision: {}{}",
-            job.prompt,
-            s.steps,
-            s.sampler,
-            s.guidance_scale,
-            job.seed,
-            s.width,
-            s.height,
-            m.model.display(),
-            precision_name(m.precision).to_uppercase(),
-            self.guide_summary()
-        );
         let mut text = BTreeMap::from([
-            ("parameters".to_string(), parameters),
-            ("prompt".into(), job.prompt.clone()),
+            ("parameters".to_string(), self.a1111_parameters()),
+            ("positive_prompt".into(), job.prompt.clone()),
             ("seed".into(), job.seed.to_string()),
             ("steps".into(), s.steps.to_string()),
             ("cfg".into(), s.guidance_scale.to_string()),
@@ -131,6 +143,13 @@ impl GenSettings {
         ]);
         if let Some(n) = &job.negative_prompt {
             text.insert("negative_prompt".into(), n.clone());
+        }
+        let c = &s.size_conditioning;
+        if *c != SizeConditioning::default() {
+            let size = |s: Option<(usize, usize)>| s.map_or("image size".into(), |(w, h)| format!("{w}x{h}"));
+            text.insert("original_size".into(), size(c.original));
+            text.insert("crops_coords_top_left".into(), format!("{},{}", c.crop_top_left.0, c.crop_top_left.1));
+            text.insert("target_size".into(), size(c.target));
         }
         if let Some(c) = &m.controlnet {
             text.insert("controlnet".into(), c.model.display().to_string());
@@ -147,24 +166,35 @@ impl GenSettings {
             text.insert("ip_scale".into(), ip.scale.to_string());
         }
         if !m.loras.is_empty() {
-            text.insert("loras".into(), m.lora_list("\n"));
+            text.insert("loras".into(), m.lora_flags().join("\n"));
         }
         text
     }
 
-    /// The A1111-style summary of the guides, appended to `parameters`.
-    fn guide_summary(&self) -> String {
-        let m = &self.models;
-        let mut parts = Vec::new();
+    /// A1111's `parameters`: the prompt with its LoRAs as `<lora:NAME:STRENGTH>` tags, a
+    /// `Negative prompt:` line (ComfyUI imports nothing without one), then `Key: value` pairs
+    /// with A1111's sampler names ("DPM++ 2M Karras").
+    fn a1111_parameters(&self) -> String {
+        let (job, s, m) = (&self.job, &self.job.sampling, &self.models);
+        let loras: String = m.loras.iter().map(|l| format!(" <lora:{}:{}>", model_name(&l.path), l.strength)).collect();
+        let schedule = if s.karras { " Karras" } else { "" };
+        let mut pairs = vec![
+            format!("Steps: {}", s.steps),
+            format!("Sampler: {}{schedule}", a1111_sampler(s.sampler)),
+            format!("CFG scale: {}", s.guidance_scale),
+            format!("Seed: {}", job.seed),
+            format!("Size: {}x{}", s.width, s.height),
+            format!("Model: {}", quoted(&model_name(&m.model))),
+            format!("RNG: {RNG}"),
+            format!("Precision: {}", precision_name(m.precision).to_uppercase()),
+        ];
         if let Some(c) = &m.controlnet {
-            parts.push(format!("ControlNet: {}, Control scale: {}, Control range: {}-{}", c.model.display(), c.scale, c.start, c.end));
+            pairs.push(format!("ControlNet: {}, Control scale: {}, Control range: {}-{}", quoted(&model_name(&c.model)), c.scale, c.start, c.end));
         }
         if let Some(ip) = &m.ip_adapter {
-            parts.push(format!("IP-Adapter: {}, IP images: {}, IP scale: {}", ip.adapter.display(), self.ip_images.len(), ip.scale));
+            pairs.push(format!("IP-Adapter: {}, IP images: {}, IP scale: {}", quoted(&model_name(&ip.adapter)), self.ip_images.len(), ip.scale));
         }
-        if !m.loras.is_empty() {
-            parts.push(format!("LoRAs: {}", m.lora_list(" ")));
-        }
-        parts.iter().map(|p| format!(", {p}")).collect()
+        let negative = job.negative_prompt.as_deref().unwrap_or("");
+        format!("{}{loras}\nNegative prompt: {negative}\n{}", job.prompt, pairs.join(", "))
     }
 }

@@ -1,7 +1,7 @@
 //! SDXL prompt conditioning as diffusers' `encode_prompt` builds it: per prompt, both encoders'
 //! penultimate hidden states side by side (CLIP-L first) and bigG's pooled projection.
 
-use crate::error::{Error, Result};
+use crate::error::{finite, Error, Result};
 use crate::sdxl::Sdxl;
 
 /// One prompt's conditioning for the UNet, rows [negative, positive] with guidance, else
@@ -31,10 +31,11 @@ impl Sdxl {
             .map(|(tok, enc)| enc.encode(&prompts.iter().map(|p| tok.encode(p)).collect::<Vec<_>>()))
             .collect::<std::result::Result<_, _>>()?;
         let (first, second) = (&encoded[0], &encoded[1]);
-        let pooled = second.pooled.clone().ok_or_else(|| Error::Config("text encoder 2 gave no pooled output".into()))?;
+        let pooled = second.pooled.as_deref().ok_or_else(|| Error::Config("text encoder 2 gave no pooled output".into()))?;
         let (w1, w2) = (self.text_encoders[0].config().hidden_size, self.text_encoders[1].config().hidden_size);
         let mut context: Vec<f32> = first.penultimate.chunks_exact(w1).zip(second.penultimate.chunks_exact(w2)).flat_map(|(a, b)| a.iter().chain(b).copied()).collect();
-        let mut pooled = pooled;
+        finite(&context, &|| "the text encoders' output".into())?;
+        let mut pooled = finite(pooled, &|| "text encoder 2's pooled output".into())?.to_vec();
         if guided && zero_negative {
             context.splice(0..0, std::iter::repeat_n(0.0, context.len()));
             pooled.splice(0..0, std::iter::repeat_n(0.0, pooled.len()));

@@ -5,7 +5,7 @@
 
 use crate::controlnet_guide::{ControlGuide, ControlNetUse};
 use crate::denoiser::{Denoiser, IpAdapterUse, ItemInputs};
-use crate::error::{Error, Result};
+use crate::error::{finite, Error, Result};
 use crate::ip_adapter_guide::ImageGuide;
 use crate::schedulers::{Sampler, SamplerKind, SchedulerConfig};
 use crate::sdxl::Sdxl;
@@ -21,9 +21,30 @@ pub struct Sampling {
     pub karras: bool,
     pub width: usize,
     pub height: usize,
+    pub size_conditioning: SizeConditioning,
+}
+
+/// SDXL's size micro-conditioning, as diffusers' `original_size`, `crops_coords_top_left` and
+/// `target_size` (negative rows get the same, diffusers' default). Unset sizes are the image's.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SizeConditioning {
+    /// (width, height) of the imagined source image.
+    pub original: Option<(usize, usize)>,
+    /// (top, left) of the imagined crop, in diffusers' order.
+    pub crop_top_left: (usize, usize),
+    /// (width, height).
+    pub target: Option<(usize, usize)>,
 }
 
 impl Sampling {
+    /// The UNet's `time_ids`: original (h, w), crop (top, left), target (h, w).
+    pub fn time_ids(&self) -> [f32; 6] {
+        let c = &self.size_conditioning;
+        let own = (self.width, self.height);
+        let ((ow, oh), (top, left), (tw, th)) = (c.original.unwrap_or(own), c.crop_top_left, c.target.unwrap_or(own));
+        [oh, ow, top, left, th, tw].map(|v| v as f32)
+    }
+
     /// Classifier-free guidance runs a negative row beside each positive one.
     pub fn guided(&self) -> bool {
         self.guidance_scale > 1.0
@@ -154,6 +175,7 @@ impl Sdxl {
         let factor = self.vae.config().scaling_factor;
         let scaled: Vec<f32> = latents.iter().map(|v| v / factor).collect();
         let (out, [_, height, width, channels]) = self.vae.decode(&nchw_to_nhwc(&scaled, [b, c, h, w]), [b, h, w, c])?;
+        finite(&out, &|| "the VAE decoder's output".into())?;
         if channels != 3 {
             return Err(Error::Config(format!("the VAE decodes {channels} channels; an RGB image needs 3")));
         }

@@ -9,6 +9,7 @@ mod controlnet;
 mod errors;
 mod forward;
 mod ip_adapter;
+mod malformed;
 mod text_and_vae;
 
 use std::path::PathBuf;

@@ -26,6 +26,8 @@ enum Source {
         prefix: String,
         /// Renaming from diffusers names to the original layout's, for single files.
         original: Option<OriginalNames>,
+        /// A leading module level of the requested names that the files leave out.
+        omitted: Option<String>,
         describe: String,
     },
     /// Every tensor drawn on request with a fan-in scale: full-size networks for benchmarks.
@@ -102,7 +104,7 @@ impl Checkpoint {
                 index.insert(name.clone(), i);
             }
         }
-        let source = Source::Files { files, index, prefix: prefix.into(), original, describe };
+        let source = Source::Files { files, index, prefix: prefix.into(), original, omitted: None, describe };
         Checkpoint { ctx: ctx.clone(), dtype, source, used: Mutex::default(), placed: Mutex::default() }
     }
 
@@ -135,10 +137,24 @@ impl Checkpoint {
         out
     }
 
+    /// This checkpoint with `level` (such as `text_model.`) left out of the stored names unless
+    /// some stored name has it: transformers 5 saves `CLIPTextModel` without its `text_model`
+    /// level, and loads either form.
+    pub(crate) fn level_optional(mut self, level: &str) -> Checkpoint {
+        if let Source::Files { index, prefix, omitted, .. } = &mut self.source {
+            let with_level = format!("{prefix}{level}");
+            if !index.keys().any(|k| k.starts_with(&with_level)) {
+                *omitted = Some(level.to_string());
+            }
+        }
+        self
+    }
+
     /// Where a diffusers-named tensor is stored.
     fn stored_as(&self, name: &str) -> Option<StoredAs> {
         match &self.source {
-            Source::Files { prefix, original, .. } => {
+            Source::Files { prefix, original, omitted, .. } => {
+                let name = omitted.as_deref().and_then(|o| name.strip_prefix(o)).unwrap_or(name);
                 let mut s = match original {
                     Some(o) => o.rename(name)?,
                     None => StoredAs::plain(name.to_string()),
@@ -289,7 +305,9 @@ impl<'a> Weights<'a> {
     /// Several [rows_k, cols] weights stacked into one [Σ rows_k, cols] tensor (fused projections).
     /// Each part is placed as its row range where the device can bind it on its own.
     pub fn stacked(&self, names: &[&str], rows: usize, cols: usize) -> Result<Tensor> {
-        let mut data = Vec::with_capacity(names.len() * rows * cols);
+        // Grown as the parts are read: each part's shape is checked first, so a config asking
+        // for absurd sizes fails on the stored shape instead of on the allocation.
+        let mut data = Vec::new();
         for n in names {
             data.extend(self.host(n, &[rows, cols])?);
         }
@@ -304,8 +322,6 @@ impl<'a> Weights<'a> {
     }
 }
 
-/// The folder of pipeline component `sub` (`dir/sub`, or `dir` itself when it is the component),
-/// which must hold a config.json.
 /// A single file's UNet config, inferred from its tensor shapes.
 fn single_file_unet_config(file: &SafeTensors) -> Result<UNetConfig> {
     if !file.entries.keys().any(|k| k.starts_with(SINGLE_FILE_UNET)) {

@@ -142,14 +142,24 @@ impl ClipTextModel {
         let pooled = slot == TextEncoderSlot::BigG;
         if path.is_dir() {
             let folder = component_folder(path, slot.folder())?;
-            let config: ClipTextConfig = read_config(&folder.join("config.json"), "a CLIP text")?;
-            return Self::load(ctx, config, &Checkpoint::diffusers(ctx, &folder, "model", dtype)?, pooled);
+            let config = Self::sdxl_config(path, slot)?;
+            let ckpt = Checkpoint::diffusers(ctx, &folder, "model", dtype)?.level_optional("text_model.");
+            return Self::load(ctx, config, &ckpt, pooled);
         }
         let file = SafeTensors::open(path)?;
         let config = infer_text_config(&file, slot)?;
         let names = (slot == TextEncoderSlot::BigG).then(|| open_clip_names(config.num_hidden_layers));
         let ckpt = Checkpoint::single_file_part(ctx, file, slot.single_file_prefix(), names, dtype);
         Self::load(ctx, config, &ckpt, pooled)
+    }
+
+    /// The config [`ClipTextModel::load_sdxl`] builds from `path`, without its weights.
+    pub fn sdxl_config(path: &Path, slot: TextEncoderSlot) -> Result<ClipTextConfig> {
+        if path.is_dir() {
+            read_config(&component_folder(path, slot.folder())?.join("config.json"), "a CLIP text")
+        } else {
+            infer_text_config(&SafeTensors::open(path)?, slot)
+        }
     }
 
     /// Builds the encoder from its config; with `pooled`, also the final norm and projection.

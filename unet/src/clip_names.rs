@@ -69,6 +69,10 @@ pub fn infer_text_config(file: &SafeTensors, slot: TextEncoderSlot) -> Result<Cl
             Error::Checkpoint(format!("{}: no tensor `{prefix}{name}`; not an SDXL single-file checkpoint with both text encoders", file.path.display()))
         })
     };
+    let dim = |name: &str, i: usize| {
+        let s = shape(name)?;
+        s.get(i).copied().ok_or_else(|| Error::Checkpoint(format!("{}: tensor `{prefix}{name}` has shape {s:?}; a weight there has more dimensions", file.path.display())))
+    };
     let (tokens, positions, layer, fc1, layers_prefix) = if big {
         ("token_embedding.weight", "positional_embedding", "transformer.resblocks.", "mlp.c_fc.weight", "transformer.resblocks.")
     } else {
@@ -84,13 +88,13 @@ pub fn infer_text_config(file: &SafeTensors, slot: TextEncoderSlot) -> Result<Cl
     let config = ClipTextConfig {
         vocab_size: vocab,
         hidden_size: hidden,
-        intermediate_size: shape(&format!("{layer}0.{fc1}"))?[0],
+        intermediate_size: dim(&format!("{layer}0.{fc1}"), 0)?,
         num_hidden_layers: layers,
         num_attention_heads: (hidden / 64).max(1),
-        max_position_embeddings: shape(positions)?[0],
+        max_position_embeddings: dim(positions, 0)?,
         hidden_act: if big { "gelu" } else { "quick_gelu" }.into(),
         layer_norm_eps: 1e-5,
-        projection_dim: if big { Some(shape("text_projection")?[1]) } else { None },
+        projection_dim: if big { Some(dim("text_projection", 1)?) } else { None },
         eos_token_id: 2,
     };
     Ok(config)

@@ -189,7 +189,7 @@ impl UNetConfig {
             }
         }
         for c in &self.block_out_channels {
-            if c % self.norm_num_groups != 0 {
+            if *c == 0 || !c.is_multiple_of(self.norm_num_groups) {
                 return Err(Error::Config(format!("{c} channels do not split into norm_num_groups = {}", self.norm_num_groups)));
             }
         }

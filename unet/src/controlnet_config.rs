@@ -111,12 +111,15 @@ impl ControlNetConfig {
         let conv_in = shape("conv_in").ok_or_else(|| {
             Error::Checkpoint("ControlNet file has no conditioning encoder (`controlnet_cond_embedding.conv_in` / `input_hint_block.0`)".into())
         })?;
-        let mut embedding_channels = vec![conv_in[0]];
+        let [out, conditioning_channels, _, _] = conv_in[..] else {
+            return Err(Error::Checkpoint(format!("the ControlNet's conditioning `conv_in` weight has shape {conv_in:?}, not a convolution's")));
+        };
+        let mut embedding_channels = vec![out];
         // Blocks come in pairs: a same-width conv, then a stride-2 conv to the next width.
-        while let Some(s) = shape(&format!("blocks.{}", 2 * embedding_channels.len() - 1)) {
-            embedding_channels.push(s[0]);
+        while let Some(&width) = shape(&format!("blocks.{}", 2 * embedding_channels.len() - 1)).as_ref().and_then(|s| s.first()) {
+            embedding_channels.push(width);
         }
-        let config = ControlNetConfig { encoder, conditioning_channels: conv_in[1], embedding_channels, bgr: false };
+        let config = ControlNetConfig { encoder, conditioning_channels, embedding_channels, bgr: false };
         config.validate()?;
         Ok(config)
     }

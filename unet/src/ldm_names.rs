@@ -164,8 +164,13 @@ fn indices(shapes: &HashMap<&str, &[usize]>, prefix: &str) -> BTreeSet<usize> {
 /// and ComfyUI's loaders assume.
 pub fn infer_unet_config(shapes: &HashMap<&str, &[usize]>) -> std::result::Result<UNetConfig, String> {
     let get = |k: &str| shapes.get(k).copied().ok_or_else(|| format!("no tensor `model.diffusion_model.{k}`"));
-    let conv_in = get("input_blocks.0.0.weight")?;
-    let out_channels = get("out.2.weight")?[0];
+    // Dimension `i` of a tensor, which a tensor of too low a rank lacks.
+    let dim = |k: &str, i: usize| {
+        let s = get(k)?;
+        s.get(i).copied().ok_or_else(|| format!("tensor `model.diffusion_model.{k}` has shape {s:?}; a weight there has more dimensions"))
+    };
+    let in_channels = dim("input_blocks.0.0.weight", 1)?;
+    let out_channels = dim("out.2.weight", 0)?;
     let inputs = indices(shapes, "input_blocks.");
     let first_down = inputs.iter().copied().find(|&n| shapes.contains_key(format!("input_blocks.{n}.0.op.weight").as_str()));
     let l = match first_down {
@@ -184,7 +189,7 @@ pub fn infer_unet_config(shapes: &HashMap<&str, &[usize]>) -> std::result::Resul
     let mut heads = Vec::new();
     for i in 0..levels {
         let block = format!("input_blocks.{}", (l + 1) * i + 1);
-        let c = get(&format!("{block}.0.out_layers.3.weight"))?[0];
+        let c = dim(&format!("{block}.0.out_layers.3.weight"), 0)?;
         channels.push(c);
         let attn = has_attention(block.clone());
         down_types.push(if attn { "CrossAttnDownBlock2D" } else { "DownBlock2D" });
@@ -198,15 +203,12 @@ pub fn infer_unet_config(shapes: &HashMap<&str, &[usize]>) -> std::result::Resul
     if mid_depth != depths[levels - 1] {
         return Err(format!("middle block has {mid_depth} transformer blocks but the last level {}; diffusers' UNet cannot hold that", depths[levels - 1]));
     }
-    let cross = shapes
-        .iter()
-        .find(|(k, _)| k.ends_with("attn2.to_k.weight"))
-        .map(|(_, s)| s[1])
-        .ok_or("no cross-attention (`…attn2.to_k.weight`) tensors")?;
+    let cross_key = shapes.keys().find(|k| k.ends_with("attn2.to_k.weight")).ok_or("no cross-attention (`…attn2.to_k.weight`) tensors")?;
+    let cross = dim(cross_key, 1)?;
     let linear = shapes.iter().find(|(k, _)| k.ends_with(".1.proj_in.weight")).is_some_and(|(_, s)| s.len() == 2);
-    let time_embed = get("time_embed.0.weight")?[0];
+    let time_embed = dim("time_embed.0.weight", 0)?;
     let mut config = serde_json::json!({
-        "in_channels": conv_in[1],
+        "in_channels": in_channels,
         "out_channels": out_channels,
         "block_out_channels": channels,
         "down_block_types": down_types,
@@ -219,10 +221,10 @@ pub fn infer_unet_config(shapes: &HashMap<&str, &[usize]>) -> std::result::Resul
         "use_linear_projection": linear,
         "time_embedding_dim": time_embed,
     });
-    if let Some(adm) = shapes.get("label_emb.0.0.weight") {
+    if shapes.contains_key("label_emb.0.0.weight") {
         config["addition_embed_type"] = "text_time".into();
         config["addition_time_embed_dim"] = TIME_ID_DIM.into();
-        config["projection_class_embeddings_input_dim"] = adm[1].into();
+        config["projection_class_embeddings_input_dim"] = dim("label_emb.0.0.weight", 1)?.into();
     }
     let config: UNetConfig = serde_json::from_value(config).map_err(|e| e.to_string())?;
     config.validate().map_err(|e: Error| e.to_string())?;

@@ -39,7 +39,7 @@ pub use error::{Error, Result};
 pub use ip_adapter::{IpAdapter, IpAdapterKind};
 pub use ldm_names::{OriginalNames, StoredAs};
 pub use layout::{nchw_to_nhwc, nhwc_to_nchw};
-pub use safetensors::{write_f32 as write_safetensors_f32, SafeTensors, SourceDtype};
+pub use safetensors::{f32_file_bytes as safetensors_f32_bytes, write_f32 as write_safetensors_f32, SafeTensors, SourceDtype};
 pub use attention::{IpAdapterInput, IpLayer};
 pub use nn::Linear;
 pub use parameters::{ParamLayout, Parameter, Parameters};

@@ -53,8 +53,10 @@ pub struct SafeTensors {
 }
 
 impl SafeTensors {
-    /// Maps `path` and checks its header: every tensor's range must lie inside the file and match
-    /// its dtype and shape, so a truncated download is caught here, naming the tensor.
+    /// Maps `path` and checks its header as the reference loader does: every tensor's range must
+    /// lie inside the file and match its dtype and shape, and the ranges must tile the data
+    /// without overlap, so a truncated download or a forged header is caught here, naming the
+    /// tensor.
     pub fn open(path: &Path) -> Result<SafeTensors> {
         let bad = |why: String| Error::Format { path: path.to_path_buf(), why };
         let file = File::open(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
@@ -80,11 +82,28 @@ impl SafeTensors {
             if entry.end > data_len {
                 return Err(bad(format!("tensor `{name}` ends at byte {} but the file holds {data_len} bytes of data (truncated?)", entry.end)));
             }
-            let numel: usize = entry.shape.iter().product();
-            if entry.element_size.is_some_and(|size| entry.end - entry.start != numel * size) {
-                return Err(bad(format!("tensor `{name}`: {} bytes for shape {:?}", entry.end - entry.start, entry.shape)));
+            let bytes = entry.shape.iter().try_fold(1usize, |n, &d| n.checked_mul(d)).and_then(|n| entry.element_size.map_or(Some(n), |s| n.checked_mul(s)));
+            match (bytes, entry.element_size) {
+                (None, _) => return Err(bad(format!("tensor `{name}`: shape {:?} is too large to exist", entry.shape))),
+                (Some(b), Some(_)) if b != entry.end - entry.start => {
+                    return Err(bad(format!("tensor `{name}`: {} bytes for shape {:?}", entry.end - entry.start, entry.shape)))
+                }
+                _ => {}
             }
             entries.insert(name, entry);
+        }
+        let mut ranges: Vec<(usize, usize, &String)> = entries.iter().map(|(n, e)| (e.start, e.end, n)).collect();
+        ranges.sort();
+        let mut covered = 0;
+        for (start, end, name) in ranges {
+            if start != covered {
+                let what = if start < covered { "overlaps the tensor before it" } else { "leaves a gap after the tensor before it" };
+                return Err(bad(format!("tensor `{name}` (bytes {start}..{end}) {what}")));
+            }
+            covered = end;
+        }
+        if covered != data_len {
+            return Err(bad(format!("the tensors cover {covered} of the file's {data_len} bytes of data")));
         }
         Ok(SafeTensors { path: path.to_path_buf(), map, data_start, entries })
     }
@@ -124,6 +143,16 @@ fn parse_entry(v: &Value) -> Option<Entry> {
 /// Writes f32 tensors as a safetensors file with string metadata, atomically (a temporary file
 /// renamed into place), so an interrupted run leaves no truncated file.
 pub fn write_f32(path: &Path, tensors: &[(&str, &[usize], &[f32])], metadata: &BTreeMap<String, String>) -> Result<()> {
+    let tmp = path.with_extension("safetensors.partial");
+    let written = std::fs::write(&tmp, f32_file_bytes(tensors, metadata)).and_then(|()| std::fs::rename(&tmp, path));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written.map_err(|e| Error::Io { path: path.to_path_buf(), source: e })
+}
+
+/// The bytes of a safetensors file of f32 tensors with string metadata.
+pub fn f32_file_bytes(tensors: &[(&str, &[usize], &[f32])], metadata: &BTreeMap<String, String>) -> Vec<u8> {
     let mut header = serde_json::Map::new();
     if !metadata.is_empty() {
         header.insert("__metadata__".into(), serde_json::to_value(metadata).expect("strings serialise"));
@@ -142,8 +171,5 @@ pub fn write_f32(path: &Path, tensors: &[(&str, &[usize], &[f32])], metadata: &B
     for (_, _, data) in tensors {
         bytes.extend(data.iter().flat_map(|v| v.to_le_bytes()));
     }
-    let tmp = path.with_extension("safetensors.partial");
-    let io = |e| Error::Io { path: path.to_path_buf(), source: e };
-    std::fs::write(&tmp, &bytes).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
+    bytes
 }

@@ -47,19 +47,23 @@ pub fn infer_vae_config(file: &SafeTensors) -> Result<VaeConfig> {
             Error::Checkpoint(format!("{}: no tensor `{SINGLE_FILE_VAE}{name}`; not a single-file checkpoint with a VAE", file.path.display()))
         })
     };
+    let dim = |name: &str, i: usize| {
+        let s = shape(name)?;
+        s.get(i).copied().ok_or_else(|| Error::Checkpoint(format!("{}: tensor `{SINGLE_FILE_VAE}{name}` has shape {s:?}; a weight there has more dimensions", file.path.display())))
+    };
     let indices = |prefix: &str| -> BTreeSet<usize> {
         let p = format!("{SINGLE_FILE_VAE}{prefix}");
         file.entries.keys().filter_map(|k| k.strip_prefix(&p)?.split('.').next()?.parse().ok()).collect()
     };
     let levels = indices("encoder.down.").len();
-    let channels = (0..levels).map(|i| shape(&format!("encoder.down.{i}.block.0.conv1.weight")).map(|s| s[0])).collect::<Result<Vec<_>>>()?;
+    let channels = (0..levels).map(|i| dim(&format!("encoder.down.{i}.block.0.conv1.weight"), 0)).collect::<Result<Vec<_>>>()?;
     let has = |name: &str| file.entries.contains_key(&format!("{SINGLE_FILE_VAE}{name}"));
     let config = serde_json::json!({
-        "in_channels": shape("encoder.conv_in.weight")?[1],
-        "out_channels": shape("decoder.conv_out.weight")?[0],
+        "in_channels": dim("encoder.conv_in.weight", 1)?,
+        "out_channels": dim("decoder.conv_out.weight", 0)?,
         "block_out_channels": channels,
         "layers_per_block": indices("encoder.down.0.block.").len(),
-        "latent_channels": shape("decoder.conv_in.weight")?[1],
+        "latent_channels": dim("decoder.conv_in.weight", 1)?,
         "scaling_factor": 0.13025,
         "force_upcast": true,
         "mid_block_add_attention": has("decoder.mid.attn_1.q.weight"),

@@ -4,7 +4,7 @@
 
 use crate::error::{Error, Result};
 use crate::gen_settings::{control_depth_name, precision_name, schedule_name, ModelSettings, RNG};
-use crate::text_to_image::Sampling;
+use crate::text_to_image::{Sampling, SizeConditioning};
 use serde_json::{json, Map, Value};
 use std::path::PathBuf;
 use vkdiff_render::control::ControlDepth;
@@ -146,7 +146,16 @@ impl DatasetSettings {
             "rng": RNG,
             "lora": m.lora_flags(),
         });
+        let c = &s.size_conditioning;
+        let size = |s: Option<(usize, usize)>| s.map(|(w, h)| format!("{w}x{h}"));
         let map = v.as_object_mut().expect("an object");
+        if *c != SizeConditioning::default() {
+            map.extend(object(json!({
+                "original-size": size(c.original),
+                "crops-coords-top-left": format!("{},{}", c.crop_top_left.0, c.crop_top_left.1),
+                "target-size": size(c.target),
+            })));
+        }
         if let Some(c) = &m.controlnet {
             map.extend(object(json!({
                 "controlnet": c.model.display().to_string(),

@@ -64,6 +64,9 @@ pub fn read_depth_exr(path: &Path) -> Result<(Vec<f32>, usize, usize)> {
 /// invalid pixels black: `vkdiff_render::control::control_image`).
 pub fn depth_control_image(path: &Path, mode: ControlDepth) -> Result<RgbImage> {
     let (depth, width, height) = read_depth_exr(path)?;
+    if !depth.iter().any(|&z| z.is_finite() && z > 0.0) {
+        return Err(Error::Format { path: path.to_path_buf(), why: "no pixel holds a valid depth (all are 0, negative, infinite or NaN)".into() });
+    }
     Ok(RgbImage {
         width,
         height,

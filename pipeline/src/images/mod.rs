@@ -20,12 +20,13 @@ pub use vkdiff_render::control::ControlDepth;
 use crate::{Result, RgbImage};
 
 /// A control image from a file: `.exr` is metric depth (made into a depth control image with
-/// `mode`); any other file is an image used as it is.
+/// `mode`); any other file is an image used as it is, but for a 16-bit grey PNG (what depth
+/// estimators save), which is scaled to 8 bits rather than clipped at 255 as PIL would.
 pub fn load_control_image(path: &Path, mode: ControlDepth) -> Result<RgbImage> {
     let is_exr = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"));
     if is_exr {
         depth_control_image(path, mode)
     } else {
-        read_image(path)
+        read::read_control_image(path)
     }
 }

@@ -16,6 +16,25 @@ pub fn read_image(path: &Path) -> Result<RgbImage> {
     decode_image(&bytes, path)
 }
 
+/// [`read_image`], but a 16-bit grey PNG keeps its range: each sample scaled to 8 bits.
+pub fn read_control_image(path: &Path) -> Result<RgbImage> {
+    let bytes = std::fs::read(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    let fail = |why: String| Error::Format { path: path.to_path_buf(), why };
+    if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        return decode_png(&bytes, Grey16::Scale).map_err(fail);
+    }
+    decode_image(&bytes, path)
+}
+
+/// What becomes of 16-bit grey samples.
+#[derive(Clone, Copy, PartialEq)]
+enum Grey16 {
+    /// PIL's `convert("RGB")` of mode I;16: values above 255 become 255.
+    Clip,
+    /// Round(v · 255 / 65535): the whole range kept.
+    Scale,
+}
+
 /// Decodes PNG or JPEG bytes; `path` only names the source in errors.
 pub fn decode_image(bytes: &[u8], path: &Path) -> Result<RgbImage> {
     let fail = |why: String| Error::Format {
@@ -23,7 +42,7 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<RgbImage> {
         why,
     };
     if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
-        decode_png(bytes).map_err(fail)
+        decode_png(bytes, Grey16::Clip).map_err(fail)
     } else if bytes.starts_with(&[0xff, 0xd8]) {
         decode_jpeg(bytes).map_err(fail)
     } else {
@@ -31,7 +50,7 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<RgbImage> {
     }
 }
 
-fn decode_png(bytes: &[u8]) -> std::result::Result<RgbImage, String> {
+fn decode_png(bytes: &[u8], grey16: Grey16) -> std::result::Result<RgbImage, String> {
     use png::{BitDepth, ColorType, Transformations};
     let mut decoder = png::Decoder::new(Cursor::new(bytes));
     // EXPAND: palettes to RGB, low-bit grey to 8 bits (scaled), tRNS to alpha; 16 bits stay.
@@ -52,8 +71,11 @@ fn decode_png(bytes: &[u8]) -> std::result::Result<RgbImage, String> {
                 if bytes_per_sample == 1 {
                     px[i]
                 } else if source_type == ColorType::Grayscale {
-                    // PIL opens 16-bit grey as I;16 and its RGB conversion clips.
-                    u16::from_be_bytes([px[2 * i], px[2 * i + 1]]).min(255) as u8
+                    let v = u16::from_be_bytes([px[2 * i], px[2 * i + 1]]);
+                    match grey16 {
+                        Grey16::Clip => v.min(255) as u8,
+                        Grey16::Scale => ((v as u32 * 255 + 32767) / 65535) as u8,
+                    }
                 } else {
                     px[2 * i]
                 }
@@ -84,4 +106,27 @@ fn decode_jpeg(bytes: &[u8]) -> std::result::Result<RgbImage, String> {
         ));
     }
     Ok(RgbImage { width, height, pixels })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sixteen_bit_grey_is_clipped_as_pil_does_for_images_and_scaled_for_control() {
+        let values: [u16; 4] = [0, 255, 32896, 65535];
+        let mut bytes = Vec::new();
+        let mut enc = png::Encoder::new(&mut bytes, 4, 1);
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(png::BitDepth::Sixteen);
+        let mut w = enc.write_header().unwrap();
+        w.write_image_data(&values.iter().flat_map(|v| v.to_be_bytes()).collect::<Vec<u8>>()).unwrap();
+        w.finish().unwrap();
+        let path = std::env::temp_dir().join(format!("vkdiff-grey16-{}.png", std::process::id()));
+        std::fs::write(&path, &bytes).unwrap();
+        let grey = |image: RgbImage| image.pixels.chunks(3).map(|p| p[0]).collect::<Vec<u8>>();
+        assert_eq!(grey(read_image(&path).unwrap()), [0, 255, 255, 255]);
+        assert_eq!(grey(read_control_image(&path).unwrap()), [0, 1, 128, 255]);
+        std::fs::remove_file(path).unwrap();
+    }
 }

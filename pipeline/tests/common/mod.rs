@@ -2,7 +2,7 @@
 
 use serde_json::Value;
 use std::sync::OnceLock;
-use vkdiff_pipeline::{Sampling, TextToImage};
+use vkdiff_pipeline::{Sampling, SizeConditioning, TextToImage};
 use vkdiff_runtime::Context;
 
 pub fn ctx() -> Context {
@@ -26,8 +26,19 @@ pub fn job(case: &Value) -> TextToImage {
             karras: case["karras"].as_bool().unwrap_or(false),
             width: case["width"].as_u64().unwrap() as usize,
             height: case["height"].as_u64().unwrap() as usize,
+            size_conditioning: SizeConditioning {
+                // diffusers' sizes are (height, width).
+                original: pair(&case["original_size"]).map(|(h, w)| (w, h)),
+                crop_top_left: pair(&case["crops_coords_top_left"]).unwrap_or((0, 0)),
+                target: pair(&case["target_size"]).map(|(h, w)| (w, h)),
+            },
         },
     }
+}
+
+/// A two-number array of a case, as it stands.
+fn pair(v: &Value) -> Option<(usize, usize)> {
+    Some((v.get(0)?.as_u64()? as usize, v.get(1)?.as_u64()? as usize))
 }
 
 pub fn relative_l2(got: &[f32], want: &[f32]) -> f64 {
