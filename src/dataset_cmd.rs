@@ -146,7 +146,7 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
         ip_sets.push(args.ip_image.clone());
     }
     ip_sets.extend(args.ip_set.iter().map(|set| set.split(',').map(str::trim).filter(|p| !p.is_empty()).map(PathBuf::from).collect()));
-    let models = args.model.settings();
+    let models = args.model.settings()?;
     models.check()?;
     let multiple = Sdxl::probe_pixel_multiple(&models.model)?;
     let crops = Crops { count: args.crops.crops, size: args.crops.crop_size, min_fraction: args.crops.crop_min_fraction };

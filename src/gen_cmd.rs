@@ -60,7 +60,7 @@ pub fn run(args: &GenArgs) -> Result<()> {
         bail!("--out {}: the image is written as PNG; give a .png path", args.out.display());
     }
     let mut settings = GenSettings {
-        models: args.model.settings(),
+        models: args.model.settings()?,
         job: TextToImage {
             prompt: args.prompt.clone(),
             negative_prompt: args.sampling.negative_prompt.clone(),

@@ -4,7 +4,7 @@
 use crate::scene_cmd::ControlMode;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
-use vkdiff_pipeline::{ControlNetSettings, IpAdapterSettings, LoraSetting, ModelSettings, SamplerKind, Sampling, SizeConditioning};
+use vkdiff_pipeline::{ControlNetSettings, IpAdapterSettings, IpMode, IpScale, LoraSetting, ModelSettings, SamplerKind, Sampling, SizeConditioning};
 use vkdiff_runtime::Dtype;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -29,6 +29,14 @@ enum Schedule {
     Default,
     /// Karras et al. noise levels (euler, dpmpp_2m).
     Karras,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum IpModeArg {
+    Style,
+    Composition,
+    #[value(name = "style+composition")]
+    StyleAndComposition,
 }
 
 /// The model, its guides and LoRAs: what loads once.
@@ -65,9 +73,16 @@ pub struct ModelArgs {
     /// (and preprocessor_config.json, else CLIP's defaults at the encoder's image size).
     #[arg(long, requires = "ip_adapter")]
     image_encoder: Option<PathBuf>,
-    /// Weight of the image tokens' attention.
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
-    ip_scale: f32,
+    /// Weight of the image tokens' attention [default: 1]: one number for every layer, or
+    /// BLOCK=SCALE (repeat it) for chosen blocks with every other layer 0, as diffusers'
+    /// set_ip_adapter_scale({...}): mid, down.I, up.I, or down.I.J / up.I.J (attention J of
+    /// block I). `--ip-scale up.0.1=1` is InstantStyle's style-only adapter.
+    #[arg(long, allow_negative_numbers = true)]
+    ip_scale: Vec<String>,
+    /// InstantStyle's blocks of SDXL: style (up.0.1), composition (down.2.1) or both, each at
+    /// --ip-scale (one number); every other layer is off.
+    #[arg(long, value_enum, requires = "ip_adapter")]
+    ip_mode: Option<IpModeArg>,
     /// A LoRA (kohya or diffusers/PEFT .safetensors) as FILE or FILE:STRENGTH (default 1);
     /// repeat it for several. Merged into the weights on the device.
     #[arg(long, value_parser = parse_lora)]
@@ -92,7 +107,7 @@ impl ModelArgs {
         self.control_depth.into()
     }
 
-    pub fn settings(&self) -> ModelSettings {
+    pub fn settings(&self) -> anyhow::Result<ModelSettings> {
         let controlnet = self.controlnet.as_ref().map(|model| ControlNetSettings {
             model: model.clone(),
             depth_mode: self.control_depth.into(),
@@ -100,13 +115,19 @@ impl ModelArgs {
             start: self.control_start,
             end: self.control_end,
         });
+        let mode = self.ip_mode.map(|m| match m {
+            IpModeArg::Style => IpMode::Style,
+            IpModeArg::Composition => IpMode::Composition,
+            IpModeArg::StyleAndComposition => IpMode::StyleAndComposition,
+        });
+        let scale = IpScale::parse(&self.ip_scale, mode)?;
         let ip_adapter = match (&self.ip_adapter, &self.image_encoder) {
-            (Some(adapter), Some(encoder)) => Some(IpAdapterSettings { adapter: adapter.clone(), encoder: encoder.clone(), scale: self.ip_scale }),
+            (Some(adapter), Some(encoder)) => Some(IpAdapterSettings { adapter: adapter.clone(), encoder: encoder.clone(), scale }),
             _ => None,
         };
         // Required by the parser wherever these flags are read (not for `dataset merge`).
         let model = self.model.clone().unwrap_or_default();
-        ModelSettings { model, precision: self.precision.dtype(), controlnet, ip_adapter, loras: self.lora.clone() }
+        Ok(ModelSettings { model, precision: self.precision.dtype(), controlnet, ip_adapter, loras: self.lora.clone() })
     }
 }
 

@@ -83,7 +83,13 @@ impl<'a> Dictionary<'a> {
                 Some(n) => n.clone(),
                 None => return Resolved::Missing,
             },
-            Address::Path(p) => format!("{p}.weight"),
+            // transformers 5's CLIPTextModel has no `text_model` level, so files saved under it
+            // name CLIP-L's modules `encoder.layers.N…`; the networks here keep the level.
+            Address::Path(p) => {
+                let (plain, leveled) = (format!("{p}.weight"), format!("text_model.{p}.weight"));
+                let known = |n: &str| self.params.get(n).is_some() || self.params.is_not_run(n);
+                if !known(&plain) && known(&leveled) { leveled } else { plain }
+            }
         };
         match self.params.get(&name) {
             Some(p) => Resolved::Weight(name, p),

@@ -6,6 +6,7 @@
 
 use crate::controlnet_guide::{ControlNetUse, ControlRun, SharedInputs};
 use crate::error::{finite, Error, Result};
+use crate::ip_scale::IpScale;
 use crate::prompt_encoding::Conditioning;
 use crate::rng::TorchCpuRng;
 use crate::schedulers::Sampler;
@@ -16,11 +17,11 @@ use std::time::{Duration, Instant};
 use vkdiff_runtime::{Dtype, Tensor};
 use vkdiff_unet::{nchw_to_nhwc, nhwc_to_nchw, IpAdapter, IpAdapterInput, UNetInputs, UNetPass};
 
-/// An IP-Adapter and its weight, for images that each have `images` style images.
+/// An IP-Adapter and its weights, for images that each have `images` style images.
 #[derive(Clone, Copy)]
 pub struct IpAdapterUse<'a> {
     pub adapter: &'a IpAdapter,
-    pub scale: f32,
+    pub scale: &'a IpScale,
     pub images: usize,
 }
 
@@ -84,12 +85,9 @@ impl<'m> Denoiser<'m> {
         let control = control.map(|c| ControlRun::record(c, &shared)).transpose()?;
         let ip = match ip {
             Some(use_) => {
-                if !use_.scale.is_finite() {
-                    return Err(Error::Config(format!("--ip-scale {} is not a number", use_.scale)));
-                }
                 let width = model.unet_config.cross_attention_dim;
                 let zeros = vec![0.0; rows * use_.images * use_.adapter.num_tokens() * width];
-                vec![use_.adapter.unet_input(&zeros, rows, use_.scale)?]
+                vec![use_.adapter.unet_input(&zeros, rows, use_.scale.per_layer(model.unet.cross_attentions())?)?]
             }
             None => Vec::new(),
         };

@@ -6,6 +6,7 @@
 //! No chunk is named `prompt` or `workflow`: ComfyUI reads those as its graph JSON and refuses
 //! the file when they are not, before it looks at `parameters`.
 
+use crate::ip_scale::IpScale;
 use crate::schedulers::SamplerKind;
 use crate::text_to_image::{Sampling, SizeConditioning, TextToImage};
 use std::collections::BTreeMap;
@@ -29,7 +30,7 @@ pub struct ControlNetSettings {
 pub struct IpAdapterSettings {
     pub adapter: PathBuf,
     pub encoder: PathBuf,
-    pub scale: f32,
+    pub scale: IpScale,
 }
 
 #[derive(Clone, Debug, PartialEq)]

@@ -5,6 +5,7 @@
 
 use crate::error::{Error, Result};
 use crate::images::ClipPreprocess;
+use crate::ip_scale::IpScale;
 use crate::RgbImage;
 use vkdiff_unet::{ClipVisionModelWithProjection, ImageFeature, IpAdapter};
 
@@ -15,7 +16,7 @@ pub struct ImageGuide<'a> {
     pub preprocess: &'a ClipPreprocess,
     /// The style images, all for the one adapter.
     pub images: &'a [RgbImage],
-    pub scale: f32,
+    pub scale: &'a IpScale,
 }
 
 impl ImageGuide<'_> {

@@ -8,6 +8,7 @@ mod error;
 pub mod files;
 mod gen_settings;
 mod ip_adapter_guide;
+mod ip_scale;
 pub mod images;
 mod prompt_encoding;
 mod rng;
@@ -19,6 +20,7 @@ mod workflow_models;
 
 pub use error::{Error, Result};
 pub use ip_adapter_guide::ImageGuide;
+pub use ip_scale::{IpBlock, IpMode, IpScale};
 pub use rng::TorchCpuRng;
 pub use schedulers::{Sampler, SamplerKind, SchedulerConfig};
 pub use sdxl::Sdxl;

@@ -41,14 +41,18 @@ impl ModelSettings {
             check_control_settings(c.scale, c.start, c.end)?;
         }
         if let Some(ip) = &self.ip_adapter {
-            if !ip.scale.is_finite() {
-                return Err(Error::Config(format!("--ip-scale {} is not a number", ip.scale)));
-            }
+            // The blocks named must hold cross-attentions of this UNet.
+            let crosses = flagged("--model", &self.model, vkdiff_unet::Checkpoint::unet_config(&self.model).and_then(|c| c.cross_attentions()))?;
+            ip.scale.per_layer(&crosses)?;
         }
         for (path, flag) in self.files() {
             if !path.exists() {
                 return Err(Error::Config(format!("{flag} {}: no such file or folder", path.display())));
             }
+        }
+        // Headers only: a file that is not a LoRA fails before the model loads.
+        for lora in &self.loras {
+            flagged("--lora", &lora.path, LoraFile::open(&lora.path))?;
         }
         Ok(())
     }
@@ -100,13 +104,13 @@ impl WorkflowModels {
     /// The IP-Adapter as a batch of images with `images` style images each uses it.
     pub fn ip_use(&self, images: usize) -> Option<IpAdapterUse<'_>> {
         let (style, ip) = (self.style.as_ref()?, self.settings.ip_adapter.as_ref()?);
-        Some(IpAdapterUse { adapter: &style.adapter, scale: ip.scale, images })
+        Some(IpAdapterUse { adapter: &style.adapter, scale: &ip.scale, images })
     }
 
     /// The IP-Adapter over `images`.
     pub fn image_guide<'a>(&'a self, images: &'a [RgbImage]) -> Option<ImageGuide<'a>> {
         let (style, ip) = (self.style.as_ref()?, self.settings.ip_adapter.as_ref()?);
-        Some(ImageGuide { adapter: &style.adapter, encoder: &style.encoder, preprocess: &style.preprocess, images, scale: ip.scale })
+        Some(ImageGuide { adapter: &style.adapter, encoder: &style.encoder, preprocess: &style.preprocess, images, scale: &ip.scale })
     }
 
     /// One image's guides over its inputs.

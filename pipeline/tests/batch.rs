@@ -5,7 +5,7 @@
 
 use std::path::PathBuf;
 use vkdiff_pipeline::images::{read_image, ControlDepth};
-use vkdiff_pipeline::{ControlNetSettings, Denoiser, IpAdapterSettings, ItemInputs, LoraSetting, ModelSettings, SamplerKind, Sampling, WorkflowModels};
+use vkdiff_pipeline::{ControlNetSettings, Denoiser, IpAdapterSettings, IpScale, ItemInputs, LoraSetting, ModelSettings, SamplerKind, Sampling, WorkflowModels};
 use vkdiff_runtime::{Context, Dtype};
 
 fn fixture(name: &str) -> PathBuf {
@@ -17,7 +17,7 @@ fn settings(precision: Dtype) -> ModelSettings {
         model: fixture("pipeline/tiny-sdxl"),
         precision,
         controlnet: Some(ControlNetSettings { model: fixture("workflow/controlnet"), depth_mode: ControlDepth::Inverse, scale: 0.7, start: 0.0, end: 1.0 }),
-        ip_adapter: Some(IpAdapterSettings { adapter: fixture("workflow/ip-adapter_tiny.safetensors"), encoder: fixture("workflow/image_encoder"), scale: 0.6 }),
+        ip_adapter: Some(IpAdapterSettings { adapter: fixture("workflow/ip-adapter_tiny.safetensors"), encoder: fixture("workflow/image_encoder"), scale: IpScale::All(0.6) }),
         loras: vec![LoraSetting { path: fixture("workflow/lora-peft.safetensors"), strength: 0.5 }],
     }
 }

@@ -5,27 +5,18 @@
 
 mod common;
 
-use common::{ctx, job, relative_l2};
+use common::{ctx, job, psnr, relative_l2};
 use serde_json::Value;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::images::{read_image, ClipPreprocess};
-use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, Sdxl};
+use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, IpScale, Sdxl};
 use vkdiff_runtime::Dtype;
 use vkdiff_unet::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter, SafeTensors};
 
 fn workflow(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/workflow").join(name)
-}
-
-fn psnr(got: &[u8], want: &[f32]) -> f64 {
-    let mse = got.iter().zip(want).map(|(&g, &w)| (g as f64 - w as f64).powi(2)).sum::<f64>() / want.len() as f64;
-    if mse == 0.0 {
-        f64::INFINITY
-    } else {
-        10.0 * (255.0f64 * 255.0 / mse).log10()
-    }
 }
 
 /// Every model a case may name, loaded once for the run precision.
@@ -82,13 +73,14 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
                 })
             }
         };
-        let style_images;
+        let (style_images, ip_scale);
         let image = match &case["ip"] {
             Value::Null => None,
             ip => {
                 style_images = ip["images"].as_array().unwrap().iter().map(|p| read_image(&workflow(p.as_str().unwrap())).unwrap()).collect::<Vec<_>>();
                 let adapter = &g.adapters[ip["adapter"].as_str().unwrap()];
-                Some(ImageGuide { adapter, encoder: &g.encoder, preprocess: &g.preprocess, images: &style_images, scale: ip["scale"].as_f64().unwrap() as f32 })
+                ip_scale = IpScale::All(ip["scale"].as_f64().unwrap() as f32);
+                Some(ImageGuide { adapter, encoder: &g.encoder, preprocess: &g.preprocess, images: &style_images, scale: &ip_scale })
             }
         };
         let out = sdxl.text_to_image(&job(case), &Guides { control, image }, &mut |_, _| {}).unwrap();

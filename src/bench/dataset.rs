@@ -126,7 +126,7 @@ fn model_settings(precision: vkdiff_runtime::Dtype, loras: &[(LoraFile, f32); 2]
         model: "random-sdxl-base".into(),
         precision,
         controlnet: Some(ControlNetSettings { model: "random-controlnet-depth".into(), depth_mode: ControlDepth::Inverse, scale: 0.5, start: 0.0, end: 1.0 }),
-        ip_adapter: Some(IpAdapterSettings { adapter: "random-ip-adapter".into(), encoder: "random-vit-h".into(), scale: 0.6 }),
+        ip_adapter: Some(IpAdapterSettings { adapter: "random-ip-adapter".into(), encoder: "random-vit-h".into(), scale: vkdiff_pipeline::IpScale::All(0.6) }),
         loras: loras.iter().enumerate().map(|(k, (_, s))| LoraSetting { path: format!("random-lora-{k}").into(), strength: *s }).collect(),
     }
 }

@@ -51,7 +51,7 @@ pub fn run(args: &WorkflowArgs) -> Result<()> {
         let depth = gradient(size, size, 3);
         let guides = Guides {
             control: Some(ControlGuide { net: &controlnet, image: &depth, scale: 0.5, start: 0.0, end: 1.0 }),
-            image: Some(ImageGuide { adapter: &adapter, encoder: &encoder, preprocess: &preprocess, images: &styles, scale: 0.6 }),
+            image: Some(ImageGuide { adapter: &adapter, encoder: &encoder, preprocess: &preprocess, images: &styles, scale: &vkdiff_pipeline::IpScale::All(0.6) }),
         };
         let start = Instant::now();
         let out = model.denoise(&job, &guides, &mut |done, total| eprintln!("{size}² workflow: step {done}/{total}"))?;

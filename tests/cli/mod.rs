@@ -16,6 +16,7 @@ pub fn scratch(name: &str) -> PathBuf {
 }
 
 /// A PNG's text chunks, `tEXt` and `iTXt` alike, in file order.
+#[allow(dead_code)] // not every test binary reads PNG text
 pub fn png_text(path: &Path) -> Vec<(String, String)> {
     let reader = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap())).read_info().unwrap();
     let info = reader.info();

@@ -109,7 +109,7 @@ fn ip_adapter(ctx: &Context, unet: &UNet, io: &SafeTensors, fixture_name: &str, 
         })
         .collect();
     let scale = io.values("ip_scale").unwrap().1[0];
-    IpAdapterInput { tokens: upload(ctx, io, "ip_tokens", dtype), scale, layers }
+    IpAdapterInput { tokens: upload(ctx, io, "ip_tokens", dtype), scales: vec![scale; unet.cross_attention_channels().len()], layers }
 }
 
 #[test]

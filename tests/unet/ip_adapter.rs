@@ -4,6 +4,7 @@
 use crate::common::{ctx, random};
 use crate::forward::errors;
 use crate::errors::assert_one_line;
+use crate::fixture;
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -118,9 +119,11 @@ fn ip_adapter_synthetic_plain_projection_and_unet_input() {
     let (rel, _) = errors(&got, &want);
     eprintln!("synthetic plain projection f32: relative L2 error {rel:.2e}");
     assert!(rel < 1e-5, "relative L2 error {rel:.2e}");
-    let input = adapter.unet_input(&got, 2, 0.7).unwrap();
+    let layers = unet.cross_attention_channels().len();
+    let input = adapter.unet_input(&got, 2, vec![0.7; layers]).unwrap();
     assert_eq!(input.tokens.shape(), [2, 4, d]);
-    assert_eq!(input.layers.len(), unet.cross_attention_channels().len());
+    assert_eq!(input.layers.len(), layers);
+    assert!(adapter.unet_input(&got, 2, vec![0.7; layers + 1]).is_err(), "a scale per layer");
     assert!(adapter.image_tokens(&embeds, &[2, 31]).is_err());
 }
 
@@ -244,9 +247,21 @@ fn ip_adapter_projections_match_diffusers() {
                 check("plain two-image negative tokens", dtype, &negative, &value(&tokens["two_negative"]).1);
                 let mut both = negative.clone();
                 both.extend(&two);
-                let input = adapter.unet_input(&both, 2, 0.6).unwrap();
+                let input = adapter.unet_input(&both, 2, vec![0.6; unet.cross_attention_channels().len()]).unwrap();
                 assert_eq!(input.tokens.shape(), [2, 8, unet.config().cross_attention_dim]);
             }
+        }
+    }
+}
+
+#[test]
+fn the_config_names_the_cross_attentions_the_unet_builds() {
+    for path in [pipeline_fixture("tiny-sdxl/unet"), fixture("sdxl3/unet"), fixture("heads/unet")] {
+        let (config, ckpt) = Checkpoint::unet(&ctx(), &path, Dtype::F16).unwrap();
+        let unet = UNet::load(&config, &ckpt).unwrap();
+        assert_eq!(config.cross_attentions().unwrap(), unet.cross_attentions(), "{}", path.display());
+        for c in unet.cross_attentions() {
+            assert!(unet.parameters().get(&format!("{}.to_q.weight", c.name)).is_some(), "{} is not a module of the UNet", c.name);
         }
     }
 }

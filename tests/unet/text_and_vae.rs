@@ -92,3 +92,21 @@ fn vae_decode_in_bands_equals_the_whole_decode() {
     let (rel, worst) = errors(&banded, &whole);
     assert!(rel <= 1e-6 && worst <= 1e-5, "banded decode differs: relative L2 {rel:.2e}, worst {worst:.2e} of RMS");
 }
+
+#[test]
+fn a_text_encoder_saved_without_its_text_model_level_loads_the_same() {
+    // transformers 5 saves CLIPTextModel as `embeddings.…`, `encoder.layers.…` (no `text_model.`).
+    let source = pipeline_fixture("tiny-sdxl");
+    let dir = std::env::temp_dir().join(format!("vkdiff-no-level-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("text_encoder")).unwrap();
+    std::fs::copy(source.join("text_encoder/config.json"), dir.join("text_encoder/config.json")).unwrap();
+    let mut parts = crate::malformed::read_parts(&source.join("text_encoder/model.safetensors"));
+    parts.header = parts.header.into_iter().map(|(k, v)| (k.strip_prefix("text_model.").map_or(k.clone(), String::from), v)).collect();
+    assert!(parts.header.keys().any(|k| k.starts_with("encoder.layers.")));
+    crate::malformed::write_parts(&dir.join("text_encoder/model.safetensors"), &parts);
+    let ids = vec![vec![49406, 320, 1125, 539, 49407, 49407]];
+    let encode = |path: &std::path::Path| ClipTextModel::load_sdxl(&ctx(), path, TextEncoderSlot::ClipL, Dtype::F32).unwrap().encode(&ids).unwrap().penultimate;
+    assert_eq!(encode(&dir), encode(&source));
+    std::fs::remove_dir_all(dir).unwrap();
+}

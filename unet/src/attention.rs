@@ -15,13 +15,14 @@ pub struct IpLayer {
     pub to_v_ip: Linear,
 }
 
-/// Extra key/value tokens on every cross-attention:
-/// `out = softmax(QKᵀ)V + scale · softmax(QK_ipᵀ)V_ip`, with K_ip, V_ip projected from `tokens`
-/// by each layer's own weights. `layers` are in the order of [`crate::UNet::cross_attention_layers`].
+/// Extra key/value tokens on every cross-attention k:
+/// `out = softmax(QKᵀ)V + scales[k] · softmax(QK_ipᵀ)V_ip`, with K_ip, V_ip projected from
+/// `tokens` by each layer's own weights. `layers` and `scales` are in the order of
+/// [`crate::UNet::cross_attentions`].
 pub struct IpAdapterInput {
     /// [B, image tokens, cross_attention_dim].
     pub tokens: Tensor,
-    pub scale: f32,
+    pub scales: Vec<f32>,
     pub layers: Vec<IpLayer>,
 }
 
@@ -92,17 +93,21 @@ impl Attention {
         self.to_out.forward_into(g, &out, residual, true, 1.0)
     }
 
-    /// out += scale · softmax(Q·K_ipᵀ)·V_ip, the scale folded into V_ip's projection.
+    /// out += scale · softmax(Q·K_ipᵀ)·V_ip, the scale folded into V_ip's projection; nothing
+    /// where the layer's scale is 0 (a style-only adapter leaves most layers out).
     fn add_image_attention(&self, g: &mut Graph, q: &Tensor, adapter: &IpAdapterInput, out: &Tensor, softmax_scale: f32) -> Result<()> {
         let index = self.cross_index.expect("only cross-attentions take image tokens");
-        let layer = adapter.layers.get(index).ok_or_else(|| {
-            Error::Config(format!("IP-Adapter has {} layers but the UNet has more cross-attentions", adapter.layers.len()))
-        })?;
+        let (Some(layer), Some(&scale)) = (adapter.layers.get(index), adapter.scales.get(index)) else {
+            return Err(Error::Config(format!("IP-Adapter has {} layers but the UNet has more cross-attentions", adapter.layers.len())));
+        };
+        if scale == 0.0 {
+            return Ok(());
+        }
         let (b, n, c) = (q.shape()[0], q.shape()[1], q.shape()[2]);
         let tokens = adapter.tokens.shape()[1];
         let k = layer.to_k_ip.forward(g, &adapter.tokens)?;
         let v = g.alloc(&[b, tokens, c])?;
-        layer.to_v_ip.forward_into(g, &adapter.tokens, &v, false, adapter.scale)?;
+        layer.to_v_ip.forward_into(g, &adapter.tokens, &v, false, scale)?;
         let image = g.alloc(&[b, n, c])?;
         ops::attention(&mut g.rec, q, &k, &v, &image, &AttentionLayout::dense(b, self.heads, self.head_dim, n, tokens), softmax_scale)?;
         Ok(ops::add(&mut g.rec, out, &image, out)?)

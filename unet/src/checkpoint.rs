@@ -270,6 +270,11 @@ impl<'a> Weights<'a> {
         Weights { ckpt: self.ckpt, prefix: self.path(name) }
     }
 
+    /// The dotted module path this view is rooted at.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
     fn path(&self, name: &str) -> String {
         if self.prefix.is_empty() {
             name.to_string()

@@ -2,6 +2,7 @@
 //! values derived the way diffusers derives them.
 
 use crate::error::{Error, Result};
+use crate::transformer_2d::CrossAttention;
 use serde::Deserialize;
 use std::path::Path;
 
@@ -219,6 +220,31 @@ impl UNetConfig {
             Some(v) => Err(Error::Config(format!("config `reverse_transformer_layers_per_block` has {} entries for {} levels", v.len(), levels.len()))),
             None => Ok(levels.iter().rev().map(|l| l.depth).collect()),
         }
+    }
+
+    /// The cross-attentions [`crate::UNet::load`] builds, in the same order (down blocks, up
+    /// blocks, then the mid block: diffusers' processor order), without loading anything.
+    pub fn cross_attentions(&self) -> Result<Vec<CrossAttention>> {
+        let levels = self.levels()?;
+        let up_depths = self.up_depths()?;
+        let last = levels.last().ok_or_else(|| Error::Config("config has no levels".into()))?;
+        let mut blocks: Vec<(String, usize, usize, usize)> = Vec::new();
+        for (i, l) in levels.iter().enumerate().filter(|(_, l)| l.cross_attention) {
+            blocks.push((format!("down_blocks.{i}"), self.layers_per_block, l.depth, l.channels));
+        }
+        for (i, _) in self.up_block_types.iter().enumerate().filter(|(_, t)| *t == "CrossAttnUpBlock2D") {
+            blocks.push((format!("up_blocks.{i}"), self.layers_per_block + 1, up_depths[i], levels[levels.len() - 1 - i].channels));
+        }
+        blocks.push(("mid_block".into(), 1, last.depth, last.channels));
+        Ok(blocks
+            .into_iter()
+            .flat_map(|(block, attentions, depth, channels)| {
+                (0..attentions).flat_map(move |j| {
+                    let block = block.clone();
+                    (0..depth).map(move |t| CrossAttention { channels, name: format!("{block}.attentions.{j}.transformer_blocks.{t}.attn2") })
+                })
+            })
+            .collect())
     }
 
     /// Width of the time embedding (4 × the first level's channels unless set).

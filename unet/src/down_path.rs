@@ -1,6 +1,7 @@
 //! The half the UNet and its ControlNet share: time and added embeddings, conv_in and the down
 //! blocks, producing the skip tensors.
 
+use crate::transformer_2d::CrossAttention;
 use crate::checkpoint::Weights;
 use crate::config::UNetConfig;
 use crate::embeddings::Embeddings;
@@ -27,7 +28,7 @@ pub struct DownOutput {
 
 impl DownPath {
     /// Loads the down path, appending its cross-attentions' channels to `crosses`.
-    pub fn load(w: &Weights, config: &UNetConfig, crosses: &mut Vec<usize>) -> Result<DownPath> {
+    pub fn load(w: &Weights, config: &UNetConfig, crosses: &mut Vec<CrossAttention>) -> Result<DownPath> {
         let levels = config.levels()?;
         let norm = NormSpec { groups: config.norm_num_groups, eps: config.norm_eps };
         let spec = BlockSpec { temb: config.time_embed_dim(), norm, context: config.cross_attention_dim };
@@ -47,7 +48,7 @@ impl DownPath {
     }
 
     /// The mid block at the bottom of this path.
-    pub fn load_mid(&self, w: &Weights, config: &UNetConfig, crosses: &mut Vec<usize>) -> Result<MidBlock> {
+    pub fn load_mid(&self, w: &Weights, config: &UNetConfig, crosses: &mut Vec<CrossAttention>) -> Result<MidBlock> {
         let last = config.levels()?.pop().expect("validated configs have levels");
         MidBlock::load(&w.sub("mid_block"), last.channels, last.depth, last.heads, &self.spec, crosses)
     }

@@ -175,8 +175,11 @@ impl IpAdapter {
     /// The UNet's input for one pass: `tokens` [batch, k·num_tokens, cross_attention_dim] from
     /// [`IpAdapter::image_tokens`] (k images per batch item, their tokens one after another as
     /// diffusers flattens them; e.g. negative and positive stacked for guidance), uploaded, with
-    /// this adapter's layers (shared, not copied) and `scale`.
-    pub fn unet_input(&self, tokens: &[f32], batch: usize, scale: f32) -> Result<IpAdapterInput> {
+    /// this adapter's layers (shared, not copied) and each layer's scale.
+    pub fn unet_input(&self, tokens: &[f32], batch: usize, scales: Vec<f32>) -> Result<IpAdapterInput> {
+        if scales.len() != self.layers.len() {
+            return Err(Error::Config(format!("IP-Adapter: {} scales for {} layers", scales.len(), self.layers.len())));
+        }
         let (t, d) = (self.num_tokens(), self.dim());
         let per_item = tokens.len() / (batch * d).max(1);
         if batch == 0 || per_item == 0 || tokens.len() != batch * per_item * d || !per_item.is_multiple_of(t) {
@@ -187,7 +190,7 @@ impl IpAdapter {
             .iter()
             .map(|(k, v)| IpLayer { to_k_ip: Linear { weight: k.clone(), bias: None }, to_v_ip: Linear { weight: v.clone(), bias: None } })
             .collect();
-        Ok(IpAdapterInput { tokens: self.ctx.upload(&[batch, per_item, d], self.dtype, tokens)?, scale, layers })
+        Ok(IpAdapterInput { tokens: self.ctx.upload(&[batch, per_item, d], self.dtype, tokens)?, scales, layers })
     }
 
     /// Width of the image tokens, the UNet's cross_attention_dim.

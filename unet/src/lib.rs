@@ -41,6 +41,7 @@ pub use ldm_names::{OriginalNames, StoredAs};
 pub use layout::{nchw_to_nhwc, nhwc_to_nchw};
 pub use safetensors::{f32_file_bytes as safetensors_f32_bytes, write_f32 as write_safetensors_f32, SafeTensors, SourceDtype};
 pub use attention::{IpAdapterInput, IpLayer};
+pub use transformer_2d::CrossAttention;
 pub use nn::Linear;
 pub use parameters::{ParamLayout, Parameter, Parameters};
 pub use unet_2d_condition::{ControlResiduals, UNet, UNetInputs, UNetPass};

@@ -58,14 +58,23 @@ pub struct Transformer2DModel {
     proj_out: Linear,
 }
 
+/// A cross-attention of the network: its width and its diffusers module name
+/// (`up_blocks.0.attentions.1.transformer_blocks.0.attn2`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CrossAttention {
+    pub channels: usize,
+    pub name: String,
+}
+
 impl Transformer2DModel {
-    /// Loads `depth` blocks; their cross-attentions are appended to `crosses` (channels of each
-    /// cross-attention, in diffusers' processor order), their index being their position there.
-    pub fn load(w: &Weights, c: usize, depth: usize, spec: &AttentionSpec, crosses: &mut Vec<usize>) -> Result<Transformer2DModel> {
+    /// Loads `depth` blocks; their cross-attentions are appended to `crosses` (in diffusers'
+    /// processor order), their index being their position there.
+    pub fn load(w: &Weights, c: usize, depth: usize, spec: &AttentionSpec, crosses: &mut Vec<CrossAttention>) -> Result<Transformer2DModel> {
         let blocks = (0..depth)
             .map(|t| {
-                crosses.push(c);
-                BasicTransformerBlock::load(&w.sub(&format!("transformer_blocks.{t}")), c, spec, crosses.len() - 1)
+                let block = w.sub(&format!("transformer_blocks.{t}"));
+                crosses.push(CrossAttention { channels: c, name: block.sub("attn2").prefix().to_string() });
+                BasicTransformerBlock::load(&block, c, spec, crosses.len() - 1)
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(Transformer2DModel {

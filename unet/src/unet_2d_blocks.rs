@@ -6,7 +6,7 @@ use crate::checkpoint::Weights;
 use crate::error::Result;
 use crate::nn::Graph;
 use crate::resnet::{Downsample2D, NormSpec, ResnetBlock2D, Upsample2D};
-use crate::transformer_2d::{AttentionSpec, Transformer2DModel};
+use crate::transformer_2d::{AttentionSpec, CrossAttention, Transformer2DModel};
 use vkdiff_runtime::ops;
 use vkdiff_runtime::Tensor;
 
@@ -34,7 +34,7 @@ pub struct BlockShape {
     pub resample: bool,
 }
 
-fn load_attentions(w: &Weights, shape: &BlockShape, spec: &BlockSpec, crosses: &mut Vec<usize>) -> Result<Vec<Transformer2DModel>> {
+fn load_attentions(w: &Weights, shape: &BlockShape, spec: &BlockSpec, crosses: &mut Vec<CrossAttention>) -> Result<Vec<Transformer2DModel>> {
     let Some((depth, heads)) = shape.attention else { return Ok(Vec::new()) };
     let attn = AttentionSpec { heads, context: spec.context, groups: spec.norm.groups };
     (0..shape.layers).map(|j| Transformer2DModel::load(&w.sub(&format!("attentions.{j}")), shape.outputs, depth, &attn, crosses)).collect()
@@ -47,7 +47,7 @@ pub struct DownBlock {
 }
 
 impl DownBlock {
-    pub fn load(w: &Weights, shape: &BlockShape, spec: &BlockSpec, padding: usize, crosses: &mut Vec<usize>) -> Result<DownBlock> {
+    pub fn load(w: &Weights, shape: &BlockShape, spec: &BlockSpec, padding: usize, crosses: &mut Vec<CrossAttention>) -> Result<DownBlock> {
         let resnets = (0..shape.layers)
             .map(|j| {
                 let inputs = if j == 0 { shape.inputs } else { shape.outputs };
@@ -83,7 +83,7 @@ pub struct MidBlock {
 }
 
 impl MidBlock {
-    pub fn load(w: &Weights, channels: usize, depth: usize, heads: usize, spec: &BlockSpec, crosses: &mut Vec<usize>) -> Result<MidBlock> {
+    pub fn load(w: &Weights, channels: usize, depth: usize, heads: usize, spec: &BlockSpec, crosses: &mut Vec<CrossAttention>) -> Result<MidBlock> {
         let attn = AttentionSpec { heads, context: spec.context, groups: spec.norm.groups };
         Ok(MidBlock {
             resnet_0: ResnetBlock2D::load(&w.sub("resnets.0"), channels, channels, Some(spec.temb), spec.norm)?,
@@ -108,7 +108,7 @@ pub struct UpBlock {
 impl UpBlock {
     /// `shape.inputs` is the channel count of the down level this block mirrors, `prev` that of
     /// the hidden state arriving from below; resnet j concatenates a skip onto its input.
-    pub fn load(w: &Weights, shape: &BlockShape, prev: usize, spec: &BlockSpec, crosses: &mut Vec<usize>) -> Result<UpBlock> {
+    pub fn load(w: &Weights, shape: &BlockShape, prev: usize, spec: &BlockSpec, crosses: &mut Vec<CrossAttention>) -> Result<UpBlock> {
         let resnets = (0..shape.layers)
             .map(|j| {
                 let skip = if j + 1 == shape.layers { shape.inputs } else { shape.outputs };

@@ -2,6 +2,7 @@
 //! command buffer that is replayed for every evaluation.
 
 use crate::attention::IpAdapterInput;
+use crate::transformer_2d::CrossAttention;
 use crate::checkpoint::Checkpoint;
 use crate::config::UNetConfig;
 use crate::down_path::{DownConditioning, DownOutput, DownPath};
@@ -57,8 +58,8 @@ pub struct UNet {
     up: Vec<UpBlock>,
     norm_out: GroupNorm,
     conv_out: Conv2d,
-    /// Channels of each cross-attention, in diffusers' attention-processor order.
-    crosses: Vec<usize>,
+    /// Every cross-attention, in diffusers' attention-processor order.
+    crosses: Vec<CrossAttention>,
     parameters: Parameters,
 }
 
@@ -115,7 +116,12 @@ impl UNet {
     /// Channels of every cross-attention in diffusers' `attn_processors` order. Cross-attention k
     /// is processor 2k + 1 (each transformer block registers attn1, then attn2), the number
     /// IP-Adapter files key their `ip_adapter.N.to_k_ip` weights by.
-    pub fn cross_attention_channels(&self) -> &[usize] {
+    pub fn cross_attention_channels(&self) -> Vec<usize> {
+        self.crosses.iter().map(|c| c.channels).collect()
+    }
+
+    /// Every cross-attention, in the order of [`UNet::cross_attention_channels`].
+    pub fn cross_attentions(&self) -> &[CrossAttention] {
         &self.crosses
     }
 

@@ -1,5 +1,6 @@
-//! LoRA files written by diffusers (tools/make_workflow_fixtures.py), merged at the strength the
-//! records were fused at and compared with diffusers' fuse_lora result.
+//! LoRA files as diffusers, PEFT and kohya write them (tools/make_workflow_fixtures.py,
+//! tools/make_compat_fixtures.py: PEFT adapters saved under transformers 5), merged at the
+//! strength the records were fused at and compared with diffusers' fuse_lora result.
 
 use crate::common::*;
 use vkdiff_lora::{LoraFile, LoraMerger, Targets};
@@ -24,13 +25,23 @@ fn ohwi_to_oihw(x: &[f32], s: &[usize]) -> Vec<f32> {
 
 #[test]
 fn diffusers_fixtures_match_fuse_lora() {
-    let dir = repo("tests/fixtures/workflow");
+    check_fused("tests/fixtures/workflow", 3);
+}
+
+#[test]
+fn a_peft_lora_saved_under_transformers_5_matches_fuse_lora() {
+    check_fused("tests/fixtures/compat", 1);
+}
+
+/// Every LoRA of the fixture folder `dir` (`files` of them) against diffusers' fused weights.
+fn check_fused(dir: &str, files: usize) {
+    let dir = repo(dir);
     let json = std::fs::read_to_string(dir.join("records.json"))
         .unwrap_or_else(|e| panic!("{}: {e} (regenerate with tools/make_workflow_fixtures.py)", dir.join("records.json").display()));
     let meta: serde_json::Value = serde_json::from_str(&json).unwrap();
     let records = SafeTensors::open(&dir.join("records.safetensors")).unwrap();
     let loras = meta["loras"].as_object().expect("records.json has no `loras`");
-    assert_eq!(loras.len(), 3, "{:?}", loras.keys());
+    assert_eq!(loras.len(), files, "{:?}", loras.keys());
     let nets = tiny_sdxl(Dtype::F32);
     let before = nets.params().map(snapshot);
     for (stem, l) in loras {

@@ -3,6 +3,7 @@
 //! flag names, so a run with other settings into the same folder is refused naming the flag.
 
 use crate::error::{Error, Result};
+use crate::ip_scale::IpScale;
 use crate::gen_settings::{control_depth_name, precision_name, schedule_name, ModelSettings, RNG};
 use crate::text_to_image::{Sampling, SizeConditioning};
 use serde_json::{json, Map, Value};
@@ -169,11 +170,19 @@ impl DatasetSettings {
             map.extend(object(json!({
                 "ip-adapter": ip.adapter.display().to_string(),
                 "image-encoder": ip.encoder.display().to_string(),
-                "ip-scale": ip.scale,
+                "ip-scale": ip_scale_json(&ip.scale),
                 "ip-set": sets,
             })));
         }
         v
+    }
+}
+
+/// A number where it is one (as earlier datasets recorded it), else the flag's text.
+fn ip_scale_json(scale: &IpScale) -> Value {
+    match scale {
+        IpScale::All(s) => json!(s),
+        blocks => json!(blocks.to_string()),
     }
 }
 

@@ -46,3 +46,14 @@ pub fn relative_l2(got: &[f32], want: &[f32]) -> f64 {
     let norm: f64 = want.iter().map(|&w| (w as f64).powi(2)).sum();
     (diff / norm).sqrt()
 }
+
+/// PSNR in dB of 8-bit pixels against the same pixels recorded as f32 (diffusers' PIL image).
+#[allow(dead_code)] // not every test binary compares images
+pub fn psnr(got: &[u8], want: &[f32]) -> f64 {
+    let mse = got.iter().zip(want).map(|(&g, &w)| (g as f64 - w as f64).powi(2)).sum::<f64>() / want.len() as f64;
+    if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (255.0f64 * 255.0 / mse).log10()
+    }
+}

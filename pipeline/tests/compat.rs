@@ -1,0 +1,80 @@
+//! What users bring from diffusers, against diffusers on the tiny SDXL
+//! (tools/make_compat_fixtures.py): IP-Adapter scales per block (`set_ip_adapter_scale` with a
+//! dict, InstantStyle's style-only adapter among them) and SDXL's size micro-conditioning.
+
+mod common;
+
+use common::{ctx, job, psnr, relative_l2};
+use serde_json::Value;
+use std::path::PathBuf;
+use vkdiff_pipeline::images::{read_image, ClipPreprocess};
+use vkdiff_pipeline::{Guides, ImageGuide, IpScale, Sdxl};
+use vkdiff_runtime::Dtype;
+use vkdiff_unet::{ClipVisionModelWithProjection, IpAdapter, SafeTensors};
+
+fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures").join(name)
+}
+
+fn cases() -> Vec<Value> {
+    let json: Value = serde_json::from_str(&std::fs::read_to_string(fixture("compat/records.json")).unwrap()).unwrap();
+    json["cases"].as_array().unwrap().clone()
+}
+
+fn ip_scale(case: &Value) -> IpScale {
+    let flags: Vec<String> = case["ip_scale_flags"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().to_string()).collect();
+    IpScale::parse(&flags, None).unwrap()
+}
+
+#[test]
+fn ip_scale_flags_give_every_layer_the_scale_diffusers_sets() {
+    let sdxl = Sdxl::load(&ctx(), &fixture("pipeline/tiny-sdxl"), Dtype::F32, &mut |_| {}).unwrap();
+    let crosses = sdxl.unet().cross_attentions();
+    for case in cases().iter().filter(|c| c["ip"].is_object()) {
+        let got = ip_scale(case).per_layer(crosses).unwrap();
+        let want = case["ip_scales"].as_object().unwrap();
+        assert_eq!(want.len(), crosses.len(), "{}", case["name"]);
+        for (cross, got) in crosses.iter().zip(got) {
+            let want = want[&cross.name].as_f64().unwrap() as f32;
+            assert_eq!(got, want, "{} {}", case["name"], cross.name);
+        }
+    }
+}
+
+fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
+    let ctx = ctx();
+    let records = SafeTensors::open(&fixture("compat/records.safetensors")).unwrap();
+    let sdxl = Sdxl::load(&ctx, &fixture("pipeline/tiny-sdxl"), dtype, &mut |_| {}).unwrap();
+    let encoder = ClipVisionModelWithProjection::load_folder(&ctx, &fixture("workflow/image_encoder"), dtype).unwrap();
+    let preprocess = ClipPreprocess::square(encoder.config().image_size);
+    for case in cases() {
+        let name = case["name"].as_str().unwrap();
+        let (adapter, images, scale);
+        let image = match &case["ip"] {
+            Value::Null => None,
+            ip => {
+                adapter = IpAdapter::load(&ctx, &fixture(&format!("workflow/{}", ip["adapter"].as_str().unwrap())), sdxl.unet(), dtype).unwrap();
+                images = ip["images"].as_array().unwrap().iter().map(|p| read_image(&fixture(&format!("workflow/{}", p.as_str().unwrap()))).unwrap()).collect::<Vec<_>>();
+                scale = ip_scale(&case);
+                Some(ImageGuide { adapter: &adapter, encoder: &encoder, preprocess: &preprocess, images: &images, scale: &scale })
+            }
+        };
+        let out = sdxl.text_to_image(&job(&case), &Guides { control: None, image }, &mut |_, _| {}).unwrap();
+        let (_, latents) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
+        let (_, pixels) = records.values(case["tensors"]["image_u8"].as_str().unwrap()).unwrap();
+        let (rel, p) = (relative_l2(&out.latents, &latents), psnr(&out.image.pixels, &pixels));
+        eprintln!("{dtype:?} {name}: latents rel L2 {rel:.2e}, image PSNR {p:.1} dB");
+        assert!(rel <= tol, "{dtype:?} case {name}: latents relative L2 error {rel:.2e} > {tol:.0e}");
+        assert!(p >= min_psnr, "{dtype:?} case {name}: image PSNR {p:.1} dB < {min_psnr} dB");
+    }
+}
+
+#[test]
+fn ip_block_scales_and_size_conditioning_match_diffusers_in_f32() {
+    check(Dtype::F32, 1e-4, 50.0);
+}
+
+#[test]
+fn ip_block_scales_and_size_conditioning_match_diffusers_in_f16() {
+    check(Dtype::F16, 2e-2, 30.0);
+}

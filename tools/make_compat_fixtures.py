@@ -1,0 +1,194 @@
+#!/usr/bin/env python3
+"""diffusers' outputs for what `vkdiff gen` takes from users' habits, on the tiny SDXL of
+tests/fixtures/pipeline/tiny-sdxl with the IP-Adapter of tests/fixtures/workflow:
+
+  - IP-Adapter per-block scales: pipe.set_ip_adapter_scale(<dict>) (InstantStyle's style-only form and a mix of
+    whole blocks, single attentions and the mid block), each case with the `--ip-scale` flags that mean the same;
+  - SDXL size micro-conditioning: original_size, crops_coords_top_left, target_size;
+  - a LoRA as diffusers' training scripts save it under transformers 5: PEFT adapters added to the UNet and both
+    text encoders, saved with StableDiffusionXLPipeline.save_lora_weights(get_peft_model_state_dict(...),
+    *_lora_adapter_metadata=...), which writes CLIP-L keys without the `text_model.` level
+    (`text_encoder.encoder.layers.N...`), since transformers 5's CLIPTextModel has none.
+
+Versions used to write the committed fixtures: Python 3.11, torch 2.15.0 (CPU), diffusers 0.42.1, transformers
+5.23.0, peft 0.21.2, safetensors 0.8.0, pillow 13.0.0.
+Setup and rerun (the tiny pipeline and the workflow fixtures must exist; they are loaded, not regenerated):
+  python3 -m venv /tmp/ref && /tmp/ref/bin/pip install torch torchvision diffusers transformers peft safetensors pillow
+  /tmp/ref/bin/python tools/make_compat_fixtures.py [--out tests/fixtures/compat]
+
+Writes under --out: records.json (every case's settings, as records.json of tests/fixtures/workflow), records.safetensors
+(float32), lora-peft-transformers5.safetensors.
+"""
+import argparse
+import json
+import pathlib
+import sys
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import make_workflow_fixtures as wf  # noqa: E402
+
+import diffusers  # noqa: E402
+import peft  # noqa: E402
+import safetensors  # noqa: E402
+import transformers  # noqa: E402
+from peft import LoraConfig  # noqa: E402
+from peft.utils import get_peft_model_state_dict  # noqa: E402
+from safetensors.torch import load_file, save_file  # noqa: E402
+from diffusers import StableDiffusionXLPipeline  # noqa: E402
+
+IP = dict(adapter="ip-adapter_tiny.safetensors", images=["style-1.png"])
+CASES = [
+    # InstantStyle's style-only adapter on a UNet of two attentions per up block: up_blocks.0.attentions.1.
+    dict(name="ip_style_only", prompt="a wooden cabin in a snowy forest", seed=21, steps=4, sampler="euler",
+         width=64, height=64, ip=dict(IP, scale={"up": {"block_0": [0.0, 1.0]}}), ip_scale_flags=["up.0.1=1"]),
+    dict(name="ip_blocks", prompt="a wooden cabin in a snowy forest", seed=21, steps=4, sampler="euler",
+         width=64, height=64,
+         ip=dict(IP, scale={"down": {"block_1": 0.5}, "mid": 0.3, "up": {"block_0": [0.0, 0.9], "block_1": 0.8}}),
+         ip_scale_flags=["down.1=0.5", "mid=0.3", "up.0.1=0.9", "up.1=0.8"]),
+    # diffusers' (height, width) and (top, left) order.
+    dict(name="size_conditioning", prompt="a lighthouse on a cliff at dusk", seed=5, steps=4, sampler="euler_a",
+         width=64, height=96, original_size=(192, 128), crops_coords_top_left=(32, 16), target_size=(96, 64)),
+]
+
+LORA_STEM = "lora-peft-transformers5"
+# (component, target modules as peft matches them (suffixes), r, lora_alpha)
+PEFT_ADAPTERS = [
+    ("unet", ["attn1.to_k", "attn2.to_v", "proj_in", "resnets.0.conv1", "time_emb_proj"], 4, 8.0),
+    ("text_encoder", ["self_attn.q_proj", "self_attn.out_proj", "mlp.fc2"], 4, 2.0),
+    ("text_encoder_2", ["self_attn.k_proj", "mlp.fc1"], 2, 4.0),
+]
+FUSE_RECORDS = [("unet", "down_blocks.1.attentions.0.transformer_blocks.0.attn1.to_k"),
+                ("unet", "up_blocks.0.resnets.0.conv1"),
+                ("text_encoder", "text_model.encoder.layers.1.self_attn.q_proj"),
+                ("text_encoder_2", "text_model.encoder.layers.0.mlp.fc1")]
+
+
+def run_case(c, base_folder, workflow):
+    pipe = wf.load_base(base_folder)
+    pipe.scheduler = wf.SAMPLERS[c["sampler"]].from_config(pipe.scheduler.config)
+    kwargs = dict(prompt=c["prompt"], num_inference_steps=c["steps"], guidance_scale=wf.GUIDANCE, width=c["width"],
+                  height=c["height"])
+    for key in ("original_size", "crops_coords_top_left", "target_size"):
+        if key in c:
+            kwargs[key] = c[key]
+    if "ip" in c:
+        wf.load_ip(pipe, workflow, c["ip"]["adapter"])
+        pipe.set_ip_adapter_scale(c["ip"]["scale"])
+        kwargs["ip_adapter_image"] = [[wf.open_rgb(workflow / f) for f in c["ip"]["images"]]]
+    latents = pipe(**kwargs, generator=torch.Generator("cpu").manual_seed(c["seed"]), output_type="latent").images
+    pil = pipe(**kwargs, generator=torch.Generator("cpu").manual_seed(c["seed"]), output_type="pil").images[0]
+    return latents, torch.from_numpy(np.array(pil)).float()
+
+
+def ip_scales_in_effect(base_folder, workflow, scale):
+    """Each IP processor's scale after set_ip_adapter_scale(scale), by processor name: what the flags must give."""
+    pipe = wf.load_base(base_folder)
+    wf.load_ip(pipe, workflow, IP["adapter"])
+    pipe.set_ip_adapter_scale(scale)
+    return {name.removesuffix(".processor"): p.scale[0] for name, p in pipe.unet.attn_processors.items()
+            if hasattr(p, "scale")}
+
+
+def build_transformers5_lora(base_folder, path):
+    """PEFT adapters on every component, weights drawn like the workflow LoRAs, saved as diffusers saves them."""
+    pipe = wf.load_base(base_folder)
+    gen = wf.gen_for(LORA_STEM)
+    layers, metadata = {}, {}
+    for comp, targets, r, alpha in PEFT_ADAPTERS:
+        model = getattr(pipe, comp)
+        config = LoraConfig(r=r, lora_alpha=alpha, target_modules=targets, init_lora_weights=True)
+        model.add_adapter(config)
+        for name, m in model.named_modules():
+            if hasattr(m, "lora_A") and "default" in m.lora_A:
+                down, up = wf.lora_pair(gen, m.base_layer.weight, r, alpha / r)
+                m.lora_A["default"].weight.copy_(down.reshape(m.lora_A["default"].weight.shape))
+                m.lora_B["default"].weight.copy_(up.reshape(m.lora_B["default"].weight.shape))
+        layers[comp] = get_peft_model_state_dict(model)
+        metadata[comp] = model.peft_config["default"].to_dict()
+    StableDiffusionXLPipeline.save_lora_weights(
+        path.parent, weight_name=path.name, unet_lora_layers=layers["unet"],
+        text_encoder_lora_layers=layers["text_encoder"], text_encoder_2_lora_layers=layers["text_encoder_2"],
+        unet_lora_adapter_metadata=metadata["unet"], text_encoder_lora_adapter_metadata=metadata["text_encoder"],
+        text_encoder_2_lora_adapter_metadata=metadata["text_encoder_2"])
+    keys = sorted(load_file(path))
+    assert any(k.startswith("text_encoder.encoder.layers.") for k in keys), "expected transformers 5's CLIP-L keys"
+    return keys
+
+
+def lora_spec(base_folder, path):
+    """What diffusers applies from the file: every wrapped module with its scale (checked by wf.check_lora)."""
+    pipe = wf.load_base(base_folder)
+    pipe.load_lora_weights(str(path), adapter_name="probe")
+    spec = []
+    for (comp, module), m in sorted(wf.lora_modules(pipe).items()):
+        if "probe" not in m.lora_A:
+            continue
+        r = m.lora_A["probe"].weight.shape[0]
+        stored = module.removeprefix("text_model.") if comp == "text_encoder" else module
+        spec.append(dict(key=f"{comp}.{stored}", component=comp, module=module, rank=r,
+                         alpha=m.scaling["probe"] * r, scale=m.scaling["probe"],
+                         down=list(m.lora_A["probe"].weight.shape), up=list(m.lora_B["probe"].weight.shape)))
+    return spec
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", default="tests/fixtures/compat")
+    ap.add_argument("--pipeline", default="tests/fixtures/pipeline/tiny-sdxl")
+    ap.add_argument("--workflow", default="tests/fixtures/workflow")
+    args = ap.parse_args()
+    out, base_folder, workflow = pathlib.Path(args.out), pathlib.Path(args.pipeline), pathlib.Path(args.workflow)
+    out.mkdir(parents=True, exist_ok=True)
+    torch.set_grad_enabled(False)
+    torch.set_num_threads(2)
+    tensors = {}
+    meta = dict(
+        description=f"diffusers (float32, CPU) on the tiny SDXL of {base_folder}; written by "
+                    "tools/make_compat_fixtures.py. Cases follow tests/fixtures/workflow/records.json's conventions; "
+                    "sizes in diffusers' (height, width) order; ip.scale is set_ip_adapter_scale's argument and "
+                    "ip_scale_flags the --ip-scale values meaning the same; ip_scales the scale diffusers then holds "
+                    "per cross-attention processor.",
+        versions=dict(torch=torch.__version__, diffusers=diffusers.__version__, transformers=transformers.__version__,
+                      peft=peft.__version__, safetensors=safetensors.__version__),
+        cases=[])
+    for c in CASES:
+        latents, image = run_case(c, base_folder, workflow)
+        wf.check_sane(c["name"], latents)
+        # The feature must show: without it (IP scale 1 everywhere, default sizes) the latents differ.
+        plain = {k: v for k, v in c.items() if k not in ("original_size", "crops_coords_top_left", "target_size")}
+        if "ip" in c:
+            plain["ip"] = dict(c["ip"], scale=1.0)
+        moved = ((latents - run_case(plain, base_folder, workflow)[0]).norm() / latents.norm()).item()
+        assert moved > 1e-2, f"{c['name']}: the feature moves the latents by only {moved:.1e}"
+        p = f"gen.{c['name']}."
+        tensors[p + "latents"], tensors[p + "image_u8"] = latents.contiguous(), image.contiguous()
+        entry = dict(c, guidance_scale=wf.GUIDANCE, negative_prompt=None,
+                     tensors=dict(latents=p + "latents", image_u8=p + "image_u8"))
+        if "ip" in c:
+            entry["ip_scales"] = ip_scales_in_effect(base_folder, workflow, c["ip"]["scale"])
+        meta["cases"].append(entry)
+        print(f"{c['name']:20s} latents std {latents.std():.3f} mean {latents.mean():+.3f}; {moved:.2f} (relative) "
+              "away from the same case without the feature")
+
+    path = out / f"{LORA_STEM}.safetensors"
+    keys = build_transformers5_lora(base_folder, path)
+    spec = lora_spec(base_folder, path)
+    pipe = wf.load_base(base_folder)
+    n = wf.check_lora(pipe, path, spec, "check")
+    pipe.unload_lora_weights()
+    wf.FUSE_RECORDS[LORA_STEM] = FUSE_RECORDS
+    fused, worst = wf.lora_fuse_records(pipe, path, spec, "check", tensors, LORA_STEM)
+    print(f"{LORA_STEM}: {len(keys)} tensors, {n} modules applied by diffusers; fuse_lora matches W + s(alpha/r)BA "
+          f"to {worst:.1e}")
+    meta["loras"] = {LORA_STEM: dict(file=path.name, tensors=len(keys), modules=spec, fused_strength=wf.FUSE_STRENGTH,
+                                     fused_records=fused, keys_sample=keys[:3] + [k for k in keys if "text_encoder." in k][:2])}
+    save_file({k: v.float().contiguous() for k, v in tensors.items()}, out / "records.safetensors")
+    (out / "records.json").write_text(json.dumps(meta, indent=1, ensure_ascii=False, allow_nan=False) + "\n")
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
