@@ -35,6 +35,14 @@ pub struct GenArgs {
     /// diffusers joins several images given to one adapter.
     #[arg(long, requires = "ip_adapter")]
     ip_image: Vec<PathBuf>,
+    /// img2img: start from this image (resized to the output where its size differs) instead of
+    /// noise, as diffusers' StableDiffusionXLImg2ImgPipeline (or its ControlNet twin with --depth).
+    #[arg(long)]
+    init_image: Option<PathBuf>,
+    /// img2img: the share of the schedule run over the init image, (0, 1]; the last
+    /// ⌊steps · strength⌋ steps run [default: 0.3, diffusers' SDXL img2img default].
+    #[arg(long, requires = "init_image")]
+    strength: Option<f64>,
     /// Also write the final latents (before VAE scaling), NCHW float32, tensor `latents`.
     #[arg(long)]
     latents_out: Option<PathBuf>,
@@ -69,12 +77,16 @@ pub fn run(args: &GenArgs) -> Result<()> {
         },
         depth: args.depth.clone(),
         ip_images: args.ip_image.clone(),
+        init_image: args.init_image.clone(),
     };
     settings.models.check()?;
     let inputs = settings.read_inputs()?;
-    // A depth map sets the size unless it is given: the image then lines up with the depth.
-    let (depth_w, depth_h) = inputs.control.as_ref().filter(|_| args.depth.is_some()).map_or((1024, 1024), |c| (c.width, c.height));
-    settings.job.sampling = args.sampling.sampling(args.width.unwrap_or(depth_w), args.height.unwrap_or(depth_h));
+    // A depth map (else an init image) sets the size unless it is given: the image then lines up
+    // with the depth; an init image keeps its size as diffusers' img2img does.
+    let given = inputs.control.as_ref().filter(|_| args.depth.is_some()).or(inputs.init.as_ref());
+    let (default_w, default_h) = given.map_or((1024, 1024), |c| (c.width, c.height));
+    settings.job.sampling = args.sampling.sampling(args.width.unwrap_or(default_w), args.height.unwrap_or(default_h));
+    settings.job.sampling.strength = args.init_image.as_ref().map(|_| args.strength.unwrap_or(0.3));
     let sampling = &settings.job.sampling;
     sampling.check()?;
     let multiple = Sdxl::probe_pixel_multiple(&settings.models.model)?;

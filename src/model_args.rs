@@ -185,6 +185,6 @@ impl SamplingArgs {
     pub fn sampling(&self, width: usize, height: usize) -> Sampling {
         let size_conditioning =
             SizeConditioning { original: self.original_size, crop_top_left: self.crops_coords_top_left, target: self.target_size };
-        Sampling { steps: self.steps, guidance_scale: self.cfg, sampler: self.sampler, karras: self.scheduler == Schedule::Karras, width, height, size_conditioning }
+        Sampling { steps: self.steps, guidance_scale: self.cfg, sampler: self.sampler, karras: self.scheduler == Schedule::Karras, width, height, size_conditioning, strength: None }
     }
 }

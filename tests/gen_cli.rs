@@ -55,12 +55,23 @@ fn bad_gen_arguments_print_one_error_line_and_write_nothing() {
     let out_arg = out.to_str().unwrap();
     let model = fixture("tiny-sdxl");
     let missing = dir.join("missing");
+    let workflow = |f: &str| format!("{}/tests/fixtures/workflow/{f}", env!("CARGO_MANIFEST_DIR"));
+    let (adapter, encoder) = (workflow("ip-adapter_tiny.safetensors"), workflow("image_encoder"));
+    let init = format!("{}/tests/fixtures/compat/init-64.png", env!("CARGO_MANIFEST_DIR"));
     for (args, message) in [
         (vec!["--model", missing.to_str().unwrap()], "--model"),
         (vec!["--model", &model, "--width", "100"], "--width 100 must be a positive multiple of 32 for this model"),
         (vec!["--model", &model, "--sampler", "dpmpp_2m_sde"], "unknown sampler `dpmpp_2m_sde`"),
         (vec!["--model", &model, "--sampler", "ddim", "--scheduler", "karras"], "Karras sigmas are not available with ddim"),
         (vec!["--model", &model, "--steps", "0"], "needs at least 1 step"),
+        (vec!["--model", &model, "--original-size", "1024"], "not WIDTHxHEIGHT"),
+        (vec!["--model", &model, "--crops-coords-top-left", "0;0"], "not TOP,LEFT"),
+        (vec!["--model", &model, "--init-image", &init, "--strength", "1.5"], "--strength 1.5 must be in (0, 1]"),
+        (vec!["--model", &model, "--init-image", &init, "--strength", "0.2", "--steps", "4"], "runs none"),
+        (vec!["--model", &model, "--init-image", missing.to_str().unwrap()], "--init-image"),
+        (vec!["--model", &model, "--ip-adapter", &adapter, "--image-encoder", &encoder, "--ip-image", &init, "--ip-scale", "up.7=1"], "--ip-scale up.7: this UNet has no cross-attention there"),
+        (vec!["--model", &model, "--ip-adapter", &adapter, "--image-encoder", &encoder, "--ip-image", &init, "--ip-scale", "sideways=1"], "name a block as"),
+        (vec!["--model", &model, "--ip-adapter", &adapter, "--image-encoder", &encoder, "--ip-image", &init, "--ip-mode", "style", "--ip-scale", "up.0=1"], "--ip-mode gives the blocks"),
     ] {
         let result = vkdiff(&[&["gen", "--prompt", "x", "--out", out_arg][..], &args].concat());
         let stderr = String::from_utf8_lossy(&result.stderr);
@@ -70,4 +81,29 @@ fn bad_gen_arguments_print_one_error_line_and_write_nothing() {
     }
     let result = vkdiff(&["gen", "--model", &model, "--prompt", "x", "--out", dir.join("x.jpg").to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&result.stderr).contains("give a .png path"));
+}
+
+#[test]
+fn gen_img2img_writes_the_latents_diffusers_wrote() {
+    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(format!("{}/tests/fixtures/compat/records.json", env!("CARGO_MANIFEST_DIR"))).unwrap()).unwrap();
+    let case = json["cases"].as_array().unwrap().iter().find(|c| c["name"] == "img2img_euler_a").unwrap();
+    let dir = scratch("img2img");
+    let (png, lat) = (dir.join("barn.png"), dir.join("barn.safetensors"));
+    let init = format!("{}/tests/fixtures/compat/{}", env!("CARGO_MANIFEST_DIR"), case["init"].as_str().unwrap());
+    let (seed, steps, strength) = (case["seed"].to_string(), case["steps"].to_string(), case["strength"].to_string());
+    let result = vkdiff(&[
+        "gen", "--model", &fixture("tiny-sdxl"), "--precision", "f32", "--prompt", case["prompt"].as_str().unwrap(), "--seed", &seed, "--steps", &steps,
+        "--sampler", "euler_a", "--init-image", &init, "--strength", &strength, "--out", png.to_str().unwrap(), "--latents-out", lat.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(result.status.success(), "{stderr}");
+    assert!(stderr.contains("3/3"), "img2img at strength 0.75 of 4 steps runs 3: {stderr}");
+    let records = vkdiff_unet::SafeTensors::open(Path::new(&format!("{}/tests/fixtures/compat/records.safetensors", env!("CARGO_MANIFEST_DIR")))).unwrap();
+    let (_, want) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
+    let (_, got) = vkdiff_unet::SafeTensors::open(&lat).unwrap().values("latents").unwrap();
+    let err: f64 = got.iter().zip(&want).map(|(&g, &w)| (g as f64 - w as f64).powi(2)).sum::<f64>().sqrt() / want.iter().map(|&w| (w as f64).powi(2)).sum::<f64>().sqrt();
+    assert!(err < 1e-4, "latents relative L2 error {err:.2e}");
+    let text = png_text(&png);
+    let parameters = &text.iter().find(|(k, _)| k == "parameters").unwrap().1;
+    assert!(parameters.contains("Denoising strength: 0.75") && parameters.contains("Size: 64x64"), "{parameters}");
 }

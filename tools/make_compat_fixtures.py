@@ -5,6 +5,8 @@ tests/fixtures/pipeline/tiny-sdxl with the IP-Adapter of tests/fixtures/workflow
   - IP-Adapter per-block scales: pipe.set_ip_adapter_scale(<dict>) (InstantStyle's style-only form and a mix of
     whole blocks, single attentions and the mid block), each case with the `--ip-scale` flags that mean the same;
   - SDXL size micro-conditioning: original_size, crops_coords_top_left, target_size;
+  - img2img: StableDiffusionXLImg2ImgPipeline with every sampler, and StableDiffusionXLControlNetImg2ImgPipeline with
+    an init image of another size (resized by the pipeline);
   - a LoRA as diffusers' training scripts save it under transformers 5: PEFT adapters added to the UNet and both
     text encoders, saved with StableDiffusionXLPipeline.save_lora_weights(get_peft_model_state_dict(...),
     *_lora_adapter_metadata=...), which writes CLIP-L keys without the `text_model.` level
@@ -17,7 +19,7 @@ Setup and rerun (the tiny pipeline and the workflow fixtures must exist; they ar
   /tmp/ref/bin/python tools/make_compat_fixtures.py [--out tests/fixtures/compat]
 
 Writes under --out: records.json (every case's settings, as records.json of tests/fixtures/workflow), records.safetensors
-(float32), lora-peft-transformers5.safetensors.
+(float32), lora-peft-transformers5.safetensors, init-64.png and init-80x72.png (RGB init images).
 """
 import argparse
 import json
@@ -37,7 +39,11 @@ import transformers  # noqa: E402
 from peft import LoraConfig  # noqa: E402
 from peft.utils import get_peft_model_state_dict  # noqa: E402
 from safetensors.torch import load_file, save_file  # noqa: E402
-from diffusers import StableDiffusionXLPipeline  # noqa: E402
+from diffusers import (  # noqa: E402
+    ControlNetModel, StableDiffusionXLControlNetImg2ImgPipeline, StableDiffusionXLImg2ImgPipeline,
+    StableDiffusionXLPipeline,
+)
+from PIL import Image  # noqa: E402
 
 IP = dict(adapter="ip-adapter_tiny.safetensors", images=["style-1.png"])
 CASES = [
@@ -51,6 +57,13 @@ CASES = [
     # diffusers' (height, width) and (top, left) order.
     dict(name="size_conditioning", prompt="a lighthouse on a cliff at dusk", seed=5, steps=4, sampler="euler_a",
          width=64, height=96, original_size=(192, 128), crops_coords_top_left=(32, 16), target_size=(96, 64)),
+    # img2img: diffusers runs the last int(steps * strength) steps.
+    *[dict(name=f"img2img_{sampler}", prompt="a red barn in a green field", seed=8, steps=steps, sampler=sampler,
+           width=64, height=64, init="init-64.png", strength=strength)
+      for sampler, steps, strength in (("euler", 4, 0.5), ("euler_a", 4, 0.75), ("dpmpp_2m", 5, 0.6), ("ddim", 4, 0.5))],
+    dict(name="img2img_controlnet_resized", prompt="a stone bridge over a river", seed=13, steps=4, sampler="euler",
+         width=64, height=64, init="init-80x72.png", strength=0.7,
+         control=dict(model="controlnet", image="control.png", scale=0.7, start=0.0, end=1.0)),
 ]
 
 LORA_STEM = "lora-peft-transformers5"
@@ -66,11 +79,43 @@ FUSE_RECORDS = [("unet", "down_blocks.1.attentions.0.transformer_blocks.0.attn1.
                 ("text_encoder_2", "text_model.encoder.layers.0.mlp.fc1")]
 
 
-def run_case(c, base_folder, workflow):
-    pipe = wf.load_base(base_folder)
-    pipe.scheduler = wf.SAMPLERS[c["sampler"]].from_config(pipe.scheduler.config)
-    kwargs = dict(prompt=c["prompt"], num_inference_steps=c["steps"], guidance_scale=wf.GUIDANCE, width=c["width"],
-                  height=c["height"])
+SAMPLERS = dict(wf.SAMPLERS, ddim=diffusers.DDIMScheduler)
+
+
+def make_init_images(out):
+    for (w, h), phase in (((64, 64), 0.7), ((80, 72), 1.9)):
+        y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+        rgb = np.stack([0.5 + 0.5 * np.sin(x / w * 6 + phase), 0.5 + 0.5 * np.cos(y / h * 4 - phase),
+                        ((x // 8 + y // 8) % 2) * 0.6 + 0.2], -1)
+        name = "init-64.png" if w == h else f"init-{w}x{h}.png"
+        Image.fromarray((rgb * 255).round().astype(np.uint8), "RGB").save(out / name)
+
+
+def img2img_pipeline(c, base_folder, workflow):
+    base = wf.load_base(base_folder)
+    if "control" in c:
+        net = ControlNetModel.from_pretrained(workflow / c["control"]["model"], variant="fp16", torch_dtype=torch.float32)
+        pipe = StableDiffusionXLControlNetImg2ImgPipeline(**base.components, controlnet=net, add_watermarker=False)
+    else:
+        pipe = StableDiffusionXLImg2ImgPipeline(**base.components, add_watermarker=False)
+    pipe.set_progress_bar_config(disable=True)
+    return pipe
+
+
+def run_case(c, base_folder, workflow, out):
+    if "init" in c:
+        pipe = img2img_pipeline(c, base_folder, workflow)
+        kwargs = dict(image=wf.open_rgb(out / c["init"]), strength=c["strength"])
+        if "control" in c:
+            cc = c["control"]
+            kwargs |= dict(control_image=wf.open_rgb(workflow / cc["image"]), controlnet_conditioning_scale=cc["scale"],
+                           control_guidance_start=cc["start"], control_guidance_end=cc["end"], width=c["width"],
+                           height=c["height"])
+    else:
+        pipe = wf.load_base(base_folder)
+        kwargs = dict(width=c["width"], height=c["height"])
+    pipe.scheduler = SAMPLERS[c["sampler"]].from_config(pipe.scheduler.config)
+    kwargs |= dict(prompt=c["prompt"], num_inference_steps=c["steps"], guidance_scale=wf.GUIDANCE)
     for key in ("original_size", "crops_coords_top_left", "target_size"):
         if key in c:
             kwargs[key] = c[key]
@@ -154,14 +199,17 @@ def main():
         versions=dict(torch=torch.__version__, diffusers=diffusers.__version__, transformers=transformers.__version__,
                       peft=peft.__version__, safetensors=safetensors.__version__),
         cases=[])
+    make_init_images(out)
     for c in CASES:
-        latents, image = run_case(c, base_folder, workflow)
+        latents, image = run_case(c, base_folder, workflow, out)
         wf.check_sane(c["name"], latents)
         # The feature must show: without it (IP scale 1 everywhere, default sizes) the latents differ.
         plain = {k: v for k, v in c.items() if k not in ("original_size", "crops_coords_top_left", "target_size")}
         if "ip" in c:
             plain["ip"] = dict(c["ip"], scale=1.0)
-        moved = ((latents - run_case(plain, base_folder, workflow)[0]).norm() / latents.norm()).item()
+        if "init" in c:
+            plain["strength"] = 1.0
+        moved = ((latents - run_case(plain, base_folder, workflow, out)[0]).norm() / latents.norm()).item()
         assert moved > 1e-2, f"{c['name']}: the feature moves the latents by only {moved:.1e}"
         p = f"gen.{c['name']}."
         tensors[p + "latents"], tensors[p + "image_u8"] = latents.contiguous(), image.contiguous()

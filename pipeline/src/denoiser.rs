@@ -6,6 +6,7 @@
 
 use crate::controlnet_guide::{ControlNetUse, ControlRun, SharedInputs};
 use crate::error::{finite, Error, Result};
+use crate::img2img::InitLatents;
 use crate::ip_scale::IpScale;
 use crate::prompt_encoding::Conditioning;
 use crate::rng::TorchCpuRng;
@@ -34,6 +35,8 @@ pub struct ItemInputs<'a> {
     pub control_image: Option<&'a RgbImage>,
     /// The image tokens of its rows ([`crate::ImageGuide::tokens`]), when it has an IP-Adapter.
     pub ip_tokens: Option<&'a [f32]>,
+    /// img2img: the encoded init image, when the batch samples with a strength.
+    pub init: Option<&'a InitLatents>,
 }
 
 /// A batch's latents and where its time went.
@@ -125,22 +128,35 @@ impl<'m> Denoiser<'m> {
 
         let [h, w, c] = self.latent;
         let n = c * h * w;
+        let first = self.sampling.first_step()?;
         let mut samplers = Vec::with_capacity(items.len());
         let mut rngs = Vec::with_capacity(items.len());
         let mut latents = Vec::with_capacity(items.len());
         for item in items {
             let sampler = Sampler::new(self.sampling.sampler, &self.model.scheduler, self.sampling.karras, self.sampling.steps)?;
             let mut rng = TorchCpuRng::new(item.seed);
-            let sigma = sampler.init_noise_sigma();
-            latents.push(rng.randn(n).into_iter().map(|v| v * sigma).collect::<Vec<f32>>());
+            latents.push(match (item.init, self.sampling.strength) {
+                (None, None) => {
+                    let sigma = sampler.init_noise_sigma();
+                    rng.randn(n).into_iter().map(|v| v * sigma).collect::<Vec<f32>>()
+                }
+                (Some(init), Some(_)) if init.mean.len() == n && init.std.len() == n => {
+                    // diffusers: latent_dist.sample(generator), scaled, then noise from the same generator.
+                    let scaling = self.model.vae.config().scaling_factor;
+                    let x0: Vec<f32> = init.mean.iter().zip(&init.std).zip(rng.randn(n)).map(|((m, s), e)| (m + s * e) * scaling).collect();
+                    sampler.add_noise(first, &x0, &rng.randn(n))
+                }
+                (Some(init), Some(_)) => return Err(Error::Config(format!("init latents of {} values for a latent of {n}", init.mean.len()))),
+                _ => return Err(Error::Config("img2img needs an init image and a strength for every image of the batch".into())),
+            });
             samplers.push(sampler);
             rngs.push(rng);
         }
         let timesteps = samplers[0].timesteps().to_vec();
         let total = timesteps.len();
         let guided = self.sampling.guided();
-        let mut steps = Vec::with_capacity(total);
-        for (step, &t) in timesteps.iter().enumerate() {
+        let mut steps = Vec::with_capacity(total - first);
+        for (step, &t) in timesteps.iter().enumerate().skip(first) {
             let start = Instant::now();
             let mut x_batch = Vec::with_capacity(self.sample.numel());
             for (sampler, x) in samplers.iter().zip(&latents) {
@@ -168,7 +184,7 @@ impl<'m> Denoiser<'m> {
                 sampler.step(step, &nhwc_to_nchw(&eps_nhwc, [1, h, w, c]), x, rng);
             }
             steps.push(start.elapsed());
-            on_step(step + 1, total);
+            on_step(step + 1 - first, total - first);
         }
         Ok(BatchOutput { latents, prepare, steps })
     }

@@ -67,6 +67,8 @@ pub struct GenSettings {
     pub depth: Option<PathBuf>,
     /// The IP-Adapter's style images, as given.
     pub ip_images: Vec<PathBuf>,
+    /// img2img's init image, as given.
+    pub init_image: Option<PathBuf>,
 }
 
 /// The noise generator's name (the only one: torch's CPU generator, bit for bit).
@@ -145,6 +147,10 @@ impl GenSettings {
         if let Some(n) = &job.negative_prompt {
             text.insert("negative_prompt".into(), n.clone());
         }
+        if let (Some(init), Some(strength)) = (&self.init_image, s.strength) {
+            text.insert("init_image".into(), init.display().to_string());
+            text.insert("strength".into(), strength.to_string());
+        }
         let c = &s.size_conditioning;
         if *c != SizeConditioning::default() {
             let size = |s: Option<(usize, usize)>| s.map_or("image size".into(), |(w, h)| format!("{w}x{h}"));
@@ -189,6 +195,9 @@ impl GenSettings {
             format!("RNG: {RNG}"),
             format!("Precision: {}", precision_name(m.precision).to_uppercase()),
         ];
+        if let Some(strength) = s.strength {
+            pairs.push(format!("Denoising strength: {strength}"));
+        }
         if let Some(c) = &m.controlnet {
             pairs.push(format!("ControlNet: {}, Control scale: {}, Control range: {}-{}", quoted(&model_name(&c.model)), c.scale, c.start, c.end));
         }

@@ -7,6 +7,7 @@ mod denoiser;
 mod error;
 pub mod files;
 mod gen_settings;
+mod img2img;
 mod ip_adapter_guide;
 mod ip_scale;
 pub mod images;
@@ -19,6 +20,7 @@ mod tokenizer;
 mod workflow_models;
 
 pub use error::{Error, Result};
+pub use img2img::InitLatents;
 pub use ip_adapter_guide::ImageGuide;
 pub use ip_scale::{IpBlock, IpMode, IpScale};
 pub use rng::TorchCpuRng;

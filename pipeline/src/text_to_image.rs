@@ -22,6 +22,9 @@ pub struct Sampling {
     pub width: usize,
     pub height: usize,
     pub size_conditioning: SizeConditioning,
+    /// img2img: how much of the schedule runs over the init image (diffusers' `strength`);
+    /// `None` starts from noise.
+    pub strength: Option<f64>,
 }
 
 /// SDXL's size micro-conditioning, as diffusers' `original_size`, `crops_coords_top_left` and
@@ -51,12 +54,27 @@ impl Sampling {
     }
 
     /// What is wrong whatever the model: the guidance scale, the step count, a noise schedule
-    /// the sampler does not have.
+    /// the sampler does not have, a strength that leaves no step.
     pub fn check(&self) -> Result<()> {
         if !self.guidance_scale.is_finite() {
             return Err(Error::Config(format!("--cfg {} is not a number", self.guidance_scale)));
         }
-        Sampler::new(self.sampler, &SchedulerConfig::sdxl_base(), self.karras, self.steps).map(|_| ())
+        Sampler::new(self.sampler, &SchedulerConfig::sdxl_base(), self.karras, self.steps)?;
+        self.first_step().map(|_| ())
+    }
+
+    /// The step img2img starts at (diffusers' `get_timesteps`: the last ⌊steps · strength⌋ steps
+    /// run); 0 without an init image.
+    pub fn first_step(&self) -> Result<usize> {
+        let Some(strength) = self.strength else { return Ok(0) };
+        if !(strength > 0.0 && strength <= 1.0) {
+            return Err(Error::Config(format!("--strength {strength} must be in (0, 1]")));
+        }
+        let run = ((self.steps as f64 * strength) as usize).min(self.steps);
+        if run == 0 {
+            return Err(Error::Config(format!("--strength {strength} of {} steps runs none; raise --steps or --strength", self.steps)));
+        }
+        Ok(self.steps - run)
     }
 
     /// The size must be a positive multiple of the model's `multiple` ([`Sdxl::pixel_multiple`]).
@@ -120,6 +138,8 @@ pub struct Generated {
 pub struct Guides<'a> {
     pub control: Option<ControlGuide<'a>>,
     pub image: Option<ImageGuide<'a>>,
+    /// img2img's init image (with [`Sampling::strength`]).
+    pub init: Option<&'a RgbImage>,
 }
 
 /// The denoising loop's result, before the VAE.
@@ -156,7 +176,14 @@ impl Sdxl {
         let ip = guides.image.as_ref().map(|g| IpAdapterUse { adapter: g.adapter, scale: g.scale, images: g.images.len() });
         let denoiser = Denoiser::record(self, sampling, control, ip, 1)?;
         timings.record = start.elapsed();
-        let item = ItemInputs { seed: job.seed, text: &text, control_image: guides.control.as_ref().map(|g| g.image), ip_tokens: ip_tokens.as_deref() };
+        let init = guides.init.map(|image| self.encode_init(image, sampling.width, sampling.height)).transpose()?;
+        let item = ItemInputs {
+            seed: job.seed,
+            text: &text,
+            control_image: guides.control.as_ref().map(|g| g.image),
+            ip_tokens: ip_tokens.as_deref(),
+            init: init.as_ref(),
+        };
         let out = denoiser.run(&[item], on_step)?;
         timings.record += out.prepare;
         timings.steps = out.steps;

@@ -116,7 +116,7 @@ impl WorkflowModels {
     /// One image's guides over its inputs.
     pub fn guides<'a>(&'a self, inputs: &'a GuideInputs) -> Guides<'a> {
         let control = self.control_use().zip(inputs.control.as_ref()).map(|(c, image)| ControlGuide { net: c.net, image, scale: c.scale, start: c.start, end: c.end });
-        Guides { control, image: self.image_guide(&inputs.style) }
+        Guides { control, image: self.image_guide(&inputs.style), init: inputs.init.as_ref() }
     }
 }
 
@@ -137,6 +137,8 @@ fn load_style(ctx: &Context, sdxl: &Sdxl, adapter: &Path, encoder: &Path, log: &
 pub struct GuideInputs {
     pub control: Option<RgbImage>,
     pub style: Vec<RgbImage>,
+    /// img2img's init image.
+    pub init: Option<RgbImage>,
 }
 
 impl GenSettings {
@@ -155,7 +157,8 @@ impl GenSettings {
         } else {
             Vec::new()
         };
-        Ok(GuideInputs { control, style })
+        let init = self.init_image.as_ref().map(|p| flagged("--init-image", p, read_image(p))).transpose()?;
+        Ok(GuideInputs { control, style, init })
     }
 }
 

@@ -1,6 +1,8 @@
 //! What users bring from diffusers, against diffusers on the tiny SDXL
 //! (tools/make_compat_fixtures.py): IP-Adapter scales per block (`set_ip_adapter_scale` with a
-//! dict, InstantStyle's style-only adapter among them) and SDXL's size micro-conditioning.
+//! dict, InstantStyle's style-only adapter among them), SDXL's size micro-conditioning, and
+//! img2img (`StableDiffusionXLImg2ImgPipeline` with every sampler, and its ControlNet twin with an
+//! init image of another size).
 
 mod common;
 
@@ -8,9 +10,9 @@ use common::{ctx, job, psnr, relative_l2};
 use serde_json::Value;
 use std::path::PathBuf;
 use vkdiff_pipeline::images::{read_image, ClipPreprocess};
-use vkdiff_pipeline::{Guides, ImageGuide, IpScale, Sdxl};
+use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, IpScale, Sdxl};
 use vkdiff_runtime::Dtype;
-use vkdiff_unet::{ClipVisionModelWithProjection, IpAdapter, SafeTensors};
+use vkdiff_unet::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter, SafeTensors};
 
 fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures").join(name)
@@ -59,7 +61,19 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
                 Some(ImageGuide { adapter: &adapter, encoder: &encoder, preprocess: &preprocess, images: &images, scale: &scale })
             }
         };
-        let out = sdxl.text_to_image(&job(&case), &Guides { control: None, image }, &mut |_, _| {}).unwrap();
+        let init = case["init"].as_str().map(|f| read_image(&fixture(&format!("compat/{f}"))).unwrap());
+        let (net, control_image);
+        let control = match &case["control"] {
+            Value::Null => None,
+            c => {
+                net = ControlNetModel::load(&ctx, &fixture(&format!("workflow/{}", c["model"].as_str().unwrap())), sdxl.unet_config(), dtype).unwrap();
+                control_image = read_image(&fixture(&format!("workflow/{}", c["image"].as_str().unwrap()))).unwrap();
+                let (start, end) = (c["start"].as_f64().unwrap(), c["end"].as_f64().unwrap());
+                Some(ControlGuide { net: &net, image: &control_image, scale: c["scale"].as_f64().unwrap() as f32, start, end })
+            }
+        };
+        let guides = Guides { control, image, init: init.as_ref() };
+        let out = sdxl.text_to_image(&job(&case), &guides, &mut |_, _| {}).unwrap();
         let (_, latents) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
         let (_, pixels) = records.values(case["tensors"]["image_u8"].as_str().unwrap()).unwrap();
         let (rel, p) = (relative_l2(&out.latents, &latents), psnr(&out.image.pixels, &pixels));
@@ -70,11 +84,11 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
 }
 
 #[test]
-fn ip_block_scales_and_size_conditioning_match_diffusers_in_f32() {
+fn ip_block_scales_size_conditioning_and_img2img_match_diffusers_in_f32() {
     check(Dtype::F32, 1e-4, 50.0);
 }
 
 #[test]
-fn ip_block_scales_and_size_conditioning_match_diffusers_in_f16() {
+fn ip_block_scales_size_conditioning_and_img2img_match_diffusers_in_f16() {
     check(Dtype::F16, 2e-2, 30.0);
 }

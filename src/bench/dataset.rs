@@ -70,7 +70,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     std::fs::remove_dir_all(&dir)?;
 
     // One image as `vkdiff gen` makes it: its own text encoding, guides and recording.
-    let inputs = GuideInputs { control: Some(gradient_depth(args.size)), style: style_images().to_vec() };
+    let inputs = GuideInputs { control: Some(gradient_depth(args.size)), style: style_images().to_vec(), init: None };
     let job = TextToImage { prompt: dataset.prompts[0].clone(), negative_prompt: None, seed: 0, sampling: dataset.sampling.clone() };
     let start = Instant::now();
     let single = models.sdxl.text_to_image(&job, &models.guides(&inputs), &mut |done, total| eprintln!("single image: step {done}/{total}"))?;
@@ -134,7 +134,7 @@ fn model_settings(precision: vkdiff_runtime::Dtype, loras: &[(LoraFile, f32); 2]
 /// The paper's set in small: frames of 1920×1080 scaled by size/1024, three crops each.
 fn dataset_settings(args: &DatasetArgs, models: &ModelSettings) -> DatasetSettings {
     let scale = |v: usize| (v * args.size / 1024) as u32;
-    let sampling = Sampling { steps: args.steps, guidance_scale: 5.0, sampler: SamplerKind::Euler, karras: false, width: args.size, height: args.size , size_conditioning: Default::default() };
+    let sampling = Sampling { steps: args.steps, guidance_scale: 5.0, sampler: SamplerKind::Euler, karras: false, width: args.size, height: args.size, size_conditioning: Default::default(), strength: None };
     DatasetSettings {
         seed: 0,
         count: args.scenes,

@@ -52,6 +52,7 @@ pub fn run(args: &WorkflowArgs) -> Result<()> {
         let guides = Guides {
             control: Some(ControlGuide { net: &controlnet, image: &depth, scale: 0.5, start: 0.0, end: 1.0 }),
             image: Some(ImageGuide { adapter: &adapter, encoder: &encoder, preprocess: &preprocess, images: &styles, scale: &vkdiff_pipeline::IpScale::All(0.6) }),
+            init: None,
         };
         let start = Instant::now();
         let out = model.denoise(&job, &guides, &mut |done, total| eprintln!("{size}² workflow: step {done}/{total}"))?;

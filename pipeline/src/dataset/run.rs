@@ -210,6 +210,7 @@ impl<'a> Loop<'a> {
         let inputs: Vec<ItemInputs> = items
             .iter()
             .map(|item| ItemInputs {
+                init: None,
                 seed: item.seed,
                 text: &self.texts[&item.prompt],
                 control_image: Some(&item.scene.control),
@@ -243,6 +244,7 @@ impl<'a> Loop<'a> {
             job: TextToImage { prompt: s.prompts[item.prompt].clone(), negative_prompt: s.negative_prompt.clone(), seed: item.seed, sampling: s.sampling.clone() },
             depth: s.models.controlnet.as_ref().map(|_| PathBuf::from(&files.depth)),
             ip_images: ip_images.clone(),
+            init_image: None,
         };
         let mut entry = json!({
             "id": index + 1,

@@ -58,6 +58,12 @@ impl Solver for Ddim {
         None
     }
 
+    fn add_noise(&self, step: usize, x0: &[f32], noise: &[f32]) -> Vec<f32> {
+        let alpha = self.alphas_cumprod[self.timesteps[step] as usize];
+        let (a, b) = (alpha.powf(0.5), (1.0 - alpha).powf(0.5));
+        x0.iter().zip(noise).map(|(x, n)| a * x + b * n).collect()
+    }
+
     fn init_noise_sigma(&self) -> f32 {
         1.0
     }

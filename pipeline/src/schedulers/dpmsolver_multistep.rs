@@ -82,6 +82,11 @@ impl Solver for DpmSolverMultistep {
         Some(&self.sigmas)
     }
 
+    fn add_noise(&self, step: usize, x0: &[f32], noise: &[f32]) -> Vec<f32> {
+        let (alpha, sigma) = alpha_sigma(self.sigmas[step]);
+        x0.iter().zip(noise).map(|(x, n)| alpha * x + sigma * n).collect()
+    }
+
     fn init_noise_sigma(&self) -> f32 {
         1.0
     }

@@ -3,7 +3,7 @@
 
 use super::config::{Prediction, SchedulerConfig};
 use super::euler_discrete::sigma_schedule;
-use super::{denoised, euler_init_noise_sigma, scale_by_sigma, Solver};
+use super::{add_sigma_noise, denoised, euler_init_noise_sigma, scale_by_sigma, Solver};
 use crate::rng::TorchCpuRng;
 use crate::Result;
 
@@ -31,6 +31,10 @@ impl Solver for EulerAncestralDiscrete {
 
     fn sigmas(&self) -> Option<&[f32]> {
         Some(&self.sigmas)
+    }
+
+    fn add_noise(&self, step: usize, x0: &[f32], noise: &[f32]) -> Vec<f32> {
+        add_sigma_noise(self.sigmas[step], x0, noise)
     }
 
     fn init_noise_sigma(&self) -> f32 {

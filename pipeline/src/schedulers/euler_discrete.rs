@@ -2,7 +2,7 @@
 
 use super::config::{Prediction, SchedulerConfig, Spacing};
 use super::{
-    denoised, euler_init_noise_sigma, interp, karras_sigmas, log_sigmas, scale_by_sigma, sigma_to_t, spaced_timesteps, train_sigmas, Solver,
+    add_sigma_noise, denoised, euler_init_noise_sigma, interp, karras_sigmas, log_sigmas, scale_by_sigma, sigma_to_t, spaced_timesteps, train_sigmas, Solver,
 };
 use crate::rng::TorchCpuRng;
 use crate::Result;
@@ -63,6 +63,10 @@ impl Solver for EulerDiscrete {
 
     fn sigmas(&self) -> Option<&[f32]> {
         Some(&self.sigmas)
+    }
+
+    fn add_noise(&self, step: usize, x0: &[f32], noise: &[f32]) -> Vec<f32> {
+        add_sigma_noise(self.sigmas[step], x0, noise)
     }
 
     fn init_noise_sigma(&self) -> f32 {

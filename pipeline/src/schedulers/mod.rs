@@ -57,6 +57,8 @@ trait Solver {
     fn sigmas(&self) -> Option<&[f32]>;
     fn init_noise_sigma(&self) -> f32;
     fn scale_model_input(&self, step: usize, x: &[f32]) -> Vec<f32>;
+    /// `scheduler.add_noise(x0, noise, timesteps[step])` with the begin index at `step`.
+    fn add_noise(&self, step: usize, x0: &[f32], noise: &[f32]) -> Vec<f32>;
     fn step(&mut self, step: usize, eps: &[f32], x: &mut [f32], rng: &mut TorchCpuRng);
 }
 
@@ -114,6 +116,13 @@ impl Sampler {
         self.solver.scale_model_input(step, x)
     }
 
+    /// img2img's start: `x0` noised to the level of timestep `step`, as diffusers'
+    /// `add_noise` after `set_begin_index(step)`.
+    pub fn add_noise(&self, step: usize, x0: &[f32], noise: &[f32]) -> Vec<f32> {
+        assert_eq!(x0.len(), noise.len(), "latent and noise sizes differ");
+        self.solver.add_noise(step, x0, noise)
+    }
+
     /// One `scheduler.step(eps, t, x, generator)`: `eps` is the (guidance-combined) model output,
     /// `x` the flat NCHW latent, updated in place; ancestral noise is drawn from `rng` as diffusers
     /// draws it (a randn of x's shape at every step, the last included). Steps go in order from 0:
@@ -169,6 +178,11 @@ fn numpy_linspace(start: f64, stop: f64, num: usize) -> Vec<f64> {
             }
         })
         .collect()
+}
+
+/// The Euler family's `add_noise`: x0 + noise · σ.
+fn add_sigma_noise(sigma: f32, x0: &[f32], noise: &[f32]) -> Vec<f32> {
+    x0.iter().zip(noise).map(|(x, n)| x + n * sigma).collect()
 }
 
 /// σ_t = √((1 − ᾱ_t)/ᾱ_t) for every training timestep, in float32 as torch computes it.

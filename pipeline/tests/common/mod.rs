@@ -32,6 +32,7 @@ pub fn job(case: &Value) -> TextToImage {
                 crop_top_left: pair(&case["crops_coords_top_left"]).unwrap_or((0, 0)),
                 target: pair(&case["target_size"]).map(|(h, w)| (w, h)),
             },
+            strength: case["strength"].as_f64(),
         },
     }
 }
