@@ -7,6 +7,8 @@ tests/fixtures/pipeline/tiny-sdxl with the IP-Adapter of tests/fixtures/workflow
   - SDXL size micro-conditioning: original_size, crops_coords_top_left, target_size;
   - img2img: StableDiffusionXLImg2ImgPipeline with every sampler, and StableDiffusionXLControlNetImg2ImgPipeline with
     an init image of another size (resized by the pipeline);
+  - a CLIP vision encoder of 40 channels over 4 heads (head size 10, off vkdiff's vec4 kernel layout): its
+    image_embeds and hidden_states[-2] from transformers;
   - a LoRA as diffusers' training scripts save it under transformers 5: PEFT adapters added to the UNet and both
     text encoders, saved with StableDiffusionXLPipeline.save_lora_weights(get_peft_model_state_dict(...),
     *_lora_adapter_metadata=...), which writes CLIP-L keys without the `text_model.` level
@@ -19,7 +21,8 @@ Setup and rerun (the tiny pipeline and the workflow fixtures must exist; they ar
   /tmp/ref/bin/python tools/make_compat_fixtures.py [--out tests/fixtures/compat]
 
 Writes under --out: records.json (every case's settings, as records.json of tests/fixtures/workflow), records.safetensors
-(float32), lora-peft-transformers5.safetensors, init-64.png and init-80x72.png (RGB init images).
+(float32), lora-peft-transformers5.safetensors, init-64.png and init-80x72.png (RGB init images),
+image_encoder_head10/ (transformers CLIPVisionModelWithProjection, float16 on disk).
 """
 import argparse
 import json
@@ -163,6 +166,28 @@ def build_transformers5_lora(base_folder, path):
     return keys
 
 
+HEAD10_ENCODER = dict(wf.IMAGE_ENCODER_CONFIG, hidden_size=40, num_attention_heads=4, intermediate_size=96,
+                      num_hidden_layers=2, projection_dim=24)
+
+
+def head10_encoder_records(out, tensors):
+    """A vision encoder with head size 10, saved in float16 (exact values), and transformers' outputs."""
+    from transformers import CLIPVisionConfig, CLIPVisionModelWithProjection
+    folder = out / "image_encoder_head10"
+    model = CLIPVisionModelWithProjection(CLIPVisionConfig(**HEAD10_ENCODER)).eval()
+    wf.redraw(model, wf.gen_for("image_encoder_head10"))
+    model.to(torch.float16).save_pretrained(folder, safe_serialization=True)
+    model = CLIPVisionModelWithProjection.from_pretrained(folder, dtype=torch.float32).eval()
+    size = HEAD10_ENCODER["image_size"]
+    pixels = torch.randn((2, 3, size, size), generator=wf.gen_for("head10-pixels"))
+    o = model(pixel_values=pixels, output_hidden_states=True)
+    tensors["head10.pixel_values"] = pixels.contiguous()
+    tensors["head10.image_embeds"] = o.image_embeds.contiguous()
+    tensors["head10.hidden_m2"] = o.hidden_states[-2].contiguous()
+    return dict(folder=folder.name, tensors=dict(pixel_values="head10.pixel_values", image_embeds="head10.image_embeds",
+                                                 hidden_m2="head10.hidden_m2"))
+
+
 def lora_spec(base_folder, path):
     """What diffusers applies from the file: every wrapped module with its scale (checked by wf.check_lora)."""
     pipe = wf.load_base(base_folder)
@@ -221,6 +246,7 @@ def main():
         print(f"{c['name']:20s} latents std {latents.std():.3f} mean {latents.mean():+.3f}; {moved:.2f} (relative) "
               "away from the same case without the feature")
 
+    meta["image_encoder_head10"] = head10_encoder_records(out, tensors)
     path = out / f"{LORA_STEM}.safetensors"
     keys = build_transformers5_lora(base_folder, path)
     spec = lora_spec(base_folder, path)

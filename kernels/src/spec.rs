@@ -83,5 +83,6 @@ pub const KERNELS: &[KernelSpec] = &[
     KernelSpec { name: "geglu", files: &["grid.wgsl", "activations.wgsl", "geglu.wgsl"], params: NONE },
     KernelSpec { name: "upsample_nearest2x", files: &["grid.wgsl", "upsample.wgsl"], params: NONE },
     KernelSpec { name: "concat_channels", files: &["grid.wgsl", "concat.wgsl"], params: NONE },
+    KernelSpec { name: "copy_heads", files: &["grid.wgsl", "copy_heads.wgsl"], params: NONE },
     KernelSpec { name: "timestep_embedding", files: &["timestep.wgsl"], params: NONE },
 ];

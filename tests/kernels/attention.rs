@@ -119,3 +119,24 @@ fn causal_self_attention_like_clip_text() {
         }
     }
 }
+
+#[test]
+fn head_sizes_and_strides_off_the_vec4_grid() {
+    // 10 (a 40-wide encoder over 4 heads), 1, 3 and 33: padded by zeros into the vec4 kernel.
+    for (d, nq, nk) in [(10, 17, 23), (1, 9, 5), (3, 20, 77), (33, 11, 13)] {
+        for dtype in DTYPES {
+            check(dtype, &AttentionLayout::dense(2, 4, d, nq, nk), 70 + d as u64);
+        }
+    }
+    // A fused projection of odd width, causal, with an odd offset on every operand.
+    let (b, h, d, n) = (2, 3, 5, 21);
+    let w = h * d;
+    let mut l = AttentionLayout::dense(b, h, d, n, n);
+    (l.q_ld, l.k_ld, l.v_ld) = (3 * w + 1, 3 * w + 1, 3 * w + 1);
+    (l.q_batch, l.k_batch, l.v_batch) = (n * (3 * w + 1), n * (3 * w + 1), n * (3 * w + 1));
+    (l.q_offset, l.k_offset, l.v_offset) = (1, w + 1, 2 * w + 1);
+    l.causal = true;
+    for dtype in DTYPES {
+        check(dtype, &l, 80);
+    }
+}

@@ -265,3 +265,19 @@ fn the_config_names_the_cross_attentions_the_unet_builds() {
         }
     }
 }
+
+#[test]
+fn an_image_encoder_with_head_size_10_matches_transformers() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/compat");
+    let meta: Value = serde_json::from_str(&std::fs::read_to_string(dir.join("records.json")).unwrap()).unwrap();
+    let rec = SafeTensors::open(&dir.join("records.safetensors")).unwrap();
+    let names = &meta["image_encoder_head10"];
+    let value = |key: &str| rec.values(names["tensors"][key].as_str().unwrap()).unwrap().1;
+    for dtype in [Dtype::F32, Dtype::F16] {
+        let encoder = ClipVisionModelWithProjection::load_folder(&ctx(), &dir.join(names["folder"].as_str().unwrap()), dtype).unwrap();
+        assert_eq!(encoder.config().hidden_size / encoder.config().num_attention_heads, 10);
+        let out = encoder.encode(&value("pixel_values"), 2, &[ImageFeature::ImageEmbeds, ImageFeature::Penultimate]).unwrap();
+        check("head-10 image_embeds", dtype, out.image_embeds.as_ref().unwrap(), &value("image_embeds"));
+        check("head-10 hidden_states[-2]", dtype, out.penultimate.as_ref().unwrap(), &value("hidden_m2"));
+    }
+}

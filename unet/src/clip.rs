@@ -68,8 +68,8 @@ impl ClipTextConfig {
     fn validate(&self) -> Result<()> {
         self.activation()?;
         let heads = self.num_attention_heads;
-        if heads == 0 || !self.hidden_size.is_multiple_of(heads) || !(self.hidden_size / heads).is_multiple_of(4) {
-            return Err(Error::Config(format!("text encoder: {} channels over {heads} heads is not a head size vkdiff runs (a multiple of 4)", self.hidden_size)));
+        if heads == 0 || !self.hidden_size.is_multiple_of(heads) {
+            return Err(Error::Config(format!("text encoder: {} channels do not split into {heads} heads", self.hidden_size)));
         }
         if self.num_hidden_layers < 2 {
             return Err(Error::Config("text encoder: SDXL reads the penultimate layer, so it needs at least 2 layers".into()));

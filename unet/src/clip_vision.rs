@@ -73,11 +73,8 @@ impl ClipVisionConfig {
     fn validate(&self) -> Result<()> {
         self.activation()?;
         let heads = self.num_attention_heads;
-        if heads == 0 || !self.hidden_size.is_multiple_of(heads) || !(self.hidden_size / heads).is_multiple_of(4) {
-            return Err(Error::Config(format!(
-                "image encoder: {} channels over {heads} heads is not a head size vkdiff runs (a multiple of 4)",
-                self.hidden_size
-            )));
+        if heads == 0 || !self.hidden_size.is_multiple_of(heads) {
+            return Err(Error::Config(format!("image encoder: {} channels do not split into {heads} heads", self.hidden_size)));
         }
         if self.patch_size == 0 || self.image_size < self.patch_size || self.num_channels == 0 {
             return Err(Error::Config(format!("image encoder: image size {} with patch size {} has no patches", self.image_size, self.patch_size)));

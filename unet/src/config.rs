@@ -185,8 +185,8 @@ impl UNetConfig {
         }
         let levels = self.levels()?;
         for l in levels.iter().filter(|l| l.cross_attention || l.depth > 0) {
-            if l.heads == 0 || l.channels % l.heads != 0 || (l.channels / l.heads) % 4 != 0 {
-                return Err(Error::Config(format!("{} channels in {} heads: head size must be a whole multiple of 4", l.channels, l.heads)));
+            if l.heads == 0 || !l.channels.is_multiple_of(l.heads) {
+                return Err(Error::Config(format!("{} channels do not split into {} heads", l.channels, l.heads)));
             }
         }
         for c in &self.block_out_channels {

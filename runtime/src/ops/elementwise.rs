@@ -1,7 +1,7 @@
 //! Element-wise and data-movement operations.
 
 use super::bands::{bands, elem, fit, image_rows, row_view, rows_per_band};
-use super::{dispatch_flat, f, kernel, same_dtype, u};
+use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u};
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
@@ -24,11 +24,6 @@ pub enum UnaryOp {
 pub enum BinaryOp {
     Add = 0,
     Mul = 1,
-}
-
-/// Workgroups for `n` elements, 64 per workgroup (kernels/wgsl/grid.wgsl).
-fn element_groups(n: usize) -> usize {
-    n.div_ceil(64)
 }
 
 /// out = op(x), element-wise; `alpha` is used by `Scale`. `out` may be `x`. Past the binding

@@ -8,7 +8,7 @@ mod elementwise;
 mod gemm;
 mod norm;
 
-pub use attention::{attention, AttentionLayout};
+pub use attention::{attention, copy_heads, AttentionLayout, HeadSpan};
 pub use conv::{conv2d, oihw_to_ohwi, ConvParams, Padding};
 pub use elementwise::{add, binary, concat_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x, BinaryOp, TimestepEmbedding, UnaryOp};
 pub use gemm::{linear, matmul, Matmul};
@@ -39,6 +39,11 @@ fn same_dtype(ctx: &Context, op: &str, tensors: &[&Tensor]) -> Result<Dtype> {
 /// Records `groups` workgroups of a kernel whose linear workgroup index is `y · groups_x + x`
 /// (element-wise and row kernels): they are spread over x and y so neither passes the 65535
 /// Vulkan guarantees, and `groups_x` is appended as the last push-constant word.
+/// Workgroups for `n` elements, 64 per workgroup (kernels/wgsl/grid.wgsl).
+fn element_groups(n: usize) -> usize {
+    n.div_ceil(64)
+}
+
 fn dispatch_flat(rec: &mut Recorder, k: &Arc<Kernel>, reads: &[&Tensor], writes: &[&Tensor], push: &[u32], groups: usize) -> Result<()> {
     let gx = groups.clamp(1, 65535);
     let words: Vec<u32> = push.iter().copied().chain([gx as u32]).collect();

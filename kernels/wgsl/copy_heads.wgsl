@@ -1,0 +1,43 @@
+// Multi-head tensors between layouts, any strides: for every (batch, token, head, d < dst_d),
+// dst[dst_off + batch·dst_batch + token·dst_ld + head·dst_d + d] =
+//     src[src_off + batch·src_batch + token·src_ld + head·src_d + d] where d < src_d, else 0.
+// Attention pads head sizes that are not a multiple of 4 into its vec4 layout with this, and
+// takes the padding off again.
+@group(0) @binding(0) var<storage, read> src: array<S>;
+@group(0) @binding(1) var<storage, read_write> dst: array<S>;
+
+struct Params {
+    n: u32,
+    tokens: u32,
+    heads: u32,
+    src_d: u32,
+    dst_d: u32,
+    src_ld: u32,
+    dst_ld: u32,
+    src_batch: u32,
+    dst_batch: u32,
+    src_off: u32,
+    dst_off: u32,
+    groups_x: u32,
+}
+
+var<immediate> p: Params;
+
+@compute @workgroup_size(64)
+fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let i = element_index(wg, lid);
+    if i >= p.n {
+        return;
+    }
+    let d = i % p.dst_d;
+    let row = i / p.dst_d;
+    let head = row % p.heads;
+    let token = (row / p.heads) % p.tokens;
+    let batch = row / (p.heads * p.tokens);
+    let at = p.dst_off + batch * p.dst_batch + token * p.dst_ld + head * p.dst_d + d;
+    if d < p.src_d {
+        dst[at] = src[p.src_off + batch * p.src_batch + token * p.src_ld + head * p.src_d + d];
+    } else {
+        dst[at] = S(0.0);
+    }
+}
