@@ -100,6 +100,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         eprintln!("device: {}", ctx.info().name);
         let start = Instant::now();
         let models = WorkflowModels::load(&ctx, &settings.models, &mut |line| eprintln!("{line}"))?;
+        crate::gen_cmd::warn_cut_prompts(&models.sdxl, settings.sampling.prompt_syntax, settings.prompts.iter().chain(&settings.negative_prompt));
         eprintln!("loaded in {:.1} s", start.elapsed().as_secs_f64());
         let done = pending.done as usize;
         let total = done + todo as usize;

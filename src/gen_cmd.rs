@@ -6,7 +6,7 @@ use anyhow::{bail, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
 use vkdiff_pipeline::files::{png_bytes, write_atomic_all};
-use vkdiff_pipeline::{check_control_shape, GenSettings, Sdxl, TextToImage, WorkflowModels};
+use vkdiff_pipeline::{check_control_shape, GenSettings, PromptSyntax, Sdxl, TextToImage, WorkflowModels};
 use vkdiff_runtime::Context;
 
 /// Text-to-image with an SDXL model (diffusers folder or single .safetensors file).
@@ -100,6 +100,7 @@ pub fn run(args: &GenArgs) -> Result<()> {
     let start = std::time::Instant::now();
     let models = WorkflowModels::load(&ctx, &settings.models, &mut |line| eprintln!("{line}"))?;
     eprintln!("loaded in {:.1} s", start.elapsed().as_secs_f64());
+    warn_cut_prompts(&models.sdxl, settings.job.sampling.prompt_syntax, [Some(&settings.job.prompt), settings.job.negative_prompt.as_ref()].into_iter().flatten());
     let progress = Progress::new("denoising", "step");
     let out = models.sdxl.text_to_image(&settings.job, &models.guides(&inputs), &mut |done, total| progress.update(done, total))?;
     let t = &out.timings;
@@ -121,4 +122,17 @@ pub fn run(args: &GenArgs) -> Result<()> {
     write_atomic_all(&files)?;
     eprintln!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// Plain prompts past CLIP's 75 tokens lose their end, as in diffusers: say so.
+pub fn warn_cut_prompts<'a>(sdxl: &Sdxl, syntax: PromptSyntax, prompts: impl Iterator<Item = &'a String>) {
+    if syntax != PromptSyntax::Plain {
+        return;
+    }
+    for prompt in prompts {
+        let cut = sdxl.tokens_cut(prompt);
+        if cut > 0 {
+            eprintln!("warning: the last {cut} tokens of \"{prompt}\" are cut (CLIP reads 75); --prompt-syntax weighted reads any length");
+        }
+    }
 }

@@ -4,7 +4,7 @@
 use crate::scene_cmd::ControlMode;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
-use vkdiff_pipeline::{ControlNetSettings, IpAdapterSettings, IpMode, IpScale, LoraSetting, ModelSettings, SamplerKind, Sampling, SizeConditioning};
+use vkdiff_pipeline::{ControlNetSettings, IpAdapterSettings, IpMode, IpScale, LoraSetting, PromptSyntax, ModelSettings, SamplerKind, Sampling, SizeConditioning};
 use vkdiff_runtime::Dtype;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -29,6 +29,21 @@ enum Schedule {
     Default,
     /// Karras et al. noise levels (euler, dpmpp_2m).
     Karras,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum SyntaxArg {
+    Plain,
+    Weighted,
+}
+
+impl From<SyntaxArg> for PromptSyntax {
+    fn from(s: SyntaxArg) -> PromptSyntax {
+        match s {
+            SyntaxArg::Plain => PromptSyntax::Plain,
+            SyntaxArg::Weighted => PromptSyntax::Weighted,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -150,6 +165,11 @@ pub struct SamplingArgs {
     /// Noise generator: torch-cpu reproduces torch.randn on a CPU generator bit for bit.
     #[arg(long, default_value = vkdiff_pipeline::RNG, value_parser = [vkdiff_pipeline::RNG])]
     rng: String,
+    /// plain: the prompt as it is, cut at CLIP's 75 tokens (diffusers). weighted: A1111's
+    /// `(word:1.3)`, `(word)` ×1.1, `[word]` ÷1.1, `\(` emphasis and prompts of any length in
+    /// chunks of 75, as diffusers' long-prompt-weighting SDXL pipeline (README: where ComfyUI differs).
+    #[arg(long, value_enum, default_value_t = SyntaxArg::Plain)]
+    prompt_syntax: SyntaxArg,
     /// SDXL size conditioning: the size of the image the model imagines it was cut from, WxH
     /// (diffusers' original_size) [default: the image size].
     #[arg(long, value_parser = parse_size)]
@@ -185,6 +205,6 @@ impl SamplingArgs {
     pub fn sampling(&self, width: usize, height: usize) -> Sampling {
         let size_conditioning =
             SizeConditioning { original: self.original_size, crop_top_left: self.crops_coords_top_left, target: self.target_size };
-        Sampling { steps: self.steps, guidance_scale: self.cfg, sampler: self.sampler, karras: self.scheduler == Schedule::Karras, width, height, size_conditioning, strength: None }
+        Sampling { steps: self.steps, guidance_scale: self.cfg, sampler: self.sampler, karras: self.scheduler == Schedule::Karras, width, height, size_conditioning, strength: None, prompt_syntax: self.prompt_syntax.into() }
     }
 }

@@ -112,3 +112,16 @@ fn the_image_and_its_latents_are_written_together_or_not_at_all() {
     let left: Vec<String> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert_eq!(left, vec!["x.safetensors".to_string()], "the image without its latents, or a temporary file, was left");
 }
+
+#[test]
+fn a_plain_prompt_past_77_tokens_is_cut_with_a_warning() {
+    let dir = scratch("long");
+    let out = dir.join("x.png");
+    let long = "mushrooms on soil ".repeat(30);
+    let result = vkdiff(&["gen", "--model", &tiny(), "--prompt", &long, "--steps", "1", "--width", "64", "--height", "64", "--out", out.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(result.status.success() && stderr.contains("warning: the last 15 tokens") && stderr.contains("--prompt-syntax weighted"), "{stderr}");
+    let result = vkdiff(&["gen", "--model", &tiny(), "--prompt", &long, "--prompt-syntax", "weighted", "--steps", "1", "--width", "64", "--height", "64", "--out", out.to_str().unwrap(), "--force"]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(result.status.success() && !stderr.contains("warning"), "{stderr}");
+}

@@ -7,6 +7,10 @@ tests/fixtures/pipeline/tiny-sdxl with the IP-Adapter of tests/fixtures/workflow
   - SDXL size micro-conditioning: original_size, crops_coords_top_left, target_size;
   - img2img: StableDiffusionXLImg2ImgPipeline with every sampler, and StableDiffusionXLControlNetImg2ImgPipeline with
     an init image of another size (resized by the pipeline);
+  - A1111-syntax weighted and long prompts as diffusers' long-prompt-weighting SDXL pipeline reads them
+    (examples/community/lpw_stable_diffusion_xl.py of the diffusers repository, loaded from --lpw; it is not in the
+    pip package): parse_prompt_attention on a corpus, and generations from get_weighted_text_embeddings_sdxl's
+    embeddings through StableDiffusionXLPipeline;
   - a CLIP vision encoder of 40 channels over 4 heads (head size 10, off vkdiff's vec4 kernel layout): its
     image_embeds and hidden_states[-2] from transformers;
   - a LoRA as diffusers' training scripts save it under transformers 5: PEFT adapters added to the UNet and both
@@ -18,13 +22,17 @@ Versions used to write the committed fixtures: Python 3.11, torch 2.15.0 (CPU), 
 5.23.0, peft 0.21.2, safetensors 0.8.0, pillow 13.0.0.
 Setup and rerun (the tiny pipeline and the workflow fixtures must exist; they are loaded, not regenerated):
   python3 -m venv /tmp/ref && /tmp/ref/bin/pip install torch torchvision diffusers transformers peft safetensors pillow
-  /tmp/ref/bin/python tools/make_compat_fixtures.py [--out tests/fixtures/compat]
+  git clone https://github.com/huggingface/diffusers /tmp/diffusers   (for examples/community/lpw_stable_diffusion_xl.py;
+      the committed fixtures used the file at commit 58eb52c080)
+  /tmp/ref/bin/python tools/make_compat_fixtures.py --lpw /tmp/diffusers/examples/community/lpw_stable_diffusion_xl.py
+      [--out tests/fixtures/compat]
 
 Writes under --out: records.json (every case's settings, as records.json of tests/fixtures/workflow), records.safetensors
 (float32), lora-peft-transformers5.safetensors, init-64.png and init-80x72.png (RGB init images),
 image_encoder_head10/ (transformers CLIPVisionModelWithProjection, float16 on disk).
 """
 import argparse
+import importlib.util
 import json
 import pathlib
 import sys
@@ -69,6 +77,21 @@ CASES = [
          control=dict(model="controlnet", image="control.png", scale=0.7, start=0.0, end=1.0)),
 ]
 
+# Weighted prompts: (name, prompt, negative (None = absent), seed, sampler).
+WEIGHTED = [
+    ("weighted_short", "a (red:1.4) barn in a [green] field, ((detailed)), \\(photo\\)", "blurry, (low quality:1.3)", 31, "euler"),
+    ("weighted_long", "a (cozy wooden cabin:1.2) in a snowy pine forest at dusk, warm light glowing from the small square windows, "
+     "smoke curling from a stone chimney, [tall] pine trees heavy with fresh snow on every side, a frozen lake in the "
+     "foreground reflecting the last (orange and purple:0.8) light of the sky, footprints leading to the red front door, "
+     "a wooden sled leaning against the porch, stacked firewood under the eaves, soft falling snowflakes, (((cinematic))) "
+     "wide angle photograph, high detail, sharp focus", None, 32, "euler_a"),
+]
+PARSE_CORPUS = [
+    "normal text", "an (important) word", "(unbalanced", "\\(literal\\]", "(unnecessary)(parens)",
+    "a (((house:1.3)) [on] a (hill:0.5), sun, (((sky))).", "[[faded]] and ((bold:1.5))", "(a:-0.5) (b:+2) (c:.5)",
+    "colon: not a weight (x:1.2", "unclosed [square (and:1.1) round", "]stray) closers(", "a\\b \\ c", "",
+    "emoji 🍄 (mushrooms:1.25), 蘑菇",
+]
 LORA_STEM = "lora-peft-transformers5"
 # (component, target modules as peft matches them (suffixes), r, lora_alpha)
 PEFT_ADAPTERS = [
@@ -204,11 +227,47 @@ def lora_spec(base_folder, path):
     return spec
 
 
+def load_lpw(path):
+    spec = importlib.util.spec_from_file_location("lpw_stable_diffusion_xl", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def weighted_records(lpw, base_folder, tensors):
+    """parse_prompt_attention on the corpus; each weighted case's embeddings and its generation from them."""
+    parses = {text: [[t, w] for t, w in lpw.parse_prompt_attention(text)] for text in PARSE_CORPUS}
+    cases = []
+    for name, prompt, negative, seed, sampler in WEIGHTED:
+        pipe = wf.load_base(base_folder)
+        pipe.scheduler = SAMPLERS[sampler].from_config(pipe.scheduler.config)
+        pe, npe, ppe, nppe = lpw.get_weighted_text_embeddings_sdxl(pipe, prompt=prompt, neg_prompt=negative or "",
+                                                                   device="cpu")
+        kwargs = dict(prompt_embeds=pe, negative_prompt_embeds=npe, pooled_prompt_embeds=ppe,
+                      negative_pooled_prompt_embeds=nppe, num_inference_steps=4, guidance_scale=wf.GUIDANCE,
+                      width=64, height=64)
+        latents = pipe(**kwargs, generator=torch.Generator("cpu").manual_seed(seed), output_type="latent").images
+        pil = pipe(**kwargs, generator=torch.Generator("cpu").manual_seed(seed), output_type="pil").images[0]
+        p = f"gen.{name}."
+        tensors[p + "latents"] = latents.contiguous()
+        tensors[p + "image_u8"] = torch.from_numpy(np.array(pil)).float().contiguous()
+        tensors[p + "context"] = torch.cat([npe, pe]).contiguous()
+        tensors[p + "pooled"] = torch.cat([nppe, ppe]).contiguous()
+        tokens = pe.shape[1]
+        print(f"{name:20s} {tokens} tokens; latents std {latents.std():.3f}")
+        cases.append(dict(name=name, prompt=prompt, negative_prompt=negative, prompt_syntax="weighted", seed=seed, steps=4,
+                          sampler=sampler, width=64, height=64, guidance_scale=wf.GUIDANCE, tokens=tokens,
+                          tensors=dict(latents=p + "latents", image_u8=p + "image_u8", context=p + "context",
+                                       pooled=p + "pooled")))
+    return parses, cases
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default="tests/fixtures/compat")
     ap.add_argument("--pipeline", default="tests/fixtures/pipeline/tiny-sdxl")
     ap.add_argument("--workflow", default="tests/fixtures/workflow")
+    ap.add_argument("--lpw", required=True, help="examples/community/lpw_stable_diffusion_xl.py of the diffusers repository")
     args = ap.parse_args()
     out, base_folder, workflow = pathlib.Path(args.out), pathlib.Path(args.pipeline), pathlib.Path(args.workflow)
     out.mkdir(parents=True, exist_ok=True)
@@ -247,6 +306,8 @@ def main():
               "away from the same case without the feature")
 
     meta["image_encoder_head10"] = head10_encoder_records(out, tensors)
+    meta["parse_prompt_attention"], weighted = weighted_records(load_lpw(args.lpw), base_folder, tensors)
+    meta["cases"].extend(weighted)
     path = out / f"{LORA_STEM}.safetensors"
     keys = build_transformers5_lora(base_folder, path)
     spec = lora_spec(base_folder, path)

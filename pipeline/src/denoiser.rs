@@ -13,7 +13,6 @@ use crate::rng::TorchCpuRng;
 use crate::schedulers::Sampler;
 use crate::sdxl::Sdxl;
 use crate::text_to_image::{RgbImage, Sampling};
-use crate::tokenizer::CONTEXT;
 use std::time::{Duration, Instant};
 use vkdiff_runtime::{Dtype, Tensor};
 use vkdiff_unet::{nchw_to_nhwc, nhwc_to_nchw, IpAdapter, IpAdapterInput, UNetInputs, UNetPass};
@@ -66,9 +65,9 @@ pub struct Denoiser<'m> {
 }
 
 impl<'m> Denoiser<'m> {
-    /// Records the passes for `batch` images sampled as `sampling` says, steered by `control`
-    /// and `ip` when given.
-    pub fn record(model: &'m Sdxl, sampling: &Sampling, control: Option<ControlNetUse<'m>>, ip: Option<IpAdapterUse<'m>>, batch: usize) -> Result<Denoiser<'m>> {
+    /// Records the passes for `batch` images sampled as `sampling` says, with prompts of
+    /// `tokens` tokens ([`Conditioning::tokens`]), steered by `control` and `ip` when given.
+    pub fn record(model: &'m Sdxl, sampling: &Sampling, control: Option<ControlNetUse<'m>>, ip: Option<IpAdapterUse<'m>>, batch: usize, tokens: usize) -> Result<Denoiser<'m>> {
         model.check_sampling(sampling)?;
         if batch == 0 {
             return Err(Error::Config("--batch must be at least 1".into()));
@@ -79,7 +78,7 @@ impl<'m> Denoiser<'m> {
         let (ctx, dt) = (&model.ctx, model.dtype);
         let sample = ctx.zeros(&[rows, latent[0], latent[1], latent[2]], dt)?;
         let timesteps = ctx.zeros(&[rows], Dtype::F32)?;
-        let context = ctx.zeros(&[rows, CONTEXT, model.unet_config.cross_attention_dim], dt)?;
+        let context = ctx.zeros(&[rows, tokens, model.unet_config.cross_attention_dim], dt)?;
         let pooled_width = model.text_encoders[1].config().projection_dim.unwrap_or(0);
         let pooled = ctx.zeros(&[rows, pooled_width], dt)?;
         let time_ids: Vec<f32> = (0..rows).flat_map(|_| sampling.time_ids()).collect();

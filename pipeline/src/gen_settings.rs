@@ -7,6 +7,7 @@
 //! the file when they are not, before it looks at `parameters`.
 
 use crate::ip_scale::IpScale;
+use crate::prompt_weights::PromptSyntax;
 use crate::schedulers::SamplerKind;
 use crate::text_to_image::{Sampling, SizeConditioning, TextToImage};
 use std::collections::BTreeMap;
@@ -146,6 +147,9 @@ impl GenSettings {
         ]);
         if let Some(n) = &job.negative_prompt {
             text.insert("negative_prompt".into(), n.clone());
+        }
+        if s.prompt_syntax == PromptSyntax::Weighted {
+            text.insert("prompt_syntax".into(), "weighted".into());
         }
         if let (Some(init), Some(strength)) = (&self.init_image, s.strength) {
             text.insert("init_image".into(), init.display().to_string());

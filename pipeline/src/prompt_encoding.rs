@@ -2,6 +2,8 @@
 //! penultimate hidden states side by side (CLIP-L first) and bigG's pooled projection.
 
 use crate::error::{finite, Error, Result};
+use crate::prompt_weights::PromptSyntax;
+use crate::tokenizer::CONTEXT;
 use crate::sdxl::Sdxl;
 
 /// One prompt's conditioning for the UNet, rows [negative, positive] with guidance, else
@@ -10,11 +12,26 @@ use crate::sdxl::Sdxl;
 pub struct Conditioning {
     /// [rows, tokens, cross_attention_dim], row-major.
     pub context: Vec<f32>,
+    /// Tokens per row: 77, or any number with [`crate::PromptSyntax::Weighted`].
+    pub tokens: usize,
     /// [rows, pooled width].
     pub pooled: Vec<f32>,
 }
 
 impl Sdxl {
+    /// The prompt's conditioning as `syntax` reads it.
+    pub fn encode_prompt_as(&self, syntax: PromptSyntax, prompt: &str, negative: Option<&str>, guided: bool) -> Result<Conditioning> {
+        match syntax {
+            PromptSyntax::Plain => self.encode_prompt(prompt, negative, guided),
+            PromptSyntax::Weighted => self.encode_weighted_prompt(prompt, negative, guided),
+        }
+    }
+
+    /// Tokens of `prompt` past the 75 that [`PromptSyntax::Plain`] reads (0 when it fits).
+    pub fn tokens_cut(&self, prompt: &str) -> usize {
+        self.tokenizers[0].tokens(prompt).len().saturating_sub(CONTEXT - 2)
+    }
+
     /// Encodes `prompt` (and `negative`, or zeros where the model asks for them when it is
     /// `None`) with both text encoders.
     pub fn encode_prompt(&self, prompt: &str, negative: Option<&str>, guided: bool) -> Result<Conditioning> {
@@ -40,6 +57,6 @@ impl Sdxl {
             context.splice(0..0, std::iter::repeat_n(0.0, context.len()));
             pooled.splice(0..0, std::iter::repeat_n(0.0, pooled.len()));
         }
-        Ok(Conditioning { context, pooled })
+        Ok(Conditioning { context, tokens: CONTEXT, pooled })
     }
 }

@@ -7,6 +7,7 @@ use crate::controlnet_guide::{ControlGuide, ControlNetUse};
 use crate::denoiser::{Denoiser, IpAdapterUse, ItemInputs};
 use crate::error::{finite, Error, Result};
 use crate::ip_adapter_guide::ImageGuide;
+use crate::prompt_weights::PromptSyntax;
 use crate::schedulers::{Sampler, SamplerKind, SchedulerConfig};
 use crate::sdxl::Sdxl;
 use std::time::{Duration, Instant};
@@ -25,6 +26,7 @@ pub struct Sampling {
     /// img2img: how much of the schedule runs over the init image (diffusers' `strength`);
     /// `None` starts from noise.
     pub strength: Option<f64>,
+    pub prompt_syntax: PromptSyntax,
 }
 
 /// SDXL's size micro-conditioning, as diffusers' `original_size`, `crops_coords_top_left` and
@@ -167,14 +169,14 @@ impl Sdxl {
         self.check_sampling(sampling)?;
         let mut timings = Timings::default();
         let start = Instant::now();
-        let text = self.encode_prompt(&job.prompt, job.negative_prompt.as_deref(), sampling.guided())?;
+        let text = self.encode_prompt_as(sampling.prompt_syntax, &job.prompt, job.negative_prompt.as_deref(), sampling.guided())?;
         timings.text_encoding = start.elapsed();
 
         let start = Instant::now();
         let ip_tokens = guides.image.as_ref().map(|g| g.tokens(sampling.guided())).transpose()?;
         let control = guides.control.as_ref().map(|g| ControlNetUse { net: g.net, scale: g.scale, start: g.start, end: g.end });
         let ip = guides.image.as_ref().map(|g| IpAdapterUse { adapter: g.adapter, scale: g.scale, images: g.images.len() });
-        let denoiser = Denoiser::record(self, sampling, control, ip, 1)?;
+        let denoiser = Denoiser::record(self, sampling, control, ip, 1, text.tokens)?;
         timings.record = start.elapsed();
         let init = guides.init.map(|image| self.encode_init(image, sampling.width, sampling.height)).transpose()?;
         let item = ItemInputs {

@@ -138,6 +138,16 @@ impl ClipTokenizer {
     /// 77 ids: BOS, the prompt's first 75 tokens, EOS, then the pad id.
     pub fn encode(&self, text: &str) -> Vec<u32> {
         let mut ids = vec![self.bos_id];
+        ids.extend(self.tokens(text));
+        ids.truncate(CONTEXT - 1);
+        ids.push(self.eos_id);
+        ids.resize(CONTEXT, self.pad_id);
+        ids
+    }
+
+    /// Every token of `text`, without BOS, EOS or a length limit.
+    pub fn tokens(&self, text: &str) -> Vec<u32> {
+        let mut ids = Vec::new();
         let mut rest = text;
         while let Some((at, len, id)) = self.next_special(rest) {
             self.encode_plain(&rest[..at], &mut ids);
@@ -145,14 +155,19 @@ impl ClipTokenizer {
             rest = &rest[at + len..];
         }
         self.encode_plain(rest, &mut ids);
-        ids.truncate(CONTEXT - 1);
-        ids.push(self.eos_id);
-        ids.resize(CONTEXT, self.pad_id);
         ids
     }
 
     pub fn pad_id(&self) -> u32 {
         self.pad_id
+    }
+
+    pub fn bos_id(&self) -> u32 {
+        self.bos_id
+    }
+
+    pub fn eos_id(&self) -> u32 {
+        self.eos_id
     }
 
     /// The leftmost special token in the raw text, the longest there: (byte offset, length, id).

@@ -26,7 +26,7 @@ fn settings(precision: Dtype) -> ModelSettings {
 /// whose weights are larger than the tensors split) with `binding_limit`.
 fn alone_and_together(ctx: &Context, precision: Dtype, size: (usize, usize), binding_limit: Option<u64>) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
     let models = WorkflowModels::load(ctx, &settings(precision), &mut |_| {}).unwrap();
-    let sampling = Sampling { steps: if binding_limit.is_some() { 1 } else { 3 }, guidance_scale: 6.0, sampler: SamplerKind::EulerAncestral, karras: false, width: size.0, height: size.1, size_conditioning: Default::default(), strength: None };
+    let sampling = Sampling { steps: if binding_limit.is_some() { 1 } else { 3 }, guidance_scale: 6.0, sampler: SamplerKind::EulerAncestral, karras: false, width: size.0, height: size.1, size_conditioning: Default::default(), strength: None, prompt_syntax: Default::default() };
     let sdxl = &models.sdxl;
     let texts = [sdxl.encode_prompt("white mushrooms", None, true).unwrap(), sdxl.encode_prompt("brown caps on compost", Some("blurry"), true).unwrap()];
     let styles = [read_image(&fixture("workflow/style-1.png")).unwrap(), read_image(&fixture("workflow/style-2.png")).unwrap()];

@@ -116,7 +116,7 @@ fn settings(prompt: &str, negative: Option<&str>, sampler: &str, karras: bool) -
             prompt: prompt.into(),
             negative_prompt: negative.map(String::from),
             seed: 1234567,
-            sampling: Sampling { steps: 30, guidance_scale: 5.5, sampler: sampler.parse().unwrap(), karras, width: 1000, height: 768, size_conditioning: Default::default(), strength: None },
+            sampling: Sampling { steps: 30, guidance_scale: 5.5, sampler: sampler.parse().unwrap(), karras, width: 1000, height: 768, size_conditioning: Default::default(), strength: None, prompt_syntax: Default::default() },
         },
         depth: Some(PathBuf::from("scene/depth.exr")),
         ip_images: vec![],

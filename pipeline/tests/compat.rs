@@ -2,7 +2,8 @@
 //! (tools/make_compat_fixtures.py): IP-Adapter scales per block (`set_ip_adapter_scale` with a
 //! dict, InstantStyle's style-only adapter among them), SDXL's size micro-conditioning, and
 //! img2img (`StableDiffusionXLImg2ImgPipeline` with every sampler, and its ControlNet twin with an
-//! init image of another size).
+//! init image of another size), and weighted, long prompts as diffusers' long-prompt-weighting
+//! SDXL pipeline reads them.
 
 mod common;
 
@@ -10,7 +11,7 @@ use common::{ctx, job, psnr, relative_l2};
 use serde_json::Value;
 use std::path::PathBuf;
 use vkdiff_pipeline::images::{read_image, ClipPreprocess};
-use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, IpScale, Sdxl};
+use vkdiff_pipeline::{parse_attention, ControlGuide, Guides, ImageGuide, IpScale, Sdxl};
 use vkdiff_runtime::Dtype;
 use vkdiff_unet::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter, SafeTensors};
 
@@ -18,9 +19,41 @@ fn fixture(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures").join(name)
 }
 
+fn records() -> Value {
+    serde_json::from_str(&std::fs::read_to_string(fixture("compat/records.json")).unwrap()).unwrap()
+}
+
 fn cases() -> Vec<Value> {
-    let json: Value = serde_json::from_str(&std::fs::read_to_string(fixture("compat/records.json")).unwrap()).unwrap();
-    json["cases"].as_array().unwrap().clone()
+    records()["cases"].as_array().unwrap().clone()
+}
+
+#[test]
+fn the_emphasis_parser_reads_prompts_as_a1111_does() {
+    let corpus = records()["parse_prompt_attention"].as_object().unwrap().clone();
+    assert!(corpus.len() >= 10);
+    for (text, want) in corpus {
+        let got = parse_attention(&text).unwrap();
+        let want: Vec<(String, f64)> = want.as_array().unwrap().iter().map(|r| (r[0].as_str().unwrap().to_string(), r[1].as_f64().unwrap())).collect();
+        assert_eq!(got.len(), want.len(), "{text:?}: {got:?} vs {want:?}");
+        for ((t, w), (wt, ww)) in got.iter().zip(&want) {
+            assert!(t == wt && (w - ww).abs() <= 1e-12 * ww.abs(), "{text:?}: {got:?} vs {want:?}");
+        }
+    }
+}
+
+#[test]
+fn weighted_long_prompts_encode_as_diffusers_long_prompt_pipeline() {
+    let sdxl = Sdxl::load(&ctx(), &fixture("pipeline/tiny-sdxl"), Dtype::F32, &mut |_| {}).unwrap();
+    let records = SafeTensors::open(&fixture("compat/records.safetensors")).unwrap();
+    for case in cases().iter().filter(|c| c["prompt_syntax"] == "weighted") {
+        let text = sdxl.encode_weighted_prompt(case["prompt"].as_str().unwrap(), case["negative_prompt"].as_str(), true).unwrap();
+        assert_eq!(text.tokens as u64, case["tokens"].as_u64().unwrap(), "{}", case["name"]);
+        for (got, key) in [(&text.context, "context"), (&text.pooled, "pooled")] {
+            let (_, want) = records.values(case["tensors"][key].as_str().unwrap()).unwrap();
+            let rel = relative_l2(got, &want);
+            assert!(rel < 1e-5, "{} {key}: relative L2 error {rel:.2e}", case["name"]);
+        }
+    }
 }
 
 fn ip_scale(case: &Value) -> IpScale {

@@ -134,7 +134,7 @@ fn model_settings(precision: vkdiff_runtime::Dtype, loras: &[(LoraFile, f32); 2]
 /// The paper's set in small: frames of 1920×1080 scaled by size/1024, three crops each.
 fn dataset_settings(args: &DatasetArgs, models: &ModelSettings) -> DatasetSettings {
     let scale = |v: usize| (v * args.size / 1024) as u32;
-    let sampling = Sampling { steps: args.steps, guidance_scale: 5.0, sampler: SamplerKind::Euler, karras: false, width: args.size, height: args.size, size_conditioning: Default::default(), strength: None };
+    let sampling = Sampling { steps: args.steps, guidance_scale: 5.0, sampler: SamplerKind::Euler, karras: false, width: args.size, height: args.size, size_conditioning: Default::default(), strength: None, prompt_syntax: Default::default() };
     DatasetSettings {
         seed: 0,
         count: args.scenes,

@@ -107,7 +107,7 @@ pub(super) fn bench_job(size: usize, steps: usize) -> TextToImage {
         prompt: "white button mushrooms on brown compost, top-down photo".into(),
         negative_prompt: None,
         seed: 0,
-        sampling: Sampling { steps, guidance_scale: 5.0, sampler: SamplerKind::Euler, karras: false, width: size, height: size, size_conditioning: Default::default(), strength: None },
+        sampling: Sampling { steps, guidance_scale: 5.0, sampler: SamplerKind::Euler, karras: false, width: size, height: size, size_conditioning: Default::default(), strength: None, prompt_syntax: Default::default() },
     }
 }
 

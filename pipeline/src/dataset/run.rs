@@ -90,9 +90,14 @@ pub fn generate(
         return Err(Error::Config("--batch must be at least 1".into()));
     }
     let total = pending.done + pending.images();
+    // Every prompt once, first: batches group images by their prompts' token counts.
+    let sampling = &settings.sampling;
+    let texts = (settings.prompts.iter().enumerate())
+        .map(|(i, p)| Ok((i, models.sdxl.encode_prompt_as(sampling.prompt_syntax, p, settings.negative_prompt.as_deref(), sampling.guided())?)))
+        .collect::<Result<HashMap<usize, Conditioning>>>()?;
     let stream = render_scenes(settings, pending.scenes, options.threads, 2 * options.batch);
     let (to_writer, writer) = start_writer(dataset.clone(), options.batch);
-    let mut run = Loop { settings, models, styles, texts: HashMap::new(), tokens: HashMap::new(), times: StageTimes::default(), denoiser: None };
+    let mut run = Loop { settings, models, styles, texts, tokens: HashMap::new(), times: StageTimes::default(), denoiser: None };
     let made = run.all(&stream.images, &to_writer, pending.done, total, options.batch, on_progress);
     drop(to_writer);
     drop(stream.images);
@@ -117,8 +122,8 @@ struct Loop<'a> {
     texts: HashMap<usize, Conditioning>,
     tokens: HashMap<usize, Vec<f32>>,
     times: StageTimes,
-    /// The recorded denoiser and the (batch, style images per image) it was recorded for.
-    denoiser: Option<(Denoiser<'a>, (usize, usize))>,
+    /// The recorded denoiser and the batch and [`Loop::shape`] it was recorded for.
+    denoiser: Option<(Denoiser<'a>, (usize, (usize, usize)))>,
 }
 
 impl<'a> Loop<'a> {
@@ -143,7 +148,7 @@ impl<'a> Loop<'a> {
                     Err(TryRecvError::Disconnected) => open = false,
                 }
             }
-            let Some(fallback) = queue.front().map(|first| self.style_images(first)) else { return Ok(made) };
+            let Some(fallback) = queue.front().map(|first| self.shape(first)) else { return Ok(made) };
             let items = self.take_batch(&mut queue, fallback, batch);
             for finished in self.batch(items, on_progress)? {
                 to_writer.send(finished).map_err(|_| Error::Config("the writer stopped".into()))?;
@@ -154,18 +159,19 @@ impl<'a> Loop<'a> {
         }
     }
 
-    /// Up to `batch` images of the queue for one pass. A pass takes images with the same number
-    /// of style images: the number the denoiser is recorded for while a whole batch of it is
-    /// queued, else the most common one (else `fallback`, the first image's), so that style sets
-    /// of other sizes neither make the denoiser record again at every batch nor cut batches short.
-    fn take_batch(&self, queue: &mut VecDeque<Item>, fallback: usize, batch: usize) -> Vec<Item> {
-        let queued = |n: usize| queue.iter().filter(|i| self.style_images(i) == n).count();
-        let recorded = self.denoiser.as_ref().map(|(_, (_, styles))| *styles).filter(|&n| queued(n) >= batch);
-        let most = queue.iter().map(|i| self.style_images(i)).max_by_key(|&n| (queued(n), n == fallback));
+    /// Up to `batch` images of the queue for one pass. A pass takes images of one shape: the
+    /// shape the denoiser is recorded for while a whole batch of it is queued, else the most
+    /// common one (else `fallback`, the first image's), so that style sets of other sizes and
+    /// prompts of other lengths neither make the denoiser record again at every batch nor cut
+    /// batches short.
+    fn take_batch(&self, queue: &mut VecDeque<Item>, fallback: (usize, usize), batch: usize) -> Vec<Item> {
+        let queued = |n: (usize, usize)| queue.iter().filter(|i| self.shape(i) == n).count();
+        let recorded = self.denoiser.as_ref().map(|(_, (_, shape))| *shape).filter(|&n| queued(n) >= batch);
+        let most = queue.iter().map(|i| self.shape(i)).max_by_key(|&n| (queued(n), n == fallback));
         let want = recorded.or(most).unwrap_or(fallback);
         let (mut items, mut rest) = (Vec::with_capacity(batch), VecDeque::with_capacity(queue.len()));
         for item in queue.drain(..) {
-            if items.len() < batch && self.style_images(&item) == want {
+            if items.len() < batch && self.shape(&item) == want {
                 items.push(item);
             } else {
                 rest.push_back(item);
@@ -186,25 +192,27 @@ impl<'a> Loop<'a> {
         item.style.map_or(0, |s| self.settings.ip_sets[s].len())
     }
 
+    /// What a recorded pass is specific to: (style images, prompt tokens).
+    fn shape(&self, item: &Item) -> (usize, usize) {
+        (self.style_images(item), self.texts[&item.prompt].tokens)
+    }
+
     /// Denoises and decodes one batch.
     fn batch(&mut self, items: Vec<Item>, on_progress: &mut dyn FnMut(Progress)) -> Result<Vec<Finished>> {
         let start = Instant::now();
         let sampling = &self.settings.sampling;
         for item in &items {
-            if !self.texts.contains_key(&item.prompt) {
-                let text = self.models.sdxl.encode_prompt(&self.settings.prompts[item.prompt], self.settings.negative_prompt.as_deref(), sampling.guided())?;
-                self.texts.insert(item.prompt, text);
-            }
             if let Some(style) = item.style.filter(|s| !self.tokens.contains_key(s)) {
                 let guide = self.models.image_guide(&self.styles[style]).ok_or_else(|| Error::Config("style images without an IP-Adapter".into()))?;
                 self.tokens.insert(style, guide.tokens(sampling.guided())?);
             }
         }
-        let key = (items.len(), self.style_images(&items[0]));
+        let key = (items.len(), self.shape(&items[0]));
         if self.denoiser.as_ref().is_none_or(|(_, k)| *k != key) {
             self.denoiser = None; // the old recording's memory goes before the new one's comes
-            let ip = self.models.ip_use(key.1).filter(|_| key.1 > 0);
-            self.denoiser = Some((Denoiser::record(&self.models.sdxl, sampling, self.models.control_use(), ip, key.0)?, key));
+            let (styles, tokens) = key.1;
+            let ip = self.models.ip_use(styles).filter(|_| styles > 0);
+            self.denoiser = Some((Denoiser::record(&self.models.sdxl, sampling, self.models.control_use(), ip, key.0, tokens)?, key));
         }
         let (denoiser, _) = self.denoiser.as_ref().expect("recorded above");
         let inputs: Vec<ItemInputs> = items

@@ -4,6 +4,7 @@
 
 use crate::error::{Error, Result};
 use crate::ip_scale::IpScale;
+use crate::prompt_weights::PromptSyntax;
 use crate::gen_settings::{control_depth_name, precision_name, schedule_name, ModelSettings, RNG};
 use crate::text_to_image::{Sampling, SizeConditioning};
 use serde_json::{json, Map, Value};
@@ -150,6 +151,9 @@ impl DatasetSettings {
         let c = &s.size_conditioning;
         let size = |s: Option<(usize, usize)>| s.map(|(w, h)| format!("{w}x{h}"));
         let map = v.as_object_mut().expect("an object");
+        if s.prompt_syntax == PromptSyntax::Weighted {
+            map.insert("prompt-syntax".into(), json!("weighted"));
+        }
         if *c != SizeConditioning::default() {
             map.extend(object(json!({
                 "original-size": size(c.original),

@@ -2,7 +2,7 @@
 
 use serde_json::Value;
 use std::sync::OnceLock;
-use vkdiff_pipeline::{Sampling, SizeConditioning, TextToImage};
+use vkdiff_pipeline::{PromptSyntax, Sampling, SizeConditioning, TextToImage};
 use vkdiff_runtime::Context;
 
 pub fn ctx() -> Context {
@@ -33,6 +33,7 @@ pub fn job(case: &Value) -> TextToImage {
                 target: pair(&case["target_size"]).map(|(h, w)| (w, h)),
             },
             strength: case["strength"].as_f64(),
+            prompt_syntax: if case["prompt_syntax"] == "weighted" { PromptSyntax::Weighted } else { PromptSyntax::Plain },
         },
     }
 }

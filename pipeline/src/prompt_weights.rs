@@ -1,0 +1,204 @@
+//! Prompts in A1111's emphasis syntax, of any length, encoded as diffusers' long-prompt-weighting
+//! SDXL pipeline does (`examples/community/lpw_stable_diffusion_xl.py`,
+//! `get_weighted_text_embeddings_sdxl`): `(word)` ×1.1, `[word]` ÷1.1, `(word:1.3)` ×1.3, nested
+//! ones multiplied, `\(` for a literal bracket; the tokens cut into chunks of 75, each encoded
+//! between BOS and EOS (the last chunk as long as it is, not padded to 77); the shorter of the
+//! prompt and the negative padded with EOS to the other's length; each token's features moved
+//! away from its chunk's last (EOS) features by its weight (as float16); the pooled output is the
+//! last chunk's. ComfyUI differs: it pads every chunk to 77, weighs against the empty prompt's
+//! features, takes the first chunk's pooled output, and repeats the shorter of prompt and
+//! negative instead of padding it.
+
+use crate::error::{Error, Result};
+use crate::prompt_encoding::Conditioning;
+use crate::sdxl::Sdxl;
+use half::f16;
+use regex::Regex;
+
+/// How `--prompt` text is read.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PromptSyntax {
+    /// Literal text, cut at CLIP's 75 tokens as diffusers does.
+    #[default]
+    Plain,
+    /// A1111 emphasis and prompts of any length.
+    Weighted,
+}
+
+/// Tokens per chunk between BOS and EOS.
+const CHUNK: usize = 75;
+
+/// A1111's `parse_prompt_attention`: the text as runs of equal weight.
+pub fn parse_attention(text: &str) -> Result<Vec<(String, f64)>> {
+    let pattern = Regex::new(r"\\\(|\\\)|\\\[|\\]|\\\\|\\|\(|\[|:([+-]?[.\d]+)\)|\)|]|[^\\()\[\]:]+|:").expect("attention pattern");
+    let word_break = Regex::new(r"\bBREAK\b").expect("BREAK pattern");
+    let mut runs: Vec<(String, f64)> = Vec::new();
+    let (mut round, mut square) = (Vec::new(), Vec::new());
+    let scale = |runs: &mut Vec<(String, f64)>, from: usize, by: f64| runs[from..].iter_mut().for_each(|r| r.1 *= by);
+    for m in pattern.captures_iter(text) {
+        let piece = &m[0];
+        match (piece, m.get(1)) {
+            (p, _) if p.starts_with('\\') => runs.push((p[1..].to_string(), 1.0)),
+            ("(", _) => round.push(runs.len()),
+            ("[", _) => square.push(runs.len()),
+            (_, Some(w)) if !round.is_empty() => {
+                let w: f64 = w.as_str().parse().map_err(|_| Error::Config(format!("prompt: weight `{}` in `{piece}` is not a number", w.as_str())))?;
+                let from = round.pop().expect("checked");
+                scale(&mut runs, from, w);
+            }
+            (")", _) if !round.is_empty() => {
+                let from = round.pop().expect("checked");
+                scale(&mut runs, from, 1.1);
+            }
+            ("]", _) if !square.is_empty() => {
+                let from = square.pop().expect("checked");
+                scale(&mut runs, from, 1.0 / 1.1);
+            }
+            (p, _) => {
+                if word_break.is_match(p) {
+                    return Err(Error::Config("prompt: BREAK is not supported by --prompt-syntax weighted (diffusers' pipeline reads it as a word)".into()));
+                }
+                runs.push((p.to_string(), 1.0));
+            }
+        }
+    }
+    for from in round {
+        scale(&mut runs, from, 1.1);
+    }
+    for from in square {
+        scale(&mut runs, from, 1.0 / 1.1);
+    }
+    if runs.is_empty() {
+        runs.push((String::new(), 1.0));
+    }
+    let mut merged: Vec<(String, f64)> = Vec::with_capacity(runs.len());
+    for (text, weight) in runs {
+        match merged.last_mut() {
+            Some(last) if last.1 == weight => last.0.push_str(&text),
+            _ => merged.push((text, weight)),
+        }
+    }
+    Ok(merged)
+}
+
+/// One prompt's tokens for both tokenizers, and each token's weight.
+struct Weighted {
+    tokens: [Vec<u32>; 2],
+    weights: Vec<f64>,
+}
+
+impl Sdxl {
+    fn weighted_tokens(&self, prompt: &str) -> Result<Weighted> {
+        let mut out = Weighted { tokens: [Vec::new(), Vec::new()], weights: Vec::new() };
+        for (text, weight) in parse_attention(prompt)? {
+            let ids = [self.tokenizers[0].tokens(&text), self.tokenizers[1].tokens(&text)];
+            out.weights.extend(std::iter::repeat_n(weight, ids[0].len()));
+            for (all, ids) in out.tokens.iter_mut().zip(ids) {
+                all.extend(ids);
+            }
+        }
+        if out.tokens[0].len() != out.tokens[1].len() {
+            return Err(Error::Config("prompt: the two tokenizers cut it into different numbers of tokens".into()));
+        }
+        Ok(out)
+    }
+
+    /// [`Sdxl::encode_prompt`] for [`PromptSyntax::Weighted`]: rows [negative, positive] with
+    /// guidance (an absent negative is `""`), else [positive]; any number of tokens.
+    pub fn encode_weighted_prompt(&self, prompt: &str, negative: Option<&str>, guided: bool) -> Result<Conditioning> {
+        let mut positive = self.weighted_tokens(prompt)?;
+        let mut rows = vec![];
+        if guided {
+            let mut negative = self.weighted_tokens(negative.unwrap_or(""))?;
+            // Padded with tokenizer 1's EOS, for both tokenizers, as diffusers' pipeline does.
+            let eos = self.tokenizers[0].eos_id();
+            let longest = positive.weights.len().max(negative.weights.len());
+            for w in [&mut positive, &mut negative] {
+                for t in &mut w.tokens {
+                    t.resize(longest, eos);
+                }
+                w.weights.resize(longest, 1.0);
+            }
+            rows.push(negative);
+        }
+        rows.push(positive);
+        if rows[0].weights.is_empty() {
+            return Err(Error::Config("prompt: an empty prompt (and negative) has no tokens to encode".into()));
+        }
+        let mut context = Vec::new();
+        let mut pooled = Vec::new();
+        for row in &rows {
+            let (c, p) = self.encode_chunks(row)?;
+            context.extend(c);
+            pooled.extend(p);
+        }
+        // BOS and EOS around every chunk.
+        let tokens = rows[0].weights.len() + 2 * rows[0].weights.len().div_ceil(CHUNK);
+        Ok(Conditioning { context, tokens, pooled })
+    }
+
+    /// One row: its chunks' weighted features side by side, and the last chunk's pooled output.
+    fn encode_chunks(&self, row: &Weighted) -> Result<(Vec<f32>, Vec<f32>)> {
+        let (w1, w2) = (self.text_encoders[0].config().hidden_size, self.text_encoders[1].config().hidden_size);
+        let width = w1 + w2;
+        let (mut context, mut pooled) = (Vec::new(), Vec::new());
+        for start in (0..row.weights.len()).step_by(CHUNK) {
+            let end = (start + CHUNK).min(row.weights.len());
+            let ids: Vec<Vec<u32>> = (0..2)
+                .map(|i| {
+                    let tok = &self.tokenizers[i];
+                    std::iter::once(tok.bos_id()).chain(row.tokens[i][start..end].iter().copied()).chain([tok.eos_id()]).collect()
+                })
+                .collect();
+            let first = self.text_encoders[0].encode(std::slice::from_ref(&ids[0]))?;
+            let second = self.text_encoders[1].encode(std::slice::from_ref(&ids[1]))?;
+            let mut chunk: Vec<f32> =
+                first.penultimate.chunks_exact(w1).zip(second.penultimate.chunks_exact(w2)).flat_map(|(a, b)| a.iter().chain(b).copied()).collect();
+            let tokens = ids[0].len();
+            let last = chunk[(tokens - 1) * width..].to_vec();
+            for (j, &weight) in row.weights[start..end].iter().enumerate() {
+                // The chunk's weights are float16 there; BOS and EOS keep 1.
+                let w = f16::from_f64(weight).to_f32();
+                if w != 1.0 {
+                    let features = &mut chunk[(j + 1) * width..(j + 2) * width];
+                    for (f, l) in features.iter_mut().zip(&last) {
+                        *f = l + (*f - l) * w;
+                    }
+                }
+            }
+            context.extend(chunk);
+            pooled = second.pooled.ok_or_else(|| Error::Config("text encoder 2 gave no pooled output".into()))?;
+        }
+        crate::error::finite(&context, &|| "the text encoders' output".into())?;
+        Ok((context, pooled))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn runs(text: &str) -> Vec<(String, f64)> {
+        parse_attention(text).unwrap()
+    }
+
+    #[test]
+    fn a1111_examples() {
+        // The examples of A1111's parse_prompt_attention docstring.
+        assert_eq!(runs("normal text"), vec![("normal text".into(), 1.0)]);
+        assert_eq!(runs("an (important) word"), vec![("an ".into(), 1.0), ("important".into(), 1.1), (" word".into(), 1.0)]);
+        assert_eq!(runs("(unbalanced"), vec![("unbalanced".into(), 1.1)]);
+        assert_eq!(runs(r"\(literal\]"), vec![("(literal]".into(), 1.0)]);
+        assert_eq!(runs("(unnecessary)(parens)"), vec![("unnecessaryparens".into(), 1.1)]);
+        let got = runs("a (((house:1.3)) [on] a (hill:0.5), sun, (((sky))).");
+        let want = [("a ", 1.0), ("house", 1.3 * 1.1 * 1.1), (" ", 1.1), ("on", 1.1 / 1.1), (" a ", 1.1), ("hill", 0.5 * 1.1), (", sun, ", 1.1), ("sky", 1.1 * 1.1 * 1.1 * 1.1), (".", 1.1)];
+        assert_eq!(got.len(), want.len(), "{got:?}");
+        for ((t, w), (wt, ww)) in got.iter().zip(want) {
+            assert_eq!(t, wt);
+            assert!((w - ww).abs() < 1e-12, "{t}: {w} vs {ww}");
+        }
+        assert!(parse_attention("a (cat:1.2.3) dog").is_err());
+        assert!(parse_attention("mushrooms BREAK soil").is_err());
+        assert_eq!(runs(""), vec![(String::new(), 1.0)]);
+    }
+}
