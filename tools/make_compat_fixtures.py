@@ -16,7 +16,10 @@ tests/fixtures/pipeline/tiny-sdxl with the IP-Adapter of tests/fixtures/workflow
   - a LoRA as diffusers' training scripts save it under transformers 5: PEFT adapters added to the UNet and both
     text encoders, saved with StableDiffusionXLPipeline.save_lora_weights(get_peft_model_state_dict(...),
     *_lora_adapter_metadata=...), which writes CLIP-L keys without the `text_model.` level
-    (`text_encoder.encoder.layers.N...`), since transformers 5's CLIPTextModel has none.
+    (`text_encoder.encoder.layers.N...`), since transformers 5's CLIPTextModel has none; and the same factors as
+    ComfyUI's LoRA save node writes them (`diffusion_model.<original UNet path>.lora_up.weight`,
+    `text_encoders.clip_l.transformer.text_model...`, `.alpha` per module), which diffusers does not load: merged, it
+    must give what the diffusers file gives.
 
 Versions used to write the committed fixtures: Python 3.11, torch 2.15.0 (CPU), diffusers 0.42.1, transformers
 5.23.0, peft 0.21.2, safetensors 0.8.0, pillow 13.0.0.
@@ -28,7 +31,7 @@ Setup and rerun (the tiny pipeline and the workflow fixtures must exist; they ar
       [--out tests/fixtures/compat]
 
 Writes under --out: records.json (every case's settings, as records.json of tests/fixtures/workflow), records.safetensors
-(float32), lora-peft-transformers5.safetensors, init-64.png and init-80x72.png (RGB init images),
+(float32), lora-peft-transformers5.safetensors, lora-comfyui.safetensors, init-64.png and init-80x72.png (RGB init images),
 image_encoder_head10/ (transformers CLIPVisionModelWithProjection, float16 on disk).
 """
 import argparse
@@ -211,6 +214,26 @@ def head10_encoder_records(out, tensors):
                                                  hidden_m2="head10.hidden_m2"))
 
 
+def write_comfyui_copy(base_folder, spec, source, path):
+    """The factors of `source` under ComfyUI's key names, each module with its alpha."""
+    from make_unet_fixtures import reference_ldm_names
+    config = json.loads((base_folder / "unet" / "config.json").read_text())
+    to_ldm = {d.removesuffix(".weight"): o.removesuffix(".weight") for o, d in reference_ldm_names(config).items()}
+    factors = load_file(source)
+    out = {}
+    for m in spec:
+        comp, module = m["component"], m["module"]
+        if comp == "unet":
+            key = f"diffusion_model.{to_ldm[module]}"
+        else:
+            key = f"text_encoders.{'clip_l' if comp == 'text_encoder' else 'clip_g'}.transformer.{module}"
+        out[f"{key}.lora_down.weight"] = factors[f"{m['key']}.lora_A.weight"]
+        out[f"{key}.lora_up.weight"] = factors[f"{m['key']}.lora_B.weight"]
+        out[f"{key}.alpha"] = torch.tensor(m["alpha"], dtype=torch.float32)
+    save_file(out, path)
+    return len(out)
+
+
 def lora_spec(base_folder, path):
     """What diffusers applies from the file: every wrapped module with its scale (checked by wf.check_lora)."""
     pipe = wf.load_base(base_folder)
@@ -318,6 +341,9 @@ def main():
     fused, worst = wf.lora_fuse_records(pipe, path, spec, "check", tensors, LORA_STEM)
     print(f"{LORA_STEM}: {len(keys)} tensors, {n} modules applied by diffusers; fuse_lora matches W + s(alpha/r)BA "
           f"to {worst:.1e}")
+    comfy = write_comfyui_copy(base_folder, spec, path, out / "lora-comfyui.safetensors")
+    print(f"lora-comfyui: {comfy} tensors, the same factors under ComfyUI's names")
+    meta["lora_comfyui"] = dict(file="lora-comfyui.safetensors", same_factors_as=path.name)
     meta["loras"] = {LORA_STEM: dict(file=path.name, tensors=len(keys), modules=spec, fused_strength=wf.FUSE_STRENGTH,
                                      fused_records=fused, keys_sample=keys[:3] + [k for k in keys if "text_encoder." in k][:2])}
     save_file({k: v.float().contiguous() for k, v in tensors.items()}, out / "records.safetensors")

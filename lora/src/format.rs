@@ -1,5 +1,7 @@
-//! LoRA files: kohya / sd-scripts (`lora_unet_…​.lora_down.weight`) and diffusers / PEFT
-//! (`unet.….lora_A.weight`, and the older `to_q_lora.down.weight` spellings), read into one list
+//! LoRA files: kohya / sd-scripts (`lora_unet_…​.lora_down.weight`), diffusers / PEFT
+//! (`unet.….lora_A.weight`, with or without `base_model.model.`, CLIP-L with or without
+//! `text_model.`, and the older `to_q_lora.down.weight` spellings), and ComfyUI's own
+//! (`diffusion_model.<original path>`, `text_encoders.clip_l.transformer.…`), read into one list
 //! of modules, each a pair of factors with its scale (reference/sdxl.md §8.1–8.2).
 
 use crate::error::{Error, Result};
@@ -79,8 +81,21 @@ struct Parts {
 
 const KOHYA: [(&str, Component); 4] =
     [("lora_unet_", Component::Unet), ("lora_te1_", Component::TextEncoder1), ("lora_te2_", Component::TextEncoder2), ("lora_te_", Component::TextEncoder1)];
-const DIFFUSERS: [(&str, Component); 3] =
-    [("unet.", Component::Unet), ("text_encoder.", Component::TextEncoder1), ("text_encoder_2.", Component::TextEncoder2)];
+const DIFFUSERS: [(&str, Component); 5] = [
+    ("unet.", Component::Unet),
+    ("text_encoder.", Component::TextEncoder1),
+    ("text_encoder_2.", Component::TextEncoder2),
+    // ComfyUI's LoRA save node and its loader's generic format.
+    ("text_encoders.clip_l.transformer.", Component::TextEncoder1),
+    ("text_encoders.clip_g.transformer.", Component::TextEncoder2),
+];
+/// ComfyUI's UNet prefix, followed by the original (sgm) module path.
+const COMFY_UNET: &str = "diffusion_model.";
+/// PEFT's wrapper levels, in front of the module path of a saved `PeftModel`.
+const PEFT_WRAPPER: &str = "base_model.model.";
+/// Top-level modules of a diffusers UNet: UNet keys ComfyUI and older diffusers files write
+/// without `unet.`.
+const UNET_MODULES: [&str; 8] = ["down_blocks.", "mid_block.", "up_blocks.", "conv_in.", "conv_out.", "conv_norm_out.", "time_embedding.", "add_embedding."];
 
 impl LoraFile {
     pub fn open(path: &Path) -> Result<LoraFile> {
@@ -152,15 +167,31 @@ fn classify(key: &str) -> std::result::Result<(Component, Address, String, Role)
         };
         return Ok((component, Address::Kohya(name.into()), format!("{prefix}{name}"), role));
     }
+    if let Some(rest) = key.strip_prefix(COMFY_UNET) {
+        let (path, role) = diffusers_module(rest, Component::Unet)?;
+        return Ok((Component::Unet, Address::Kohya(path.replace('.', "_")), format!("{COMFY_UNET}{path}"), role));
+    }
+    let unwrapped = key.strip_prefix(PEFT_WRAPPER).unwrap_or(key);
+    if UNET_MODULES.iter().any(|m| unwrapped.starts_with(m)) {
+        return diffusers_key(Component::Unet, "", unwrapped);
+    }
     for (prefix, component) in DIFFUSERS {
         let Some(rest) = key.strip_prefix(prefix) else { continue };
-        // PEFT names the adapter inside the key (`lora_A.default.weight`).
-        let rest = rest.replace(".default.", ".");
-        let (path, role) = diffusers_module(&rest, component)?;
-        return Ok((component, Address::Path(path.clone()), format!("{prefix}{path}"), role));
+        return diffusers_key(component, prefix, rest.strip_prefix(PEFT_WRAPPER).unwrap_or(rest));
     }
-    Err("not part of any LoRA layout vkdiff knows (kohya `lora_unet_` / `lora_te1_` / `lora_te2_`, diffusers `unet.` / `text_encoder.` / `text_encoder_2.`)"
+    if unwrapped != key {
+        return Err("a PEFT adapter without its component (`unet.` / `text_encoder.` / `text_encoder_2.`): which network it adapts is not in the file".into());
+    }
+    Err("not part of any LoRA layout vkdiff knows (kohya `lora_unet_` / `lora_te1_` / `lora_te2_`, diffusers `unet.` / `text_encoder.` / `text_encoder_2.`, ComfyUI `diffusion_model.` / `text_encoders.`)"
         .into())
+}
+
+/// A diffusers / PEFT tensor of `component` whose module path (after `prefix`) is `rest`.
+fn diffusers_key(component: Component, prefix: &str, rest: &str) -> std::result::Result<(Component, Address, String, Role), String> {
+    // PEFT names the adapter inside the key (`lora_A.default.weight`).
+    let rest = rest.replace(".default.", ".");
+    let (path, role) = diffusers_module(&rest, component)?;
+    Ok((component, Address::Path(path.clone()), format!("{prefix}{path}"), role))
 }
 
 /// Names of LyCORIS / DoRA tensors, which look like LoRA but need other algebra.
@@ -181,9 +212,11 @@ fn lycoris(key: &str) -> Option<&'static str> {
 
 /// The module path and role of a diffusers / PEFT tensor name (after its component prefix).
 fn diffusers_module(rest: &str, component: Component) -> std::result::Result<(String, Role), String> {
-    const SUFFIXES: [(&str, Role); 9] = [
+    const SUFFIXES: [(&str, Role); 11] = [
         (".lora_A.weight", Role::Down),
         (".lora_B.weight", Role::Up),
+        (".lora_down.weight", Role::Down),
+        (".lora_up.weight", Role::Up),
         (".lora_linear_layer.down.weight", Role::Down),
         (".lora_linear_layer.up.weight", Role::Up),
         (".lora.down.weight", Role::Down),

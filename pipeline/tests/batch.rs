@@ -41,7 +41,7 @@ fn alone_and_together(ctx: &Context, precision: Dtype, size: (usize, usize), bin
     if let Some(limit) = binding_limit {
         ctx.set_binding_limit(limit);
     }
-    let record = |batch| Denoiser::record(sdxl, &sampling, models.control_use(), models.ip_use(1), batch).unwrap();
+    let record = |batch| Denoiser::record(sdxl, &sampling, models.control_use(), models.ip_use(1), batch, texts[0].tokens).unwrap();
     let one = record(1);
     let alone = items.iter().map(|item| one.run(std::slice::from_ref(item), &mut |_, _| {}).unwrap().latents.remove(0)).collect();
     drop(one);

@@ -5,6 +5,7 @@
 use crate::common::*;
 use vkdiff_lora::{LoraFile, LoraMerger, Targets};
 use vkdiff_runtime::Dtype;
+use std::path::Path;
 use vkdiff_unet::{ParamLayout, SafeTensors};
 
 /// PyTorch layout [o, i, kh, kw] of a device tensor [o, kh, kw, i].
@@ -75,5 +76,60 @@ fn check_fused(dir: &str, files: usize) {
         for (b, p) in before.iter().zip(nets.params()) {
             assert_restored(stem, b, p);
         }
+    }
+}
+
+/// The tensors of `path` under names `rename` gives (`None` drops one), with the file's PEFT
+/// metadata.
+fn renamed(path: &Path, out: &Path, rename: impl Fn(&str) -> Option<String>) {
+    let file = SafeTensors::open(path).unwrap();
+    let tensors: Vec<(String, Vec<usize>, Vec<f32>)> =
+        file.entries.keys().filter_map(|k| Some((rename(k)?, file.values(k).unwrap().0, file.values(k).unwrap().1))).collect();
+    let bytes = std::fs::read(path).unwrap();
+    let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
+    let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
+    let meta = header["__metadata__"]["lora_adapter_metadata"].as_str().unwrap().to_string();
+    write(out, &tensors, &[("lora_adapter_metadata", meta)]);
+}
+
+#[test]
+fn every_layout_of_one_lora_merges_the_same_weights() {
+    // The diffusers file (held to fuse_lora above) against the same factors as ComfyUI saves them
+    // and as other diffusers / PEFT versions spell them.
+    let dir = repo("tests/fixtures/compat");
+    let source = dir.join("lora-peft-transformers5.safetensors");
+    let out = scratch("layouts");
+    std::fs::create_dir_all(&out).unwrap();
+    let spellings: [(&str, &dyn Fn(&str) -> Option<String>); 4] = [
+        ("UNet keys without `unet.`", &|k| Some(k.strip_prefix("unet.").unwrap_or(k).to_string())),
+        ("PEFT's `base_model.model.` and adapter name", &|k| {
+            let (component, rest) = k.split_once('.').unwrap();
+            Some(format!("{component}.base_model.model.{}", rest.replace(".lora_A.", ".lora_A.default.").replace(".lora_B.", ".lora_B.default.")))
+        }),
+        ("CLIP-L with `text_model.`", &|k| Some(k.replacen("text_encoder.encoder.", "text_encoder.text_model.encoder.", 1))),
+        ("kohya-style factor names on diffusers paths", &|k| Some(k.replace(".lora_A.weight", ".lora_down.weight").replace(".lora_B.weight", ".lora_up.weight"))),
+    ];
+    let mut files = vec![("ComfyUI's save node".to_string(), dir.join("lora-comfyui.safetensors"))];
+    for (i, (what, rename)) in spellings.iter().enumerate() {
+        let path = out.join(format!("{i}.safetensors"));
+        renamed(&source, &path, rename);
+        files.push((what.to_string(), path));
+    }
+    let nets = tiny_sdxl(Dtype::F32);
+    let targets = Targets::sdxl(&nets.unet, &nets.clip_l, &nets.big_g);
+    let merged = |path: &Path| {
+        let lora = LoraFile::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let mut merger = LoraMerger::new();
+        let summary = merger.apply(&targets, &[(&lora, 0.7)]).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let weights = nets.params().map(snapshot);
+        merger.restore().unwrap();
+        (summary.loras[0].unet, summary.loras[0].text_encoder_1, summary.loras[0].text_encoder_2, weights)
+    };
+    let want = merged(&source);
+    assert!(want.0 > 0 && want.1 > 0 && want.2 > 0, "the fixture adapts all three networks");
+    for (what, path) in files {
+        let got = merged(&path);
+        assert_eq!((got.0, got.1, got.2), (want.0, want.1, want.2), "{what}: modules merged per network");
+        assert!(got.3 == want.3, "{what}: merged weights differ from the diffusers file's");
     }
 }
