@@ -156,7 +156,7 @@ mod tests {
         assert_eq!(at(&crosses, &scales, "down_blocks.2.attentions.0."), vec![0.5; 10]);
         assert_eq!(at(&crosses, &scales, "down_blocks.2.attentions.1."), vec![1.0; 10]);
         assert_eq!(at(&crosses, &scales, "mid_block."), vec![0.25; 10]);
-        assert_eq!(at(&crosses, &scales, "up_blocks."), vec![0.0; 60]);
+        assert_eq!(at(&crosses, &scales, "up_blocks."), vec![0.0; 36]);
         assert_eq!(scale.to_string(), "down.2=0.5 down.2.1=1 mid=0.25");
         assert_eq!(IpScale::parse(&[], None).unwrap().per_layer(&crosses).unwrap(), vec![1.0; crosses.len()]);
     }
