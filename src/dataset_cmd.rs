@@ -9,7 +9,7 @@ use clap::{Args, Subcommand};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use vkdiff_pipeline::dataset::{generate, merge, Crops, Dataset, DatasetSettings, Progress as Event, Report, RunOptions, Shard};
-use vkdiff_pipeline::{read_images, Sdxl, WorkflowModels};
+use vkdiff_pipeline::{read_images, Sampling, Sdxl, WorkflowModels};
 use vkdiff_runtime::Context;
 
 /// Render scenes and make each into photoreal images with exact masks: one folder with the
@@ -47,6 +47,11 @@ pub struct DatasetArgs {
     /// from its seed.
     #[arg(long, requires = "ip_adapter")]
     ip_set: Vec<String>,
+    /// img2img from the scene: each image starts from its crop's shaded render (compost brown,
+    /// mushrooms white, lit from the depth; kept as init/NNNNNN.png) at this strength, as
+    /// `vkdiff gen --init-image` does, instead of from noise.
+    #[arg(long)]
+    init_strength: Option<f64>,
     /// Images per UNet pass (2 × batch rows with guidance); results do not depend on it.
     #[arg(long, default_value_t = 1)]
     batch: usize,
@@ -160,7 +165,7 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
         models,
         prompts,
         args.sampling.negative_prompt.clone(),
-        args.sampling.sampling(0, 0),
+        Sampling { strength: args.init_strength, ..args.sampling.sampling(0, 0) },
         ip_sets,
         multiple,
     )?)

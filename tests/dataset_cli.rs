@@ -159,7 +159,30 @@ fn annotations_follow_coco_and_match_the_masks() {
 
 #[test]
 fn gen_reproduces_every_image_byte_for_byte() {
-    let dir = reference();
+    assert_gen_reproduces(reference());
+}
+
+#[test]
+fn img2img_from_the_shaded_render_is_reproduced_by_gen() {
+    let dir = scratch("dataset-init").join("set");
+    let mut args = dataset_flags(&dir);
+    let count = args.iter().position(|a| a == "--count").unwrap() + 1;
+    args[count] = "1".into();
+    args.extend(["--init-strength", "0.67"].map(String::from));
+    run_ok(&args, &[]);
+    let coco = read_json(&dir.join("annotations.json"));
+    for image in coco["images"].as_array().unwrap() {
+        assert_eq!((image["init_file"].as_str().is_some(), image["strength"].as_f64()), (true, Some(0.67)), "{image}");
+        let init = vkdiff_pipeline::images::read_image(&dir.join(image["init_file"].as_str().unwrap())).unwrap();
+        let control = vkdiff_pipeline::images::read_image(&dir.join(image["control_file"].as_str().unwrap())).unwrap();
+        assert_eq!((init.width, init.height), (control.width, control.height));
+        assert!(init.pixels != control.pixels, "the init image is the shaded render, not the control image");
+    }
+    assert_gen_reproduces(&dir);
+}
+
+/// `vkdiff gen` with each image's recorded settings writes the very same PNG.
+fn assert_gen_reproduces(dir: &Path) {
     let coco = read_json(&dir.join("annotations.json"));
     for image in coco["images"].as_array().unwrap() {
         let out = dir.parent().unwrap().join(format!("gen-{}.png", image["id"]));
@@ -168,6 +191,9 @@ fn gen_reproduces_every_image_byte_for_byte() {
             args.extend([flag.to_string(), image[key].as_str().unwrap().to_string()]);
         }
         args.extend(["--seed".to_string(), image["seed"].to_string()]);
+        if let Some(init) = image["init_file"].as_str() {
+            args.extend(["--init-image".to_string(), init.to_string(), "--strength".to_string(), image["strength"].to_string()]);
+        }
         for style in image["ip_images"].as_array().unwrap() {
             args.extend(["--ip-image".to_string(), style.as_str().unwrap().to_string()]);
         }

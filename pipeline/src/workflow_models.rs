@@ -13,7 +13,7 @@ use crate::text_to_image::{Guides, RgbImage};
 use std::path::Path;
 use vkdiff_lora::LoraFile;
 use vkdiff_runtime::Context;
-use vkdiff_unet::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter};
+use vkdiff_unet::{ClipVisionConfig, ClipVisionModelWithProjection, ControlNetConfig, ControlNetModel, IpAdapter, SafeTensors};
 
 /// An IP-Adapter with the encoder and preprocessing of its style images.
 pub struct StyleModels {
@@ -50,9 +50,20 @@ impl ModelSettings {
                 return Err(Error::Config(format!("{flag} {}: no such file or folder", path.display())));
             }
         }
-        // Headers only: a file that is not a LoRA fails before the model loads.
+        // Headers and configs only: a file that is not what its flag wants fails before the
+        // model loads.
         for lora in &self.loras {
             flagged("--lora", &lora.path, LoraFile::open(&lora.path))?;
+        }
+        if let Some(c) = &self.controlnet {
+            let checked = if c.model.is_dir() { ControlNetConfig::from_file(&c.model.join("config.json")).map(drop) } else { SafeTensors::open(&c.model).map(drop) };
+            flagged("--controlnet", &c.model, checked)?;
+        }
+        if let Some(ip) = &self.ip_adapter {
+            flagged("--image-encoder", &ip.encoder, ClipVisionConfig::from_file(&ip.encoder.join("config.json")))?;
+            if ip.adapter.extension().is_some_and(|e| e == "safetensors") {
+                flagged("--ip-adapter", &ip.adapter, SafeTensors::open(&ip.adapter))?;
+            }
         }
         Ok(())
     }

@@ -11,6 +11,17 @@ const MUSHROOM: [f64; 3] = [238.0, 234.0, 224.0];
 const TINT: f64 = 0.25;
 
 pub fn preview_image(frame: &Frame) -> Vec<u8> {
+    draw(frame, true)
+}
+
+/// The scene as an img2img start: compost brown and mushrooms white, lit from the depth, with
+/// no tints or outlines.
+pub fn shaded_image(frame: &Frame) -> Vec<u8> {
+    draw(frame, false)
+}
+
+/// With `mark_instances`, each instance tinted with its colour and outlined.
+fn draw(frame: &Frame, mark_instances: bool) -> Vec<u8> {
     let (w, h) = (frame.width(), frame.height());
     let light = normalize([-0.45, -0.55, -1.0]); // towards the light, camera axes (z forward)
     let tints: Vec<[f64; 3]> = (0..=frame.instances.len()).map(|id| instance_colour(id as u16)).collect();
@@ -36,7 +47,7 @@ pub fn preview_image(frame: &Frame) -> Vec<u8> {
             let shade = 0.25 + 0.75 * lambert;
             let id = frame.ids[i];
             let mut colour = if id == 0 { COMPOST } else { MUSHROOM }.map(|c| c * shade);
-            if id != 0 {
+            if id != 0 && mark_instances {
                 let tint = tints[id as usize];
                 let edge = [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
                     let (xx, yy) = (x as isize + dx, y as isize + dy);

@@ -137,7 +137,7 @@ impl Dataset {
         if record.fingerprint != self.fingerprint {
             return Err(Some(format!("{} was made with other settings (fingerprint {}, the dataset's {})", files.record, record.fingerprint, self.fingerprint)));
         }
-        for name in files.outputs() {
+        for name in files.outputs().into_iter().chain(record.files.keys().map(String::as_str)) {
             let want = record.files.get(name).copied();
             let got = std::fs::metadata(self.dir.join(name)).ok().map(|m| m.len());
             if want.is_none() || got != want {
@@ -213,6 +213,7 @@ fn manifest(settings: &DatasetSettings) -> Value {
             "depth": "depth/NNNNNN.exr: planar depth in metres (channel Z), the ControlNet's input",
             "control": "control/NNNNNN.png: the depth as the ControlNet saw it",
             "masks": "masks/NNNNNN.png: 16-bit instance ids, 0 = compost, k = the annotation with mask_id k",
+            "init": "init/NNNNNN.png: with --init-strength, the shaded render each image started from (img2img)",
             "records": "records/NNNNNN.json: one finished image's COCO entry and annotations",
             "annotations": "annotations.json: COCO instance segmentation of every image, once all are done",
         },

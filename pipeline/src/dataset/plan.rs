@@ -114,11 +114,13 @@ pub struct ImageFiles {
     pub depth: String,
     pub control: String,
     pub mask: String,
+    /// img2img's start, the scene's shaded render (`--init-strength`).
+    pub init: String,
     pub record: String,
 }
 
-/// The folders, one kind of file each.
-pub const FOLDERS: [&str; 5] = ["images", "depth", "control", "masks", "records"];
+/// The folders, one kind of file each (`init` stays empty without `--init-strength`).
+pub const FOLDERS: [&str; 6] = ["images", "depth", "control", "masks", "init", "records"];
 
 impl ImageFiles {
     /// Image `index` of a dataset of `total` images: zero-padded to 6 digits, or more when the
@@ -131,12 +133,13 @@ impl ImageFiles {
             depth: format!("depth/{stem}.exr"),
             control: format!("control/{stem}.png"),
             mask: format!("masks/{stem}.png"),
+            init: format!("init/{stem}.png"),
             record: format!("records/{stem}.json"),
         }
     }
 
-    /// The files an image is made of, written in this order (the record last: it marks the
-    /// image done).
+    /// The files every image is made of, written in this order (the record last: it marks the
+    /// image done); img2img images add their init image.
     pub fn outputs(&self) -> [&str; 4] {
         [&self.depth, &self.control, &self.mask, &self.image]
     }

@@ -215,10 +215,16 @@ impl<'a> Loop<'a> {
             self.denoiser = Some((Denoiser::record(&self.models.sdxl, sampling, self.models.control_use(), ip, key.0, tokens)?, key));
         }
         let (denoiser, _) = self.denoiser.as_ref().expect("recorded above");
+        // img2img: each image's shaded render through the VAE encoder.
+        let inits = items
+            .iter()
+            .map(|item| item.scene.init.as_ref().map(|(image, _)| self.models.sdxl.encode_init(image, sampling.width, sampling.height)).transpose())
+            .collect::<Result<Vec<_>>>()?;
         let inputs: Vec<ItemInputs> = items
             .iter()
-            .map(|item| ItemInputs {
-                init: None,
+            .zip(&inits)
+            .map(|(item, init)| ItemInputs {
+                init: init.as_ref(),
                 seed: item.seed,
                 text: &self.texts[&item.prompt],
                 control_image: Some(&item.scene.control),
@@ -252,7 +258,7 @@ impl<'a> Loop<'a> {
             job: TextToImage { prompt: s.prompts[item.prompt].clone(), negative_prompt: s.negative_prompt.clone(), seed: item.seed, sampling: s.sampling.clone() },
             depth: s.models.controlnet.as_ref().map(|_| PathBuf::from(&files.depth)),
             ip_images: ip_images.clone(),
-            init_image: None,
+            init_image: item.scene.init.as_ref().map(|_| PathBuf::from(&files.init)),
         };
         let mut entry = json!({
             "id": index + 1,
@@ -270,6 +276,10 @@ impl<'a> Loop<'a> {
             "camera": item.scene.camera,
         });
         entry["crop"]["index"] = json!(item.scene.crop);
+        if let (Some(_), Some(strength)) = (&item.scene.init, s.sampling.strength) {
+            entry["init_file"] = json!(files.init);
+            entry["strength"] = json!(strength);
+        }
         if item.style.is_some() {
             entry["ip_images"] = json!(ip_images.iter().map(|p| p.display().to_string()).collect::<Vec<_>>());
         }
@@ -299,8 +309,9 @@ fn start_writer(dataset: Dataset, batch: usize) -> (SyncSender<Finished>, JoinHa
                     a
                 })
                 .collect();
-            let outputs: [(&str, &[u8]); 4] =
-                [(&files.depth, &f.scene.depth_exr), (&files.control, &f.scene.control_png), (&files.mask, &f.scene.mask_png), (&files.image, &png)];
+            let mut outputs: Vec<(&str, &[u8])> = vec![(&files.depth, &f.scene.depth_exr), (&files.control, &f.scene.control_png), (&files.mask, &f.scene.mask_png)];
+            outputs.extend(f.scene.init.as_ref().map(|(_, png)| (files.init.as_str(), png.as_slice())));
+            outputs.push((&files.image, &png));
             dataset.write_image(f.index, &outputs, f.entry, annotations)?;
             busy += start.elapsed();
         }

@@ -14,6 +14,7 @@ use vkdiff_render::control::control_image;
 use vkdiff_render::crops::crop_frame;
 use vkdiff_render::exr::encode_single_channel;
 use vkdiff_render::png_out::{gray16, rgb8};
+use vkdiff_render::preview::shaded_image;
 use vkdiff_render::scene::Scene;
 
 /// One image's share of its scene, ready to be denoised and written.
@@ -30,6 +31,8 @@ pub struct SceneImage {
     pub depth_exr: Vec<u8>,
     pub control_png: Vec<u8>,
     pub mask_png: Vec<u8>,
+    /// img2img's start (`--init-strength`): the crop's shaded render, and as a PNG.
+    pub init: Option<(RgbImage, Vec<u8>)>,
     /// COCO annotations, ids = the instance ids in the mask.
     pub annotations: Vec<Value>,
 }
@@ -88,6 +91,11 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
             let (w, h) = (part.camera.width, part.camera.height);
             let pixels = control_image(&part.depth, settings.control_depth);
             let camera = part.camera.to_json();
+            let init = settings.sampling.strength.map(|_| {
+                let shaded = shaded_image(&part);
+                let png = rgb8(w, h, &shaded);
+                (RgbImage { width: w as usize, height: h as usize, pixels: shaded }, png)
+            });
             SceneImage {
                 index,
                 scene_seed: seed,
@@ -97,6 +105,7 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
                 depth_exr: encode_single_channel(w, h, "Z", &part.depth),
                 control_png: rgb8(w, h, &pixels),
                 mask_png: gray16(w, h, &part.ids),
+                init,
                 annotations: annotation_values(&part, &instance_masks(&part)),
                 control: RgbImage { width: w as usize, height: h as usize, pixels },
             }

@@ -154,6 +154,9 @@ impl DatasetSettings {
         if s.prompt_syntax == PromptSyntax::Weighted {
             map.insert("prompt-syntax".into(), json!("weighted"));
         }
+        if let Some(strength) = s.strength {
+            map.insert("init-strength".into(), json!(strength));
+        }
         if *c != SizeConditioning::default() {
             map.extend(object(json!({
                 "original-size": size(c.original),
