@@ -89,6 +89,9 @@ pub fn run(args: &GenArgs) -> Result<()> {
     settings.job.sampling.strength = args.init_image.as_ref().map(|_| args.strength.unwrap_or(0.3));
     let sampling = &settings.job.sampling;
     sampling.check()?;
+    for prompt in std::iter::once(&settings.job.prompt).chain(&settings.job.negative_prompt) {
+        sampling.prompt_syntax.check(prompt)?;
+    }
     let multiple = Sdxl::probe_pixel_multiple(&settings.models.model)?;
     sampling.check_size(multiple)?;
     if let Some(control) = &inputs.control {

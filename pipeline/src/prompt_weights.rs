@@ -25,6 +25,16 @@ pub enum PromptSyntax {
     Weighted,
 }
 
+impl PromptSyntax {
+    /// A prompt this syntax cannot read is refused before anything loads.
+    pub fn check(self, prompt: &str) -> Result<()> {
+        match self {
+            PromptSyntax::Plain => Ok(()),
+            PromptSyntax::Weighted => parse_attention(prompt).map(drop),
+        }
+    }
+}
+
 /// Tokens per chunk between BOS and EOS.
 const CHUNK: usize = 75;
 

@@ -70,11 +70,11 @@ impl Sampling {
     pub fn first_step(&self) -> Result<usize> {
         let Some(strength) = self.strength else { return Ok(0) };
         if !(strength > 0.0 && strength <= 1.0) {
-            return Err(Error::Config(format!("--strength {strength} must be in (0, 1]")));
+            return Err(Error::Config(format!("a strength of {strength} (--strength, --init-strength) must be in (0, 1]")));
         }
         let run = ((self.steps as f64 * strength) as usize).min(self.steps);
         if run == 0 {
-            return Err(Error::Config(format!("--strength {strength} of {} steps runs none; raise --steps or --strength", self.steps)));
+            return Err(Error::Config(format!("a strength of {strength} over {} steps runs none of them; raise --steps or the strength", self.steps)));
         }
         Ok(self.steps - run)
     }

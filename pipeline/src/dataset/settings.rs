@@ -80,6 +80,9 @@ impl DatasetSettings {
         }
         models.check()?;
         sampling.check()?;
+        for prompt in prompts.iter().chain(&negative_prompt) {
+            sampling.prompt_syntax.check(prompt)?;
+        }
         let multiple = pixel_multiple as u32;
         let (width, height) = if crops.count > 0 {
             if crops.size == 0 || crops.size > scene.width.min(scene.height) {
