@@ -75,17 +75,25 @@ impl Context {
         let info = infos[index].clone();
         let pd = pds[index];
         let family = info.compute_queue_family.expect("checked by choose");
-        let mut f11 = vk::PhysicalDeviceVulkan11Features::default().storage_buffer16_bit_access(info.storage_16bit);
+        // Every feature the kernels' SPIR-V declares, where the device has it.
+        let mut f11 = vk::PhysicalDeviceVulkan11Features::default()
+            .storage_buffer16_bit_access(info.storage_16bit)
+            .uniform_and_storage_buffer16_bit_access(info.storage_16bit);
         let mut f12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(info.shader_f16);
         let size_control = info.subgroup_size_range.is_some();
         let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
             .subgroup_size_control(size_control)
-            .compute_full_subgroups(size_control);
+            .compute_full_subgroups(size_control)
+            .shader_zero_initialize_workgroup_memory(info.zero_init_workgroup);
+        let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default().shader_zero_initialize_workgroup_memory(true);
         let priorities = [1.0f32];
         let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&priorities)];
+        let extensions = [ash::khr::zero_initialize_workgroup_memory::NAME.as_ptr()];
         let mut create = vk::DeviceCreateInfo::default().queue_create_infos(&queues).push_next(&mut f11).push_next(&mut f12);
         if info.api_version >= (1, 3, 0) {
             create = create.push_next(&mut f13);
+        } else if info.zero_init_extension {
+            create = create.enabled_extension_names(&extensions).push_next(&mut zero_init);
         }
         // SAFETY: pd belongs to the instance; the create info outlives the call.
         let device = unsafe { instance.create_device(pd, &create, None) }.vk("vkCreateDevice")?;

@@ -46,7 +46,14 @@ pub struct DeviceInfo {
     pub driver: String,
     pub api_version: (u32, u32, u32),
     pub shader_f16: bool,
+    /// 16-bit values in storage buffers: `storageBuffer16BitAccess` and
+    /// `uniformAndStorageBuffer16BitAccess` (naga declares the second capability for them).
     pub storage_16bit: bool,
+    /// `shaderZeroInitializeWorkgroupMemory` (core in 1.3, else its KHR extension): the kernels
+    /// zero their workgroup memory natively (naga's polyfill is seconds of JIT on lavapipe).
+    pub zero_init_workgroup: bool,
+    /// Whether `zero_init_workgroup` comes from the extension, which must then be enabled.
+    pub zero_init_extension: bool,
     pub subgroup_size: u32,
     pub subgroup_size_range: Option<(u32, u32)>,
     pub subgroup_shuffle: bool,
@@ -76,6 +83,9 @@ impl DeviceInfo {
         }
         if !self.subgroup_shuffle || !self.subgroup_arithmetic {
             return Some("no subgroup shuffle/arithmetic operations in compute shaders".into());
+        }
+        if !self.zero_init_workgroup {
+            return Some("no shaderZeroInitializeWorkgroupMemory (Vulkan 1.3 or VK_KHR_zero_initialize_workgroup_memory)".into());
         }
         None
     }
@@ -128,7 +138,9 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
     let mut f11 = vk::PhysicalDeviceVulkan11Features::default();
     let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
     let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
-    let mut feats2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f11).push_next(&mut f12).push_next(&mut f13);
+    let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default();
+    let zero_init_extension = has_extension(instance, pd, ash::khr::zero_initialize_workgroup_memory::NAME);
+    let mut feats2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f11).push_next(&mut f12).push_next(&mut f13).push_next(&mut zero_init);
     // SAFETY: pd comes from this instance; the chained structs live until the calls return.
     let (mem, families) = unsafe {
         instance.get_physical_device_properties2(pd, &mut props2);
@@ -169,7 +181,9 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
         driver: format!("{} {}", text(&driver.driver_name), text(&driver.driver_info)).trim().to_string(),
         api_version,
         shader_f16: f12.shader_float16 == vk::TRUE,
-        storage_16bit: f11.storage_buffer16_bit_access == vk::TRUE,
+        storage_16bit: f11.storage_buffer16_bit_access == vk::TRUE && f11.uniform_and_storage_buffer16_bit_access == vk::TRUE,
+        zero_init_workgroup: zero_init.shader_zero_initialize_workgroup_memory == vk::TRUE,
+        zero_init_extension: api_version < (1, 3, 0) && zero_init_extension,
         subgroup_size: subgroup.subgroup_size,
         subgroup_size_range: size_range,
         subgroup_shuffle: subgroup.supported_stages.contains(compute)
@@ -248,6 +262,8 @@ mod tests {
             api_version: (1, 3, 0),
             shader_f16: true,
             storage_16bit: true,
+            zero_init_workgroup: true,
+            zero_init_extension: false,
             subgroup_size: 32,
             subgroup_size_range: None,
             subgroup_shuffle: usable,
@@ -289,5 +305,16 @@ mod tests {
         assert!(err.contains("dev0") && err.contains("subgroup"), "{err}");
         assert!(choose(&devs, Some(5)).unwrap_err().to_string().contains("only 2"));
         assert!(matches!(choose(&[], None), Err(Error::NoDevice)));
+    }
+
+    #[test]
+    fn a_device_without_what_the_kernels_declare_is_refused_by_name() {
+        let mut dev = device(0, DeviceKind::Discrete, true);
+        dev.zero_init_workgroup = false;
+        let err = choose(&[dev], Some(0)).unwrap_err().to_string();
+        assert!(err.contains("shaderZeroInitializeWorkgroupMemory"), "{err}");
+        let mut dev = device(0, DeviceKind::Discrete, true);
+        dev.storage_16bit = false;
+        assert!(!dev.supports_f16(), "f16 kernels need 16-bit storage access");
     }
 }
