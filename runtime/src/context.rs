@@ -3,6 +3,7 @@
 use crate::device::{self, DeviceInfo, DeviceKind};
 use crate::error::{Error, Result, VkContext};
 use crate::pipeline::PipelineCache;
+use crate::validation::Validation;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use std::mem::ManuallyDrop;
@@ -21,6 +22,7 @@ pub enum GemmFamily {
 pub(crate) struct Shared {
     _entry: ash::Entry,
     instance: ash::Instance,
+    validation: Option<Validation>,
     pub(crate) device: ash::Device,
     pub(crate) queue: Mutex<vk::Queue>,
     pub(crate) queue_family: u32,
@@ -41,6 +43,9 @@ impl Drop for Shared {
             self.pipelines.destroy(&self.device);
             ManuallyDrop::drop(&mut self.allocator);
             self.device.destroy_device(None);
+            if let Some(v) = &self.validation {
+                v.destroy();
+            }
             self.instance.destroy_instance(None);
         }
     }
@@ -56,12 +61,17 @@ impl Context {
     /// Opens the device `requested` (or `VKDIFF_DEVICE`, or the best one; see [`device::choose`]).
     pub fn new(requested: Option<usize>) -> Result<Context> {
         let entry = device::load_entry()?;
-        let instance = device::create_instance(&entry)?;
+        let (instance, validation) = device::create_instance(&entry)?;
         match Self::open(&instance, requested) {
-            Ok((device, pd, info, queue_family)) => Self::finish(entry, instance, device, pd, info, queue_family),
+            Ok((device, pd, info, queue_family)) => Self::finish(entry, (instance, validation), device, pd, info, queue_family),
             Err(e) => {
-                // SAFETY: nothing created from the instance is alive.
-                unsafe { instance.destroy_instance(None) };
+                // SAFETY: nothing created from the instance is alive but the messenger, which goes first.
+                unsafe {
+                    if let Some(v) = &validation {
+                        v.destroy();
+                    }
+                    instance.destroy_instance(None)
+                };
                 Err(e)
             }
         }
@@ -102,7 +112,7 @@ impl Context {
 
     fn finish(
         entry: ash::Entry,
-        instance: ash::Instance,
+        (instance, validation): (ash::Instance, Option<Validation>),
         device: ash::Device,
         pd: vk::PhysicalDevice,
         info: DeviceInfo,
@@ -127,6 +137,7 @@ impl Context {
         let shared = Shared {
             _entry: entry,
             instance,
+            validation,
             device,
             queue: Mutex::new(queue),
             queue_family: family,

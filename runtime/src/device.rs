@@ -1,5 +1,6 @@
 //! Vulkan instance, physical-device discovery and the choice of device.
 
+use crate::validation::Validation;
 use crate::error::{Error, Result, VkContext};
 use ash::vk;
 use std::ffi::CStr;
@@ -109,14 +110,13 @@ pub(crate) fn load_entry() -> Result<ash::Entry> {
     unsafe { ash::Entry::load() }.map_err(|e| Error::NoLoader(e.to_string()))
 }
 
-pub(crate) fn create_instance(entry: &ash::Entry) -> Result<ash::Instance> {
+/// vkdiff's instance, validated under `VKDIFF_VALIDATE=1`.
+pub(crate) fn create_instance(entry: &ash::Entry) -> Result<(ash::Instance, Option<Validation>)> {
     let app = vk::ApplicationInfo::default()
         .application_name(c"vkdiff")
         .engine_name(c"vkdiff")
         .api_version(vk::API_VERSION_1_3);
-    let info = vk::InstanceCreateInfo::default().application_info(&app);
-    // SAFETY: the create info and everything it points to outlive the call.
-    unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance")
+    crate::validation::create_instance(entry, vk::InstanceCreateInfo::default().application_info(&app))
 }
 
 fn has_extension(instance: &ash::Instance, pd: vk::PhysicalDevice, name: &CStr) -> bool {
@@ -208,13 +208,18 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
 /// Every Vulkan device on this machine, described.
 pub fn list_devices() -> Result<Vec<DeviceInfo>> {
     let entry = load_entry()?;
-    let instance = create_instance(&entry)?;
+    let (instance, validation) = create_instance(&entry)?;
     // SAFETY: the instance is valid until destroyed below.
     let infos = unsafe { instance.enumerate_physical_devices() }
         .vk("vkEnumeratePhysicalDevices")
         .map(|pds| pds.iter().enumerate().map(|(i, &pd)| describe(&instance, pd, i)).collect());
-    // SAFETY: nothing created from the instance outlives it.
-    unsafe { instance.destroy_instance(None) };
+    // SAFETY: nothing created from the instance outlives it; the messenger goes first.
+    unsafe {
+        if let Some(v) = &validation {
+            v.destroy();
+        }
+        instance.destroy_instance(None)
+    };
     infos
 }
 

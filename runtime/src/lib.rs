@@ -11,6 +11,7 @@ mod pipeline;
 mod recorder;
 mod submit;
 mod tensor;
+mod validation;
 
 pub use arena::Arena;
 pub use context::{Context, GemmFamily};
