@@ -17,6 +17,8 @@ pub enum Error {
     Vulkan { call: &'static str, result: vk::Result },
     #[error("device memory: {0}")]
     Memory(String),
+    #[error("VKDIFF_VALIDATE=1 needs the Khronos validation layer (Debian: apt-get install vulkan-validationlayers)")]
+    NoValidationLayer,
     #[error("{0}")]
     Shape(String),
     #[error("kernel `{kernel}` has no compiled variant with {want}")]

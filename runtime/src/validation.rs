@@ -37,10 +37,7 @@ pub(crate) fn create_instance(entry: &ash::Entry, info: vk::InstanceCreateInfo) 
     // SAFETY: a plain query of the loader.
     let layers = unsafe { entry.enumerate_instance_layer_properties() }.vk("vkEnumerateInstanceLayerProperties")?;
     if !layers.iter().any(|l| l.layer_name_as_c_str() == Ok(LAYER)) {
-        return Err(Error::Unsupported {
-            device: "this machine".into(),
-            reason: "VKDIFF_VALIDATE=1 needs the Khronos validation layer (Debian: apt-get install vulkan-validationlayers)".into(),
-        });
+        return Err(Error::NoValidationLayer);
     }
     let layer_names: [*const c_char; 1] = [LAYER.as_ptr()];
     let extensions: [*const c_char; 1] = [ash::ext::debug_utils::NAME.as_ptr()];
