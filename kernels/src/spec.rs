@@ -21,23 +21,43 @@ pub struct KernelSpec {
 const NONE: &[&[(&str, u32)]] = &[&[]];
 
 pub const KERNELS: &[KernelSpec] = &[
-    // Register-blocked GEMM for CPU-like devices: workgroup = one subgroup, A shared by shuffles.
+    // Register-blocked GEMM for CPU-like devices: workgroup = one subgroup, A shared by shuffles;
+    // one variant set per lavapipe width (LP_NATIVE_VECTOR_WIDTH 128, 256, 512 → 4, 8, 16 lanes).
     KernelSpec {
         name: "gemm_sg",
         files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "gemm_sg.wgsl"],
         params: &[
+            &[("SG", 4), ("TM", 16), ("BT", 0)],
+            &[("SG", 4), ("TM", 16), ("BT", 1)],
+            &[("SG", 4), ("TM", 32), ("BT", 0)],
+            &[("SG", 4), ("TM", 32), ("BT", 1)],
+            &[("SG", 4), ("TM", 64), ("BT", 0)],
+            &[("SG", 4), ("TM", 64), ("BT", 1)],
             &[("SG", 8), ("TM", 16), ("BT", 0)],
             &[("SG", 8), ("TM", 16), ("BT", 1)],
             &[("SG", 8), ("TM", 32), ("BT", 0)],
             &[("SG", 8), ("TM", 32), ("BT", 1)],
             &[("SG", 8), ("TM", 64), ("BT", 0)],
             &[("SG", 8), ("TM", 64), ("BT", 1)],
+            &[("SG", 16), ("TM", 16), ("BT", 0)],
+            &[("SG", 16), ("TM", 16), ("BT", 1)],
+            &[("SG", 16), ("TM", 32), ("BT", 0)],
+            &[("SG", 16), ("TM", 32), ("BT", 1)],
         ],
     },
     KernelSpec {
         name: "conv_sg",
         files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "gemm_sg.wgsl"],
-        params: &[&[("SG", 8), ("TM", 16), ("BT", 1)], &[("SG", 8), ("TM", 32), ("BT", 1)], &[("SG", 8), ("TM", 64), ("BT", 1)]],
+        params: &[
+            &[("SG", 4), ("TM", 16), ("BT", 1)],
+            &[("SG", 4), ("TM", 32), ("BT", 1)],
+            &[("SG", 4), ("TM", 64), ("BT", 1)],
+            &[("SG", 8), ("TM", 16), ("BT", 1)],
+            &[("SG", 8), ("TM", 32), ("BT", 1)],
+            &[("SG", 8), ("TM", 64), ("BT", 1)],
+            &[("SG", 16), ("TM", 16), ("BT", 1)],
+            &[("SG", 16), ("TM", 32), ("BT", 1)],
+        ],
     },
     // Shared-memory tiled GEMM: any shape, the variant for GPUs.
     KernelSpec {
@@ -56,23 +76,31 @@ pub const KERNELS: &[KernelSpec] = &[
     KernelSpec { name: "group_norm_apply", files: &["reduce.wgsl", "group_apply.wgsl", "group_norm_apply.wgsl"], params: NONE },
     KernelSpec { name: "layer_norm", files: &["reduce.wgsl", "layer_norm.wgsl"], params: NONE },
     KernelSpec { name: "softmax", files: &["reduce.wgsl", "softmax.wgsl"], params: NONE },
-    // Flash attention; DV = vec4 slots of the head per lane, TM = query rows per workgroup.
+    // Flash attention; DV = vec4 slots of the head per lane, TM = query rows per workgroup. The
+    // subgroup variants cover lavapipe's widths; `attention_wg` every other width and head size.
     KernelSpec {
         name: "attention",
         files: &["attention.wgsl"],
         params: &[
+            &[("SG", 4), ("DV", 1), ("TM", 16)],
+            &[("SG", 4), ("DV", 2), ("TM", 16)],
+            &[("SG", 4), ("DV", 4), ("TM", 8)],
             &[("SG", 8), ("DV", 1), ("TM", 16)],
             &[("SG", 8), ("DV", 2), ("TM", 16)],
             &[("SG", 8), ("DV", 4), ("TM", 8)],
             &[("SG", 8), ("DV", 8), ("TM", 4)],
             &[("SG", 8), ("DV", 16), ("TM", 4)],
             &[("SG", 16), ("DV", 1), ("TM", 8)],
+            &[("SG", 16), ("DV", 2), ("TM", 8)],
+            &[("SG", 16), ("DV", 4), ("TM", 4)],
             &[("SG", 16), ("DV", 8), ("TM", 4)],
-            &[("SG", 32), ("DV", 1), ("TM", 8)],
-            &[("SG", 32), ("DV", 4), ("TM", 4)],
-            &[("SG", 64), ("DV", 1), ("TM", 4)],
-            &[("SG", 64), ("DV", 2), ("TM", 4)],
         ],
+    },
+    // Workgroup-memory attention: W invocations, no subgroup operations.
+    KernelSpec {
+        name: "attention_wg",
+        files: &["attention_wg.wgsl"],
+        params: &[&[("W", 64), ("DV", 1), ("TM", 8)], &[("W", 64), ("DV", 2), ("TM", 4)], &[("W", 64), ("DV", 4), ("TM", 2)]],
     },
     KernelSpec {
         name: "unary",

@@ -1,6 +1,8 @@
 // out = a op b element-wise with b broadcast: b's index is (i / b_outer)·b_inner + i % b_inner,
 // which covers same-shape (b_inner = b_outer = n), a per-channel vector (b_inner = C, b_outer ≥ n)
 // and a per-(batch, channel) vector over pixels (b_inner = C, b_outer = H·W·C). OP: 0 add, 1 mul.
+// Past the binding limit the runtime binds runs of a and out starting at element `base` of the
+// whole tensors, and b's elements from `b_shift` on.
 @group(0) @binding(0) var<storage, read> a: array<S>;
 @group(0) @binding(1) var<storage, read> b: array<S>;
 @group(0) @binding(2) var<storage, read_write> out: array<S>;
@@ -9,6 +11,8 @@ struct Params {
     n: u32,
     b_inner: u32,
     b_outer: u32,
+    base: u32,
+    b_shift: u32,
     groups_x: u32,
 }
 
@@ -21,7 +25,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         return;
     }
     let x = f32(a[i]);
-    let y = f32(b[(i / p.b_outer) * p.b_inner + i % p.b_inner]);
+    let g = p.base + i;
+    let y = f32(b[(g / p.b_outer) * p.b_inner + g % p.b_inner - p.b_shift]);
     if OP == 0u {
         out[i] = S(x + y);
     } else {

@@ -7,7 +7,7 @@ use crate::validation::Validation;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use std::mem::ManuallyDrop;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// Which family of GEMM/convolution kernels a context uses (see kernels/src/spec.rs).
@@ -33,6 +33,10 @@ pub(crate) struct Shared {
     pub(crate) pipelines: PipelineCache,
     pub(crate) gemm_family: Mutex<GemmFamily>,
     pub(crate) binding_limit: AtomicU64,
+    /// The most workgroups one dispatch may have per dimension; larger grids are split.
+    pub(crate) workgroup_limit: Mutex<[u32; 3]>,
+    /// `VKDIFF_GPU_PATHS=1`: run as a discrete GPU would (see [`Context::gpu_paths`]).
+    pub(crate) gpu_paths: AtomicBool,
 }
 
 impl Drop for Shared {
@@ -98,13 +102,18 @@ impl Context {
         let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default().shader_zero_initialize_workgroup_memory(true);
         let priorities = [1.0f32];
         let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&priorities)];
-        let extensions = [ash::khr::zero_initialize_workgroup_memory::NAME.as_ptr()];
+        let mut extensions = Vec::new();
+        if device::is_portability_subset(instance, pd) {
+            extensions.push(ash::khr::portability_subset::NAME.as_ptr());
+        }
         let mut create = vk::DeviceCreateInfo::default().queue_create_infos(&queues).push_next(&mut f11).push_next(&mut f12);
         if info.api_version >= (1, 3, 0) {
             create = create.push_next(&mut f13);
         } else if info.zero_init_extension {
-            create = create.enabled_extension_names(&extensions).push_next(&mut zero_init);
+            extensions.push(ash::khr::zero_initialize_workgroup_memory::NAME.as_ptr());
+            create = create.push_next(&mut zero_init);
         }
+        let create = create.enabled_extension_names(&extensions);
         // SAFETY: pd belongs to the instance; the create info outlives the call.
         let device = unsafe { instance.create_device(pd, &create, None) }.vk("vkCreateDevice")?;
         Ok((device, pd, info, family))
@@ -129,7 +138,8 @@ impl Context {
             allocation_sizes: Default::default(),
         })
         .map_err(|e| Error::Memory(e.to_string()))?;
-        let gemm_family = if info.kind == DeviceKind::Cpu && info.can_use_subgroup(8) {
+        let gpu_paths = std::env::var("VKDIFF_GPU_PATHS").is_ok_and(|v| v == "1");
+        let gemm_family = if !gpu_paths && info.kind == DeviceKind::Cpu && crate::ops::gemm_subgroup_width(&info).is_some() {
             GemmFamily::Subgroup
         } else {
             GemmFamily::Tiled
@@ -147,6 +157,8 @@ impl Context {
             pipelines: PipelineCache::default(),
             gemm_family: Mutex::new(gemm_family),
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
+            workgroup_limit: Mutex::new(info.max_workgroup_count),
+            gpu_paths: AtomicBool::new(gpu_paths),
             info,
         };
         Ok(Context { shared: Arc::new(shared) })
@@ -188,6 +200,34 @@ impl Context {
     /// small tensors); values above the device limit are clamped to it.
     pub fn set_binding_limit(&self, bytes: u64) {
         self.shared.binding_limit.store(bytes.min(self.shared.info.max_storage_buffer_range), Ordering::SeqCst);
+    }
+
+    /// Whether `VKDIFF_GPU_PATHS=1` runs this device as a discrete GPU would: device-only memory
+    /// reached through staging buffers, the tiled GEMM/convolution kernels and the workgroup
+    /// attention kernel. On lavapipe this proves the code a GPU runs.
+    pub fn gpu_paths(&self) -> bool {
+        self.shared.gpu_paths.load(Ordering::SeqCst)
+    }
+
+    /// Turns the GPU paths on or off for this context (tests run both on one device); turning
+    /// them on also selects the tiled GEMM family.
+    pub fn set_gpu_paths(&self, on: bool) {
+        self.shared.gpu_paths.store(on, Ordering::SeqCst);
+        if on {
+            self.set_gemm_family(GemmFamily::Tiled);
+        }
+    }
+
+    /// The most workgroups one dispatch may have per dimension.
+    pub fn workgroup_limit(&self) -> [u32; 3] {
+        *self.shared.workgroup_limit.lock().unwrap()
+    }
+
+    /// Lowers the per-dispatch workgroup limit below the device's own (tests exercise the
+    /// splitting of large grids); values above the device limit are clamped to it.
+    pub fn set_workgroup_limit(&self, limit: [u32; 3]) {
+        let device = self.shared.info.max_workgroup_count;
+        *self.shared.workgroup_limit.lock().unwrap() = [0, 1, 2].map(|i| limit[i].clamp(1, device[i]));
     }
 
     /// Whether this device can pin a kernel to a subgroup of `size` lanes.

@@ -110,19 +110,35 @@ pub(crate) fn load_entry() -> Result<ash::Entry> {
     unsafe { ash::Entry::load() }.map_err(|e| Error::NoLoader(e.to_string()))
 }
 
-/// vkdiff's instance, validated under `VKDIFF_VALIDATE=1`.
+/// vkdiff's instance, validated under `VKDIFF_VALIDATE=1`. Where the loader offers
+/// `VK_KHR_portability_enumeration`, portability devices (MoltenVK) are listed too.
 pub(crate) fn create_instance(entry: &ash::Entry) -> Result<(ash::Instance, Option<Validation>)> {
     let app = vk::ApplicationInfo::default()
         .application_name(c"vkdiff")
         .engine_name(c"vkdiff")
         .api_version(vk::API_VERSION_1_3);
-    crate::validation::create_instance(entry, vk::InstanceCreateInfo::default().application_info(&app))
+    // SAFETY: a plain query of the loader.
+    let available = unsafe { entry.enumerate_instance_extension_properties(None) }.vk("vkEnumerateInstanceExtensionProperties")?;
+    let portability = ash::khr::portability_enumeration::NAME;
+    let mut info = vk::InstanceCreateInfo::default().application_info(&app);
+    let mut extensions = Vec::new();
+    if available.iter().any(|e| e.extension_name_as_c_str() == Ok(portability)) {
+        extensions.push(portability.as_ptr());
+        info = info.flags(vk::InstanceCreateFlags::ENUMERATE_PORTABILITY_KHR);
+    }
+    crate::validation::create_instance(entry, info, extensions)
 }
 
 fn has_extension(instance: &ash::Instance, pd: vk::PhysicalDevice, name: &CStr) -> bool {
     // SAFETY: pd comes from this instance.
     let exts = unsafe { instance.enumerate_device_extension_properties(pd) }.unwrap_or_default();
     exts.iter().any(|e| e.extension_name_as_c_str() == Ok(name))
+}
+
+/// Whether the device is a portability implementation (MoltenVK), which must then be created
+/// with `VK_KHR_portability_subset` enabled.
+pub(crate) fn is_portability_subset(instance: &ash::Instance, pd: vk::PhysicalDevice) -> bool {
+    has_extension(instance, pd, ash::khr::portability_subset::NAME)
 }
 
 pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> DeviceInfo {

@@ -20,7 +20,8 @@ pub struct Buffer {
 
 impl Buffer {
     pub(crate) fn new(shared: &Arc<Shared>, size: u64, location: MemoryLocation, name: &str) -> Result<Arc<Buffer>> {
-        let size = size.max(4);
+        // Whole words: fills (vkCmdFillBuffer) and vec4 kernels then cover an odd-length f16 tensor.
+        let size = size.max(4).next_multiple_of(4);
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST;
@@ -56,8 +57,12 @@ impl Buffer {
         Ok(Arc::new(Buffer { raw, size, allocation: Mutex::new(Some(allocation)), counted, shared: shared.clone() }))
     }
 
-    /// Runs `f` on the buffer's host mapping, if the memory is host-visible (always on lavapipe).
+    /// Runs `f` on the buffer's host mapping, if the memory is host-visible (always on lavapipe)
+    /// and, under `VKDIFF_GPU_PATHS=1`, not device-only memory (which then goes through staging).
     pub(crate) fn with_mapped<R>(&self, f: impl FnOnce(&mut [u8]) -> R) -> Option<R> {
+        if self.counted && self.shared.gpu_paths.load(Ordering::SeqCst) {
+            return None;
+        }
         let mut guard = self.allocation.lock().unwrap();
         guard.as_mut()?.mapped_slice_mut().map(f)
     }

@@ -87,7 +87,8 @@ impl Context {
                 required = required.required_subgroup_size(sg);
                 stage = stage.flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS).push_next(&mut required);
             }
-            let info = [vk::ComputePipelineCreateInfo::default().stage(stage).layout(layout)];
+            // DISPATCH_BASE: grids past the workgroup-count limit run as based dispatches.
+            let info = [vk::ComputePipelineCreateInfo::default().flags(vk::PipelineCreateFlags::DISPATCH_BASE).stage(stage).layout(layout)];
             let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
             device.destroy_shader_module(module, None);
             let pipeline = created.map_err(|(_, e)| e).vk("vkCreateComputePipelines")?[0];

@@ -5,7 +5,7 @@ use crate::context::Context;
 use crate::error::{ensure, Result, VkContext};
 use crate::memory::Buffer;
 use crate::pipeline::{Kernel, PUSH_BYTES};
-use crate::submit::submit_and_wait;
+use crate::submit::{memory_barrier, submit_and_wait};
 use crate::tensor::Tensor;
 use ash::vk;
 use std::collections::HashSet;
@@ -84,7 +84,16 @@ impl Recorder {
                 .allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(command_pool).command_buffer_count(1))
                 .vk("vkAllocateCommandBuffers")?[0];
             device.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default()).vk("vkBeginCommandBuffer")?;
-            Ok(Recorder { ctx: ctx.clone(), res, cmd, sets_left: 0, written: HashSet::new(), read: HashSet::new(), profile })
+            let rec = Recorder { ctx: ctx.clone(), res, cmd, sets_left: 0, written: HashSet::new(), read: HashSet::new(), profile };
+            // What earlier submissions wrote (kernels, staging copies, fills) is made visible
+            // to this recording's kernels: a fence wait alone does not.
+            rec.barrier(
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE,
+                vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+            );
+            Ok(rec)
         }
     }
 
@@ -95,12 +104,8 @@ impl Recorder {
     /// Records one dispatch of `kernel` over `groups` workgroups. Bindings are `reads` then
     /// `writes`, in the kernel's binding order; `push` fills its push constants.
     pub fn dispatch(&mut self, kernel: &Arc<Kernel>, reads: &[&Tensor], writes: &[&Tensor], push: &[u32], groups: [u32; 3]) -> Result<()> {
-        let info = &self.ctx.shared.info;
         ensure(reads.len() + writes.len() == kernel.bindings as usize, || format!("kernel `{}` takes {} bindings", kernel.name, kernel.bindings))?;
         ensure(push.len() * 4 <= PUSH_BYTES as usize, || format!("kernel `{}`: push constants too large", kernel.name))?;
-        for (g, max) in groups.iter().zip(info.max_workgroup_count) {
-            ensure(*g <= max, || format!("kernel `{}`: {groups:?} workgroups exceed the device limit {:?}", kernel.name, info.max_workgroup_count))?;
-        }
         let limit = self.ctx.binding_limit();
         for t in reads.iter().chain(writes) {
             ensure(t.bytes() <= limit, || {
@@ -136,7 +141,8 @@ impl Recorder {
         unsafe {
             device.update_descriptor_sets(&descriptor_writes, &[]);
             if hazard {
-                self.barrier(vk::AccessFlags::SHADER_WRITE, vk::PipelineStageFlags::COMPUTE_SHADER, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
+                let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
+                self.barrier(compute, vk::AccessFlags::SHADER_WRITE, compute, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
                 self.written.clear();
                 self.read.clear();
             }
@@ -148,7 +154,7 @@ impl Recorder {
             if !push.is_empty() {
                 device.cmd_push_constants(self.cmd, kernel.layout, vk::ShaderStageFlags::COMPUTE, 0, bytemuck::cast_slice(push));
             }
-            device.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]);
+            self.dispatch_split(groups);
             if let Some((pool, q)) = timed {
                 device.cmd_write_timestamp(self.cmd, vk::PipelineStageFlags::BOTTOM_OF_PIPE, pool, q + 1);
                 self.res.labels.push(kernel.name);
@@ -163,18 +169,30 @@ impl Recorder {
         Ok(())
     }
 
+    /// Records a grid of `groups` workgroups as dispatches of at most the workgroup limit per
+    /// dimension, each based where the last ended (`vkCmdDispatchBase`), so kernels see the
+    /// workgroup ids of the whole grid.
+    ///
+    /// SAFETY: the command buffer must be recording with a pipeline and its bindings bound.
+    unsafe fn dispatch_split(&self, groups: [u32; 3]) {
+        let limit = self.ctx.workgroup_limit();
+        let device = &self.ctx.shared.device;
+        if groups.iter().zip(limit).all(|(&g, l)| g <= l) {
+            return device.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]);
+        }
+        let starts = |d: usize| (0..groups[d]).step_by(limit[d] as usize).map(move |s| (s, (groups[d] - s).min(limit[d])));
+        for (z, nz) in starts(2) {
+            for (y, ny) in starts(1) {
+                for (x, nx) in starts(0) {
+                    device.cmd_dispatch_base(self.cmd, x, y, z, nx, ny, nz);
+                }
+            }
+        }
+    }
+
     /// SAFETY: the command buffer must be recording.
-    unsafe fn barrier(&self, src: vk::AccessFlags, dst_stage: vk::PipelineStageFlags, dst: vk::AccessFlags) {
-        let barrier = [vk::MemoryBarrier::default().src_access_mask(src).dst_access_mask(dst)];
-        self.ctx.shared.device.cmd_pipeline_barrier(
-            self.cmd,
-            vk::PipelineStageFlags::COMPUTE_SHADER,
-            dst_stage,
-            vk::DependencyFlags::empty(),
-            &barrier,
-            &[],
-            &[],
-        );
+    unsafe fn barrier(&self, src_stage: vk::PipelineStageFlags, src: vk::AccessFlags, dst_stage: vk::PipelineStageFlags, dst: vk::AccessFlags) {
+        memory_barrier(&self.ctx.shared.device, self.cmd, (src_stage, src), (dst_stage, dst));
     }
 
     fn allocate_set(&mut self, kernel: &Kernel) -> Result<vk::DescriptorSet> {
@@ -221,6 +239,7 @@ impl Recorder {
         // SAFETY: the command buffer is recording.
         unsafe {
             self.barrier(
+                vk::PipelineStageFlags::COMPUTE_SHADER,
                 vk::AccessFlags::SHADER_WRITE,
                 vk::PipelineStageFlags::HOST | vk::PipelineStageFlags::TRANSFER,
                 vk::AccessFlags::HOST_READ | vk::AccessFlags::TRANSFER_READ,

@@ -26,7 +26,14 @@ pub(crate) fn submit_once(ctx: &Context, f: impl FnOnce(&ash::Device, vk::Comman
             device
                 .begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))
                 .vk("vkBeginCommandBuffer")?;
+            // Earlier kernels' and transfers' writes before this transfer; its writes before the
+            // host reads a staging buffer and before later submissions (which also wait on
+            // their own first barrier).
+            let transfer = vk::PipelineStageFlags::TRANSFER;
+            let writes = vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE;
+            memory_barrier(device, cmd, (vk::PipelineStageFlags::COMPUTE_SHADER | transfer, writes), (transfer, vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::TRANSFER_WRITE));
             f(device, cmd);
+            memory_barrier(device, cmd, (transfer, vk::AccessFlags::TRANSFER_WRITE), (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ));
             device.end_command_buffer(cmd).vk("vkEndCommandBuffer")?;
             submit_and_wait(ctx, cmd)
         })();
@@ -51,4 +58,19 @@ pub(crate) fn submit_and_wait(ctx: &Context, cmd: vk::CommandBuffer) -> Result<(
         device.destroy_fence(fence, None);
         result
     }
+}
+
+/// Records a global memory barrier from `(stages, accesses)` to `(stages, accesses)`.
+///
+/// # Safety
+/// `cmd` must be recording.
+pub(crate) unsafe fn memory_barrier(
+    device: &ash::Device,
+    cmd: vk::CommandBuffer,
+    (src_stage, src): (vk::PipelineStageFlags, vk::AccessFlags),
+    (dst_stage, dst): (vk::PipelineStageFlags, vk::AccessFlags),
+) {
+    let barrier = [vk::MemoryBarrier::default().src_access_mask(src).dst_access_mask(dst)];
+    // SAFETY: the caller guarantees cmd is recording.
+    unsafe { device.cmd_pipeline_barrier(cmd, src_stage, dst_stage, vk::DependencyFlags::empty(), &barrier, &[], &[]) };
 }

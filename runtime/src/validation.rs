@@ -28,9 +28,10 @@ impl Validation {
     }
 }
 
-/// Creates the instance `info` describes, validated when asked for.
-pub(crate) fn create_instance(entry: &ash::Entry, info: vk::InstanceCreateInfo) -> Result<(ash::Instance, Option<Validation>)> {
+/// Creates the instance `info` describes with `extensions`, validated when asked for.
+pub(crate) fn create_instance(entry: &ash::Entry, info: vk::InstanceCreateInfo, mut extensions: Vec<*const c_char>) -> Result<(ash::Instance, Option<Validation>)> {
     if !requested() {
+        let info = info.enabled_extension_names(&extensions);
         // SAFETY: the create info and everything it points to outlive the call.
         return Ok((unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance")?, None));
     }
@@ -40,7 +41,7 @@ pub(crate) fn create_instance(entry: &ash::Entry, info: vk::InstanceCreateInfo) 
         return Err(Error::NoValidationLayer);
     }
     let layer_names: [*const c_char; 1] = [LAYER.as_ptr()];
-    let extensions: [*const c_char; 1] = [ash::ext::debug_utils::NAME.as_ptr()];
+    extensions.push(ash::ext::debug_utils::NAME.as_ptr());
     let features = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
     let mut enables = vk::ValidationFeaturesEXT::default().enabled_validation_features(&features);
     let info = info.enabled_layer_names(&layer_names).enabled_extension_names(&extensions).push_next(&mut enables);

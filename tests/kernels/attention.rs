@@ -2,7 +2,7 @@
 
 use crate::common::*;
 use vkdiff_runtime::ops::{attention, AttentionLayout};
-use vkdiff_runtime::Dtype;
+use vkdiff_runtime::{Context, Dtype};
 
 fn reference(q: &[f32], k: &[f32], v: &[f32], l: &AttentionLayout, scale: f64) -> Vec<f64> {
     let d = l.head_dim;
@@ -35,9 +35,15 @@ fn reference(q: &[f32], k: &[f32], v: &[f32], l: &AttentionLayout, scale: f64) -
     out
 }
 
-/// Runs attention on random Q, K, V laid out as `l` (output dense) and compares.
+/// Runs attention on random Q, K, V laid out as `l` (output dense) and compares, with the
+/// device's own kernel choice and on the GPU paths (workgroup attention).
 fn check(dtype: Dtype, l: &AttentionLayout, seed: u64) {
-    let ctx = ctx();
+    for ctx in [ctx(), gpu_ctx()] {
+        check_on(&ctx, dtype, l, seed);
+    }
+}
+
+fn check_on(ctx: &Context, dtype: Dtype, l: &AttentionLayout, seed: u64) {
     let extent = |off: usize, ld: usize, bs: usize, n: usize| off + (l.batch - 1) * bs + (n - 1) * ld + l.heads * l.head_dim;
     let q = stored(&random(extent(l.q_offset, l.q_ld, l.q_batch, l.q_tokens), seed), dtype);
     let k = stored(&random(extent(l.k_offset, l.k_ld, l.k_batch, l.kv_tokens), seed + 1), dtype);
@@ -59,7 +65,7 @@ fn check(dtype: Dtype, l: &AttentionLayout, seed: u64) {
         Dtype::F32 => 1e-5,
         Dtype::F16 => 1e-3,
     };
-    let what = format!("attention {dtype:?} b{} h{} d{} {}x{}", l.batch, l.heads, l.head_dim, l.q_tokens, l.kv_tokens);
+    let what = format!("attention (GPU paths: {}) {dtype:?} b{} h{} d{} {}x{}", ctx.gpu_paths(), l.batch, l.heads, l.head_dim, l.q_tokens, l.kv_tokens);
     assert_close(&what, &out.download().unwrap(), &want, atol, storage_rtol(dtype));
 }
 
@@ -80,8 +86,8 @@ fn cross_attention_77_tokens() {
 #[test]
 fn head_sizes() {
     // 8 and 40: tiny models and SD1.x; 80: CLIP ViT-H vision; 104: ViT-bigG; 160: the 8-slot
-    // variant; 512: the VAE's single-head mid-block attention. Token counts off every tile size.
-    for (d, nq, nk) in [(8, 19, 23), (40, 33, 77), (80, 21, 50), (104, 9, 13), (160, 11, 19), (512, 17, 29)] {
+    // variant; 512: the VAE's single-head mid-block attention; 1024: past every subgroup variant. Token counts off every tile size.
+    for (d, nq, nk) in [(8, 19, 23), (40, 33, 77), (80, 21, 50), (104, 9, 13), (160, 11, 19), (512, 17, 29), (1024, 5, 7)] {
         for dtype in DTYPES {
             check(dtype, &AttentionLayout::dense(2, 2, d, nq, nk), 43 + d as u64);
         }

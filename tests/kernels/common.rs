@@ -10,6 +10,18 @@ pub fn ctx() -> Context {
     CTX.get_or_init(|| open(None)).clone()
 }
 
+/// A private context on the GPU paths (`VKDIFF_GPU_PATHS=1`'s configuration: device memory
+/// through staging, the tiled GEMM family, workgroup attention), so every pass also runs them.
+pub fn gpu_ctx() -> Context {
+    static CTX: OnceLock<Context> = OnceLock::new();
+    CTX.get_or_init(|| {
+        let c = open(None);
+        c.set_gpu_paths(true);
+        c
+    })
+    .clone()
+}
+
 /// A private context with a fixed GEMM family, so tests of both families can run in parallel.
 pub fn ctx_with(family: GemmFamily) -> Context {
     let c = open(None);

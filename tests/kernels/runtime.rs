@@ -77,20 +77,38 @@ fn memory_accounting_tracks_live_and_peak() {
 #[test]
 fn views_and_uploads_round_trip() {
     let ctx = ctx();
-    let data = random(8 * 32, 75);
+    // Rows as wide as the device's binding alignment (lavapipe 16 bytes, AMD 4, others up to 256).
+    let cols = 32.max(ctx.info().min_storage_offset_alignment as usize / 2);
+    let data = random(8 * cols, 75);
     for dtype in DTYPES {
-        let t = ctx.upload(&[8, 32], dtype, &data).unwrap();
+        let t = ctx.upload(&[8, cols], dtype, &data).unwrap();
         let rows = t.narrow(2, 3).unwrap();
-        let want: Vec<f64> = stored(&data[64..160], dtype).iter().map(|&v| v as f64).collect();
+        let want: Vec<f64> = stored(&data[2 * cols..5 * cols], dtype).iter().map(|&v| v as f64).collect();
         assert_close("narrow", &rows.download().unwrap(), &want, 0.0, 0.0);
         // Writing through a view changes only its rows.
-        rows.write(&vec![0.5; 96]).unwrap();
+        rows.write(&vec![0.5; 3 * cols]).unwrap();
         let all = t.download().unwrap();
-        assert!(all[64..160].iter().all(|&v| v == 0.5) && all[..64] == stored(&data[..64], dtype)[..]);
+        assert!(all[2 * cols..5 * cols].iter().all(|&v| v == 0.5) && all[..2 * cols] == stored(&data[..2 * cols], dtype)[..]);
     }
-    let t = ctx.zeros(&[3, 5], Dtype::F32).unwrap();
+    // 10 bytes in: off every alignment a device may have (at least 4).
+    let t = ctx.zeros(&[3, 5], Dtype::F16).unwrap();
     assert!(t.narrow(1, 1).unwrap_err().to_string().contains("alignment"));
     assert!(t.reshape(&[4, 4]).is_err());
+}
+
+#[test]
+fn odd_length_f16_tensors_are_filled_and_copied_whole() {
+    // A 7-element f16 tensor is 14 bytes: the fill and staging copies must reach its last one.
+    for ctx in [ctx(), gpu_ctx()] {
+        // Memory freed with values in it is where the allocator places the next tensor.
+        drop(ctx.upload(&[7], Dtype::F16, &[9.0; 7]).unwrap());
+        let t = ctx.zeros(&[7], Dtype::F16).unwrap();
+        assert_eq!(t.download().unwrap(), vec![0.0; 7]);
+        let x = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
+        let u = ctx.upload(&[7], Dtype::F16, &x).unwrap();
+        ctx.run(|rec| vkdiff_runtime::ops::add(rec, &u, &u, &t)).unwrap();
+        assert_eq!(t.download().unwrap(), x.map(|v| 2.0 * v));
+    }
 }
 
 #[test]

@@ -1,7 +1,10 @@
 //! Fused multi-head attention (flash-style: no Nq×Nk scores in memory).
 
+use super::bands::{bands, elem, fit, rows_per_band, span_view};
 use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u};
+use crate::context::Context;
 use crate::error::{ensure, Error, Result};
+use crate::tensor::Dtype;
 use crate::recorder::Recorder;
 use crate::tensor::Tensor;
 
@@ -57,7 +60,7 @@ impl AttentionLayout {
 }
 
 /// Subgroup widths attention has variants for.
-const WIDTHS: [u32; 4] = [8, 16, 32, 64];
+const WIDTHS: [u32; 3] = [4, 8, 16];
 
 /// out = softmax(scale · Q·Kᵀ)·V for every batch and head.
 pub fn attention(rec: &mut Recorder, q: &Tensor, k: &Tensor, v: &Tensor, out: &Tensor, l: &AttentionLayout, scale: f32) -> Result<()> {
@@ -70,33 +73,103 @@ pub fn attention(rec: &mut Recorder, q: &Tensor, k: &Tensor, v: &Tensor, out: &T
     ensure(k.numel() >= need_at(l.k_offset, l.k_ld, l.k_batch, l.kv_tokens), || format!("attention: K {:?} too small", k.shape()))?;
     ensure(v.numel() >= need_at(l.v_offset, l.v_ld, l.v_batch, l.kv_tokens), || format!("attention: V {:?} too small", v.shape()))?;
     ensure(out.numel() >= need(l.o_ld, l.o_batch, l.q_tokens), || format!("attention: output {:?} too small", out.shape()))?;
+    if !fit(rec.context(), &[q, k, v, out]) {
+        return attention_banded(rec, [q, k, v], out, l, scale);
+    }
     let strides = [l.head_dim, l.q_ld, l.k_ld, l.v_ld, l.o_ld, l.q_batch, l.k_batch, l.v_batch, l.o_batch, l.q_offset, l.k_offset, l.v_offset];
     if strides.iter().any(|s| s % 4 != 0) {
         return padded_attention(rec, [q, k, v], out, l, scale);
     }
     let ctx = rec.context().clone();
-    let native = ctx.info().subgroup_size;
-    let mut widths: Vec<u32> = WIDTHS.iter().copied().filter(|&w| ctx.subgroup_ok(w)).collect();
-    widths.sort_by_key(|&w| (w != native, w));
-    let slots = (l.head_dim / 4) as u32;
-    let variant = widths.iter().find_map(|&sg| {
-        vkdiff_kernels::variants("attention", dtype)
-            .filter(|v| v.param("SG") == Some(sg) && v.param("DV").unwrap() * sg >= slots)
-            .min_by_key(|v| v.param("DV"))
-    });
-    let variant = variant.ok_or_else(|| Error::Unsupported {
-        device: ctx.info().name.clone(),
-        reason: format!("no attention variant for head dim {} with subgroup widths {widths:?}", l.head_dim),
-    })?;
+    let slots = u(l.head_dim / 4);
+    let (name, width, variant) = match subgroup_variant(&ctx, dtype, slots) {
+        Some(v) => ("attention", v.param("SG").unwrap(), v),
+        None => {
+            let v = vkdiff_kernels::variants("attention_wg", dtype)
+                .filter(|v| v.param("DV").unwrap() * v.param("W").unwrap() >= slots)
+                .min_by_key(|v| v.param("DV"))
+                .ok_or_else(|| Error::Shape(format!("attention: head size {} is past the widest variant", l.head_dim)))?;
+            ("attention_wg", v.param("W").unwrap(), v)
+        }
+    };
     let tm = variant.param("TM").unwrap() as usize;
-    let sg = variant.param("SG").unwrap();
-    let kern = kernel(&ctx, "attention", dtype, &[("SG", sg), ("DV", variant.param("DV").unwrap()), ("TM", tm as u32)], 4)?;
+    let width_param = if name == "attention" { "SG" } else { "W" };
+    let kern = kernel(&ctx, name, dtype, &[(width_param, width), ("DV", variant.param("DV").unwrap()), ("TM", tm as u32)], 4)?;
     let push = [
         u(l.q_tokens), u(l.kv_tokens), u(l.head_dim), u(l.q_ld), u(l.k_ld), u(l.v_ld), u(l.o_ld),
         u(l.q_batch), u(l.k_batch), u(l.v_batch), u(l.o_batch), f(scale), u(l.q_offset), u(l.k_offset), u(l.v_offset),
         l.causal as u32,
     ];
     rec.dispatch(&kern, &[q, k, v], &[out], &push, [u(l.q_tokens.div_ceil(tm)), u(l.heads), u(l.batch)])
+}
+
+/// The subgroup attention variant for a head of `slots` vec4s at a width this device can pin,
+/// its native width first, with the fewest slots per lane; none under `VKDIFF_GPU_PATHS=1` (GPUs
+/// run `attention_wg`) or where no width fits.
+fn subgroup_variant(ctx: &Context, dtype: Dtype, slots: u32) -> Option<&'static vkdiff_kernels::Variant> {
+    if ctx.gpu_paths() {
+        return None;
+    }
+    let native = ctx.info().subgroup_size;
+    let mut widths: Vec<u32> = WIDTHS.iter().copied().filter(|&w| ctx.subgroup_ok(w)).collect();
+    widths.sort_by_key(|&w| (w != native, w));
+    widths.iter().find_map(|&sg| {
+        vkdiff_kernels::variants("attention", dtype)
+            .filter(|v| v.param("SG") == Some(sg) && v.param("DV").unwrap() * sg >= slots)
+            .min_by_key(|v| v.param("DV"))
+    })
+}
+
+/// Attention on operands past the binding limit: one batch at a time on views of its rows
+/// where those fit, else in groups of heads copied into dense operands that do.
+fn attention_banded(rec: &mut Recorder, [q, k, v]: [&Tensor; 3], out: &Tensor, l: &AttentionLayout, scale: f32) -> Result<()> {
+    let ctx = rec.context().clone();
+    let span = |offset: usize, batch: usize, ld: usize, tokens: usize, b: usize| {
+        let start = offset + b * batch;
+        start..start + (tokens - 1) * ld + l.heads * l.head_dim
+    };
+    for b in 0..l.batch {
+        let (qv, q_offset) = span_view(q, span(l.q_offset, l.q_batch, l.q_ld, l.q_tokens, b))?;
+        let (kv, k_offset) = span_view(k, span(l.k_offset, l.k_batch, l.k_ld, l.kv_tokens, b))?;
+        let (vv, v_offset) = span_view(v, span(l.v_offset, l.v_batch, l.v_ld, l.kv_tokens, b))?;
+        // The kernel writes the output at offset 0 of its binding.
+        let (ov, o_offset) = span_view(out, span(0, l.o_batch, l.o_ld, l.q_tokens, b))?;
+        if o_offset == 0 && fit(&ctx, &[&qv, &kv, &vv, &ov]) {
+            let one = AttentionLayout { batch: 1, q_offset, k_offset, v_offset, ..l.clone() };
+            attention(rec, &qv, &kv, &vv, &ov, &one, scale)?;
+        } else {
+            attention_by_heads(rec, [q, k, v], out, l, b, scale)?;
+        }
+    }
+    Ok(())
+}
+
+/// Batch `b` of attention in groups of heads, each copied into dense operands that fit one
+/// binding (heads padded to a multiple of 4), attended, and copied back.
+fn attention_by_heads(rec: &mut Recorder, [q, k, v]: [&Tensor; 3], out: &Tensor, l: &AttentionLayout, b: usize, scale: f32) -> Result<()> {
+    let ctx = rec.context().clone();
+    let padded = l.head_dim.next_multiple_of(4);
+    let head_bytes = l.q_tokens.max(l.kv_tokens) * padded * elem(q);
+    let per = (ctx.binding_limit() as usize / head_bytes).min(l.heads);
+    ensure(per > 0, || format!("attention: one head of {head_bytes} bytes does not fit the {} byte binding limit", ctx.binding_limit()))?;
+    for heads in bands(l.heads, per) {
+        let n = heads.len();
+        let dense = AttentionLayout { causal: l.causal, ..AttentionLayout::dense(1, n, padded, l.q_tokens, l.kv_tokens) };
+        let dense_span = HeadSpan { offset: 0, ld: n * padded, batch: 0, head_dim: padded };
+        let strided = |offset: usize, batch: usize, ld: usize| HeadSpan { offset: offset + b * batch + heads.start * l.head_dim, ld, batch: 0, head_dim: l.head_dim };
+        let gather = |rec: &mut Recorder, t: &Tensor, from: HeadSpan, tokens: usize| -> Result<Tensor> {
+            let to = ctx.zeros(&[tokens, n * padded], t.dtype())?;
+            copy_heads(rec, t, &to, from, dense_span, 1, tokens, n)?;
+            Ok(to)
+        };
+        let qd = gather(rec, q, strided(l.q_offset, l.q_batch, l.q_ld), l.q_tokens)?;
+        let kd = gather(rec, k, strided(l.k_offset, l.k_batch, l.k_ld), l.kv_tokens)?;
+        let vd = gather(rec, v, strided(l.v_offset, l.v_batch, l.v_ld), l.kv_tokens)?;
+        let od = ctx.zeros(&[l.q_tokens, n * padded], out.dtype())?;
+        attention(rec, &qd, &kd, &vd, &od, &dense, scale)?;
+        copy_heads(rec, &od, out, dense_span, strided(0, l.o_batch, l.o_ld), 1, l.q_tokens, n)?;
+    }
+    Ok(())
 }
 
 /// Attention on operands whose head size or strides are not multiples of 4 (the kernel reads
@@ -141,8 +214,32 @@ pub fn copy_heads(rec: &mut Recorder, src: &Tensor, dst: &Tensor, from: HeadSpan
     ensure(src.numel() >= extent(from) && dst.numel() >= extent(to), || {
         format!("copy_heads: {from:?} of {:?} into {to:?} of {:?} for {batch}×{tokens}×{heads} heads", src.shape(), dst.shape())
     })?;
-    let n = batch * tokens * heads * to.head_dim;
     let k = kernel(rec.context(), "copy_heads", dtype, &[], 2)?;
-    let push = [n, tokens, heads, from.head_dim, to.head_dim, from.ld, to.ld, from.batch, to.batch, from.offset, to.offset].map(u);
-    dispatch_flat(rec, &k, &[src], &[dst], &push, element_groups(n))
+    let record = |rec: &mut Recorder, src: &Tensor, dst: &Tensor, from: HeadSpan, to: HeadSpan, batch: usize, tokens: usize| {
+        let n = batch * tokens * heads * to.head_dim;
+        let push = [n, tokens, heads, from.head_dim, to.head_dim, from.ld, to.ld, from.batch, to.batch, from.offset, to.offset].map(u);
+        dispatch_flat(rec, &k, &[src], &[dst], &push, element_groups(n))
+    };
+    if fit(rec.context(), &[src, dst]) {
+        return record(rec, src, dst, from, to, batch, tokens);
+    }
+    // Past the binding limit: bands of tokens of one batch at a time, each on views of the rows
+    // it reads and writes.
+    let row_bytes = [from.ld.max(from.head_dim) * elem(src), to.ld.max(to.head_dim) * elem(dst)];
+    // A band's view may start up to one alignment before its first row and end a row of heads after its last.
+    let align = rec.context().info().min_storage_offset_alignment.max(4) as usize;
+    let halo = 1 + align.div_ceil(row_bytes[0].min(row_bytes[1]));
+    let per = rows_per_band(rec.context(), "copy_heads", &row_bytes, halo, 1)?;
+    let rows = |s: HeadSpan, b: usize, t: &std::ops::Range<usize>| {
+        let start = s.offset + b * s.batch + t.start * s.ld;
+        start..start + (t.len() - 1) * s.ld + heads * s.head_dim
+    };
+    for b in 0..batch {
+        for band in bands(tokens, per) {
+            let (sv, src_offset) = span_view(src, rows(from, b, &band))?;
+            let (dv, dst_offset) = span_view(dst, rows(to, b, &band))?;
+            record(rec, &sv, &dv, HeadSpan { offset: src_offset, batch: 0, ..from }, HeadSpan { offset: dst_offset, batch: 0, ..to }, 1, band.len())?;
+        }
+    }
+    Ok(())
 }

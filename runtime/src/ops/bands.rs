@@ -26,12 +26,34 @@ pub(super) fn image_rows(t: &Tensor, b: usize, rows: Range<usize>) -> Result<Ten
     row_view(t, w * c, b * h + rows.start..b * h + rows.end)?.reshape(&[1, n, w, c])
 }
 
-/// The most rows of `row_bytes` bytes (plus `halo` further rows) one binding holds, as a
-/// multiple of `multiple` when possible.
-pub(super) fn rows_per_band(ctx: &Context, what: &str, row_bytes: usize, halo: usize, multiple: usize) -> Result<usize> {
-    let fit = (ctx.binding_limit() as usize / row_bytes.max(1)).saturating_sub(halo);
-    ensure(fit > 0, || format!("{what}: one row of {row_bytes} bytes does not fit the {} byte binding limit", ctx.binding_limit()))?;
-    Ok(if fit >= multiple { fit - fit % multiple } else { fit })
+/// The most rows one binding holds of tensors whose rows take `row_bytes` bytes each (plus
+/// `halo` further rows), such that every band starts on the device's binding alignment in each
+/// tensor, and as a multiple of `multiple` when possible.
+pub(super) fn rows_per_band(ctx: &Context, what: &str, row_bytes: &[usize], halo: usize, multiple: usize) -> Result<usize> {
+    let widest = row_bytes.iter().copied().max().unwrap_or(1).max(1);
+    let fit = (ctx.binding_limit() as usize / widest).saturating_sub(halo);
+    ensure(fit > 0, || format!("{what}: one row of {widest} bytes does not fit the {} byte binding limit", ctx.binding_limit()))?;
+    let align = ctx.info().min_storage_offset_alignment.max(4) as usize;
+    let aligned = row_bytes.iter().fold(1, |step, &b| lcm(step, align / gcd(align, b.max(1))));
+    ensure(fit >= aligned, || format!("{what}: {fit} rows fit the binding limit, fewer than the {aligned} that keep bands on the device's {align}-byte alignment"))?;
+    let step = if fit >= lcm(aligned, multiple) { lcm(aligned, multiple) } else { aligned };
+    Ok(fit - fit % step)
+}
+
+fn gcd(a: usize, b: usize) -> usize {
+    if b == 0 { a } else { gcd(b, a % b) }
+}
+
+fn lcm(a: usize, b: usize) -> usize {
+    a / gcd(a, b) * b
+}
+
+/// Elements `range` of `t` (flat) as a view that starts at the binding-aligned element at or
+/// before `range.start`, and how many elements before it that is (the view's offset to pass).
+pub(super) fn span_view(t: &Tensor, range: Range<usize>) -> Result<(Tensor, usize)> {
+    let step = t.context().info().min_storage_offset_alignment.max(4) as usize / elem(t);
+    let start = range.start - range.start % step.max(1);
+    Ok((row_view(t, 1, start..range.end)?, range.start - start))
 }
 
 /// Consecutive ranges of at most `per` covering 0..n.

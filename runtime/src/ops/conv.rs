@@ -68,8 +68,8 @@ pub fn conv2d(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>,
     let expect = [b, (h + p.pad.top + p.pad.bottom).saturating_sub(kh) / s + 1, (wd + p.pad.left + p.pad.right).saturating_sub(kw) / s + 1, w.shape()[0]];
     ensure(out.shape() == expect, || format!("conv2d: output {:?}, expected {expect:?}", out.shape()))?;
     let ctx = rec.context().clone();
-    let by_out = rows_per_band(&ctx, "conv2d", wo * cout * elem(out), 0, 1)?;
-    let by_in = (rows_per_band(&ctx, "conv2d", wd * cin * elem(x), kh, 1)? - 1) / s + 1;
+    let by_out = rows_per_band(&ctx, "conv2d", &[wo * cout * elem(out)], 0, 1)?;
+    let by_in = (rows_per_band(&ctx, "conv2d", &[wd * cin * elem(x)], kh, 1)? - 1) / s + 1;
     for image in 0..b {
         for rows in bands(ho, by_out.min(by_in)) {
             // Input rows this band reads, before clipping to the image: the clipped part is padding.

@@ -3,6 +3,7 @@
 use super::bands::{bands, elem, fit, image_rows, row_view, rows_per_band};
 use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u};
 use crate::error::{ensure, Result};
+use std::ops::Range;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -33,7 +34,7 @@ pub fn unary(rec: &mut Recorder, op: UnaryOp, x: &Tensor, out: &Tensor, alpha: f
     ensure(x.numel() == out.numel(), || format!("{op:?}: {:?} into {:?}", x.shape(), out.shape()))?;
     let k = kernel(rec.context(), "unary", dtype, &[("OP", op as u32)], 2)?;
     let n = x.numel();
-    let per = if fit(rec.context(), &[x, out]) { n } else { rows_per_band(rec.context(), "unary", elem(x), 0, 64)? };
+    let per = if fit(rec.context(), &[x, out]) { n } else { rows_per_band(rec.context(), "unary", &[elem(x)], 0, 64)? };
     for run in bands(n, per) {
         let (xs, ys) = (row_view(x, 1, run.clone())?, row_view(out, 1, run.clone())?);
         dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(run.len()), f(alpha)], element_groups(run.len()))?;
@@ -42,13 +43,40 @@ pub fn unary(rec: &mut Recorder, op: UnaryOp, x: &Tensor, out: &Tensor, alpha: f
 }
 
 /// out = a op b, where b's flat index is `(i / b_outer)·b_inner + i % b_inner` (see binary.wgsl).
+/// Past the binding limit, in runs of elements, each binding the part of b it reads.
 pub fn binary(rec: &mut Recorder, op: BinaryOp, a: &Tensor, b: &Tensor, out: &Tensor, b_inner: usize, b_outer: usize) -> Result<()> {
     let dtype = same_dtype(rec.context(), "binary", &[a, b, out])?;
     let n = a.numel();
     ensure(out.numel() == n && b_inner > 0 && b_outer > 0, || format!("{op:?}: {:?} into {:?}", a.shape(), out.shape()))?;
     ensure((n - 1) / b_outer * b_inner + b_inner.min(n) <= b.numel(), || format!("{op:?}: {:?} cannot broadcast over {:?}", b.shape(), a.shape()))?;
     let k = kernel(rec.context(), "binary", dtype, &[("OP", op as u32)], 3)?;
-    dispatch_flat(rec, &k, &[a, b], &[out], &[u(n), u(b_inner), u(b_outer)], element_groups(n))
+    if fit(rec.context(), &[a, b, out]) {
+        return dispatch_flat(rec, &k, &[a, b], &[out], &[u(n), u(b_inner), u(b_outer), 0, 0], element_groups(n));
+    }
+    // b's view starts at an aligned element at or before the run's first index, so it may take
+    // up to `slack` elements more than the run.
+    let slack = (rec.context().info().min_storage_offset_alignment.max(4) as usize).div_ceil(elem(b));
+    let per = rows_per_band(rec.context(), "binary", &[elem(a)], slack, 64)?;
+    for run in bands(n, per) {
+        let reads = broadcast_span(run.clone(), b_inner, b_outer);
+        let first = reads.start - reads.start % slack;
+        let (xs, ys, bs) = (row_view(a, 1, run.clone())?, row_view(out, 1, run.clone())?, row_view(b, 1, first..reads.end)?);
+        let push = [u(run.len()), u(b_inner), u(b_outer), u(run.start), u(first)];
+        dispatch_flat(rec, &k, &[&xs, &bs], &[&ys], &push, element_groups(run.len()))?;
+    }
+    Ok(())
+}
+
+/// The indices `(i / outer)·inner + i % inner` of b that the elements i in `run` read: within
+/// one block of `outer` elements they are contiguous unless i % inner wraps around.
+fn broadcast_span(run: Range<usize>, inner: usize, outer: usize) -> Range<usize> {
+    let wraps = |from: usize, to: usize| to - from >= inner || from % inner > to % inner;
+    let (s, e) = (run.start, run.end - 1);
+    let first_block_end = ((s / outer + 1) * outer - 1).min(e);
+    let lo = s / outer * inner + if wraps(s, first_block_end) { 0 } else { s % inner };
+    let last_block_start = (e / outer * outer).max(s);
+    let hi = e / outer * inner + if wraps(last_block_start, e) { inner - 1 } else { e % inner };
+    lo..hi + 1
 }
 
 /// `binary`'s (b_inner, b_outer) for NumPy-style broadcasting of b over a, in the shapes
@@ -86,7 +114,7 @@ pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
     ensure(two_f.is_multiple_of(2) && two_f > 0 && out.numel() * 2 == x.numel(), || format!("geglu: {:?} into {:?}", x.shape(), out.shape()))?;
     let k = kernel(rec.context(), "geglu", dtype, &[], 2)?;
     let rows = x.numel() / two_f;
-    let per = if fit(rec.context(), &[x, out]) { rows } else { rows_per_band(rec.context(), "geglu", two_f * elem(x), 0, 64)? };
+    let per = if fit(rec.context(), &[x, out]) { rows } else { rows_per_band(rec.context(), "geglu", &[two_f * elem(x), two_f / 2 * elem(x)], 0, 64)? };
     for band in bands(rows, per) {
         let (xs, ys) = (row_view(x, two_f, band.clone())?, row_view(out, two_f / 2, band)?);
         dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(ys.numel()), u(two_f / 2)], element_groups(ys.numel()))?;
@@ -104,7 +132,7 @@ pub fn upsample_nearest2x(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Resul
     if fit(rec.context(), &[x, out]) {
         return dispatch_flat(rec, &k, &[x], &[out], &[u(out.numel()), u(s[1]), u(s[2]), u(s[3])], element_groups(out.numel()));
     }
-    let per = rows_per_band(rec.context(), "upsample", 2 * out.shape()[2] * s[3] * elem(out), 0, 1)?;
+    let per = rows_per_band(rec.context(), "upsample", &[2 * out.shape()[2] * s[3] * elem(out), s[2] * s[3] * elem(x)], 0, 1)?;
     for image in 0..s[0] {
         for rows in bands(s[1], per) {
             let (xs, ys) = (image_rows(x, image, rows.clone())?, image_rows(out, image, 2 * rows.start..2 * rows.end)?);
@@ -123,7 +151,13 @@ pub fn concat_channels(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor)
         format!("concat: {:?} + {:?} into {:?}", a.shape(), b.shape(), out.shape())
     })?;
     let k = kernel(rec.context(), "concat_channels", dtype, &[], 3)?;
-    dispatch_flat(rec, &k, &[a, b], &[out], &[u(out.numel()), u(c1), u(c2)], element_groups(out.numel()))
+    let rows = a.numel() / c1;
+    let per = if fit(rec.context(), &[a, b, out]) { rows } else { rows_per_band(rec.context(), "concat", &[c1 * elem(a), c2 * elem(a), (c1 + c2) * elem(a)], 0, 64)? };
+    for band in bands(rows, per) {
+        let (av, bv, ov) = (row_view(a, c1, band.clone())?, row_view(b, c2, band.clone())?, row_view(out, c1 + c2, band)?);
+        dispatch_flat(rec, &k, &[&av, &bv], &[&ov], &[u(ov.numel()), u(c1), u(c2)], element_groups(ov.numel()))?;
+    }
+    Ok(())
 }
 
 /// diffusers' `Timesteps` settings.

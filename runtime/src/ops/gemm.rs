@@ -3,6 +3,7 @@
 use super::bands::{bands, elem, fit, row_view, rows_per_band};
 use super::{f, kernel, same_dtype, u};
 use crate::context::GemmFamily;
+use crate::device::DeviceInfo;
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
@@ -67,7 +68,7 @@ pub fn matmul(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>,
     ensure(rows_of(a, spec.lda) >= Some(spec.m) && rows_of(c, spec.ldc) >= Some(spec.m), || {
         format!("matmul: A {:?} or C {:?} pass the binding limit and are not whole rows of {spec:?}", a.shape(), c.shape())
     })?;
-    let per = rows_per_band(rec.context(), "matmul", spec.lda.max(spec.ldc) * elem(a), 0, 64)?;
+    let per = rows_per_band(rec.context(), "matmul", &[spec.lda * elem(a), spec.ldc * elem(c)], 0, 64)?;
     for rows in bands(spec.m, per) {
         let band = Matmul { m: rows.len(), a_batch: rows.len() * spec.lda, c_batch: rows.len() * spec.ldc, ..spec.clone() };
         matmul_whole(rec, &row_view(a, spec.lda, rows.clone())?, b, bias, &row_view(c, spec.ldc, rows)?, &band)?;
@@ -116,15 +117,24 @@ pub(super) fn dispatch_gemm_family(
     push: &[u32],
 ) -> Result<()> {
     let ctx = rec.context().clone();
-    let columns = u(s.n.div_ceil(64));
-    if ctx.gemm_family() == GemmFamily::Subgroup && ctx.subgroup_ok(8) && s.fits_subgroup {
-        let tm: u32 = if s.m >= 1024 { 64 } else if s.m >= 256 { 32 } else { 16 };
-        let want: Vec<(&str, u32)> = [("SG", 8), ("TM", tm)].into_iter().chain(params.iter().copied()).collect();
+    let width = gemm_subgroup_width(ctx.info()).filter(|_| ctx.gemm_family() == GemmFamily::Subgroup && s.fits_subgroup);
+    if let Some(sg) = width {
+        // Taller products take more rows per workgroup; 16 lanes stop at 32 (code size).
+        let tm: u32 = if s.m >= 1024 && sg < 16 { 64 } else if s.m >= 256 { 32 } else { 16 };
+        let want: Vec<(&str, u32)> = [("SG", sg), ("TM", tm)].into_iter().chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.0, dtype, &want, 4)?;
+        let columns = u(s.n.div_ceil(8 * sg as usize));
         return rec.dispatch(&k, reads, &[out], push, [columns, u(s.m.div_ceil(tm as usize)), u(s.batch)]);
     }
     let k = kernel(&ctx, names.1, dtype, params, 4)?;
-    rec.dispatch(&k, reads, &[out], push, [columns, u(s.m.div_ceil(64)), u(s.batch)])
+    rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(64)), u(s.m.div_ceil(64)), u(s.batch)])
+}
+
+/// The width of the subgroup GEMM/convolution variants this device runs: its native subgroup
+/// width where variants exist for it (4, 8 or 16 lanes) and kernels can be pinned to it.
+pub(crate) fn gemm_subgroup_width(info: &DeviceInfo) -> Option<u32> {
+    let native = info.subgroup_size;
+    ([4, 8, 16].contains(&native) && info.can_use_subgroup(native)).then_some(native)
 }
 
 /// A PyTorch `Linear`: out[.., N] = x[.., K] · wᵀ (+ bias), w stored [N, K].

@@ -26,7 +26,7 @@ pub fn group_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor,
 /// with its image's merged statistics, so the result equals the whole-tensor one.
 fn group_norm_banded(rec: &mut Recorder, [x, gamma, beta, out]: [&Tensor; 4], (b, hw, c): (usize, usize, usize), groups: usize, eps: f32, silu: bool) -> Result<()> {
     let ctx = rec.context().clone();
-    let per = rows_per_band(&ctx, "group_norm", c * elem(x), 0, 64)?;
+    let per = rows_per_band(&ctx, "group_norm", &[c * elem(x)], 0, 64)?;
     let parts = hw.div_ceil(per);
     let stats = ctx.zeros(&[b * parts * groups * 3], Dtype::F32)?;
     let pixels = |image: usize, band: &std::ops::Range<usize>| image * hw + band.start..image * hw + band.end;
@@ -54,7 +54,17 @@ pub fn layer_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor,
     let (rows, c) = rows_of(x, "layer_norm")?;
     ensure(gamma.numel() == c && beta.numel() == c && out.shape() == x.shape(), || "layer_norm: affine or output shape mismatch".into())?;
     let k = kernel(rec.context(), "layer_norm", dtype, &[], 4)?;
-    dispatch_flat(rec, &k, &[x, gamma, beta], &[out], &[u(c), f(eps)], rows)
+    for band in row_bands(rec, "layer_norm", x, out, rows, c)? {
+        let (xs, ys) = (row_view(x, c, band.clone())?, row_view(out, c, band.clone())?);
+        dispatch_flat(rec, &k, &[&xs, gamma, beta], &[&ys], &[u(c), f(eps)], band.len())?;
+    }
+    Ok(())
+}
+
+/// Bands of whole rows of `x` and `out` that fit one binding (one band when both fit).
+fn row_bands(rec: &Recorder, what: &str, x: &Tensor, out: &Tensor, rows: usize, c: usize) -> Result<impl Iterator<Item = std::ops::Range<usize>>> {
+    let per = if fit(rec.context(), &[x, out]) { rows } else { rows_per_band(rec.context(), what, &[c * elem(x)], 0, 1)? };
+    Ok(bands(rows, per))
 }
 
 /// Softmax of scale·x over the last dimension.
@@ -63,5 +73,9 @@ pub fn softmax(rec: &mut Recorder, x: &Tensor, out: &Tensor, scale: f32) -> Resu
     let (rows, c) = rows_of(x, "softmax")?;
     ensure(out.shape() == x.shape(), || "softmax: output shape mismatch".into())?;
     let k = kernel(rec.context(), "softmax", dtype, &[], 2)?;
-    dispatch_flat(rec, &k, &[x], &[out], &[u(c), f(scale)], rows)
+    for band in row_bands(rec, "softmax", x, out, rows, c)? {
+        let (xs, ys) = (row_view(x, c, band.clone())?, row_view(out, c, band.clone())?);
+        dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(c), f(scale)], band.len())?;
+    }
+    Ok(())
 }
