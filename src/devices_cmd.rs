@@ -1,7 +1,7 @@
 //! `vkdiff devices`: every Vulkan device, what it supports and which one vkdiff picks.
 
 use anyhow::Result;
-use vkdiff_runtime::{choose, list_devices, DeviceInfo};
+use vkdiff_runtime::{choose, gpu_paths_requested, list_devices, DeviceInfo, GemmFamily};
 
 #[derive(clap::Args)]
 pub struct DevicesArgs {
@@ -25,13 +25,18 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
         None if chosen => "selected (default)".into(),
         None => format!("usable (--device {})", d.index),
     };
-    let gemm = if d.kind == vkdiff_runtime::DeviceKind::Cpu && d.can_use_subgroup(8) { "subgroup-register (CPU)" } else { "shared-memory tiles (GPU)" };
+    let gpu_paths = gpu_paths_requested();
+    let gemm = match (d.gemm_family(gpu_paths), d.gemm_subgroup_width()) {
+        (GemmFamily::Subgroup, Some(lanes)) => format!("subgroup-register, {lanes} lanes (CPU)"),
+        _ => "shared-memory tiles (GPU)".into(),
+    };
+    let paths = if gpu_paths { " (VKDIFF_GPU_PATHS=1: device memory through staging, workgroup attention)" } else { "" };
     [
         format!("[{}] {} — {}", d.index, d.name, verdict),
         format!("    kind: {}, Vulkan {}.{}.{}, driver: {}", d.kind.label(), d.api_version.0, d.api_version.1, d.api_version.2, d.driver),
         format!("    f16 storage+arith: {}, subgroup size: {sizes}, shuffle: {}, arithmetic: {}, cooperative matrix: {}", yes(d.supports_f16()), yes(d.subgroup_shuffle), yes(d.subgroup_arithmetic), yes(d.cooperative_matrix)),
         format!("    device memory: {}, max allocation: {}, max storage binding: {}, shared memory: {} KiB", mib(d.device_local_bytes), mib(d.max_allocation), mib(d.max_storage_buffer_range), d.max_shared_memory / 1024),
-        format!("    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, timestamps: {}", if d.supports_f16() { "f16 and f32" } else { "f32 only" }, yes(d.timestamps)),
+        format!("    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, timestamps: {}{paths}", if d.supports_f16() { "f16 and f32" } else { "f32 only" }, yes(d.timestamps)),
     ]
     .join("\n")
 }

@@ -19,6 +19,23 @@ pub enum GemmFamily {
     Tiled,
 }
 
+/// Whether `VKDIFF_GPU_PATHS=1` asks for the discrete-GPU configuration (see [`Context::gpu_paths`]).
+pub fn gpu_paths_requested() -> bool {
+    std::env::var("VKDIFF_GPU_PATHS").is_ok_and(|v| v == "1")
+}
+
+impl DeviceInfo {
+    /// The GEMM/convolution family a context on this device starts with: the subgroup-register
+    /// kernels on CPU devices with a width they are built for, else the tiled ones.
+    pub fn gemm_family(&self, gpu_paths: bool) -> GemmFamily {
+        if !gpu_paths && self.kind == DeviceKind::Cpu && self.gemm_subgroup_width().is_some() {
+            GemmFamily::Subgroup
+        } else {
+            GemmFamily::Tiled
+        }
+    }
+}
+
 pub(crate) struct Shared {
     _entry: ash::Entry,
     instance: ash::Instance,
@@ -138,12 +155,8 @@ impl Context {
             allocation_sizes: Default::default(),
         })
         .map_err(|e| Error::Memory(e.to_string()))?;
-        let gpu_paths = std::env::var("VKDIFF_GPU_PATHS").is_ok_and(|v| v == "1");
-        let gemm_family = if !gpu_paths && info.kind == DeviceKind::Cpu && crate::ops::gemm_subgroup_width(&info).is_some() {
-            GemmFamily::Subgroup
-        } else {
-            GemmFamily::Tiled
-        };
+        let gpu_paths = gpu_paths_requested();
+        let gemm_family = info.gemm_family(gpu_paths);
         let shared = Shared {
             _entry: entry,
             instance,

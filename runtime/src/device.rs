@@ -45,6 +45,9 @@ pub struct DeviceInfo {
     pub kind: DeviceKind,
     pub vendor_id: u32,
     pub driver: String,
+    /// Mesa's lavapipe, and its Mesa version (major, minor): its JIT compile time and speed per
+    /// kernel shape differ between releases.
+    pub lavapipe_mesa: Option<(u32, u32)>,
     pub api_version: (u32, u32, u32),
     pub shader_f16: bool,
     /// 16-bit values in storage buffers: `storageBuffer16BitAccess` and
@@ -195,6 +198,8 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
         kind: DeviceKind::from_vk(p.device_type),
         vendor_id: p.vendor_id,
         driver: format!("{} {}", text(&driver.driver_name), text(&driver.driver_info)).trim().to_string(),
+        lavapipe_mesa: (driver.driver_id == vk::DriverId::MESA_LLVMPIPE)
+            .then(|| (vk::api_version_major(p.driver_version), vk::api_version_minor(p.driver_version))),
         api_version,
         shader_f16: f12.shader_float16 == vk::TRUE,
         storage_16bit: f11.storage_buffer16_bit_access == vk::TRUE && f11.uniform_and_storage_buffer16_bit_access == vk::TRUE,
@@ -280,6 +285,7 @@ mod tests {
             kind,
             vendor_id: 0,
             driver: String::new(),
+            lavapipe_mesa: None,
             api_version: (1, 3, 0),
             shader_f16: true,
             storage_16bit: true,

@@ -14,7 +14,7 @@ mod tensor;
 mod validation;
 
 pub use arena::Arena;
-pub use context::{Context, GemmFamily};
+pub use context::{gpu_paths_requested, Context, GemmFamily};
 pub use device::{choose, list_devices, DeviceInfo, DeviceKind};
 pub use error::{Error, Result};
 pub use pipeline::Kernel;

@@ -117,10 +117,9 @@ pub(super) fn dispatch_gemm_family(
     push: &[u32],
 ) -> Result<()> {
     let ctx = rec.context().clone();
-    let width = gemm_subgroup_width(ctx.info()).filter(|_| ctx.gemm_family() == GemmFamily::Subgroup && s.fits_subgroup);
+    let width = ctx.info().gemm_subgroup_width().filter(|_| ctx.gemm_family() == GemmFamily::Subgroup && s.fits_subgroup);
     if let Some(sg) = width {
-        // Taller products take more rows per workgroup; 16 lanes stop at 32 (code size).
-        let tm: u32 = if s.m >= 1024 && sg < 16 { 64 } else if s.m >= 256 { 32 } else { 16 };
+        let tm: u32 = if s.m >= 1024 && sg < 16 && tall_tiles_compile_fast(ctx.info()) { 64 } else if s.m >= 256 { 32 } else { 16 };
         let want: Vec<(&str, u32)> = [("SG", sg), ("TM", tm)].into_iter().chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.0, dtype, &want, 4)?;
         let columns = u(s.n.div_ceil(8 * sg as usize));
@@ -130,11 +129,20 @@ pub(super) fn dispatch_gemm_family(
     rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(64)), u(s.m.div_ceil(64)), u(s.batch)])
 }
 
-/// The width of the subgroup GEMM/convolution variants this device runs: its native subgroup
-/// width where variants exist for it (4, 8 or 16 lanes) and kernels can be pinned to it.
-pub(crate) fn gemm_subgroup_width(info: &DeviceInfo) -> Option<u32> {
-    let native = info.subgroup_size;
-    ([4, 8, 16].contains(&native) && info.can_use_subgroup(native)).then_some(native)
+/// Whether taller products may take 64 rows per workgroup (fastest on Mesa 22.3's lavapipe). 16
+/// lanes stop at 32 (code size), and so does every lavapipe but 22.x: Mesa 25's JIT takes three
+/// minutes over one 64-row variant (measured), against a fraction of a second at 32.
+fn tall_tiles_compile_fast(info: &DeviceInfo) -> bool {
+    info.lavapipe_mesa.is_none_or(|(major, _)| major <= 22)
+}
+
+impl DeviceInfo {
+    /// The width of the subgroup GEMM/convolution variants this device runs: its native
+    /// subgroup width where variants exist for it (4, 8 or 16 lanes) and kernels can be pinned to it.
+    pub fn gemm_subgroup_width(&self) -> Option<u32> {
+        let native = self.subgroup_size;
+        ([4, 8, 16].contains(&native) && self.can_use_subgroup(native)).then_some(native)
+    }
 }
 
 /// A PyTorch `Linear`: out[.., N] = x[.., K] · wᵀ (+ bias), w stored [N, K].

@@ -12,7 +12,6 @@ pub use attention::{attention, copy_heads, AttentionLayout, HeadSpan};
 pub use conv::{conv2d, oihw_to_ohwi, ConvParams, Padding};
 pub use elementwise::{add, binary, concat_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x, BinaryOp, TimestepEmbedding, UnaryOp};
 pub use gemm::{linear, matmul, Matmul};
-pub(crate) use gemm::gemm_subgroup_width;
 pub use norm::{group_norm, layer_norm, softmax};
 
 use crate::context::Context;
