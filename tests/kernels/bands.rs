@@ -77,6 +77,11 @@ fn upsample_linear_and_geglu_bands_match() {
         let shapes: [&[usize]; 3] = [&[300, 16], &[24, 16], &[24]];
         let (whole, banded) = whole_and_banded(dtype, &shapes, &[300, 24], |rec, t, o| matmul(rec, &t[0], &t[1], Some(&t[2]), o, &spec));
         assert_same(&format!("matmul {dtype:?}"), &whole, &banded);
+        let mut batched = Matmul::dense(64, 24, 16, false);
+        (batched.batch, batched.b_batch) = (3, 16 * 24);
+        let shapes: [&[usize]; 2] = [&[3, 64, 16], &[3, 16, 24]];
+        let (whole, banded) = whole_and_banded(dtype, &shapes, &[3, 64, 24], |rec, t, o| matmul(rec, &t[0], &t[1], None, o, &batched));
+        assert_same(&format!("batched matmul {dtype:?}"), &whole, &banded);
         let (whole, banded) = whole_and_banded(dtype, &[&[100, 64]], &[100, 32], |rec, t, o| geglu(rec, &t[0], o));
         assert_same(&format!("geglu {dtype:?}"), &whole, &banded);
     }

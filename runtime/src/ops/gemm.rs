@@ -1,6 +1,6 @@
 //! Matrix products: batched GEMM with optional bias and accumulation, and `linear`.
 
-use super::bands::{bands, elem, fit, row_view, rows_per_band};
+use super::bands::{bands, elem, fit, row_view, rows_per_band, span_view};
 use super::{f, kernel, same_dtype, u};
 use crate::context::GemmFamily;
 use crate::device::DeviceInfo;
@@ -61,6 +61,9 @@ impl Matmul {
 /// Records C = alpha·A·B (+ bias) (+ C) as described by `spec`. A single product whose A or C
 /// passes the binding limit runs in bands of rows, each a product of its own.
 pub fn matmul(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>, c: &Tensor, spec: &Matmul) -> Result<()> {
+    if spec.batch > 1 && !fit(rec.context(), &[a, b, c]) {
+        return matmul_per_batch(rec, a, b, bias, c, spec);
+    }
     if fit(rec.context(), &[a, c]) || spec.batch != 1 || spec.lda == 0 || spec.ldc == 0 {
         return matmul_whole(rec, a, b, bias, c, spec);
     }
@@ -72,6 +75,27 @@ pub fn matmul(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>,
     for rows in bands(spec.m, per) {
         let band = Matmul { m: rows.len(), a_batch: rows.len() * spec.lda, c_batch: rows.len() * spec.ldc, ..spec.clone() };
         matmul_whole(rec, &row_view(a, spec.lda, rows.clone())?, b, bias, &row_view(c, spec.ldc, rows)?, &band)?;
+    }
+    Ok(())
+}
+
+/// A batched product past the binding limit: one product per batch entry, each on views of
+/// its own operands (shared ones whole), which must start on the binding alignment.
+fn matmul_per_batch(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>, c: &Tensor, spec: &Matmul) -> Result<()> {
+    let (b_rows, b_cols) = if spec.b_transposed { (spec.n, spec.k) } else { (spec.k, spec.n) };
+    for i in 0..spec.batch {
+        let view = |t: &Tensor, stride: usize, rows: usize, ld: usize, cols: usize| -> Result<Tensor> {
+            if stride == 0 {
+                return Ok(t.clone());
+            }
+            let start = i * stride;
+            let (v, before) = span_view(t, start..start + Matmul::extent(1, 0, rows, ld, cols))?;
+            ensure(before == 0, || format!("matmul: batch {i} of {:?} starts off the device's binding alignment", t.shape()))?;
+            Ok(v)
+        };
+        let one = Matmul { batch: 1, ..spec.clone() };
+        let (av, bv, cv) = (view(a, spec.a_batch, spec.m, spec.lda, spec.k)?, view(b, spec.b_batch, b_rows, spec.ldb, b_cols)?, view(c, spec.c_batch, spec.m, spec.ldc, spec.n)?);
+        matmul(rec, &av, &bv, bias, &cv, &one)?;
     }
     Ok(())
 }
