@@ -3,6 +3,7 @@
 mod bench;
 mod dataset_cmd;
 mod devices_cmd;
+mod eval_cmd;
 mod gen_cmd;
 mod model_args;
 mod progress;
@@ -27,6 +28,8 @@ enum Command {
     Dataset(Box<dataset_cmd::DatasetArgs>),
     /// List every Vulkan device and what vkdiff would use on it.
     Devices(devices_cmd::DevicesArgs),
+    /// Score COCO predictions against COCO ground truth: AP/AR as pycocotools, F1, mIoU.
+    Eval(eval_cmd::EvalArgs),
     /// Measure speed: kernels, networks, scene generation.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -39,6 +42,7 @@ fn main() {
         Command::Gen(args) => gen_cmd::run(&args),
         Command::Dataset(args) => dataset_cmd::run(&args),
         Command::Devices(args) => devices_cmd::run(&args),
+        Command::Eval(args) => eval_cmd::run(&args),
         Command::Bench(cmd) => bench::run(cmd),
     };
     if let Err(e) = result {

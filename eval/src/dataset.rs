@@ -1,0 +1,177 @@
+//! COCO ground truth (`images`, `annotations`, `categories`) and COCO results (a list of
+//! detections), read as pycocotools' `COCO` and `loadRes` read them.
+
+use crate::masks::{self, polygon_rle, union};
+use crate::{EvalError, Result};
+use serde_json::Value;
+use std::collections::HashMap;
+use vkdiff_render::rle::Rle;
+
+/// What an annotation outlines.
+#[derive(Clone, Debug)]
+pub enum Geometry {
+    Mask(Rle),
+    /// Results given only as boxes (bbox evaluation).
+    Box,
+}
+
+#[derive(Clone, Debug)]
+pub struct Annotation {
+    pub id: u64,
+    pub image_id: u64,
+    pub category_id: u64,
+    pub area: f64,
+    pub bbox: [f64; 4],
+    pub iscrowd: bool,
+    /// Detections only (ground truth: 1).
+    pub score: f64,
+    pub geometry: Geometry,
+}
+
+/// Images (id → height, width) and their annotations, in file order.
+#[derive(Clone, Debug, Default)]
+pub struct Dataset {
+    pub images: HashMap<u64, (u32, u32)>,
+    pub categories: Vec<u64>,
+    pub annotations: Vec<Annotation>,
+}
+
+fn err(what: String) -> EvalError {
+    EvalError(what)
+}
+
+fn number(v: &Value, what: &str) -> Result<f64> {
+    v.as_f64().ok_or_else(|| err(format!("{what} is not a number: {}", short(v))))
+}
+
+fn id(v: &Value, what: &str) -> Result<u64> {
+    v.as_u64().ok_or_else(|| err(format!("{what} is not a non-negative integer: {}", short(v))))
+}
+
+fn short(v: &Value) -> String {
+    let s = v.to_string();
+    if s.len() > 60 { format!("{}…", &s[..s.char_indices().nth(60).map_or(s.len(), |(i, _)| i)]) } else { s }
+}
+
+fn field<'a>(o: &'a Value, key: &str, what: &str) -> Result<&'a Value> {
+    o.get(key).ok_or_else(|| err(format!("{what} has no `{key}`")))
+}
+
+/// A segmentation (polygons, uncompressed or compressed RLE) as one mask of the image's size.
+fn segmentation(v: &Value, (h, w): (u32, u32), what: &str) -> Result<Rle> {
+    match v {
+        Value::Array(polys) => {
+            let rles = polys
+                .iter()
+                .map(|p| {
+                    let xy = p.as_array().ok_or_else(|| err(format!("{what}: a polygon is not a list of numbers")))?;
+                    let xy: Vec<f64> = xy.iter().map(|c| number(c, what)).collect::<Result<_>>()?;
+                    Ok(polygon_rle(&xy, h, w))
+                })
+                .collect::<Result<Vec<_>>>()?;
+            Ok(union(&rles, h, w))
+        }
+        Value::Object(o) => {
+            let size = o.get("size").and_then(Value::as_array).ok_or_else(|| err(format!("{what}: an RLE without `size`")))?;
+            let (rh, rw) = match size.as_slice() {
+                [a, b] => (id(a, what)? as u32, id(b, what)? as u32),
+                _ => return Err(err(format!("{what}: RLE `size` is not [height, width]"))),
+            };
+            if (rh, rw) != (h, w) {
+                return Err(err(format!("{what}: RLE of size {rh}×{rw} on an image of {h}×{w}")));
+            }
+            match o.get("counts") {
+                Some(Value::String(s)) => Rle::from_coco_string(s, h, w).map_err(|e| err(format!("{what}: {e}"))),
+                Some(Value::Array(c)) => {
+                    let counts: Vec<u32> = c.iter().map(|x| id(x, what).map(|x| x as u32)).collect::<Result<_>>()?;
+                    let total: u64 = counts.iter().map(|&c| c as u64).sum();
+                    if total != h as u64 * w as u64 {
+                        return Err(err(format!("{what}: RLE counts cover {total} pixels, not {h}×{w}")));
+                    }
+                    Ok(Rle { height: h, width: w, counts })
+                }
+                _ => Err(err(format!("{what}: RLE `counts` is neither a string nor a list"))),
+            }
+        }
+        _ => Err(err(format!("{what}: `segmentation` is neither polygons nor an RLE"))),
+    }
+}
+
+fn bbox(v: &Value, what: &str) -> Result<[f64; 4]> {
+    let b = v.as_array().filter(|b| b.len() == 4).ok_or_else(|| err(format!("{what}: `bbox` is not [x, y, w, h]")))?;
+    Ok([number(&b[0], what)?, number(&b[1], what)?, number(&b[2], what)?, number(&b[3], what)?])
+}
+
+impl Dataset {
+    /// COCO ground truth. Masks are decoded only when `masks` (segm evaluation).
+    pub fn ground_truth(json: &Value, masks: bool) -> Result<Dataset> {
+        let mut d = Dataset::default();
+        for (i, img) in json.get("images").and_then(Value::as_array).ok_or_else(|| err("ground truth has no `images` list".into()))?.iter().enumerate() {
+            let what = format!("images[{i}]");
+            let size = (id(field(img, "height", &what)?, &what)? as u32, id(field(img, "width", &what)?, &what)? as u32);
+            d.images.insert(id(field(img, "id", &what)?, &what)?, size);
+        }
+        if let Some(cats) = json.get("categories").and_then(Value::as_array) {
+            d.categories = cats.iter().enumerate().map(|(i, c)| id(field(c, "id", &format!("categories[{i}]"))?, "category id")).collect::<Result<_>>()?;
+        }
+        for (i, a) in json.get("annotations").and_then(Value::as_array).ok_or_else(|| err("ground truth has no `annotations` list".into()))?.iter().enumerate() {
+            let what = format!("annotations[{i}]");
+            let image_id = id(field(a, "image_id", &what)?, &what)?;
+            let size = *d.images.get(&image_id).ok_or_else(|| err(format!("{what}: image {image_id} is not in `images`")))?;
+            let geometry = if masks { Geometry::Mask(segmentation(field(a, "segmentation", &what)?, size, &what)?) } else { Geometry::Box };
+            let bbox = match a.get("bbox") {
+                Some(b) => bbox(b, &what)?,
+                None => match &geometry {
+                    Geometry::Mask(r) => masks::bbox(r),
+                    Geometry::Box => return Err(err(format!("{what} has no `bbox`"))),
+                },
+            };
+            d.annotations.push(Annotation {
+                id: id(field(a, "id", &what)?, &what)?,
+                image_id,
+                category_id: id(field(a, "category_id", &what)?, &what)?,
+                area: number(field(a, "area", &what)?, &what)?,
+                bbox,
+                iscrowd: a.get("iscrowd").and_then(Value::as_u64).unwrap_or(0) != 0,
+                score: 1.0,
+                geometry,
+            });
+        }
+        Ok(d)
+    }
+
+    /// COCO results on the images of `gt`, as `loadRes` reads them: ids 1, 2, … in file order;
+    /// a mask's area and (when absent) box from the mask; a box's area w·h.
+    pub fn results(json: &Value, gt: &Dataset, masks: bool) -> Result<Dataset> {
+        let list = json.as_array().ok_or_else(|| err("results are not a JSON list of detections".into()))?;
+        let mut d = Dataset { images: gt.images.clone(), categories: gt.categories.clone(), annotations: Vec::new() };
+        for (i, a) in list.iter().enumerate() {
+            let what = format!("results[{i}]");
+            let image_id = id(field(a, "image_id", &what)?, &what)?;
+            let size = *gt.images.get(&image_id).ok_or_else(|| err(format!("{what}: image {image_id} is not in the ground truth")))?;
+            let (geometry, area, bbox) = if masks {
+                let rle = segmentation(field(a, "segmentation", &what)?, size, &what)?;
+                let area = masks::ones(&rle).iter().map(|(s, e)| e - s).sum::<u64>() as f64;
+                let b = match a.get("bbox") {
+                    Some(b) => bbox(b, &what)?,
+                    None => masks::bbox(&rle),
+                };
+                (Geometry::Mask(rle), area, b)
+            } else {
+                let b = bbox(field(a, "bbox", &what)?, &what)?;
+                (Geometry::Box, b[2] * b[3], b)
+            };
+            d.annotations.push(Annotation {
+                id: i as u64 + 1,
+                image_id,
+                category_id: id(field(a, "category_id", &what)?, &what)?,
+                area,
+                bbox,
+                iscrowd: false,
+                score: number(field(a, "score", &what)?, &what)?,
+                geometry,
+            });
+        }
+        Ok(d)
+    }
+}

@@ -1,0 +1,17 @@
+//! COCO evaluation on the CPU: ground truth and results read from COCO JSON, masks as COCO
+//! run-length encodings, and `COCOeval`'s matching, accumulation and twelve statistics computed
+//! as pycocotools does (held to it by `tests/`).
+
+mod cocoeval;
+mod dataset;
+mod masks;
+
+pub use cocoeval::{evaluate, EvalParams, IouType, Stats};
+pub use dataset::{Annotation, Dataset, Geometry};
+pub use masks::{bbox_iou, foreground_iou, mask_iou, polygon_rle, union};
+
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct EvalError(pub String);
+
+pub type Result<T> = std::result::Result<T, EvalError>;

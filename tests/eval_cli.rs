@@ -1,0 +1,64 @@
+//! `vkdiff eval` as a user runs it: pycocotools' statistics by name, F1 and mIoU, annotation
+//! id 0, and one error line for bad input.
+
+mod cli;
+
+use cli::{scratch, vkdiff};
+use serde_json::Value;
+
+fn fixture(name: &str) -> String {
+    format!("{}/tests/fixtures/eval/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+fn eval_json(gt: &str, pred: &str) -> Value {
+    let out = vkdiff(&["eval", "--gt", gt, "--pred", pred, "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn prints_pycocotools_statistics_f1_and_miou() {
+    let got = eval_json(&fixture("gt.json"), &fixture("dt_segm.json"));
+    let expected: Value = serde_json::from_str(&std::fs::read_to_string(fixture("expected.json")).unwrap()).unwrap();
+    let stats = &expected["segm [1, 10, 100]"]["stats"];
+    for (i, name) in ["AP", "AP50", "AP75", "APs", "APm", "APl", "AR1", "AR10", "AR100", "ARs", "ARm", "ARl"].iter().enumerate() {
+        let (g, w) = (got[name].as_f64().unwrap(), stats[i].as_f64().unwrap());
+        assert!((g - w).abs() <= 1e-6, "{name}: {g} against pycocotools {w}");
+    }
+    let (ap, ar, f1) = (got["AP"].as_f64().unwrap(), got["AR100"].as_f64().unwrap(), got["F1"].as_f64().unwrap());
+    assert!((f1 - 2.0 * ap * ar / (ap + ar)).abs() < 1e-12);
+    let (miou, matched) = (got["mIoU"].as_f64().unwrap(), got["mIoU_matched"].as_f64().unwrap());
+    assert!(matched >= 0.5 && matched <= 1.0 && miou <= matched, "mIoU {miou}, matched {matched}");
+    assert!((0.0..=1.0).contains(&got["foreground_IoU"].as_f64().unwrap()));
+}
+
+#[test]
+fn annotation_id_zero_is_matched_and_warned_about() {
+    // The same ground truth with ids from 0 (as Roboflow exports them) scores the same.
+    let mut gt: Value = serde_json::from_str(&std::fs::read_to_string(fixture("gt.json")).unwrap()).unwrap();
+    for a in gt["annotations"].as_array_mut().unwrap() {
+        a["id"] = (a["id"].as_u64().unwrap() - 1).into();
+    }
+    let path = scratch("eval-id0").join("gt.json");
+    std::fs::write(&path, gt.to_string()).unwrap();
+    let shifted = vkdiff(&["eval", "--gt", path.to_str().unwrap(), "--pred", &fixture("dt_segm.json"), "--json"]);
+    assert!(String::from_utf8_lossy(&shifted.stderr).contains("annotation id 0"), "{}", String::from_utf8_lossy(&shifted.stderr));
+    let shifted: Value = serde_json::from_slice(&shifted.stdout).unwrap();
+    assert_eq!(shifted, eval_json(&fixture("gt.json"), &fixture("dt_segm.json")));
+}
+
+#[test]
+fn bad_input_is_one_error_line() {
+    let dir = scratch("eval-bad");
+    let bad = dir.join("bad.json");
+    std::fs::write(&bad, r#"[{"image_id": 99, "category_id": 1, "segmentation": {"size": [90, 120], "counts": "00"}, "score": 0.5}]"#).unwrap();
+    for (args, message) in [
+        (vec!["--pred", bad.to_str().unwrap()], "image 99 is not in the ground truth"),
+        (vec!["--pred", "/nonexistent.json"], "cannot read /nonexistent.json"),
+        (vec!["--pred", &fixture("dt_segm.json"), "--max-dets", "10,1,100"], "must be positive and ascending"),
+    ] {
+        let out = vkdiff(&[&["eval", "--gt", &fixture("gt.json")][..], &args].concat());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(message) && err.trim().lines().count() == 1, "{args:?}: {err}");
+    }
+}
