@@ -80,7 +80,7 @@ pub const KERNELS: &[KernelSpec] = &[
     // subgroup variants cover lavapipe's widths; `attention_wg` every other width and head size.
     KernelSpec {
         name: "attention",
-        files: &["attention.wgsl"],
+        files: &["attention_common.wgsl", "attention.wgsl"],
         params: &[
             &[("SG", 4), ("DV", 1), ("TM", 16)],
             &[("SG", 4), ("DV", 2), ("TM", 16)],
@@ -99,7 +99,7 @@ pub const KERNELS: &[KernelSpec] = &[
     // Workgroup-memory attention: W invocations, no subgroup operations.
     KernelSpec {
         name: "attention_wg",
-        files: &["attention_wg.wgsl"],
+        files: &["attention_common.wgsl", "attention_wg.wgsl"],
         params: &[&[("W", 64), ("DV", 1), ("TM", 8)], &[("W", 64), ("DV", 2), ("TM", 4)], &[("W", 64), ("DV", 4), ("TM", 2)]],
     },
     KernelSpec {

@@ -4,35 +4,7 @@
 // query and output row. For each chunk of SG keys, lane l scores key j0 + l against all TM
 // queries (query slots arrive by shuffles), the chunk's softmax statistics are subgroup
 // reductions, and each lane accumulates its own output slots from the chunk's V rows.
-// Layout: element (b, token, head, d) at off + b·batch + token·ld + head·D + d; D and every
-// stride and offset % 4 = 0.
-@group(0) @binding(0) var<storage, read> q: array<vec4<S>>;
-@group(0) @binding(1) var<storage, read> k: array<vec4<S>>;
-@group(0) @binding(2) var<storage, read> v: array<vec4<S>>;
-@group(0) @binding(3) var<storage, read_write> o: array<vec4<S>>;
-
-struct Params {
-    nq: u32,
-    nk: u32,
-    d: u32,
-    q_ld: u32,
-    k_ld: u32,
-    v_ld: u32,
-    o_ld: u32,
-    q_batch: u32,
-    k_batch: u32,
-    v_batch: u32,
-    o_batch: u32,
-    scale: f32,
-    q_off: u32,
-    k_off: u32,
-    v_off: u32,
-    causal: u32,
-}
-
-var<immediate> p: Params;
-
-const NEG: f32 = -1.0e30;
+// Operands, parameters and layout: attention_common.wgsl.
 
 @compute @workgroup_size(SG)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lane: u32) {

@@ -3,35 +3,7 @@
 // fits the device (32- and 64-lane GPUs, other widths, heads wider than the subgroup variants
 // hold). A workgroup of W invocations handles TM query rows of one head: the rows' scaled Q
 // slots sit in workgroup memory, invocation t scores key j0 + t of each chunk of W keys against
-// them, and owns output slots v·W + t (v < DV). Same bindings, push constants and layout rules
-// as attention.wgsl.
-@group(0) @binding(0) var<storage, read> q: array<vec4<S>>;
-@group(0) @binding(1) var<storage, read> k: array<vec4<S>>;
-@group(0) @binding(2) var<storage, read> v: array<vec4<S>>;
-@group(0) @binding(3) var<storage, read_write> o: array<vec4<S>>;
-
-struct Params {
-    nq: u32,
-    nk: u32,
-    d: u32,
-    q_ld: u32,
-    k_ld: u32,
-    v_ld: u32,
-    o_ld: u32,
-    q_batch: u32,
-    k_batch: u32,
-    v_batch: u32,
-    o_batch: u32,
-    scale: f32,
-    q_off: u32,
-    k_off: u32,
-    v_off: u32,
-    causal: u32,
-}
-
-var<immediate> p: Params;
-
-const NEG: f32 = -1.0e30;
+// them, and owns output slots v·W + t (v < DV). Operands and parameters: attention_common.wgsl.
 const SLOTS: u32 = DV * W;
 
 var<workgroup> qs: array<vec4<f32>, TM * SLOTS>;
