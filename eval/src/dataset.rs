@@ -151,7 +151,7 @@ impl Dataset {
             let size = *gt.images.get(&image_id).ok_or_else(|| err(format!("{what}: image {image_id} is not in the ground truth")))?;
             let (geometry, area, bbox) = if masks {
                 let rle = segmentation(field(a, "segmentation", &what)?, size, &what)?;
-                let area = masks::ones(&rle).iter().map(|(s, e)| e - s).sum::<u64>() as f64;
+                let area = masks::runs_area(&masks::ones(&rle)) as f64;
                 let b = match a.get("bbox") {
                     Some(b) => bbox(b, &what)?,
                     None => masks::bbox(&rle),

@@ -47,6 +47,11 @@ fn union_runs<'a>(masks: impl Iterator<Item = &'a Rle>) -> Vec<(u64, u64)> {
     merged
 }
 
+/// Pixels in a mask's runs.
+pub(crate) fn runs_area(runs: &[(u64, u64)]) -> u64 {
+    runs.iter().map(|(s, e)| e - s).sum()
+}
+
 /// Pixels in both masks.
 fn intersection(a: &[(u64, u64)], b: &[(u64, u64)]) -> u64 {
     let (mut i, mut j, mut n) = (0, 0, 0);
@@ -61,9 +66,8 @@ fn intersection(a: &[(u64, u64)], b: &[(u64, u64)]) -> u64 {
 /// IoU of a detection's mask with a ground-truth mask; against a crowd region, the part of the
 /// detection inside it (intersection over the detection's area). 0 where the union is empty.
 pub fn mask_iou(dt: &[(u64, u64)], gt: &[(u64, u64)], crowd: bool) -> f64 {
-    let area = |r: &[(u64, u64)]| r.iter().map(|(s, e)| e - s).sum::<u64>();
     let i = intersection(dt, gt);
-    let u = if crowd { area(dt) } else { area(dt) + area(gt) - i };
+    let u = if crowd { runs_area(dt) } else { runs_area(dt) + runs_area(gt) - i };
     if u == 0 { 0.0 } else { i as f64 / u as f64 }
 }
 
@@ -180,10 +184,9 @@ pub fn foreground_iou(images: &[(Vec<&Rle>, Vec<&Rle>)]) -> f64 {
     let (mut inter, mut uni) = (0u64, 0u64);
     for (gts, preds) in images {
         let (g, p) = (union_runs(gts.iter().copied()), union_runs(preds.iter().copied()));
-        let area = |r: &[(u64, u64)]| r.iter().map(|(s, e)| e - s).sum::<u64>();
         let i = intersection(&g, &p);
         inter += i;
-        uni += area(&g) + area(&p) - i;
+        uni += runs_area(&g) + runs_area(&p) - i;
     }
     if uni == 0 { 0.0 } else { inter as f64 / uni as f64 }
 }

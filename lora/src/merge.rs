@@ -224,7 +224,7 @@ struct Pack {
 
 impl Pack {
     fn new(ctx: Context, dtype: Dtype) -> Pack {
-        let align = (ctx.info().min_storage_offset_alignment.max(4) as usize).div_ceil(dtype_size(dtype));
+        let align = (ctx.info().binding_alignment() as usize).div_ceil(dtype_size(dtype));
         Pack { ctx, dtype, align, data: Vec::new(), gemms: Vec::new() }
     }
 

@@ -94,6 +94,11 @@ impl DeviceInfo {
         None
     }
 
+    /// The byte alignment every storage binding's offset keeps (at least 4: kernels read words).
+    pub fn binding_alignment(&self) -> u64 {
+        self.min_storage_offset_alignment.max(4)
+    }
+
     /// Whether f16 storage with f32 arithmetic (`--precision f16`) can run here.
     pub fn supports_f16(&self) -> bool {
         self.shader_f16 && self.storage_16bit

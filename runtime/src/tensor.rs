@@ -80,7 +80,7 @@ impl Tensor {
         ensure(start + len <= rows, || format!("rows {start}..{} out of range for {:?}", start + len, self.shape))?;
         let row_bytes = (self.numel() / rows.max(1) * dtype_size(self.dtype)) as u64;
         let offset = self.offset + start as u64 * row_bytes;
-        let align = self.buf.shared.info.min_storage_offset_alignment.max(4);
+        let align = self.buf.shared.info.binding_alignment();
         ensure(offset.is_multiple_of(align), || format!("view at byte {offset} breaks the device's {align}-byte binding alignment"))?;
         let mut shape = self.shape.clone();
         shape[0] = len;

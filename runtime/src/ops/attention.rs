@@ -82,19 +82,15 @@ pub fn attention(rec: &mut Recorder, q: &Tensor, k: &Tensor, v: &Tensor, out: &T
     }
     let ctx = rec.context().clone();
     let slots = u(l.head_dim / 4);
-    let (name, width, variant) = match subgroup_variant(&ctx, dtype, slots) {
-        Some(v) => ("attention", v.param("SG").unwrap(), v),
-        None => {
-            let v = vkdiff_kernels::variants("attention_wg", dtype)
-                .filter(|v| v.param("DV").unwrap() * v.param("W").unwrap() >= slots)
-                .min_by_key(|v| v.param("DV"))
-                .ok_or_else(|| Error::Shape(format!("attention: head size {} is past the widest variant", l.head_dim)))?;
-            ("attention_wg", v.param("W").unwrap(), v)
-        }
+    let variant = match subgroup_variant(&ctx, dtype, slots) {
+        Some(v) => v,
+        None => vkdiff_kernels::variants("attention_wg", dtype)
+            .filter(|v| v.param("DV").unwrap() * v.param("W").unwrap() >= slots)
+            .min_by_key(|v| v.param("DV"))
+            .ok_or_else(|| Error::Shape(format!("attention: head size {} is past the widest variant", l.head_dim)))?,
     };
     let tm = variant.param("TM").unwrap() as usize;
-    let width_param = if name == "attention" { "SG" } else { "W" };
-    let kern = kernel(&ctx, name, dtype, &[(width_param, width), ("DV", variant.param("DV").unwrap()), ("TM", tm as u32)], 4)?;
+    let kern = ctx.kernel(variant, 4)?;
     let push = [
         u(l.q_tokens), u(l.kv_tokens), u(l.head_dim), u(l.q_ld), u(l.k_ld), u(l.v_ld), u(l.o_ld),
         u(l.q_batch), u(l.k_batch), u(l.v_batch), u(l.o_batch), f(scale), u(l.q_offset), u(l.k_offset), u(l.v_offset),
@@ -227,7 +223,7 @@ pub fn copy_heads(rec: &mut Recorder, src: &Tensor, dst: &Tensor, from: HeadSpan
     // it reads and writes.
     let row_bytes = [from.ld.max(from.head_dim) * elem(src), to.ld.max(to.head_dim) * elem(dst)];
     // A band's view may start up to one alignment before its first row and end a row of heads after its last.
-    let align = rec.context().info().min_storage_offset_alignment.max(4) as usize;
+    let align = rec.context().info().binding_alignment() as usize;
     let halo = 1 + align.div_ceil(row_bytes[0].min(row_bytes[1]));
     let per = rows_per_band(rec.context(), "copy_heads", &row_bytes, halo, 1)?;
     let rows = |s: HeadSpan, b: usize, t: &std::ops::Range<usize>| {

@@ -33,7 +33,7 @@ pub(super) fn rows_per_band(ctx: &Context, what: &str, row_bytes: &[usize], halo
     let widest = row_bytes.iter().copied().max().unwrap_or(1).max(1);
     let fit = (ctx.binding_limit() as usize / widest).saturating_sub(halo);
     ensure(fit > 0, || format!("{what}: one row of {widest} bytes does not fit the {} byte binding limit", ctx.binding_limit()))?;
-    let align = ctx.info().min_storage_offset_alignment.max(4) as usize;
+    let align = ctx.info().binding_alignment() as usize;
     let aligned = row_bytes.iter().fold(1, |step, &b| lcm(step, align / gcd(align, b.max(1))));
     ensure(fit >= aligned, || format!("{what}: {fit} rows fit the binding limit, fewer than the {aligned} that keep bands on the device's {align}-byte alignment"))?;
     let step = if fit >= lcm(aligned, multiple) { lcm(aligned, multiple) } else { aligned };
@@ -51,7 +51,7 @@ fn lcm(a: usize, b: usize) -> usize {
 /// Elements `range` of `t` (flat) as a view that starts at the binding-aligned element at or
 /// before `range.start`, and how many elements before it that is (the view's offset to pass).
 pub(super) fn span_view(t: &Tensor, range: Range<usize>) -> Result<(Tensor, usize)> {
-    let step = t.context().info().min_storage_offset_alignment.max(4) as usize / elem(t);
+    let step = t.context().info().binding_alignment() as usize / elem(t);
     let start = range.start - range.start % step.max(1);
     Ok((row_view(t, 1, start..range.end)?, range.start - start))
 }

@@ -55,7 +55,7 @@ pub fn binary(rec: &mut Recorder, op: BinaryOp, a: &Tensor, b: &Tensor, out: &Te
     }
     // b's view starts at an aligned element at or before the run's first index, so it may take
     // up to `slack` elements more than the run.
-    let slack = (rec.context().info().min_storage_offset_alignment.max(4) as usize).div_ceil(elem(b));
+    let slack = (rec.context().info().binding_alignment() as usize).div_ceil(elem(b));
     let per = rows_per_band(rec.context(), "binary", &[elem(a)], slack, 64)?;
     for run in bands(n, per) {
         let reads = broadcast_span(run.clone(), b_inner, b_outer);
