@@ -4,6 +4,7 @@ mod bench;
 mod dataset_cmd;
 mod devices_cmd;
 mod eval_cmd;
+mod fid_cmd;
 mod gen_cmd;
 mod model_args;
 mod progress;
@@ -30,6 +31,9 @@ enum Command {
     Devices(devices_cmd::DevicesArgs),
     /// Score COCO predictions against COCO ground truth: AP/AR as pycocotools, F1, mIoU.
     Eval(eval_cmd::EvalArgs),
+    /// FID and KID between real photos and generated images, as torch-fidelity computes them,
+    /// with its InceptionV3 on the Vulkan device.
+    Fid(fid_cmd::FidArgs),
     /// Measure speed: kernels, networks, scene generation.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -43,6 +47,7 @@ fn main() {
         Command::Dataset(args) => dataset_cmd::run(&args),
         Command::Devices(args) => devices_cmd::run(&args),
         Command::Eval(args) => eval_cmd::run(&args),
+        Command::Fid(args) => fid_cmd::run(&args),
         Command::Bench(cmd) => bench::run(cmd),
     };
     if let Err(e) = result {

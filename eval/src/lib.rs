@@ -4,6 +4,7 @@
 
 mod cocoeval;
 mod dataset;
+pub mod fid;
 mod masks;
 
 pub use cocoeval::{evaluate, EvalParams, IouType, Stats};

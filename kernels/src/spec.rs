@@ -112,5 +112,9 @@ pub const KERNELS: &[KernelSpec] = &[
     KernelSpec { name: "upsample_nearest2x", files: &["grid.wgsl", "upsample.wgsl"], params: NONE },
     KernelSpec { name: "concat_channels", files: &["grid.wgsl", "concat.wgsl"], params: NONE },
     KernelSpec { name: "copy_heads", files: &["grid.wgsl", "copy_heads.wgsl"], params: NONE },
+    KernelSpec { name: "copy_channels", files: &["grid.wgsl", "copy_channels.wgsl"], params: NONE },
+    // Inception's pooling (0 max, 1 average of the taps inside) and its TensorFlow-style resize.
+    KernelSpec { name: "pool2d", files: &["grid.wgsl", "pool2d.wgsl"], params: &[&[("OP", 0)], &[("OP", 1)]] },
+    KernelSpec { name: "resize_tf1", files: &["grid.wgsl", "resize_tf1.wgsl"], params: NONE },
     KernelSpec { name: "timestep_embedding", files: &["timestep.wgsl"], params: NONE },
 ];

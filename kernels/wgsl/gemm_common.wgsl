@@ -1,5 +1,5 @@
 // Parameters shared by every GEMM-shaped kernel (matrix product and implicit-GEMM convolution):
-// C[batch] = alpha · A[batch]·B[batch] (+ bias) (+ C when accumulating). The A side (`AParams`,
+// C[batch] = alpha · A[batch]·B[batch] (+ bias) (+ C when accumulating), then ReLU when asked. The A side (`AParams`,
 // `RowCtx`, `row_ctx`, `k_ctx`, `load_a*`) comes from the loader file the kernel is built with.
 struct GemmParams {
     m: u32,
@@ -22,3 +22,4 @@ var<immediate> p: Params;
 
 const FLAG_BIAS: u32 = 1u;
 const FLAG_ACCUMULATE: u32 = 2u;
+const FLAG_RELU: u32 = 4u;

@@ -78,6 +78,9 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             if (p.g.flags & FLAG_ACCUMULATE) != 0u {
                 v += vec4<f32>(c[at]);
             }
+            if (p.g.flags & FLAG_RELU) != 0u {
+                v = max(v, vec4<f32>(0.0));
+            }
             c[at] = vec4<S>(v);
         }
     }

@@ -75,6 +75,9 @@ fn main(
                 if (p.g.flags & FLAG_ACCUMULATE) != 0u {
                     v += f32(c[at]);
                 }
+                if (p.g.flags & FLAG_RELU) != 0u {
+                    v = max(v, 0.0);
+                }
                 c[at] = S(v);
             }
         }

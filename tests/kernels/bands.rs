@@ -45,7 +45,7 @@ fn assert_same(what: &str, whole: &[f32], banded: &[f32]) {
 #[test]
 fn conv_bands_match_the_whole_convolution() {
     let square = ConvParams::new(1, 1);
-    let down = ConvParams { stride: 2, pad: Padding { top: 0, left: 0, bottom: 1, right: 1 }, accumulate: true };
+    let down = ConvParams { stride: 2, pad: Padding { top: 0, left: 0, bottom: 1, right: 1 }, accumulate: true, relu: false };
     let shortcut = ConvParams { accumulate: true, ..ConvParams::new(1, 0) };
     for dtype in DTYPES {
         for (name, p, k, out) in [("3x3", square, 3, [2, 21, 16, 8]), ("stride 2, pad bottom-right", down, 3, [2, 10, 8, 8]), ("1x1", shortcut, 1, [2, 21, 16, 8])] {

@@ -8,4 +8,5 @@ mod conv;
 mod elementwise;
 mod gemm;
 mod norm;
+mod pool;
 mod runtime;

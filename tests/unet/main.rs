@@ -8,6 +8,7 @@ mod common;
 mod controlnet;
 mod errors;
 mod forward;
+mod inception;
 mod ip_adapter;
 mod malformed;
 mod text_and_vae;

@@ -89,7 +89,7 @@ impl Conv2d {
     }
 
     fn params(&self, accumulate: bool) -> ConvParams {
-        ConvParams { stride: self.stride, pad: self.pad, accumulate }
+        ConvParams { stride: self.stride, pad: self.pad, accumulate, relu: false }
     }
 
     /// x[B, H, W, in] → [B, H', W', out].

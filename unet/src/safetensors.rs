@@ -50,6 +50,8 @@ pub struct SafeTensors {
     map: Mmap,
     data_start: usize,
     pub entries: BTreeMap<String, Entry>,
+    /// The header's `__metadata__` strings (other values are left out).
+    pub metadata: BTreeMap<String, String>,
 }
 
 impl SafeTensors {
@@ -74,8 +76,12 @@ impl SafeTensors {
         let data_start = 8 + header_len;
         let data_len = map.len() - data_start;
         let mut entries = BTreeMap::new();
+        let mut metadata = BTreeMap::new();
         for (name, v) in fields {
             if name == "__metadata__" {
+                if let Value::Object(m) = v {
+                    metadata.extend(m.into_iter().filter_map(|(k, v)| Some((k, v.as_str()?.to_string()))));
+                }
                 continue;
             }
             let entry = parse_entry(&v).ok_or_else(|| bad(format!("tensor `{name}` has a malformed header entry")))?;
@@ -105,7 +111,7 @@ impl SafeTensors {
         if covered != data_len {
             return Err(bad(format!("the tensors cover {covered} of the file's {data_len} bytes of data")));
         }
-        Ok(SafeTensors { path: path.to_path_buf(), map, data_start, entries })
+        Ok(SafeTensors { path: path.to_path_buf(), map, data_start, entries, metadata })
     }
 
     /// The raw little-endian bytes of a tensor.

@@ -30,12 +30,14 @@ pub struct ConvParams {
     pub pad: Padding,
     /// Adds the result to what `out` holds (a fused residual connection).
     pub accumulate: bool,
+    /// max(·, 0) of the result (Inception's conv + folded batch norm + ReLU in one pass).
+    pub relu: bool,
 }
 
 impl ConvParams {
     /// Stride `stride`, symmetric padding `pad`, output overwritten.
     pub fn new(stride: usize, pad: usize) -> ConvParams {
-        ConvParams { stride, pad: Padding::same(pad), accumulate: false }
+        ConvParams { stride, pad: Padding::same(pad), accumulate: false, relu: false }
     }
 }
 
@@ -55,7 +57,7 @@ pub fn oihw_to_ohwi(w: &[f32], cout: usize, cin: usize, kh: usize, kw: usize) ->
     out
 }
 
-/// out[B, Ho, Wo, Cout] = conv(x[B, H, W, Cin], w[Cout, KH, KW, Cin]) (+ bias) (+ out), with the
+/// out[B, Ho, Wo, Cout] = conv(x[B, H, W, Cin], w[Cout, KH, KW, Cin]) (+ bias) (+ out) (ReLU), with the
 /// output size implied by stride and padding. Input or output past the binding limit is
 /// convolved in bands of output rows, each reading its input rows plus the kernel's halo.
 pub fn conv2d(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor, p: &ConvParams) -> Result<()> {
@@ -102,7 +104,7 @@ fn conv2d_whole(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor
     }
     let (m, n, k) = (b * ho * wo, cout, kh * kw * cin);
     let push = [
-        u(m), u(n), u(k), u(k), u(n), 0, 0, bias.is_some() as u32 | (p.accumulate as u32) << 1, f(1.0),
+        u(m), u(n), u(k), u(k), u(n), 0, 0, bias.is_some() as u32 | (p.accumulate as u32) << 1 | (p.relu as u32) << 2, f(1.0),
         u(h), u(wd), u(cin), u(ho), u(wo), u(kw), u(stride), u(pad.top), u(pad.left),
     ];
     // Without a bias the kernel never reads binding 2; the output stands in for it.

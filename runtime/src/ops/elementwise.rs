@@ -160,6 +160,25 @@ pub fn concat_channels(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor)
     Ok(())
 }
 
+/// out[.., offset..offset + C] = x[.., C]: one branch of a channel concatenation written in place
+/// (Inception's blocks join four branches). In bands of rows past the binding limit.
+pub fn copy_into_channels(rec: &mut Recorder, x: &Tensor, out: &Tensor, offset: usize) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "copy_into_channels", &[x, out])?;
+    let (c, c_out) = (*x.shape().last().unwrap_or(&0), *out.shape().last().unwrap_or(&0));
+    let lead = |t: &Tensor| t.shape()[..t.shape().len().saturating_sub(1)].to_vec();
+    ensure(c > 0 && lead(x) == lead(out) && offset + c <= c_out, || {
+        format!("copy_into_channels: {:?} at channel {offset} of {:?}", x.shape(), out.shape())
+    })?;
+    let k = kernel(rec.context(), "copy_channels", dtype, &[], 2)?;
+    let rows = x.numel() / c;
+    let per = if fit(rec.context(), &[x, out]) { rows } else { rows_per_band(rec.context(), "copy_into_channels", &[c * elem(x), c_out * elem(x)], 0, 64)? };
+    for band in bands(rows, per) {
+        let (xv, ov) = (row_view(x, c, band.clone())?, row_view(out, c_out, band)?);
+        dispatch_flat(rec, &k, &[&xv], &[&ov], &[u(xv.numel()), u(c), u(c_out), u(offset)], element_groups(xv.numel()))?;
+    }
+    Ok(())
+}
+
 /// diffusers' `Timesteps` settings.
 #[derive(Clone, Copy, Debug)]
 pub struct TimestepEmbedding {

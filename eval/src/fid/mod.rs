@@ -1,0 +1,11 @@
+//! Fréchet and kernel Inception distances between two sets of feature rows, as torch-fidelity
+//! computes them.
+
+mod cache;
+mod features;
+pub mod numpy_rng;
+pub mod stats;
+
+pub use cache::FeatureCache;
+pub use features::{file_stamp, list_images, open_weights, FeatureExtractor};
+pub use stats::{fid, kid, Kid, KidOptions};

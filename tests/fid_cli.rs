@@ -1,0 +1,78 @@
+//! `vkdiff fid` as a user runs it, held to torch-fidelity (tools/make_fid_fixtures.py): FID and
+//! KID between two small folders with the real InceptionV3 architecture (reproducible random
+//! weights, given as a safetensors file), the feature cache, and one error line for bad input.
+
+mod cli;
+
+use cli::{scratch, vkdiff};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use vkdiff_unet::{write_safetensors_f32, RandomInception};
+
+fn fixture(name: &str) -> String {
+    format!("{}/tests/fixtures/fid/{name}", env!("CARGO_MANIFEST_DIR"))
+}
+
+fn weights(dir: &Path) -> PathBuf {
+    let path = dir.join("inception-random.safetensors");
+    write_safetensors_f32(&path, &RandomInception::new().tensors(), &Default::default()).unwrap();
+    path
+}
+
+fn fid_json(args: &[&str]) -> Value {
+    let out = vkdiff(&[&["fid"], args, &["--json"]].concat());
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+fn close(what: &str, got: f64, want: f64, rtol: f64) {
+    assert!((got - want).abs() <= rtol * want.abs(), "{what}: {got} against torch-fidelity's {want} (relative {:.2e})", (got - want).abs() / want.abs());
+}
+
+#[test]
+fn fid_and_kid_match_torch_fidelity_and_the_cache_reuses_features() {
+    let dir = scratch("fid");
+    let w = weights(&dir);
+    let expected: Value = serde_json::from_str(&std::fs::read_to_string(fixture("expected.json")).unwrap()).unwrap();
+    let cache = dir.join("cache");
+    let (real, fake) = (fixture("real"), fixture("fake"));
+    let args = ["--inception", w.to_str().unwrap(), "--cache-dir", cache.to_str().unwrap(), "--batch", "3"];
+    let first = fid_json(&[&[real.as_str(), fake.as_str()], &args[..]].concat());
+    assert_eq!(first["kid_subset_size"], expected["kid_subset_size"]);
+    close("FID", first["fid"].as_f64().unwrap(), expected["fid"].as_f64().unwrap(), 1e-3);
+    close("KID mean", first["kid_mean"].as_f64().unwrap(), expected["kid_mean"].as_f64().unwrap(), 1e-3);
+    close("KID std", first["kid_std"].as_f64().unwrap(), expected["kid_std"].as_f64().unwrap(), 1e-3);
+    assert_eq!(first["real"]["cached"], 0);
+
+    // Again: every feature comes from the cache, and the figures are the same.
+    let second = fid_json(&[&[real.as_str(), fake.as_str()], &args[..]].concat());
+    assert_eq!((second["real"]["cached"].as_u64(), second["fake"]["cached"].as_u64()), (Some(5), Some(6)));
+    assert_eq!(first["fid"], second["fid"]);
+    assert_eq!(first["kid_mean"], second["kid_mean"]);
+}
+
+#[test]
+fn bad_input_is_one_line_before_any_work() {
+    let dir = scratch("fid-bad");
+    let (real, fake) = (fixture("real"), fixture("fake"));
+    let one = dir.join("one");
+    std::fs::create_dir_all(&one).unwrap();
+    std::fs::copy(fixture("real/real_00.png"), one.join("a.png")).unwrap();
+    let garbage = dir.join("garbage.pth");
+    std::fs::write(&garbage, b"PK\x03\x04 not really a zip").unwrap();
+    let missing = dir.join("missing.pth");
+    let cases: [(Vec<&str>, &str); 4] = [
+        (vec![&real, &fake, "--inception", missing.to_str().unwrap()], "--inception"),
+        (vec![&real, one.to_str().unwrap(), "--inception", garbage.to_str().unwrap()], "at least 2"),
+        (vec![&real, &fake, "--inception", garbage.to_str().unwrap()], "garbage.pth"),
+        (vec![&real, "/nonexistent/folder", "--inception", garbage.to_str().unwrap()], "not a folder"),
+    ];
+    for (args, needle) in cases {
+        let out = vkdiff(&[&["fid"], &args[..]].concat());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        let last = err.lines().last().unwrap_or("");
+        assert!(last.starts_with("error: ") && last.contains(needle), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}
