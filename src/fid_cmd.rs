@@ -83,7 +83,7 @@ pub fn run(args: &FidArgs) -> Result<()> {
     let extractor = FeatureExtractor::new(&ctx, &args.inception, args.precision.dtype(), args.batch)?;
     let encode = |files: &[PathBuf], dir: &Path, label: &'static str| -> Result<(Vec<f32>, usize)> {
         let mut cache = cache_dir.as_ref().map(|d| FeatureCache::open(d, dir, &extractor.fingerprint)).transpose()?;
-        let bar = Progress::new(label, "images");
+        let bar = Progress::new(label, "image");
         let features = extractor.features(files, cache.as_mut(), &mut |done, total| bar.update(done, total))?;
         Ok((features, cache.map_or(0, |c| c.hits)))
     };

@@ -40,7 +40,11 @@ impl Progress {
         let width = 30;
         let filled = width * done / total.max(1);
         let bar: String = "#".repeat(filled) + &"-".repeat(width - filled);
-        let speed = if rate >= 1.0 { format!("{rate:.2} {}/s", self.unit) } else { format!("{:.2} s/{}", 1.0 / rate.max(1e-9), self.unit) };
+        let speed = match rate {
+            r if r >= 1.0 => format!("{r:.2} {}/s", self.unit),
+            r if r > 0.0 => format!("{:.2} s/{}", 1.0 / r, self.unit),
+            _ => String::new(),
+        };
         let left = if rate > 0.0 { format!("{}left", duration(left)) } else { "…".into() };
         let line = format!("{} [{bar}] {done}/{total}  {speed}  {left}{note}", self.label);
         let mut err = std::io::stderr().lock();

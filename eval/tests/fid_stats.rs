@@ -2,7 +2,7 @@
 //! `tools/make_fid_stats_fixtures.py`: FID to 1e-10 relative of its exact (40-digit) value and to
 //! 1e-6 of torch-fidelity's, whose `eigvals(σ1·σ2)` is itself off by up to ~1e-7 when the
 //! covariances are rank-deficient; KID on float64 features (its formulas without float32
-//! round-off) to 1e-9, on float32 features (what it computes in practice) to 1e-3; numpy's
+//! round-off) to 1e-10, on float32 features (what it computes in practice) to 1e-3; numpy's
 //! `RandomState.choice` indices exactly.
 
 use serde_json::Value;
@@ -67,8 +67,8 @@ fn fid_and_kid_equal_torch_fidelity() {
         let errors = [
             close(&format!("{name} FID (exact)"), got_fid, v(case, "fid_exact"), 1e-10, 0.0),
             close(&format!("{name} FID (f64)"), got_fid, v(f64_ref, "fid"), 1e-6, 0.0),
-            close(&format!("{name} KID mean (f64)"), got_kid.mean, v(f64_ref, "kid_mean"), 1e-9, 0.0),
-            close(&format!("{name} KID std (f64)"), got_kid.std, v(f64_ref, "kid_std"), 1e-9, 1e-12),
+            close(&format!("{name} KID mean (f64)"), got_kid.mean, v(f64_ref, "kid_mean"), 1e-10, 0.0),
+            close(&format!("{name} KID std (f64)"), got_kid.std, v(f64_ref, "kid_std"), 1e-10, 1e-15),
             close(&format!("{name} FID (f32)"), got_fid, v(f32_ref, "fid"), 1e-6, 0.0),
             close(&format!("{name} KID mean (f32)"), got_kid.mean, v(f32_ref, "kid_mean"), 1e-3, 0.0),
             close(&format!("{name} KID std (f32)"), got_kid.std, v(f32_ref, "kid_std"), 1e-3, 1e-9),
@@ -81,6 +81,33 @@ fn fid_and_kid_equal_torch_fidelity() {
     }
 }
 
+#[test]
+fn fid_is_zero_for_a_set_with_itself_and_symmetric() {
+    let (want, feats) = (expected(), features());
+    for (name, case) in want["cases"].as_object().unwrap() {
+        let (x, y) = (&feats[&format!("{name}.x")], &feats[&format!("{name}.y")]);
+        let dim = case["dim"].as_u64().unwrap() as usize;
+        let (xy, yx) = (fid(x, y, dim).unwrap(), fid(y, x, dim).unwrap());
+        assert!(rel(yx, xy) < 1e-12, "{name}: FID(x, y) {xy}, FID(y, x) {yx}");
+        for z in [x, y] {
+            let own = fid(z, z, dim).unwrap();
+            assert!(own.abs() < 1e-12 * xy, "{name}: FID with itself {own}");
+        }
+    }
+}
+
+#[test]
+fn bad_features_are_clear_errors() {
+    let x: Vec<f32> = (0..12).map(|i| i as f32).collect();
+    assert!(fid(&x[..3], &x, 3).unwrap_err().0.contains("1 feature row(s); at least 2"));
+    assert!(fid(&x[..11], &x, 3).unwrap_err().0.contains("11 values are not rows of dimension 3"));
+    let mut nan = x.clone();
+    nan[7] = f32::NAN;
+    assert!(kid(&x, &nan, 3, &KidOptions::default()).unwrap_err().0.contains("KID set 2: row 2 has a non-finite"));
+    let no_subsets = KidOptions { subsets: 0, ..KidOptions::default() };
+    assert!(kid(&x, &x, 3, &no_subsets).unwrap_err().0.contains("at least 1 subset"));
+}
+
 /// torch-fidelity refuses a KID subset larger than a set; we clamp to the smaller set.
 #[test]
 fn kid_clamps_the_subset_size() {
@@ -89,8 +116,8 @@ fn kid_clamps_the_subset_size() {
     let opts = KidOptions { subsets: 10, ..KidOptions::default() };
     let got = kid(&feats["small.x"], &feats["small.y"], 64, &opts).unwrap();
     assert_eq!(got.subset_size, 30);
-    close("clamped KID mean", got.mean, clamped[0].as_f64().unwrap(), 1e-9, 0.0);
-    close("clamped KID std", got.std, clamped[1].as_f64().unwrap(), 1e-9, 1e-12);
+    close("clamped KID mean", got.mean, clamped[0].as_f64().unwrap(), 1e-10, 0.0);
+    close("clamped KID std", got.std, clamped[1].as_f64().unwrap(), 1e-10, 1e-15);
 }
 
 fn indices(v: &Value) -> Vec<usize> {

@@ -27,12 +27,10 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     if i >= p.n {
         return;
     }
-    let ch = i % p.c;
-    let pix = i / p.c;
-    let ox = pix % p.wo;
-    let rest = pix / p.wo;
-    let oy = rest % p.ho;
-    let base = (rest / p.ho) * p.h * p.w * p.c + ch;
+    let at = nhwc_position(i, p.ho, p.wo, p.c);
+    let oy = at.y;
+    let ox = at.z;
+    let base = at.x * p.h * p.w * p.c + at.w;
     // The window clipped to the image.
     let y0 = max(i32(oy * p.stride) - i32(p.pad), 0);
     let x0 = max(i32(ox * p.stride) - i32(p.pad), 0);

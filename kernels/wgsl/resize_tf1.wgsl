@@ -31,17 +31,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     if i >= p.n {
         return;
     }
-    let ch = i % p.c_out;
-    let pix = i / p.c_out;
+    let pos = nhwc_position(i, p.ho, p.wo, p.c_out);
     let at = p.first * p.ho * p.wo * p.c_out + i;
-    if ch >= p.c {
+    if pos.w >= p.c {
         out[at] = S(0.0);
         return;
     }
-    let ox = pix % p.wo;
-    let rest = pix / p.wo;
-    let oy = rest % p.ho;
-    let base = (rest / p.ho) * p.h * p.w * p.c + ch;
+    let oy = pos.y;
+    let ox = pos.z;
+    let base = pos.x * p.h * p.w * p.c + pos.w;
     let gy = f32(oy) * p.scale_y;
     let gx = f32(ox) * p.scale_x;
     let y0 = u32(gy);

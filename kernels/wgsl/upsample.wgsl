@@ -18,11 +18,6 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     if i >= p.n {
         return;
     }
-    let ch = i % p.c;
-    let pix = i / p.c;
-    let ox = pix % (2u * p.w);
-    let rest = pix / (2u * p.w);
-    let oy = rest % (2u * p.h);
-    let batch = rest / (2u * p.h);
-    out[i] = x[((batch * p.h + oy / 2u) * p.w + ox / 2u) * p.c + ch];
+    let at = nhwc_position(i, 2u * p.h, 2u * p.w, p.c);
+    out[i] = x[((at.x * p.h + at.y / 2u) * p.w + at.z / 2u) * p.c + at.w];
 }

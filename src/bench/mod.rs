@@ -2,6 +2,7 @@
 
 mod cpu_reference;
 mod dataset;
+mod fid;
 mod gen;
 mod kernels;
 mod lora;
@@ -31,6 +32,9 @@ pub enum BenchCommand {
     /// Seconds per image of `vkdiff dataset` with the paper's workflow (random full-size
     /// weights) by stage, against one `vkdiff gen` per image measured in the same run.
     Dataset(dataset::DatasetArgs),
+    /// Images per second of FID features (torch-fidelity's InceptionV3, random weights) over a
+    /// folder of PNGs, against torch-fidelity on the CPU.
+    Fid(fid::FidArgs),
 }
 
 pub fn run(cmd: BenchCommand) -> Result<()> {
@@ -42,5 +46,6 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Lora(args) => lora::run(&args),
         BenchCommand::Workflow(args) => workflow::run(&args),
         BenchCommand::Dataset(args) => dataset::run(&args),
+        BenchCommand::Fid(args) => fid::run(&args),
     }
 }
