@@ -106,7 +106,9 @@ fn bench(args: &FidArgs, dir: &Path) -> Result<Row> {
             ratio_to_cpu: None,
         }
     };
-    if !args.no_cpu_reference {
+    if args.no_cpu_reference {
+        row.cpu_reference = "not run (--no-cpu-reference)".into();
+    } else {
         match reference(&weights, dir, args.batch) {
             Ok((rate, what)) => (row.cpu_reference_images_per_s, row.cpu_reference, row.ratio_to_cpu) = (Some(rate), what, Some(row.images_per_s / rate)),
             Err(why) => row.cpu_reference = format!("unavailable: {why}"),
