@@ -16,7 +16,7 @@ pub struct FidArgs {
     /// The generated images, or a `vkdiff dataset` folder (its images/).
     fake: PathBuf,
     /// torch-fidelity's InceptionV3 weights, `weights-inception-2015-12-05-6726825d.pth` as torch
-    /// saved it (or the same tensors as .safetensors); pytorch-fid's `pt_inception-…` also loads.
+    /// saved it, or the same tensors as .safetensors.
     #[arg(long)]
     inception: PathBuf,
     /// Keep each folder's features (by file, size and time) and reuse them: the real set is

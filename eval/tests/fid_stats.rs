@@ -19,21 +19,10 @@ fn expected() -> Value {
     serde_json::from_str(&std::fs::read_to_string(dir().join("expected.json")).unwrap()).unwrap()
 }
 
-/// The f32 tensors of a safetensors file, by name.
+/// The fixture's feature sets, by name.
 fn features() -> HashMap<String, Vec<f32>> {
-    let bytes = std::fs::read(dir().join("features.safetensors")).unwrap();
-    let len = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
-    let header: Value = serde_json::from_slice(&bytes[8..8 + len]).unwrap();
-    let data = &bytes[8 + len..];
-    let mut out = HashMap::new();
-    for (name, t) in header.as_object().unwrap().iter().filter(|(k, _)| *k != "__metadata__") {
-        assert_eq!(t["dtype"], "F32");
-        let range = &t["data_offsets"];
-        let (begin, end) = (range[0].as_u64().unwrap() as usize, range[1].as_u64().unwrap() as usize);
-        let values = data[begin..end].chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap()));
-        out.insert(name.clone(), values.collect());
-    }
-    out
+    let file = vkdiff_unet::SafeTensors::open(&dir().join("features.safetensors")).unwrap();
+    file.entries.keys().map(|name| (name.clone(), file.values(name).unwrap().1)).collect()
 }
 
 fn rel(got: f64, want: f64) -> f64 {

@@ -1,6 +1,5 @@
 //! The InceptionV3 that FID and KID are defined with (TensorFlow's 2015-12-05 graph, as
-//! torch-fidelity's `FeatureExtractorInceptionV3` and pytorch-fid run it): TF 1.x bilinear resize
-//! to 299², (x − 128)/128, the network, and the 2048 pooled features. Each `BasicConv2d` is one
+//! torch-fidelity's `FeatureExtractorInceptionV3` runs it): TF 1.x bilinear resize to 299², (x − 128)/128, the network, and the 2048 pooled features. Each `BasicConv2d` is one
 //! convolution with its batch norm folded in and ReLU fused into the store.
 
 use crate::error::{Error, Result};
@@ -134,7 +133,7 @@ pub struct InceptionV3 {
 impl InceptionV3 {
     /// Builds the network from tensors named as in torch-fidelity's
     /// `weights-inception-2015-12-05-6726825d.pth` (pytorch-fid's `pt_inception-…` uses the same
-    /// names). `fc` and `num_batches_tracked` are not needed for the pooled features.
+    /// torchvision names). `fc` and `num_batches_tracked` are not needed for the pooled features.
     pub fn load(ctx: &Context, dtype: Dtype, src: &dyn TensorSource) -> Result<InceptionV3> {
         let mut layers = Vec::new();
         for (name, stage) in architecture() {
