@@ -1,10 +1,11 @@
-// Bilinear resize of NHWC images as TensorFlow 1.x computes it (align_corners=False, no half-pixel
+// Bilinear resize of an 8-bit image as TensorFlow 1.x computes it (align_corners=False, no half-pixel
 // centres): output pixel d samples the input at d·(in/out), its far neighbour clamped to the last
 // row or column. This is the resize the FID Inception was defined with, which torch-fidelity
-// reproduces; then out = (v + shift)·scale (torch-fidelity: (v − 128)/128). The images land at
-// image `first` of the output onwards, so images of other sizes can share one batch. Output
-// channels past the input's are zero: RGB padded to 4 channels takes the vectorised convolution.
-@group(0) @binding(0) var<storage, read> x: array<S>;
+// reproduces; then out = (v + shift)·scale (torch-fidelity: (v − 128)/128). The image is its
+// bytes (H·W·C, row-major), four to a word: a 12-megapixel photo binds as 36 MB, not 144. It lands
+// as image `first` of the NHWC output, so images of other sizes share one batch. Output channels
+// past the input's are zero: RGB padded to 4 channels takes the vectorised convolution.
+@group(0) @binding(0) var<storage, read> x: array<u32>;
 @group(0) @binding(1) var<storage, read_write> out: array<S>;
 
 struct Params {
@@ -25,6 +26,10 @@ struct Params {
 
 var<immediate> p: Params;
 
+fn byte_at(i: u32) -> f32 {
+    return f32((x[i / 4u] >> (8u * (i % 4u))) & 0xffu);
+}
+
 @compute @workgroup_size(64)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let i = element_index(wg, lid);
@@ -37,21 +42,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         out[at] = S(0.0);
         return;
     }
-    let oy = pos.y;
-    let ox = pos.z;
-    let base = pos.x * p.h * p.w * p.c + pos.w;
-    let gy = f32(oy) * p.scale_y;
-    let gx = f32(ox) * p.scale_x;
+    let gy = f32(pos.y) * p.scale_y;
+    let gx = f32(pos.z) * p.scale_x;
     let y0 = u32(gy);
     let x0 = u32(gx);
     let y1 = min(y0 + 1u, p.h - 1u);
     let x1 = min(x0 + 1u, p.w - 1u);
     let dy = gy - f32(y0);
     let dx = gx - f32(x0);
-    let v00 = f32(x[base + (y0 * p.w + x0) * p.c]);
-    let v01 = f32(x[base + (y0 * p.w + x1) * p.c]);
-    let v10 = f32(x[base + (y1 * p.w + x0) * p.c]);
-    let v11 = f32(x[base + (y1 * p.w + x1) * p.c]);
+    let v00 = byte_at((y0 * p.w + x0) * p.c + pos.w);
+    let v01 = byte_at((y0 * p.w + x1) * p.c + pos.w);
+    let v10 = byte_at((y1 * p.w + x0) * p.c + pos.w);
+    let v11 = byte_at((y1 * p.w + x1) * p.c + pos.w);
     let top = v00 + (v01 - v00) * dx;
     let bottom = v10 + (v11 - v10) * dx;
     out[at] = S((top + (bottom - top) * dy + p.shift) * p.scale);

@@ -2,7 +2,7 @@
 //! global), the TensorFlow 1.x bilinear resize, and writing a branch into a channel slice.
 
 use crate::common::*;
-use vkdiff_runtime::ops::{copy_into_channels, pool2d, resize_tf1, Pool, PoolOp};
+use vkdiff_runtime::ops::{copy_into_channels, pool2d, resize_tf1, upload_image_bytes, Pool, PoolOp};
 
 /// Reference pooling of NHWC `x` [b, h, w, c].
 fn pool_ref(x: &[f32], [b, h, w, c]: [usize; 4], p: &Pool) -> Vec<f64> {
@@ -75,8 +75,9 @@ fn pools_one_image_at_a_time_past_the_binding_limit() {
     assert_close("banded max pool", &out.download().unwrap(), &pool_ref(&x, shape, &pool), 0.0, 0.0);
 }
 
-/// torch-fidelity's `interpolate_bilinear_2d_like_tensorflow1x`, in the same float32 steps.
-fn resize_ref(x: &[f32], [b, h, w, c]: [usize; 4], ho: usize, wo: usize) -> Vec<f64> {
+/// torch-fidelity's `interpolate_bilinear_2d_like_tensorflow1x` of an 8-bit image, then
+/// (v − 128)/128, in the same float32 steps.
+fn resize_ref(x: &[u8], [h, w, c]: [usize; 3], ho: usize, wo: usize) -> Vec<f64> {
     let axis = |n_in: usize, n_out: usize| {
         let scale = (n_in as f64 / n_out as f64) as f32;
         (0..n_out).map(move |d| {
@@ -86,35 +87,36 @@ fn resize_ref(x: &[f32], [b, h, w, c]: [usize; 4], ho: usize, wo: usize) -> Vec<
         })
     };
     let mut out = Vec::new();
-    for n in 0..b {
-        for (y0, y1, dy) in axis(h, ho) {
-            for (x0, x1, dx) in axis(w, wo) {
-                for ch in 0..c {
-                    let at = |y: usize, x_: usize| x[((n * h + y) * w + x_) * c + ch];
-                    let top = at(y0, x0) + (at(y0, x1) - at(y0, x0)) * dx;
-                    let bottom = at(y1, x0) + (at(y1, x1) - at(y1, x0)) * dx;
-                    out.push(((top + (bottom - top) * dy - 128.0) / 128.0) as f64);
-                }
+    for (y0, y1, dy) in axis(h, ho) {
+        for (x0, x1, dx) in axis(w, wo) {
+            for ch in 0..c {
+                let at = |y: usize, x_: usize| x[(y * w + x_) * c + ch] as f32;
+                let top = at(y0, x0) + (at(y0, x1) - at(y0, x0)) * dx;
+                let bottom = at(y1, x0) + (at(y1, x1) - at(y1, x0)) * dx;
+                out.push(((top + (bottom - top) * dy - 128.0) / 128.0) as f64);
             }
         }
     }
     out
 }
 
+fn bytes(n: usize, seed: u64) -> Vec<u8> {
+    random(n, seed).iter().map(|v| ((v + 1.0) * 127.9) as u8).collect()
+}
+
 #[test]
 fn resize_like_tensorflow1x() {
     let ctx = ctx();
-    // Down- and up-sampling, non-square, to Inception's 299.
-    for (shape, ho, wo) in [([2, 37, 23, 3], 19, 41), ([1, 320, 256, 3], 299, 299), ([1, 64, 48, 3], 299, 299)] {
+    // Down- and up-sampling, non-square, to Inception's 299; 5·7·3 bytes end inside a word.
+    for ([h, w], ho, wo) in [([37, 23], 19, 41), ([320, 256], 299, 299), ([64, 48], 299, 299), ([5, 7], 3, 4)] {
         for dtype in DTYPES {
-            let n: usize = shape.iter().product();
-            let pixels: Vec<f32> = random(n, 77).iter().map(|v| ((v + 1.0) * 127.5).floor()).collect();
-            let tx = ctx.upload(&shape, dtype, &pixels).unwrap();
-            let out = ctx.zeros(&[shape[0], ho, wo, 3], dtype).unwrap();
-            ctx.run(|rec| resize_tf1(rec, &tx, &out, 0, -128.0, 1.0 / 128.0)).unwrap();
-            // Pixel values are exact in f16; the interpolation runs in f32 as in torch-fidelity.
-            let what = format!("resize {shape:?} -> {ho}x{wo} {dtype:?}");
-            assert_close(&what, &out.download().unwrap(), &resize_ref(&pixels, shape, ho, wo), 2e-6, storage_rtol(dtype));
+            let pixels = bytes(h * w * 3, 77);
+            let image = upload_image_bytes(&ctx, &pixels).unwrap();
+            let out = ctx.zeros(&[1, ho, wo, 3], dtype).unwrap();
+            ctx.run(|rec| resize_tf1(rec, &image, [h, w, 3], &out, 0, -128.0, 1.0 / 128.0)).unwrap();
+            // The interpolation runs in f32 as in torch-fidelity.
+            let what = format!("resize {h}x{w} -> {ho}x{wo} {dtype:?}");
+            assert_close(&what, &out.download().unwrap(), &resize_ref(&pixels, [h, w, 3], ho, wo), 2e-6, storage_rtol(dtype));
         }
     }
 }
@@ -122,13 +124,13 @@ fn resize_like_tensorflow1x() {
 #[test]
 fn resize_into_a_later_slot_of_the_batch_padded_to_four_channels() {
     let ctx = ctx();
-    let (shape, pixels) = ([1, 9, 14, 3], random(9 * 14 * 3, 78));
-    let tx = ctx.upload(&shape, vkdiff_runtime::Dtype::F32, &pixels).unwrap();
+    let pixels = bytes(9 * 14 * 3, 78);
+    let image = upload_image_bytes(&ctx, &pixels).unwrap();
     // A fourth channel, which the resize fills with zeros.
     let out = ctx.upload(&[3, 5, 6, 4], vkdiff_runtime::Dtype::F32, &[7.0; 3 * 5 * 6 * 4]).unwrap();
-    ctx.run(|rec| resize_tf1(rec, &tx, &out, 2, -128.0, 1.0 / 128.0)).unwrap();
+    ctx.run(|rec| resize_tf1(rec, &image, [9, 14, 3], &out, 2, -128.0, 1.0 / 128.0)).unwrap();
     let mut want = vec![7.0; 2 * 5 * 6 * 4];
-    want.extend(resize_ref(&pixels, shape, 5, 6).chunks(3).flat_map(|px| [px[0], px[1], px[2], 0.0]));
+    want.extend(resize_ref(&pixels, [9, 14, 3], 5, 6).chunks(3).flat_map(|px| [px[0], px[1], px[2], 0.0]));
     assert_close("resize into slot 2, padded to 4 channels", &out.download().unwrap(), &want, 2e-6, 1e-6);
 }
 

@@ -165,9 +165,8 @@ impl InceptionV3 {
             if img.width == 0 || img.height == 0 || img.data.len() != img.width * img.height * 3 {
                 return Err(Error::Config(format!("image {slot}: {} bytes for {}×{} RGB", img.data.len(), img.width, img.height)));
             }
-            let pixels: Vec<f32> = img.data.iter().map(|&v| v as f32).collect();
-            let t = self.ctx.upload(&[1, img.height, img.width, 3], self.dtype, &pixels)?;
-            ops::resize_tf1(&mut g.rec, &t, &x, slot, -128.0, 1.0 / 128.0)?;
+            let bytes = ops::upload_image_bytes(&self.ctx, img.data)?;
+            ops::resize_tf1(&mut g.rec, &bytes, [img.height, img.width, 3], &x, slot, -128.0, 1.0 / 128.0)?;
         }
         let mut x = x;
         for layer in &self.layers {

@@ -14,7 +14,7 @@ pub use conv::{conv2d, oihw_to_ohwi, ConvParams, Padding};
 pub use elementwise::{add, binary, concat_channels, copy_into_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x, BinaryOp, TimestepEmbedding, UnaryOp};
 pub use gemm::{linear, matmul, Matmul};
 pub use norm::{group_norm, layer_norm, softmax};
-pub use pool::{pool2d, resize_tf1, Pool, PoolOp};
+pub use pool::{pool2d, resize_tf1, upload_image_bytes, Pool, PoolOp};
 
 use crate::context::Context;
 use crate::error::{ensure, Error, Result};

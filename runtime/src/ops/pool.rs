@@ -5,7 +5,8 @@ use super::bands::{fit, image_rows};
 use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u};
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
-use crate::tensor::Tensor;
+use crate::context::Context;
+use crate::tensor::{Dtype, Tensor};
 use std::sync::Arc;
 use crate::pipeline::Kernel;
 
@@ -51,21 +52,29 @@ pub fn pool2d(rec: &mut Recorder, x: &Tensor, out: &Tensor, pool: &Pool) -> Resu
     per_image(rec, &k, x, out, push)
 }
 
-/// out[first..first + B, Ho, Wo, ..C] = (x[B, H, W, C] resized bilinearly as TensorFlow 1.x does
-/// it + shift) · scale, and 0 in any further channels of `out`: images of any size resized into
-/// their slots of one network batch.
-pub fn resize_tf1(rec: &mut Recorder, x: &Tensor, out: &Tensor, first: usize, shift: f32, scale: f32) -> Result<()> {
-    let dtype = same_dtype(rec.context(), "resize", &[x, out])?;
-    let [b, h, w, c] = nhwc(x, "resize")?;
+/// An 8-bit image's bytes (H·W·C, row-major) on the device, four to a 32-bit word, as
+/// [`resize_tf1`] reads them.
+pub fn upload_image_bytes(ctx: &Context, bytes: &[u8]) -> Result<Tensor> {
+    let mut words = bytes.to_vec();
+    words.resize(bytes.len().div_ceil(4).max(1) * 4, 0);
+    ctx.upload_bytes(&[words.len() / 4], Dtype::F32, &words)
+}
+
+/// out[first, Ho, Wo, ..C] = (the 8-bit image (`image`, from [`upload_image_bytes`], of
+/// `[H, W, C]`) resized bilinearly as TensorFlow 1.x does it + shift) · scale, and 0 in any further
+/// channels of `out`: images of any size resized into their slots of one network batch.
+pub fn resize_tf1(rec: &mut Recorder, image: &Tensor, [h, w, c]: [usize; 3], out: &Tensor, first: usize, shift: f32, scale: f32) -> Result<()> {
+    let dtype = same_dtype(rec.context(), "resize", &[out])?;
     let [ob, ho, wo, oc] = nhwc(out, "resize")?;
-    ensure(first + b <= ob && oc >= c, || format!("resize: {:?} into images {first}.. of {:?}", x.shape(), out.shape()))?;
-    ensure(fit(rec.context(), &[x, out]), || format!("resize: {:?} into {:?} passes the binding limit", x.shape(), out.shape()))?;
+    ensure(h > 0 && w > 0 && c > 0 && image.bytes() as usize >= h * w * c, || format!("resize: {} bytes for a {h}×{w}×{c} image", image.bytes()))?;
+    ensure(first < ob && oc >= c, || format!("resize: a {h}×{w}×{c} image into image {first} of {:?}", out.shape()))?;
+    ensure(fit(rec.context(), &[image, out]), || format!("resize: a {h}×{w}×{c} image into {:?} passes the binding limit", out.shape()))?;
     let k = kernel(rec.context(), "resize_tf1", dtype, &[], 2)?;
     // torch-fidelity: the ratio in double precision, then rounded to float32.
     let ratio = |i: usize, o: usize| (i as f64 / o as f64) as f32;
-    let n = b * ho * wo * oc;
+    let n = ho * wo * oc;
     let push = [u(n), u(h), u(w), u(c), u(oc), u(ho), u(wo), f(ratio(h, ho)), f(ratio(w, wo)), f(shift), f(scale), u(first)];
-    dispatch_flat(rec, &k, &[x], &[out], &push, element_groups(n))
+    dispatch_flat(rec, &k, &[image], &[out], &push, element_groups(n))
 }
 
 fn nhwc(t: &Tensor, what: &str) -> Result<[usize; 4]> {
