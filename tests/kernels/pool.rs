@@ -134,9 +134,8 @@ fn resize_into_a_later_slot_of_the_batch_padded_to_four_channels() {
     assert_close("resize into slot 2, padded to 4 channels", &out.download().unwrap(), &want, 2e-6, 1e-6);
 }
 
-#[test]
-fn branches_written_into_channel_slices() {
-    let ctx = ctx();
+/// Three branches of [2, 5, 3, C] written side by side into one tensor on `ctx`.
+fn check_channel_slices(ctx: &vkdiff_runtime::Context, what: &str) {
     for dtype in DTYPES {
         let (pixels, widths) = (2 * 5 * 3, [4, 12, 8]);
         let total: usize = widths.iter().sum();
@@ -154,6 +153,19 @@ fn branches_written_into_channel_slices() {
             }
             offset += c;
         }
-        assert_close(&format!("channel slices {dtype:?}"), &out.download().unwrap(), &want, 0.0, 0.0);
+        assert_close(&format!("{what} {dtype:?}"), &out.download().unwrap(), &want, 0.0, 0.0);
     }
+}
+
+#[test]
+fn branches_written_into_channel_slices() {
+    check_channel_slices(&ctx(), "channel slices");
+}
+
+#[test]
+fn channel_slices_in_bands_past_the_binding_limit() {
+    let ctx = ctx_with(vkdiff_runtime::GemmFamily::Subgroup);
+    // 8 pixels of the 24-channel output per binding in f16, 4 in f32: the 30 pixels go in bands.
+    ctx.set_binding_limit(8 * 24 * 2);
+    check_channel_slices(&ctx, "banded channel slices");
 }
