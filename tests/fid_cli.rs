@@ -64,7 +64,9 @@ fn bad_input_is_one_line_before_any_work() {
     let garbage = dir.join("garbage.pth");
     std::fs::write(&garbage, b"PK\x03\x04 not really a zip").unwrap();
     let missing = dir.join("missing.pth");
-    let cases: [(Vec<&str>, &str); 4] = [
+    let cases: [(Vec<&str>, &str); 6] = [
+        (vec![&real, &fake, "--inception", garbage.to_str().unwrap(), "--batch", "0"], "--batch"),
+        (vec![&real, &fake, "--inception", garbage.to_str().unwrap(), "--kid-subset-size", "1"], "--kid-subset-size"),
         (vec![&real, &fake, "--inception", missing.to_str().unwrap()], "--inception"),
         (vec![&real, one.to_str().unwrap(), "--inception", garbage.to_str().unwrap()], "at least 2"),
         (vec![&real, &fake, "--inception", garbage.to_str().unwrap()], "garbage.pth"),
