@@ -38,3 +38,16 @@ pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String>
         })
         .collect()
 }
+
+/// Runs a reference script with `$VKDIFF_REFERENCE_PYTHON` (else python3) and `args`, and reads
+/// the JSON line it prints last; or why it could not run.
+pub fn run_python_reference<S: AsRef<std::ffi::OsStr>>(script: &str, args: impl IntoIterator<Item = S>) -> Result<serde_json::Value, String> {
+    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
+    let out = Command::new(&python).arg("-c").arg(script).args(args).output().map_err(|e| format!("{python} not runnable ({e})"))?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        return Err(format!("{python}: {}", err.lines().last().unwrap_or("failed")));
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(text.lines().last().unwrap_or("")).map_err(|e| format!("reference output is not JSON: {e}"))
+}

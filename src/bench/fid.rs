@@ -5,7 +5,6 @@
 use crate::model_args::Precision;
 use anyhow::{Context as _, Result};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Instant;
 use vkdiff_eval::fid::FeatureExtractor;
 use vkdiff_pipeline::RgbImage;
@@ -143,19 +142,7 @@ fn write_images(dir: &Path, n: usize, size: usize) -> Result<Vec<PathBuf>> {
 
 /// torch-fidelity on the CPU: images per second and what ran it.
 fn reference(weights: &Path, dir: &Path, batch: usize) -> std::result::Result<(f64, String), String> {
-    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
-    let out = Command::new(&python)
-        .arg("-c")
-        .arg(REFERENCE)
-        .args([weights.as_os_str(), dir.as_os_str(), batch.to_string().as_ref()])
-        .output()
-        .map_err(|e| format!("{python} not runnable ({e})"))?;
-    if !out.status.success() {
-        let err = String::from_utf8_lossy(&out.stderr);
-        return Err(format!("{python}: {}", err.lines().last().unwrap_or("failed")));
-    }
-    let line = String::from_utf8_lossy(&out.stdout);
-    let v: serde_json::Value = serde_json::from_str(line.lines().last().unwrap_or("")).map_err(|e| e.to_string())?;
+    let v = super::cpu_reference::run_python_reference(REFERENCE, [weights.as_os_str(), dir.as_os_str(), batch.to_string().as_ref()])?;
     let rate = v["images_per_s"].as_f64().ok_or("no images_per_s")?;
     Ok((rate, format!("torch {} / torch-fidelity {}, {} threads", v["torch"].as_str().unwrap_or("?"), v["torch_fidelity"].as_str().unwrap_or("?"), v["threads"])))
 }

@@ -2,8 +2,7 @@
 //! weights (text encoders, UNet, VAE), timed by stage on the device, beside diffusers'
 //! StableDiffusionXLPipeline on this machine's CPU in the same run.
 
-use anyhow::{Context as _, Result};
-use std::process::Command;
+use anyhow::Result;
 use std::time::Instant;
 use vkdiff_pipeline::{Guides, SamplerKind, Sampling, Sdxl, TextToImage};
 use vkdiff_runtime::{Context, Dtype};
@@ -112,17 +111,6 @@ pub(super) fn bench_job(size: usize, steps: usize) -> TextToImage {
 }
 
 fn reference(size: usize, steps: usize) -> std::result::Result<serde_json::Value, String> {
-    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
-    let out = Command::new(&python)
-        .arg("-c")
-        .arg(REFERENCE)
-        .args([SDXL_BASE_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_BIGG_CONFIG, SDXL_VAE_CONFIG, TOKENIZERS])
-        .args([size.to_string(), steps.to_string()])
-        .output()
-        .map_err(|e| format!("{python} not runnable ({e})"))?;
-    if !out.status.success() {
-        let err = String::from_utf8_lossy(&out.stderr);
-        return Err(format!("{python}: {}", err.lines().last().unwrap_or("failed")));
-    }
-    serde_json::from_slice(&out.stdout).context("reference output is not JSON").map_err(|e| e.to_string())
+    let configs = [SDXL_BASE_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_BIGG_CONFIG, SDXL_VAE_CONFIG, TOKENIZERS].map(String::from);
+    super::cpu_reference::run_python_reference(REFERENCE, configs.into_iter().chain([size.to_string(), steps.to_string()]))
 }

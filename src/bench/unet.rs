@@ -4,7 +4,6 @@
 use crate::model_args::Precision;
 use super::kernels::{dtype_name, rand_tensor};
 use anyhow::{Context as _, Result};
-use std::process::Command;
 use std::time::Instant;
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_unet::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
@@ -153,18 +152,8 @@ struct Reference {
 }
 
 fn reference(latent: usize, batch: usize, samples: usize) -> std::result::Result<Reference, String> {
-    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
-    let out = Command::new(&python)
-        .arg("-c")
-        .arg(REFERENCE)
-        .args([SDXL_BASE_CONFIG.to_string(), latent.to_string(), latent.to_string(), batch.to_string(), samples.max(1).to_string()])
-        .output()
-        .map_err(|e| format!("{python} not runnable ({e})"))?;
-    if !out.status.success() {
-        let err = String::from_utf8_lossy(&out.stderr);
-        return Err(format!("{python}: {}", err.lines().last().unwrap_or("failed")));
-    }
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).map_err(|e| e.to_string())?;
+    let args = [SDXL_BASE_CONFIG.to_string(), latent.to_string(), latent.to_string(), batch.to_string(), samples.max(1).to_string()];
+    let v = super::cpu_reference::run_python_reference(REFERENCE, args)?;
     let ms = v["ms"].as_f64().context("no ms").map_err(|e| e.to_string())?;
     let what = format!("torch {} / diffusers {}, {} threads", v["torch"].as_str().unwrap_or("?"), v["diffusers"].as_str().unwrap_or("?"), v["threads"]);
     Ok(Reference { ms, peak_mib: v["peak_mib"].as_f64().unwrap_or(0.0), what })

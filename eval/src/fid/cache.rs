@@ -14,7 +14,7 @@ pub struct FeatureCache {
     path: PathBuf,
     /// File stamp → its features.
     rows: HashMap<String, Vec<f32>>,
-    /// Whether the file on disk already holds exactly what `store` would write.
+    /// The stamps the file on disk holds, in order: storing the same list again writes nothing.
     loaded_stamps: Vec<String>,
     fingerprint: String,
     pub hits: usize,
@@ -45,11 +45,6 @@ impl FeatureCache {
         }
         self.rows = stamps.iter().cloned().zip(values.chunks_exact(INCEPTION_FEATURES).map(<[f32]>::to_vec)).collect();
         self.loaded_stamps = stamps;
-    }
-
-    /// Where this folder's features are kept.
-    pub fn path(&self) -> &Path {
-        &self.path
     }
 
     /// The cached features of `file`, if it is unchanged since they were computed.
