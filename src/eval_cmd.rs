@@ -4,7 +4,7 @@
 use anyhow::{bail, Context, Result};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use vkdiff_eval::{evaluate, foreground_iou, Dataset, EvalParams, Geometry, IouType};
+use vkdiff_eval::{evaluate, foreground_iou, AreaRule, AreaSource, Dataset, EvalParams, Geometry, IouType};
 
 #[derive(clap::Args)]
 pub struct EvalArgs {
@@ -24,9 +24,22 @@ pub struct EvalArgs {
     /// Predictions at or above this score make the foreground mask (foreground IoU, segm only).
     #[arg(long, default_value_t = 0.5)]
     score_threshold: f64,
+    /// Where each detection's area, which sorts it into small / medium / large, comes from.
+    /// `loadres`: as pycocotools' loadRes decides from the first result: w·h of the boxes when it
+    /// has a bbox (what Detectron2, MMDetection and YOLO exporters write), else the masks.
+    /// `mask`: the masks' areas whatever boxes the results carry (Detectron2's COCOEvaluator,
+    /// which drops bbox before segm evaluation).
+    #[arg(long, value_enum, default_value = "loadres")]
+    area_from: AreaFromArg,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum AreaFromArg {
+    Loadres,
+    Mask,
 }
 
 fn read_json(path: &Path) -> Result<Value> {
@@ -44,7 +57,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let max_dets: [usize; 3] = args.max_dets.clone().try_into().map_err(|_| anyhow::anyhow!("--max-dets takes three numbers"))?;
     let masks = iou_type == IouType::Segm;
     let gt = Dataset::ground_truth(&read_json(&args.gt)?, masks).with_context(|| format!("{}", args.gt.display()))?;
-    let dt = Dataset::results(&read_json(&args.pred)?, &gt, masks).with_context(|| format!("{}", args.pred.display()))?;
+    let pred = read_json(&args.pred)?;
+    let rule = match args.area_from {
+        AreaFromArg::Loadres => AreaRule::LoadRes,
+        AreaFromArg::Mask => AreaRule::Mask,
+    };
+    let areas = AreaSource::of_results(&pred, rule).with_context(|| format!("{}", args.pred.display()))?;
+    let dt = Dataset::results(&pred, &gt, masks, areas).with_context(|| format!("{}", args.pred.display()))?;
     if gt.annotations.is_empty() {
         bail!("{} holds no annotations", args.gt.display());
     }
@@ -77,12 +96,24 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         }
         rows.push(("foreground_IoU".into(), foreground_iou(&per_image.into_values().collect::<Vec<_>>())));
     }
+    let rule_name = match rule {
+        AreaRule::LoadRes => "loadres",
+        AreaRule::Mask => "mask",
+    };
     if args.json {
-        let map: serde_json::Map<String, Value> = rows.iter().map(|(k, x)| (k.clone(), serde_json::json!(x))).collect();
+        let mut map: serde_json::Map<String, Value> = rows.iter().map(|(k, x)| (k.clone(), serde_json::json!(x))).collect();
+        map.insert("area_from".into(), areas.name().into());
+        map.insert("area_rule".into(), rule_name.into());
         println!("{}", serde_json::to_string_pretty(&Value::Object(map))?);
         return Ok(());
     }
     println!("{} images, {} ground-truth annotations, {} predictions, iou type {}", gt.images.len(), gt.annotations.len(), dt.annotations.len(), args.iou_type);
+    let why = match (rule, areas) {
+        (AreaRule::Mask, _) => "--area-from mask",
+        (_, AreaSource::Box) => "as pycocotools' loadRes: the first result has a bbox; --area-from mask for Detectron2's rule",
+        (_, AreaSource::Mask) => "as pycocotools' loadRes: the first result has no bbox",
+    };
+    println!("detection areas from each {} ({why})", areas.name());
     for (name, x) in rows {
         println!("{name:<16} {x:.4}");
     }

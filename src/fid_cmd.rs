@@ -6,7 +6,7 @@ use crate::model_args::Precision;
 use crate::progress::Progress;
 use anyhow::{bail, ensure, Context as _, Result};
 use std::path::{Path, PathBuf};
-use vkdiff_eval::fid::{fid, kid, list_images, FeatureCache, FeatureExtractor, KidOptions};
+use vkdiff_eval::fid::{check_images, fid, kid, list_images, FeatureCache, FeatureExtractor, KidOptions};
 use vkdiff_unet::INCEPTION_FEATURES;
 
 #[derive(clap::Args)]
@@ -57,9 +57,6 @@ fn images_of(dir: &Path, what: &str) -> Result<Vec<PathBuf>> {
     ensure!(dir.is_dir(), "{what} {}: not a folder", dir.display());
     let files = list_images(dir)?;
     ensure!(files.len() >= 2, "{what} {}: {} png/jpg/jpeg images; FID and KID need at least 2", dir.display(), files.len());
-    if files.iter().any(|f| f.extension().is_some_and(|e| !e.eq_ignore_ascii_case("png"))) {
-        eprintln!("note: {what} {} holds JPEG images; lossy compression moves FID, and JPEG decoders differ slightly from PIL's", dir.display());
-    }
     Ok(files)
 }
 
@@ -81,14 +78,20 @@ pub fn run(args: &FidArgs) -> Result<()> {
 
     let ctx = vkdiff_runtime::Context::new(args.device)?;
     let extractor = FeatureExtractor::new(&ctx, &args.inception, args.precision.dtype(), args.batch)?;
-    let encode = |files: &[PathBuf], dir: &Path, label: &'static str| -> Result<(Vec<f32>, usize)> {
-        let mut cache = cache_dir.as_ref().map(|d| FeatureCache::open(d, dir, &extractor.fingerprint)).transpose()?;
+    let open_cache = |dir: &Path| cache_dir.as_ref().map(|d| FeatureCache::open(d, dir, &extractor.fingerprint)).transpose();
+    let (mut real_cache, mut fake_cache) = (open_cache(&args.real)?, open_cache(&args.fake)?);
+    // Every file the network will read, of both folders, is read once before any encoding.
+    let uncached = |files: &[PathBuf], cache: &Option<FeatureCache>| -> Vec<PathBuf> { files.iter().filter(|f| !cache.as_ref().is_some_and(|c| c.has(f))).cloned().collect() };
+    let unchecked = [uncached(&real, &real_cache), uncached(&fake, &fake_cache)].concat();
+    let bar = Progress::new("reading", "image");
+    check_images(&unchecked.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &mut |done, total| bar.update(done, total))?;
+    let encode = |files: &[PathBuf], mut cache: Option<FeatureCache>, label: &'static str| -> Result<(Vec<f32>, usize)> {
         let bar = Progress::new(label, "image");
         let features = extractor.features(files, cache.as_mut(), &mut |done, total| bar.update(done, total))?;
         Ok((features, cache.map_or(0, |c| c.hits)))
     };
-    let (real_features, real_cached) = encode(&real, &args.real, "real")?;
-    let (fake_features, fake_cached) = encode(&fake, &args.fake, "fake")?;
+    let (real_features, real_cached) = encode(&real, real_cache.take(), "real")?;
+    let (fake_features, fake_cached) = encode(&fake, fake_cache.take(), "fake")?;
 
     let fid_value = fid(&fake_features, &real_features, INCEPTION_FEATURES)?;
     let opts = KidOptions { subsets: args.kid_subsets, subset_size, ..KidOptions::default() };

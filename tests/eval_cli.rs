@@ -33,6 +33,24 @@ fn prints_pycocotools_statistics_f1_and_miou() {
 }
 
 #[test]
+fn detector_files_are_scored_by_box_areas_unless_area_from_mask() {
+    let expected: Value = serde_json::from_str(&std::fs::read_to_string(fixture("expected.json")).unwrap()).unwrap();
+    let stats = |args: &[&str]| {
+        let out = vkdiff(&[&["eval", "--gt", &fixture("gt.json"), "--pred", &fixture("dt_both.json"), "--json"][..], args].concat());
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice::<Value>(&out.stdout).unwrap()
+    };
+    for (args, key, area_from, rule) in [(vec![], "segm [1, 10, 100] both", "box", "loadres"), (vec!["--area-from", "mask"], "segm [1, 10, 100] both, boxes dropped", "mask", "mask")] {
+        let got = stats(&args);
+        assert_eq!((got["area_from"].as_str(), got["area_rule"].as_str()), (Some(area_from), Some(rule)));
+        for (i, name) in ["AP", "APs", "APm", "APl"].iter().zip([0, 3, 4, 5]).map(|(n, i)| (i, n)) {
+            let (g, w) = (got[name].as_f64().unwrap(), expected[key]["stats"][i].as_f64().unwrap());
+            assert!((g - w).abs() <= 1e-6, "{key}: {name} {g} against pycocotools {w}");
+        }
+    }
+}
+
+#[test]
 fn annotation_id_zero_is_matched_and_warned_about() {
     // The same ground truth with ids from 0 (as Roboflow exports them) scores the same.
     let mut gt: Value = serde_json::from_str(&std::fs::read_to_string(fixture("gt.json")).unwrap()).unwrap();

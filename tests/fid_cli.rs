@@ -81,3 +81,32 @@ fn bad_input_is_one_line_before_any_work() {
         assert!(!err.contains("panicked"), "{err}");
     }
 }
+
+#[test]
+fn every_unreadable_image_of_both_folders_is_named_before_any_encoding() {
+    let dir = scratch("fid-unreadable");
+    let w = weights(&dir);
+    let (real, fake) = (dir.join("real"), dir.join("fake"));
+    for (from, to) in [(fixture("real"), &real), (fixture("fake"), &fake)] {
+        std::fs::create_dir_all(to).unwrap();
+        for entry in std::fs::read_dir(from).unwrap() {
+            let path = entry.unwrap().path();
+            std::fs::copy(&path, to.join(path.file_name().unwrap())).unwrap();
+        }
+    }
+    // A truncated PNG and a text file named .png among the generated images, an empty .jpg among
+    // the photos: the real folder comes first, and is not encoded before they are found.
+    let png = std::fs::read(fake.join("fake_02.png")).unwrap();
+    std::fs::write(fake.join("fake_02.png"), &png[..png.len() / 2]).unwrap();
+    std::fs::write(fake.join("notes.png"), b"not an image\n").unwrap();
+    std::fs::write(real.join("empty.jpg"), b"").unwrap();
+    let out = vkdiff(&["fid", real.to_str().unwrap(), fake.to_str().unwrap(), "--inception", w.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    let last = err.lines().last().unwrap_or("");
+    assert!(last.starts_with("error: 3 of 13 images cannot be read"), "{err}");
+    for name in ["fake_02.png", "notes.png", "empty.jpg"] {
+        assert!(last.contains(name), "{name} is not named: {err}");
+    }
+    assert!(!err.lines().any(|l| l.starts_with("real [") || l.starts_with("fake [")), "encoding started: {err}");
+}

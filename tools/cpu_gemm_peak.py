@@ -3,7 +3,10 @@
 
 Usage: cpu_gemm_peak.py M N K [M N K ...]   -> one JSON object per line.
 Best of 5 timed runs after a warm-up, all cores (numpy's default threading). vkdiff embeds this
-file and runs it with python3 when numpy is importable, so both sides are measured in one run.
+file and runs it with $VKDIFF_REFERENCE_PYTHON (else python3) when numpy is importable, so both
+sides are measured in one run, with OPENBLAS_CORETYPE and OPENBLAS_L2_SIZE removed from its
+environment (set on some machines for old OpenBLAS builds, they force slower kernels); the kernel
+OpenBLAS chose is reported (threadpoolctl's internal_api and architecture, when installed).
 """
 import json
 import sys
@@ -34,8 +37,19 @@ def blas_name():
         return "unknown BLAS"
 
 
+def blas_kernel():
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:
+        return None
+    for pool in threadpool_info():
+        if pool.get("user_api") == "blas":
+            return f"{pool.get('internal_api')} {pool.get('version')}, {pool.get('architecture')}, {pool.get('num_threads')} threads"
+    return None
+
+
 if __name__ == "__main__":
     dims = list(map(int, sys.argv[1:]))
     for i in range(0, len(dims), 3):
         m, n, k = dims[i : i + 3]
-        print(json.dumps({"m": m, "n": n, "k": k, "gflops": gflops(m, n, k), "numpy": np.__version__, "blas": blas_name()}))
+        print(json.dumps({"m": m, "n": n, "k": k, "gflops": gflops(m, n, k), "numpy": np.__version__, "blas": blas_name(), "kernel": blas_kernel()}))

@@ -3,16 +3,25 @@
 RLE, crowd regions, two categories, every area range) and random segm and bbox results (score
 ties, images without detections or without ground truth), scored by pycocotools' COCOeval.
 
-Usage: make_coco_eval_fixtures.py OUT_DIR   (writes gt.json, dt_segm.json, dt_bbox.json, expected.json)
-Made with pycocotools 2.0.10 and numpy 2.4.6 (Python 3.11).
+Detector output files: `dt_both.json` holds every segm result with a detector's box beside its
+mask (as Detectron2, MMDetection and YOLO export them), scored as `loadRes` reads it (areas from
+the boxes, since the first result has one) and as Detectron2 scores it (boxes dropped: areas from
+the masks); `dt_mixed.json` is the same with some masks missing (`loadRes` makes them the box's
+polygon). The segm-only results are also scored as boxes (`loadRes` takes each box from its mask).
+
+Usage: make_coco_eval_fixtures.py OUT_DIR
+  (writes gt.json, dt_segm.json, dt_bbox.json, dt_both.json, dt_mixed.json, expected.json)
+Made with pycocotools 2.0.11 and numpy 2.4.6 (Python 3.11); the values of the first three files
+are those pycocotools 2.0.10 gave.
 """
 import contextlib
+import copy
+import importlib.metadata
 import io
 import json
 import sys
 
 import numpy as np
-import pycocotools
 from pycocotools import mask as mask_utils
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
@@ -82,23 +91,45 @@ for img in range(1, 7):
         results_segm.append({"image_id": img, "category_id": int(rng.integers(1, 3)), "segmentation": {"size": [H, W], "counts": rle["counts"].decode()}, "score": score})
         results_bbox.append({"image_id": img, "category_id": results_segm[-1]["category_id"], "bbox": [float(v) for v in mask_utils.toBbox(rle)], "score": score})
 
+# Detector boxes: a few pixels larger than the mask's own box, as box heads predict them, so an
+# object near a size-class boundary is small by its mask and medium by its box.
+box_rng = np.random.default_rng(2121)
+results_both = []
+for r in results_segm:
+    x, y, w, h = mask_utils.toBbox(r["segmentation"])
+    dx, dy = box_rng.uniform(0, 3, 2)
+    box = [float(round(v, 2)) for v in (x - dx, y - dy, w + dx + box_rng.uniform(0, 4), h + dy + box_rng.uniform(0, 4))]
+    results_both.append({"image_id": r["image_id"], "category_id": r["category_id"], "bbox": box, "segmentation": r["segmentation"], "score": r["score"]})
+results_mixed = [{k: v for k, v in r.items() if not (k == "segmentation" and i % 5 == 3)} for i, r in enumerate(results_both)]
+results_boxless = [{k: v for k, v in r.items() if k != "bbox"} for r in results_both]
+
 gt = {"info": {"description": "vkdiff eval fixture"}, "images": images, "annotations": anns, "categories": [{"id": 1, "name": "cap"}, {"id": 2, "name": "stem"}]}
 out = sys.argv[1]
-for name, obj in [("gt.json", gt), ("dt_segm.json", results_segm), ("dt_bbox.json", results_bbox)]:
+for name, obj in [("gt.json", gt), ("dt_segm.json", results_segm), ("dt_bbox.json", results_bbox), ("dt_both.json", results_both), ("dt_mixed.json", results_mixed)]:
     with open(f"{out}/{name}", "w") as f:
         json.dump(obj, f)
 
-expected = {"pycocotools": pycocotools.__version__ if hasattr(pycocotools, "__version__") else "2.0.10", "numpy": np.__version__}
-for iou_type, dt_file, max_dets in [("segm", "dt_segm.json", [1, 10, 100]), ("bbox", "dt_bbox.json", [1, 10, 100]), ("segm", "dt_segm.json", [1, 3, 5])]:
+expected = {"pycocotools": importlib.metadata.version("pycocotools"), "numpy": np.__version__}
+runs = [
+    ("segm", "dt_segm.json", [1, 10, 100], ""),
+    ("bbox", "dt_bbox.json", [1, 10, 100], ""),
+    ("segm", "dt_segm.json", [1, 3, 5], ""),
+    ("segm", "dt_both.json", [1, 10, 100], " both"),
+    ("segm", results_boxless, [1, 10, 100], " both, boxes dropped"),
+    ("segm", "dt_mixed.json", [1, 10, 100], " mixed"),
+    ("bbox", "dt_segm.json", [1, 10, 100], " from masks"),
+]
+for iou_type, dt_file, max_dets, label in runs:
     with contextlib.redirect_stdout(io.StringIO()):
         coco = COCO(f"{out}/gt.json")
-        res = coco.loadRes(f"{out}/{dt_file}")
+        # loadRes fills in area, id and iscrowd on the dicts it is given: give it copies.
+        res = coco.loadRes(f"{out}/{dt_file}" if isinstance(dt_file, str) else copy.deepcopy(dt_file))
         e = COCOeval(coco, res, iou_type)
         e.params.maxDets = max_dets
         e.evaluate()
         e.accumulate()
         e.summarize()
-    key = f"{iou_type} {max_dets}"
+    key = f"{iou_type} {max_dets}{label}"
     expected[key] = {"stats": [float(v) for v in e.stats],
                      "precision_sum": float(e.eval["precision"].sum()), "recall_sum": float(e.eval["recall"].sum())}
     # summarize() takes AP at 100 detections whatever maxDets says (-1 when 100 is not among

@@ -10,7 +10,7 @@ a 95 MB file. torch-fidelity loads them from a .pth exactly as it loads the real
     /tmp/ref/bin/pip install torch torch-fidelity safetensors pillow numpy
     /tmp/ref/bin/python tools/make_fid_fixtures.py
 
-Writes tests/fixtures/fid/{real,fake}/*.png, features.safetensors and expected.json.
+Writes tests/fixtures/fid/{real,fake}/*.{png,jpg}, features.safetensors and expected.json.
 """
 
 import json
@@ -58,8 +58,10 @@ def write_sets(rng):
                 img.putalpha(Image.fromarray(image(rng, h, w)[:, :, 0]))
             if folder == "fake" and i == 4:
                 img = img.convert("P", palette=Image.Palette.ADAPTIVE, colors=64)
-            name = f"{folder}_{i:02d}.png"
-            img.save(os.path.join(OUT, folder, name))
+            # Real photos are JPEG: the last one is, with 4:2:0 chroma (Pillow's default).
+            ext = "jpg" if folder == "real" and i == len(sizes) - 1 else "png"
+            name = f"{folder}_{i:02d}.{ext}"
+            img.save(os.path.join(OUT, folder, name), **({"quality": 90} if ext == "jpg" else {}))
             names[folder].append(name)
     return names
 
@@ -95,7 +97,7 @@ def main():
             cuda=False,
             cache=False,
             verbose=False,
-            samples_find_ext="png",
+            samples_find_ext="png,jpg",
         )
     expected = {
         "made_by": "tools/make_fid_fixtures.py",

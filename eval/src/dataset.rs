@@ -28,6 +28,50 @@ pub struct Annotation {
     pub geometry: Geometry,
 }
 
+/// Which rule gives each detection its area (and so its small / medium / large range).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AreaRule {
+    /// pycocotools' `loadRes`: decided by the first result's keys for all of them.
+    LoadRes,
+    /// The mask's area whatever box a result carries: Detectron2's `COCOEvaluator`, which
+    /// deletes `bbox` from its results before segm evaluation.
+    Mask,
+}
+
+/// Where the detections' areas come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AreaSource {
+    /// w·h of each `bbox`.
+    Box,
+    /// The area of each `segmentation`.
+    Mask,
+}
+
+impl AreaSource {
+    /// `loadRes`'s choice: boxes when the first result has a non-empty `bbox`, masks when it has
+    /// a `segmentation` (an empty list of results has neither, and nothing to measure).
+    pub fn of_results(json: &Value, rule: AreaRule) -> Result<AreaSource> {
+        let first = match json.as_array().and_then(|l| l.first()) {
+            Some(first) if rule == AreaRule::LoadRes => first,
+            _ => return Ok(AreaSource::Mask),
+        };
+        if first.get("bbox").is_some_and(|b| b.as_array().is_none_or(|b| !b.is_empty())) {
+            Ok(AreaSource::Box)
+        } else if first.get("segmentation").is_some() {
+            Ok(AreaSource::Mask)
+        } else {
+            Err(err("results[0] has neither `bbox` nor `segmentation`".into()))
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            AreaSource::Box => "box",
+            AreaSource::Mask => "mask",
+        }
+    }
+}
+
 /// Images (id → height, width) and their annotations, in file order.
 #[derive(Clone, Debug, Default)]
 pub struct Dataset {
@@ -140,26 +184,41 @@ impl Dataset {
         Ok(d)
     }
 
-    /// COCO results on the images of `gt`, as `loadRes` reads them: ids 1, 2, … in file order;
-    /// a mask's area and (when absent) box from the mask; a box's area w·h.
-    pub fn results(json: &Value, gt: &Dataset, masks: bool) -> Result<Dataset> {
+    /// COCO results on the images of `gt`, as `loadRes` reads them: ids 1, 2, … in file order,
+    /// not crowd; with areas from boxes, each w·h, or from masks, and a result's missing mask the
+    /// polygon of its box (box areas) or its missing box the mask's (mask areas).
+    pub fn results(json: &Value, gt: &Dataset, masks: bool, areas: AreaSource) -> Result<Dataset> {
         let list = json.as_array().ok_or_else(|| err("results are not a JSON list of detections".into()))?;
         let mut d = Dataset { images: gt.images.clone(), categories: gt.categories.clone(), annotations: Vec::new() };
         for (i, a) in list.iter().enumerate() {
             let what = format!("results[{i}]");
             let image_id = id(field(a, "image_id", &what)?, &what)?;
             let size = *gt.images.get(&image_id).ok_or_else(|| err(format!("{what}: image {image_id} is not in the ground truth")))?;
-            let (geometry, area, bbox) = if masks {
-                let rle = segmentation(field(a, "segmentation", &what)?, size, &what)?;
-                let area = masks::runs_area(&masks::ones(&rle)) as f64;
-                let b = match a.get("bbox") {
-                    Some(b) => bbox(b, &what)?,
-                    None => masks::bbox(&rle),
-                };
-                (Geometry::Mask(rle), area, b)
-            } else {
-                let b = bbox(field(a, "bbox", &what)?, &what)?;
-                (Geometry::Box, b[2] * b[3], b)
+            let (geometry, area, bbox) = match areas {
+                AreaSource::Box => {
+                    let b = a.get("bbox").ok_or_else(|| {
+                        err(format!("{what} has no `bbox`, but results[0] has one: pycocotools' loadRes reads every result by the first one's keys (give every result a box, or pass --area-from mask)"))
+                    })?;
+                    let b = bbox(b, &what)?;
+                    let geometry = match (masks, a.get("segmentation")) {
+                        (false, _) => Geometry::Box,
+                        (true, Some(s)) => Geometry::Mask(segmentation(s, size, &what)?),
+                        (true, None) => {
+                            let (x1, y1, x2, y2) = (b[0], b[1], b[0] + b[2], b[1] + b[3]);
+                            Geometry::Mask(polygon_rle(&[x1, y1, x1, y2, x2, y2, x2, y1], size.0, size.1))
+                        }
+                    };
+                    (geometry, b[2] * b[3], b)
+                }
+                AreaSource::Mask => {
+                    let rle = segmentation(field(a, "segmentation", &what)?, size, &what)?;
+                    let area = masks::runs_area(&masks::ones(&rle)) as f64;
+                    let b = match a.get("bbox").filter(|b| b.as_array().is_some_and(|b| !b.is_empty())) {
+                        Some(b) => bbox(b, &what)?,
+                        None => masks::bbox(&rle),
+                    };
+                    (if masks { Geometry::Mask(rle) } else { Geometry::Box }, area, b)
+                }
             };
             d.annotations.push(Annotation {
                 id: i as u64 + 1,

@@ -8,7 +8,7 @@ pub mod fid;
 mod masks;
 
 pub use cocoeval::{evaluate, EvalParams, IouType, Stats};
-pub use dataset::{Annotation, Dataset, Geometry};
+pub use dataset::{Annotation, AreaRule, AreaSource, Dataset, Geometry};
 pub use masks::{bbox_iou, foreground_iou, mask_iou, polygon_rle, union};
 
 #[derive(Debug, thiserror::Error)]

@@ -4,7 +4,7 @@
 
 use serde_json::Value;
 use std::path::PathBuf;
-use vkdiff_eval::{evaluate, polygon_rle, union, Dataset, EvalParams, IouType};
+use vkdiff_eval::{evaluate, polygon_rle, union, AreaRule, AreaSource, Dataset, EvalParams, IouType};
 use vkdiff_render::rle::Rle;
 
 fn fixture(name: &str) -> Value {
@@ -13,12 +13,21 @@ fn fixture(name: &str) -> Value {
 }
 
 fn check(iou_type: IouType, results: &str, max_dets: [usize; 3]) {
+    check_as(iou_type, results, max_dets, AreaRule::LoadRes, "");
+}
+
+/// Scores `results` with `rule` and compares to the expected entry `"{iou type} {max_dets}{label}"`.
+fn check_as(iou_type: IouType, results: &str, max_dets: [usize; 3], rule: AreaRule, label: &str) {
     let masks = iou_type == IouType::Segm;
-    let gt = Dataset::ground_truth(&fixture("gt.json"), masks).unwrap();
-    let dt = Dataset::results(&fixture(results), &gt, masks).unwrap();
+    let mut gt_json = fixture("gt.json");
+    // pycocotools 2.0.10's loadRes needs the ground truth's `info`; vkdiff does not.
+    gt_json.as_object_mut().unwrap().remove("info");
+    let gt = Dataset::ground_truth(&gt_json, masks).unwrap();
+    let json = fixture(results);
+    let dt = Dataset::results(&json, &gt, masks, AreaSource::of_results(&json, rule).unwrap()).unwrap();
     let stats = evaluate(&gt, &dt, &EvalParams { iou_type, max_dets }).unwrap();
     let kind = if masks { "segm" } else { "bbox" };
-    let key = format!("{kind} {max_dets:?}");
+    let key = format!("{kind} {max_dets:?}{label}");
     let want = &fixture("expected.json")[&key];
     for (i, (name, got)) in stats.names.iter().zip(&stats.values).enumerate() {
         // pycocotools reports AP at 100 detections whatever the caps; vkdiff at the last cap.
@@ -45,6 +54,40 @@ fn bbox_statistics_equal_pycocotools() {
 #[test]
 fn other_detection_caps_equal_pycocotools() {
     check(IouType::Segm, "dt_segm.json", [1, 3, 5]);
+}
+
+#[test]
+fn detector_results_with_boxes_and_masks_take_box_areas_as_load_res_does() {
+    let json = fixture("dt_both.json");
+    assert_eq!(AreaSource::of_results(&json, AreaRule::LoadRes).unwrap(), AreaSource::Box);
+    check_as(IouType::Segm, "dt_both.json", [1, 10, 100], AreaRule::LoadRes, " both");
+}
+
+#[test]
+fn area_from_mask_is_detectron2s_rule() {
+    check_as(IouType::Segm, "dt_both.json", [1, 10, 100], AreaRule::Mask, " both, boxes dropped");
+}
+
+#[test]
+fn results_without_a_mask_take_their_box_polygon_as_load_res_does() {
+    check_as(IouType::Segm, "dt_mixed.json", [1, 10, 100], AreaRule::LoadRes, " mixed");
+}
+
+#[test]
+fn box_scoring_of_mask_only_results_takes_boxes_from_the_masks() {
+    check_as(IouType::Bbox, "dt_segm.json", [1, 10, 100], AreaRule::LoadRes, " from masks");
+}
+
+#[test]
+fn a_result_without_the_first_ones_box_is_refused_with_the_rule_named() {
+    let gt = Dataset::ground_truth(&fixture("gt.json"), true).unwrap();
+    let mut json = fixture("dt_both.json");
+    json.as_array_mut().unwrap()[4].as_object_mut().unwrap().remove("bbox");
+    let areas = AreaSource::of_results(&json, AreaRule::LoadRes).unwrap();
+    let e = Dataset::results(&json, &gt, true, areas).unwrap_err().to_string();
+    assert!(e.contains("results[4] has no `bbox`") && e.contains("--area-from mask"), "{e}");
+    // Detectron2's rule needs no boxes.
+    Dataset::results(&json, &gt, true, AreaSource::of_results(&json, AreaRule::Mask).unwrap()).unwrap();
 }
 
 #[test]

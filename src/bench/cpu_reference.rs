@@ -1,7 +1,22 @@
-//! The CPU's practical GEMM peak (numpy → OpenBLAS, float32), measured by running
-//! `tools/cpu_gemm_peak.py` with python3 in the same benchmark run.
+//! The CPU references of the benchmarks, run as Python subprocesses in the same benchmark run:
+//! the CPU's practical GEMM peak (numpy → OpenBLAS, float32, `tools/cpu_gemm_peak.py`) and the
+//! diffusers / torch-fidelity / torch scripts of the other benchmarks.
 
 use std::process::Command;
+
+/// Settings some machines export for older OpenBLAS builds, which force a slower kernel family
+/// (e.g. Haswell's AVX2 kernels on an AVX-512 CPU): a reference runs with OpenBLAS's own choice.
+const SLOWING_VARIABLES: [&str; 2] = ["OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE"];
+
+/// `$VKDIFF_REFERENCE_PYTHON` (else python3), ready to run a reference script.
+pub fn reference_python() -> (String, Command) {
+    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
+    let mut command = Command::new(&python);
+    for name in SLOWING_VARIABLES {
+        command.env_remove(name);
+    }
+    (python, command)
+}
 
 const SCRIPT: &str = include_str!("../../tools/cpu_gemm_peak.py");
 
@@ -13,12 +28,15 @@ pub struct CpuGemm {
     pub k: usize,
     pub gflops: f64,
     pub library: String,
+    /// The kernel family OpenBLAS chose (threadpoolctl's `internal_api` and `architecture`).
+    pub kernel: String,
 }
 
 /// GFLOP/s for each (M, N, K), or why it could not be measured (no python3 or numpy).
 pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String> {
     let args: Vec<String> = shapes.iter().flat_map(|&(m, n, k)| [m, n, k]).map(|x| x.to_string()).collect();
-    let out = Command::new("python3").arg("-c").arg(SCRIPT).args(&args).output().map_err(|e| format!("python3 not runnable ({e})"))?;
+    let (python, mut command) = reference_python();
+    let out = command.arg("-c").arg(SCRIPT).args(&args).output().map_err(|e| format!("{python} not runnable ({e})"))?;
     if !out.status.success() {
         let err = String::from_utf8_lossy(&out.stderr);
         return Err(format!("numpy reference failed: {}", err.lines().last().unwrap_or("")));
@@ -34,6 +52,7 @@ pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String>
                 k: get("k"),
                 gflops: v["gflops"].as_f64().unwrap_or(0.0),
                 library: format!("numpy {} / {}", v["numpy"].as_str().unwrap_or("?"), v["blas"].as_str().unwrap_or("?")),
+                kernel: v["kernel"].as_str().unwrap_or("unknown (pip install threadpoolctl to see it)").to_string(),
             })
         })
         .collect()
@@ -42,12 +61,24 @@ pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String>
 /// Runs a reference script with `$VKDIFF_REFERENCE_PYTHON` (else python3) and `args`, and reads
 /// the JSON line it prints last; or why it could not run.
 pub fn run_python_reference<S: AsRef<std::ffi::OsStr>>(script: &str, args: impl IntoIterator<Item = S>) -> Result<serde_json::Value, String> {
-    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
-    let out = Command::new(&python).arg("-c").arg(script).args(args).output().map_err(|e| format!("{python} not runnable ({e})"))?;
+    let (python, mut command) = reference_python();
+    let out = command.arg("-c").arg(script).args(args).output().map_err(|e| format!("{python} not runnable ({e})"))?;
     if !out.status.success() {
         let err = String::from_utf8_lossy(&out.stderr);
         return Err(format!("{python}: {}", err.lines().last().unwrap_or("failed")));
     }
     let text = String::from_utf8_lossy(&out.stdout);
     serde_json::from_str(text.lines().last().unwrap_or("")).map_err(|e| format!("reference output is not JSON: {e}"))
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn references_run_without_the_variables_that_slow_openblas() {
+        let (_, command) = super::reference_python();
+        let removed: Vec<_> = command.get_envs().filter(|(_, value)| value.is_none()).map(|(name, _)| name.to_owned()).collect();
+        for name in super::SLOWING_VARIABLES {
+            assert!(removed.iter().any(|r| r == name), "{name} reaches the reference process");
+        }
+    }
 }

@@ -262,7 +262,7 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
     }
     match cpu {
         Ok(cpu) if !cpu.is_empty() => {
-            println!("\nagainst the CPU's float32 GEMM ({}), measured just now on this machine:", cpu[0].library);
+            println!("\nagainst the CPU's float32 GEMM ({}, kernel {}), measured just now on this machine:", cpu[0].library, cpu[0].kernel);
             for (row, _) in rows.iter().filter(|(r, _)| r.ratio_to_cpu.is_some()) {
                 println!(
                     "  {:<26} {:<5} {:<18} {:>7.1} GFLOP/s vs {:>7.1} = {:.2}x",

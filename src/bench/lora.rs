@@ -4,7 +4,7 @@
 
 use anyhow::{Context as _, Result};
 use std::io::Write as _;
-use std::process::{Command, Stdio};
+use std::process::Stdio;
 use std::time::Instant;
 use vkdiff_lora::{LoraFile, LoraMerger, Targets};
 use vkdiff_runtime::Context;
@@ -101,9 +101,9 @@ pub(super) fn write_lora(path: &std::path::Path, shapes: &[(String, [usize; 2])]
 }
 
 fn reference(shapes: &[(String, [usize; 2])], rank: usize) -> std::result::Result<f64, String> {
-    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
+    let (python, mut command) = super::cpu_reference::reference_python();
     let job = serde_json::json!({ "rank": rank, "shapes": shapes.iter().map(|(_, s)| s).collect::<Vec<_>>() });
-    let mut child = Command::new(&python)
+    let mut child = command
         .arg("-c")
         .arg(REFERENCE)
         .stdin(Stdio::piped())

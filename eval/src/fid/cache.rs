@@ -47,6 +47,11 @@ impl FeatureCache {
         self.loaded_stamps = stamps;
     }
 
+    /// Whether the cache holds `file`'s features, unchanged since they were computed.
+    pub fn has(&self, file: &Path) -> bool {
+        file_stamp(file).is_ok_and(|stamp| self.rows.contains_key(&stamp))
+    }
+
     /// The cached features of `file`, if it is unchanged since they were computed.
     pub fn get(&mut self, file: &Path) -> Option<Vec<f32>> {
         let row = self.rows.get(&file_stamp(file).ok()?).cloned();

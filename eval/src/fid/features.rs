@@ -4,6 +4,7 @@
 
 use super::cache::FeatureCache;
 use crate::{EvalError, Result};
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_unet::{InceptionV3, RgbPixels, SafeTensors, TensorSource, TorchPth, INCEPTION_FEATURES};
@@ -43,6 +44,27 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// Images decoded in parallel, as the encoder reads them.
+fn read_images(files: &[&Path]) -> Vec<std::result::Result<vkdiff_pipeline::RgbImage, String>> {
+    files.par_iter().map(|f| vkdiff_pipeline::images::read_image(f).map_err(|e| e.to_string())).collect()
+}
+
+/// Reads every file as the encoder will, before anything is encoded, so that a bad file costs
+/// seconds, not the encoding of the folders before it; the error names every file that cannot
+/// be read. `progress(done, total)` as files are read.
+pub fn check_images(files: &[&Path], progress: &mut dyn FnMut(usize, usize)) -> Result<()> {
+    let mut bad = Vec::new();
+    progress(0, files.len());
+    for (i, chunk) in files.chunks(64).enumerate() {
+        bad.extend(read_images(chunk).into_iter().filter_map(std::result::Result::err));
+        progress((i * 64 + chunk.len()).min(files.len()), files.len());
+    }
+    if bad.is_empty() {
+        return Ok(());
+    }
+    Err(EvalError(format!("{} of {} images cannot be read (nothing was encoded): {}", bad.len(), files.len(), bad.join("; "))))
+}
+
 /// torch-fidelity's InceptionV3 on a device, a batch of images at a time.
 pub struct FeatureExtractor {
     net: InceptionV3,
@@ -66,7 +88,8 @@ impl FeatureExtractor {
         let mut done = files.len() - missing.len();
         progress(done, files.len());
         for chunk in missing.chunks(self.batch) {
-            let images = chunk.iter().map(|&i| vkdiff_pipeline::images::read_image(&files[i]).map_err(|e| EvalError(e.to_string()))).collect::<Result<Vec<_>>>()?;
+            let paths: Vec<&Path> = chunk.iter().map(|&i| files[i].as_path()).collect();
+            let images = read_images(&paths).into_iter().collect::<std::result::Result<Vec<_>, String>>().map_err(EvalError)?;
             let pixels: Vec<RgbPixels> = images.iter().map(|m| RgbPixels { data: &m.pixels, width: m.width, height: m.height }).collect();
             let features = self.net.features(&pixels).map_err(|e| EvalError(e.to_string()))?;
             for (&i, row) in chunk.iter().zip(features.chunks_exact(INCEPTION_FEATURES)) {

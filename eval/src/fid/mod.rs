@@ -7,5 +7,5 @@ pub mod numpy_rng;
 pub mod stats;
 
 pub use cache::FeatureCache;
-pub use features::{file_stamp, list_images, open_weights, FeatureExtractor};
+pub use features::{check_images, file_stamp, list_images, open_weights, FeatureExtractor};
 pub use stats::{fid, kid, Kid, KidOptions};

@@ -5,6 +5,7 @@
 mod clip_preprocess;
 mod control;
 mod depth_input;
+mod jpeg;
 mod read;
 mod resample;
 

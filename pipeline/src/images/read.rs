@@ -41,10 +41,12 @@ pub fn decode_image(bytes: &[u8], path: &Path) -> Result<RgbImage> {
         path: path.to_path_buf(),
         why,
     };
-    if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+    if bytes.is_empty() {
+        Err(fail("empty file".into()))
+    } else if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
         decode_png(bytes, Grey16::Clip).map_err(fail)
     } else if bytes.starts_with(&[0xff, 0xd8]) {
-        decode_jpeg(bytes).map_err(fail)
+        super::jpeg::decode_jpeg(bytes).map_err(fail)
     } else {
         Err(fail("not a PNG or JPEG file (the formats read as images)".into()))
     }
@@ -86,24 +88,6 @@ fn decode_png(bytes: &[u8], grey16: Grey16) -> std::result::Result<RgbImage, Str
                 ColorType::Indexed => return Err("palette not expanded".into()),
             }
         }
-    }
-    Ok(RgbImage { width, height, pixels })
-}
-
-fn decode_jpeg(bytes: &[u8]) -> std::result::Result<RgbImage, String> {
-    use zune_core::bytestream::ZCursor;
-    use zune_core::colorspace::ColorSpace;
-    use zune_core::options::DecoderOptions;
-    let options = DecoderOptions::default().jpeg_set_out_colorspace(ColorSpace::RGB);
-    let mut decoder = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), options);
-    let pixels = decoder.decode().map_err(|e| format!("bad JPEG: {e:?}"))?;
-    let info = decoder.info().ok_or("bad JPEG: no header")?;
-    let (width, height) = (info.width as usize, info.height as usize);
-    if pixels.len() != width * height * 3 {
-        return Err(format!(
-            "JPEG decoded to {} bytes for {width}x{height} RGB",
-            pixels.len()
-        ));
     }
     Ok(RgbImage { width, height, pixels })
 }
