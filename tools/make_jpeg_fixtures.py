@@ -67,6 +67,19 @@ def first_scans(data, n):
     return data[:at] + b"\xff\xd9"
 
 
+def without_huffman_tables(data):
+    """The file with its DHT segments removed, as motion-JPEG frames come (the decoder then takes
+    the standard tables, which Pillow's encoder used)."""
+    out, at = data[:2], 2
+    while True:
+        marker, length = data[at : at + 2], int.from_bytes(data[at + 2 : at + 4], "big")
+        if marker != b"\xff\xc4":
+            out += data[at : at + 2 + length]
+        at += 2 + length
+        if marker == b"\xff\xda":
+            return out + data[at:]
+
+
 def scans(text):
     """A cjpeg scan script in a file that lives as long as the process."""
     f = tempfile.NamedTemporaryFile("w", suffix=".txt", delete=False)
@@ -124,6 +137,7 @@ cases = {
     "pil_restart_rows_progressive": pillow(big, restart_marker_rows=1, progressive=True),
     "pil_exif_orientation": pillow(small, exif=exif.tobytes()),
     "pil_1x1": pillow(scene(1, 1)),
+    "motion_jpeg_frame_without_tables": without_huffman_tables(pillow(small)),
     "pil_3x2_420": pillow(scene(3, 2)),
     "pil_17x9_422": pillow(scene(17, 9), subsampling=1),
     "cjpeg_411": tool(["cjpeg", "-sample", "4x1", "-outfile", "OUT", "IN"], big),

@@ -2,6 +2,7 @@
 //! entropy decoder, with libjpeg-turbo's rules for what ends the image and which colour space it is.
 
 use super::entropy::{decode_scan, next_marker, Huffman, ScanTables, TRUNCATED};
+use super::standard_huffman::standard_table;
 use super::MAX_PIXELS;
 
 pub(super) struct Component {
@@ -90,6 +91,15 @@ fn segment<'a>(data: &'a [u8], pos: &mut usize) -> Result<&'a [u8], String> {
 }
 
 impl Tables {
+    /// libjpeg-turbo's `std_huff_tables` when its sequential decoder starts: slots 0 and 1 that
+    /// no table was given for get Annex K's.
+    fn fill_standard_huffman(&mut self) {
+        for slot in 0..2 {
+            self.dc[slot].get_or_insert_with(|| standard_table(true, slot));
+            self.ac[slot].get_or_insert_with(|| standard_table(false, slot));
+        }
+    }
+
     fn read_quant(&mut self, mut s: &[u8]) -> Result<(), String> {
         while !s.is_empty() {
             let (precision, slot) = (s[0] >> 4, (s[0] & 15) as usize);
@@ -281,6 +291,9 @@ pub(super) fn decode(data: &[u8]) -> Result<Frame, String> {
                 }
                 let header = segment(data, &mut pos)?;
                 let scan = f.parse_scan(header, &tables.quant)?;
+                if scans == 0 && !f.progressive {
+                    tables.fill_standard_huffman();
+                }
                 let scan_tables = ScanTables {
                     dc: scan.dc_slots.iter().map(|&i| tables.dc.get(i).and_then(Option::as_ref)).collect(),
                     ac: scan.ac_slots.iter().map(|&i| tables.ac.get(i).and_then(Option::as_ref)).collect(),

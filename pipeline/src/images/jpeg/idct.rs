@@ -67,11 +67,16 @@ pub(super) fn idct_islow(coefs: &[i16], quant: &[u16; 64], out: &mut [u8], strid
             workspace[row * 8 + col] = descale(outs[row], CONST_BITS - PASS1_BITS) as i32;
         }
     }
-    for row in 0..8 {
-        let v: [i64; 8] = std::array::from_fn(|col| workspace[row * 8 + col] as i64);
-        let outs = butterfly(v);
-        for col in 0..8 {
-            out[row * stride + col] = range_limit(descale(outs[col], CONST_BITS + PASS1_BITS + 3));
+    for (row, w) in workspace.chunks_exact(8).enumerate() {
+        let out = &mut out[row * stride..row * stride + 8];
+        // A row of zero AC terms is flat (libjpeg-turbo's shortcut, equal to the butterfly's).
+        if w[1..].iter().all(|&x| x == 0) {
+            out.fill(range_limit(descale(w[0] as i64, PASS1_BITS + 3)));
+            continue;
+        }
+        let outs = butterfly(std::array::from_fn(|col| w[col] as i64));
+        for (o, v) in out.iter_mut().zip(outs) {
+            *o = range_limit(descale(v, CONST_BITS + PASS1_BITS + 3));
         }
     }
 }

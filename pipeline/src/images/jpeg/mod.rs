@@ -3,7 +3,8 @@
 //! upsampling, its fixed-point YCbCr → RGB tables) and converts CMYK itself. This is our own
 //! decoder written to that arithmetic, so FID over JPEG photos is torch-fidelity's.
 //!
-//! Read: baseline, extended (8-bit) and progressive Huffman JPEG; greyscale, YCbCr, RGB, CMYK and
+//! Read: baseline, extended (8-bit) and progressive Huffman JPEG (sequential files without Huffman
+//! tables, as motion-JPEG frames come, take the standard ones); greyscale, YCbCr, RGB, CMYK and
 //! YCCK (colour space chosen from JFIF/Adobe markers and component ids as libjpeg-turbo does);
 //! any sampling factors libjpeg-turbo takes; restart markers (with its resynchronisation); data
 //! that ends early at a marker (libjpeg-turbo leaves the rest of the scan grey or unrefined, as
@@ -17,6 +18,7 @@ mod entropy;
 mod frame;
 mod idct;
 mod output;
+mod standard_huffman;
 
 use crate::RgbImage;
 

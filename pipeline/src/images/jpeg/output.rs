@@ -13,12 +13,6 @@ struct Plane {
     height: usize,
 }
 
-impl Plane {
-    fn at(&self, x: usize, y: usize) -> i32 {
-        self.samples[y * self.width + x] as i32
-    }
-}
-
 fn inverse_dct(c: &Component, frame: &Frame) -> Plane {
     let width = (frame.width * c.h).div_ceil(frame.max_h);
     let height = (frame.height * c.v).div_ceil(frame.max_v);
@@ -31,69 +25,76 @@ fn inverse_dct(c: &Component, frame: &Frame) -> Plane {
             idct_islow(c.block(bx, by), &quant, &mut full[by * 8 * stride + bx * 8..], stride);
         }
     }
-    let samples = (0..height).flat_map(|y| full[y * stride..y * stride + width].iter().copied()).collect();
+    let mut samples = Vec::with_capacity(width * height);
+    for y in 0..height {
+        samples.extend_from_slice(&full[y * stride..y * stride + width]);
+    }
     Plane { samples, width, height }
 }
 
 /// The component at the frame's full resolution (`out_w` × `out_h`), upsampled by
 /// (max_h / h, max_v / v) with libjpeg-turbo's method for that ratio. Neighbours past the
 /// plane's edge repeat its edge, as libjpeg-turbo's context rows and edge columns do.
-fn upsample(p: &Plane, (fx, fy): (usize, usize), out_w: usize, out_h: usize) -> Vec<u8> {
+fn upsample(p: Plane, (fx, fy): (usize, usize), out_w: usize, out_h: usize) -> Vec<u8> {
+    if (fx, fy) == (1, 1) {
+        return p.samples;
+    }
     let mut out = Vec::with_capacity(out_w * out_h);
-    let row_near = |y: usize| y / fy;
-    // The vertically nearer and further rows of output row y (triangular 2:1 filters).
+    let row = |y: usize| &p.samples[y * p.width..(y + 1) * p.width];
+    // The nearer and further input rows of output row y under a triangular 2:1 vertical filter.
     let rows = |y: usize| {
         let i = y / 2;
         let far = if y % 2 == 0 { i.saturating_sub(1) } else { (i + 1).min(p.height - 1) };
-        (i, far)
+        (row(i), row(far))
     };
+    let mut line = vec![0i32; p.width];
     match (fx, fy) {
         (2, 1) if p.width > 2 => {
             for y in 0..out_h {
-                for x in 0..out_w {
-                    let (i, s) = (x / 2, y);
-                    let v = if x % 2 == 0 {
-                        if i == 0 { p.at(0, s) } else { (3 * p.at(i, s) + p.at(i - 1, s) + 1) >> 2 }
-                    } else if i == p.width - 1 {
-                        p.at(i, s)
-                    } else {
-                        (3 * p.at(i, s) + p.at(i + 1, s) + 2) >> 2
-                    };
-                    out.push(v as u8);
-                }
+                line.iter_mut().zip(row(y)).for_each(|(l, &v)| *l = v as i32);
+                horizontal_triangle(&line, (1, 2), 2, out_w, &mut out);
             }
         }
         (1, 2) => {
             for y in 0..out_h {
                 let (near, far) = rows(y);
                 let bias = if y % 2 == 0 { 1 } else { 2 };
-                out.extend((0..out_w).map(|x| ((3 * p.at(x, near) + p.at(x, far) + bias) >> 2) as u8));
+                out.extend(near.iter().zip(far).take(out_w).map(|(&n, &f)| ((3 * n as i32 + f as i32 + bias) >> 2) as u8));
             }
         }
         (2, 2) if p.width > 2 => {
             for y in 0..out_h {
                 let (near, far) = rows(y);
-                let colsum = |i: usize| 3 * p.at(i, near) + p.at(i, far);
-                for x in 0..out_w {
-                    let i = x / 2;
-                    let v = if x % 2 == 0 {
-                        if i == 0 { (colsum(0) * 4 + 8) >> 4 } else { (colsum(i) * 3 + colsum(i - 1) + 8) >> 4 }
-                    } else if i == p.width - 1 {
-                        (colsum(i) * 4 + 7) >> 4
-                    } else {
-                        (colsum(i) * 3 + colsum(i + 1) + 7) >> 4
-                    };
-                    out.push(v as u8);
-                }
+                line.iter_mut().zip(near.iter().zip(far)).for_each(|(l, (&n, &f))| *l = 3 * n as i32 + f as i32);
+                horizontal_triangle(&line, (8, 7), 4, out_w, &mut out);
             }
         }
         _ => {
             for y in 0..out_h {
-                out.extend((0..out_w).map(|x| p.at(x / fx, row_near(y)) as u8));
+                let start = out.len();
+                out.extend(row(y / fy).iter().flat_map(|&v| std::iter::repeat_n(v, fx)));
+                out.truncate(start + out_w);
             }
         }
     }
     out
+}
+
+/// libjpeg-turbo's horizontal 2:1 triangle over one row of `line` (samples, or column sums
+/// already weighted 3:1): (3 · nearer + further + bias) >> shift, with the even outputs' bias
+/// `biases.0` and the odd ones' `biases.1`. Its special edge cases are this formula with the
+/// edge input repeated.
+fn horizontal_triangle(line: &[i32], biases: (i32, i32), shift: u32, out_w: usize, out: &mut Vec<u8>) {
+    let last = line.len() - 1;
+    for x in 0..out_w {
+        let i = x / 2;
+        let v = if x % 2 == 0 {
+            (3 * line[i] + line[i.saturating_sub(1)] + biases.0) >> shift
+        } else {
+            (3 * line[i] + line[(i + 1).min(last)] + biases.1) >> shift
+        };
+        out.push(v as u8);
+    }
 }
 
 /// libjpeg-turbo's YCbCr → RGB tables (16-bit fixed point, `build_ycc_rgb_table`).
@@ -145,25 +146,21 @@ pub(super) fn to_rgb(frame: &Frame) -> Result<RgbImage, String> {
         if frame.max_h % c.h != 0 || frame.max_v % c.v != 0 {
             return Err("JPEG with fractional sampling factors (libjpeg-turbo refuses them too)".into());
         }
-        planes.push(upsample(&inverse_dct(c, frame), (frame.max_h / c.h, frame.max_v / c.v), w, h));
+        planes.push(upsample(inverse_dct(c, frame), (frame.max_h / c.h, frame.max_v / c.v), w, h));
     }
-    let mut pixels = Vec::with_capacity(w * h * 3);
+    let mut pixels = vec![0u8; w * h * 3];
+    let px = pixels.chunks_exact_mut(3).enumerate();
+    let t = YccTables::new();
     match frame.color {
-        ColorSpace::Grey => pixels.extend(planes[0].iter().flat_map(|&g| [g; 3])),
-        ColorSpace::Rgb => pixels.extend((0..w * h).flat_map(|i| [planes[0][i], planes[1][i], planes[2][i]])),
-        ColorSpace::YCbCr => {
-            let t = YccTables::new();
-            pixels.extend((0..w * h).flat_map(|i| t.rgb(planes[0][i], planes[1][i], planes[2][i])));
-        }
-        ColorSpace::Cmyk => pixels.extend((0..w * h).flat_map(|i| cmyk_to_rgb(planes[0][i], planes[1][i], planes[2][i], planes[3][i]))),
-        ColorSpace::Ycck => {
-            // libjpeg-turbo's `ycck_cmyk_convert`: C, M, Y = 255 − R, G, B of the YCbCr triple.
-            let t = YccTables::new();
-            pixels.extend((0..w * h).flat_map(|i| {
-                let [r, g, b] = t.rgb(planes[0][i], planes[1][i], planes[2][i]);
-                cmyk_to_rgb(255 - r, 255 - g, 255 - b, planes[3][i])
-            }));
-        }
+        ColorSpace::Grey => px.for_each(|(i, p)| p.fill(planes[0][i])),
+        ColorSpace::Rgb => px.for_each(|(i, p)| p.copy_from_slice(&[planes[0][i], planes[1][i], planes[2][i]])),
+        ColorSpace::YCbCr => px.for_each(|(i, p)| p.copy_from_slice(&t.rgb(planes[0][i], planes[1][i], planes[2][i]))),
+        ColorSpace::Cmyk => px.for_each(|(i, p)| p.copy_from_slice(&cmyk_to_rgb(planes[0][i], planes[1][i], planes[2][i], planes[3][i]))),
+        // libjpeg-turbo's `ycck_cmyk_convert`: C, M, Y = 255 − R, G, B of the YCbCr triple.
+        ColorSpace::Ycck => px.for_each(|(i, p)| {
+            let [r, g, b] = t.rgb(planes[0][i], planes[1][i], planes[2][i]);
+            p.copy_from_slice(&cmyk_to_rgb(255 - r, 255 - g, 255 - b, planes[3][i]));
+        }),
     }
     Ok(RgbImage { width: w, height: h, pixels })
 }
