@@ -29,3 +29,4 @@ const MAX_PIXELS: u64 = 2 * 89_478_485;
 pub fn decode_jpeg(bytes: &[u8]) -> Result<RgbImage, String> {
     output::to_rgb(&frame::decode(bytes)?)
 }
+

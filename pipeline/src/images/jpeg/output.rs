@@ -149,18 +149,21 @@ pub(super) fn to_rgb(frame: &Frame) -> Result<RgbImage, String> {
         planes.push(upsample(inverse_dct(c, frame), (frame.max_h / c.h, frame.max_v / c.v), w, h));
     }
     let mut pixels = vec![0u8; w * h * 3];
-    let px = pixels.chunks_exact_mut(3).enumerate();
+    let px = pixels.chunks_exact_mut(3);
     let t = YccTables::new();
-    match frame.color {
-        ColorSpace::Grey => px.for_each(|(i, p)| p.fill(planes[0][i])),
-        ColorSpace::Rgb => px.for_each(|(i, p)| p.copy_from_slice(&[planes[0][i], planes[1][i], planes[2][i]])),
-        ColorSpace::YCbCr => px.for_each(|(i, p)| p.copy_from_slice(&t.rgb(planes[0][i], planes[1][i], planes[2][i]))),
-        ColorSpace::Cmyk => px.for_each(|(i, p)| p.copy_from_slice(&cmyk_to_rgb(planes[0][i], planes[1][i], planes[2][i], planes[3][i]))),
+    match (frame.color, &planes[..]) {
+        (ColorSpace::Grey, [g]) => px.zip(g).for_each(|(p, &g)| p.fill(g)),
+        (ColorSpace::Rgb, [r, g, b]) => px.zip(r.iter().zip(g).zip(b)).for_each(|(p, ((&r, &g), &b))| p.copy_from_slice(&[r, g, b])),
+        (ColorSpace::YCbCr, [y, cb, cr]) => px.zip(y.iter().zip(cb).zip(cr)).for_each(|(p, ((&y, &cb), &cr))| p.copy_from_slice(&t.rgb(y, cb, cr))),
+        (ColorSpace::Cmyk, [c, m, y, k]) => {
+            px.zip(c.iter().zip(m).zip(y).zip(k)).for_each(|(p, (((&c, &m), &y), &k))| p.copy_from_slice(&cmyk_to_rgb(c, m, y, k)))
+        }
         // libjpeg-turbo's `ycck_cmyk_convert`: C, M, Y = 255 − R, G, B of the YCbCr triple.
-        ColorSpace::Ycck => px.for_each(|(i, p)| {
-            let [r, g, b] = t.rgb(planes[0][i], planes[1][i], planes[2][i]);
-            p.copy_from_slice(&cmyk_to_rgb(255 - r, 255 - g, 255 - b, planes[3][i]));
+        (ColorSpace::Ycck, [y, cb, cr, k]) => px.zip(y.iter().zip(cb).zip(cr).zip(k)).for_each(|(p, (((&y, &cb), &cr), &k))| {
+            let [r, g, b] = t.rgb(y, cb, cr);
+            p.copy_from_slice(&cmyk_to_rgb(255 - r, 255 - g, 255 - b, k));
         }),
+        _ => unreachable!("the colour space follows the component count"),
     }
     Ok(RgbImage { width: w, height: h, pixels })
 }
