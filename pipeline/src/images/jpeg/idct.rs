@@ -118,3 +118,31 @@ pub(super) fn idct_islow(coefs: &[i16], quant: &[u16; 64], out: &mut [u8], strid
         rows::<i64>(&workspace, out, stride);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Extreme blocks just under the bound (all ±(2^14 − 1), alternating and random signs): the
+    /// i32 passes give the i64 passes' values.
+    #[test]
+    fn the_i32_passes_equal_the_i64_ones_under_the_bound() {
+        let max = I32_SAFE - 1;
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut sign = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            if state & 1 == 0 { 1 } else { -1 }
+        };
+        let mut blocks: Vec<[i32; 64]> = vec![[max; 64], [-max; 64], std::array::from_fn(|i| if i % 2 == 0 { max } else { -max })];
+        blocks.extend((0..200).map(|_| std::array::from_fn(|_| sign() * max)));
+        for block in blocks {
+            assert_eq!(columns(&block), columns(&block.map(i64::from)));
+            let (mut narrow, mut wide) = ([0u8; 64], [0u8; 64]);
+            rows::<i32>(&block, &mut narrow, 8);
+            rows::<i64>(&block, &mut wide, 8);
+            assert_eq!(narrow, wide);
+        }
+    }
+}
