@@ -83,8 +83,10 @@ pub fn run(args: &FidArgs) -> Result<()> {
     // Every file the network will read, of both folders, is read once before any encoding.
     let uncached = |files: &[PathBuf], cache: &Option<FeatureCache>| -> Vec<PathBuf> { files.iter().filter(|f| !cache.as_ref().is_some_and(|c| c.has(f))).cloned().collect() };
     let unchecked = [uncached(&real, &real_cache), uncached(&fake, &fake_cache)].concat();
-    let bar = Progress::new("reading", "image");
-    check_images(&unchecked.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &mut |done, total| bar.update(done, total))?;
+    if !unchecked.is_empty() {
+        let bar = Progress::new("reading", "image");
+        check_images(&unchecked.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &mut |done, total| bar.update(done, total))?;
+    }
     let encode = |files: &[PathBuf], mut cache: Option<FeatureCache>, label: &'static str| -> Result<(Vec<f32>, usize)> {
         let bar = Progress::new(label, "image");
         let features = extractor.features(files, cache.as_mut(), &mut |done, total| bar.update(done, total))?;
