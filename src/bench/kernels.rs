@@ -276,7 +276,7 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             }
         }
         Ok(_) => {}
-        Err(e) => println!("\nCPU reference not measured: {e} (needs python3 with numpy)"),
+        Err(e) => println!("\nCPU reference not measured: {e} (needs numpy in $VKDIFF_REFERENCE_PYTHON, else python3)"),
     }
     Ok(())
 }
