@@ -162,6 +162,23 @@ cases = {
     "cjpeg_arithmetic": tool(["cjpeg", "-arithmetic", "-outfile", "OUT", "IN"], small),
 }
 
+# Random settings on small random images: sizes 1..48, every mode and subsampling, any quality,
+# progressive, optimised tables and restart intervals mixed.
+pick = np.random.default_rng(2111)
+for i in range(24):
+    w, h = (int(v) for v in pick.integers(1, 49, 2))
+    mode = ["RGB", "RGB", "L", "CMYK"][int(pick.integers(0, 4))]
+    kw = {"quality": int(pick.integers(1, 101))}
+    if mode == "RGB":
+        kw["subsampling"] = int(pick.integers(0, 3))
+    if pick.random() < 0.4:
+        kw["progressive"] = True
+    if pick.random() < 0.3:
+        kw["optimize"] = True
+    if pick.random() < 0.3:
+        kw["restart_marker_blocks"] = int(pick.integers(1, 8))
+    cases[f"random_{i:02d}_{mode.lower()}"] = pillow(scene(w, h).convert(mode), **kw)
+
 os.makedirs(OUT, exist_ok=True)
 index = {"pillow": Image.__version__, "libjpeg_turbo": features.version("libjpeg_turbo"), "numpy": np.__version__, "cases": {}}
 for name, data in cases.items():
