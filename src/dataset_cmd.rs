@@ -8,7 +8,9 @@ use anyhow::{Context as _, Result};
 use clap::{Args, Subcommand};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
-use vkdiff_pipeline::dataset::{generate, merge, Crops, Dataset, DatasetSettings, Progress as Event, Report, RunOptions, Shard};
+use vkdiff_pipeline::dataset::{
+    generate, merge, Crops, Dataset, DatasetSettings, Progress as Event, Report, RunOptions, Shard,
+};
 use vkdiff_pipeline::{read_images, Sampling, Sdxl, WorkflowModels};
 use vkdiff_runtime::Context;
 
@@ -73,7 +75,12 @@ enum DatasetCommand {
 pub fn run(args: &DatasetArgs) -> Result<()> {
     if let Some(DatasetCommand::Merge { dir }) = &args.command {
         let merged = merge(dir)?;
-        println!("wrote {}: {} images, {} annotations", dir.join("annotations.json").display(), merged.images, merged.annotations);
+        println!(
+            "wrote {}: {} images, {} annotations",
+            dir.join("annotations.json").display(),
+            merged.images,
+            merged.annotations
+        );
         return Ok(());
     }
     let out = args.out.as_deref().context("--out DIR is required")?;
@@ -105,7 +112,11 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         eprintln!("device: {}", ctx.info().name);
         let start = Instant::now();
         let models = WorkflowModels::load(&ctx, &settings.models, &mut |line| eprintln!("{line}"))?;
-        crate::gen_cmd::warn_cut_prompts(&models.sdxl, settings.sampling.prompt_syntax, settings.prompts.iter().chain(&settings.negative_prompt));
+        crate::gen_cmd::warn_cut_prompts(
+            &models.sdxl,
+            settings.sampling.prompt_syntax,
+            settings.prompts.iter().chain(&settings.negative_prompt),
+        );
         eprintln!("loaded in {:.1} s", start.elapsed().as_secs_f64());
         let done = pending.done as usize;
         let total = done + todo as usize;
@@ -127,7 +138,12 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     let recorded = Dataset::read(out)?.recorded();
     if recorded == settings.images() {
         let merged = merge(out)?;
-        println!("wrote {}: {} images, {} annotations", out.join("annotations.json").display(), merged.images, merged.annotations);
+        println!(
+            "wrote {}: {} images, {} annotations",
+            out.join("annotations.json").display(),
+            merged.images,
+            merged.annotations
+        );
     } else {
         println!(
             "shard {}/{} done; {} of {} images are made. Once every shard is: vkdiff dataset merge {}",
@@ -151,11 +167,16 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
     if !args.ip_image.is_empty() {
         ip_sets.push(args.ip_image.clone());
     }
-    ip_sets.extend(args.ip_set.iter().map(|set| set.split(',').map(str::trim).filter(|p| !p.is_empty()).map(PathBuf::from).collect()));
+    ip_sets.extend(
+        args.ip_set
+            .iter()
+            .map(|set| set.split(',').map(str::trim).filter(|p| !p.is_empty()).map(PathBuf::from).collect()),
+    );
     let models = args.model.settings()?;
     models.check()?;
     let multiple = Sdxl::probe_pixel_multiple(&models.model)?;
-    let crops = Crops { count: args.crops.crops, size: args.crops.crop_size, min_fraction: args.crops.crop_min_fraction };
+    let crops =
+        Crops { count: args.crops.crops, size: args.crops.crop_size, min_fraction: args.crops.crop_min_fraction };
     Ok(DatasetSettings::new(
         args.scene.seed,
         args.count,

@@ -30,13 +30,37 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
         (GemmFamily::Subgroup, Some(lanes)) => format!("subgroup-register, {lanes} lanes (CPU)"),
         _ => "shared-memory tiles (GPU)".into(),
     };
-    let paths = if gpu_paths { " (VKDIFF_GPU_PATHS=1: device memory through staging, workgroup attention)" } else { "" };
+    let paths =
+        if gpu_paths { " (VKDIFF_GPU_PATHS=1: device memory through staging, workgroup attention)" } else { "" };
     [
         format!("[{}] {} — {}", d.index, d.name, verdict),
-        format!("    kind: {}, Vulkan {}.{}.{}, driver: {}", d.kind.label(), d.api_version.0, d.api_version.1, d.api_version.2, d.driver),
-        format!("    f16 storage+arith: {}, subgroup size: {sizes}, shuffle: {}, arithmetic: {}, cooperative matrix: {}", yes(d.supports_f16()), yes(d.subgroup_shuffle), yes(d.subgroup_arithmetic), yes(d.cooperative_matrix)),
-        format!("    device memory: {}, max allocation: {}, max storage binding: {}, shared memory: {} KiB", mib(d.device_local_bytes), mib(d.max_allocation), mib(d.max_storage_buffer_range), d.max_shared_memory / 1024),
-        format!("    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, timestamps: {}{paths}", if d.supports_f16() { "f16 and f32" } else { "f32 only" }, yes(d.timestamps)),
+        format!(
+            "    kind: {}, Vulkan {}.{}.{}, driver: {}",
+            d.kind.label(),
+            d.api_version.0,
+            d.api_version.1,
+            d.api_version.2,
+            d.driver
+        ),
+        format!(
+            "    f16 storage+arith: {}, subgroup size: {sizes}, shuffle: {}, arithmetic: {}, cooperative matrix: {}",
+            yes(d.supports_f16()),
+            yes(d.subgroup_shuffle),
+            yes(d.subgroup_arithmetic),
+            yes(d.cooperative_matrix)
+        ),
+        format!(
+            "    device memory: {}, max allocation: {}, max storage binding: {}, shared memory: {} KiB",
+            mib(d.device_local_bytes),
+            mib(d.max_allocation),
+            mib(d.max_storage_buffer_range),
+            d.max_shared_memory / 1024
+        ),
+        format!(
+            "    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, timestamps: {}{paths}",
+            if d.supports_f16() { "f16 and f32" } else { "f32 only" },
+            yes(d.timestamps)
+        ),
     ]
     .join("\n")
 }

@@ -49,12 +49,19 @@ fn read_json(path: &Path) -> Result<Value> {
 
 /// 2·a·b / (a + b), -1 where either is undefined.
 fn f1(a: f64, b: f64) -> f64 {
-    if a < 0.0 || b < 0.0 { -1.0 } else if a + b == 0.0 { 0.0 } else { 2.0 * a * b / (a + b) }
+    if a < 0.0 || b < 0.0 {
+        -1.0
+    } else if a + b == 0.0 {
+        0.0
+    } else {
+        2.0 * a * b / (a + b)
+    }
 }
 
 pub fn run(args: &EvalArgs) -> Result<()> {
     let iou_type = if args.iou_type == "bbox" { IouType::Bbox } else { IouType::Segm };
-    let max_dets: [usize; 3] = args.max_dets.clone().try_into().map_err(|_| anyhow::anyhow!("--max-dets takes three numbers"))?;
+    let max_dets: [usize; 3] =
+        args.max_dets.clone().try_into().map_err(|_| anyhow::anyhow!("--max-dets takes three numbers"))?;
     let masks = iou_type == IouType::Segm;
     let gt = Dataset::ground_truth(&read_json(&args.gt)?, masks).with_context(|| format!("{}", args.gt.display()))?;
     let pred = read_json(&args.pred)?;
@@ -83,7 +90,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     if masks {
         rows.push(("mIoU".into(), stats.mean_instance_iou));
         rows.push(("mIoU_matched".into(), stats.mean_matched_iou));
-        let mut per_image: std::collections::BTreeMap<u64, (Vec<_>, Vec<_>)> = gt.images.keys().map(|&i| (i, (vec![], vec![]))).collect();
+        let mut per_image: std::collections::BTreeMap<u64, (Vec<_>, Vec<_>)> =
+            gt.images.keys().map(|&i| (i, (vec![], vec![]))).collect();
         for a in &gt.annotations {
             if let (Geometry::Mask(r), Some(e)) = (&a.geometry, per_image.get_mut(&a.image_id)) {
                 e.0.push(r);
@@ -101,16 +109,25 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         AreaRule::Mask => "mask",
     };
     if args.json {
-        let mut map: serde_json::Map<String, Value> = rows.iter().map(|(k, x)| (k.clone(), serde_json::json!(x))).collect();
+        let mut map: serde_json::Map<String, Value> =
+            rows.iter().map(|(k, x)| (k.clone(), serde_json::json!(x))).collect();
         map.insert("area_from".into(), areas.name().into());
         map.insert("area_rule".into(), rule_name.into());
         println!("{}", serde_json::to_string_pretty(&Value::Object(map))?);
         return Ok(());
     }
-    println!("{} images, {} ground-truth annotations, {} predictions, iou type {}", gt.images.len(), gt.annotations.len(), dt.annotations.len(), args.iou_type);
+    println!(
+        "{} images, {} ground-truth annotations, {} predictions, iou type {}",
+        gt.images.len(),
+        gt.annotations.len(),
+        dt.annotations.len(),
+        args.iou_type
+    );
     let why = match (rule, areas) {
         (AreaRule::Mask, _) => "--area-from mask",
-        (_, AreaSource::Box) => "as pycocotools' loadRes: the first result has a bbox; --area-from mask for Detectron2's rule",
+        (_, AreaSource::Box) => {
+            "as pycocotools' loadRes: the first result has a bbox; --area-from mask for Detectron2's rule"
+        }
         (_, AreaSource::Mask) => "as pycocotools' loadRes: the first result has no bbox",
     };
     println!("detection areas from each {} ({why})", areas.name());

@@ -7,7 +7,7 @@ use crate::progress::Progress;
 use anyhow::{bail, ensure, Context as _, Result};
 use std::path::{Path, PathBuf};
 use vkdiff_eval::fid::{check_images, fid, kid, list_images, FeatureCache, FeatureExtractor, KidOptions};
-use vkdiff_unet::INCEPTION_FEATURES;
+use vkdiff_networks::INCEPTION_FEATURES;
 
 #[derive(clap::Args)]
 pub struct FidArgs {
@@ -48,7 +48,9 @@ pub struct FidArgs {
 }
 
 fn default_cache_dir() -> Result<PathBuf> {
-    let base = std::env::var_os("XDG_CACHE_HOME").map(PathBuf::from).or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")));
+    let base = std::env::var_os("XDG_CACHE_HOME")
+        .map(PathBuf::from)
+        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")));
     Ok(base.context("--cache: neither XDG_CACHE_HOME nor HOME is set; give --cache-dir")?.join("vkdiff/fid"))
 }
 
@@ -56,13 +58,25 @@ fn default_cache_dir() -> Result<PathBuf> {
 fn images_of(dir: &Path, what: &str) -> Result<Vec<PathBuf>> {
     ensure!(dir.is_dir(), "{what} {}: not a folder", dir.display());
     let files = list_images(dir)?;
-    ensure!(files.len() >= 2, "{what} {}: {} png/jpg/jpeg images; FID and KID need at least 2", dir.display(), files.len());
+    ensure!(
+        files.len() >= 2,
+        "{what} {}: {} png/jpg/jpeg images; FID and KID need at least 2",
+        dir.display(),
+        files.len()
+    );
     Ok(files)
 }
 
 pub fn run(args: &FidArgs) -> Result<()> {
-    ensure!(args.inception.is_file(), "--inception {}: no such file (torch-fidelity's weights-inception-2015-12-05-6726825d.pth)", args.inception.display());
-    ensure!(args.kid_subsets > 0 && args.kid_subset_size > 1, "--kid-subsets must be positive and --kid-subset-size at least 2");
+    ensure!(
+        args.inception.is_file(),
+        "--inception {}: no such file (torch-fidelity's weights-inception-2015-12-05-6726825d.pth)",
+        args.inception.display()
+    );
+    ensure!(
+        args.kid_subsets > 0 && args.kid_subset_size > 1,
+        "--kid-subsets must be positive and --kid-subset-size at least 2"
+    );
     ensure!(args.batch > 0, "--batch must be positive");
     let real = images_of(&args.real, "real")?;
     let fake = images_of(&args.fake, "fake")?;
@@ -78,20 +92,26 @@ pub fn run(args: &FidArgs) -> Result<()> {
 
     let ctx = vkdiff_runtime::Context::new(args.device)?;
     let extractor = FeatureExtractor::new(&ctx, &args.inception, args.precision.dtype(), args.batch)?;
-    let open_cache = |dir: &Path| cache_dir.as_ref().map(|d| FeatureCache::open(d, dir, &extractor.fingerprint)).transpose();
+    let open_cache =
+        |dir: &Path| cache_dir.as_ref().map(|d| FeatureCache::open(d, dir, &extractor.fingerprint)).transpose();
     let (mut real_cache, mut fake_cache) = (open_cache(&args.real)?, open_cache(&args.fake)?);
     // Every file the network will read, of both folders, is read once before any encoding.
-    let uncached = |files: &[PathBuf], cache: &Option<FeatureCache>| -> Vec<PathBuf> { files.iter().filter(|f| !cache.as_ref().is_some_and(|c| c.has(f))).cloned().collect() };
+    let uncached = |files: &[PathBuf], cache: &Option<FeatureCache>| -> Vec<PathBuf> {
+        files.iter().filter(|f| !cache.as_ref().is_some_and(|c| c.has(f))).cloned().collect()
+    };
     let unchecked = [uncached(&real, &real_cache), uncached(&fake, &fake_cache)].concat();
     if !unchecked.is_empty() {
         let bar = Progress::new("reading", "image");
-        check_images(&unchecked.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &mut |done, total| bar.update(done, total))?;
+        check_images(&unchecked.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &mut |done, total| {
+            bar.update(done, total)
+        })?;
     }
-    let encode = |files: &[PathBuf], mut cache: Option<FeatureCache>, label: &'static str| -> Result<(Vec<f32>, usize)> {
-        let bar = Progress::new(label, "image");
-        let features = extractor.features(files, cache.as_mut(), &mut |done, total| bar.update(done, total))?;
-        Ok((features, cache.map_or(0, |c| c.hits)))
-    };
+    let encode =
+        |files: &[PathBuf], mut cache: Option<FeatureCache>, label: &'static str| -> Result<(Vec<f32>, usize)> {
+            let bar = Progress::new(label, "image");
+            let features = extractor.features(files, cache.as_mut(), &mut |done, total| bar.update(done, total))?;
+            Ok((features, cache.map_or(0, |c| c.hits)))
+        };
     let (real_features, real_cached) = encode(&real, real_cache.take(), "real")?;
     let (fake_features, fake_cached) = encode(&fake, fake_cache.take(), "fake")?;
 
@@ -118,7 +138,15 @@ pub fn run(args: &FidArgs) -> Result<()> {
         return Ok(());
     }
     let cached = |n: usize| if n > 0 { format!(", {n} from the cache") } else { String::new() };
-    println!("real {} ({} images{}), fake {} ({} images{})", args.real.display(), real.len(), cached(real_cached), args.fake.display(), fake.len(), cached(fake_cached));
+    println!(
+        "real {} ({} images{}), fake {} ({} images{})",
+        args.real.display(),
+        real.len(),
+        cached(real_cached),
+        args.fake.display(),
+        fake.len(),
+        cached(fake_cached)
+    );
     println!("FID       {fid_value:.4}");
     println!("KID_mean  {:.6}", k.mean);
     println!("KID_std   {:.6}   ({} subsets of {})", k.std, args.kid_subsets, k.subset_size);

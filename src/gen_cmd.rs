@@ -55,7 +55,9 @@ pub struct GenArgs {
 }
 
 pub fn run(args: &GenArgs) -> Result<()> {
-    for (flag, path) in std::iter::once(("--out", &args.out)).chain(args.latents_out.iter().map(|p| ("--latents-out", p))) {
+    for (flag, path) in
+        std::iter::once(("--out", &args.out)).chain(args.latents_out.iter().map(|p| ("--latents-out", p)))
+    {
         let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
         if !parent.is_dir() {
             bail!("{flag} {}: folder {} does not exist", path.display(), parent.display());
@@ -103,9 +105,15 @@ pub fn run(args: &GenArgs) -> Result<()> {
     let start = std::time::Instant::now();
     let models = WorkflowModels::load(&ctx, &settings.models, &mut |line| eprintln!("{line}"))?;
     eprintln!("loaded in {:.1} s", start.elapsed().as_secs_f64());
-    warn_cut_prompts(&models.sdxl, settings.job.sampling.prompt_syntax, [Some(&settings.job.prompt), settings.job.negative_prompt.as_ref()].into_iter().flatten());
+    warn_cut_prompts(
+        &models.sdxl,
+        settings.job.sampling.prompt_syntax,
+        [Some(&settings.job.prompt), settings.job.negative_prompt.as_ref()].into_iter().flatten(),
+    );
     let progress = Progress::new("denoising", "step");
-    let out = models.sdxl.text_to_image(&settings.job, &models.guides(&inputs), &mut |done, total| progress.update(done, total))?;
+    let out = models
+        .sdxl
+        .text_to_image(&settings.job, &models.guides(&inputs), &mut |done, total| progress.update(done, total))?;
     let t = &out.timings;
     let steps: f64 = t.steps.iter().map(|d| d.as_secs_f64()).sum();
     eprintln!(
@@ -119,7 +127,10 @@ pub fn run(args: &GenArgs) -> Result<()> {
     let text = settings.png_text();
     let png = png_bytes(&out.image, &text)?;
     // The image and its latents appear together or not at all.
-    let latents = args.latents_out.as_ref().map(|_| vkdiff_unet::safetensors_f32_bytes(&[("latents", &out.latent_shape, &out.latents)], &text));
+    let latents = args
+        .latents_out
+        .as_ref()
+        .map(|_| vkdiff_formats::safetensors_f32_bytes(&[("latents", &out.latent_shape, &out.latents)], &text));
     let mut files = vec![(args.out.as_path(), png.as_slice())];
     files.extend(args.latents_out.as_deref().zip(latents.as_deref()));
     write_atomic_all(&files)?;

@@ -13,7 +13,11 @@ mod scene_cmd;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "vkdiff", version, about = "Procedural scenes to photorealistic, exactly annotated training images, on any Vulkan GPU")]
+#[command(
+    name = "vkdiff",
+    version,
+    about = "Procedural scenes to photorealistic, exactly annotated training images, on any Vulkan GPU"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

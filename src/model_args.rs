@@ -4,7 +4,10 @@
 use crate::scene_cmd::ControlMode;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
-use vkdiff_pipeline::{ControlNetSettings, IpAdapterSettings, IpMode, IpScale, LoraSetting, PromptSyntax, ModelSettings, SamplerKind, Sampling, SizeConditioning};
+use vkdiff_pipeline::{
+    ControlNetSettings, IpAdapterSettings, IpMode, IpScale, LoraSetting, ModelSettings, PromptSyntax, SamplerKind,
+    Sampling, SizeConditioning,
+};
 use vkdiff_runtime::Dtype;
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -137,7 +140,9 @@ impl ModelArgs {
         });
         let scale = IpScale::parse(&self.ip_scale, mode)?;
         let ip_adapter = match (&self.ip_adapter, &self.image_encoder) {
-            (Some(adapter), Some(encoder)) => Some(IpAdapterSettings { adapter: adapter.clone(), encoder: encoder.clone(), scale }),
+            (Some(adapter), Some(encoder)) => {
+                Some(IpAdapterSettings { adapter: adapter.clone(), encoder: encoder.clone(), scale })
+            }
             _ => None,
         };
         // Required by the parser wherever these flags are read (not for `dataset merge`).
@@ -203,8 +208,21 @@ fn parse_top_left(text: &str) -> Result<(usize, usize), String> {
 
 impl SamplingArgs {
     pub fn sampling(&self, width: usize, height: usize) -> Sampling {
-        let size_conditioning =
-            SizeConditioning { original: self.original_size, crop_top_left: self.crops_coords_top_left, target: self.target_size };
-        Sampling { steps: self.steps, guidance_scale: self.cfg, sampler: self.sampler, karras: self.scheduler == Schedule::Karras, width, height, size_conditioning, strength: None, prompt_syntax: self.prompt_syntax.into() }
+        let size_conditioning = SizeConditioning {
+            original: self.original_size,
+            crop_top_left: self.crops_coords_top_left,
+            target: self.target_size,
+        };
+        Sampling {
+            steps: self.steps,
+            guidance_scale: self.cfg,
+            sampler: self.sampler,
+            karras: self.scheduler == Schedule::Karras,
+            width,
+            height,
+            size_conditioning,
+            strength: None,
+            prompt_syntax: self.prompt_syntax.into(),
+        }
     }
 }

@@ -24,10 +24,26 @@ const IMAGES: u64 = 6;
 fn model_flags() -> Vec<String> {
     let w = |n: &str| fixture(&format!("workflow/{n}"));
     [
-        "--model", &fixture("pipeline/tiny-sdxl"), "--steps", "3", "--sampler", "euler_a", "--negative-prompt", "blurry, low quality",
-        "--controlnet", &w("controlnet"), "--control-scale", "0.7",
-        "--ip-adapter", &w("ip-adapter_tiny.safetensors"), "--image-encoder", &w("image_encoder"),
-        "--lora", &format!("{}:0.5", w("lora-peft.safetensors")), "--lora", &format!("{}:0.8", w("lora-kohya-ldm.safetensors")),
+        "--model",
+        &fixture("pipeline/tiny-sdxl"),
+        "--steps",
+        "3",
+        "--sampler",
+        "euler_a",
+        "--negative-prompt",
+        "blurry, low quality",
+        "--controlnet",
+        &w("controlnet"),
+        "--control-scale",
+        "0.7",
+        "--ip-adapter",
+        &w("ip-adapter_tiny.safetensors"),
+        "--image-encoder",
+        &w("image_encoder"),
+        "--lora",
+        &format!("{}:0.5", w("lora-peft.safetensors")),
+        "--lora",
+        &format!("{}:0.8", w("lora-kohya-ldm.safetensors")),
     ]
     .map(String::from)
     .to_vec()
@@ -36,10 +52,29 @@ fn model_flags() -> Vec<String> {
 /// Three scenes of 160×128, two 64² crops each, two prompts and two style sets.
 fn dataset_flags(out: &Path) -> Vec<String> {
     let style = |n: &str| fixture(&format!("workflow/style-{n}.png"));
-    let mut flags: Vec<String> = ["dataset", "--out", out.to_str().unwrap(), "--count", "3", "--seed", "5", "--width", "160", "--height", "128", "--crops", "2", "--crop-size", "64"]
-        .map(String::from)
-        .to_vec();
-    flags.extend(["--prompt", "white button mushrooms, top-down photo", "--prompt", "brown caps on dark compost"].map(String::from));
+    let mut flags: Vec<String> = [
+        "dataset",
+        "--out",
+        out.to_str().unwrap(),
+        "--count",
+        "3",
+        "--seed",
+        "5",
+        "--width",
+        "160",
+        "--height",
+        "128",
+        "--crops",
+        "2",
+        "--crop-size",
+        "64",
+    ]
+    .map(String::from)
+    .to_vec();
+    flags.extend(
+        ["--prompt", "white button mushrooms, top-down photo", "--prompt", "brown caps on dark compost"]
+            .map(String::from),
+    );
     flags.extend(["--ip-set".into(), style("1"), "--ip-set".into(), format!("{},{}", style("1"), style("2"))]);
     flags.extend(model_flags());
     flags
@@ -48,7 +83,13 @@ fn dataset_flags(out: &Path) -> Vec<String> {
 /// The binary, shielded from a Slurm or Kubernetes job the tests may themselves run in.
 fn vk() -> Command {
     let mut command = Command::new(env!("CARGO_BIN_EXE_vkdiff"));
-    for var in ["SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_MIN", "SLURM_ARRAY_TASK_COUNT", "SLURM_ARRAY_TASK_STEP", "JOB_COMPLETION_INDEX"] {
+    for var in [
+        "SLURM_ARRAY_TASK_ID",
+        "SLURM_ARRAY_TASK_MIN",
+        "SLURM_ARRAY_TASK_COUNT",
+        "SLURM_ARRAY_TASK_STEP",
+        "JOB_COMPLETION_INDEX",
+    ] {
         command.env_remove(var);
     }
     command
@@ -101,7 +142,8 @@ fn read_json(path: &Path) -> Value {
 }
 
 fn png_info(path: &Path) -> (u32, u32, png::ColorType, png::BitDepth, Vec<u8>) {
-    let mut reader = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap())).read_info().unwrap();
+    let mut reader =
+        png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap())).read_info().unwrap();
     let mut buf = vec![0; reader.output_buffer_size().unwrap()];
     let frame = reader.next_frame(&mut buf).unwrap();
     buf.truncate(frame.buffer_size());
@@ -127,7 +169,11 @@ fn annotations_follow_coco_and_match_the_masks() {
         let (mw, mh, mcolor, mdepth, bytes) = png_info(&dir.join(image["mask_file"].as_str().unwrap()));
         assert_eq!((mw, mh, mcolor, mdepth), (w, h, png::ColorType::Grayscale, png::BitDepth::Sixteen));
         let mask: Vec<u16> = bytes.chunks(2).map(|b| u16::from_be_bytes([b[0], b[1]])).collect();
-        assert!(dir.join(image["depth_file"].as_str().unwrap()).is_file() && image["seed"].is_u64() && image["scene_seed"] == 5 + k as u64 / 2);
+        assert!(
+            dir.join(image["depth_file"].as_str().unwrap()).is_file()
+                && image["seed"].is_u64()
+                && image["scene_seed"] == 5 + k as u64 / 2
+        );
         assert_eq!(image["crop"]["index"], k as u64 % 2);
         styles.insert(image["ip_images"].as_array().unwrap().len());
         let mine: Vec<&Value> = annotations.iter().filter(|a| a["image_id"] == image["id"]).collect();
@@ -192,7 +238,12 @@ fn assert_gen_reproduces(dir: &Path) {
         }
         args.extend(["--seed".to_string(), image["seed"].to_string()]);
         if let Some(init) = image["init_file"].as_str() {
-            args.extend(["--init-image".to_string(), init.to_string(), "--strength".to_string(), image["strength"].to_string()]);
+            args.extend([
+                "--init-image".to_string(),
+                init.to_string(),
+                "--strength".to_string(),
+                image["strength"].to_string(),
+            ]);
         }
         for style in image["ip_images"].as_array().unwrap() {
             args.extend(["--ip-image".to_string(), style.as_str().unwrap().to_string()]);
@@ -212,13 +263,34 @@ fn depth_control_and_masks_are_the_crops_vkdiff_scene_cuts() {
     for scene in 0..SCENES {
         let folder = scenes.join(scene.to_string());
         let seed = (5 + scene).to_string();
-        run_ok(&["scene", "--seed", &seed, "--width", "160", "--height", "128", "--crops", "2", "--crop-size", "64", "--out", folder.to_str().unwrap()].map(String::from), &[]);
+        run_ok(
+            &[
+                "scene",
+                "--seed",
+                &seed,
+                "--width",
+                "160",
+                "--height",
+                "128",
+                "--crops",
+                "2",
+                "--crop-size",
+                "64",
+                "--out",
+                folder.to_str().unwrap(),
+            ]
+            .map(String::from),
+            &[],
+        );
         for k in 0..2 {
             let stem = format!("{:06}", scene * 2 + k);
             for (ours, theirs) in [("depth", "depth.exr"), ("control", "control.png"), ("masks", "instances.png")] {
                 let ext = Path::new(theirs).extension().unwrap().to_str().unwrap();
                 let got = std::fs::read(dir.join(format!("{ours}/{stem}.{ext}"))).unwrap();
-                assert!(got == std::fs::read(folder.join(format!("crops/{k}/{theirs}"))).unwrap(), "{ours}/{stem}.{ext} differs from scene {seed}'s crop {k}");
+                assert!(
+                    got == std::fs::read(folder.join(format!("crops/{k}/{theirs}"))).unwrap(),
+                    "{ours}/{stem}.{ext} differs from scene {seed}'s crop {k}"
+                );
             }
         }
     }
@@ -243,7 +315,8 @@ fn two_shards_and_a_merge_give_the_one_run() {
     };
     // Two processes on one folder at once: one told its shard, one taking it from Slurm.
     let first = spawn(&["--shard", "0/2"], &[]);
-    let second = spawn(&[], &[("SLURM_ARRAY_TASK_ID", "8"), ("SLURM_ARRAY_TASK_MIN", "7"), ("SLURM_ARRAY_TASK_COUNT", "2")]);
+    let second =
+        spawn(&[], &[("SLURM_ARRAY_TASK_ID", "8"), ("SLURM_ARRAY_TASK_MIN", "7"), ("SLURM_ARRAY_TASK_COUNT", "2")]);
     for child in [first, second] {
         let out = child.wait_with_output().unwrap();
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -258,13 +331,21 @@ fn two_shards_and_a_merge_give_the_one_run() {
     std::fs::rename(&record, &aside).unwrap();
     let refused = vkdiff(&["dataset", "merge", dir.to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert!(!refused.status.success() && stderr.contains("1 of 6 images are not done") && stderr.contains("image 3 (scene 1)"), "{stderr}");
+    assert!(
+        !refused.status.success()
+            && stderr.contains("1 of 6 images are not done")
+            && stderr.contains("image 3 (scene 1)"),
+        "{stderr}"
+    );
     let text = std::fs::read_to_string(&aside).unwrap();
     let fingerprint = read_json(&aside)["fingerprint"].as_str().unwrap().to_string();
     std::fs::write(&record, text.replace(&fingerprint, "0123456789abcdef")).unwrap();
     let refused = vkdiff(&["dataset", "merge", dir.to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&refused.stderr);
-    assert!(!refused.status.success() && stderr.contains("records/000003.json was made with other settings"), "{stderr}");
+    assert!(
+        !refused.status.success() && stderr.contains("records/000003.json was made with other settings"),
+        "{stderr}"
+    );
     std::fs::rename(&aside, &record).unwrap();
 
     // So is a run with other settings into the folder, before it writes anything.
@@ -274,7 +355,10 @@ fn two_shards_and_a_merge_give_the_one_run() {
     let refused = vk().args(&other).output().unwrap();
     let stderr = String::from_utf8_lossy(&refused.stderr);
     let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
-    assert!(!refused.status.success() && errors.len() == 1 && errors[0].contains("--cfg was 5.0 there, 3.0 now"), "{stderr}");
+    assert!(
+        !refused.status.success() && errors.len() == 1 && errors[0].contains("--cfg was 5.0 there, 3.0 now"),
+        "{stderr}"
+    );
     assert!(tree(&dir) == before, "a refused run changed the folder");
 }
 
@@ -283,7 +367,10 @@ fn a_killed_run_resumes_to_the_same_folder() {
     let dir = scratch("dataset-kill").join("set");
     let mut child = vk().args(dataset_flags(&dir)).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
     let records = dir.join("records");
-    let count = || std::fs::read_dir(&records).map_or(0, |d| d.flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')).count());
+    let count = || {
+        std::fs::read_dir(&records)
+            .map_or(0, |d| d.flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')).count())
+    };
     while count() < 2 && child.try_wait().unwrap().is_none() {
         std::thread::sleep(std::time::Duration::from_millis(10));
     }
@@ -301,20 +388,44 @@ fn a_killed_run_resumes_to_the_same_folder() {
 fn whole_frames_are_cut_to_the_model_size_not_stretched() {
     let root = scratch("dataset-frames");
     let dir = root.join("set");
-    let mut args: Vec<String> =
-        ["dataset", "--out", dir.to_str().unwrap(), "--seed", "9", "--width", "150", "--height", "100", "--prompt", "mushrooms"].map(String::from).to_vec();
+    let mut args: Vec<String> = [
+        "dataset",
+        "--out",
+        dir.to_str().unwrap(),
+        "--seed",
+        "9",
+        "--width",
+        "150",
+        "--height",
+        "100",
+        "--prompt",
+        "mushrooms",
+    ]
+    .map(String::from)
+    .to_vec();
     args.extend(model_flags().into_iter().take(10)); // the model, sampling and the ControlNet
     run_ok(&args, &[]);
     let image = &read_json(&dir.join("annotations.json"))["images"][0];
-    assert_eq!((image["width"].as_u64(), image["height"].as_u64()), (Some(128), Some(96)), "150×100 cut to multiples of 32");
+    assert_eq!(
+        (image["width"].as_u64(), image["height"].as_u64()),
+        (Some(128), Some(96)),
+        "150×100 cut to multiples of 32"
+    );
     assert_eq!(image["crop"]["offset_px"], serde_json::json!([11, 2]), "centred");
     assert_eq!(image["crop"]["index"], Value::Null);
-    run_ok(&["scene", "--seed", "9", "--width", "150", "--height", "100", "--out", root.join("scene").to_str().unwrap()].map(String::from), &[]);
+    run_ok(
+        &["scene", "--seed", "9", "--width", "150", "--height", "100", "--out", root.join("scene").to_str().unwrap()]
+            .map(String::from),
+        &[],
+    );
     let (frame, fw, _) = vkdiff_pipeline::images::read_depth_exr(&root.join("scene/depth.exr")).unwrap();
     let (cut, w, h) = vkdiff_pipeline::images::read_depth_exr(&dir.join("depth/000000.exr")).unwrap();
     assert_eq!((w, h), (128, 96));
     for y in 0..h {
-        assert!(cut[y * w..(y + 1) * w] == frame[(y + 2) * fw + 11..(y + 2) * fw + 11 + w], "depth row {y} is not the frame's");
+        assert!(
+            cut[y * w..(y + 1) * w] == frame[(y + 2) * fw + 11..(y + 2) * fw + 11 + w],
+            "depth row {y} is not the frame's"
+        );
     }
 }
 
@@ -330,7 +441,11 @@ fn bad_dataset_arguments_print_one_error_line_and_write_nothing() {
     let encoder = fixture("workflow/image_encoder");
     let missing = dir.join("missing.png");
     let missing = missing.to_str().unwrap();
-    let base = |out: &Path| ["dataset", "--out", out.to_str().unwrap(), "--model", &model, "--width", "160", "--height", "128"].map(String::from).to_vec();
+    let base = |out: &Path| {
+        ["dataset", "--out", out.to_str().unwrap(), "--model", &model, "--width", "160", "--height", "128"]
+            .map(String::from)
+            .to_vec()
+    };
     for (extra, message) in [
         (vec!["--prompt", "x", "--crops", "2", "--crop-size", "48"], "--crop-size 48 must be a multiple of 32"),
         (vec!["--prompt", "x", "--crops", "2", "--crop-size", "256"], "--crop-size 256 must lie in [1, 128]"),
@@ -340,11 +455,20 @@ fn bad_dataset_arguments_print_one_error_line_and_write_nothing() {
         (vec!["--prompt", "x", "--batch", "0"], "--batch must be at least 1"),
         (vec!["--prompt", "x", "--shard", "2/2"], "--shard 2/2"),
         (vec!["--prompt", "x", "--shards", "2"], "JOB_COMPLETION_INDEX"),
-        (vec!["--prompt", "x", "--ip-adapter", &adapter, "--image-encoder", &encoder], "--ip-adapter needs style images"),
-        (vec!["--prompt", "x", "--ip-adapter", &adapter, "--image-encoder", &encoder, "--ip-set", missing], "--ip-image"),
+        (
+            vec!["--prompt", "x", "--ip-adapter", &adapter, "--image-encoder", &encoder],
+            "--ip-adapter needs style images",
+        ),
+        (
+            vec!["--prompt", "x", "--ip-adapter", &adapter, "--image-encoder", &encoder, "--ip-set", missing],
+            "--ip-image",
+        ),
         (vec!["--prompt", "x", "--sampler", "ddim", "--scheduler", "karras"], "Karras"),
         (vec!["--prompt", "x", "--density", "-1"], "--density"),
-        (vec!["--prompt", "x", "--init-strength", "0"], "a strength of 0 (--strength, --init-strength) must be in (0, 1]"),
+        (
+            vec!["--prompt", "x", "--init-strength", "0"],
+            "a strength of 0 (--strength, --init-strength) must be in (0, 1]",
+        ),
         (vec!["--prompt", "(x:1.2.3)", "--prompt-syntax", "weighted"], "weight `1.2.3`"),
     ] {
         let mut args = base(&out);
@@ -358,7 +482,11 @@ fn bad_dataset_arguments_print_one_error_line_and_write_nothing() {
     let mut args = base(&foreign);
     args.extend(["--prompt", "x"].map(String::from));
     let result = vk().args(&args).output().unwrap();
-    assert!(String::from_utf8_lossy(&result.stderr).contains("holds other files (notes.txt"), "{}", String::from_utf8_lossy(&result.stderr));
+    assert!(
+        String::from_utf8_lossy(&result.stderr).contains("holds other files (notes.txt"),
+        "{}",
+        String::from_utf8_lossy(&result.stderr)
+    );
     assert_eq!(std::fs::read_dir(&foreign).unwrap().count(), 1, "nothing written into someone else's folder");
     let result = vkdiff(&["dataset", "merge", dir.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&result.stderr).contains("not a vkdiff dataset folder"));
@@ -376,10 +504,20 @@ fn args_file(dir: &Path) -> PathBuf {
 fn deploy(shell: &str, script: &[&str], dir: &Path, args: &Path, env: &[(&str, &str)]) -> std::process::Child {
     let mut command = Command::new(shell);
     command.args(script).current_dir(env!("CARGO_MANIFEST_DIR"));
-    for var in ["SLURM_ARRAY_TASK_ID", "SLURM_ARRAY_TASK_MIN", "SLURM_ARRAY_TASK_COUNT", "SLURM_ARRAY_TASK_STEP", "JOB_COMPLETION_INDEX"] {
+    for var in [
+        "SLURM_ARRAY_TASK_ID",
+        "SLURM_ARRAY_TASK_MIN",
+        "SLURM_ARRAY_TASK_COUNT",
+        "SLURM_ARRAY_TASK_STEP",
+        "JOB_COMPLETION_INDEX",
+    ] {
         command.env_remove(var);
     }
-    command.envs([("VKDIFF", env!("CARGO_BIN_EXE_vkdiff")), ("DATASET_DIR", dir.to_str().unwrap()), ("DATASET_ARGS", args.to_str().unwrap())]);
+    command.envs([
+        ("VKDIFF", env!("CARGO_BIN_EXE_vkdiff")),
+        ("DATASET_DIR", dir.to_str().unwrap()),
+        ("DATASET_ARGS", args.to_str().unwrap()),
+    ]);
     command.envs(env.iter().copied()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap()
 }
 
@@ -406,13 +544,19 @@ fn the_kubernetes_indexed_job_makes_the_one_run() {
     let root = scratch("dataset-k8s");
     let (dir, args) = (root.join("set"), args_file(&root));
     // The pod's shell script, as the Job's container runs it.
-    let yaml = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/kubernetes/dataset-job.yaml")).unwrap();
+    let yaml =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/kubernetes/dataset-job.yaml"))
+            .unwrap();
     let lines: Vec<&str> = yaml.lines().collect();
     let start = lines.iter().position(|l| l.trim() == "- |").expect("the Job runs a script") + 1;
     let indent = lines[start].len() - lines[start].trim_start().len();
-    let script: Vec<&str> = lines[start..].iter().take_while(|l| l.len() - l.trim_start().len() >= indent).map(|l| &l[indent..]).collect();
+    let script: Vec<&str> =
+        lines[start..].iter().take_while(|l| l.len() - l.trim_start().len() >= indent).map(|l| &l[indent..]).collect();
     let script = script.join("\n");
-    let pods: Vec<_> = ["0", "1"].iter().map(|&index| deploy("sh", &["-c", &script], &dir, &args, &[("JOB_COMPLETION_INDEX", index), ("SHARDS", "2")])).collect();
+    let pods: Vec<_> = ["0", "1"]
+        .iter()
+        .map(|&index| deploy("sh", &["-c", &script], &dir, &args, &[("JOB_COMPLETION_INDEX", index), ("SHARDS", "2")]))
+        .collect();
     pods.into_iter().for_each(wait_ok);
     assert_same_folder(&dir, reference());
 }

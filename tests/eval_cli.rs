@@ -21,14 +21,16 @@ fn prints_pycocotools_statistics_f1_and_miou() {
     let got = eval_json(&fixture("gt.json"), &fixture("dt_segm.json"));
     let expected: Value = serde_json::from_str(&std::fs::read_to_string(fixture("expected.json")).unwrap()).unwrap();
     let stats = &expected["segm [1, 10, 100]"]["stats"];
-    for (i, name) in ["AP", "AP50", "AP75", "APs", "APm", "APl", "AR1", "AR10", "AR100", "ARs", "ARm", "ARl"].iter().enumerate() {
+    for (i, name) in
+        ["AP", "AP50", "AP75", "APs", "APm", "APl", "AR1", "AR10", "AR100", "ARs", "ARm", "ARl"].iter().enumerate()
+    {
         let (g, w) = (got[name].as_f64().unwrap(), stats[i].as_f64().unwrap());
         assert!((g - w).abs() <= 1e-6, "{name}: {g} against pycocotools {w}");
     }
     let (ap, ar, f1) = (got["AP"].as_f64().unwrap(), got["AR100"].as_f64().unwrap(), got["F1"].as_f64().unwrap());
     assert!((f1 - 2.0 * ap * ar / (ap + ar)).abs() < 1e-12);
     let (miou, matched) = (got["mIoU"].as_f64().unwrap(), got["mIoU_matched"].as_f64().unwrap());
-    assert!(matched >= 0.5 && matched <= 1.0 && miou <= matched, "mIoU {miou}, matched {matched}");
+    assert!((0.5..=1.0).contains(&matched) && miou <= matched, "mIoU {miou}, matched {matched}");
     assert!((0.0..=1.0).contains(&got["foreground_IoU"].as_f64().unwrap()));
 }
 
@@ -36,11 +38,16 @@ fn prints_pycocotools_statistics_f1_and_miou() {
 fn detector_files_are_scored_by_box_areas_unless_area_from_mask() {
     let expected: Value = serde_json::from_str(&std::fs::read_to_string(fixture("expected.json")).unwrap()).unwrap();
     let stats = |args: &[&str]| {
-        let out = vkdiff(&[&["eval", "--gt", &fixture("gt.json"), "--pred", &fixture("dt_both.json"), "--json"][..], args].concat());
+        let out = vkdiff(
+            &[&["eval", "--gt", &fixture("gt.json"), "--pred", &fixture("dt_both.json"), "--json"][..], args].concat(),
+        );
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
         serde_json::from_slice::<Value>(&out.stdout).unwrap()
     };
-    for (args, key, area_from, rule) in [(vec![], "segm [1, 10, 100] both", "box", "loadres"), (vec!["--area-from", "mask"], "segm [1, 10, 100] both, boxes dropped", "mask", "mask")] {
+    for (args, key, area_from, rule) in [
+        (vec![], "segm [1, 10, 100] both", "box", "loadres"),
+        (vec!["--area-from", "mask"], "segm [1, 10, 100] both, boxes dropped", "mask", "mask"),
+    ] {
         let got = stats(&args);
         assert_eq!((got["area_from"].as_str(), got["area_rule"].as_str()), (Some(area_from), Some(rule)));
         for (i, name) in ["AP", "APs", "APm", "APl"].iter().zip([0, 3, 4, 5]).map(|(n, i)| (i, n)) {
@@ -60,7 +67,11 @@ fn annotation_id_zero_is_matched_and_warned_about() {
     let path = scratch("eval-id0").join("gt.json");
     std::fs::write(&path, gt.to_string()).unwrap();
     let shifted = vkdiff(&["eval", "--gt", path.to_str().unwrap(), "--pred", &fixture("dt_segm.json"), "--json"]);
-    assert!(String::from_utf8_lossy(&shifted.stderr).contains("annotation id 0"), "{}", String::from_utf8_lossy(&shifted.stderr));
+    assert!(
+        String::from_utf8_lossy(&shifted.stderr).contains("annotation id 0"),
+        "{}",
+        String::from_utf8_lossy(&shifted.stderr)
+    );
     let shifted: Value = serde_json::from_slice(&shifted.stdout).unwrap();
     assert_eq!(shifted, eval_json(&fixture("gt.json"), &fixture("dt_segm.json")));
 }
@@ -69,7 +80,11 @@ fn annotation_id_zero_is_matched_and_warned_about() {
 fn bad_input_is_one_error_line() {
     let dir = scratch("eval-bad");
     let bad = dir.join("bad.json");
-    std::fs::write(&bad, r#"[{"image_id": 99, "category_id": 1, "segmentation": {"size": [90, 120], "counts": "00"}, "score": 0.5}]"#).unwrap();
+    std::fs::write(
+        &bad,
+        r#"[{"image_id": 99, "category_id": 1, "segmentation": {"size": [90, 120], "counts": "00"}, "score": 0.5}]"#,
+    )
+    .unwrap();
     for (args, message) in [
         (vec!["--pred", bad.to_str().unwrap()], "image 99 is not in the ground truth"),
         (vec!["--pred", "/nonexistent.json"], "cannot read /nonexistent.json"),

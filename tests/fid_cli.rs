@@ -8,7 +8,8 @@ use cli::{scratch, vkdiff};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use vkdiff_unet::{write_safetensors_f32, RandomInception};
+use vkdiff_formats::write_safetensors_f32;
+use vkdiff_networks::RandomInception;
 
 fn fixture(name: &str) -> String {
     format!("{}/tests/fixtures/fid/{name}", env!("CARGO_MANIFEST_DIR"))
@@ -23,13 +24,21 @@ fn weights(dir: &Path) -> PathBuf {
 fn fid_json(args: &[&str]) -> Value {
     // The network on the GPU paths is tests/unet/inception.rs' part; here the command runs on the
     // default paths, where eleven images take seconds instead of minutes on lavapipe.
-    let out = Command::new(env!("CARGO_BIN_EXE_vkdiff")).args([&["fid"], args, &["--json"]].concat()).env_remove("VKDIFF_GPU_PATHS").output().unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_vkdiff"))
+        .args([&["fid"], args, &["--json"]].concat())
+        .env_remove("VKDIFF_GPU_PATHS")
+        .output()
+        .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
 fn close(what: &str, got: f64, want: f64, rtol: f64) {
-    assert!((got - want).abs() <= rtol * want.abs(), "{what}: {got} against torch-fidelity's {want} (relative {:.2e})", (got - want).abs() / want.abs());
+    assert!(
+        (got - want).abs() <= rtol * want.abs(),
+        "{what}: {got} against torch-fidelity's {want} (relative {:.2e})",
+        (got - want).abs() / want.abs()
+    );
 }
 
 #[test]

@@ -12,24 +12,56 @@ fn fixture(name: &str) -> String {
 
 /// Recorded case 1 of records.json: euler, seed 42, 5 steps, cfg 7.5, 96×64, a negative prompt.
 const CASE: [&str; 14] = [
-    "--prompt", "a red bicycle leaning on a brick wall, golden hour", "--negative-prompt", "blurry, low quality", "--seed", "42", "--steps", "5", "--cfg", "7.5", "--width", "96", "--height", "64",
+    "--prompt",
+    "a red bicycle leaning on a brick wall, golden hour",
+    "--negative-prompt",
+    "blurry, low quality",
+    "--seed",
+    "42",
+    "--steps",
+    "5",
+    "--cfg",
+    "7.5",
+    "--width",
+    "96",
+    "--height",
+    "64",
 ];
 
 #[test]
 fn gen_writes_the_image_and_latents_diffusers_wrote() {
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(fixture("records.json")).unwrap()).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(fixture("records.json")).unwrap()).unwrap();
     let case = &json["gen"][1];
-    assert_eq!((case["prompt"].as_str(), case["negative_prompt"].as_str(), case["seed"].as_u64()), (Some(CASE[1]), Some(CASE[3]), Some(42)), "fixture case 1 changed");
+    assert_eq!(
+        (case["prompt"].as_str(), case["negative_prompt"].as_str(), case["seed"].as_u64()),
+        (Some(CASE[1]), Some(CASE[3]), Some(42)),
+        "fixture case 1 changed"
+    );
     let dir = scratch("case");
     let (png, lat) = (dir.join("bike.png"), dir.join("bike.safetensors"));
     let model = fixture("tiny-sdxl");
-    let args = [&["gen", "--model", &model, "--precision", "f32", "--out", png.to_str().unwrap(), "--latents-out", lat.to_str().unwrap()][..], &CASE].concat();
+    let args = [
+        &[
+            "gen",
+            "--model",
+            &model,
+            "--precision",
+            "f32",
+            "--out",
+            png.to_str().unwrap(),
+            "--latents-out",
+            lat.to_str().unwrap(),
+        ][..],
+        &CASE,
+    ]
+    .concat();
     let result = vkdiff(&args);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     assert!(String::from_utf8_lossy(&result.stderr).contains("5/5"), "no progress shown");
 
-    let records = vkdiff_unet::SafeTensors::open(Path::new(&fixture("records.safetensors"))).unwrap();
-    let written = vkdiff_unet::SafeTensors::open(&lat).unwrap();
+    let records = vkdiff_formats::SafeTensors::open(Path::new(&fixture("records.safetensors"))).unwrap();
+    let written = vkdiff_formats::SafeTensors::open(&lat).unwrap();
     let (shape, got) = written.values("latents").unwrap();
     let (want_shape, want) = records.values("gen.1.latents").unwrap();
     assert_eq!(shape, want_shape);
@@ -42,8 +74,17 @@ fn gen_writes_the_image_and_latents_diffusers_wrote() {
     let info = reader.info();
     assert_eq!((info.width, info.height, info.color_type), (96, 64, png::ColorType::Rgb));
     let text = png_text(&png);
-    let get = |k: &str| text.iter().find(|(key, _)| key == k).map(|(_, v)| v.clone()).unwrap_or_else(|| panic!("no `{k}` text chunk"));
-    assert!(get("parameters").starts_with(&format!("{}\nNegative prompt: {}\nSteps: 5, Sampler: Euler, CFG scale: 7.5, Seed: 42, Size: 96x64", CASE[1], CASE[3])), "{}", get("parameters"));
+    let get = |k: &str| {
+        text.iter().find(|(key, _)| key == k).map(|(_, v)| v.clone()).unwrap_or_else(|| panic!("no `{k}` text chunk"))
+    };
+    assert!(
+        get("parameters").starts_with(&format!(
+            "{}\nNegative prompt: {}\nSteps: 5, Sampler: Euler, CFG scale: 7.5, Seed: 42, Size: 96x64",
+            CASE[1], CASE[3]
+        )),
+        "{}",
+        get("parameters")
+    );
     assert_eq!((get("seed"), get("sampler"), get("negative_prompt")), ("42".into(), "euler".into(), CASE[3].into()));
     assert!(!dir.join("bike.png.partial").exists());
 }
@@ -62,17 +103,70 @@ fn bad_gen_arguments_print_one_error_line_and_write_nothing() {
         (vec!["--model", missing.to_str().unwrap()], "--model"),
         (vec!["--model", &model, "--width", "100"], "--width 100 must be a positive multiple of 32 for this model"),
         (vec!["--model", &model, "--sampler", "dpmpp_2m_sde"], "unknown sampler `dpmpp_2m_sde`"),
-        (vec!["--model", &model, "--sampler", "ddim", "--scheduler", "karras"], "Karras sigmas are not available with ddim"),
+        (
+            vec!["--model", &model, "--sampler", "ddim", "--scheduler", "karras"],
+            "Karras sigmas are not available with ddim",
+        ),
         (vec!["--model", &model, "--steps", "0"], "needs at least 1 step"),
         (vec!["--model", &model, "--original-size", "1024"], "not WIDTHxHEIGHT"),
         (vec!["--model", &model, "--crops-coords-top-left", "0;0"], "not TOP,LEFT"),
-        (vec!["--model", &model, "--init-image", &init, "--strength", "1.5"], "a strength of 1.5 (--strength, --init-strength) must be in (0, 1]"),
+        (
+            vec!["--model", &model, "--init-image", &init, "--strength", "1.5"],
+            "a strength of 1.5 (--strength, --init-strength) must be in (0, 1]",
+        ),
         (vec!["--model", &model, "--init-image", &init, "--strength", "0.2", "--steps", "4"], "runs none of them"),
         (vec!["--model", &model, "--init-image", missing.to_str().unwrap()], "--init-image"),
-        (vec!["--model", &model, "--prompt-syntax", "weighted", "--negative-prompt", "BREAK it"], "BREAK is not supported"),
-        (vec!["--model", &model, "--ip-adapter", &adapter, "--image-encoder", &encoder, "--ip-image", &init, "--ip-scale", "up.7=1"], "--ip-scale up.7: this UNet has no cross-attention there"),
-        (vec!["--model", &model, "--ip-adapter", &adapter, "--image-encoder", &encoder, "--ip-image", &init, "--ip-scale", "sideways=1"], "name a block as"),
-        (vec!["--model", &model, "--ip-adapter", &adapter, "--image-encoder", &encoder, "--ip-image", &init, "--ip-mode", "style", "--ip-scale", "up.0=1"], "--ip-mode gives the blocks"),
+        (
+            vec!["--model", &model, "--prompt-syntax", "weighted", "--negative-prompt", "BREAK it"],
+            "BREAK is not supported",
+        ),
+        (
+            vec![
+                "--model",
+                &model,
+                "--ip-adapter",
+                &adapter,
+                "--image-encoder",
+                &encoder,
+                "--ip-image",
+                &init,
+                "--ip-scale",
+                "up.7=1",
+            ],
+            "--ip-scale up.7: this UNet has no cross-attention there",
+        ),
+        (
+            vec![
+                "--model",
+                &model,
+                "--ip-adapter",
+                &adapter,
+                "--image-encoder",
+                &encoder,
+                "--ip-image",
+                &init,
+                "--ip-scale",
+                "sideways=1",
+            ],
+            "name a block as",
+        ),
+        (
+            vec![
+                "--model",
+                &model,
+                "--ip-adapter",
+                &adapter,
+                "--image-encoder",
+                &encoder,
+                "--ip-image",
+                &init,
+                "--ip-mode",
+                "style",
+                "--ip-scale",
+                "up.0=1",
+            ],
+            "--ip-mode gives the blocks",
+        ),
     ] {
         let result = vkdiff(&[&["gen", "--prompt", "x", "--out", out_arg][..], &args].concat());
         let stderr = String::from_utf8_lossy(&result.stderr);
@@ -86,23 +180,50 @@ fn bad_gen_arguments_print_one_error_line_and_write_nothing() {
 
 #[test]
 fn gen_img2img_writes_the_latents_diffusers_wrote() {
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(format!("{}/tests/fixtures/compat/records.json", env!("CARGO_MANIFEST_DIR"))).unwrap()).unwrap();
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(format!("{}/tests/fixtures/compat/records.json", env!("CARGO_MANIFEST_DIR"))).unwrap(),
+    )
+    .unwrap();
     let case = json["cases"].as_array().unwrap().iter().find(|c| c["name"] == "img2img_euler_a").unwrap();
     let dir = scratch("img2img");
     let (png, lat) = (dir.join("barn.png"), dir.join("barn.safetensors"));
     let init = format!("{}/tests/fixtures/compat/{}", env!("CARGO_MANIFEST_DIR"), case["init"].as_str().unwrap());
     let (seed, steps, strength) = (case["seed"].to_string(), case["steps"].to_string(), case["strength"].to_string());
     let result = vkdiff(&[
-        "gen", "--model", &fixture("tiny-sdxl"), "--precision", "f32", "--prompt", case["prompt"].as_str().unwrap(), "--seed", &seed, "--steps", &steps,
-        "--sampler", "euler_a", "--init-image", &init, "--strength", &strength, "--out", png.to_str().unwrap(), "--latents-out", lat.to_str().unwrap(),
+        "gen",
+        "--model",
+        &fixture("tiny-sdxl"),
+        "--precision",
+        "f32",
+        "--prompt",
+        case["prompt"].as_str().unwrap(),
+        "--seed",
+        &seed,
+        "--steps",
+        &steps,
+        "--sampler",
+        "euler_a",
+        "--init-image",
+        &init,
+        "--strength",
+        &strength,
+        "--out",
+        png.to_str().unwrap(),
+        "--latents-out",
+        lat.to_str().unwrap(),
     ]);
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(result.status.success(), "{stderr}");
     assert!(stderr.contains("3/3"), "img2img at strength 0.75 of 4 steps runs 3: {stderr}");
-    let records = vkdiff_unet::SafeTensors::open(Path::new(&format!("{}/tests/fixtures/compat/records.safetensors", env!("CARGO_MANIFEST_DIR")))).unwrap();
+    let records = vkdiff_formats::SafeTensors::open(Path::new(&format!(
+        "{}/tests/fixtures/compat/records.safetensors",
+        env!("CARGO_MANIFEST_DIR")
+    )))
+    .unwrap();
     let (_, want) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
-    let (_, got) = vkdiff_unet::SafeTensors::open(&lat).unwrap().values("latents").unwrap();
-    let err: f64 = got.iter().zip(&want).map(|(&g, &w)| (g as f64 - w as f64).powi(2)).sum::<f64>().sqrt() / want.iter().map(|&w| (w as f64).powi(2)).sum::<f64>().sqrt();
+    let (_, got) = vkdiff_formats::SafeTensors::open(&lat).unwrap().values("latents").unwrap();
+    let err: f64 = got.iter().zip(&want).map(|(&g, &w)| (g as f64 - w as f64).powi(2)).sum::<f64>().sqrt()
+        / want.iter().map(|&w| (w as f64).powi(2)).sum::<f64>().sqrt();
     assert!(err < 1e-4, "latents relative L2 error {err:.2e}");
     let text = png_text(&png);
     let parameters = &text.iter().find(|(k, _)| k == "parameters").unwrap().1;

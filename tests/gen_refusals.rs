@@ -25,7 +25,8 @@ fn tiny() -> String {
 }
 
 fn depth_exr(path: &Path, width: u32, height: u32, depth: impl Fn(u32, u32) -> f32) {
-    let values: Vec<f32> = (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| depth(x, y)).collect();
+    let values: Vec<f32> =
+        (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| depth(x, y)).collect();
     std::fs::write(path, vkdiff_render::exr::encode_single_channel(width, height, "Z", &values)).unwrap();
 }
 
@@ -34,10 +35,39 @@ fn an_existing_output_is_kept_without_force() {
     let dir = scratch("force");
     let out = dir.join("x.png");
     std::fs::write(&out, b"earlier work").unwrap();
-    let line = error_line(&["gen", "--model", &tiny(), "--prompt", "x", "--steps", "1", "--width", "64", "--height", "64", "--out", out.to_str().unwrap()]);
+    let line = error_line(&[
+        "gen",
+        "--model",
+        &tiny(),
+        "--prompt",
+        "x",
+        "--steps",
+        "1",
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert!(line.contains("exists; give --force"), "{line}");
     assert_eq!(std::fs::read(&out).unwrap(), b"earlier work");
-    let result = vkdiff(&["gen", "--model", &tiny(), "--prompt", "x", "--steps", "1", "--width", "64", "--height", "64", "--out", out.to_str().unwrap(), "--force"]);
+    let result = vkdiff(&[
+        "gen",
+        "--model",
+        &tiny(),
+        "--prompt",
+        "x",
+        "--steps",
+        "1",
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--out",
+        out.to_str().unwrap(),
+        "--force",
+    ]);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     assert!(std::fs::read(&out).unwrap().starts_with(b"\x89PNG"));
 }
@@ -50,14 +80,28 @@ fn depth_of_another_shape_or_without_depth_is_refused() {
     let (wide, empty) = (dir.join("wide.exr"), dir.join("empty.exr"));
     depth_exr(&wide, 128, 64, |x, _| 1.0 + x as f32 / 128.0);
     depth_exr(&empty, 64, 64, |x, _| if x % 2 == 0 { 0.0 } else { f32::INFINITY });
-    let base = ["gen", "--model", &tiny(), "--controlnet", &controlnet, "--prompt", "x", "--steps", "1", "--out", out.to_str().unwrap()];
-    let line = error_line(&[&base[..], &["--depth", wide.to_str().unwrap(), "--width", "64", "--height", "64"]].concat());
+    let base = [
+        "gen",
+        "--model",
+        &tiny(),
+        "--controlnet",
+        &controlnet,
+        "--prompt",
+        "x",
+        "--steps",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let line =
+        error_line(&[&base[..], &["--depth", wide.to_str().unwrap(), "--width", "64", "--height", "64"]].concat());
     assert!(line.contains("128x64") && line.contains("stretched") && line.contains("--width 64 --height 32"), "{line}");
     let line = error_line(&[&base[..], &["--depth", empty.to_str().unwrap()]].concat());
     assert!(line.contains("empty.exr") && line.contains("no pixel holds a valid depth"), "{line}");
     assert!(!out.exists());
     // The same shape at another size is a resize, not a stretch.
-    let result = vkdiff(&[&base[..], &["--depth", wide.to_str().unwrap(), "--width", "128", "--height", "64"]].concat());
+    let result =
+        vkdiff(&[&base[..], &["--depth", wide.to_str().unwrap(), "--width", "128", "--height", "64"]].concat());
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
 }
 
@@ -90,9 +134,26 @@ fn model_with_nan(dir: &Path, component: &str, file: &str, name: &str) -> PathBu
 fn a_network_output_that_is_not_a_number_is_an_error_naming_the_stage() {
     let dir = scratch("nan");
     let out = dir.join("x.png");
-    for (component, tensor, stage) in [("unet", "conv_out.bias", "the UNet's output at step 1 of 2"), ("vae", "decoder.conv_out.bias", "the VAE decoder's output")] {
+    for (component, tensor, stage) in [
+        ("unet", "conv_out.bias", "the UNet's output at step 1 of 2"),
+        ("vae", "decoder.conv_out.bias", "the VAE decoder's output"),
+    ] {
         let model = model_with_nan(&dir, component, "diffusion_pytorch_model.safetensors", tensor);
-        let line = error_line(&["gen", "--model", model.to_str().unwrap(), "--prompt", "x", "--steps", "2", "--width", "64", "--height", "64", "--out", out.to_str().unwrap()]);
+        let line = error_line(&[
+            "gen",
+            "--model",
+            model.to_str().unwrap(),
+            "--prompt",
+            "x",
+            "--steps",
+            "2",
+            "--width",
+            "64",
+            "--height",
+            "64",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
         assert!(line.contains(stage) && line.contains("NaN") && line.contains("--precision f32"), "{line}");
         assert!(!out.exists(), "a {component} NaN wrote an image");
     }
@@ -106,10 +167,14 @@ fn the_image_and_its_latents_are_written_together_or_not_at_all() {
     let latents = dir.join("x.safetensors");
     std::fs::create_dir(&latents).unwrap();
     std::fs::write(latents.join("keep"), b"").unwrap();
-    let args = ["gen", "--model", &tiny(), "--prompt", "x", "--steps", "1", "--width", "64", "--height", "64", "--force"];
-    let line = error_line(&[&args[..], &["--out", out.to_str().unwrap(), "--latents-out", latents.to_str().unwrap()]].concat());
+    let args =
+        ["gen", "--model", &tiny(), "--prompt", "x", "--steps", "1", "--width", "64", "--height", "64", "--force"];
+    let line = error_line(
+        &[&args[..], &["--out", out.to_str().unwrap(), "--latents-out", latents.to_str().unwrap()]].concat(),
+    );
     assert!(line.contains("x.safetensors"), "{line}");
-    let left: Vec<String> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    let left: Vec<String> =
+        std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert_eq!(left, vec!["x.safetensors".to_string()], "the image without its latents, or a temporary file, was left");
 }
 
@@ -118,10 +183,46 @@ fn a_plain_prompt_past_77_tokens_is_cut_with_a_warning() {
     let dir = scratch("long");
     let out = dir.join("x.png");
     let long = "mushrooms on soil ".repeat(30);
-    let result = vkdiff(&["gen", "--model", &tiny(), "--prompt", &long, "--steps", "1", "--width", "64", "--height", "64", "--out", out.to_str().unwrap()]);
+    let result = vkdiff(&[
+        "gen",
+        "--model",
+        &tiny(),
+        "--prompt",
+        &long,
+        "--steps",
+        "1",
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     let stderr = String::from_utf8_lossy(&result.stderr);
-    assert!(result.status.success() && stderr.contains("warning: the last 15 tokens") && stderr.contains("--prompt-syntax weighted"), "{stderr}");
-    let result = vkdiff(&["gen", "--model", &tiny(), "--prompt", &long, "--prompt-syntax", "weighted", "--steps", "1", "--width", "64", "--height", "64", "--out", out.to_str().unwrap(), "--force"]);
+    assert!(
+        result.status.success()
+            && stderr.contains("warning: the last 15 tokens")
+            && stderr.contains("--prompt-syntax weighted"),
+        "{stderr}"
+    );
+    let result = vkdiff(&[
+        "gen",
+        "--model",
+        &tiny(),
+        "--prompt",
+        &long,
+        "--prompt-syntax",
+        "weighted",
+        "--steps",
+        "1",
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--out",
+        out.to_str().unwrap(),
+        "--force",
+    ]);
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(result.status.success() && !stderr.contains("warning"), "{stderr}");
 }

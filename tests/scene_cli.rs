@@ -10,10 +10,25 @@ const SMALL: [&str; 4] = ["--width", "320", "--height", "180"];
 fn scene_writes_the_folder_with_its_crops() {
     let out = scratch("scene").join("bed");
     let out_arg = out.to_str().unwrap();
-    let result = vkdiff(&[&["scene", "--seed", "3", "--out", out_arg, "--crops", "2", "--crop-size", "128", "--threads", "1"][..], &SMALL].concat());
+    let result = vkdiff(
+        &[
+            &["scene", "--seed", "3", "--out", out_arg, "--crops", "2", "--crop-size", "128", "--threads", "1"][..],
+            &SMALL,
+        ]
+        .concat(),
+    );
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     assert_eq!(String::from_utf8_lossy(&result.stdout).trim(), format!("wrote scene 3 to {out_arg}"));
-    for file in ["depth.exr", "instances.png", "annotations.json", "camera.json", "control.png", "preview.png", "crops/1/depth.exr", "crops/1/camera.json"] {
+    for file in [
+        "depth.exr",
+        "instances.png",
+        "annotations.json",
+        "camera.json",
+        "control.png",
+        "preview.png",
+        "crops/1/depth.exr",
+        "crops/1/camera.json",
+    ] {
         assert!(out.join(file).is_file(), "{file}");
     }
 }

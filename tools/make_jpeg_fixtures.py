@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""A JPEG corpus and what Pillow decodes from each file, for `pipeline/tests/jpeg.rs`.
+"""A JPEG corpus and what Pillow decodes from each file, for `formats/tests/jpeg.rs`.
 
 Every file is written by a real encoder: Pillow (its bundled libjpeg-turbo), libjpeg-turbo's
 `cjpeg` and ImageMagick's `convert` (Debian 12's libjpeg62-turbo 2.1.5), covering baseline and

@@ -1,4 +1,4 @@
-"""Writes tests/fixtures/pth/: tiny checkpoints as torch.save writes them, for unet/tests/torch_pth.rs.
+"""Writes tests/fixtures/pth/: tiny checkpoints as torch.save writes them, for formats/tests/torch_pth.rs.
 
   zip.pth         a dict of tensors, zip format (torch >= 1.6 default): float32 incl. a transposed view,
                   views sharing one storage at offsets, a broadcast (stride 0) view, a 0-d scalar, an empty

@@ -23,7 +23,8 @@ pub struct EvalParams {
 }
 
 /// Area ranges and their names, as pycocotools sets them.
-const AREAS: [(f64, f64, &str); 4] = [(0.0, 1e10, "all"), (0.0, 1024.0, "small"), (1024.0, 9216.0, "medium"), (9216.0, 1e10, "large")];
+const AREAS: [(f64, f64, &str); 4] =
+    [(0.0, 1e10, "all"), (0.0, 1024.0, "small"), (1024.0, 9216.0, "medium"), (9216.0, 1e10, "large")];
 
 /// numpy's `linspace(start, stop, n)`: i·step + start, the last value exactly `stop`.
 fn linspace(start: f64, stop: f64, n: usize) -> Vec<f64> {
@@ -96,7 +97,14 @@ fn overlap(a: [f64; 4], b: [f64; 4]) -> bool {
 
 /// `evaluateImg` for one image and category: detections (sorted, capped) and ground truth
 /// (non-ignored first) and the IoU matrix in detection order × file order of ground truth.
-fn evaluate_image(dts: &[&Annotation], gts: &[&Annotation], iou: &[Vec<f64>], area: (f64, f64), thresholds: &[f64], max_det: usize) -> Option<ImageEval> {
+fn evaluate_image(
+    dts: &[&Annotation],
+    gts: &[&Annotation],
+    iou: &[Vec<f64>],
+    area: (f64, f64),
+    thresholds: &[f64],
+    max_det: usize,
+) -> Option<ImageEval> {
     if dts.is_empty() && gts.is_empty() {
         return None;
     }
@@ -139,8 +147,17 @@ fn evaluate_image(dts: &[&Annotation], gts: &[&Annotation], iou: &[Vec<f64>], ar
             }
         }
     }
-    Some(ImageEval { scores: dts[..d].iter().map(|a| a.score).collect(), matched, ignored, gt_ignored: g_order.iter().map(|&i| g_ignore[i]).collect(), gt_match_iou: g_order.iter().map(|&i| gt_match_iou[i]).collect() })
+    Some(ImageEval {
+        scores: dts[..d].iter().map(|a| a.score).collect(),
+        matched,
+        ignored,
+        gt_ignored: g_order.iter().map(|&i| g_ignore[i]).collect(),
+        gt_match_iou: g_order.iter().map(|&i| gt_match_iou[i]).collect(),
+    })
 }
+
+/// One image's ground truth and detections of a category, and their IoUs.
+type ImageMatches<'a> = (Vec<&'a Annotation>, Vec<&'a Annotation>, Vec<Vec<f64>>);
 
 /// Runs `COCOeval.evaluate()`, `accumulate()` and `summarize()` on `dt` against `gt`.
 pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
@@ -170,11 +187,13 @@ pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
     // evalImgs[k][a][i]
     let mut evals: Vec<Option<ImageEval>> = Vec::with_capacity(k_n * a_n * images.len());
     for &cat in &cats {
-        let per_image: Vec<(Vec<&Annotation>, Vec<&Annotation>, Vec<Vec<f64>>)> = images
+        let per_image: Vec<ImageMatches> = images
             .iter()
             .map(|&img| {
-                let gts: Vec<&Annotation> = g_map.get(&(img, cat)).map_or(vec![], |v| v.iter().map(|&i| &gt.annotations[i]).collect());
-                let dts: Vec<&Annotation> = d_map.get(&(img, cat)).map_or(vec![], |v| v.iter().map(|&i| &dt.annotations[i]).collect());
+                let gts: Vec<&Annotation> =
+                    g_map.get(&(img, cat)).map_or(vec![], |v| v.iter().map(|&i| &gt.annotations[i]).collect());
+                let dts: Vec<&Annotation> =
+                    d_map.get(&(img, cat)).map_or(vec![], |v| v.iter().map(|&i| &dt.annotations[i]).collect());
                 let mut dts: Vec<&Annotation> = by_score(&dts).into_iter().map(|i| dts[i]).collect();
                 dts.truncate(max_det);
                 let iou = ious(&dts, &gts, p.iou_type);
@@ -250,19 +269,64 @@ pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
 }
 
 /// pycocotools' `summarize()`: means over the defined (> -1) entries.
-fn summarize(precision: &[f64], recall: &[f64], [t_n, r_n, k_n, a_n, m_n]: [usize; 5], max_dets: [usize; 3]) -> (Vec<String>, Vec<f64>) {
+fn summarize(
+    precision: &[f64],
+    recall: &[f64],
+    [t_n, r_n, k_n, a_n, m_n]: [usize; 5],
+    max_dets: [usize; 3],
+) -> (Vec<String>, Vec<f64>) {
     let mean = |vals: Vec<f64>| {
         let v: Vec<f64> = vals.into_iter().filter(|&x| x > -1.0).collect();
-        if v.is_empty() { -1.0 } else { v.iter().sum::<f64>() / v.len() as f64 }
+        if v.is_empty() {
+            -1.0
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
     };
     let ap = |t: Option<usize>, a: usize| {
         let ts: Vec<usize> = t.map_or((0..t_n).collect(), |t| vec![t]);
-        mean(ts.iter().flat_map(|&t| (0..r_n).flat_map(move |r| (0..k_n).map(move |k| precision[(((t * r_n + r) * k_n + k) * a_n + a) * m_n + 2]))).collect())
+        mean(
+            ts.iter()
+                .flat_map(|&t| {
+                    (0..r_n).flat_map(move |r| {
+                        (0..k_n).map(move |k| precision[(((t * r_n + r) * k_n + k) * a_n + a) * m_n + 2])
+                    })
+                })
+                .collect(),
+        )
     };
-    let ar = |a: usize, m: usize| mean((0..t_n).flat_map(|t| (0..k_n).map(move |k| recall[((t * k_n + k) * a_n + a) * m_n + m])).collect());
+    let ar = |a: usize, m: usize| {
+        mean((0..t_n).flat_map(|t| (0..k_n).map(move |k| recall[((t * k_n + k) * a_n + a) * m_n + m])).collect())
+    };
     let d = max_dets[2];
     let tag = |name: &str| if d == 100 { name.to_string() } else { format!("{name}@{d}") };
-    let names = [tag("AP"), tag("AP50"), tag("AP75"), tag("APs"), tag("APm"), tag("APl"), format!("AR{}", max_dets[0]), format!("AR{}", max_dets[1]), format!("AR{d}"), tag("ARs"), tag("ARm"), tag("ARl")];
-    let values = vec![ap(None, 0), ap(Some(0), 0), ap(Some(5), 0), ap(None, 1), ap(None, 2), ap(None, 3), ar(0, 0), ar(0, 1), ar(0, 2), ar(1, 2), ar(2, 2), ar(3, 2)];
+    let names = [
+        tag("AP"),
+        tag("AP50"),
+        tag("AP75"),
+        tag("APs"),
+        tag("APm"),
+        tag("APl"),
+        format!("AR{}", max_dets[0]),
+        format!("AR{}", max_dets[1]),
+        format!("AR{d}"),
+        tag("ARs"),
+        tag("ARm"),
+        tag("ARl"),
+    ];
+    let values = vec![
+        ap(None, 0),
+        ap(Some(0), 0),
+        ap(Some(5), 0),
+        ap(None, 1),
+        ap(None, 2),
+        ap(None, 3),
+        ar(0, 0),
+        ar(0, 1),
+        ar(0, 2),
+        ar(1, 2),
+        ar(2, 2),
+        ar(3, 2),
+    ];
     (names.to_vec(), values)
 }

@@ -94,7 +94,11 @@ fn id(v: &Value, what: &str) -> Result<u64> {
 
 fn short(v: &Value) -> String {
     let s = v.to_string();
-    if s.len() > 60 { format!("{}…", &s[..s.char_indices().nth(60).map_or(s.len(), |(i, _)| i)]) } else { s }
+    if s.len() > 60 {
+        format!("{}…", &s[..s.char_indices().nth(60).map_or(s.len(), |(i, _)| i)])
+    } else {
+        s
+    }
 }
 
 fn field<'a>(o: &'a Value, key: &str, what: &str) -> Result<&'a Value> {
@@ -116,7 +120,8 @@ fn segmentation(v: &Value, (h, w): (u32, u32), what: &str) -> Result<Rle> {
             Ok(union(&rles, h, w))
         }
         Value::Object(o) => {
-            let size = o.get("size").and_then(Value::as_array).ok_or_else(|| err(format!("{what}: an RLE without `size`")))?;
+            let size =
+                o.get("size").and_then(Value::as_array).ok_or_else(|| err(format!("{what}: an RLE without `size`")))?;
             let (rh, rw) = match size.as_slice() {
                 [a, b] => (id(a, what)? as u32, id(b, what)? as u32),
                 _ => return Err(err(format!("{what}: RLE `size` is not [height, width]"))),
@@ -150,19 +155,41 @@ impl Dataset {
     /// COCO ground truth. Masks are decoded only when `masks` (segm evaluation).
     pub fn ground_truth(json: &Value, masks: bool) -> Result<Dataset> {
         let mut d = Dataset::default();
-        for (i, img) in json.get("images").and_then(Value::as_array).ok_or_else(|| err("ground truth has no `images` list".into()))?.iter().enumerate() {
+        for (i, img) in json
+            .get("images")
+            .and_then(Value::as_array)
+            .ok_or_else(|| err("ground truth has no `images` list".into()))?
+            .iter()
+            .enumerate()
+        {
             let what = format!("images[{i}]");
-            let size = (id(field(img, "height", &what)?, &what)? as u32, id(field(img, "width", &what)?, &what)? as u32);
+            let size =
+                (id(field(img, "height", &what)?, &what)? as u32, id(field(img, "width", &what)?, &what)? as u32);
             d.images.insert(id(field(img, "id", &what)?, &what)?, size);
         }
         if let Some(cats) = json.get("categories").and_then(Value::as_array) {
-            d.categories = cats.iter().enumerate().map(|(i, c)| id(field(c, "id", &format!("categories[{i}]"))?, "category id")).collect::<Result<_>>()?;
+            d.categories = cats
+                .iter()
+                .enumerate()
+                .map(|(i, c)| id(field(c, "id", &format!("categories[{i}]"))?, "category id"))
+                .collect::<Result<_>>()?;
         }
-        for (i, a) in json.get("annotations").and_then(Value::as_array).ok_or_else(|| err("ground truth has no `annotations` list".into()))?.iter().enumerate() {
+        for (i, a) in json
+            .get("annotations")
+            .and_then(Value::as_array)
+            .ok_or_else(|| err("ground truth has no `annotations` list".into()))?
+            .iter()
+            .enumerate()
+        {
             let what = format!("annotations[{i}]");
             let image_id = id(field(a, "image_id", &what)?, &what)?;
-            let size = *d.images.get(&image_id).ok_or_else(|| err(format!("{what}: image {image_id} is not in `images`")))?;
-            let geometry = if masks { Geometry::Mask(segmentation(field(a, "segmentation", &what)?, size, &what)?) } else { Geometry::Box };
+            let size =
+                *d.images.get(&image_id).ok_or_else(|| err(format!("{what}: image {image_id} is not in `images`")))?;
+            let geometry = if masks {
+                Geometry::Mask(segmentation(field(a, "segmentation", &what)?, size, &what)?)
+            } else {
+                Geometry::Box
+            };
             let bbox = match a.get("bbox") {
                 Some(b) => bbox(b, &what)?,
                 None => match &geometry {
@@ -193,7 +220,10 @@ impl Dataset {
         for (i, a) in list.iter().enumerate() {
             let what = format!("results[{i}]");
             let image_id = id(field(a, "image_id", &what)?, &what)?;
-            let size = *gt.images.get(&image_id).ok_or_else(|| err(format!("{what}: image {image_id} is not in the ground truth")))?;
+            let size = *gt
+                .images
+                .get(&image_id)
+                .ok_or_else(|| err(format!("{what}: image {image_id} is not in the ground truth")))?;
             let (geometry, area, bbox) = match areas {
                 AreaSource::Box => {
                     let b = a.get("bbox").ok_or_else(|| {

@@ -58,7 +58,11 @@ fn intersection(a: &[(u64, u64)], b: &[(u64, u64)]) -> u64 {
     while i < a.len() && j < b.len() {
         let (s, e) = (a[i].0.max(b[j].0), a[i].1.min(b[j].1));
         n += e.saturating_sub(s);
-        if a[i].1 < b[j].1 { i += 1 } else { j += 1 }
+        if a[i].1 < b[j].1 {
+            i += 1
+        } else {
+            j += 1
+        }
     }
     n
 }
@@ -68,7 +72,11 @@ fn intersection(a: &[(u64, u64)], b: &[(u64, u64)]) -> u64 {
 pub fn mask_iou(dt: &[(u64, u64)], gt: &[(u64, u64)], crowd: bool) -> f64 {
     let i = intersection(dt, gt);
     let u = if crowd { runs_area(dt) } else { runs_area(dt) + runs_area(gt) - i };
-    if u == 0 { 0.0 } else { i as f64 / u as f64 }
+    if u == 0 {
+        0.0
+    } else {
+        i as f64 / u as f64
+    }
 }
 
 /// IoU of two `[x, y, w, h]` boxes, with the crowd rule of [`mask_iou`].
@@ -188,5 +196,9 @@ pub fn foreground_iou(images: &[(Vec<&Rle>, Vec<&Rle>)]) -> f64 {
         inter += i;
         uni += runs_area(&g) + runs_area(&p) - i;
     }
-    if uni == 0 { 0.0 } else { inter as f64 / uni as f64 }
+    if uni == 0 {
+        0.0
+    } else {
+        inter as f64 / uni as f64
+    }
 }

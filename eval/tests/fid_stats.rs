@@ -12,7 +12,7 @@ use vkdiff_eval::fid::numpy_rng::RandomState;
 use vkdiff_eval::fid::{fid, kid, KidOptions};
 
 fn dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/fid_stats")
+    vkdiff_testkit::fixture("fid_stats")
 }
 
 fn expected() -> Value {
@@ -21,7 +21,7 @@ fn expected() -> Value {
 
 /// The fixture's feature sets, by name.
 fn features() -> HashMap<String, Vec<f32>> {
-    let file = vkdiff_unet::SafeTensors::open(&dir().join("features.safetensors")).unwrap();
+    let file = vkdiff_formats::SafeTensors::open(&dir().join("features.safetensors")).unwrap();
     file.entries.keys().map(|name| (name.clone(), file.values(name).unwrap().1)).collect()
 }
 

@@ -3,12 +3,11 @@
 //! and every polygon rasterised pixel for pixel as `frPyObjects` does.
 
 use serde_json::Value;
-use std::path::PathBuf;
 use vkdiff_eval::{evaluate, polygon_rle, union, AreaRule, AreaSource, Dataset, EvalParams, IouType};
 use vkdiff_render::rle::Rle;
 
 fn fixture(name: &str) -> Value {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/eval").join(name);
+    let path = vkdiff_testkit::fixture("eval").join(name);
     serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap()
 }
 
@@ -31,13 +30,18 @@ fn check_as(iou_type: IouType, results: &str, max_dets: [usize; 3], rule: AreaRu
     let want = &fixture("expected.json")[&key];
     for (i, (name, got)) in stats.names.iter().zip(&stats.values).enumerate() {
         // pycocotools reports AP at 100 detections whatever the caps; vkdiff at the last cap.
-        let expected = if i == 0 && max_dets[2] != 100 { want["ap_at_last_max_dets"].as_f64() } else { want["stats"][i].as_f64() }.unwrap();
+        let expected =
+            if i == 0 && max_dets[2] != 100 { want["ap_at_last_max_dets"].as_f64() } else { want["stats"][i].as_f64() }
+                .unwrap();
         assert!((got - expected).abs() <= 1e-6, "{key}: {name} = {got}, pycocotools {expected}");
     }
     let sum = |v: &[f64]| v.iter().sum::<f64>();
     for (what, got) in [("precision_sum", sum(&stats.precision)), ("recall_sum", sum(&stats.recall))] {
         let expected = want[what].as_f64().unwrap();
-        assert!((got - expected).abs() <= 1e-9 * expected.abs().max(1.0), "{key}: {what} {got}, pycocotools {expected}");
+        assert!(
+            (got - expected).abs() <= 1e-9 * expected.abs().max(1.0),
+            "{key}: {what} {got}, pycocotools {expected}"
+        );
     }
 }
 
@@ -93,7 +97,8 @@ fn a_result_without_the_first_ones_box_is_refused_with_the_rule_named() {
 #[test]
 fn polygons_rasterise_as_pycocotools_does() {
     let gt = fixture("gt.json");
-    let (h, w) = (gt["images"][0]["height"].as_u64().unwrap() as u32, gt["images"][0]["width"].as_u64().unwrap() as u32);
+    let (h, w) =
+        (gt["images"][0]["height"].as_u64().unwrap() as u32, gt["images"][0]["width"].as_u64().unwrap() as u32);
     let expected = fixture("expected.json");
     let wanted = expected["polygon_rles"].as_array().unwrap();
     assert!(wanted.len() >= 5, "the fixture holds polygons");

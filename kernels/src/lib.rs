@@ -43,12 +43,16 @@ mod compile_tests {
     include!("../compile.rs");
 
     fn one_file(body: &str) -> Source {
-        Source::new(&prelude(false, &[("N", 2)]), &[("a.wgsl".into(), "// line 1\n".into()), ("broken.wgsl".into(), body.into())])
+        Source::new(
+            &prelude(false, &[("N", 2)]),
+            &[("a.wgsl".into(), "// line 1\n".into()), ("broken.wgsl".into(), body.into())],
+        )
     }
 
     #[test]
     fn parse_errors_name_the_file_and_line() {
-        let err = compile(one_file("@compute @workgroup_size(1)\nfn main() {\n    let x = ;\n}\n"), &[], "kernel `t`").unwrap_err();
+        let err = compile(one_file("@compute @workgroup_size(1)\nfn main() {\n    let x = ;\n}\n"), &[], "kernel `t`")
+            .unwrap_err();
         assert!(err.starts_with("kernels/wgsl/broken.wgsl:3: kernel `t`"), "{err}");
     }
 

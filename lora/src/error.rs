@@ -19,7 +19,9 @@ pub enum Error {
     #[error("{}: module `{key}` makes a delta of shape {found:?} but `{weight}` has shape {expected:?}", path.display())]
     Shape { path: PathBuf, key: String, weight: String, expected: Vec<usize>, found: Vec<usize> },
     #[error(transparent)]
-    Unet(#[from] vkdiff_unet::Error),
+    Network(#[from] vkdiff_networks::Error),
+    #[error(transparent)]
+    File(#[from] vkdiff_formats::Error),
     #[error(transparent)]
     Runtime(#[from] vkdiff_runtime::Error),
 }

@@ -8,7 +8,7 @@ use crate::error::{Error, Result};
 use crate::metadata::PeftConfigs;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use vkdiff_unet::SafeTensors;
+use vkdiff_formats::SafeTensors;
 
 /// Which network a module adapts.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -79,8 +79,12 @@ struct Parts {
     alpha: Option<String>,
 }
 
-const KOHYA: [(&str, Component); 4] =
-    [("lora_unet_", Component::Unet), ("lora_te1_", Component::TextEncoder1), ("lora_te2_", Component::TextEncoder2), ("lora_te_", Component::TextEncoder1)];
+const KOHYA: [(&str, Component); 4] = [
+    ("lora_unet_", Component::Unet),
+    ("lora_te1_", Component::TextEncoder1),
+    ("lora_te2_", Component::TextEncoder2),
+    ("lora_te_", Component::TextEncoder1),
+];
 const DIFFUSERS: [(&str, Component); 5] = [
     ("unet.", Component::Unet),
     ("text_encoder.", Component::TextEncoder1),
@@ -95,7 +99,16 @@ const COMFY_UNET: &str = "diffusion_model.";
 const PEFT_WRAPPER: &str = "base_model.model.";
 /// Top-level modules of a diffusers UNet: UNet keys ComfyUI and older diffusers files write
 /// without `unet.`.
-const UNET_MODULES: [&str; 8] = ["down_blocks.", "mid_block.", "up_blocks.", "conv_in.", "conv_out.", "conv_norm_out.", "time_embedding.", "add_embedding."];
+const UNET_MODULES: [&str; 8] = [
+    "down_blocks.",
+    "mid_block.",
+    "up_blocks.",
+    "conv_in.",
+    "conv_out.",
+    "conv_norm_out.",
+    "time_embedding.",
+    "add_embedding.",
+];
 
 impl LoraFile {
     pub fn open(path: &Path) -> Result<LoraFile> {
@@ -104,8 +117,11 @@ impl LoraFile {
         let bad = |why: String| Error::Format { path: path.to_path_buf(), why };
         let mut grouped: BTreeMap<(Component, String), (Address, Parts)> = BTreeMap::new();
         for key in file.entries.keys() {
-            let (component, address, module_key, role) =
-                classify(key).map_err(|what| Error::Unsupported { path: path.to_path_buf(), key: key.clone(), what })?;
+            let (component, address, module_key, role) = classify(key).map_err(|what| Error::Unsupported {
+                path: path.to_path_buf(),
+                key: key.clone(),
+                what,
+            })?;
             let parts = &mut grouped.entry((component, module_key)).or_insert_with(|| (address, Parts::default())).1;
             let slot = match role {
                 Role::Down => &mut parts.down,
@@ -119,12 +135,19 @@ impl LoraFile {
         let mut modules = Vec::new();
         for ((component, key), (address, parts)) in grouped {
             let (Some(down), Some(up)) = (parts.down, parts.up) else {
-                return Err(bad(format!("module `{key}` needs both a down (lora_down / lora_A) and an up (lora_up / lora_B) factor")));
+                return Err(bad(format!(
+                    "module `{key}` needs both a down (lora_down / lora_A) and an up (lora_up / lora_B) factor"
+                )));
             };
             let (down_shape, up_shape) = (file.entries[&down].shape.clone(), file.entries[&up].shape.clone());
             let r = down_shape.first().copied().unwrap_or(0);
             let linear_or_conv = |s: &[usize]| s.len() == 2 || s.len() == 4;
-            if r == 0 || !linear_or_conv(&down_shape) || !linear_or_conv(&up_shape) || up_shape[1] != r || up_shape[2..].iter().any(|&d| d != 1) {
+            if r == 0
+                || !linear_or_conv(&down_shape)
+                || !linear_or_conv(&up_shape)
+                || up_shape[1] != r
+                || up_shape[2..].iter().any(|&d| d != 1)
+            {
                 return Err(bad(format!(
                     "module `{key}`: down {down_shape:?} and up {up_shape:?} are not LoRA factors ([r, in(, kh, kw)] and [out, r(, 1, 1)])"
                 )));
@@ -132,7 +155,9 @@ impl LoraFile {
             let scale = match (&parts.alpha, &address) {
                 (Some(alpha), _) => {
                     let (_, v) = file.values(alpha)?;
-                    let [alpha] = v[..] else { return Err(bad(format!("alpha `{alpha}` holds {} values, not one", v.len()))) };
+                    let [alpha] = v[..] else {
+                        return Err(bad(format!("alpha `{alpha}` holds {} values, not one", v.len())));
+                    };
                     alpha / r as f32
                 }
                 (None, Address::Path(p)) => peft.scale(component, p, r),
@@ -158,7 +183,9 @@ fn classify(key: &str) -> std::result::Result<(Component, Address, String, Role)
     }
     for (prefix, component) in KOHYA {
         let Some(rest) = key.strip_prefix(prefix) else { continue };
-        let Some((name, suffix)) = rest.split_once('.') else { return Err("a kohya name without a `.lora_down` / `.lora_up` / `.alpha` suffix".into()) };
+        let Some((name, suffix)) = rest.split_once('.') else {
+            return Err("a kohya name without a `.lora_down` / `.lora_up` / `.alpha` suffix".into());
+        };
         let role = match suffix {
             "lora_down.weight" => Role::Down,
             "lora_up.weight" => Role::Up,
@@ -187,7 +214,11 @@ fn classify(key: &str) -> std::result::Result<(Component, Address, String, Role)
 }
 
 /// A diffusers / PEFT tensor of `component` whose module path (after `prefix`) is `rest`.
-fn diffusers_key(component: Component, prefix: &str, rest: &str) -> std::result::Result<(Component, Address, String, Role), String> {
+fn diffusers_key(
+    component: Component,
+    prefix: &str,
+    rest: &str,
+) -> std::result::Result<(Component, Address, String, Role), String> {
     // PEFT names the adapter inside the key (`lora_A.default.weight`).
     let rest = rest.replace(".default.", ".");
     let (path, role) = diffusers_module(&rest, component)?;
@@ -242,5 +273,6 @@ fn diffusers_module(rest: &str, component: Component) -> std::result::Result<(St
         };
         return Ok((if parent.is_empty() { proj } else { format!("{parent}.{proj}") }, role));
     }
-    Err("a diffusers tensor that is neither a LoRA factor (`lora_A` / `lora_B`, `lora.down` / `lora.up`) nor an alpha".into())
+    Err("a diffusers tensor that is neither a LoRA factor (`lora_A` / `lora_B`, `lora.down` / `lora.up`) nor an alpha"
+        .into())
 }

@@ -10,9 +10,9 @@ use std::collections::BTreeMap;
 use std::fmt;
 use std::path::PathBuf;
 use std::time::Instant;
+use vkdiff_networks::{ParamLayout, Parameter};
 use vkdiff_runtime::ops::{matmul, oihw_to_ohwi, Matmul};
 use vkdiff_runtime::{dtype_size, Context, Dtype, Recorder, Tensor};
-use vkdiff_unet::{ParamLayout, Parameter};
 
 /// Factors uploaded per recording: few submits, bounded device memory, within a binding.
 const CHUNK_BYTES: u64 = 64 << 20;
@@ -44,7 +44,15 @@ pub struct Summary {
 impl fmt::Display for Summary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         for l in &self.loras {
-            write!(f, "LoRA {} at {}: {} UNet, {} CLIP-L, {} bigG modules", l.path.display(), l.strength, l.unet, l.text_encoder_1, l.text_encoder_2)?;
+            write!(
+                f,
+                "LoRA {} at {}: {} UNet, {} CLIP-L, {} bigG modules",
+                l.path.display(),
+                l.strength,
+                l.unet,
+                l.text_encoder_1,
+                l.text_encoder_2
+            )?;
             if l.not_run > 0 {
                 write!(f, " ({} aimed at layers the model never runs, skipped)", l.not_run)?;
             }

@@ -32,14 +32,24 @@ impl PeftConfigs {
     pub fn read(path: &Path) -> Result<PeftConfigs> {
         let bad = |why: String| Error::Format { path: path.to_path_buf(), why };
         let Some(raw) = header_metadata(path)?.remove(METADATA_KEY) else { return Ok(PeftConfigs::default()) };
-        let json: Map<String, Value> = serde_json::from_str(&raw).map_err(|e| bad(format!("`{METADATA_KEY}` is not a JSON object: {e}")))?;
+        let json: Map<String, Value> =
+            serde_json::from_str(&raw).map_err(|e| bad(format!("`{METADATA_KEY}` is not a JSON object: {e}")))?;
         let mut by_component = HashMap::new();
-        for (prefix, component) in [("unet.", Component::Unet), ("text_encoder.", Component::TextEncoder1), ("text_encoder_2.", Component::TextEncoder2)] {
+        for (prefix, component) in [
+            ("unet.", Component::Unet),
+            ("text_encoder.", Component::TextEncoder1),
+            ("text_encoder_2.", Component::TextEncoder2),
+        ] {
             let field = |name: &str| json.get(&format!("{prefix}{name}"));
             if !json.keys().any(|k| k.starts_with(prefix)) {
                 continue;
             }
-            let wrong = |name: &str, want: &str| bad(format!("`{prefix}{name}` in `{METADATA_KEY}` is {}, not {want}", field(name).map_or(String::new(), Value::to_string)));
+            let wrong = |name: &str, want: &str| {
+                bad(format!(
+                    "`{prefix}{name}` in `{METADATA_KEY}` is {}, not {want}",
+                    field(name).map_or(String::new(), Value::to_string)
+                ))
+            };
             let lora_alpha = match field("lora_alpha") {
                 None | Some(Value::Null) => PEFT_DEFAULT_ALPHA,
                 Some(v) => v.as_f64().ok_or_else(|| wrong("lora_alpha", "a number"))?,
@@ -56,9 +66,12 @@ impl PeftConfigs {
             let mut alpha_pattern = Vec::new();
             if let Some(patterns) = patterns {
                 for (pattern, alpha) in patterns {
-                    let alpha = alpha.as_f64().ok_or_else(|| bad(format!("alpha_pattern `{pattern}` of {prefix} is not a number")))?;
+                    let alpha = alpha
+                        .as_f64()
+                        .ok_or_else(|| bad(format!("alpha_pattern `{pattern}` of {prefix} is not a number")))?;
                     // PEFT: re.match(rf"(.*\.)?({key})$", module_name).
-                    let re = Regex::new(&format!(r"^(?:.*\.)?(?:{pattern})$")).map_err(|e| bad(format!("alpha_pattern `{pattern}`: {e}")))?;
+                    let re = Regex::new(&format!(r"^(?:.*\.)?(?:{pattern})$"))
+                        .map_err(|e| bad(format!("alpha_pattern `{pattern}`: {e}")))?;
                     alpha_pattern.push((re, alpha));
                 }
             }
@@ -85,7 +98,8 @@ fn header_metadata(path: &Path) -> Result<HashMap<String, String>> {
     let mut header = vec![0u8; u64::from_le_bytes(len) as usize];
     // SafeTensors::open has already checked the length against the file.
     file.read_exact(&mut header).map_err(io)?;
-    let json: Value = serde_json::from_slice(&header).map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("header is not JSON: {e}") })?;
+    let json: Value = serde_json::from_slice(&header)
+        .map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("header is not JSON: {e}") })?;
     let Some(Value::Object(meta)) = json.get("__metadata__") else { return Ok(HashMap::new()) };
     Ok(meta.iter().filter_map(|(k, v)| Some((k.clone(), v.as_str()?.to_string()))).collect())
 }

@@ -5,7 +5,7 @@
 use crate::error::Result;
 use crate::format::{Address, Component};
 use std::collections::HashMap;
-use vkdiff_unet::{ClipTextModel, OriginalNames, Parameter, Parameters, UNet, UNetConfig};
+use vkdiff_networks::{unet_names, ClipTextModel, Parameter, Parameters, UNet, UNetConfig};
 
 /// The networks a merge edits. A component left out makes LoRA modules aimed at it unmatched.
 #[derive(Clone, Copy)]
@@ -18,7 +18,11 @@ pub struct Targets<'a> {
 impl<'a> Targets<'a> {
     /// SDXL: the UNet, CLIP-L and OpenCLIP bigG.
     pub fn sdxl(unet: &'a UNet, clip_l: &'a ClipTextModel, big_g: &'a ClipTextModel) -> Targets<'a> {
-        Targets { unet: Some((unet.parameters(), unet.config())), text_encoder_1: Some(clip_l.parameters()), text_encoder_2: Some(big_g.parameters()) }
+        Targets {
+            unet: Some((unet.parameters(), unet.config())),
+            text_encoder_1: Some(clip_l.parameters()),
+            text_encoder_2: Some(big_g.parameters()),
+        }
     }
 
     pub fn unet_only(unet: &'a UNet) -> Targets<'a> {
@@ -42,11 +46,12 @@ pub(crate) struct Dictionary<'a> {
 
 /// Text-encoder layer modules kohya adapts; registered for every layer index up to the deepest
 /// present, so that a key aimed at a layer the network never loaded is still recognised.
-const CLIP_LAYER_MODULES: [&str; 6] = ["self_attn.q_proj", "self_attn.k_proj", "self_attn.v_proj", "self_attn.out_proj", "mlp.fc1", "mlp.fc2"];
+const CLIP_LAYER_MODULES: [&str; 6] =
+    ["self_attn.q_proj", "self_attn.k_proj", "self_attn.v_proj", "self_attn.out_proj", "mlp.fc1", "mlp.fc2"];
 
 impl<'a> Dictionary<'a> {
     pub fn unet(params: &'a Parameters, config: &UNetConfig) -> Result<Dictionary<'a>> {
-        let original = OriginalNames::unet(config)?;
+        let original = unet_names(config)?;
         let mut d = Dictionary::plain(params);
         for name in weights(params) {
             if let Some(stored) = original.rename(name) {
@@ -88,7 +93,11 @@ impl<'a> Dictionary<'a> {
             Address::Path(p) => {
                 let (plain, leveled) = (format!("{p}.weight"), format!("text_model.{p}.weight"));
                 let known = |n: &str| self.params.get(n).is_some() || self.params.is_not_run(n);
-                if !known(&plain) && known(&leveled) { leveled } else { plain }
+                if !known(&plain) && known(&leveled) {
+                    leveled
+                } else {
+                    plain
+                }
             }
         };
         match self.params.get(&name) {
@@ -105,7 +114,9 @@ pub(crate) fn dictionaries<'a>(targets: &Targets<'a>) -> Result<HashMap<Componen
     if let Some((params, config)) = targets.unet {
         out.insert(Component::Unet, Dictionary::unet(params, config)?);
     }
-    for (component, params) in [(Component::TextEncoder1, targets.text_encoder_1), (Component::TextEncoder2, targets.text_encoder_2)] {
+    for (component, params) in
+        [(Component::TextEncoder1, targets.text_encoder_1), (Component::TextEncoder2, targets.text_encoder_2)]
+    {
         if let Some(params) = params {
             out.insert(component, Dictionary::text(params));
         }
@@ -115,7 +126,10 @@ pub(crate) fn dictionaries<'a>(targets: &Targets<'a>) -> Result<HashMap<Componen
 
 /// Names of matrix and conv weights: what a LoRA can adapt.
 fn weights(params: &Parameters) -> impl Iterator<Item = &str> {
-    params.names().into_iter().filter(|n| n.ends_with(".weight") && params.get(n).is_some_and(|p| p.torch_shape.len() >= 2))
+    params
+        .names()
+        .into_iter()
+        .filter(|n| n.ends_with(".weight") && params.get(n).is_some_and(|p| p.torch_shape.len() >= 2))
 }
 
 fn flat(module: &str) -> String {

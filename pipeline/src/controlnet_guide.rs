@@ -5,8 +5,8 @@
 use crate::error::{Error, Result};
 use crate::images::control_tensor;
 use crate::RgbImage;
+use vkdiff_networks::{nchw_to_nhwc, ControlNetInputs, ControlNetModel, ControlNetPass, ControlResiduals};
 use vkdiff_runtime::Tensor;
-use vkdiff_unet::{nchw_to_nhwc, ControlNetInputs, ControlNetModel, ControlNetPass, ControlResiduals};
 
 /// The `--controlnet` settings of one generation.
 pub struct ControlGuide<'a> {
@@ -27,7 +27,9 @@ pub fn check_control_settings(scale: f32, start: f64, end: f64) -> Result<()> {
         return Err(Error::Config(format!("--control-scale {scale} is not a number")));
     }
     if !(0.0..=1.0).contains(&start) || !(0.0..=1.0).contains(&end) || start >= end {
-        return Err(Error::Config(format!("--control-start {start} and --control-end {end} must satisfy 0 <= start < end <= 1")));
+        return Err(Error::Config(format!(
+            "--control-start {start} and --control-end {end} must satisfy 0 <= start < end <= 1"
+        )));
     }
     Ok(())
 }

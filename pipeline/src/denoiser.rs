@@ -10,12 +10,13 @@ use crate::img2img::InitLatents;
 use crate::ip_scale::IpScale;
 use crate::prompt_encoding::Conditioning;
 use crate::rng::TorchCpuRng;
+use crate::sampling::Sampling;
 use crate::schedulers::Sampler;
 use crate::sdxl::Sdxl;
-use crate::text_to_image::{RgbImage, Sampling};
+use crate::RgbImage;
 use std::time::{Duration, Instant};
+use vkdiff_networks::{nchw_to_nhwc, nhwc_to_nchw, IpAdapter, IpAdapterInput, UNetInputs, UNetPass};
 use vkdiff_runtime::{Dtype, Tensor};
-use vkdiff_unet::{nchw_to_nhwc, nhwc_to_nchw, IpAdapter, IpAdapterInput, UNetInputs, UNetPass};
 
 /// An IP-Adapter and its weights, for images that each have `images` style images.
 #[derive(Clone, Copy)]
@@ -67,7 +68,14 @@ pub struct Denoiser<'m> {
 impl<'m> Denoiser<'m> {
     /// Records the passes for `batch` images sampled as `sampling` says, with prompts of
     /// `tokens` tokens ([`Conditioning::tokens`]), steered by `control` and `ip` when given.
-    pub fn record(model: &'m Sdxl, sampling: &Sampling, control: Option<ControlNetUse<'m>>, ip: Option<IpAdapterUse<'m>>, batch: usize, tokens: usize) -> Result<Denoiser<'m>> {
+    pub fn record(
+        model: &'m Sdxl,
+        sampling: &Sampling,
+        control: Option<ControlNetUse<'m>>,
+        ip: Option<IpAdapterUse<'m>>,
+        batch: usize,
+        tokens: usize,
+    ) -> Result<Denoiser<'m>> {
         model.check_sampling(sampling)?;
         if batch == 0 {
             return Err(Error::Config("--batch must be at least 1".into()));
@@ -83,7 +91,8 @@ impl<'m> Denoiser<'m> {
         let pooled = ctx.zeros(&[rows, pooled_width], dt)?;
         let time_ids: Vec<f32> = (0..rows).flat_map(|_| sampling.time_ids()).collect();
         let time_ids = ctx.upload(&[rows, 6], Dtype::F32, &time_ids)?;
-        let shared = SharedInputs { sample: &sample, timesteps: &timesteps, context: &context, added: (&pooled, &time_ids) };
+        let shared =
+            SharedInputs { sample: &sample, timesteps: &timesteps, context: &context, added: (&pooled, &time_ids) };
         let control = control.map(|c| ControlRun::record(c, &shared)).transpose()?;
         let ip = match ip {
             Some(use_) => {
@@ -102,7 +111,20 @@ impl<'m> Denoiser<'m> {
             ip: &ip,
         };
         let pass = model.unet.record(&inputs)?;
-        Ok(Denoiser { model, sampling: sampling.clone(), batch, latent, sample, timesteps, context, pooled, _time_ids: time_ids, control, ip, pass })
+        Ok(Denoiser {
+            model,
+            sampling: sampling.clone(),
+            batch,
+            latent,
+            sample,
+            timesteps,
+            context,
+            pooled,
+            _time_ids: time_ids,
+            control,
+            ip,
+            pass,
+        })
     }
 
     /// Images per pass.
@@ -132,7 +154,8 @@ impl<'m> Denoiser<'m> {
         let mut rngs = Vec::with_capacity(items.len());
         let mut latents = Vec::with_capacity(items.len());
         for item in items {
-            let sampler = Sampler::new(self.sampling.sampler, &self.model.scheduler, self.sampling.karras, self.sampling.steps)?;
+            let sampler =
+                Sampler::new(self.sampling.sampler, &self.model.scheduler, self.sampling.karras, self.sampling.steps)?;
             let mut rng = TorchCpuRng::new(item.seed);
             latents.push(match (item.init, self.sampling.strength) {
                 (None, None) => {
@@ -142,11 +165,26 @@ impl<'m> Denoiser<'m> {
                 (Some(init), Some(_)) if init.mean.len() == n && init.std.len() == n => {
                     // diffusers: latent_dist.sample(generator), scaled, then noise from the same generator.
                     let scaling = self.model.vae.config().scaling_factor;
-                    let x0: Vec<f32> = init.mean.iter().zip(&init.std).zip(rng.randn(n)).map(|((m, s), e)| (m + s * e) * scaling).collect();
+                    let x0: Vec<f32> = init
+                        .mean
+                        .iter()
+                        .zip(&init.std)
+                        .zip(rng.randn(n))
+                        .map(|((m, s), e)| (m + s * e) * scaling)
+                        .collect();
                     sampler.add_noise(first, &x0, &rng.randn(n))
                 }
-                (Some(init), Some(_)) => return Err(Error::Config(format!("init latents of {} values for a latent of {n}", init.mean.len()))),
-                _ => return Err(Error::Config("img2img needs an init image and a strength for every image of the batch".into())),
+                (Some(init), Some(_)) => {
+                    return Err(Error::Config(format!(
+                        "init latents of {} values for a latent of {n}",
+                        init.mean.len()
+                    )))
+                }
+                _ => {
+                    return Err(Error::Config(
+                        "img2img needs an init image and a strength for every image of the batch".into(),
+                    ))
+                }
             });
             samplers.push(sampler);
             rngs.push(rng);
@@ -192,13 +230,30 @@ impl<'m> Denoiser<'m> {
     fn write_conditioning(&self, items: &[ItemInputs]) -> Result<()> {
         let per_image = self.sampling.rows_per_image();
         let row = |t: &Tensor| t.numel() / t.shape()[0];
-        self.context.write(&by_row(items, per_image, row(&self.context), |i| Some(&i.text.context), "prompt encoding")?)?;
-        self.pooled.write(&by_row(items, per_image, row(&self.pooled), |i| Some(&i.text.pooled), "pooled prompt encoding")?)?;
+        self.context.write(&by_row(
+            items,
+            per_image,
+            row(&self.context),
+            |i| Some(&i.text.context),
+            "prompt encoding",
+        )?)?;
+        self.pooled.write(&by_row(
+            items,
+            per_image,
+            row(&self.pooled),
+            |i| Some(&i.text.pooled),
+            "pooled prompt encoding",
+        )?)?;
         if let Some(ip) = self.ip.first() {
             ip.tokens.write(&by_row(items, per_image, row(&ip.tokens), |i| i.ip_tokens, "IP-Adapter image tokens")?)?;
         }
         if let Some(control) = &self.control {
-            let images = items.iter().map(|i| i.control_image.ok_or_else(|| Error::Config("an image of the batch has no ControlNet image".into()))).collect::<Result<Vec<_>>>()?;
+            let images = items
+                .iter()
+                .map(|i| {
+                    i.control_image.ok_or_else(|| Error::Config("an image of the batch has no ControlNet image".into()))
+                })
+                .collect::<Result<Vec<_>>>()?;
             control.set_images(&images, per_image, self.sampling.width, self.sampling.height)?;
         }
         Ok(())
@@ -207,13 +262,23 @@ impl<'m> Denoiser<'m> {
 
 /// Rows of `row_len` values from every item's `per_image` rows: first row of every item, then the
 /// second row of every item.
-fn by_row<'a>(items: &'a [ItemInputs<'a>], per_image: usize, row_len: usize, values: impl Fn(&'a ItemInputs<'a>) -> Option<&'a [f32]>, what: &str) -> Result<Vec<f32>> {
+fn by_row<'a>(
+    items: &'a [ItemInputs<'a>],
+    per_image: usize,
+    row_len: usize,
+    values: impl Fn(&'a ItemInputs<'a>) -> Option<&'a [f32]>,
+    what: &str,
+) -> Result<Vec<f32>> {
     let mut out = Vec::with_capacity(row_len * per_image * items.len());
     for r in 0..per_image {
         for item in items {
             let v = values(item).ok_or_else(|| Error::Config(format!("an image of the batch has no {what}")))?;
             if v.len() != row_len * per_image {
-                return Err(Error::Config(format!("{what}: {} values where the recorded pass takes {}", v.len(), row_len * per_image)));
+                return Err(Error::Config(format!(
+                    "{what}: {} values where the recorded pass takes {}",
+                    v.len(),
+                    row_len * per_image
+                )));
             }
             out.extend_from_slice(&v[r * row_len..(r + 1) * row_len]);
         }

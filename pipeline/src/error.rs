@@ -18,7 +18,9 @@ pub enum Error {
     #[error("{0}: {1}")]
     Context(String, Box<Error>),
     #[error(transparent)]
-    Network(#[from] vkdiff_unet::Error),
+    File(#[from] vkdiff_formats::Error),
+    #[error(transparent)]
+    Network(#[from] vkdiff_networks::Error),
     #[error(transparent)]
     Lora(#[from] vkdiff_lora::Error),
     #[error(transparent)]

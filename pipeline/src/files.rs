@@ -4,7 +4,7 @@
 //! removes.
 
 use crate::error::{Error, Result};
-use crate::text_to_image::RgbImage;
+use crate::RgbImage;
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};

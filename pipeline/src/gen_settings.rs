@@ -7,9 +7,9 @@
 //! the file when they are not, before it looks at `parameters`.
 
 use crate::ip_scale::IpScale;
-use crate::prompt_weights::PromptSyntax;
+use crate::prompt_syntax::PromptSyntax;
+use crate::sampling::{Sampling, SizeConditioning, TextToImage};
 use crate::schedulers::SamplerKind;
-use crate::text_to_image::{Sampling, SizeConditioning, TextToImage};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use vkdiff_render::control::ControlDepth;
@@ -110,7 +110,9 @@ fn a1111_sampler(kind: SamplerKind) -> &'static str {
 /// A model's name as A1111 gives it: the file name without its extension, or the folder name
 /// (diffusers folders such as `stable-diffusion-xl-base-1.0` keep their dots).
 fn model_name(path: &Path) -> String {
-    let is_file = path.extension().is_some_and(|e| ["safetensors", "ckpt", "pt", "bin"].iter().any(|x| e.eq_ignore_ascii_case(x)));
+    let is_file = path
+        .extension()
+        .is_some_and(|e| ["safetensors", "ckpt", "pt", "bin"].iter().any(|x| e.eq_ignore_ascii_case(x)));
     let name = if is_file { path.file_stem() } else { path.file_name() };
     name.map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
@@ -203,10 +205,21 @@ impl GenSettings {
             pairs.push(format!("Denoising strength: {strength}"));
         }
         if let Some(c) = &m.controlnet {
-            pairs.push(format!("ControlNet: {}, Control scale: {}, Control range: {}-{}", quoted(&model_name(&c.model)), c.scale, c.start, c.end));
+            pairs.push(format!(
+                "ControlNet: {}, Control scale: {}, Control range: {}-{}",
+                quoted(&model_name(&c.model)),
+                c.scale,
+                c.start,
+                c.end
+            ));
         }
         if let Some(ip) = &m.ip_adapter {
-            pairs.push(format!("IP-Adapter: {}, IP images: {}, IP scale: {}", quoted(&model_name(&ip.adapter)), self.ip_images.len(), ip.scale));
+            pairs.push(format!(
+                "IP-Adapter: {}, IP images: {}, IP scale: {}",
+                quoted(&model_name(&ip.adapter)),
+                self.ip_images.len(),
+                ip.scale
+            ));
         }
         let negative = job.negative_prompt.as_deref().unwrap_or("");
         format!("{}{loras}\nNegative prompt: {negative}\n{}", job.prompt, pairs.join(", "))

@@ -6,8 +6,8 @@
 use crate::error::Result;
 use crate::images::{resize_pil, Filter};
 use crate::sdxl::Sdxl;
-use crate::text_to_image::RgbImage;
-use vkdiff_unet::nhwc_to_nchw;
+use crate::RgbImage;
+use vkdiff_networks::nhwc_to_nchw;
 
 /// The VAE encoder's latent distribution of an init image, NCHW [1, C, h, w], before the VAE's
 /// scaling factor.

@@ -7,7 +7,7 @@ use crate::error::{Error, Result};
 use crate::images::ClipPreprocess;
 use crate::ip_scale::IpScale;
 use crate::RgbImage;
-use vkdiff_unet::{ClipVisionModelWithProjection, ImageFeature, IpAdapter};
+use vkdiff_networks::{ClipVisionModelWithProjection, ImageFeature, IpAdapter};
 
 /// The `--ip-adapter` settings of one generation.
 pub struct ImageGuide<'a> {
@@ -43,7 +43,9 @@ impl ImageGuide<'_> {
                     let width = self.encoder.config().projection_dim;
                     self.adapter.image_tokens(&vec![0.0; n * width], &[n, width])?
                 }
-                ImageFeature::Penultimate => self.encode_tokens(&vec![0.0; n * size[1] * size[2] * size[3]], n, feature)?,
+                ImageFeature::Penultimate => {
+                    self.encode_tokens(&vec![0.0; n * size[1] * size[2] * size[3]], n, feature)?
+                }
             };
             tokens.extend(negative);
         }

@@ -5,7 +5,7 @@
 
 use crate::error::{Error, Result};
 use std::fmt;
-use vkdiff_unet::CrossAttention;
+use vkdiff_networks::CrossAttention;
 
 /// A part of the UNet: `mid`, `down.I`/`up.I` (every attention of block I), or
 /// `down.I.J`/`up.I.J` (its J-th `Transformer2DModel`).
@@ -18,13 +18,17 @@ pub struct IpBlock {
 
 impl IpBlock {
     fn parse(text: &str) -> Result<IpBlock> {
-        let bad = || Error::Config(format!("--ip-scale {text}: name a block as mid, down.I, up.I, down.I.J or up.I.J (diffusers' down/up block_I, attention J)"));
+        let bad = || {
+            Error::Config(format!("--ip-scale {text}: name a block as mid, down.I, up.I, down.I.J or up.I.J (diffusers' down/up block_I, attention J)"))
+        };
         let parts: Vec<&str> = text.split('.').collect();
         let index = |s: &str| s.parse::<usize>().map_err(|_| bad());
         let prefix = match parts[..] {
             ["mid"] => "mid_block.".to_string(),
             [side @ ("down" | "up"), block] => format!("{side}_blocks.{}.", index(block)?),
-            [side @ ("down" | "up"), block, attention] => format!("{side}_blocks.{}.attentions.{}.", index(block)?, index(attention)?),
+            [side @ ("down" | "up"), block, attention] => {
+                format!("{side}_blocks.{}.attentions.{}.", index(block)?, index(attention)?)
+            }
             _ => return Err(bad()),
         };
         Ok(IpBlock { text: text.to_string(), prefix })
@@ -75,11 +79,17 @@ impl IpScale {
         };
         match (single, mode) {
             (Some(s), None) => Ok(IpScale::All(s)),
-            (Some(s), Some(mode)) => Ok(IpScale::Blocks(mode.blocks().iter().map(|b| Ok((IpBlock::parse(b)?, s))).collect::<Result<_>>()?)),
-            (None, Some(_)) => Err(Error::Config("--ip-mode gives the blocks; with it, --ip-scale is one number".into())),
+            (Some(s), Some(mode)) => {
+                Ok(IpScale::Blocks(mode.blocks().iter().map(|b| Ok((IpBlock::parse(b)?, s))).collect::<Result<_>>()?))
+            }
+            (None, Some(_)) => {
+                Err(Error::Config("--ip-mode gives the blocks; with it, --ip-scale is one number".into()))
+            }
             (None, None) => {
                 let entries = values.iter().map(|v| {
-                    let (block, scale) = v.split_once('=').ok_or_else(|| Error::Config(format!("--ip-scale {v}: give one number, or BLOCK=SCALE entries only")))?;
+                    let (block, scale) = v.split_once('=').ok_or_else(|| {
+                        Error::Config(format!("--ip-scale {v}: give one number, or BLOCK=SCALE entries only"))
+                    })?;
                     Ok((IpBlock::parse(block.trim())?, number(scale)?))
                 });
                 Ok(IpScale::Blocks(entries.collect::<Result<_>>()?))
@@ -87,7 +97,7 @@ impl IpScale {
         }
     }
 
-    /// The scale of every cross-attention of `crosses` ([`vkdiff_unet::UNet::cross_attentions`]);
+    /// The scale of every cross-attention of `crosses` ([`vkdiff_networks::UNet::cross_attentions`]);
     /// a named block the UNet has no cross-attention in is an error, as in diffusers.
     pub fn per_layer(&self, crosses: &[CrossAttention]) -> Result<Vec<f32>> {
         let blocks = match self {
@@ -123,11 +133,16 @@ mod tests {
     /// and 1 (3 attentions), mid (10 blocks).
     fn sdxl() -> Vec<CrossAttention> {
         let mut names = Vec::new();
-        for (side, block, attentions, depth) in [("down", 1, 2, 2), ("down", 2, 2, 10), ("up", 0, 3, 10), ("up", 1, 3, 2), ("mid", 0, 1, 10)] {
+        for (side, block, attentions, depth) in
+            [("down", 1, 2, 2), ("down", 2, 2, 10), ("up", 0, 3, 10), ("up", 1, 3, 2), ("mid", 0, 1, 10)]
+        {
             for j in 0..attentions {
                 for t in 0..depth {
                     let root = if side == "mid" { "mid_block".to_string() } else { format!("{side}_blocks.{block}") };
-                    names.push(CrossAttention { channels: 0, name: format!("{root}.attentions.{j}.transformer_blocks.{t}.attn2") });
+                    names.push(CrossAttention {
+                        channels: 0,
+                        name: format!("{root}.attentions.{j}.transformer_blocks.{t}.attn2"),
+                    });
                 }
             }
         }

@@ -2,9 +2,9 @@
 //! penultimate hidden states side by side (CLIP-L first) and bigG's pooled projection.
 
 use crate::error::{finite, Error, Result};
-use crate::prompt_weights::PromptSyntax;
-use crate::tokenizer::CONTEXT;
+use crate::prompt_syntax::PromptSyntax;
 use crate::sdxl::Sdxl;
+use crate::tokenizer::CONTEXT;
 
 /// One prompt's conditioning for the UNet, rows [negative, positive] with guidance, else
 /// [positive].
@@ -20,7 +20,13 @@ pub struct Conditioning {
 
 impl Sdxl {
     /// The prompt's conditioning as `syntax` reads it.
-    pub fn encode_prompt_as(&self, syntax: PromptSyntax, prompt: &str, negative: Option<&str>, guided: bool) -> Result<Conditioning> {
+    pub fn encode_prompt_as(
+        &self,
+        syntax: PromptSyntax,
+        prompt: &str,
+        negative: Option<&str>,
+        guided: bool,
+    ) -> Result<Conditioning> {
         match syntax {
             PromptSyntax::Plain => self.encode_prompt(prompt, negative, guided),
             PromptSyntax::Weighted => self.encode_weighted_prompt(prompt, negative, guided),
@@ -48,9 +54,15 @@ impl Sdxl {
             .map(|(tok, enc)| enc.encode(&prompts.iter().map(|p| tok.encode(p)).collect::<Vec<_>>()))
             .collect::<std::result::Result<_, _>>()?;
         let (first, second) = (&encoded[0], &encoded[1]);
-        let pooled = second.pooled.as_deref().ok_or_else(|| Error::Config("text encoder 2 gave no pooled output".into()))?;
+        let pooled =
+            second.pooled.as_deref().ok_or_else(|| Error::Config("text encoder 2 gave no pooled output".into()))?;
         let (w1, w2) = (self.text_encoders[0].config().hidden_size, self.text_encoders[1].config().hidden_size);
-        let mut context: Vec<f32> = first.penultimate.chunks_exact(w1).zip(second.penultimate.chunks_exact(w2)).flat_map(|(a, b)| a.iter().chain(b).copied()).collect();
+        let mut context: Vec<f32> = first
+            .penultimate
+            .chunks_exact(w1)
+            .zip(second.penultimate.chunks_exact(w2))
+            .flat_map(|(a, b)| a.iter().chain(b).copied())
+            .collect();
         finite(&context, &|| "the text encoders' output".into())?;
         let mut pooled = finite(pooled, &|| "text encoder 2's pooled output".into())?.to_vec();
         if guided && zero_negative {

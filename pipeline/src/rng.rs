@@ -72,8 +72,16 @@ fn box_muller_16(u: &mut [f32]) {
 /// Cephes `log256_ps` for a normal positive `x`, with the fused multiply-adds the compiled kernel has.
 fn log_f32(x: f32) -> f32 {
     const SQRT_HALF: f32 = 0.707_106_77;
-    const POLY: [f32; 8] =
-        [-1.151_461e-1, 1.167_699_84e-1, -1.242_014_1e-1, 1.424_932_3e-1, -1.666_805_8e-1, 2.000_071_4e-1, -2.499_999_4e-1, 3.333_333e-1];
+    const POLY: [f32; 8] = [
+        -1.151_461e-1,
+        1.167_699_84e-1,
+        -1.242_014_1e-1,
+        1.424_932_3e-1,
+        -1.666_805_8e-1,
+        2.000_071_4e-1,
+        -2.499_999_4e-1,
+        3.333_333e-1,
+    ];
     let bits = x.to_bits();
     let mut e = ((bits >> 23) as i32 - 127) as f32 + 1.0;
     let m = f32::from_bits((bits & 0x807F_FFFF) | 0x3F00_0000);

@@ -6,8 +6,11 @@ use crate::schedulers::SchedulerConfig;
 use crate::tokenizer::ClipTokenizer;
 use std::path::Path;
 use vkdiff_lora::{LoraFile, LoraMerger, Summary, Targets};
+use vkdiff_networks::{
+    read_unet_config, unet_checkpoint, AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig,
+    VaeConfig, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG,
+};
 use vkdiff_runtime::{Context, Dtype};
-use vkdiff_unet::{AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig, VaeConfig, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
 
 pub struct Sdxl {
     pub(crate) ctx: Context,
@@ -33,10 +36,11 @@ impl Sdxl {
         }
         let folder = path.is_dir().then_some(path);
         progress("tokenizers");
-        let tokenizer = |sub: &str, pad: &str| match folder.map(|d| d.join(sub)).filter(|d| d.join("vocab.json").is_file()) {
-            Some(dir) => ClipTokenizer::from_dir(&dir),
-            None => ClipTokenizer::builtin(pad),
-        };
+        let tokenizer =
+            |sub: &str, pad: &str| match folder.map(|d| d.join(sub)).filter(|d| d.join("vocab.json").is_file()) {
+                Some(dir) => ClipTokenizer::from_dir(&dir),
+                None => ClipTokenizer::builtin(pad),
+            };
         let tokenizers = [tokenizer("tokenizer", "<|endoftext|>")?, tokenizer("tokenizer_2", "!")?];
         progress("text encoders");
         let text_encoders = [
@@ -44,7 +48,7 @@ impl Sdxl {
             ClipTextModel::load_sdxl(ctx, path, TextEncoderSlot::BigG, dtype)?,
         ];
         progress("UNet");
-        let (unet_config, ckpt) = Checkpoint::unet(ctx, path, dtype)?;
+        let (unet_config, ckpt) = unet_checkpoint(ctx, path, dtype)?;
         let unet = UNet::load(&unet_config, &ckpt)?;
         progress("VAE");
         let vae = AutoencoderKl::load_sdxl(ctx, path, dtype)?;
@@ -56,7 +60,18 @@ impl Sdxl {
             Some(p) => read_force_zeros(&p)?,
             None => true,
         };
-        let model = Sdxl { ctx: ctx.clone(), dtype, tokenizers, text_encoders, unet_config, unet, vae, scheduler, force_zeros_for_empty_prompt, loras: LoraMerger::new() };
+        let model = Sdxl {
+            ctx: ctx.clone(),
+            dtype,
+            tokenizers,
+            text_encoders,
+            unet_config,
+            unet,
+            vae,
+            scheduler,
+            force_zeros_for_empty_prompt,
+            loras: LoraMerger::new(),
+        };
         model.check_widths()?;
         Ok(model)
     }
@@ -74,7 +89,18 @@ impl Sdxl {
         let vae = AutoencoderKl::load(ctx, vae_config, &Checkpoint::random(ctx, vae_dtype, 4))?;
         let tokenizers = [ClipTokenizer::builtin("<|endoftext|>")?, ClipTokenizer::builtin("!")?];
         let scheduler = SchedulerConfig::sdxl_base();
-        Ok(Sdxl { ctx: ctx.clone(), dtype, tokenizers, text_encoders, unet_config, unet, vae, scheduler, force_zeros_for_empty_prompt: true, loras: LoraMerger::new() })
+        Ok(Sdxl {
+            ctx: ctx.clone(),
+            dtype,
+            tokenizers,
+            text_encoders,
+            unet_config,
+            unet,
+            vae,
+            scheduler,
+            force_zeros_for_empty_prompt: true,
+            loras: LoraMerger::new(),
+        })
     }
 
     /// The text encoders' widths must be what the UNet was trained on.
@@ -120,7 +146,7 @@ impl Sdxl {
         if !path.exists() {
             return Err(Error::Config(format!("{}: no such model folder or file", path.display())));
         }
-        let unet = Checkpoint::unet_config(path)?;
+        let unet = read_unet_config(path)?;
         let vae = AutoencoderKl::sdxl_config(path)?;
         if unet.block_out_channels.is_empty() || vae.block_out_channels.is_empty() {
             return Err(Error::Config(format!("{}: a UNet or VAE config without block_out_channels", path.display())));
@@ -158,6 +184,7 @@ fn builtin<T: serde::de::DeserializeOwned>(text: &str) -> T {
 
 fn read_force_zeros(path: &Path) -> Result<bool> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
-    let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("not JSON: {e}") })?;
+    let json: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("not JSON: {e}") })?;
     Ok(json.get("force_zeros_for_empty_prompt").and_then(|v| v.as_bool()).unwrap_or(true))
 }

@@ -20,8 +20,7 @@ const END_OF_WORD: &str = "</w>";
 
 /// CLIP's word pattern. The special-token literals only matter when typed in another case, since
 /// exact ones are cut out before; lower-casing turns e.g. `<|EndOfText|>` into one such word.
-const WORDS: &str =
-    r"<\|startoftext\|>|<\|endoftext\|>|'s|'t|'re|'ve|'m|'ll|'d|\p{L}+|\p{N}|[^\s\p{L}\p{N}]+";
+const WORDS: &str = r"<\|startoftext\|>|<\|endoftext\|>|'s|'t|'re|'ve|'m|'ll|'d|\p{L}+|\p{N}|[^\s\p{L}\p{N}]+";
 /// transformers' byte-level step splits each word again by GPT-2's pattern; that changes only the
 /// special-token words above (`<|`, `endoftext`, `|>`). Words hold no whitespace, so GPT-2's
 /// whitespace alternatives are left out.
@@ -72,8 +71,7 @@ impl ClipTokenizer {
         let mut vocab = symbols.clone();
         vocab.extend(symbols.iter().map(|s| format!("{s}{END_OF_WORD}")));
         vocab.extend(
-            merge_lines(BUILTIN_MERGES)
-                .filter_map(|(_, line)| line.split_once(' ').map(|(a, b)| format!("{a}{b}"))),
+            merge_lines(BUILTIN_MERGES).filter_map(|(_, line)| line.split_once(' ').map(|(a, b)| format!("{a}{b}"))),
         );
         vocab.extend([BOS.to_string(), EOS.to_string()]);
         let vocab = vocab.into_iter().zip(0..).collect();
@@ -101,15 +99,12 @@ impl ClipTokenizer {
         for (byte, c) in byte_symbols() {
             let symbol = c.to_string();
             byte_ids[0][byte as usize] = vocab.get(&symbol).copied().unwrap_or(eos_id);
-            byte_ids[1][byte as usize] =
-                vocab.get(&format!("{symbol}{END_OF_WORD}")).copied().unwrap_or(eos_id);
+            byte_ids[1][byte as usize] = vocab.get(&format!("{symbol}{END_OF_WORD}")).copied().unwrap_or(eos_id);
         }
         let mut merges = HashMap::new();
         for (rank, (line_no, line)) in (0..).zip(merge_lines(merges_text)) {
-            let bad = |why: String| Error::Format {
-                path: merges_path.to_path_buf(),
-                why: format!("line {line_no}: {why}"),
-            };
+            let bad =
+                |why: String| Error::Format { path: merges_path.to_path_buf(), why: format!("line {line_no}: {why}") };
             let (a, b) = line
                 .split_once(' ')
                 .filter(|(_, b)| !b.contains(' '))
@@ -192,16 +187,11 @@ impl ClipTokenizer {
 
     fn bpe(&self, word: &[u8], ids: &mut Vec<u32>) {
         let last = word.len() - 1;
-        let mut symbols: Vec<u32> = word
-            .iter()
-            .enumerate()
-            .map(|(i, &b)| self.byte_ids[usize::from(i == last)][b as usize])
-            .collect();
+        let mut symbols: Vec<u32> =
+            word.iter().enumerate().map(|(i, &b)| self.byte_ids[usize::from(i == last)][b as usize]).collect();
         loop {
             let best = (0..symbols.len().saturating_sub(1))
-                .filter_map(|i| {
-                    self.merges.get(&(symbols[i], symbols[i + 1])).map(|&(rank, id)| (rank, i, id))
-                })
+                .filter_map(|i| self.merges.get(&(symbols[i], symbols[i + 1])).map(|&(rank, id)| (rank, i, id)))
                 .min();
             let Some((_, i, id)) = best else { break };
             symbols[i] = id;
@@ -215,8 +205,7 @@ impl ClipTokenizer {
 /// bytes stand for themselves, the others take chars from U+0100 on, in byte order.
 fn byte_symbols() -> Vec<(u8, char)> {
     let printable = |b: u8| matches!(b, b'!'..=b'~' | 0xA1..=0xAC | 0xAE..=0xFF);
-    let mut symbols: Vec<(u8, char)> =
-        (0..=255u8).filter(|&b| printable(b)).map(|b| (b, char::from(b))).collect();
+    let mut symbols: Vec<(u8, char)> = (0..=255u8).filter(|&b| printable(b)).map(|b| (b, char::from(b))).collect();
     let others = (0..=255u8).filter(|&b| !printable(b));
     symbols.extend(others.zip(256u32..).map(|(b, c)| (b, char::from_u32(c).expect("U+0100 and up"))));
     symbols

@@ -5,15 +5,17 @@
 use crate::controlnet_guide::{check_control_settings, ControlGuide, ControlNetUse};
 use crate::denoiser::IpAdapterUse;
 use crate::error::{Error, Result};
-use crate::gen_settings::{ModelSettings, GenSettings};
+use crate::gen_settings::{GenSettings, ModelSettings};
 use crate::images::{load_control_image, read_image, ClipPreprocess};
 use crate::ip_adapter_guide::ImageGuide;
 use crate::sdxl::Sdxl;
-use crate::text_to_image::{Guides, RgbImage};
+use crate::text_to_image::Guides;
+use crate::RgbImage;
 use std::path::Path;
+use vkdiff_formats::SafeTensors;
 use vkdiff_lora::LoraFile;
+use vkdiff_networks::{ClipVisionConfig, ClipVisionModelWithProjection, ControlNetConfig, ControlNetModel, IpAdapter};
 use vkdiff_runtime::Context;
-use vkdiff_unet::{ClipVisionConfig, ClipVisionModelWithProjection, ControlNetConfig, ControlNetModel, IpAdapter, SafeTensors};
 
 /// An IP-Adapter with the encoder and preprocessing of its style images.
 pub struct StyleModels {
@@ -42,7 +44,11 @@ impl ModelSettings {
         }
         if let Some(ip) = &self.ip_adapter {
             // The blocks named must hold cross-attentions of this UNet.
-            let crosses = flagged("--model", &self.model, vkdiff_unet::Checkpoint::unet_config(&self.model).and_then(|c| c.cross_attentions()))?;
+            let crosses = flagged(
+                "--model",
+                &self.model,
+                vkdiff_networks::read_unet_config(&self.model).and_then(|c| c.cross_attentions()),
+            )?;
             ip.scale.per_layer(&crosses)?;
         }
         for (path, flag) in self.files() {
@@ -56,7 +62,11 @@ impl ModelSettings {
             flagged("--lora", &lora.path, LoraFile::open(&lora.path))?;
         }
         if let Some(c) = &self.controlnet {
-            let checked = if c.model.is_dir() { ControlNetConfig::from_file(&c.model.join("config.json")).map(drop) } else { SafeTensors::open(&c.model).map(drop) };
+            let checked = if c.model.is_dir() {
+                ControlNetConfig::from_file(&c.model.join("config.json")).map(drop)
+            } else {
+                SafeTensors::open(&c.model).map(drop).map_err(Into::into)
+            };
             flagged("--controlnet", &c.model, checked)?;
         }
         if let Some(ip) = &self.ip_adapter {
@@ -89,11 +99,16 @@ impl WorkflowModels {
         let controlnet = match &settings.controlnet {
             Some(c) => {
                 log(&format!("loading ControlNet {}", c.model.display()));
-                Some(flagged("--controlnet", &c.model, ControlNetModel::load(ctx, &c.model, sdxl.unet_config(), dtype))?)
+                Some(flagged(
+                    "--controlnet",
+                    &c.model,
+                    ControlNetModel::load(ctx, &c.model, sdxl.unet_config(), dtype),
+                )?)
             }
             None => None,
         };
-        let style = settings.ip_adapter.as_ref().map(|ip| load_style(ctx, &sdxl, &ip.adapter, &ip.encoder, log)).transpose()?;
+        let style =
+            settings.ip_adapter.as_ref().map(|ip| load_style(ctx, &sdxl, &ip.adapter, &ip.encoder, log)).transpose()?;
         let loras = settings
             .loras
             .iter()
@@ -121,20 +136,41 @@ impl WorkflowModels {
     /// The IP-Adapter over `images`.
     pub fn image_guide<'a>(&'a self, images: &'a [RgbImage]) -> Option<ImageGuide<'a>> {
         let (style, ip) = (self.style.as_ref()?, self.settings.ip_adapter.as_ref()?);
-        Some(ImageGuide { adapter: &style.adapter, encoder: &style.encoder, preprocess: &style.preprocess, images, scale: &ip.scale })
+        Some(ImageGuide {
+            adapter: &style.adapter,
+            encoder: &style.encoder,
+            preprocess: &style.preprocess,
+            images,
+            scale: &ip.scale,
+        })
     }
 
     /// One image's guides over its inputs.
     pub fn guides<'a>(&'a self, inputs: &'a GuideInputs) -> Guides<'a> {
-        let control = self.control_use().zip(inputs.control.as_ref()).map(|(c, image)| ControlGuide { net: c.net, image, scale: c.scale, start: c.start, end: c.end });
+        let control = self.control_use().zip(inputs.control.as_ref()).map(|(c, image)| ControlGuide {
+            net: c.net,
+            image,
+            scale: c.scale,
+            start: c.start,
+            end: c.end,
+        });
         Guides { control, image: self.image_guide(&inputs.style), init: inputs.init.as_ref() }
     }
 }
 
-fn load_style(ctx: &Context, sdxl: &Sdxl, adapter: &Path, encoder: &Path, log: &mut dyn FnMut(&str)) -> Result<StyleModels> {
+fn load_style(
+    ctx: &Context,
+    sdxl: &Sdxl,
+    adapter: &Path,
+    encoder: &Path,
+    log: &mut dyn FnMut(&str),
+) -> Result<StyleModels> {
     log(&format!("loading IP-Adapter {} and image encoder {}", adapter.display(), encoder.display()));
-    let encoder_model = flagged("--image-encoder", encoder, ClipVisionModelWithProjection::load_folder(ctx, encoder, sdxl.dtype()))?;
-    let config = [encoder.join("preprocessor_config.json"), encoder.join("image_encoder/preprocessor_config.json")].into_iter().find(|p| p.is_file());
+    let encoder_model =
+        flagged("--image-encoder", encoder, ClipVisionModelWithProjection::load_folder(ctx, encoder, sdxl.dtype()))?;
+    let config = [encoder.join("preprocessor_config.json"), encoder.join("image_encoder/preprocessor_config.json")]
+        .into_iter()
+        .find(|p| p.is_file());
     let preprocess = match config {
         Some(path) => flagged("--image-encoder", encoder, ClipPreprocess::from_file(&path))?,
         None => ClipPreprocess::square(encoder_model.config().image_size),

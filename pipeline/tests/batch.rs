@@ -3,54 +3,108 @@
 //! ancestral noise), in f16 and f32, and with tensors split into bands past the binding limit.
 //! A private device context: the binding limit is lowered here.
 
-use std::path::PathBuf;
 use vkdiff_pipeline::images::{read_image, ControlDepth};
-use vkdiff_pipeline::{ControlNetSettings, Denoiser, IpAdapterSettings, IpScale, ItemInputs, LoraSetting, ModelSettings, SamplerKind, Sampling, WorkflowModels};
+use vkdiff_pipeline::{
+    ControlNetSettings, Denoiser, IpAdapterSettings, IpScale, ItemInputs, LoraSetting, ModelSettings, SamplerKind,
+    Sampling, WorkflowModels,
+};
 use vkdiff_runtime::{Context, Dtype};
-
-fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures").join(name)
-}
+use vkdiff_testkit::fixture;
 
 fn settings(precision: Dtype) -> ModelSettings {
     ModelSettings {
         model: fixture("pipeline/tiny-sdxl"),
         precision,
-        controlnet: Some(ControlNetSettings { model: fixture("workflow/controlnet"), depth_mode: ControlDepth::Inverse, scale: 0.7, start: 0.0, end: 1.0 }),
-        ip_adapter: Some(IpAdapterSettings { adapter: fixture("workflow/ip-adapter_tiny.safetensors"), encoder: fixture("workflow/image_encoder"), scale: IpScale::All(0.6) }),
+        controlnet: Some(ControlNetSettings {
+            model: fixture("workflow/controlnet"),
+            depth_mode: ControlDepth::Inverse,
+            scale: 0.7,
+            start: 0.0,
+            end: 1.0,
+        }),
+        ip_adapter: Some(IpAdapterSettings {
+            adapter: fixture("workflow/ip-adapter_tiny.safetensors"),
+            encoder: fixture("workflow/image_encoder"),
+            scale: IpScale::All(0.6),
+        }),
         loras: vec![LoraSetting { path: fixture("workflow/lora-peft.safetensors"), strength: 0.5 }],
     }
 }
 
 /// Latents of three images: each alone, then all in one batch; the denoiser (not the encoders,
 /// whose weights are larger than the tensors split) with `binding_limit`.
-fn alone_and_together(ctx: &Context, precision: Dtype, size: (usize, usize), binding_limit: Option<u64>) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
+fn alone_and_together(
+    ctx: &Context,
+    precision: Dtype,
+    size: (usize, usize),
+    binding_limit: Option<u64>,
+) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
     let models = WorkflowModels::load(ctx, &settings(precision), &mut |_| {}).unwrap();
-    let sampling = Sampling { steps: if binding_limit.is_some() { 1 } else { 3 }, guidance_scale: 6.0, sampler: SamplerKind::EulerAncestral, karras: false, width: size.0, height: size.1, size_conditioning: Default::default(), strength: None, prompt_syntax: Default::default() };
+    let sampling = Sampling {
+        steps: if binding_limit.is_some() { 1 } else { 3 },
+        guidance_scale: 6.0,
+        sampler: SamplerKind::EulerAncestral,
+        karras: false,
+        width: size.0,
+        height: size.1,
+        size_conditioning: Default::default(),
+        strength: None,
+        prompt_syntax: Default::default(),
+    };
     let sdxl = &models.sdxl;
-    let texts = [sdxl.encode_prompt("white mushrooms", None, true).unwrap(), sdxl.encode_prompt("brown caps on compost", Some("blurry"), true).unwrap()];
-    let styles = [read_image(&fixture("workflow/style-1.png")).unwrap(), read_image(&fixture("workflow/style-2.png")).unwrap()];
-    let tokens: Vec<Vec<f32>> = styles.iter().map(|s| models.image_guide(std::slice::from_ref(s)).unwrap().tokens(true).unwrap()).collect();
+    let texts = [
+        sdxl.encode_prompt("white mushrooms", None, true).unwrap(),
+        sdxl.encode_prompt("brown caps on compost", Some("blurry"), true).unwrap(),
+    ];
+    let styles =
+        [read_image(&fixture("workflow/style-1.png")).unwrap(), read_image(&fixture("workflow/style-2.png")).unwrap()];
+    let tokens: Vec<Vec<f32>> =
+        styles.iter().map(|s| models.image_guide(std::slice::from_ref(s)).unwrap().tokens(true).unwrap()).collect();
     let control = read_image(&fixture("workflow/control.png")).unwrap();
-    let flipped = vkdiff_pipeline::RgbImage { pixels: control.pixels.iter().rev().copied().collect(), ..control.clone() };
+    let flipped =
+        vkdiff_pipeline::RgbImage { pixels: control.pixels.iter().rev().copied().collect(), ..control.clone() };
     let items = [
-        ItemInputs { seed: 11, text: &texts[0], control_image: Some(&control), ip_tokens: Some(&tokens[0]), init: None },
-        ItemInputs { seed: 12, text: &texts[1], control_image: Some(&flipped), ip_tokens: Some(&tokens[1]), init: None },
-        ItemInputs { seed: 13, text: &texts[1], control_image: Some(&control), ip_tokens: Some(&tokens[0]), init: None },
+        ItemInputs {
+            seed: 11,
+            text: &texts[0],
+            control_image: Some(&control),
+            ip_tokens: Some(&tokens[0]),
+            init: None,
+        },
+        ItemInputs {
+            seed: 12,
+            text: &texts[1],
+            control_image: Some(&flipped),
+            ip_tokens: Some(&tokens[1]),
+            init: None,
+        },
+        ItemInputs {
+            seed: 13,
+            text: &texts[1],
+            control_image: Some(&control),
+            ip_tokens: Some(&tokens[0]),
+            init: None,
+        },
     ];
     if let Some(limit) = binding_limit {
         ctx.set_binding_limit(limit);
     }
-    let record = |batch| Denoiser::record(sdxl, &sampling, models.control_use(), models.ip_use(1), batch, texts[0].tokens).unwrap();
+    let record = |batch| {
+        Denoiser::record(sdxl, &sampling, models.control_use(), models.ip_use(1), batch, texts[0].tokens).unwrap()
+    };
     let one = record(1);
-    let alone = items.iter().map(|item| one.run(std::slice::from_ref(item), &mut |_, _| {}).unwrap().latents.remove(0)).collect();
+    let alone = items
+        .iter()
+        .map(|item| one.run(std::slice::from_ref(item), &mut |_, _| {}).unwrap().latents.remove(0))
+        .collect();
     drop(one);
     let together = record(3).run(&items, &mut |_, _| {}).unwrap().latents;
     (alone, together)
 }
 
 fn check(precision: Dtype, size: (usize, usize), binding_limit: Option<u64>) {
-    let ctx = Context::new(None).unwrap_or_else(|e| panic!("these tests need a Vulkan device and found none usable: {e}"));
+    let ctx =
+        Context::new(None).unwrap_or_else(|e| panic!("these tests need a Vulkan device and found none usable: {e}"));
     let (alone, together) = alone_and_together(&ctx, precision, size, binding_limit);
     for (k, (a, t)) in alone.iter().zip(&together).enumerate() {
         let differ = a.iter().zip(t).filter(|(x, y)| x.to_bits() != y.to_bits()).count();

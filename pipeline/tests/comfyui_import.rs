@@ -11,8 +11,20 @@ use vkdiff_pipeline::{ControlNetSettings, GenSettings, LoraSetting, ModelSetting
 use vkdiff_runtime::Dtype;
 
 /// ComfyUI's KSampler sampler names (comfy/samplers.py, KSAMPLER_NAMES and the extra ones).
-const COMFY_SAMPLERS: [&str; 12] =
-    ["euler", "euler_cfg_pp", "euler_ancestral", "heun", "dpm_2", "dpm_2_ancestral", "lms", "dpmpp_2m", "dpmpp_sde", "ddim", "uni_pc", "lcm"];
+const COMFY_SAMPLERS: [&str; 12] = [
+    "euler",
+    "euler_cfg_pp",
+    "euler_ancestral",
+    "heun",
+    "dpm_2",
+    "dpm_2_ancestral",
+    "lms",
+    "dpmpp_2m",
+    "dpmpp_sde",
+    "ddim",
+    "uni_pc",
+    "lcm",
+];
 
 /// A text chunk as `getFromPngBuffer` sees it.
 struct Chunk {
@@ -90,7 +102,8 @@ fn import_a1111(parameters: &str) -> Option<Imported> {
     } else {
         "normal".into()
     };
-    imported.sampler_name = COMFY_SAMPLERS.iter().find(|s| **s == name || format!("sample_{name}") == **s).map(|s| s.to_string());
+    imported.sampler_name =
+        COMFY_SAMPLERS.iter().find(|s| **s == name || format!("sample_{name}") == **s).map(|s| s.to_string());
     Some(imported)
 }
 
@@ -116,7 +129,17 @@ fn settings(prompt: &str, negative: Option<&str>, sampler: &str, karras: bool) -
             prompt: prompt.into(),
             negative_prompt: negative.map(String::from),
             seed: 1234567,
-            sampling: Sampling { steps: 30, guidance_scale: 5.5, sampler: sampler.parse().unwrap(), karras, width: 1000, height: 768, size_conditioning: Default::default(), strength: None, prompt_syntax: Default::default() },
+            sampling: Sampling {
+                steps: 30,
+                guidance_scale: 5.5,
+                sampler: sampler.parse().unwrap(),
+                karras,
+                width: 1000,
+                height: 768,
+                size_conditioning: Default::default(),
+                strength: None,
+                prompt_syntax: Default::default(),
+            },
         },
         depth: Some(PathBuf::from("scene/depth.exr")),
         ip_images: vec![],
@@ -134,7 +157,11 @@ fn comfyui_imports_the_parameters_with_our_settings() {
     let png = written(&settings(prompt, Some("blurry, (low quality)"), "dpmpp_2m", true));
     let chunks = text_chunks(&png);
     for c in &chunks {
-        assert!(c.keyword != "prompt" && c.keyword != "workflow", "ComfyUI parses a `{}` chunk as its graph JSON", c.keyword);
+        assert!(
+            c.keyword != "prompt" && c.keyword != "workflow",
+            "ComfyUI parses a `{}` chunk as its graph JSON",
+            c.keyword
+        );
         assert!(!c.compressed, "`{}`: ComfyUI does not inflate compressed iTXt", c.keyword);
         let ascii = c.keyword.is_ascii() && c.text.is_ascii();
         assert_eq!(c.kind, if ascii { "tEXt" } else { "iTXt" }, "`{}`", c.keyword);
@@ -146,22 +173,33 @@ fn comfyui_imports_the_parameters_with_our_settings() {
     assert_eq!(got.loras, vec![("mushroom_style".to_string(), 0.7), ("macro, detail".to_string(), 1.0)]);
     assert_eq!((got.sampler_name.as_deref(), got.scheduler.as_str()), (Some("dpmpp_2m"), "karras"));
     let o = &got.options;
-    assert_eq!((o["steps"].as_str(), o["cfg scale"].as_str(), o["seed"].as_str(), o["size"].as_str()), ("30", "5.5", "1234567", "1000x768"));
+    assert_eq!(
+        (o["steps"].as_str(), o["cfg scale"].as_str(), o["seed"].as_str(), o["size"].as_str()),
+        ("30", "5.5", "1234567", "1000x768")
+    );
     assert_eq!(o["model"], "stable-diffusion-xl-base-1.0", "ComfyUI matches ckpt_name by this prefix");
     // The same text reaches readers that follow the PNG specification (PIL, A1111).
     let decoded = png::Decoder::new(std::io::Cursor::new(&png)).read_info().unwrap();
     let info = decoded.info();
-    let spec: Vec<String> = info.uncompressed_latin1_text.iter().map(|t| t.text.clone()).chain(info.utf8_text.iter().map(|t| t.get_text().unwrap())).collect();
+    let spec: Vec<String> = info
+        .uncompressed_latin1_text
+        .iter()
+        .map(|t| t.text.clone())
+        .chain(info.utf8_text.iter().map(|t| t.get_text().unwrap()))
+        .collect();
     assert!(spec.contains(parameters) && spec.len() == chunks.len());
 }
 
 #[test]
 fn a_missing_negative_prompt_still_imports_and_every_sampler_keeps_its_a1111_name() {
-    for (sampler, a1111, comfy) in [("euler", "Euler", Some("euler")), ("ddim", "DDIM", Some("ddim")), ("euler_a", "Euler a", None)] {
+    for (sampler, a1111, comfy) in
+        [("euler", "Euler", Some("euler")), ("ddim", "DDIM", Some("ddim")), ("euler_a", "Euler a", None)]
+    {
         let png = written(&settings("a forest floor", None, sampler, false));
         let chunks = text_chunks(&png);
         let parameters = &chunks.iter().find(|c| c.keyword == "parameters").unwrap().text;
-        let got = import_a1111(parameters).unwrap_or_else(|| panic!("ComfyUI would import nothing from {parameters:?}"));
+        let got =
+            import_a1111(parameters).unwrap_or_else(|| panic!("ComfyUI would import nothing from {parameters:?}"));
         assert_eq!((got.positive.trim(), got.negative.as_str()), ("a forest floor", ""));
         assert_eq!(got.options["sampler"], a1111);
         // ComfyUI maps A1111's "Euler a" to no sampler of its own and keeps its default.

@@ -9,15 +9,12 @@ mod common;
 
 use common::{ctx, job, psnr, relative_l2};
 use serde_json::Value;
-use std::path::PathBuf;
+use vkdiff_formats::SafeTensors;
+use vkdiff_networks::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter};
 use vkdiff_pipeline::images::{read_image, ClipPreprocess};
 use vkdiff_pipeline::{parse_attention, ControlGuide, Guides, ImageGuide, IpScale, Sdxl};
 use vkdiff_runtime::Dtype;
-use vkdiff_unet::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter, SafeTensors};
-
-fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures").join(name)
-}
+use vkdiff_testkit::fixture;
 
 fn records() -> Value {
     serde_json::from_str(&std::fs::read_to_string(fixture("compat/records.json")).unwrap()).unwrap()
@@ -33,7 +30,12 @@ fn the_emphasis_parser_reads_prompts_as_a1111_does() {
     assert!(corpus.len() >= 10);
     for (text, want) in corpus {
         let got = parse_attention(&text).unwrap();
-        let want: Vec<(String, f64)> = want.as_array().unwrap().iter().map(|r| (r[0].as_str().unwrap().to_string(), r[1].as_f64().unwrap())).collect();
+        let want: Vec<(String, f64)> = want
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| (r[0].as_str().unwrap().to_string(), r[1].as_f64().unwrap()))
+            .collect();
         assert_eq!(got.len(), want.len(), "{text:?}: {got:?} vs {want:?}");
         for ((t, w), (wt, ww)) in got.iter().zip(&want) {
             assert!(t == wt && (w - ww).abs() <= 1e-12 * ww.abs(), "{text:?}: {got:?} vs {want:?}");
@@ -46,7 +48,9 @@ fn weighted_long_prompts_encode_as_diffusers_long_prompt_pipeline() {
     let sdxl = Sdxl::load(&ctx(), &fixture("pipeline/tiny-sdxl"), Dtype::F32, &mut |_| {}).unwrap();
     let records = SafeTensors::open(&fixture("compat/records.safetensors")).unwrap();
     for case in cases().iter().filter(|c| c["prompt_syntax"] == "weighted") {
-        let text = sdxl.encode_weighted_prompt(case["prompt"].as_str().unwrap(), case["negative_prompt"].as_str(), true).unwrap();
+        let text = sdxl
+            .encode_weighted_prompt(case["prompt"].as_str().unwrap(), case["negative_prompt"].as_str(), true)
+            .unwrap();
         assert_eq!(text.tokens as u64, case["tokens"].as_u64().unwrap(), "{}", case["name"]);
         for (got, key) in [(&text.context, "context"), (&text.pooled, "pooled")] {
             let (_, want) = records.values(case["tensors"][key].as_str().unwrap()).unwrap();
@@ -57,7 +61,8 @@ fn weighted_long_prompts_encode_as_diffusers_long_prompt_pipeline() {
 }
 
 fn ip_scale(case: &Value) -> IpScale {
-    let flags: Vec<String> = case["ip_scale_flags"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().to_string()).collect();
+    let flags: Vec<String> =
+        case["ip_scale_flags"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().to_string()).collect();
     IpScale::parse(&flags, None).unwrap()
 }
 
@@ -88,10 +93,27 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
         let image = match &case["ip"] {
             Value::Null => None,
             ip => {
-                adapter = IpAdapter::load(&ctx, &fixture(&format!("workflow/{}", ip["adapter"].as_str().unwrap())), sdxl.unet(), dtype).unwrap();
-                images = ip["images"].as_array().unwrap().iter().map(|p| read_image(&fixture(&format!("workflow/{}", p.as_str().unwrap()))).unwrap()).collect::<Vec<_>>();
+                adapter = IpAdapter::load(
+                    &ctx,
+                    &fixture(&format!("workflow/{}", ip["adapter"].as_str().unwrap())),
+                    sdxl.unet(),
+                    dtype,
+                )
+                .unwrap();
+                images = ip["images"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|p| read_image(&fixture(&format!("workflow/{}", p.as_str().unwrap()))).unwrap())
+                    .collect::<Vec<_>>();
                 scale = ip_scale(&case);
-                Some(ImageGuide { adapter: &adapter, encoder: &encoder, preprocess: &preprocess, images: &images, scale: &scale })
+                Some(ImageGuide {
+                    adapter: &adapter,
+                    encoder: &encoder,
+                    preprocess: &preprocess,
+                    images: &images,
+                    scale: &scale,
+                })
             }
         };
         let init = case["init"].as_str().map(|f| read_image(&fixture(&format!("compat/{f}"))).unwrap());
@@ -99,10 +121,22 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
         let control = match &case["control"] {
             Value::Null => None,
             c => {
-                net = ControlNetModel::load(&ctx, &fixture(&format!("workflow/{}", c["model"].as_str().unwrap())), sdxl.unet_config(), dtype).unwrap();
+                net = ControlNetModel::load(
+                    &ctx,
+                    &fixture(&format!("workflow/{}", c["model"].as_str().unwrap())),
+                    sdxl.unet_config(),
+                    dtype,
+                )
+                .unwrap();
                 control_image = read_image(&fixture(&format!("workflow/{}", c["image"].as_str().unwrap()))).unwrap();
                 let (start, end) = (c["start"].as_f64().unwrap(), c["end"].as_f64().unwrap());
-                Some(ControlGuide { net: &net, image: &control_image, scale: c["scale"].as_f64().unwrap() as f32, start, end })
+                Some(ControlGuide {
+                    net: &net,
+                    image: &control_image,
+                    scale: c["scale"].as_f64().unwrap() as f32,
+                    start,
+                    end,
+                })
             }
         };
         let guides = Guides { control, image, init: init.as_ref() };

@@ -12,7 +12,7 @@ use vkdiff_pipeline::RgbImage;
 use vkdiff_render::control::control_image;
 
 fn dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/images")
+    vkdiff_testkit::fixture("images")
 }
 
 struct Fixtures {
@@ -23,10 +23,7 @@ struct Fixtures {
 impl Fixtures {
     fn load() -> Self {
         let index = serde_json::from_str(&std::fs::read_to_string(dir().join("index.json")).unwrap()).unwrap();
-        Fixtures {
-            index,
-            expected: std::fs::read(dir().join("expected.bin")).unwrap(),
-        }
+        Fixtures { index, expected: std::fs::read(dir().join("expected.bin")).unwrap() }
     }
     fn entries(&self, kind: &str) -> &Vec<Value> {
         self.index[kind].as_array().unwrap()
@@ -36,10 +33,7 @@ impl Fixtures {
         &self.expected[a..b]
     }
     fn floats(&self, range: &Value) -> Vec<f32> {
-        self.bytes(range)
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
-            .collect()
+        self.bytes(range).chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect()
     }
 }
 
@@ -66,18 +60,8 @@ fn png_files_read_as_pil_converts_them_to_rgb() {
     assert!(f.entries("png").len() >= 17);
     for e in f.entries("png") {
         let img = source(e);
-        assert_eq!(
-            (img.width, img.height),
-            (usize_of(&e["width"]), usize_of(&e["height"])),
-            "{e}"
-        );
-        assert_eq!(
-            img.pixels,
-            f.bytes(&e["rgb"]),
-            "{} (PIL mode {})",
-            e["file"],
-            e["pil_mode"]
-        );
+        assert_eq!((img.width, img.height), (usize_of(&e["width"]), usize_of(&e["height"])), "{e}");
+        assert_eq!(img.pixels, f.bytes(&e["rgb"]), "{} (PIL mode {})", e["file"], e["pil_mode"]);
     }
 }
 
@@ -101,10 +85,7 @@ fn check_resizes(kind: &str, resize: fn(&RgbImage, usize, usize, Filter) -> RgbI
         let want = f.bytes(&e["rgb"]);
         let differ = out.pixels.iter().zip(want).filter(|(a, b)| a != b).count();
         if differ > 0 {
-            failures.push(format!(
-                "{} -> {w}x{h} {}: {differ} bytes differ",
-                e["file"], e["filter"]
-            ));
+            failures.push(format!("{} -> {w}x{h} {}: {differ} bytes differ", e["file"], e["filter"]));
         }
     }
     assert!(f.entries(kind).len() > 30);
@@ -125,10 +106,7 @@ fn torch_uint8_antialiased_resize_is_bit_exact() {
 fn the_two_resizes_really_differ() {
     // Guards the tests above against both references being the same function.
     let img = source(&serde_json::json!({"file": "src_37x29.png"}));
-    assert_ne!(
-        resize_pil(&img, 19, 15, Filter::Bicubic).pixels,
-        resize_torch(&img, 19, 15, Filter::Bicubic).pixels
-    );
+    assert_ne!(resize_pil(&img, 19, 15, Filter::Bicubic).pixels, resize_torch(&img, 19, 15, Filter::Bicubic).pixels);
 }
 
 #[test]
@@ -156,11 +134,7 @@ fn clip_preprocessing_matches_transformers() {
         let want_shape: Vec<usize> = e["shape"].as_array().unwrap().iter().map(usize_of).collect();
         assert_eq!(shape.to_vec(), want_shape, "{e}");
         let want = f.floats(&e["values"]);
-        let worst = values
-            .iter()
-            .zip(&want)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0f32, f32::max);
+        let worst = values.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
         assert!(worst <= 1e-5, "{config} {}: max abs difference {worst}", e["file"]);
     }
 }
@@ -183,17 +157,10 @@ fn clip_config_rejects_what_it_cannot_do() {
 
 #[test]
 fn center_crop_offsets_round_down_and_padding_is_zero() {
-    let img = RgbImage {
-        width: 3,
-        height: 1,
-        pixels: vec![1, 1, 1, 2, 2, 2, 3, 3, 3],
-    };
+    let img = RgbImage { width: 3, height: 1, pixels: vec![1, 1, 1, 2, 2, 2, 3, 3, 3] };
     assert_eq!(center_crop(&img, 1, 2).pixels, vec![1, 1, 1, 2, 2, 2]);
     let padded = center_crop(&img, 2, 4);
-    assert_eq!(
-        padded.pixels,
-        vec![1, 1, 1, 2, 2, 2, 3, 3, 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]
-    );
+    assert_eq!(padded.pixels, vec![1, 1, 1, 2, 2, 2, 3, 3, 3, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
 }
 
 #[test]

@@ -2,8 +2,8 @@
 //! (tests/fixtures/pipeline/samplers.*, written by tools/make_sampler_fixtures.py).
 
 use serde_json::Value;
+use vkdiff_formats::SafeTensors;
 use vkdiff_pipeline::{Error, Sampler, SamplerKind, SchedulerConfig, TorchCpuRng};
-use vkdiff_unet::SafeTensors;
 
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/pipeline/samplers");
 
@@ -42,8 +42,13 @@ fn consecutive_randn_calls_continue_torchs_stream() {
     for case in listing["rng_sequences"].as_array().unwrap() {
         let name = case["name"].as_str().unwrap();
         let mut rng = TorchCpuRng::new(case["seed"].as_u64().unwrap());
-        let got: Vec<u32> =
-            case["sizes"].as_array().unwrap().iter().flat_map(|n| rng.randn(n.as_u64().unwrap() as usize)).map(f32::to_bits).collect();
+        let got: Vec<u32> = case["sizes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|n| rng.randn(n.as_u64().unwrap() as usize))
+            .map(f32::to_bits)
+            .collect();
         let want: Vec<u32> = values(&tensors, name).iter().map(|v| v.to_bits()).collect();
         assert_eq!(got, want, "{name}");
     }
@@ -78,7 +83,12 @@ fn schedules_match_diffusers() {
         if let (Some(got), Some(want)) = (sampler.sigmas(), sigmas) {
             assert_close(name, "sigmas", got, &want);
         }
-        assert_close(name, "init_noise_sigma", &[sampler.init_noise_sigma()], &values(&tensors, &format!("{name}/init_noise_sigma")));
+        assert_close(
+            name,
+            "init_noise_sigma",
+            &[sampler.init_noise_sigma()],
+            &values(&tensors, &format!("{name}/init_noise_sigma")),
+        );
     }
 }
 
@@ -134,7 +144,8 @@ fn refused_settings_are_one_line_errors() {
     }
     let sdxl = |edit: &str| {
         let mut config: Value =
-            serde_json::from_str(r#"{"beta_schedule": "scaled_linear", "beta_start": 0.00085, "beta_end": 0.012}"#).unwrap();
+            serde_json::from_str(r#"{"beta_schedule": "scaled_linear", "beta_start": 0.00085, "beta_end": 0.012}"#)
+                .unwrap();
         config.as_object_mut().unwrap().extend(serde_json::from_str::<serde_json::Map<String, Value>>(edit).unwrap());
         SchedulerConfig::from_json(&config.to_string()).unwrap()
     };

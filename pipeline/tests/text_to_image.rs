@@ -6,17 +6,14 @@ mod common;
 
 use common::{ctx, job, relative_l2};
 use serde_json::Value;
-use std::path::PathBuf;
+use vkdiff_formats::SafeTensors;
 use vkdiff_pipeline::{Guides, Sdxl};
 use vkdiff_runtime::Dtype;
-use vkdiff_unet::SafeTensors;
-
-fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/pipeline").join(name)
-}
+use vkdiff_testkit::fixture;
 
 fn cases() -> Vec<Value> {
-    let json: Value = serde_json::from_str(&std::fs::read_to_string(fixture("records.json")).unwrap()).unwrap();
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(fixture("pipeline").join("records.json")).unwrap()).unwrap();
     json["gen"].as_array().unwrap().clone()
 }
 
@@ -32,14 +29,18 @@ fn psnr(pixels: &[u8], chw: &[f32], [c, h, w]: [usize; 3]) -> f64 {
         }
     }
     mse /= (c * h * w) as f64;
-    if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64 * 255.0 / mse).log10() }
+    if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (255.0f64 * 255.0 / mse).log10()
+    }
 }
 
 /// Runs every recorded case on `model` in `dtype`; latents within `tol` (relative L2), images
 /// above `min_psnr`.
 fn check(model: &str, dtype: Dtype, tol: f64, min_psnr: f64, only: Option<usize>) {
-    let records = SafeTensors::open(&fixture("records.safetensors")).unwrap();
-    let sdxl = Sdxl::load(&ctx(), &fixture(model), dtype, &mut |_| {}).unwrap();
+    let records = SafeTensors::open(&fixture("pipeline").join("records.safetensors")).unwrap();
+    let sdxl = Sdxl::load(&ctx(), &fixture("pipeline").join(model), dtype, &mut |_| {}).unwrap();
     for (i, case) in cases().iter().enumerate().filter(|(i, _)| only.is_none_or(|o| o == *i)) {
         let name = case["name"].as_str().unwrap();
         let out = sdxl.text_to_image(&job(case), &Guides::default(), &mut |_, _| {}).unwrap();

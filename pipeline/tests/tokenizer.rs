@@ -24,8 +24,7 @@ fn corpus() -> Corpus {
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
     let pads = json["pad_tokens"].as_object().unwrap();
-    let pads: Vec<(String, String)> =
-        pads.iter().map(|(k, v)| (k.clone(), v.as_str().unwrap().into())).collect();
+    let pads: Vec<(String, String)> = pads.iter().map(|(k, v)| (k.clone(), v.as_str().unwrap().into())).collect();
     let cases: Vec<Case> = serde_json::from_value::<Vec<serde_json::Value>>(json["cases"].clone())
         .unwrap()
         .into_iter()

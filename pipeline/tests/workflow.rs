@@ -8,16 +8,13 @@ mod common;
 use common::{ctx, job, psnr, relative_l2};
 use serde_json::Value;
 use std::collections::HashMap;
-use std::path::PathBuf;
+use vkdiff_formats::SafeTensors;
 use vkdiff_lora::LoraFile;
+use vkdiff_networks::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter};
 use vkdiff_pipeline::images::{read_image, ClipPreprocess};
 use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, IpScale, Sdxl};
 use vkdiff_runtime::Dtype;
-use vkdiff_unet::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter, SafeTensors};
-
-fn workflow(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/workflow").join(name)
-}
+use vkdiff_testkit::fixture;
 
 /// Every model a case may name, loaded once for the run precision.
 struct Guidance {
@@ -31,15 +28,23 @@ struct Guidance {
 impl Guidance {
     fn load(sdxl: &Sdxl, dtype: Dtype) -> Guidance {
         let ctx = ctx();
-        let controlnets =
-            ["controlnet", "controlnet-small"].map(|n| (n.to_string(), ControlNetModel::load(&ctx, &workflow(n), sdxl.unet_config(), dtype).unwrap())).into();
-        let adapters = ["ip-adapter_tiny.safetensors", "ip-adapter-plus_tiny.safetensors"]
-            .map(|n| (n.to_string(), IpAdapter::load(&ctx, &workflow(n), sdxl.unet(), dtype).unwrap()))
+        let controlnets = ["controlnet", "controlnet-small"]
+            .map(|n| {
+                (
+                    n.to_string(),
+                    ControlNetModel::load(&ctx, &fixture("workflow").join(n), sdxl.unet_config(), dtype).unwrap(),
+                )
+            })
             .into();
-        let encoder = ClipVisionModelWithProjection::load_folder(&ctx, &workflow("image_encoder"), dtype).unwrap();
+        let adapters = ["ip-adapter_tiny.safetensors", "ip-adapter-plus_tiny.safetensors"]
+            .map(|n| (n.to_string(), IpAdapter::load(&ctx, &fixture("workflow").join(n), sdxl.unet(), dtype).unwrap()))
+            .into();
+        let encoder =
+            ClipVisionModelWithProjection::load_folder(&ctx, &fixture("workflow").join("image_encoder"), dtype)
+                .unwrap();
         let preprocess = ClipPreprocess::square(encoder.config().image_size);
         let loras = ["lora-kohya-ldm.safetensors", "lora-kohya-diffusers.safetensors", "lora-peft.safetensors"]
-            .map(|n| (n.to_string(), LoraFile::open(&workflow(n)).unwrap()))
+            .map(|n| (n.to_string(), LoraFile::open(&fixture("workflow").join(n)).unwrap()))
             .into();
         Guidance { controlnets, adapters, encoder, preprocess, loras }
     }
@@ -47,22 +52,27 @@ impl Guidance {
 
 /// Runs every recorded case; latents within `tol` (relative L2), images above `min_psnr`.
 fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
-    let json: Value = serde_json::from_str(&std::fs::read_to_string(workflow("records.json")).unwrap()).unwrap();
-    let records = SafeTensors::open(&workflow("records.safetensors")).unwrap();
-    let mut sdxl = Sdxl::load(&ctx(), &workflow("../pipeline/tiny-sdxl"), dtype, &mut |_| {}).unwrap();
+    let json: Value =
+        serde_json::from_str(&std::fs::read_to_string(fixture("workflow").join("records.json")).unwrap()).unwrap();
+    let records = SafeTensors::open(&fixture("workflow").join("records.safetensors")).unwrap();
+    let mut sdxl = Sdxl::load(&ctx(), &fixture("workflow").join("../pipeline/tiny-sdxl"), dtype, &mut |_| {}).unwrap();
     let g = Guidance::load(&sdxl, dtype);
     let cases = json["cases"].as_array().unwrap();
     assert!(cases.len() >= 11, "fixture has {} cases", cases.len());
     for case in cases {
         let name = case["name"].as_str().unwrap();
-        let loras: Vec<(&LoraFile, f32)> =
-            case["loras"].as_array().unwrap().iter().map(|l| (&g.loras[l["file"].as_str().unwrap()], l["strength"].as_f64().unwrap() as f32)).collect();
+        let loras: Vec<(&LoraFile, f32)> = case["loras"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|l| (&g.loras[l["file"].as_str().unwrap()], l["strength"].as_f64().unwrap() as f32))
+            .collect();
         sdxl.set_loras(&loras).unwrap();
         let control_image;
         let control = match &case["control"] {
             Value::Null => None,
             c => {
-                control_image = read_image(&workflow(c["image"].as_str().unwrap())).unwrap();
+                control_image = read_image(&fixture("workflow").join(c["image"].as_str().unwrap())).unwrap();
                 let net = &g.controlnets[c["model"].as_str().unwrap()];
                 Some(ControlGuide {
                     net,
@@ -77,10 +87,21 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
         let image = match &case["ip"] {
             Value::Null => None,
             ip => {
-                style_images = ip["images"].as_array().unwrap().iter().map(|p| read_image(&workflow(p.as_str().unwrap())).unwrap()).collect::<Vec<_>>();
+                style_images = ip["images"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|p| read_image(&fixture("workflow").join(p.as_str().unwrap())).unwrap())
+                    .collect::<Vec<_>>();
                 let adapter = &g.adapters[ip["adapter"].as_str().unwrap()];
                 ip_scale = IpScale::All(ip["scale"].as_f64().unwrap() as f32);
-                Some(ImageGuide { adapter, encoder: &g.encoder, preprocess: &g.preprocess, images: &style_images, scale: &ip_scale })
+                Some(ImageGuide {
+                    adapter,
+                    encoder: &g.encoder,
+                    preprocess: &g.preprocess,
+                    images: &style_images,
+                    scale: &ip_scale,
+                })
             }
         };
         let out = sdxl.text_to_image(&job(case), &Guides { control, image, init: None }, &mut |_, _| {}).unwrap();

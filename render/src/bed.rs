@@ -131,7 +131,13 @@ fn growth_rows(seed: u64, config: &BedConfig, pixels_per_metre: f64) -> Vec<Vari
     variants
 }
 
-fn place_instances(seed: u64, config: &BedConfig, region: Rect, variants: &[Variant], compost: &Compost) -> Vec<Instance> {
+fn place_instances(
+    seed: u64,
+    config: &BedConfig,
+    region: Rect,
+    variants: &[Variant],
+    compost: &Compost,
+) -> Vec<Instance> {
     let mut rng = Rng::stream(seed, Stream::Placement);
     let count = (config.density * region.area()).round() as usize;
     let points = clustered_points(&mut rng, region, count, &config.clumping);
@@ -201,7 +207,8 @@ mod tests {
 
     #[test]
     fn density_scales_the_count_and_zero_is_an_empty_bed() {
-        let count = |density: f64| Bed::generate(8, &BedConfig { density, ..BedConfig::default() }, &camera()).instances.len();
+        let count =
+            |density: f64| Bed::generate(8, &BedConfig { density, ..BedConfig::default() }, &camera()).instances.len();
         assert_eq!(count(0.0), 0);
         assert!(count(400.0) < count(800.0));
         assert!(BedConfig { density: -1.0, ..BedConfig::default() }.validate().is_err());

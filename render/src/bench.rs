@@ -102,7 +102,15 @@ impl BenchReport {
 impl fmt::Display for BenchReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let n = self.times.len();
-        writeln!(f, "vkdiff bench scene: {}×{}, {n} frames (seeds {}..{}), {} threads", self.width, self.height, self.first_seed, self.first_seed.wrapping_add(n as u64), self.threads)?;
+        writeln!(
+            f,
+            "vkdiff bench scene: {}×{}, {n} frames (seeds {}..{}), {} threads",
+            self.width,
+            self.height,
+            self.first_seed,
+            self.first_seed.wrapping_add(n as u64),
+            self.threads
+        )?;
         writeln!(f, "{:<10} {:>9}", "stage", "ms/frame")?;
         for (s, name) in STAGES.iter().enumerate() {
             writeln!(f, "{name:<10} {:>9.2}", self.mean_ms(s))?;
@@ -110,11 +118,21 @@ impl fmt::Display for BenchReport {
         let annotate = self.seconds_per_frame(ANNOTATION_STAGES);
         let all = self.seconds_per_frame(STAGES.len());
         writeln!(f, "depth + masks + COCO: {:.1} ms/frame = {:.1} frames/s, {:.0}× the paper's {PAPER_SECONDS_PER_FRAME} s/frame", annotate * 1e3, 1.0 / annotate, PAPER_SECONDS_PER_FRAME / annotate)?;
-        writeln!(f, "with every file encoded (EXR, PNGs, JSON, preview): {:.1} ms/frame = {:.1} frames/s", all * 1e3, 1.0 / all)?;
+        writeln!(
+            f,
+            "with every file encoded (EXR, PNGs, JSON, preview): {:.1} ms/frame = {:.1} frames/s",
+            all * 1e3,
+            1.0 / all
+        )?;
         let mean = self.mean_visible();
         let sd = (self.visible.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n.max(1) as f64).sqrt();
-        let (lo, hi) = (self.visible.iter().min().copied().unwrap_or(0), self.visible.iter().max().copied().unwrap_or(0));
+        let (lo, hi) =
+            (self.visible.iter().min().copied().unwrap_or(0), self.visible.iter().max().copied().unwrap_or(0));
         writeln!(f, "visible instances per frame: mean {mean:.1}, sd {sd:.1}, min {lo}, max {hi} (paper: 145)")?;
-        write!(f, "triangles drawn per frame (after culling): mean {:.0}", self.triangles.iter().sum::<usize>() as f64 / n.max(1) as f64)
+        write!(
+            f,
+            "triangles drawn per frame (after culling): mean {:.0}",
+            self.triangles.iter().sum::<usize>() as f64 / n.max(1) as f64
+        )
     }
 }

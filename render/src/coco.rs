@@ -39,7 +39,9 @@ pub fn instance_masks(frame: &Frame) -> Vec<InstanceMask> {
 /// Bounding box of each id 1..=count, by rows in parallel.
 fn instance_bounds(ids: &[u16], width: usize, count: usize) -> Vec<Option<PixelBox>> {
     let merge = |a: Option<PixelBox>, b: Option<PixelBox>| match (a, b) {
-        (Some(a), Some(b)) => Some(PixelBox { x0: a.x0.min(b.x0), y0: a.y0.min(b.y0), x1: a.x1.max(b.x1), y1: a.y1.max(b.y1) }),
+        (Some(a), Some(b)) => {
+            Some(PixelBox { x0: a.x0.min(b.x0), y0: a.y0.min(b.y0), x1: a.x1.max(b.x1), y1: a.y1.max(b.y1) })
+        }
         (a, b) => a.or(b),
     };
     ids.par_chunks(width)
@@ -126,7 +128,10 @@ fn annotations<'a>(frame: &'a Frame, masks: &[InstanceMask]) -> Vec<Annotation<'
 /// The annotations of `frame` as JSON objects, as annotations.json holds them (id = the
 /// instance's id in the mask, image id 1), for writers that combine frames.
 pub fn annotation_values(frame: &Frame, masks: &[InstanceMask]) -> Vec<Value> {
-    annotations(frame, masks).iter().map(|a| serde_json::to_value(a).expect("COCO structures always serialise")).collect()
+    annotations(frame, masks)
+        .iter()
+        .map(|a| serde_json::to_value(a).expect("COCO structures always serialise"))
+        .collect()
 }
 
 /// The COCO category every annotation belongs to.

@@ -21,7 +21,11 @@ pub struct CropWindow {
 pub fn centered_window(width: u32, height: u32, multiple: u32) -> Result<CropWindow> {
     let (w, h) = (width - width % multiple.max(1), height - height % multiple.max(1));
     if w == 0 || h == 0 {
-        return Err(RenderError::invalid("--width/--height", format!("{width}×{height}"), format!("the model needs sides of at least {multiple} pixels")));
+        return Err(RenderError::invalid(
+            "--width/--height",
+            format!("{width}×{height}"),
+            format!("the model needs sides of at least {multiple} pixels"),
+        ));
     }
     Ok(centered(width, height, w, h))
 }
@@ -35,7 +39,11 @@ pub fn centered(width: u32, height: u32, w: u32, h: u32) -> CropWindow {
 /// `count` windows of `size`² inside a `width`×`height` frame, from the scene seed alone.
 pub fn crop_windows(seed: u64, count: usize, size: u32, width: u32, height: u32) -> Result<Vec<CropWindow>> {
     if count > 0 && (size == 0 || size > width || size > height) {
-        return Err(RenderError::invalid("--crop-size", size, format!("must lie in [1, {}] to fit the {width}×{height} frame", width.min(height))));
+        return Err(RenderError::invalid(
+            "--crop-size",
+            size,
+            format!("must lie in [1, {}] to fit the {width}×{height} frame", width.min(height)),
+        ));
     }
     let mut rng = Rng::stream(seed, Stream::Crops);
     Ok((0..count)
@@ -53,13 +61,15 @@ pub fn crop_windows(seed: u64, count: usize, size: u32, width: u32, height: u32)
 /// default); the pixels of dropped slivers become background.
 pub fn crop_frame(frame: &Frame, window: CropWindow, min_fraction: f64) -> Frame {
     let (w, cw) = (frame.width(), window.width as usize);
-    let rows = (window.y0 as usize..(window.y0 + window.height) as usize).map(|y| y * w + window.x0 as usize..y * w + window.x0 as usize + cw);
+    let rows = (window.y0 as usize..(window.y0 + window.height) as usize)
+        .map(|y| y * w + window.x0 as usize..y * w + window.x0 as usize + cw);
     let mut ids: Vec<u16> = rows.clone().flat_map(|r| frame.ids[r].iter().copied()).collect();
     let depth: Vec<f32> = rows.flat_map(|r| frame.depth[r].iter().copied()).collect();
     let labels = frame.instances.len() + 1;
     let in_frame = pixel_counts(&frame.ids, labels);
     let in_crop = pixel_counts(&ids, labels);
-    let kept = renumber(&mut ids, labels, |id| in_crop[id] > 0 && in_crop[id] as f64 >= min_fraction * in_frame[id] as f64);
+    let kept =
+        renumber(&mut ids, labels, |id| in_crop[id] > 0 && in_crop[id] as f64 >= min_fraction * in_frame[id] as f64);
     let instances = kept.iter().map(|&id| frame.instances[id - 1].clone()).collect();
     Frame { camera: frame.camera.crop(window.x0, window.y0, window.width, window.height), depth, ids, instances }
 }

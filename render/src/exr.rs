@@ -94,4 +94,3 @@ fn compress_block(lines: &[f32]) -> Vec<u8> {
         raw
     }
 }
-

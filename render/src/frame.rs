@@ -74,10 +74,13 @@ pub fn pixel_counts(ids: &[u16], labels: usize) -> Vec<u64> {
             chunk.iter().for_each(|&id| counts[id as usize] += 1);
             counts
         })
-        .reduce(|| vec![0u64; labels], |mut a, b| {
-            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
-            a
-        })
+        .reduce(
+            || vec![0u64; labels],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                a
+            },
+        )
 }
 
 fn instance_info(scene: &Scene, bed_index: usize) -> InstanceInfo {

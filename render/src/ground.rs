@@ -68,7 +68,8 @@ mod tests {
     #[test]
     fn relief_is_a_few_millimetres_and_mesh_faces_up() {
         let compost = Compost::new(11);
-        let heights: Vec<f64> = (0..10_000).map(|i| compost.height((i % 100) as f64 * 0.003, (i / 100) as f64 * 0.003)).collect();
+        let heights: Vec<f64> =
+            (0..10_000).map(|i| compost.height((i % 100) as f64 * 0.003, (i / 100) as f64 * 0.003)).collect();
         let (lo, hi) = heights.iter().fold((f64::MAX, f64::MIN), |(lo, hi), &h| (lo.min(h), hi.max(h)));
         assert!(hi - lo > 0.002 && hi - lo < 0.010, "relief {} mm", (hi - lo) * 1e3);
         let mesh = compost.mesh(Rect { x0: 0.0, y0: 0.0, x1: 0.05, y1: 0.03 }, 0.002);

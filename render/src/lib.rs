@@ -41,6 +41,9 @@ pub use error::{RenderError, Result};
 
 /// Runs `work` on a pool of `threads` workers (0: one per core). Outputs never depend on the
 /// count; it only sets how many cores the work may use.
-pub fn with_threads<R: Send>(threads: usize, work: impl FnOnce() -> R + Send) -> std::result::Result<R, rayon::ThreadPoolBuildError> {
+pub fn with_threads<R: Send>(
+    threads: usize,
+    work: impl FnOnce() -> R + Send,
+) -> std::result::Result<R, rayon::ThreadPoolBuildError> {
     Ok(rayon::ThreadPoolBuilder::new().num_threads(threads).build()?.install(work))
 }

@@ -33,7 +33,11 @@ impl GradientNoise {
     }
 
     fn corner(&self, ix: i64, iy: i64, fx: f64, fy: f64) -> f64 {
-        let h = mix64(self.seed ^ (ix as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (iy as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f));
+        let h = mix64(
+            self.seed
+                ^ (ix as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+                ^ (iy as u64).wrapping_mul(0xc2b2_ae3d_27d4_eb4f),
+        );
         let (gx, gy) = GRADIENTS[(h >> 61) as usize];
         gx * fx + gy * fy
     }

@@ -32,7 +32,13 @@ pub struct OutputOptions {
 
 impl Default for OutputOptions {
     fn default() -> Self {
-        OutputOptions { crops: 0, crop_size: 1024, crop_min_fraction: 0.1, control: ControlDepth::Inverse, replace: false }
+        OutputOptions {
+            crops: 0,
+            crop_size: 1024,
+            crop_min_fraction: 0.1,
+            control: ControlDepth::Inverse,
+            replace: false,
+        }
     }
 }
 
@@ -57,7 +63,8 @@ pub fn scene_files(seed: u64, config: &SceneConfig, options: &OutputOptions) -> 
     let windows = options.windows(seed, config)?;
     let frame = Scene::build(seed, config)?.render();
     let info = provenance(seed, config);
-    let (mut files, preview) = rayon::join(|| frame_files(&frame, info.clone(), options.control, ""), || preview_image(&frame));
+    let (mut files, preview) =
+        rayon::join(|| frame_files(&frame, info.clone(), options.control, ""), || preview_image(&frame));
     files.push(("preview.png".into(), rgb8(config.width, config.height, &preview)));
     let crops: Vec<Vec<SceneFile>> = windows
         .par_iter()
@@ -90,7 +97,12 @@ pub fn frame_files(frame: &Frame, info: Value, control: ControlDepth, prefix: &s
     let (w, h) = (frame.camera.width, frame.camera.height);
     let ((depth, ids), (annotations, control)) = rayon::join(
         || rayon::join(|| encode_single_channel(w, h, "Z", &frame.depth), || gray16(w, h, &frame.ids)),
-        || rayon::join(|| coco_json(frame, &instance_masks(frame), info), || rgb8(w, h, &control_image(&frame.depth, control))),
+        || {
+            rayon::join(
+                || coco_json(frame, &instance_masks(frame), info),
+                || rgb8(w, h, &control_image(&frame.depth, control)),
+            )
+        },
     );
     let mut camera = serde_json::to_string_pretty(&frame.camera.to_json()).expect("camera JSON always serialises");
     camera.push('\n');
@@ -131,13 +143,23 @@ pub fn scene_folder_name(seed: u64) -> String {
 }
 
 /// Scenes `first_seed..first_seed + count` into numbered subfolders of `dir`, in parallel.
-pub fn write_dataset(dir: &Path, first_seed: u64, count: u64, config: &SceneConfig, options: &OutputOptions) -> Result<DatasetReport> {
+pub fn write_dataset(
+    dir: &Path,
+    first_seed: u64,
+    count: u64,
+    config: &SceneConfig,
+    options: &OutputOptions,
+) -> Result<DatasetReport> {
     validate(config, options)?;
     if count == 0 {
         return Err(RenderError::invalid("--count", count, "must be at least 1"));
     }
     if first_seed.checked_add(count).is_none() {
-        return Err(RenderError::invalid("--count", count, format!("runs past the largest seed from --seed {first_seed}")));
+        return Err(RenderError::invalid(
+            "--count",
+            count,
+            format!("runs past the largest seed from --seed {first_seed}"),
+        ));
     }
     let outcomes: Vec<bool> = (first_seed..first_seed + count)
         .into_par_iter()

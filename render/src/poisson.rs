@@ -232,7 +232,12 @@ mod tests {
             .iter()
             .enumerate()
             .map(|(i, a)| {
-                points.iter().enumerate().filter(|&(j, _)| j != i).map(|(_, b)| (a.0 - b.0).hypot(a.1 - b.1)).fold(f64::MAX, f64::min)
+                points
+                    .iter()
+                    .enumerate()
+                    .filter(|&(j, _)| j != i)
+                    .map(|(_, b)| (a.0 - b.0).hypot(a.1 - b.1))
+                    .fold(f64::MAX, f64::min)
             })
             .sum::<f64>()
             / points.len() as f64;

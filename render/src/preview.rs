@@ -34,9 +34,16 @@ fn draw(frame: &Frame, mark_instances: bool) -> Vec<u8> {
                 continue;
             }
             let at = |dx: isize, dy: isize| {
-                let (xx, yy) = ((x as isize + dx).clamp(0, w as isize - 1) as usize, (y as isize + dy).clamp(0, h as isize - 1) as usize);
+                let (xx, yy) = (
+                    (x as isize + dx).clamp(0, w as isize - 1) as usize,
+                    (y as isize + dy).clamp(0, h as isize - 1) as usize,
+                );
                 let d = frame.depth[yy * w + xx] as f64;
-                if d.is_finite() { d } else { z }
+                if d.is_finite() {
+                    d
+                } else {
+                    z
+                }
             };
             // Depth slope per metre across the image plane; a pixel spans z / f metres there.
             let (sx, sy) = (frame.camera.fx / z, frame.camera.fy / z);
@@ -51,10 +58,15 @@ fn draw(frame: &Frame, mark_instances: bool) -> Vec<u8> {
                 let tint = tints[id as usize];
                 let edge = [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|&(dx, dy)| {
                     let (xx, yy) = (x as isize + dx, y as isize + dy);
-                    xx >= 0 && yy >= 0 && (xx as usize) < w && (yy as usize) < h && frame.ids[yy as usize * w + xx as usize] != id
+                    xx >= 0
+                        && yy >= 0
+                        && (xx as usize) < w
+                        && (yy as usize) < h
+                        && frame.ids[yy as usize * w + xx as usize] != id
                 });
                 let alpha = if edge { 0.9 } else { TINT };
-                colour = [0, 1, 2].map(|c| colour[c] * (1.0 - alpha) + tint[c] * alpha * if edge { 1.0 } else { shade });
+                colour =
+                    [0, 1, 2].map(|c| colour[c] * (1.0 - alpha) + tint[c] * alpha * if edge { 1.0 } else { shade });
             }
             // + 0.5 and a saturating cast: rounding without the libm call.
             row[x * 3..x * 3 + 3].copy_from_slice(&colour.map(|c| (c + 0.5) as u8));

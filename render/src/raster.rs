@@ -154,15 +154,17 @@ pub fn rasterize(width: u32, height: u32, lists: &[Vec<ScreenTriangle>]) -> Rast
     // The buffer holds 1/z while drawing and becomes z in place afterwards.
     let mut depth = vec![0f32; w * h];
     let mut ids = vec![0u16; w * h];
-    depth.par_chunks_mut(BAND_ROWS * w).zip(ids.par_chunks_mut(BAND_ROWS * w)).enumerate().for_each(|(band, (inv_depth, ids))| {
-        let rows = (band * BAND_ROWS) as u32..((band + 1) * BAND_ROWS).min(h) as u32;
-        for (list, list_bins) in lists.iter().zip(&bins) {
-            for &t in &list_bins[band] {
-                draw(&list[t as usize], rows.clone(), w, inv_depth, ids);
+    depth.par_chunks_mut(BAND_ROWS * w).zip(ids.par_chunks_mut(BAND_ROWS * w)).enumerate().for_each(
+        |(band, (inv_depth, ids))| {
+            let rows = (band * BAND_ROWS) as u32..((band + 1) * BAND_ROWS).min(h) as u32;
+            for (list, list_bins) in lists.iter().zip(&bins) {
+                for &t in &list_bins[band] {
+                    draw(&list[t as usize], rows.clone(), w, inv_depth, ids);
+                }
             }
-        }
-        inv_depth.iter_mut().for_each(|v| *v = if *v > 0.0 { 1.0 / *v } else { f32::INFINITY });
-    });
+            inv_depth.iter_mut().for_each(|v| *v = if *v > 0.0 { 1.0 / *v } else { f32::INFINITY });
+        },
+    );
     RasterImage { width, height, depth, ids }
 }
 
@@ -261,7 +263,8 @@ mod tests {
     }
 
     fn render(cam: &Camera, meshes: &[(&Mesh, u16)]) -> RasterImage {
-        let lists: Vec<Vec<ScreenTriangle>> = meshes.iter().flat_map(|(mesh, id)| project_mesh(cam, &mesh.positions, &mesh.triangles, *id)).collect();
+        let lists: Vec<Vec<ScreenTriangle>> =
+            meshes.iter().flat_map(|(mesh, id)| project_mesh(cam, &mesh.positions, &mesh.triangles, *id)).collect();
         rasterize(cam.width, cam.height, &lists)
     }
 
@@ -280,7 +283,11 @@ mod tests {
             draw(t, rows, 97, &mut depth, &mut ids);
             ids.iter().zip(&mut coverage).for_each(|(&id, c)| *c += u32::from(id != 0));
         }
-        assert!(coverage.iter().all(|&c| c == 1), "pixels drawn {:?} times", coverage.iter().filter(|&&c| c != 1).collect::<Vec<_>>());
+        assert!(
+            coverage.iter().all(|&c| c == 1),
+            "pixels drawn {:?} times",
+            coverage.iter().filter(|&&c| c != 1).collect::<Vec<_>>()
+        );
     }
 
     #[test]
@@ -301,7 +308,12 @@ mod tests {
         let cam = camera(80, 80);
         // A plane rising along x: z = 0.2 x.
         let mesh = Mesh {
-            positions: vec![Vec3::new(-0.4, -0.4, -0.08), Vec3::new(0.4, -0.4, 0.08), Vec3::new(0.4, 0.4, 0.08), Vec3::new(-0.4, 0.4, -0.08)],
+            positions: vec![
+                Vec3::new(-0.4, -0.4, -0.08),
+                Vec3::new(0.4, -0.4, 0.08),
+                Vec3::new(0.4, 0.4, 0.08),
+                Vec3::new(-0.4, 0.4, -0.08),
+            ],
             triangles: vec![[0, 1, 2], [0, 2, 3]],
         };
         let image = render(&cam, &[(&mesh, 5)]);
@@ -327,7 +339,8 @@ mod tests {
     fn same_image_for_any_thread_count() {
         let cam = camera(200, 130);
         let far = plane(&cam, 0.0, 17);
-        let tilted = Mesh { positions: far.positions.iter().map(|p| Vec3::new(p.x, p.y, 0.1 * p.x)).collect(), ..far.clone() };
+        let tilted =
+            Mesh { positions: far.positions.iter().map(|p| Vec3::new(p.x, p.y, 0.1 * p.x)).collect(), ..far.clone() };
         let run = |threads: usize| {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| render(&cam, &[(&far, 1), (&tilted, 2)]))

@@ -114,7 +114,8 @@ impl Rle {
 
     /// Parses pycocotools' compressed counts for a `height`×`width` mask.
     pub fn from_coco_string(s: &str, height: u32, width: u32) -> Result<Rle> {
-        let bad = |why: &str| RenderError::invalid("RLE counts", s.chars().take(40).collect::<String>(), why.to_string());
+        let bad =
+            |why: &str| RenderError::invalid("RLE counts", s.chars().take(40).collect::<String>(), why.to_string());
         let bytes = s.as_bytes();
         let mut counts: Vec<u32> = Vec::new();
         let mut p = 0;

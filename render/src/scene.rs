@@ -26,7 +26,14 @@ pub struct SceneConfig {
 
 impl Default for SceneConfig {
     fn default() -> Self {
-        SceneConfig { width: 1920, height: 1080, lens_mm: 50.0, sensor_width_mm: 36.0, camera_height_m: 1.0, bed: BedConfig::default() }
+        SceneConfig {
+            width: 1920,
+            height: 1080,
+            lens_mm: 50.0,
+            sensor_width_mm: 36.0,
+            camera_height_m: 1.0,
+            bed: BedConfig::default(),
+        }
     }
 }
 

@@ -18,7 +18,8 @@ pub struct StagingDir {
 /// A hidden sibling of `target` that no other process or call uses.
 fn sibling(target: &Path, tag: &str) -> Result<PathBuf> {
     let name = target.file_name().ok_or_else(|| RenderError::invalid("--out", target.display(), "names no folder"))?;
-    let unique = format!(".{}.{tag}-{}-{}", name.to_string_lossy(), std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed));
+    let unique =
+        format!(".{}.{tag}-{}-{}", name.to_string_lossy(), std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed));
     Ok(target.with_file_name(unique))
 }
 
@@ -55,7 +56,8 @@ impl StagingDir {
         } else {
             None
         };
-        std::fs::rename(&self.staging, &self.target).map_err(|e| RenderError::io("move into place", &self.target, e))?;
+        std::fs::rename(&self.staging, &self.target)
+            .map_err(|e| RenderError::io("move into place", &self.target, e))?;
         self.committed = true;
         if let Some(old) = old {
             std::fs::remove_dir_all(&old).map_err(|e| RenderError::io("remove the replaced", &old, e))?;

@@ -13,7 +13,8 @@ fn small() -> SceneConfig {
 }
 
 fn entries(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    let mut names: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     names.sort();
     names
 }
@@ -41,7 +42,10 @@ fn a_crop_larger_than_the_frame_is_refused() {
 fn negative_density_and_out_of_range_settings_are_refused() {
     let mut config = small();
     config.bed.density = -1.0;
-    assert_eq!(fails("negative-density", &config, &OutputOptions::default()), "--density -1: must be a number ≥ 0 (mushrooms per m²)");
+    assert_eq!(
+        fails("negative-density", &config, &OutputOptions::default()),
+        "--density -1: must be a number ≥ 0 (mushrooms per m²)"
+    );
     config.bed.density = f64::NAN;
     assert!(fails("nan-density", &config, &OutputOptions::default()).starts_with("--density NaN"));
     let config = SceneConfig { width: 8, ..small() };
@@ -83,6 +87,9 @@ fn an_existing_scene_is_kept_unless_replacing() {
     assert_eq!(err.to_string(), format!("{}: output exists already (pass --force to replace it)", dir.display()));
     assert_eq!(entries(&dir), ["mine.txt"]);
     write_scene(&dir, 1, &small(), &OutputOptions { replace: true, ..OutputOptions::default() }).unwrap();
-    assert_eq!(entries(&dir), ["annotations.json", "camera.json", "control.png", "depth.exr", "instances.png", "preview.png"]);
+    assert_eq!(
+        entries(&dir),
+        ["annotations.json", "camera.json", "control.png", "depth.exr", "instances.png", "preview.png"]
+    );
     assert_eq!(entries(&root), ["scene"], "no staging or replaced folder left behind");
 }

@@ -5,7 +5,8 @@ use serde_json::Value;
 use vkdiff_render::rle::{PixelBox, Rle};
 
 fn fixture() -> Value {
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/coco_rle_golden.json")).unwrap();
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/coco_rle_golden.json")).unwrap();
     serde_json::from_str(&text).unwrap()
 }
 
@@ -17,7 +18,13 @@ fn encoding_area_bbox_and_decoding_match_pycocotools() {
     let mut checked = 0;
     for case in cases {
         let (h, w) = (case["height"].as_u64().unwrap() as u32, case["width"].as_u64().unwrap() as u32);
-        let labels: Vec<u8> = case["rows"].as_array().unwrap().iter().flat_map(|row| row.as_str().unwrap().bytes()).map(|c| if c == b'.' { 0 } else { c - b'a' + 1 }).collect();
+        let labels: Vec<u8> = case["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|row| row.as_str().unwrap().bytes())
+            .map(|c| if c == b'.' { 0 } else { c - b'a' + 1 })
+            .collect();
         assert_eq!(labels.len(), (w * h) as usize);
         let everything = PixelBox { x0: 0, y0: 0, x1: w - 1, y1: h - 1 };
         for ann in case["annotations"].as_array().unwrap() {

@@ -23,7 +23,8 @@ fn intersect(origin: Vec3, dir: Vec3, [a, b, c]: [Vec3; 3]) -> Option<f64> {
 
 /// Signed distance in pixels from (u, v) to the edges of the screen triangle: positive inside.
 fn edge_distance(screen: &[(f64, f64); 3], u: f64, v: f64) -> f64 {
-    let area = (screen[1].0 - screen[0].0) * (screen[2].1 - screen[0].1) - (screen[1].1 - screen[0].1) * (screen[2].0 - screen[0].0);
+    let area = (screen[1].0 - screen[0].0) * (screen[2].1 - screen[0].1)
+        - (screen[1].1 - screen[0].1) * (screen[2].0 - screen[0].0);
     (0..3)
         .map(|i| {
             let (p, q) = (screen[i], screen[(i + 1) % 3]);
@@ -119,7 +120,8 @@ fn mask_pixels_carry_the_depth_of_their_own_mushroom_and_nothing_is_in_front() {
     let (mut checked, mut max_error, mut occluded) = (0usize, 0f64, 0usize);
     for y in 0..h {
         let v = y as f64;
-        let in_row: Vec<usize> = (0..meshes.len()).filter(|&k| v >= meshes[k].bounds[1] && v <= meshes[k].bounds[3]).collect();
+        let in_row: Vec<usize> =
+            (0..meshes.len()).filter(|&k| v >= meshes[k].bounds[1] && v <= meshes[k].bounds[3]).collect();
         for x in 0..w {
             let u = x as f64;
             let depth = frame.depth[y * w + x] as f64;
@@ -132,8 +134,11 @@ fn mask_pixels_carry_the_depth_of_their_own_mushroom_and_nothing_is_in_front() {
                 let candidates = hits(cam, u, v, &meshes[id - 1], -SNAP_SLACK_PX);
                 assert!(!candidates.is_empty(), "pixel ({x},{y}) labelled {id} misses that mushroom");
                 let tolerance = |hit: &Hit| {
-                    let plane_depth = |du: f64, dv: f64| intersect(cam.position, cam.ray_direction(u + du, v + dv), hit.triangle).unwrap_or(hit.depth);
-                    3e-7 + ((plane_depth(1.0, 0.0) - hit.depth).abs() + (plane_depth(0.0, 1.0) - hit.depth).abs()) / 512.0
+                    let plane_depth = |du: f64, dv: f64| {
+                        intersect(cam.position, cam.ray_direction(u + du, v + dv), hit.triangle).unwrap_or(hit.depth)
+                    };
+                    3e-7 + ((plane_depth(1.0, 0.0) - hit.depth).abs() + (plane_depth(0.0, 1.0) - hit.depth).abs())
+                        / 512.0
                 };
                 let error = candidates
                     .iter()
@@ -142,11 +147,22 @@ fn mask_pixels_carry_the_depth_of_their_own_mushroom_and_nothing_is_in_front() {
                         (error <= tolerance(hit)).then_some(error)
                     })
                     .fold(None, |best: Option<f64>, e| Some(best.map_or(e, |b| b.min(e))))
-                    .unwrap_or_else(|| panic!("pixel ({x},{y}) of {id}: raster depth {depth} m matches none of {:?}", candidates.iter().map(|h| h.depth).collect::<Vec<_>>()));
+                    .unwrap_or_else(|| {
+                        panic!(
+                            "pixel ({x},{y}) of {id}: raster depth {depth} m matches none of {:?}",
+                            candidates.iter().map(|h| h.depth).collect::<Vec<_>>()
+                        )
+                    });
                 max_error = max_error.max(error);
                 // ... and it is the front surface: nothing of the same mushroom clearly in front.
-                if let Some(front) = candidates.iter().filter(|h| h.margin > ROBUST_PX).min_by(|a, b| a.depth.total_cmp(&b.depth)) {
-                    assert!(depth <= front.depth + tolerance(front), "pixel ({x},{y}) of {id} shows {depth} m behind its front surface at {} m", front.depth);
+                if let Some(front) =
+                    candidates.iter().filter(|h| h.margin > ROBUST_PX).min_by(|a, b| a.depth.total_cmp(&b.depth))
+                {
+                    assert!(
+                        depth <= front.depth + tolerance(front),
+                        "pixel ({x},{y}) of {id} shows {depth} m behind its front surface at {} m",
+                        front.depth
+                    );
                 }
                 checked += 1;
             }
@@ -158,7 +174,11 @@ fn mask_pixels_carry_the_depth_of_their_own_mushroom_and_nothing_is_in_front() {
                 // Only hits well inside a triangle count: on an edge the snapped raster may
                 // legitimately fall on either side.
                 if let Some(front) = hits(cam, u, v, &meshes[k], ROBUST_PX).iter().map(|h| h.depth).reduce(f64::min) {
-                    assert!(front > depth - 1e-6, "pixel ({x},{y}) shows {id} at {depth} m but {} is at {front} m", k + 1);
+                    assert!(
+                        front > depth - 1e-6,
+                        "pixel ({x},{y}) shows {id} at {depth} m but {} is at {front} m",
+                        k + 1
+                    );
                     occluded += 1;
                 }
             }

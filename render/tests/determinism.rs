@@ -39,7 +39,8 @@ fn dataset_runs_write_numbered_scenes_and_resume() {
     let dataset = root.join("beds");
     let report = with_threads(2, || write_dataset(&dataset, 7, 3, &config, &options)).unwrap().unwrap();
     assert_eq!((report.written, report.skipped), (3, 0));
-    let mut folders: Vec<String> = std::fs::read_dir(&dataset).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    let mut folders: Vec<String> =
+        std::fs::read_dir(&dataset).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     folders.sort();
     assert_eq!(folders, ["000007", "000008", "000009"]);
     // A scene of the dataset is the scene written alone.

@@ -25,6 +25,7 @@ fn smooth_depth_compresses_and_incompressible_blocks_stay_readable() {
     let bytes = encode_single_channel(w, h, "Z", &smooth);
     assert!(bytes.len() < (w * h * 4) as usize / 2, "{} bytes", bytes.len());
     assert_eq!(bits(&common::read_exr(&bytes).3), bits(&smooth));
-    let noise: Vec<f32> = (0..w * h).map(|i| f32::from_bits((vkdiff_render::rng::mix64(i as u64) as u32) >> 2)).collect();
+    let noise: Vec<f32> =
+        (0..w * h).map(|i| f32::from_bits((vkdiff_render::rng::mix64(i as u64) as u32) >> 2)).collect();
     assert_eq!(bits(&common::read_exr(&encode_single_channel(w, h, "Z", &noise)).3), bits(&noise));
 }

@@ -45,7 +45,10 @@ fn check_coco(dir: &Path) -> Vec<Value> {
     for (n, ann) in annotations.iter().enumerate() {
         let id = n + 1;
         assert_eq!(ann["id"], id, "annotation ids run 1..K");
-        assert_eq!((ann["image_id"].as_u64(), ann["category_id"].as_u64(), ann["iscrowd"].as_u64()), (Some(1), Some(1), Some(0)));
+        assert_eq!(
+            (ann["image_id"].as_u64(), ann["category_id"].as_u64(), ann["iscrowd"].as_u64()),
+            (Some(1), Some(1), Some(0))
+        );
         assert!(pixels[id] > 0, "instance {id} has pixels");
         assert_eq!(ann["area"].as_u64().unwrap(), pixels[id], "area of {id} is its pixel count");
         let b = boxes[id];
@@ -108,7 +111,10 @@ fn crops_are_windows_of_the_full_frame() {
         let dir = full.join(format!("crops/{k}"));
         let crop_annotations = check_coco(&dir);
         let camera = common::read_json(&dir.join("camera.json"));
-        let (x0, y0) = (camera["crop_offset_px"][0].as_u64().unwrap() as usize, camera["crop_offset_px"][1].as_u64().unwrap() as usize);
+        let (x0, y0) = (
+            camera["crop_offset_px"][0].as_u64().unwrap() as usize,
+            camera["crop_offset_px"][1].as_u64().unwrap() as usize,
+        );
         assert!(x0 + 512 <= 1920 && y0 + 512 <= 1080, "crop {k} inside the frame");
         for (row, shift) in [(0, x0), (1, y0)] {
             let expected = full_camera["K"][row][2].as_f64().unwrap() - shift as f64;
@@ -126,15 +132,24 @@ fn crops_are_windows_of_the_full_frame() {
                 *crop_pixels_of_full.entry(full_id).or_default() += 1;
                 if crop_id > 0 {
                     let crop_bed = &crop_annotations[crop_id as usize - 1]["bed_index"];
-                    assert_eq!(crop_bed, &full_annotations[full_id as usize - 1]["bed_index"], "crop {k} pixel ({x},{y}) is the same mushroom");
+                    assert_eq!(
+                        crop_bed,
+                        &full_annotations[full_id as usize - 1]["bed_index"],
+                        "crop {k} pixel ({x},{y}) is the same mushroom"
+                    );
                 }
             }
         }
         // Kept instances hold at least a tenth of their full-frame pixels; dropped ones less.
-        let kept: std::collections::HashSet<u64> = crop_annotations.iter().map(|a| a["bed_index"].as_u64().unwrap()).collect();
+        let kept: std::collections::HashSet<u64> =
+            crop_annotations.iter().map(|a| a["bed_index"].as_u64().unwrap()).collect();
         for (&full_id, &count) in crop_pixels_of_full.iter().filter(|(&id, _)| id > 0) {
             let bed = full_annotations[full_id as usize - 1]["bed_index"].as_u64().unwrap();
-            assert_eq!(kept.contains(&bed), count as f64 >= 0.1 * full_area(full_id) as f64, "crop {k}, full id {full_id}");
+            assert_eq!(
+                kept.contains(&bed),
+                count as f64 >= 0.1 * full_area(full_id) as f64,
+                "crop {k}, full id {full_id}"
+            );
         }
     }
 }

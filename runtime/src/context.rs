@@ -84,7 +84,9 @@ impl Context {
         let entry = device::load_entry()?;
         let (instance, validation) = device::create_instance(&entry)?;
         match Self::open(&instance, requested) {
-            Ok((device, pd, info, queue_family)) => Self::finish(entry, (instance, validation), device, pd, info, queue_family),
+            Ok((device, pd, info, queue_family)) => {
+                Self::finish(entry, (instance, validation), device, pd, info, queue_family)
+            }
             Err(e) => {
                 // SAFETY: nothing created from the instance is alive but the messenger, which goes first.
                 unsafe {
@@ -98,7 +100,10 @@ impl Context {
         }
     }
 
-    fn open(instance: &ash::Instance, requested: Option<usize>) -> Result<(ash::Device, vk::PhysicalDevice, DeviceInfo, u32)> {
+    fn open(
+        instance: &ash::Instance,
+        requested: Option<usize>,
+    ) -> Result<(ash::Device, vk::PhysicalDevice, DeviceInfo, u32)> {
         // SAFETY: valid instance.
         let pds = unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
         let infos: Vec<DeviceInfo> = pds.iter().enumerate().map(|(i, &pd)| device::describe(instance, pd, i)).collect();
@@ -116,14 +121,16 @@ impl Context {
             .subgroup_size_control(size_control)
             .compute_full_subgroups(size_control)
             .shader_zero_initialize_workgroup_memory(info.zero_init_workgroup);
-        let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default().shader_zero_initialize_workgroup_memory(true);
+        let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default()
+            .shader_zero_initialize_workgroup_memory(true);
         let priorities = [1.0f32];
         let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&priorities)];
         let mut extensions = Vec::new();
         if device::is_portability_subset(instance, pd) {
             extensions.push(ash::khr::portability_subset::NAME.as_ptr());
         }
-        let mut create = vk::DeviceCreateInfo::default().queue_create_infos(&queues).push_next(&mut f11).push_next(&mut f12);
+        let mut create =
+            vk::DeviceCreateInfo::default().queue_create_infos(&queues).push_next(&mut f11).push_next(&mut f12);
         if info.api_version >= (1, 3, 0) {
             create = create.push_next(&mut f13);
         } else if info.zero_init_extension {

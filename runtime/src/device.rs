@@ -1,7 +1,7 @@
 //! Vulkan instance, physical-device discovery and the choice of device.
 
-use crate::validation::Validation;
 use crate::error::{Error, Result, VkContext};
+use crate::validation::Validation;
 use ash::vk;
 use std::ffi::CStr;
 
@@ -89,7 +89,9 @@ impl DeviceInfo {
             return Some("no subgroup shuffle/arithmetic operations in compute shaders".into());
         }
         if !self.zero_init_workgroup {
-            return Some("no shaderZeroInitializeWorkgroupMemory (Vulkan 1.3 or VK_KHR_zero_initialize_workgroup_memory)".into());
+            return Some(
+                "no shaderZeroInitializeWorkgroupMemory (Vulkan 1.3 or VK_KHR_zero_initialize_workgroup_memory)".into(),
+            );
         }
         None
     }
@@ -126,7 +128,8 @@ pub(crate) fn create_instance(entry: &ash::Entry) -> Result<(ash::Instance, Opti
         .engine_name(c"vkdiff")
         .api_version(vk::API_VERSION_1_3);
     // SAFETY: a plain query of the loader.
-    let available = unsafe { entry.enumerate_instance_extension_properties(None) }.vk("vkEnumerateInstanceExtensionProperties")?;
+    let available =
+        unsafe { entry.enumerate_instance_extension_properties(None) }.vk("vkEnumerateInstanceExtensionProperties")?;
     let portability = ash::khr::portability_enumeration::NAME;
     let mut info = vk::InstanceCreateInfo::default().application_info(&app);
     let mut extensions = Vec::new();
@@ -164,23 +167,21 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
     let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
     let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default();
     let zero_init_extension = has_extension(instance, pd, ash::khr::zero_initialize_workgroup_memory::NAME);
-    let mut feats2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f11).push_next(&mut f12).push_next(&mut f13).push_next(&mut zero_init);
+    let mut feats2 = vk::PhysicalDeviceFeatures2::default()
+        .push_next(&mut f11)
+        .push_next(&mut f12)
+        .push_next(&mut f13)
+        .push_next(&mut zero_init);
     // SAFETY: pd comes from this instance; the chained structs live until the calls return.
     let (mem, families) = unsafe {
         instance.get_physical_device_properties2(pd, &mut props2);
         instance.get_physical_device_features2(pd, &mut feats2);
-        (
-            instance.get_physical_device_memory_properties(pd),
-            instance.get_physical_device_queue_family_properties(pd),
-        )
+        (instance.get_physical_device_memory_properties(pd), instance.get_physical_device_queue_family_properties(pd))
     };
     let p = props2.properties;
     let v = p.api_version;
     let api_version = (vk::api_version_major(v), vk::api_version_minor(v), vk::api_version_patch(v));
-    let family = families
-        .iter()
-        .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
-        .map(|i| i as u32);
+    let family = families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)).map(|i| i as u32);
     let timestamps = family.is_some_and(|f| families[f as usize].timestamp_valid_bits > 0);
     let device_local_bytes = mem.memory_heaps[..mem.memory_heap_count as usize]
         .iter()
@@ -207,7 +208,8 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
             .then(|| (vk::api_version_major(p.driver_version), vk::api_version_minor(p.driver_version))),
         api_version,
         shader_f16: f12.shader_float16 == vk::TRUE,
-        storage_16bit: f11.storage_buffer16_bit_access == vk::TRUE && f11.uniform_and_storage_buffer16_bit_access == vk::TRUE,
+        storage_16bit: f11.storage_buffer16_bit_access == vk::TRUE
+            && f11.uniform_and_storage_buffer16_bit_access == vk::TRUE,
         zero_init_workgroup: zero_init.shader_zero_initialize_workgroup_memory == vk::TRUE,
         zero_init_extension: api_version < (1, 3, 0) && zero_init_extension,
         subgroup_size: subgroup.subgroup_size,
@@ -255,7 +257,9 @@ pub fn choose(devices: &[DeviceInfo], requested: Option<usize>) -> Result<usize>
     let from_env = std::env::var("VKDIFF_DEVICE").ok().filter(|s| !s.is_empty());
     let (index, source_name) = match (requested, from_env) {
         (Some(i), _) => (Some(i), "--device"),
-        (None, Some(s)) => (Some(s.trim().parse().map_err(|_| Error::BadDeviceSpec(format!("VKDIFF_DEVICE={s}")))?), "VKDIFF_DEVICE"),
+        (None, Some(s)) => {
+            (Some(s.trim().parse().map_err(|_| Error::BadDeviceSpec(format!("VKDIFF_DEVICE={s}")))?), "VKDIFF_DEVICE")
+        }
         (None, None) => (None, ""),
     };
     if devices.is_empty() {
@@ -318,7 +322,11 @@ mod tests {
     #[test]
     fn prefers_discrete_then_integrated_then_cpu() {
         // Run without VKDIFF_DEVICE influence: only `requested` paths read it after None.
-        let devs = [device(0, DeviceKind::Cpu, true), device(1, DeviceKind::Integrated, true), device(2, DeviceKind::Discrete, true)];
+        let devs = [
+            device(0, DeviceKind::Cpu, true),
+            device(1, DeviceKind::Integrated, true),
+            device(2, DeviceKind::Discrete, true),
+        ];
         assert_eq!(choose(&devs, Some(0)).unwrap(), 0);
         if std::env::var("VKDIFF_DEVICE").is_err() {
             assert_eq!(choose(&devs, None).unwrap(), 2);

@@ -64,7 +64,10 @@ impl Context {
         // with the cache or right here when pipeline creation fails.
         unsafe {
             let set_layout = device
-                .create_descriptor_set_layout(&vk::DescriptorSetLayoutCreateInfo::default().bindings(&layout_bindings), None)
+                .create_descriptor_set_layout(
+                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&layout_bindings),
+                    None,
+                )
                 .vk("vkCreateDescriptorSetLayout")?;
             let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).size(PUSH_BYTES)];
             let set_layouts = [set_layout];
@@ -85,10 +88,14 @@ impl Context {
             // Kernels built for a subgroup width are pinned to it where the device allows.
             if let (Some(sg), Some(_)) = (variant.param("SG"), self.shared.info.subgroup_size_range) {
                 required = required.required_subgroup_size(sg);
-                stage = stage.flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS).push_next(&mut required);
+                stage =
+                    stage.flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS).push_next(&mut required);
             }
             // DISPATCH_BASE: grids past the workgroup-count limit run as based dispatches.
-            let info = [vk::ComputePipelineCreateInfo::default().flags(vk::PipelineCreateFlags::DISPATCH_BASE).stage(stage).layout(layout)];
+            let info = [vk::ComputePipelineCreateInfo::default()
+                .flags(vk::PipelineCreateFlags::DISPATCH_BASE)
+                .stage(stage)
+                .layout(layout)];
             let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
             device.destroy_shader_module(module, None);
             let pipeline = created.map_err(|(_, e)| e).vk("vkCreateComputePipelines")?[0];

@@ -64,12 +64,17 @@ impl Drop for Resources {
 impl Recorder {
     /// Starts a recording; with `profile`, every dispatch is timed with timestamp queries.
     pub fn new(ctx: &Context, profile: bool) -> Result<Recorder> {
-        ensure(!profile || ctx.info().timestamps, || format!("device `{}` has no timestamp queries to profile with", ctx.info().name))?;
+        ensure(!profile || ctx.info().timestamps, || {
+            format!("device `{}` has no timestamp queries to profile with", ctx.info().name)
+        })?;
         let device = &ctx.shared.device;
         // SAFETY: plain object creation on a valid device; Resources destroys them.
         unsafe {
             let command_pool = device
-                .create_command_pool(&vk::CommandPoolCreateInfo::default().queue_family_index(ctx.shared.queue_family), None)
+                .create_command_pool(
+                    &vk::CommandPoolCreateInfo::default().queue_family_index(ctx.shared.queue_family),
+                    None,
+                )
                 .vk("vkCreateCommandPool")?;
             let res = Resources {
                 ctx: ctx.clone(),
@@ -81,10 +86,20 @@ impl Recorder {
                 kernels: Vec::new(),
             };
             let cmd = device
-                .allocate_command_buffers(&vk::CommandBufferAllocateInfo::default().command_pool(command_pool).command_buffer_count(1))
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default().command_pool(command_pool).command_buffer_count(1),
+                )
                 .vk("vkAllocateCommandBuffers")?[0];
             device.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default()).vk("vkBeginCommandBuffer")?;
-            let rec = Recorder { ctx: ctx.clone(), res, cmd, sets_left: 0, written: HashSet::new(), read: HashSet::new(), profile };
+            let rec = Recorder {
+                ctx: ctx.clone(),
+                res,
+                cmd,
+                sets_left: 0,
+                written: HashSet::new(),
+                read: HashSet::new(),
+                profile,
+            };
             // What earlier submissions wrote (kernels, staging copies, fills) is made visible
             // to this recording's kernels: a fence wait alone does not.
             rec.barrier(
@@ -103,13 +118,29 @@ impl Recorder {
 
     /// Records one dispatch of `kernel` over `groups` workgroups. Bindings are `reads` then
     /// `writes`, in the kernel's binding order; `push` fills its push constants.
-    pub fn dispatch(&mut self, kernel: &Arc<Kernel>, reads: &[&Tensor], writes: &[&Tensor], push: &[u32], groups: [u32; 3]) -> Result<()> {
-        ensure(reads.len() + writes.len() == kernel.bindings as usize, || format!("kernel `{}` takes {} bindings", kernel.name, kernel.bindings))?;
-        ensure(push.len() * 4 <= PUSH_BYTES as usize, || format!("kernel `{}`: push constants too large", kernel.name))?;
+    pub fn dispatch(
+        &mut self,
+        kernel: &Arc<Kernel>,
+        reads: &[&Tensor],
+        writes: &[&Tensor],
+        push: &[u32],
+        groups: [u32; 3],
+    ) -> Result<()> {
+        ensure(reads.len() + writes.len() == kernel.bindings as usize, || {
+            format!("kernel `{}` takes {} bindings", kernel.name, kernel.bindings)
+        })?;
+        ensure(push.len() * 4 <= PUSH_BYTES as usize, || {
+            format!("kernel `{}`: push constants too large", kernel.name)
+        })?;
         let limit = self.ctx.binding_limit();
         for t in reads.iter().chain(writes) {
             ensure(t.bytes() <= limit, || {
-                format!("kernel `{}`: a {} tensor exceeds the {} storage binding limit", kernel.name, human_bytes(t.bytes()), human_bytes(limit))
+                format!(
+                    "kernel `{}`: a {} tensor exceeds the {} storage binding limit",
+                    kernel.name,
+                    human_bytes(t.bytes()),
+                    human_bytes(limit)
+                )
             })?;
         }
         if groups.contains(&0) {
@@ -142,7 +173,12 @@ impl Recorder {
             device.update_descriptor_sets(&descriptor_writes, &[]);
             if hazard {
                 let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
-                self.barrier(compute, vk::AccessFlags::SHADER_WRITE, compute, vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE);
+                self.barrier(
+                    compute,
+                    vk::AccessFlags::SHADER_WRITE,
+                    compute,
+                    vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+                );
                 self.written.clear();
                 self.read.clear();
             }
@@ -152,7 +188,13 @@ impl Recorder {
             device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, kernel.pipeline);
             device.cmd_bind_descriptor_sets(self.cmd, vk::PipelineBindPoint::COMPUTE, kernel.layout, 0, &[set], &[]);
             if !push.is_empty() {
-                device.cmd_push_constants(self.cmd, kernel.layout, vk::ShaderStageFlags::COMPUTE, 0, bytemuck::cast_slice(push));
+                device.cmd_push_constants(
+                    self.cmd,
+                    kernel.layout,
+                    vk::ShaderStageFlags::COMPUTE,
+                    0,
+                    bytemuck::cast_slice(push),
+                );
             }
             self.dispatch_split(groups);
             if let Some((pool, q)) = timed {
@@ -180,7 +222,8 @@ impl Recorder {
         if groups.iter().zip(limit).all(|(&g, l)| g <= l) {
             return device.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]);
         }
-        let starts = |d: usize| (0..groups[d]).step_by(limit[d] as usize).map(move |s| (s, (groups[d] - s).min(limit[d])));
+        let starts =
+            |d: usize| (0..groups[d]).step_by(limit[d] as usize).map(move |s| (s, (groups[d] - s).min(limit[d])));
         for (z, nz) in starts(2) {
             for (y, ny) in starts(1) {
                 for (x, nx) in starts(0) {
@@ -191,7 +234,13 @@ impl Recorder {
     }
 
     /// SAFETY: the command buffer must be recording.
-    unsafe fn barrier(&self, src_stage: vk::PipelineStageFlags, src: vk::AccessFlags, dst_stage: vk::PipelineStageFlags, dst: vk::AccessFlags) {
+    unsafe fn barrier(
+        &self,
+        src_stage: vk::PipelineStageFlags,
+        src: vk::AccessFlags,
+        dst_stage: vk::PipelineStageFlags,
+        dst: vk::AccessFlags,
+    ) {
         memory_barrier(&self.ctx.shared.device, self.cmd, (src_stage, src), (dst_stage, dst));
     }
 
@@ -200,9 +249,15 @@ impl Recorder {
         // SAFETY: pools and layouts are valid; pools are destroyed with the recording.
         unsafe {
             if self.sets_left == 0 {
-                let sizes = [vk::DescriptorPoolSize { ty: vk::DescriptorType::STORAGE_BUFFER, descriptor_count: SETS_PER_POOL * MAX_BINDINGS }];
+                let sizes = [vk::DescriptorPoolSize {
+                    ty: vk::DescriptorType::STORAGE_BUFFER,
+                    descriptor_count: SETS_PER_POOL * MAX_BINDINGS,
+                }];
                 let pool = device
-                    .create_descriptor_pool(&vk::DescriptorPoolCreateInfo::default().max_sets(SETS_PER_POOL).pool_sizes(&sizes), None)
+                    .create_descriptor_pool(
+                        &vk::DescriptorPoolCreateInfo::default().max_sets(SETS_PER_POOL).pool_sizes(&sizes),
+                        None,
+                    )
                     .vk("vkCreateDescriptorPool")?;
                 self.res.descriptor_pools.push(pool);
                 self.sets_left = SETS_PER_POOL;
@@ -211,7 +266,9 @@ impl Recorder {
             let layouts = [kernel.set_layout];
             let pool = *self.res.descriptor_pools.last().unwrap();
             Ok(device
-                .allocate_descriptor_sets(&vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts))
+                .allocate_descriptor_sets(
+                    &vk::DescriptorSetAllocateInfo::default().descriptor_pool(pool).set_layouts(&layouts),
+                )
                 .vk("vkAllocateDescriptorSets")?[0])
         }
     }
@@ -225,7 +282,12 @@ impl Recorder {
             // SAFETY: plain creation; the reset is recorded before the pool's first use.
             unsafe {
                 let pool = device
-                    .create_query_pool(&vk::QueryPoolCreateInfo::default().query_type(vk::QueryType::TIMESTAMP).query_count(QUERIES_PER_POOL), None)
+                    .create_query_pool(
+                        &vk::QueryPoolCreateInfo::default()
+                            .query_type(vk::QueryType::TIMESTAMP)
+                            .query_count(QUERIES_PER_POOL),
+                        None,
+                    )
                     .vk("vkCreateQueryPool")?;
                 device.cmd_reset_query_pool(self.cmd, pool, 0, QUERIES_PER_POOL);
                 self.res.query_pools.push(pool);
@@ -271,7 +333,12 @@ impl Recording {
         for (i, chunk) in stamps.chunks_mut(QUERIES_PER_POOL as usize).enumerate() {
             // SAFETY: the run has finished, so every query in range is available.
             unsafe {
-                self.ctx.shared.device.get_query_pool_results(self.res.query_pools[i], 0, chunk, vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT)
+                self.ctx.shared.device.get_query_pool_results(
+                    self.res.query_pools[i],
+                    0,
+                    chunk,
+                    vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+                )
             }
             .vk("vkGetQueryPoolResults")?;
         }

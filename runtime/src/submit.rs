@@ -24,16 +24,29 @@ pub(crate) fn submit_once(ctx: &Context, f: impl FnOnce(&ash::Device, vk::Comman
                 )
                 .vk("vkAllocateCommandBuffers")?[0];
             device
-                .begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT))
+                .begin_command_buffer(
+                    cmd,
+                    &vk::CommandBufferBeginInfo::default().flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                )
                 .vk("vkBeginCommandBuffer")?;
             // Earlier kernels' and transfers' writes before this transfer; its writes before the
             // host reads a staging buffer and before later submissions (which also wait on
             // their own first barrier).
             let transfer = vk::PipelineStageFlags::TRANSFER;
             let writes = vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE;
-            memory_barrier(device, cmd, (vk::PipelineStageFlags::COMPUTE_SHADER | transfer, writes), (transfer, vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::TRANSFER_WRITE));
+            memory_barrier(
+                device,
+                cmd,
+                (vk::PipelineStageFlags::COMPUTE_SHADER | transfer, writes),
+                (transfer, vk::AccessFlags::TRANSFER_READ | vk::AccessFlags::TRANSFER_WRITE),
+            );
             f(device, cmd);
-            memory_barrier(device, cmd, (transfer, vk::AccessFlags::TRANSFER_WRITE), (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ));
+            memory_barrier(
+                device,
+                cmd,
+                (transfer, vk::AccessFlags::TRANSFER_WRITE),
+                (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
+            );
             device.end_command_buffer(cmd).vk("vkEndCommandBuffer")?;
             submit_and_wait(ctx, cmd)
         })();

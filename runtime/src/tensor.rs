@@ -81,7 +81,9 @@ impl Tensor {
         let row_bytes = (self.numel() / rows.max(1) * dtype_size(self.dtype)) as u64;
         let offset = self.offset + start as u64 * row_bytes;
         let align = self.buf.shared.info.binding_alignment();
-        ensure(offset.is_multiple_of(align), || format!("view at byte {offset} breaks the device's {align}-byte binding alignment"))?;
+        ensure(offset.is_multiple_of(align), || {
+            format!("view at byte {offset} breaks the device's {align}-byte binding alignment")
+        })?;
         let mut shape = self.shape.clone();
         shape[0] = len;
         Ok(Tensor { offset, shape, ..self.clone() })
@@ -89,7 +91,9 @@ impl Tensor {
 
     /// Overwrites the tensor with `data` (converted to the storage dtype).
     pub fn write(&self, data: &[f32]) -> Result<()> {
-        ensure(data.len() == self.numel(), || format!("writing {} values into a tensor of shape {:?}", data.len(), self.shape))?;
+        ensure(data.len() == self.numel(), || {
+            format!("writing {} values into a tensor of shape {:?}", data.len(), self.shape)
+        })?;
         self.write_bytes(&encode(data, self.dtype))
     }
 
@@ -169,7 +173,9 @@ impl Context {
     /// A tensor holding `bytes`, already encoded in `dtype` (weights streamed from a file).
     pub fn upload_bytes(&self, shape: &[usize], dtype: Dtype, bytes: &[u8]) -> Result<Tensor> {
         let numel: usize = shape.iter().product();
-        ensure(numel * dtype_size(dtype) == bytes.len(), || format!("{} bytes for {dtype:?} shape {shape:?}", bytes.len()))?;
+        ensure(numel * dtype_size(dtype) == bytes.len(), || {
+            format!("{} bytes for {dtype:?} shape {shape:?}", bytes.len())
+        })?;
         let buf = Buffer::new(&self.shared, bytes.len() as u64, MemoryLocation::GpuOnly, "tensor")?;
         let t = Tensor::owned(buf, shape, dtype);
         t.write_bytes(bytes)?;

@@ -29,7 +29,11 @@ impl Validation {
 }
 
 /// Creates the instance `info` describes with `extensions`, validated when asked for.
-pub(crate) fn create_instance(entry: &ash::Entry, info: vk::InstanceCreateInfo, mut extensions: Vec<*const c_char>) -> Result<(ash::Instance, Option<Validation>)> {
+pub(crate) fn create_instance(
+    entry: &ash::Entry,
+    info: vk::InstanceCreateInfo,
+    mut extensions: Vec<*const c_char>,
+) -> Result<(ash::Instance, Option<Validation>)> {
     if !requested() {
         let info = info.enabled_extension_names(&extensions);
         // SAFETY: the create info and everything it points to outlive the call.

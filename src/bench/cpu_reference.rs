@@ -51,7 +51,11 @@ pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String>
                 n: get("n"),
                 k: get("k"),
                 gflops: v["gflops"].as_f64().unwrap_or(0.0),
-                library: format!("numpy {} / {}", v["numpy"].as_str().unwrap_or("?"), v["blas"].as_str().unwrap_or("?")),
+                library: format!(
+                    "numpy {} / {}",
+                    v["numpy"].as_str().unwrap_or("?"),
+                    v["blas"].as_str().unwrap_or("?")
+                ),
                 kernel: v["kernel"].as_str().unwrap_or("unknown (pip install threadpoolctl to see it)").to_string(),
             })
         })
@@ -60,7 +64,10 @@ pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String>
 
 /// Runs a reference script with `$VKDIFF_REFERENCE_PYTHON` (else python3) and `args`, and reads
 /// the JSON line it prints last; or why it could not run.
-pub fn run_python_reference<S: AsRef<std::ffi::OsStr>>(script: &str, args: impl IntoIterator<Item = S>) -> Result<serde_json::Value, String> {
+pub fn run_python_reference<S: AsRef<std::ffi::OsStr>>(
+    script: &str,
+    args: impl IntoIterator<Item = S>,
+) -> Result<serde_json::Value, String> {
     let (python, mut command) = reference_python();
     let out = command.arg("-c").arg(script).args(args).output().map_err(|e| format!("{python} not runnable ({e})"))?;
     if !out.status.success() {
@@ -76,7 +83,8 @@ mod tests {
     #[test]
     fn references_run_without_the_variables_that_slow_openblas() {
         let (_, command) = super::reference_python();
-        let removed: Vec<_> = command.get_envs().filter(|(_, value)| value.is_none()).map(|(name, _)| name.to_owned()).collect();
+        let removed: Vec<_> =
+            command.get_envs().filter(|(_, value)| value.is_none()).map(|(name, _)| name.to_owned()).collect();
         for name in super::SLOWING_VARIABLES {
             assert!(removed.iter().any(|r| r == name), "{name} reaches the reference process");
         }

@@ -7,10 +7,13 @@
 use super::workflow::{style_images, RandomGuides};
 use anyhow::Result;
 use std::time::{Duration, Instant};
+use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::dataset::{generate, Crops, Dataset, DatasetSettings, RunOptions, Shard};
 use vkdiff_pipeline::images::{ClipPreprocess, ControlDepth};
-use vkdiff_lora::LoraFile;
-use vkdiff_pipeline::{ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, Sampling, SamplerKind, Sdxl, StyleModels, TextToImage, WorkflowModels};
+use vkdiff_pipeline::{
+    ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, SamplerKind, Sampling, Sdxl,
+    StyleModels, TextToImage, WorkflowModels,
+};
 use vkdiff_render::scene::SceneConfig;
 use vkdiff_runtime::Context;
 
@@ -38,7 +41,11 @@ pub struct DatasetArgs {
 }
 
 pub fn run(args: &DatasetArgs) -> Result<()> {
-    anyhow::ensure!(args.size.is_multiple_of(32) && args.size >= 64, "--size {} must be a multiple of 32, at least 64", args.size);
+    anyhow::ensure!(
+        args.size.is_multiple_of(32) && args.size >= 64,
+        "--size {} must be a multiple of 32, at least 64",
+        args.size
+    );
     let dtype = args.precision.dtype();
     let ctx = Context::new(args.device)?;
     let start = Instant::now();
@@ -47,7 +54,12 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     let load = start.elapsed();
     let settings = model_settings(dtype, &loras);
     let preprocess = ClipPreprocess::square(encoder.config().image_size);
-    let mut models = WorkflowModels { sdxl, controlnet: Some(controlnet), style: Some(StyleModels { adapter, encoder, preprocess }), settings };
+    let mut models = WorkflowModels {
+        sdxl,
+        controlnet: Some(controlnet),
+        style: Some(StyleModels { adapter, encoder, preprocess }),
+        settings,
+    };
     let refs: Vec<(&LoraFile, f32)> = loras.iter().map(|(f, s)| (f, *s)).collect();
     let merge = models.sdxl.set_loras(&refs)?.map_or(Duration::ZERO, |s| Duration::from_secs_f64(s.seconds));
     let load_once = load + merge;
@@ -61,19 +73,34 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     let styles = vec![style_images().to_vec()];
     let images = pending.images();
     let start = Instant::now();
-    let report = generate(&folder, &dataset, &models, &styles, pending, &RunOptions { batch: args.batch, threads: 0 }, &mut |event| {
-        if let vkdiff_pipeline::dataset::Progress::Images { done, total } = event {
-            eprintln!("{done}/{total} images");
-        }
-    })?;
+    let report = generate(
+        &folder,
+        &dataset,
+        &models,
+        &styles,
+        pending,
+        &RunOptions { batch: args.batch, threads: 0 },
+        &mut |event| {
+            if let vkdiff_pipeline::dataset::Progress::Images { done, total } = event {
+                eprintln!("{done}/{total} images");
+            }
+        },
+    )?;
     let wall = start.elapsed();
     std::fs::remove_dir_all(&dir)?;
 
     // One image as `vkdiff gen` makes it: its own text encoding, guides and recording.
     let inputs = GuideInputs { control: Some(gradient_depth(args.size)), style: style_images().to_vec(), init: None };
-    let job = TextToImage { prompt: dataset.prompts[0].clone(), negative_prompt: None, seed: 0, sampling: dataset.sampling.clone() };
+    let job = TextToImage {
+        prompt: dataset.prompts[0].clone(),
+        negative_prompt: None,
+        seed: 0,
+        sampling: dataset.sampling.clone(),
+    };
     let start = Instant::now();
-    let single = models.sdxl.text_to_image(&job, &models.guides(&inputs), &mut |done, total| eprintln!("single image: step {done}/{total}"))?;
+    let single = models.sdxl.text_to_image(&job, &models.guides(&inputs), &mut |done, total| {
+        eprintln!("single image: step {done}/{total}")
+    })?;
     let single_wall = start.elapsed();
 
     let per = |d: Duration| d.as_secs_f64() / images.max(1) as f64;
@@ -125,16 +152,40 @@ fn model_settings(precision: vkdiff_runtime::Dtype, loras: &[(LoraFile, f32); 2]
     ModelSettings {
         model: "random-sdxl-base".into(),
         precision,
-        controlnet: Some(ControlNetSettings { model: "random-controlnet-depth".into(), depth_mode: ControlDepth::Inverse, scale: 0.5, start: 0.0, end: 1.0 }),
-        ip_adapter: Some(IpAdapterSettings { adapter: "random-ip-adapter".into(), encoder: "random-vit-h".into(), scale: vkdiff_pipeline::IpScale::All(0.6) }),
-        loras: loras.iter().enumerate().map(|(k, (_, s))| LoraSetting { path: format!("random-lora-{k}").into(), strength: *s }).collect(),
+        controlnet: Some(ControlNetSettings {
+            model: "random-controlnet-depth".into(),
+            depth_mode: ControlDepth::Inverse,
+            scale: 0.5,
+            start: 0.0,
+            end: 1.0,
+        }),
+        ip_adapter: Some(IpAdapterSettings {
+            adapter: "random-ip-adapter".into(),
+            encoder: "random-vit-h".into(),
+            scale: vkdiff_pipeline::IpScale::All(0.6),
+        }),
+        loras: loras
+            .iter()
+            .enumerate()
+            .map(|(k, (_, s))| LoraSetting { path: format!("random-lora-{k}").into(), strength: *s })
+            .collect(),
     }
 }
 
 /// The paper's set in small: frames of 1920×1080 scaled by size/1024, three crops each.
 fn dataset_settings(args: &DatasetArgs, models: &ModelSettings) -> DatasetSettings {
     let scale = |v: usize| (v * args.size / 1024) as u32;
-    let sampling = Sampling { steps: args.steps, guidance_scale: 5.0, sampler: SamplerKind::Euler, karras: false, width: args.size, height: args.size, size_conditioning: Default::default(), strength: None, prompt_syntax: Default::default() };
+    let sampling = Sampling {
+        steps: args.steps,
+        guidance_scale: 5.0,
+        sampler: SamplerKind::Euler,
+        karras: false,
+        width: args.size,
+        height: args.size,
+        size_conditioning: Default::default(),
+        strength: None,
+        prompt_syntax: Default::default(),
+    };
     DatasetSettings {
         seed: 0,
         count: args.scenes,

@@ -7,8 +7,9 @@ use anyhow::{Context as _, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use vkdiff_eval::fid::FeatureExtractor;
+use vkdiff_formats::write_safetensors_f32;
+use vkdiff_networks::RandomInception;
 use vkdiff_pipeline::RgbImage;
-use vkdiff_unet::{write_safetensors_f32, RandomInception};
 
 const REFERENCE: &str = include_str!("../../tools/fid_cpu_reference.py");
 
@@ -52,7 +53,10 @@ struct Row {
 }
 
 pub fn run(args: &FidArgs) -> Result<()> {
-    anyhow::ensure!(args.images > 0 && args.size > 0 && args.batch > 0, "--images, --size and --batch must be positive");
+    anyhow::ensure!(
+        args.images > 0 && args.size > 0 && args.batch > 0,
+        "--images, --size and --batch must be positive"
+    );
     let dir = std::env::temp_dir().join(format!("vkdiff-bench-fid-{}", std::process::id()));
     let result = bench(args, &dir);
     let _ = std::fs::remove_dir_all(&dir);
@@ -61,7 +65,9 @@ pub fn run(args: &FidArgs) -> Result<()> {
         println!("{}", serde_json::to_string(&row)?);
         return Ok(());
     }
-    let reference = row.cpu_reference_images_per_s.map_or(row.cpu_reference.clone(), |r| format!("{r:.2} images/s ({})", row.cpu_reference));
+    let reference = row
+        .cpu_reference_images_per_s
+        .map_or(row.cpu_reference.clone(), |r| format!("{r:.2} images/s ({})", row.cpu_reference));
     println!(
         "{} | FID features, {} PNGs of {}², batch {} {}: {:.2} images/s (load {:.1} s, peak {:.0} MiB) | torch-fidelity CPU f32: {reference} | speed-up {}",
         row.device,
@@ -109,7 +115,10 @@ fn bench(args: &FidArgs, dir: &Path) -> Result<Row> {
         row.cpu_reference = "not run (--no-cpu-reference)".into();
     } else {
         match reference(&weights, dir, args.batch) {
-            Ok((rate, what)) => (row.cpu_reference_images_per_s, row.cpu_reference, row.ratio_to_cpu) = (Some(rate), what, Some(row.images_per_s / rate)),
+            Ok((rate, what)) => {
+                (row.cpu_reference_images_per_s, row.cpu_reference, row.ratio_to_cpu) =
+                    (Some(rate), what, Some(row.images_per_s / rate))
+            }
             Err(why) => row.cpu_reference = format!("unavailable: {why}"),
         }
     }
@@ -128,12 +137,16 @@ fn write_images(dir: &Path, n: usize, size: usize) -> Result<Vec<PathBuf>> {
                     state ^= state >> 7;
                     state ^= state << 17;
                     let (y, x, c) = (j / (3 * size), j / 3 % size, j % 3);
-                    let wave = ((y as f32 * 0.02 * (c + 1) as f32 + i as f32).sin() * (x as f32 * 0.015).cos() * 90.0) + 127.0;
+                    let wave =
+                        ((y as f32 * 0.02 * (c + 1) as f32 + i as f32).sin() * (x as f32 * 0.015).cos() * 90.0) + 127.0;
                     (wave + (state >> 59) as f32).clamp(0.0, 255.0) as u8
                 })
                 .collect();
             let path = dir.join(format!("{i:05}.png"));
-            let bytes = vkdiff_pipeline::files::png_bytes(&RgbImage { width: size, height: size, pixels }, &Default::default())?;
+            let bytes = vkdiff_pipeline::files::png_bytes(
+                &RgbImage { width: size, height: size, pixels },
+                &Default::default(),
+            )?;
             std::fs::write(&path, bytes)?;
             Ok(path)
         })
@@ -142,7 +155,18 @@ fn write_images(dir: &Path, n: usize, size: usize) -> Result<Vec<PathBuf>> {
 
 /// torch-fidelity on the CPU: images per second and what ran it.
 fn reference(weights: &Path, dir: &Path, batch: usize) -> std::result::Result<(f64, String), String> {
-    let v = super::cpu_reference::run_python_reference(REFERENCE, [weights.as_os_str(), dir.as_os_str(), batch.to_string().as_ref()])?;
+    let v = super::cpu_reference::run_python_reference(
+        REFERENCE,
+        [weights.as_os_str(), dir.as_os_str(), batch.to_string().as_ref()],
+    )?;
     let rate = v["images_per_s"].as_f64().ok_or("no images_per_s")?;
-    Ok((rate, format!("torch {} / torch-fidelity {}, {} threads", v["torch"].as_str().unwrap_or("?"), v["torch_fidelity"].as_str().unwrap_or("?"), v["threads"])))
+    Ok((
+        rate,
+        format!(
+            "torch {} / torch-fidelity {}, {} threads",
+            v["torch"].as_str().unwrap_or("?"),
+            v["torch_fidelity"].as_str().unwrap_or("?"),
+            v["threads"]
+        ),
+    ))
 }

@@ -4,9 +4,9 @@
 
 use anyhow::Result;
 use std::time::Instant;
+use vkdiff_networks::{SDXL_BASE_CONFIG, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
 use vkdiff_pipeline::{Guides, SamplerKind, Sampling, Sdxl, TextToImage};
 use vkdiff_runtime::{Context, Dtype};
-use vkdiff_unet::{SDXL_BASE_CONFIG, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
 
 const REFERENCE: &str = include_str!("../../tools/gen_cpu_reference.py");
 /// The CLIP vocabulary in the layout transformers reads, for the reference's tokenizers.
@@ -80,7 +80,8 @@ fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
     let load_s = start.elapsed().as_secs_f64();
     let job = bench_job(size, args.steps);
     let start = Instant::now();
-    let out = model.text_to_image(&job, &Guides::default(), &mut |done, total| eprintln!("{size}²: step {done}/{total}"))?;
+    let out =
+        model.text_to_image(&job, &Guides::default(), &mut |done, total| eprintln!("{size}²: step {done}/{total}"))?;
     let total_s = start.elapsed().as_secs_f64();
     let t = &out.timings;
     let steps: f64 = t.steps.iter().map(|d| d.as_secs_f64()).sum();
@@ -106,11 +107,25 @@ pub(super) fn bench_job(size: usize, steps: usize) -> TextToImage {
         prompt: "white button mushrooms on brown compost, top-down photo".into(),
         negative_prompt: None,
         seed: 0,
-        sampling: Sampling { steps, guidance_scale: 5.0, sampler: SamplerKind::Euler, karras: false, width: size, height: size, size_conditioning: Default::default(), strength: None, prompt_syntax: Default::default() },
+        sampling: Sampling {
+            steps,
+            guidance_scale: 5.0,
+            sampler: SamplerKind::Euler,
+            karras: false,
+            width: size,
+            height: size,
+            size_conditioning: Default::default(),
+            strength: None,
+            prompt_syntax: Default::default(),
+        },
     }
 }
 
 fn reference(size: usize, steps: usize) -> std::result::Result<serde_json::Value, String> {
-    let configs = [SDXL_BASE_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_BIGG_CONFIG, SDXL_VAE_CONFIG, TOKENIZERS].map(String::from);
-    super::cpu_reference::run_python_reference(REFERENCE, configs.into_iter().chain([size.to_string(), steps.to_string()]))
+    let configs =
+        [SDXL_BASE_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_BIGG_CONFIG, SDXL_VAE_CONFIG, TOKENIZERS].map(String::from);
+    super::cpu_reference::run_python_reference(
+        REFERENCE,
+        configs.into_iter().chain([size.to_string(), steps.to_string()]),
+    )
 }

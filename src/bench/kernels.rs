@@ -63,7 +63,9 @@ pub(super) fn dtype_name(d: Dtype) -> &'static str {
 
 pub(super) fn rand_tensor(ctx: &Context, shape: &[usize], dtype: Dtype, seed: u32) -> vkdiff_runtime::Result<Tensor> {
     let n: usize = shape.iter().product();
-    let data: Vec<f32> = (0..n).map(|i| (((i as u32).wrapping_mul(2654435761).wrapping_add(seed) >> 8) as f32 / (1u32 << 24) as f32) - 0.5).collect();
+    let data: Vec<f32> = (0..n)
+        .map(|i| (((i as u32).wrapping_mul(2654435761).wrapping_add(seed) >> 8) as f32 / (1u32 << 24) as f32) - 0.5)
+        .collect();
     ctx.upload(shape, dtype, &data)
 }
 
@@ -74,7 +76,11 @@ fn gemm_case(ctx: &Context, dtype: Dtype, m: usize, n: usize, k: usize, linear: 
         shape: format!("M={m} N={n} K={k}"),
         work: Work::Flops(2.0 * (m * n * k) as f64),
         gemm: Some((m, n, k)),
-        tensors: vec![rand_tensor(ctx, &[m, k], dtype, 1)?, rand_tensor(ctx, &b_shape, dtype, 2)?, ctx.zeros(&[m, n], dtype)?],
+        tensors: vec![
+            rand_tensor(ctx, &[m, k], dtype, 1)?,
+            rand_tensor(ctx, &b_shape, dtype, 2)?,
+            ctx.zeros(&[m, n], dtype)?,
+        ],
         record: if linear {
             |rec, t| ops::linear(rec, &t[0], &t[1], None, &t[2])
         } else {
@@ -111,7 +117,9 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             shape: "4096 tokens, 10 heads x 64".into(),
             work: Work::Flops(4.0 * 4096.0 * 4096.0 * 64.0 * 10.0),
             gemm: None,
-            tensors: (0..4).map(|i| rand_tensor(ctx, &[1, 4096, 640], dtype, 6 + i)).collect::<vkdiff_runtime::Result<_>>()?,
+            tensors: (0..4)
+                .map(|i| rand_tensor(ctx, &[1, 4096, 640], dtype, 6 + i))
+                .collect::<vkdiff_runtime::Result<_>>()?,
             record: |rec, t| {
                 let l = AttentionLayout::dense(1, 10, 64, 4096, 4096);
                 ops::attention(rec, &t[0], &t[1], &t[2], &t[3], &l, 0.125)
@@ -208,7 +216,13 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
     let mut rows = Vec::new();
     let mut gemm_shapes = Vec::new();
     if !args.json {
-        println!("device: {} ({}, {}), GEMM kernels: {:?}", info.name, info.kind.label(), info.driver, ctx.gemm_family());
+        println!(
+            "device: {} ({}, {}), GEMM kernels: {:?}",
+            info.name,
+            info.kind.label(),
+            info.driver,
+            ctx.gemm_family()
+        );
         println!("{:<26} {:<5} {:<32} {:>10} {:>9} {:>8}", "kernel", "dtype", "shape", "ms", "GFLOP/s", "GB/s");
     }
     for dtype in dtypes {
@@ -236,13 +250,22 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             };
             if !args.json {
                 let show = |x: Option<f64>| x.map_or(String::from("-"), |v| format!("{v:.1}"));
-                println!("{:<26} {:<5} {:<32} {:>10.3} {:>9} {:>8}", row.kernel, row.dtype, row.shape, row.ms, show(row.gflops), show(row.gbps));
+                println!(
+                    "{:<26} {:<5} {:<32} {:>10.3} {:>9} {:>8}",
+                    row.kernel,
+                    row.dtype,
+                    row.shape,
+                    row.ms,
+                    show(row.gflops),
+                    show(row.gbps)
+                );
             }
             rows.push((row, case.gemm));
         }
     }
     gemm_shapes.dedup();
-    let cpu: Result<Vec<CpuGemm>, String> = if args.no_cpu_reference || gemm_shapes.is_empty() { Ok(vec![]) } else { cpu_reference::measure(&gemm_shapes) };
+    let cpu: Result<Vec<CpuGemm>, String> =
+        if args.no_cpu_reference || gemm_shapes.is_empty() { Ok(vec![]) } else { cpu_reference::measure(&gemm_shapes) };
     if let Ok(cpu) = &cpu {
         for (row, gemm) in &mut rows {
             if let Some(c) = cpu.iter().find(|c| Some((c.m, c.n, c.k)) == *gemm) {
@@ -262,7 +285,10 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
     }
     match cpu {
         Ok(cpu) if !cpu.is_empty() => {
-            println!("\nagainst the CPU's float32 GEMM ({}, kernel {}), measured just now on this machine:", cpu[0].library, cpu[0].kernel);
+            println!(
+                "\nagainst the CPU's float32 GEMM ({}, kernel {}), measured just now on this machine:",
+                cpu[0].library, cpu[0].kernel
+            );
             for (row, _) in rows.iter().filter(|(r, _)| r.ratio_to_cpu.is_some()) {
                 println!(
                     "  {:<26} {:<5} {:<18} {:>7.1} GFLOP/s vs {:>7.1} = {:.2}x",

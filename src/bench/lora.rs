@@ -7,8 +7,8 @@ use std::io::Write as _;
 use std::process::Stdio;
 use std::time::Instant;
 use vkdiff_lora::{LoraFile, LoraMerger, Targets};
+use vkdiff_networks::{Checkpoint, UNet, UNetConfig};
 use vkdiff_runtime::Context;
-use vkdiff_unet::{Checkpoint, UNet, UNetConfig};
 
 const REFERENCE: &str = include_str!("../../tools/lora_merge_cpu_reference.py");
 
@@ -96,8 +96,9 @@ pub(super) fn write_lora(path: &std::path::Path, shapes: &[(String, [usize; 2])]
         tensors.push((format!("{key}.lora_up.weight"), vec![*o, r], (0..o * r).map(|_| next()).collect()));
         tensors.push((format!("{key}.alpha"), vec![], vec![16.0]));
     }
-    let refs: Vec<(&str, &[usize], &[f32])> = tensors.iter().map(|(n, s, v)| (n.as_str(), s.as_slice(), v.as_slice())).collect();
-    Ok(vkdiff_unet::write_safetensors_f32(path, &refs, &Default::default())?)
+    let refs: Vec<(&str, &[usize], &[f32])> =
+        tensors.iter().map(|(n, s, v)| (n.as_str(), s.as_slice(), v.as_slice())).collect();
+    Ok(vkdiff_formats::write_safetensors_f32(path, &refs, &Default::default())?)
 }
 
 fn reference(shapes: &[(String, [usize; 2])], rank: usize) -> std::result::Result<f64, String> {
@@ -116,6 +117,7 @@ fn reference(shapes: &[(String, [usize; 2])], rank: usize) -> std::result::Resul
     if !out.status.success() {
         return Err(format!("{python}: {}", String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or("failed")));
     }
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).context("reference output is not JSON").map_err(|e| e.to_string())?;
+    let v: serde_json::Value =
+        serde_json::from_slice(&out.stdout).context("reference output is not JSON").map_err(|e| e.to_string())?;
     v["merge_s"].as_f64().ok_or_else(|| "no merge_s in the reference output".into())
 }

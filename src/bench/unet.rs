@@ -1,12 +1,12 @@
 //! `vkdiff bench unet`: one SDXL UNet evaluation (the real architecture, random weights) per
 //! latent size, timed on the device, beside diffusers on this machine's CPU in the same run.
 
-use crate::model_args::Precision;
 use super::kernels::{dtype_name, rand_tensor};
+use crate::model_args::Precision;
 use anyhow::{Context as _, Result};
 use std::time::Instant;
+use vkdiff_networks::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
 use vkdiff_runtime::{Context, Dtype};
-use vkdiff_unet::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
 
 const REFERENCE: &str = include_str!("../../tools/unet_cpu_reference.py");
 
@@ -61,7 +61,8 @@ pub fn run(args: &UnetArgs) -> Result<()> {
             match reference(size / 8, args.batch, args.samples) {
                 Ok(r) => {
                     row.ratio_to_cpu = Some(r.ms / row.ms);
-                    (row.cpu_reference_ms, row.cpu_reference_peak_mib, row.cpu_reference) = (Some(r.ms), Some(r.peak_mib), r.what);
+                    (row.cpu_reference_ms, row.cpu_reference_peak_mib, row.cpu_reference) =
+                        (Some(r.ms), Some(r.peak_mib), r.what);
                 }
                 Err(why) => row.cpu_reference = format!("unavailable: {why}"),
             }
@@ -103,7 +104,8 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
     let sample = rand_tensor(&ctx, &[b, h, h, config.in_channels], dtype, 1)?;
     let timesteps = ctx.upload(&[b], Dtype::F32, &vec![500.0; b])?;
     let context = rand_tensor(&ctx, &[b, 77, config.cross_attention_dim], dtype, 2)?;
-    let text_dim = config.projection_class_embeddings_input_dim.unwrap_or(0) - 6 * config.addition_time_embed_dim.unwrap_or(0);
+    let text_dim =
+        config.projection_class_embeddings_input_dim.unwrap_or(0) - 6 * config.addition_time_embed_dim.unwrap_or(0);
     let text = rand_tensor(&ctx, &[b, text_dim], dtype, 3)?;
     let px = size as f32;
     let ids = ctx.upload(&[b, 6], Dtype::F32, &[px, px, 0.0, 0.0, px, px].repeat(b))?;
@@ -152,9 +154,20 @@ struct Reference {
 }
 
 fn reference(latent: usize, batch: usize, samples: usize) -> std::result::Result<Reference, String> {
-    let args = [SDXL_BASE_CONFIG.to_string(), latent.to_string(), latent.to_string(), batch.to_string(), samples.max(1).to_string()];
+    let args = [
+        SDXL_BASE_CONFIG.to_string(),
+        latent.to_string(),
+        latent.to_string(),
+        batch.to_string(),
+        samples.max(1).to_string(),
+    ];
     let v = super::cpu_reference::run_python_reference(REFERENCE, args)?;
     let ms = v["ms"].as_f64().context("no ms").map_err(|e| e.to_string())?;
-    let what = format!("torch {} / diffusers {}, {} threads", v["torch"].as_str().unwrap_or("?"), v["diffusers"].as_str().unwrap_or("?"), v["threads"]);
+    let what = format!(
+        "torch {} / diffusers {}, {} threads",
+        v["torch"].as_str().unwrap_or("?"),
+        v["diffusers"].as_str().unwrap_or("?"),
+        v["threads"]
+    );
     Ok(Reference { ms, peak_mib: v["peak_mib"].as_f64().unwrap_or(0.0), what })
 }

@@ -6,10 +6,13 @@
 use anyhow::Result;
 use std::time::Instant;
 use vkdiff_lora::LoraFile;
+use vkdiff_networks::{
+    Checkpoint, ClipVisionConfig, ClipVisionModelWithProjection, ControlNetConfig, ControlNetModel, IpAdapter,
+    SDXL_CONTROLNET_CONFIG,
+};
 use vkdiff_pipeline::images::ClipPreprocess;
 use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, RgbImage, Sdxl};
 use vkdiff_runtime::{Context, Dtype};
-use vkdiff_unet::{Checkpoint, ClipVisionConfig, ClipVisionModelWithProjection, ControlNetConfig, ControlNetModel, IpAdapter, SDXL_CONTROLNET_CONFIG};
 
 /// h94's `models/image_encoder` (OpenCLIP ViT-H/14 vision tower, 632 M parameters), the encoder of
 /// ip-adapter_sdxl_vit-h.
@@ -37,25 +40,34 @@ pub fn run(args: &WorkflowArgs) -> Result<()> {
     let ctx = Context::new(args.device)?;
     let start = Instant::now();
     let mut model = Sdxl::random_sdxl_base(&ctx, dtype)?;
-    let RandomGuides { controlnet, encoder, adapter, loras } = RandomGuides::build(&ctx, &model, dtype, args.lora_rank)?;
+    let RandomGuides { controlnet, encoder, adapter, loras } =
+        RandomGuides::build(&ctx, &model, dtype, args.lora_rank)?;
     let load_s = start.elapsed().as_secs_f64();
     let preprocess = ClipPreprocess::square(encoder.config().image_size);
     let styles = style_images();
     for &size in &args.size {
         let job = super::gen::bench_job(size, args.steps);
         model.set_loras(&[])?;
-        let base = model.denoise(&job, &Guides::default(), &mut |done, total| eprintln!("{size}² base: step {done}/{total}"))?;
+        let base = model
+            .denoise(&job, &Guides::default(), &mut |done, total| eprintln!("{size}² base: step {done}/{total}"))?;
         let base_step = mean_step(&base.timings.steps);
         let refs: Vec<(&LoraFile, f32)> = loras.iter().map(|(f, s)| (f, *s)).collect();
         let merge = model.set_loras(&refs)?.map_or(0.0, |s| s.seconds);
         let depth = gradient(size, size, 3);
         let guides = Guides {
             control: Some(ControlGuide { net: &controlnet, image: &depth, scale: 0.5, start: 0.0, end: 1.0 }),
-            image: Some(ImageGuide { adapter: &adapter, encoder: &encoder, preprocess: &preprocess, images: &styles, scale: &vkdiff_pipeline::IpScale::All(0.6) }),
+            image: Some(ImageGuide {
+                adapter: &adapter,
+                encoder: &encoder,
+                preprocess: &preprocess,
+                images: &styles,
+                scale: &vkdiff_pipeline::IpScale::All(0.6),
+            }),
             init: None,
         };
         let start = Instant::now();
-        let out = model.denoise(&job, &guides, &mut |done, total| eprintln!("{size}² workflow: step {done}/{total}"))?;
+        let out =
+            model.denoise(&job, &guides, &mut |done, total| eprintln!("{size}² workflow: step {done}/{total}"))?;
         let total_s = start.elapsed().as_secs_f64();
         let t = &out.timings;
         let step = mean_step(&t.steps);
@@ -85,7 +97,8 @@ pub(super) struct RandomGuides {
 impl RandomGuides {
     pub fn build(ctx: &Context, model: &Sdxl, dtype: Dtype, lora_rank: usize) -> Result<RandomGuides> {
         let control_config = ControlNetConfig::from_json(SDXL_CONTROLNET_CONFIG, "built-in ControlNet config")?;
-        let controlnet = ControlNetModel::build(control_config, &Checkpoint::random(ctx, dtype, 6), model.unet_config())?;
+        let controlnet =
+            ControlNetModel::build(control_config, &Checkpoint::random(ctx, dtype, 6), model.unet_config())?;
         let vision_config: ClipVisionConfig = serde_json::from_str(VIT_H_CONFIG)?;
         let encoder = ClipVisionModelWithProjection::load(ctx, vision_config, &Checkpoint::random(ctx, dtype, 7))?;
         let adapter = IpAdapter::random_plain(ctx, model.unet(), encoder.config().projection_dim, 4, dtype)?;

@@ -8,7 +8,8 @@ use super::features::file_stamp;
 use crate::{EvalError, Result};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
-use vkdiff_unet::{write_safetensors_f32, SafeTensors, INCEPTION_FEATURES};
+use vkdiff_formats::{write_safetensors_f32, SafeTensors};
+use vkdiff_networks::INCEPTION_FEATURES;
 
 pub struct FeatureCache {
     path: PathBuf,
@@ -24,12 +25,19 @@ impl FeatureCache {
     /// The cache of `folder` under `cache_dir` for features made with `fingerprint` (weights and
     /// precision); an unreadable or stale cache file is treated as empty.
     pub fn open(cache_dir: &Path, folder: &Path, fingerprint: &str) -> Result<FeatureCache> {
-        std::fs::create_dir_all(cache_dir).map_err(|e| EvalError(format!("--cache-dir {}: {e}", cache_dir.display())))?;
+        std::fs::create_dir_all(cache_dir)
+            .map_err(|e| EvalError(format!("--cache-dir {}: {e}", cache_dir.display())))?;
         let folder = std::fs::canonicalize(folder).unwrap_or_else(|_| folder.to_path_buf());
         let key = fnv1a64(format!("{}\n{fingerprint}", folder.display()).as_bytes());
         let name = folder.file_name().map_or("root".into(), |n| n.to_string_lossy().into_owned());
         let path = cache_dir.join(format!("{name}-{key:016x}.safetensors"));
-        let mut cache = FeatureCache { path, rows: HashMap::new(), loaded_stamps: Vec::new(), fingerprint: fingerprint.to_string(), hits: 0 };
+        let mut cache = FeatureCache {
+            path,
+            rows: HashMap::new(),
+            loaded_stamps: Vec::new(),
+            fingerprint: fingerprint.to_string(),
+            hits: 0,
+        };
         if let Ok(file) = SafeTensors::open(&cache.path) {
             cache.load(&file);
         }

@@ -6,8 +6,9 @@ use super::cache::FeatureCache;
 use crate::{EvalError, Result};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
+use vkdiff_formats::{SafeTensors, TorchPth};
+use vkdiff_networks::{InceptionV3, RgbPixels, TensorSource, INCEPTION_FEATURES};
 use vkdiff_runtime::{Context, Dtype};
-use vkdiff_unet::{InceptionV3, RgbPixels, SafeTensors, TensorSource, TorchPth, INCEPTION_FEATURES};
 
 /// The extensions torch-fidelity's `samples_find_ext` defaults to.
 const EXTENSIONS: [&str; 3] = ["png", "jpg", "jpeg"];
@@ -17,7 +18,7 @@ pub fn open_weights(path: &Path) -> Result<Box<dyn TensorSource>> {
     let mut head = [0u8; 8];
     let read = std::fs::File::open(path).and_then(|mut f| std::io::Read::read(&mut f, &mut head));
     let n = read.map_err(|e| EvalError(format!("{}: {e}", path.display())))?;
-    let err = |e: vkdiff_unet::Error| EvalError(e.to_string());
+    let err = |e: vkdiff_formats::Error| EvalError(e.to_string());
     // A zip archive (torch ≥ 1.6) or a pickle (the legacy format) is torch's; anything else is
     // tried as safetensors, whose own checks name what is wrong.
     if head[..n].starts_with(b"PK") || head[..n].starts_with(&[0x80]) {
@@ -30,7 +31,11 @@ pub fn open_weights(path: &Path) -> Result<Box<dyn TensorSource>> {
 /// The images of `dir` as torch-fidelity lists them. A `vkdiff dataset` folder stands for its
 /// `images/`.
 pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
-    let dir = if dir.join("dataset.json").is_file() && dir.join("images").is_dir() { dir.join("images") } else { dir.to_path_buf() };
+    let dir = if dir.join("dataset.json").is_file() && dir.join("images").is_dir() {
+        dir.join("images")
+    } else {
+        dir.to_path_buf()
+    };
     let entries = std::fs::read_dir(&dir).map_err(|e| EvalError(format!("{}: {e}", dir.display())))?;
     let mut files = Vec::new();
     for entry in entries {
@@ -45,8 +50,8 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
 }
 
 /// Images decoded in parallel, as the encoder reads them.
-fn read_images(files: &[&Path]) -> Vec<std::result::Result<vkdiff_pipeline::RgbImage, String>> {
-    files.par_iter().map(|f| vkdiff_pipeline::images::read_image(f).map_err(|e| e.to_string())).collect()
+fn read_images(files: &[&Path]) -> Vec<std::result::Result<vkdiff_formats::RgbImage, String>> {
+    files.par_iter().map(|f| vkdiff_formats::image::read_image(f).map_err(|e| e.to_string())).collect()
 }
 
 /// Reads every file as the encoder will, before anything is encoded, so that a bad file costs
@@ -62,7 +67,12 @@ pub fn check_images(files: &[&Path], progress: &mut dyn FnMut(usize, usize)) -> 
     if bad.is_empty() {
         return Ok(());
     }
-    Err(EvalError(format!("{} of {} images cannot be read (nothing was encoded): {}", bad.len(), files.len(), bad.join("; "))))
+    Err(EvalError(format!(
+        "{} of {} images cannot be read (nothing was encoded): {}",
+        bad.len(),
+        files.len(),
+        bad.join("; ")
+    )))
 }
 
 /// torch-fidelity's InceptionV3 on a device, a batch of images at a time.
@@ -76,25 +86,36 @@ pub struct FeatureExtractor {
 impl FeatureExtractor {
     pub fn new(ctx: &Context, weights: &Path, dtype: Dtype, batch: usize) -> Result<FeatureExtractor> {
         let src = open_weights(weights)?;
-        let net = InceptionV3::load(ctx, dtype, src.as_ref()).map_err(|e| EvalError(format!("{}: {e}", weights.display())))?;
+        let net = InceptionV3::load(ctx, dtype, src.as_ref())
+            .map_err(|e| EvalError(format!("{}: {e}", weights.display())))?;
         Ok(FeatureExtractor { net, batch: batch.max(1), fingerprint: format!("{} {dtype:?}", file_stamp(weights)?) })
     }
 
     /// Features of `files` ([files × 2048]), taking what `cache` holds and adding what it lacks;
     /// `progress(done, total)` after each batch.
-    pub fn features(&self, files: &[PathBuf], mut cache: Option<&mut FeatureCache>, progress: &mut dyn FnMut(usize, usize)) -> Result<Vec<f32>> {
+    pub fn features(
+        &self,
+        files: &[PathBuf],
+        mut cache: Option<&mut FeatureCache>,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Vec<f32>> {
         let mut rows: Vec<Option<Vec<f32>>> = files.iter().map(|f| cache.as_mut().and_then(|c| c.get(f))).collect();
         let missing: Vec<usize> = (0..files.len()).filter(|&i| rows[i].is_none()).collect();
         let mut done = files.len() - missing.len();
         progress(done, files.len());
         for chunk in missing.chunks(self.batch) {
             let paths: Vec<&Path> = chunk.iter().map(|&i| files[i].as_path()).collect();
-            let images = read_images(&paths).into_iter().collect::<std::result::Result<Vec<_>, String>>().map_err(EvalError)?;
-            let pixels: Vec<RgbPixels> = images.iter().map(|m| RgbPixels { data: &m.pixels, width: m.width, height: m.height }).collect();
+            let images =
+                read_images(&paths).into_iter().collect::<std::result::Result<Vec<_>, String>>().map_err(EvalError)?;
+            let pixels: Vec<RgbPixels> =
+                images.iter().map(|m| RgbPixels { data: &m.pixels, width: m.width, height: m.height }).collect();
             let features = self.net.features(&pixels).map_err(|e| EvalError(e.to_string()))?;
             for (&i, row) in chunk.iter().zip(features.chunks_exact(INCEPTION_FEATURES)) {
                 if row.iter().any(|v| !v.is_finite()) {
-                    return Err(EvalError(format!("{}: Inception features are not finite (try --precision f32)", files[i].display())));
+                    return Err(EvalError(format!(
+                        "{}: Inception features are not finite (try --precision f32)",
+                        files[i].display()
+                    )));
                 }
                 rows[i] = Some(row.to_vec());
             }
@@ -112,7 +133,8 @@ impl FeatureExtractor {
 /// A file's identity for caches: canonical path, size and modification time.
 pub fn file_stamp(path: &Path) -> Result<String> {
     let meta = std::fs::metadata(path).map_err(|e| EvalError(format!("{}: {e}", path.display())))?;
-    let modified = meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos());
+    let modified =
+        meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos());
     let full = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
     Ok(format!("{} {} {modified}", full.display(), meta.len()))
 }

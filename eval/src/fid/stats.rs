@@ -143,7 +143,14 @@ pub fn kid(a: &[f32], b: &[f32], dim: usize, opts: &KidOptions) -> Result<Kid> {
 
 /// MMD² of each drawn pair of subsets (rows of the row-major `x`, `y`), from kernel matrices over
 /// the whole sets or per subset.
-fn subset_mmds(x: &[f32], y: &[f32], dim: usize, draws: &[(Vec<usize>, Vec<usize>)], k: &Poly, whole: bool) -> Vec<f64> {
+fn subset_mmds(
+    x: &[f32],
+    y: &[f32],
+    dim: usize,
+    draws: &[(Vec<usize>, Vec<usize>)],
+    k: &Poly,
+    whole: bool,
+) -> Vec<f64> {
     if whole {
         let (xs, ys) = (gather(x, dim, 0..x.len() / dim), gather(y, dim, 0..y.len() / dim));
         let kernels = Kernels::new(row_major(&xs, dim), row_major(&ys, dim), k);
@@ -217,9 +224,8 @@ impl Kernels {
     /// (distinct indices, so the subset's diagonal is the kernel's).
     fn mmd2(&self, ix: &[usize], iy: &[usize]) -> f64 {
         let m = ix.len() as f64;
-        let off_diagonal = |k: &Mat<f64>, idx: &[usize]| {
-            block_sum(k, idx, idx) - idx.iter().map(|&i| k[(i, i)]).sum::<f64>()
-        };
+        let off_diagonal =
+            |k: &Mat<f64>, idx: &[usize]| block_sum(k, idx, idx) - idx.iter().map(|&i| k[(i, i)]).sum::<f64>();
         let same = off_diagonal(&self.xx, ix) + off_diagonal(&self.yy, iy);
         same / (m * (m - 1.0)) - 2.0 * block_sum(&self.xy, ix, iy) / (m * m)
     }
@@ -282,9 +288,8 @@ mod tests {
         let (n1, n2, d, m) = (30, 25, 16, 12);
         let (x, y) = (features(7, n1, d, 0.0), features(8, n2, d, 0.1));
         let mut rng = RandomState::new(9);
-        let draws: Vec<_> = (0..5)
-            .map(|_| (rng.choice_without_replacement(n1, m), rng.choice_without_replacement(n2, m)))
-            .collect();
+        let draws: Vec<_> =
+            (0..5).map(|_| (rng.choice_without_replacement(n1, m), rng.choice_without_replacement(n2, m))).collect();
         let k = Poly { gamma: 1.0 / d as f64, coef0: 1.0, degree: 3 };
         let whole = subset_mmds(&x, &y, d, &draws, &k, true);
         let each = subset_mmds(&x, &y, d, &draws, &k, false);

@@ -1,32 +1,10 @@
 //! Shared helpers: the device, the tiny SDXL fixture, LoRA factors and their CPU reference.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
-use vkdiff_runtime::{Context, Dtype};
-use vkdiff_unet::{Checkpoint, ClipTextModel, ParamLayout, Parameters, TextEncoderSlot, UNet};
-
-/// The Vulkan device the tests run on. No device is a failure, not a skip.
-pub fn ctx() -> Context {
-    static CTX: OnceLock<Context> = OnceLock::new();
-    CTX.get_or_init(|| {
-        Context::new(None).unwrap_or_else(|e| {
-            panic!("LoRA tests need a Vulkan device and found none usable: {e}\n(on Debian: apt-get install -y mesa-vulkan-drivers libvulkan1)")
-        })
-    })
-    .clone()
-}
-
-pub fn repo(path: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
-}
-
-/// A scratch file path unique to one test.
-pub fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vkdiff-lora-tests-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
-}
+use std::path::Path;
+use vkdiff_networks::{unet_checkpoint, ClipTextModel, ParamLayout, Parameters, TextEncoderSlot, UNet};
+use vkdiff_runtime::Dtype;
+pub use vkdiff_testkit::{ctx, random, repo, scratch};
 
 pub struct Nets {
     pub unet: UNet,
@@ -43,30 +21,23 @@ impl Nets {
 
 pub fn tiny_sdxl(dtype: Dtype) -> Nets {
     let ctx = ctx();
-    let path = repo("tests/fixtures/pipeline/tiny-sdxl");
-    let (config, ckpt) = Checkpoint::unet(&ctx, &path, dtype).unwrap();
+    let path = vkdiff_testkit::fixture("pipeline/tiny-sdxl");
+    let (config, ckpt) = unet_checkpoint(&ctx, &path, dtype).unwrap();
     let unet = UNet::load(&config, &ckpt).unwrap();
     let clip_l = ClipTextModel::load_sdxl(&ctx, &path, TextEncoderSlot::ClipL, dtype).unwrap();
     let big_g = ClipTextModel::load_sdxl(&ctx, &path, TextEncoderSlot::BigG, dtype).unwrap();
     Nets { unet, clip_l, big_g }
 }
 
-/// Deterministic values uniform in [-1, 1) (xorshift64*).
-pub fn random(n: usize, seed: u64) -> Vec<f32> {
-    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-    (0..n)
-        .map(|_| {
-            s ^= s >> 12;
-            s ^= s << 25;
-            s ^= s >> 27;
-            ((s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        })
-        .collect()
-}
-
 /// Every parameter's stored bits.
 pub fn snapshot(params: &Parameters) -> BTreeMap<String, Vec<u32>> {
-    params.names().into_iter().map(|n| (n.to_string(), params.get(n).unwrap().tensor.download().unwrap().iter().map(|v| v.to_bits()).collect())).collect()
+    params
+        .names()
+        .into_iter()
+        .map(|n| {
+            (n.to_string(), params.get(n).unwrap().tensor.download().unwrap().iter().map(|v| v.to_bits()).collect())
+        })
+        .collect()
 }
 
 pub fn assert_restored(what: &str, before: &BTreeMap<String, Vec<u32>>, params: &Parameters) {
@@ -158,7 +129,10 @@ impl Expected {
                     Dtype::F32 => 1e-6 + 1e-6 * w.abs() + 1e-6 * m,
                     Dtype::F16 => 1e-5 + 1e-3 * w.abs() + 2e-3 * m,
                 };
-                assert!((g as f64 - w).abs() <= bound, "net {net} {name} ({dtype:?}) element {i}: got {g}, want {w} (bound {bound:.2e})");
+                assert!(
+                    (g as f64 - w).abs() <= bound,
+                    "net {net} {name} ({dtype:?}) element {i}: got {g}, want {w} (bound {bound:.2e})"
+                );
             }
         }
     }
@@ -177,7 +151,8 @@ fn device_index(layout: ParamLayout, shape: &[usize], o: usize, j: usize) -> usi
 
 /// Writes LoRA tensors (name, shape, values) with optional header metadata.
 pub fn write(path: &Path, tensors: &[(String, Vec<usize>, Vec<f32>)], metadata: &[(&str, String)]) {
-    let refs: Vec<(&str, &[usize], &[f32])> = tensors.iter().map(|(n, s, v)| (n.as_str(), s.as_slice(), v.as_slice())).collect();
+    let refs: Vec<(&str, &[usize], &[f32])> =
+        tensors.iter().map(|(n, s, v)| (n.as_str(), s.as_slice(), v.as_slice())).collect();
     let meta = metadata.iter().map(|(k, v)| (k.to_string(), v.clone())).collect();
-    vkdiff_unet::write_safetensors_f32(path, &refs, &meta).unwrap();
+    vkdiff_formats::write_safetensors_f32(path, &refs, &meta).unwrap();
 }

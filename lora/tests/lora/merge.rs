@@ -1,7 +1,7 @@
 use crate::common::*;
 use vkdiff_lora::{LoraFile, LoraMerger, Targets};
+use vkdiff_networks::{unet_names, Parameters};
 use vkdiff_runtime::Dtype;
-use vkdiff_unet::{OriginalNames, Parameters};
 
 /// Matrix and conv weights: (name, PyTorch shape).
 fn weights(params: &Parameters) -> Vec<(String, Vec<usize>)> {
@@ -24,7 +24,10 @@ fn flat(s: &str) -> String {
 
 /// kohya tensors for one module; `alpha` None leaves the alpha out (scale 1).
 fn kohya(name: &str, f: &Factors, alpha: Option<f32>) -> Vec<(String, Vec<usize>, Vec<f32>)> {
-    let mut t = vec![(format!("{name}.lora_down.weight"), f.down_shape(), f.down.clone()), (format!("{name}.lora_up.weight"), f.up_shape(), f.up.clone())];
+    let mut t = vec![
+        (format!("{name}.lora_down.weight"), f.down_shape(), f.down.clone()),
+        (format!("{name}.lora_up.weight"), f.up_shape(), f.up.clone()),
+    ];
     if let Some(a) = alpha {
         t.push((format!("{name}.alpha"), vec![], vec![a]));
     }
@@ -46,11 +49,14 @@ fn clip_l_last_layer(nets: &Nets) -> Vec<(String, Vec<usize>)> {
 /// A kohya file in sd-scripts' own naming (original UNet paths) over every weight of all three
 /// networks, plus CLIP-L's not-run last layer; ranks, alphas and absent alphas vary.
 fn kohya_ldm_everything(nets: &Nets, dtype: Dtype, strength: f64) {
-    let original = OriginalNames::unet(nets.unet.config()).unwrap();
+    let original = unet_names(nets.unet.config()).unwrap();
     let mut tensors = Vec::new();
     let mut expected = Expected::new();
-    let parts: [(&str, &Parameters); 3] =
-        [("lora_unet_", nets.unet.parameters()), ("lora_te1_", nets.clip_l.parameters()), ("lora_te2_", nets.big_g.parameters())];
+    let parts: [(&str, &Parameters); 3] = [
+        ("lora_unet_", nets.unet.parameters()),
+        ("lora_te1_", nets.clip_l.parameters()),
+        ("lora_te2_", nets.big_g.parameters()),
+    ];
     let mut seed = 10;
     let mut counts = [0; 3];
     for (c, (prefix, params)) in parts.iter().enumerate() {
@@ -75,14 +81,19 @@ fn kohya_ldm_everything(nets: &Nets, dtype: Dtype, strength: f64) {
             }
         }
     }
-    let path = scratch(&format!("kohya-ldm-{dtype:?}.safetensors"));
+    let path = scratch(&format!("kohya-ldm-{dtype:?}.safetensors")).join("lora.safetensors");
     write(&path, &tensors, &[]);
     let lora = LoraFile::open(&path).unwrap();
     let before = [nets.unet.parameters(), nets.clip_l.parameters(), nets.big_g.parameters()].map(snapshot);
     let mut merger = LoraMerger::new();
-    let summary = merger.apply(&Targets::sdxl(&nets.unet, &nets.clip_l, &nets.big_g), &[(&lora, strength as f32)]).unwrap();
+    let summary =
+        merger.apply(&Targets::sdxl(&nets.unet, &nets.clip_l, &nets.big_g), &[(&lora, strength as f32)]).unwrap();
     let s = &summary.loras[0];
-    assert_eq!([s.unet, s.text_encoder_1, s.text_encoder_2, s.not_run], [counts[0], counts[1], counts[2], 6], "{summary}");
+    assert_eq!(
+        [s.unet, s.text_encoder_1, s.text_encoder_2, s.not_run],
+        [counts[0], counts[1], counts[2], 6],
+        "{summary}"
+    );
     assert!(counts[0] > 60 && counts[1] == 12 && counts[2] == 12, "{counts:?}");
     expected.check(nets.params(), dtype);
     merger.restore().unwrap();
@@ -113,17 +124,23 @@ fn selection(nets: &Nets, unet_filter: impl Fn(&str) -> bool, layer: usize) -> [
 
 /// A kohya file in diffusers module paths (no alphas) and a PEFT file with adapter metadata.
 fn diffusers_pair(nets: &Nets, dtype: Dtype) -> (LoraFile, Vec<Factors>, LoraFile, Vec<Factors>) {
-    let sel = selection(nets, |n| n.contains("attentions") || n.contains("resnets.0.conv1") || n.contains("conv_shortcut"), 0);
+    let sel = selection(
+        nets,
+        |n| n.contains("attentions") || n.contains("resnets.0.conv1") || n.contains("conv_shortcut"),
+        0,
+    );
     let mut tensors = Vec::new();
     let mut kohya_factors = Vec::new();
-    for (net, ((prefix, list), seed)) in ["lora_unet_", "lora_te1_", "lora_te2_"].iter().zip(&sel).zip([100, 200, 300]).enumerate() {
+    for (net, ((prefix, list), seed)) in
+        ["lora_unet_", "lora_te1_", "lora_te2_"].iter().zip(&sel).zip([100, 200, 300]).enumerate()
+    {
         for (i, (w, shape)) in list.iter().enumerate() {
             let f = Factors::new(net, w, shape, 3, 1.0, seed + 2 * i as u64);
             tensors.extend(kohya(&format!("{prefix}{}", flat(module(w))), &f, None));
             kohya_factors.push(f);
         }
     }
-    let kohya_path = scratch(&format!("kohya-diffusers-{dtype:?}.safetensors"));
+    let kohya_path = scratch(&format!("kohya-diffusers-{dtype:?}.safetensors")).join("lora.safetensors");
     write(&kohya_path, &tensors, &[]);
 
     // PEFT: UNet lora_alpha 8 with patterns (one module by full path, every ff.net.2 by suffix),
@@ -157,8 +174,12 @@ fn diffusers_pair(nets: &Nets, dtype: Dtype) -> (LoraFile, Vec<Factors>, LoraFil
         "unet.target_modules": ["to_q"],
         "text_encoder.r": r, "text_encoder.lora_alpha": 4, "text_encoder.use_rslora": true,
     });
-    let peft_path = scratch(&format!("peft-{dtype:?}.safetensors"));
-    write(&peft_path, &tensors, &[("format", "pt".into()), ("lora_adapter_metadata", serde_json::to_string_pretty(&meta).unwrap())]);
+    let peft_path = scratch(&format!("peft-{dtype:?}.safetensors")).join("lora.safetensors");
+    write(
+        &peft_path,
+        &tensors,
+        &[("format", "pt".into()), ("lora_adapter_metadata", serde_json::to_string_pretty(&meta).unwrap())],
+    );
     (LoraFile::open(&kohya_path).unwrap(), kohya_factors, LoraFile::open(&peft_path).unwrap(), peft_factors)
 }
 
@@ -214,8 +235,18 @@ fn old_diffusers_spellings() {
         (0, format!("{attn}.attn1.to_q.weight"), format!("unet.{attn}.attn1.processor.to_q_lora"), None),
         (0, format!("{attn}.attn2.to_out.0.weight"), format!("unet.{attn}.attn2.processor.to_out_lora"), None),
         (0, format!("{attn}.ff.net.2.weight"), format!("unet.{attn}.ff.net.2.lora"), Some(2.0)),
-        (1, format!("{}.self_attn.k_proj.weight", layer(0)), format!("text_encoder.{}.self_attn.to_k_lora", layer(0)), None),
-        (2, format!("{}.mlp.fc1.weight", layer(1)), format!("text_encoder_2.{}.mlp.fc1.lora_linear_layer", layer(1)), None),
+        (
+            1,
+            format!("{}.self_attn.k_proj.weight", layer(0)),
+            format!("text_encoder.{}.self_attn.to_k_lora", layer(0)),
+            None,
+        ),
+        (
+            2,
+            format!("{}.mlp.fc1.weight", layer(1)),
+            format!("text_encoder_2.{}.mlp.fc1.lora_linear_layer", layer(1)),
+            None,
+        ),
     ];
     let (r, strength) = (4, 0.9);
     let mut tensors = Vec::new();
@@ -231,12 +262,13 @@ fn old_diffusers_spellings() {
         }
         want.add(nets.params(), &f, strength);
     }
-    let path = scratch("old-diffusers.safetensors");
+    let path = scratch("old-diffusers.safetensors").join("lora.safetensors");
     write(&path, &tensors, &[]);
     let lora = LoraFile::open(&path).unwrap();
     let before = nets.params().map(snapshot);
     let mut merger = LoraMerger::new();
-    let summary = merger.apply(&Targets::sdxl(&nets.unet, &nets.clip_l, &nets.big_g), &[(&lora, strength as f32)]).unwrap();
+    let summary =
+        merger.apply(&Targets::sdxl(&nets.unet, &nets.clip_l, &nets.big_g), &[(&lora, strength as f32)]).unwrap();
     let s = &summary.loras[0];
     assert_eq!([s.unet, s.text_encoder_1, s.text_encoder_2], [3, 1, 1], "{summary}");
     want.check(nets.params(), dtype);

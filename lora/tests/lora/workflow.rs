@@ -3,10 +3,11 @@
 //! strength the records were fused at and compared with diffusers' fuse_lora result.
 
 use crate::common::*;
-use vkdiff_lora::{LoraFile, LoraMerger, Targets};
-use vkdiff_runtime::Dtype;
 use std::path::Path;
-use vkdiff_unet::{ParamLayout, SafeTensors};
+use vkdiff_formats::SafeTensors;
+use vkdiff_lora::{LoraFile, LoraMerger, Targets};
+use vkdiff_networks::ParamLayout;
+use vkdiff_runtime::Dtype;
 
 /// PyTorch layout [o, i, kh, kw] of a device tensor [o, kh, kw, i].
 fn ohwi_to_oihw(x: &[f32], s: &[usize]) -> Vec<f32> {
@@ -24,6 +25,9 @@ fn ohwi_to_oihw(x: &[f32], s: &[usize]) -> Vec<f32> {
     out
 }
 
+/// A renaming of a LoRA's keys as another tool saves them (None drops the key).
+type Respell = dyn Fn(&str) -> Option<String>;
+
 #[test]
 fn diffusers_fixtures_match_fuse_lora() {
     check_fused("tests/fixtures/workflow", 3);
@@ -37,8 +41,9 @@ fn a_peft_lora_saved_under_transformers_5_matches_fuse_lora() {
 /// Every LoRA of the fixture folder `dir` (`files` of them) against diffusers' fused weights.
 fn check_fused(dir: &str, files: usize) {
     let dir = repo(dir);
-    let json = std::fs::read_to_string(dir.join("records.json"))
-        .unwrap_or_else(|e| panic!("{}: {e} (regenerate with tools/make_workflow_fixtures.py)", dir.join("records.json").display()));
+    let json = std::fs::read_to_string(dir.join("records.json")).unwrap_or_else(|e| {
+        panic!("{}: {e} (regenerate with tools/make_workflow_fixtures.py)", dir.join("records.json").display())
+    });
     let meta: serde_json::Value = serde_json::from_str(&json).unwrap();
     let records = SafeTensors::open(&dir.join("records.safetensors")).unwrap();
     let loras = meta["loras"].as_object().expect("records.json has no `loras`");
@@ -49,15 +54,22 @@ fn check_fused(dir: &str, files: usize) {
         let lora = LoraFile::open(&dir.join(l["file"].as_str().unwrap())).unwrap();
         let strength = l["fused_strength"].as_f64().unwrap() as f32;
         let mut merger = LoraMerger::new();
-        let summary = merger.apply(&Targets::sdxl(&nets.unet, &nets.clip_l, &nets.big_g), &[(&lora, strength)]).unwrap();
+        let summary =
+            merger.apply(&Targets::sdxl(&nets.unet, &nets.clip_l, &nets.big_g), &[(&lora, strength)]).unwrap();
         println!("{stem}: {summary}");
         let s = &summary.loras[0];
         let modules = l["modules"].as_array().map_or(0, Vec::len);
-        assert_eq!(s.unet + s.text_encoder_1 + s.text_encoder_2 + s.not_run, modules, "{stem}: every module diffusers applied is merged or not run");
+        assert_eq!(
+            s.unet + s.text_encoder_1 + s.text_encoder_2 + s.not_run,
+            modules,
+            "{stem}: every module diffusers applied is merged or not run"
+        );
         for r in l["fused_records"].as_array().unwrap() {
             let param = r["param"].as_str().unwrap();
-            let (net, name) =
-                [("unet.", 0), ("text_encoder.", 1), ("text_encoder_2.", 2)].iter().find_map(|(p, n)| Some((*n, param.strip_prefix(p)?))).unwrap();
+            let (net, name) = [("unet.", 0), ("text_encoder.", 1), ("text_encoder_2.", 2)]
+                .iter()
+                .find_map(|(p, n)| Some((*n, param.strip_prefix(p)?)))
+                .unwrap();
             let p = nets.params()[net].get(name).unwrap_or_else(|| panic!("{stem}: no parameter `{name}`"));
             let mut got = p.tensor.download().unwrap();
             if p.layout == ParamLayout::ConvOhwi {
@@ -83,8 +95,11 @@ fn check_fused(dir: &str, files: usize) {
 /// metadata.
 fn renamed(path: &Path, out: &Path, rename: impl Fn(&str) -> Option<String>) {
     let file = SafeTensors::open(path).unwrap();
-    let tensors: Vec<(String, Vec<usize>, Vec<f32>)> =
-        file.entries.keys().filter_map(|k| Some((rename(k)?, file.values(k).unwrap().0, file.values(k).unwrap().1))).collect();
+    let tensors: Vec<(String, Vec<usize>, Vec<f32>)> = file
+        .entries
+        .keys()
+        .filter_map(|k| Some((rename(k)?, file.values(k).unwrap().0, file.values(k).unwrap().1)))
+        .collect();
     let bytes = std::fs::read(path).unwrap();
     let n = u64::from_le_bytes(bytes[..8].try_into().unwrap()) as usize;
     let header: serde_json::Value = serde_json::from_slice(&bytes[8..8 + n]).unwrap();
@@ -100,14 +115,21 @@ fn every_layout_of_one_lora_merges_the_same_weights() {
     let source = dir.join("lora-peft-transformers5.safetensors");
     let out = scratch("layouts");
     std::fs::create_dir_all(&out).unwrap();
-    let spellings: [(&str, &dyn Fn(&str) -> Option<String>); 4] = [
+    let spellings: [(&str, &Respell); 4] = [
         ("UNet keys without `unet.`", &|k| Some(k.strip_prefix("unet.").unwrap_or(k).to_string())),
         ("PEFT's `base_model.model.` and adapter name", &|k| {
             let (component, rest) = k.split_once('.').unwrap();
-            Some(format!("{component}.base_model.model.{}", rest.replace(".lora_A.", ".lora_A.default.").replace(".lora_B.", ".lora_B.default.")))
+            Some(format!(
+                "{component}.base_model.model.{}",
+                rest.replace(".lora_A.", ".lora_A.default.").replace(".lora_B.", ".lora_B.default.")
+            ))
         }),
-        ("CLIP-L with `text_model.`", &|k| Some(k.replacen("text_encoder.encoder.", "text_encoder.text_model.encoder.", 1))),
-        ("kohya-style factor names on diffusers paths", &|k| Some(k.replace(".lora_A.weight", ".lora_down.weight").replace(".lora_B.weight", ".lora_up.weight"))),
+        ("CLIP-L with `text_model.`", &|k| {
+            Some(k.replacen("text_encoder.encoder.", "text_encoder.text_model.encoder.", 1))
+        }),
+        ("kohya-style factor names on diffusers paths", &|k| {
+            Some(k.replace(".lora_A.weight", ".lora_down.weight").replace(".lora_B.weight", ".lora_up.weight"))
+        }),
     ];
     let mut files = vec![("ComfyUI's save node".to_string(), dir.join("lora-comfyui.safetensors"))];
     for (i, (what, rename)) in spellings.iter().enumerate() {

@@ -133,15 +133,23 @@ impl Dataset {
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(None),
             Err(e) => return Err(Some(format!("{}: {e}", files.record))),
         };
-        let record: ImageRecord = serde_json::from_slice(&text).map_err(|e| Some(format!("{}: unreadable ({e})", files.record)))?;
+        let record: ImageRecord =
+            serde_json::from_slice(&text).map_err(|e| Some(format!("{}: unreadable ({e})", files.record)))?;
         if record.fingerprint != self.fingerprint {
-            return Err(Some(format!("{} was made with other settings (fingerprint {}, the dataset's {})", files.record, record.fingerprint, self.fingerprint)));
+            return Err(Some(format!(
+                "{} was made with other settings (fingerprint {}, the dataset's {})",
+                files.record, record.fingerprint, self.fingerprint
+            )));
         }
         for name in files.outputs().into_iter().chain(record.files.keys().map(String::as_str)) {
             let want = record.files.get(name).copied();
             let got = std::fs::metadata(self.dir.join(name)).ok().map(|m| m.len());
             if want.is_none() || got != want {
-                return Err(Some(format!("{name} is {} bytes, its record says {}", got.map_or("missing, 0".into(), |g| g.to_string()), want.map_or("nothing".into(), |w| w.to_string()))));
+                return Err(Some(format!(
+                    "{name} is {} bytes, its record says {}",
+                    got.map_or("missing, 0".into(), |g| g.to_string()),
+                    want.map_or("nothing".into(), |w| w.to_string())
+                )));
             }
         }
         Ok(record)
@@ -186,7 +194,13 @@ impl Dataset {
     }
 
     /// Writes an image's files, then its record: the image counts as done only once all are whole.
-    pub fn write_image(&self, index: u64, outputs: &[(&str, &[u8])], image: Value, annotations: Vec<Value>) -> Result<()> {
+    pub fn write_image(
+        &self,
+        index: u64,
+        outputs: &[(&str, &[u8])],
+        image: Value,
+        annotations: Vec<Value>,
+    ) -> Result<()> {
         let mut files = BTreeMap::new();
         for (name, bytes) in outputs {
             write_atomic(&self.dir.join(name), bytes)?;
@@ -229,8 +243,14 @@ fn to_text(v: &Value) -> String {
 
 fn read_manifest(path: &Path) -> Result<Value> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
-    let value: Value = serde_json::from_str(&text).map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("not JSON ({e})") })?;
-    if !value["format"].is_string() || !value["settings"].is_object() || !value["images"].is_u64() || !value["scenes"].is_u64() || !value["fingerprint"].is_string() {
+    let value: Value = serde_json::from_str(&text)
+        .map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("not JSON ({e})") })?;
+    if !value["format"].is_string()
+        || !value["settings"].is_object()
+        || !value["images"].is_u64()
+        || !value["scenes"].is_u64()
+        || !value["fingerprint"].is_string()
+    {
         return Err(Error::Format { path: path.to_path_buf(), why: "not a vkdiff dataset manifest".into() });
     }
     Ok(value)
@@ -254,10 +274,16 @@ fn create_once(path: &Path, text: &str) -> Result<()> {
 /// someone else's: never write into it.
 fn refuse_foreign_folder(dir: &Path) -> Result<()> {
     let Ok(entries) = std::fs::read_dir(dir) else { return Ok(()) };
-    let ours = |name: &str| FOLDERS.contains(&name) || name == ANNOTATIONS || (name.starts_with('.') && name.contains(PARTIAL));
-    let foreign: Vec<String> = entries.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).filter(|n| !ours(n)).collect();
+    let ours = |name: &str| {
+        FOLDERS.contains(&name) || name == ANNOTATIONS || (name.starts_with('.') && name.contains(PARTIAL))
+    };
+    let foreign: Vec<String> =
+        entries.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).filter(|n| !ours(n)).collect();
     if let Some(first) = foreign.first() {
-        return Err(Error::Config(format!("--out {}: the folder holds other files ({first}, …) and no {MANIFEST}; give a new or empty folder", dir.display())));
+        return Err(Error::Config(format!(
+            "--out {}: the folder holds other files ({first}, …) and no {MANIFEST}; give a new or empty folder",
+            dir.display()
+        )));
     }
     Ok(())
 }

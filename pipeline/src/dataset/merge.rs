@@ -35,7 +35,8 @@ pub fn merge(dir: &Path) -> Result<Merged> {
     }
     if !missing.is_empty() {
         let per = dataset.images_per_scene.max(1);
-        let first: Vec<String> = missing.iter().take(5).map(|(i, _)| format!("image {i} (scene {})", i / per)).collect();
+        let first: Vec<String> =
+            missing.iter().take(5).map(|(i, _)| format!("image {i} (scene {})", i / per)).collect();
         return Err(Error::Config(format!(
             "{}: {} of {} images are not done yet ({}{}); run the shards that own them (vkdiff dataset with the same settings) before merging",
             dir.display(),
@@ -64,7 +65,9 @@ pub fn merge(dir: &Path) -> Result<Merged> {
         w.write_all(b",\"annotations\":[")?;
         let mut id = 0u64;
         for index in 0..dataset.images {
-            let record = dataset.finished(index).map_err(|why| std::io::Error::other(why.unwrap_or_else(|| format!("image {index} vanished during the merge"))))?;
+            let record = dataset.finished(index).map_err(|why| {
+                std::io::Error::other(why.unwrap_or_else(|| format!("image {index} vanished during the merge")))
+            })?;
             for mut annotation in record.annotations {
                 id += 1;
                 annotation["id"] = json!(id);

@@ -69,15 +69,25 @@ impl Shard {
     /// (`SLURM_ARRAY_TASK_ID` − `SLURM_ARRAY_TASK_MIN` of `SLURM_ARRAY_TASK_COUNT`); else a
     /// Kubernetes Indexed Job's `JOB_COMPLETION_INDEX` of `--shards N`; else the whole set.
     /// Returns where it came from, for the log.
-    pub fn resolve(flag: Option<&str>, shards: Option<u64>, env: &dyn Fn(&str) -> Option<String>) -> Result<(Shard, String)> {
+    pub fn resolve(
+        flag: Option<&str>,
+        shards: Option<u64>,
+        env: &dyn Fn(&str) -> Option<String>,
+    ) -> Result<(Shard, String)> {
         if let Some(text) = flag {
             if shards.is_some() {
-                return Err(Error::Config("give --shard I/N or --shards N (with JOB_COMPLETION_INDEX), not both".into()));
+                return Err(Error::Config(
+                    "give --shard I/N or --shards N (with JOB_COMPLETION_INDEX), not both".into(),
+                ));
             }
             return Ok((Shard::parse(text)?, "--shard".into()));
         }
         let number = |name: &str| -> Result<Option<u64>> {
-            env(name).map(|v| v.trim().parse::<u64>().map_err(|_| Error::Config(format!("{name}={v} is not a whole number")))).transpose()
+            env(name)
+                .map(|v| {
+                    v.trim().parse::<u64>().map_err(|_| Error::Config(format!("{name}={v} is not a whole number")))
+                })
+                .transpose()
         };
         if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
             let (min, count) = match (number("SLURM_ARRAY_TASK_MIN")?, number("SLURM_ARRAY_TASK_COUNT")?) {
@@ -91,17 +101,26 @@ impl Shard {
                 )));
             }
             if shards.is_some_and(|n| n != count) {
-                return Err(Error::Config(format!("--shards {} disagrees with SLURM_ARRAY_TASK_COUNT={count}", shards.unwrap_or(0))));
+                return Err(Error::Config(format!(
+                    "--shards {} disagrees with SLURM_ARRAY_TASK_COUNT={count}",
+                    shards.unwrap_or(0)
+                )));
             }
             return Ok((Shard::new(id - min, count)?, format!("Slurm array task {id}")));
         }
         match (number("JOB_COMPLETION_INDEX")?, shards) {
             (Some(index), Some(count)) => {
-                let shard = Shard::new(index, count).map_err(|_| Error::Config(format!("JOB_COMPLETION_INDEX={index} is not below --shards {count}")))?;
+                let shard = Shard::new(index, count).map_err(|_| {
+                    Error::Config(format!("JOB_COMPLETION_INDEX={index} is not below --shards {count}"))
+                })?;
                 Ok((shard, format!("JOB_COMPLETION_INDEX={index}")))
             }
-            (Some(_), None) => Err(Error::Config("JOB_COMPLETION_INDEX is set: give --shards N, the Job's completions".into())),
-            (None, Some(_)) => Err(Error::Config("--shards N needs JOB_COMPLETION_INDEX (a Kubernetes Indexed Job); elsewhere give --shard I/N".into())),
+            (Some(_), None) => {
+                Err(Error::Config("JOB_COMPLETION_INDEX is set: give --shards N, the Job's completions".into()))
+            }
+            (None, Some(_)) => Err(Error::Config(
+                "--shards N needs JOB_COMPLETION_INDEX (a Kubernetes Indexed Job); elsewhere give --shard I/N".into(),
+            )),
             (None, None) => Ok((Shard::ALL, "the whole set".into())),
         }
     }
@@ -187,10 +206,16 @@ mod tests {
         let none = env(&[]);
         assert_eq!(Shard::resolve(None, None, &none).unwrap().0, Shard::ALL);
         assert_eq!(Shard::resolve(Some("1/4"), None, &none).unwrap().0, Shard { index: 1, count: 4 });
-        let slurm = env(&[("SLURM_ARRAY_TASK_ID", "12"), ("SLURM_ARRAY_TASK_MIN", "10"), ("SLURM_ARRAY_TASK_COUNT", "4")]);
+        let slurm =
+            env(&[("SLURM_ARRAY_TASK_ID", "12"), ("SLURM_ARRAY_TASK_MIN", "10"), ("SLURM_ARRAY_TASK_COUNT", "4")]);
         assert_eq!(Shard::resolve(None, None, &slurm).unwrap().0, Shard { index: 2, count: 4 });
         assert_eq!(Shard::resolve(Some("0/2"), None, &slurm).unwrap().0, Shard { index: 0, count: 2 }, "the flag wins");
-        let stepped = env(&[("SLURM_ARRAY_TASK_ID", "6"), ("SLURM_ARRAY_TASK_MIN", "0"), ("SLURM_ARRAY_TASK_COUNT", "4"), ("SLURM_ARRAY_TASK_STEP", "2")]);
+        let stepped = env(&[
+            ("SLURM_ARRAY_TASK_ID", "6"),
+            ("SLURM_ARRAY_TASK_MIN", "0"),
+            ("SLURM_ARRAY_TASK_COUNT", "4"),
+            ("SLURM_ARRAY_TASK_STEP", "2"),
+        ]);
         assert!(Shard::resolve(None, None, &stepped).unwrap_err().to_string().contains("contiguous"));
         let partial = env(&[("SLURM_ARRAY_TASK_ID", "1")]);
         assert!(Shard::resolve(None, None, &partial).unwrap_err().to_string().contains("SLURM_ARRAY_TASK_MIN"));
@@ -199,7 +224,10 @@ mod tests {
         assert!(Shard::resolve(None, None, &k8s).unwrap_err().to_string().contains("--shards"));
         assert!(Shard::resolve(None, Some(3), &k8s).unwrap_err().to_string().contains("not below --shards 3"));
         assert!(Shard::resolve(None, Some(3), &none).unwrap_err().to_string().contains("JOB_COMPLETION_INDEX"));
-        assert!(Shard::resolve(None, None, &env(&[("JOB_COMPLETION_INDEX", "x")])).unwrap_err().to_string().contains("not a whole number"));
+        assert!(Shard::resolve(None, None, &env(&[("JOB_COMPLETION_INDEX", "x")]))
+            .unwrap_err()
+            .to_string()
+            .contains("not a whole number"));
     }
 
     #[test]

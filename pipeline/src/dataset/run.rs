@@ -11,8 +11,9 @@ use crate::error::{Error, Result};
 use crate::files::png_bytes;
 use crate::gen_settings::GenSettings;
 use crate::prompt_encoding::Conditioning;
-use crate::text_to_image::{RgbImage, TextToImage};
+use crate::sampling::TextToImage;
 use crate::workflow_models::WorkflowModels;
+use crate::RgbImage;
 use serde_json::{json, Value};
 use std::collections::{HashMap, VecDeque};
 use std::path::PathBuf;
@@ -93,11 +94,22 @@ pub fn generate(
     // Every prompt once, first: batches group images by their prompts' token counts.
     let sampling = &settings.sampling;
     let texts = (settings.prompts.iter().enumerate())
-        .map(|(i, p)| Ok((i, models.sdxl.encode_prompt_as(sampling.prompt_syntax, p, settings.negative_prompt.as_deref(), sampling.guided())?)))
+        .map(|(i, p)| {
+            Ok((
+                i,
+                models.sdxl.encode_prompt_as(
+                    sampling.prompt_syntax,
+                    p,
+                    settings.negative_prompt.as_deref(),
+                    sampling.guided(),
+                )?,
+            ))
+        })
         .collect::<Result<HashMap<usize, Conditioning>>>()?;
     let stream = render_scenes(settings, pending.scenes, options.threads, 2 * options.batch);
     let (to_writer, writer) = start_writer(dataset.clone(), options.batch);
-    let mut run = Loop { settings, models, styles, texts, tokens: HashMap::new(), times: StageTimes::default(), denoiser: None };
+    let mut run =
+        Loop { settings, models, styles, texts, tokens: HashMap::new(), times: StageTimes::default(), denoiser: None };
     let made = run.all(&stream.images, &to_writer, pending.done, total, options.batch, on_progress);
     drop(to_writer);
     drop(stream.images);
@@ -115,6 +127,9 @@ pub fn generate(
     Ok(Report { made, times: run.times })
 }
 
+/// A recorded denoiser with the batch size and [`Loop::shape`] it was recorded for.
+type RecordedDenoiser<'a> = (Denoiser<'a>, (usize, (usize, usize)));
+
 struct Loop<'a> {
     settings: &'a DatasetSettings,
     models: &'a WorkflowModels,
@@ -122,12 +137,19 @@ struct Loop<'a> {
     texts: HashMap<usize, Conditioning>,
     tokens: HashMap<usize, Vec<f32>>,
     times: StageTimes,
-    /// The recorded denoiser and the batch and [`Loop::shape`] it was recorded for.
-    denoiser: Option<(Denoiser<'a>, (usize, (usize, usize)))>,
+    denoiser: Option<RecordedDenoiser<'a>>,
 }
 
 impl<'a> Loop<'a> {
-    fn all(&mut self, images: &Receiver<Result<SceneImage>>, to_writer: &SyncSender<Finished>, mut done: u64, total: u64, batch: usize, on_progress: &mut dyn FnMut(Progress)) -> Result<u64> {
+    fn all(
+        &mut self,
+        images: &Receiver<Result<SceneImage>>,
+        to_writer: &SyncSender<Finished>,
+        mut done: u64,
+        total: u64,
+        batch: usize,
+        on_progress: &mut dyn FnMut(Progress),
+    ) -> Result<u64> {
         let mut made = 0;
         let mut queue: VecDeque<Item> = VecDeque::new();
         let mut open = true;
@@ -184,7 +206,8 @@ impl<'a> Loop<'a> {
     fn item(&self, scene: SceneImage) -> Item {
         let seed = image_seed(self.settings.seed, scene.index);
         let prompt = choose(seed, Choice::Prompt, self.settings.prompts.len());
-        let style = (!self.settings.ip_sets.is_empty()).then(|| choose(seed, Choice::StyleSet, self.settings.ip_sets.len()));
+        let style =
+            (!self.settings.ip_sets.is_empty()).then(|| choose(seed, Choice::StyleSet, self.settings.ip_sets.len()));
         Item { scene, seed, prompt, style }
     }
 
@@ -203,7 +226,10 @@ impl<'a> Loop<'a> {
         let sampling = &self.settings.sampling;
         for item in &items {
             if let Some(style) = item.style.filter(|s| !self.tokens.contains_key(s)) {
-                let guide = self.models.image_guide(&self.styles[style]).ok_or_else(|| Error::Config("style images without an IP-Adapter".into()))?;
+                let guide = self
+                    .models
+                    .image_guide(&self.styles[style])
+                    .ok_or_else(|| Error::Config("style images without an IP-Adapter".into()))?;
                 self.tokens.insert(style, guide.tokens(sampling.guided())?);
             }
         }
@@ -212,13 +238,22 @@ impl<'a> Loop<'a> {
             self.denoiser = None; // the old recording's memory goes before the new one's comes
             let (styles, tokens) = key.1;
             let ip = self.models.ip_use(styles).filter(|_| styles > 0);
-            self.denoiser = Some((Denoiser::record(&self.models.sdxl, sampling, self.models.control_use(), ip, key.0, tokens)?, key));
+            self.denoiser = Some((
+                Denoiser::record(&self.models.sdxl, sampling, self.models.control_use(), ip, key.0, tokens)?,
+                key,
+            ));
         }
         let (denoiser, _) = self.denoiser.as_ref().expect("recorded above");
         // img2img: each image's shaded render through the VAE encoder.
         let inits = items
             .iter()
-            .map(|item| item.scene.init.as_ref().map(|(image, _)| self.models.sdxl.encode_init(image, sampling.width, sampling.height)).transpose())
+            .map(|item| {
+                item.scene
+                    .init
+                    .as_ref()
+                    .map(|(image, _)| self.models.sdxl.encode_init(image, sampling.width, sampling.height))
+                    .transpose()
+            })
             .collect::<Result<Vec<_>>>()?;
         let inputs: Vec<ItemInputs> = items
             .iter()
@@ -255,7 +290,12 @@ impl<'a> Loop<'a> {
         let ip_images: Vec<PathBuf> = item.style.map(|k| s.ip_sets[k].clone()).unwrap_or_default();
         let gen = GenSettings {
             models: s.models.clone(),
-            job: TextToImage { prompt: s.prompts[item.prompt].clone(), negative_prompt: s.negative_prompt.clone(), seed: item.seed, sampling: s.sampling.clone() },
+            job: TextToImage {
+                prompt: s.prompts[item.prompt].clone(),
+                negative_prompt: s.negative_prompt.clone(),
+                seed: item.seed,
+                sampling: s.sampling.clone(),
+            },
             depth: s.models.controlnet.as_ref().map(|_| PathBuf::from(&files.depth)),
             ip_images: ip_images.clone(),
             init_image: item.scene.init.as_ref().map(|_| PathBuf::from(&files.init)),
@@ -309,7 +349,11 @@ fn start_writer(dataset: Dataset, batch: usize) -> (SyncSender<Finished>, JoinHa
                     a
                 })
                 .collect();
-            let mut outputs: Vec<(&str, &[u8])> = vec![(&files.depth, &f.scene.depth_exr), (&files.control, &f.scene.control_png), (&files.mask, &f.scene.mask_png)];
+            let mut outputs: Vec<(&str, &[u8])> = vec![
+                (&files.depth, &f.scene.depth_exr),
+                (&files.control, &f.scene.control_png),
+                (&files.mask, &f.scene.mask_png),
+            ];
             outputs.extend(f.scene.init.as_ref().map(|(_, png)| (files.init.as_str(), png.as_slice())));
             outputs.push((&files.image, &png));
             dataset.write_image(f.index, &outputs, f.entry, annotations)?;

@@ -4,7 +4,7 @@
 
 use super::settings::DatasetSettings;
 use crate::error::{Error, Result};
-use crate::text_to_image::RgbImage;
+use crate::RgbImage;
 use serde_json::{json, Value};
 use std::sync::mpsc::{sync_channel, Receiver};
 use std::thread::JoinHandle;
@@ -46,7 +46,12 @@ pub struct SceneStream {
 
 /// Starts rendering `scenes` (scene number, the indices of its images to make) on `threads`
 /// worker threads (0: one per core), at most `ahead` images ahead of the reader.
-pub fn render_scenes(settings: &DatasetSettings, scenes: Vec<(u64, Vec<u64>)>, threads: usize, ahead: usize) -> SceneStream {
+pub fn render_scenes(
+    settings: &DatasetSettings,
+    scenes: Vec<(u64, Vec<u64>)>,
+    threads: usize,
+    ahead: usize,
+) -> SceneStream {
     let (send, images) = sync_channel(ahead.max(1));
     let settings = settings.clone();
     let thread = std::thread::spawn(move || {

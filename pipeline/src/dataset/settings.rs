@@ -3,10 +3,10 @@
 //! flag names, so a run with other settings into the same folder is refused naming the flag.
 
 use crate::error::{Error, Result};
-use crate::ip_scale::IpScale;
-use crate::prompt_weights::PromptSyntax;
 use crate::gen_settings::{control_depth_name, precision_name, schedule_name, ModelSettings, RNG};
-use crate::text_to_image::{Sampling, SizeConditioning};
+use crate::ip_scale::IpScale;
+use crate::prompt_syntax::PromptSyntax;
+use crate::sampling::{Sampling, SizeConditioning};
 use serde_json::{json, Map, Value};
 use std::path::PathBuf;
 use vkdiff_render::control::ControlDepth;
@@ -68,10 +68,16 @@ impl DatasetSettings {
             return Err(Error::Config(format!("--count {count} runs past the largest seed from --seed {seed}")));
         }
         if prompts.is_empty() || prompts.iter().any(|p| p.trim().is_empty()) {
-            return Err(Error::Config("--prompt (or --prompts FILE) must give at least one prompt, none of them empty".into()));
+            return Err(Error::Config(
+                "--prompt (or --prompts FILE) must give at least one prompt, none of them empty".into(),
+            ));
         }
         match (&models.ip_adapter, ip_sets.is_empty()) {
-            (Some(_), true) => return Err(Error::Config("--ip-adapter needs style images: --ip-image (one set) or --ip-set A,B (repeatable)".into())),
+            (Some(_), true) => {
+                return Err(Error::Config(
+                    "--ip-adapter needs style images: --ip-image (one set) or --ip-set A,B (repeatable)".into(),
+                ))
+            }
             (None, false) => return Err(Error::Config("--ip-image/--ip-set need --ip-adapter".into())),
             _ => {}
         }
@@ -86,10 +92,19 @@ impl DatasetSettings {
         let multiple = pixel_multiple as u32;
         let (width, height) = if crops.count > 0 {
             if crops.size == 0 || crops.size > scene.width.min(scene.height) {
-                return Err(Error::Config(format!("--crop-size {} must lie in [1, {}] to fit the {}×{} frame", crops.size, scene.width.min(scene.height), scene.width, scene.height)));
+                return Err(Error::Config(format!(
+                    "--crop-size {} must lie in [1, {}] to fit the {}×{} frame",
+                    crops.size,
+                    scene.width.min(scene.height),
+                    scene.width,
+                    scene.height
+                )));
             }
             if !crops.size.is_multiple_of(multiple) {
-                return Err(Error::Config(format!("--crop-size {} must be a multiple of {multiple}, the sizes this model makes", crops.size)));
+                return Err(Error::Config(format!(
+                    "--crop-size {} must be a multiple of {multiple}, the sizes this model makes",
+                    crops.size
+                )));
             }
             (crops.size, crops.size)
         } else {
@@ -98,7 +113,18 @@ impl DatasetSettings {
         };
         sampling.width = width as usize;
         sampling.height = height as usize;
-        Ok(DatasetSettings { seed, count, scene, crops, control_depth, models, prompts, negative_prompt, sampling, ip_sets })
+        Ok(DatasetSettings {
+            seed,
+            count,
+            scene,
+            crops,
+            control_depth,
+            models,
+            prompts,
+            negative_prompt,
+            sampling,
+            ip_sets,
+        })
     }
 
     /// Images per scene.
@@ -116,7 +142,13 @@ impl DatasetSettings {
         if self.crops.count == 0 {
             return Ok(vec![self.whole_frame_window()]);
         }
-        Ok(vkdiff_render::crops::crop_windows(scene_seed, self.crops.count, self.crops.size, self.scene.width, self.scene.height)?)
+        Ok(vkdiff_render::crops::crop_windows(
+            scene_seed,
+            self.crops.count,
+            self.crops.size,
+            self.scene.width,
+            self.scene.height,
+        )?)
     }
 
     /// The window of the image made from a whole frame: the frame cut to the image size, centred.
@@ -176,7 +208,8 @@ impl DatasetSettings {
             })));
         }
         if let Some(ip) = &m.ip_adapter {
-            let sets: Vec<Vec<String>> = self.ip_sets.iter().map(|set| set.iter().map(|p| p.display().to_string()).collect()).collect();
+            let sets: Vec<Vec<String>> =
+                self.ip_sets.iter().map(|set| set.iter().map(|p| p.display().to_string()).collect()).collect();
             map.extend(object(json!({
                 "ip-adapter": ip.adapter.display().to_string(),
                 "image-encoder": ip.encoder.display().to_string(),

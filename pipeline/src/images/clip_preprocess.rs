@@ -50,12 +50,7 @@ impl Default for ClipPreprocess {
 #[serde(untagged)]
 enum SizeJson {
     Int(usize),
-    Map {
-        shortest_edge: Option<usize>,
-        height: Option<usize>,
-        width: Option<usize>,
-        longest_edge: Option<usize>,
-    },
+    Map { shortest_edge: Option<usize>, height: Option<usize>, width: Option<usize>, longest_edge: Option<usize> },
 }
 
 #[derive(Deserialize)]
@@ -111,57 +106,31 @@ impl ClipPreprocess {
 
     /// Reads a preprocessor_config.json; keys not listed here are ignored.
     pub fn from_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::from_json(&text).map_err(|why| Error::Format {
-            path: path.to_path_buf(),
-            why,
-        })
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        Self::from_json(&text).map_err(|why| Error::Format { path: path.to_path_buf(), why })
     }
 
     pub fn from_json(text: &str) -> std::result::Result<Self, String> {
         let c: ConfigJson = serde_json::from_str(text).map_err(|e| format!("bad preprocessor config: {e}"))?;
-        for kind in [&c.image_processor_type, &c.feature_extractor_type]
-            .into_iter()
-            .flatten()
-        {
-            if !matches!(
-                kind.as_str(),
-                "CLIPImageProcessor" | "CLIPImageProcessorFast" | "CLIPFeatureExtractor"
-            ) {
-                return Err(format!(
-                    "image processor {kind:?} is not CLIP's (CLIPImageProcessor); not supported"
-                ));
+        for kind in [&c.image_processor_type, &c.feature_extractor_type].into_iter().flatten() {
+            if !matches!(kind.as_str(), "CLIPImageProcessor" | "CLIPImageProcessorFast" | "CLIPFeatureExtractor") {
+                return Err(format!("image processor {kind:?} is not CLIP's (CLIPImageProcessor); not supported"));
             }
         }
         let mut p = Self::default();
         if let Some(size) = c.size {
             p.size = match size {
                 SizeJson::Int(n) => ResizeTo::ShortestEdge(n),
-                SizeJson::Map {
-                    longest_edge: Some(_), ..
-                } => return Err("size.longest_edge is not supported".into()),
-                SizeJson::Map {
-                    shortest_edge: Some(n), ..
-                } => ResizeTo::ShortestEdge(n),
-                SizeJson::Map {
-                    height: Some(height),
-                    width: Some(width),
-                    ..
-                } => ResizeTo::Exact { height, width },
+                SizeJson::Map { longest_edge: Some(_), .. } => return Err("size.longest_edge is not supported".into()),
+                SizeJson::Map { shortest_edge: Some(n), .. } => ResizeTo::ShortestEdge(n),
+                SizeJson::Map { height: Some(height), width: Some(width), .. } => ResizeTo::Exact { height, width },
                 _ => return Err("size needs shortest_edge, or height and width".into()),
             };
         }
         if let Some(crop) = c.crop_size {
             p.crop_size = match crop {
                 SizeJson::Int(n) => (n, n),
-                SizeJson::Map {
-                    height: Some(h),
-                    width: Some(w),
-                    ..
-                } => (h, w),
+                SizeJson::Map { height: Some(h), width: Some(w), .. } => (h, w),
                 _ => return Err("crop_size needs height and width".into()),
             };
         }
@@ -200,11 +169,7 @@ impl ClipPreprocess {
         match self.size {
             ResizeTo::Exact { height, width } => (height, width),
             ResizeTo::ShortestEdge(n) => {
-                let (short, long) = if width <= height {
-                    (width, height)
-                } else {
-                    (height, width)
-                };
+                let (short, long) = if width <= height { (width, height) } else { (height, width) };
                 let new_long = ((n * long) as f64 / short as f64) as usize;
                 if width <= height {
                     (new_long, n)
@@ -261,11 +226,7 @@ pub fn center_crop(image: &RgbImage, crop_h: usize, crop_w: usize) -> RgbImage {
             let dst = ((y + pad_t) * w + pad_l) * 3;
             pixels[dst..dst + img.width * 3].copy_from_slice(&img.pixels[y * img.width * 3..(y + 1) * img.width * 3]);
         }
-        img = RgbImage {
-            width: w,
-            height: h,
-            pixels,
-        };
+        img = RgbImage { width: w, height: h, pixels };
     }
     if (img.width, img.height) != (crop_w, crop_h) {
         off_y = ((img.height - crop_h) as f64 / 2.0) as usize;
@@ -276,9 +237,5 @@ pub fn center_crop(image: &RgbImage, crop_h: usize, crop_w: usize) -> RgbImage {
         let row = (y * img.width + off_x) * 3;
         pixels.extend_from_slice(&img.pixels[row..row + crop_w * 3]);
     }
-    RgbImage {
-        width: crop_w,
-        height: crop_h,
-        pixels,
-    }
+    RgbImage { width: crop_w, height: crop_h, pixels }
 }

@@ -15,9 +15,8 @@ fn pick(names: &[String]) -> std::result::Result<usize, String> {
     if let Some(i) = find("Z") {
         return Ok(i);
     }
-    let depth: Vec<usize> = (0..names.len())
-        .filter(|&i| names[i] == "Depth.Z" || names[i].ends_with(".Depth.Z"))
-        .collect();
+    let depth: Vec<usize> =
+        (0..names.len()).filter(|&i| names[i] == "Depth.Z" || names[i].ends_with(".Depth.Z")).collect();
     match depth.len() {
         1 => return Ok(depth[0]),
         0 => {}
@@ -26,20 +25,14 @@ fn pick(names: &[String]) -> std::result::Result<usize, String> {
             return Err(format!("several depth layers ({}); keep one", list.join(", ")));
         }
     }
-    find("V").or_else(|| find("R")).ok_or_else(|| {
-        format!(
-            "no depth channel (Z, <layer>.Depth.Z, V or R); channels: {}",
-            names.join(", ")
-        )
-    })
+    find("V")
+        .or_else(|| find("R"))
+        .ok_or_else(|| format!("no depth channel (Z, <layer>.Depth.Z, V or R); channels: {}", names.join(", ")))
 }
 
 /// Depth values (row-major) and (width, height) of the depth channel of an EXR file.
 pub fn read_depth_exr(path: &Path) -> Result<(Vec<f32>, usize, usize)> {
-    let fail = |why: String| Error::Format {
-        path: path.to_path_buf(),
-        why,
-    };
+    let fail = |why: String| Error::Format { path: path.to_path_buf(), why };
     let image = read_all_flat_layers_from_file(path).map_err(|e| fail(format!("bad OpenEXR file: {e}")))?;
     // Every channel of every part, named `<part>.<channel>` for named parts.
     let mut names = Vec::new();
@@ -65,11 +58,10 @@ pub fn read_depth_exr(path: &Path) -> Result<(Vec<f32>, usize, usize)> {
 pub fn depth_control_image(path: &Path, mode: ControlDepth) -> Result<RgbImage> {
     let (depth, width, height) = read_depth_exr(path)?;
     if !depth.iter().any(|&z| z.is_finite() && z > 0.0) {
-        return Err(Error::Format { path: path.to_path_buf(), why: "no pixel holds a valid depth (all are 0, negative, infinite or NaN)".into() });
+        return Err(Error::Format {
+            path: path.to_path_buf(),
+            why: "no pixel holds a valid depth (all are 0, negative, infinite or NaN)".into(),
+        });
     }
-    Ok(RgbImage {
-        width,
-        height,
-        pixels: control_image(&depth, mode),
-    })
+    Ok(RgbImage { width, height, pixels: control_image(&depth, mode) })
 }

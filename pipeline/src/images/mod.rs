@@ -5,8 +5,6 @@
 mod clip_preprocess;
 mod control;
 mod depth_input;
-mod jpeg;
-mod read;
 mod resample;
 
 use std::path::Path;
@@ -14,8 +12,8 @@ use std::path::Path;
 pub use clip_preprocess::{center_crop, ClipPreprocess, ResizeTo};
 pub use control::{control_size, control_tensor, VAE_SCALE_FACTOR};
 pub use depth_input::{depth_control_image, read_depth_exr};
-pub use read::{decode_image, read_image};
 pub use resample::{resize_pil, resize_torch, Filter};
+pub use vkdiff_formats::image::{decode_image, read_image};
 pub use vkdiff_render::control::ControlDepth;
 
 use crate::{Result, RgbImage};
@@ -28,6 +26,6 @@ pub fn load_control_image(path: &Path, mode: ControlDepth) -> Result<RgbImage> {
     if is_exr {
         depth_control_image(path, mode)
     } else {
-        read::read_control_image(path)
+        Ok(vkdiff_formats::image::read_control_image(path)?)
     }
 }

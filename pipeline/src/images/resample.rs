@@ -140,11 +140,7 @@ fn pil_kernel(in_size: usize, out_size: usize, filter: Filter) -> Kernel {
     let taps = taps(in_size, out_size, filter.support(), f);
     const PRECISION_BITS: u32 = 32 - 8 - 2;
     let fixed = taps.weights.iter().map(|&w| fixed(w, PRECISION_BITS)).collect();
-    Kernel {
-        taps,
-        fixed,
-        precision: PRECISION_BITS,
-    }
+    Kernel { taps, fixed, precision: PRECISION_BITS }
 }
 
 fn torch_kernel(in_size: usize, out_size: usize, filter: Filter) -> Kernel {
@@ -163,18 +159,12 @@ fn torch_kernel(in_size: usize, out_size: usize, filter: Filter) -> Kernel {
         }
         precision += 1;
     }
-    let fixed = taps
-        .weights
-        .iter()
-        .map(|&w| fixed(w, precision) as i16 as i32)
-        .collect();
+    let fixed = taps.weights.iter().map(|&w| fixed(w, precision) as i16 as i32).collect();
     Kernel { taps, fixed, precision }
 }
 
 fn convolve(values: impl Iterator<Item = u8>, k: &[i32], precision: u32) -> u8 {
-    let sum = values
-        .zip(k)
-        .fold(1i64 << (precision - 1), |s, (p, &w)| s + p as i64 * w as i64);
+    let sum = values.zip(k).fold(1i64 << (precision - 1), |s, (p, &w)| s + p as i64 * w as i64);
     (sum >> precision).clamp(0, 255) as u8
 }
 
@@ -198,11 +188,7 @@ fn vertical(src: &[u8], width: usize, kernel: &Kernel) -> Vec<u8> {
     for (yy, &(ymin, n)) in kernel.taps.bounds.iter().enumerate() {
         let k = &kernel.fixed[yy * kernel.taps.ksize..yy * kernel.taps.ksize + n];
         for i in 0..stride {
-            out.push(convolve(
-                (ymin..ymin + n).map(|y| src[y * stride + i]),
-                k,
-                kernel.precision,
-            ));
+            out.push(convolve((ymin..ymin + n).map(|y| src[y * stride + i]), k, kernel.precision));
         }
     }
     out
@@ -216,15 +202,8 @@ fn resize_with(
     filter: Filter,
     vertical_first: bool,
 ) -> RgbImage {
-    assert!(
-        width > 0 && height > 0 && image.width > 0 && image.height > 0,
-        "resize of an empty image"
-    );
-    assert_eq!(
-        image.pixels.len(),
-        image.width * image.height * 3,
-        "RGB image data does not match its size"
-    );
+    assert!(width > 0 && height > 0 && image.width > 0 && image.height > 0, "resize of an empty image");
+    assert_eq!(image.pixels.len(), image.width * image.height * 3, "RGB image data does not match its size");
     let mut pixels = image.pixels.clone();
     if vertical_first {
         if height != image.height {

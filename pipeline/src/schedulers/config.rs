@@ -67,7 +67,10 @@ impl SchedulerConfig {
 
     /// The config SDXL base 1.0 ships with.
     pub fn sdxl_base() -> SchedulerConfig {
-        SchedulerConfig { source: "SDXL base scheduler config".into(), keys: parse(SDXL_BASE).expect("built-in config is valid JSON") }
+        SchedulerConfig {
+            source: "SDXL base scheduler config".into(),
+            keys: parse(SDXL_BASE).expect("built-in config is valid JSON"),
+        }
     }
 
     /// ᾱ_t for every training timestep, as diffusers computes them: betas from a float32
@@ -83,7 +86,9 @@ impl SchedulerConfig {
         let (start, end) = (self.number("beta_start", 0.0001)?, self.number("beta_end", 0.02)?);
         let betas: Vec<f32> = match self.text("beta_schedule", "linear")? {
             "linear" => torch_linspace(start as f32, end as f32, n),
-            "scaled_linear" => torch_linspace(start.powf(0.5) as f32, end.powf(0.5) as f32, n).iter().map(|b| b * b).collect(),
+            "scaled_linear" => {
+                torch_linspace(start.powf(0.5) as f32, end.powf(0.5) as f32, n).iter().map(|b| b * b).collect()
+            }
             _ => return Err(self.unsupported("beta_schedule", "(use \"scaled_linear\" or \"linear\")")),
         };
         let mut product = 1.0f64;
@@ -149,7 +154,8 @@ impl SchedulerConfig {
     }
 
     pub(super) fn integer(&self, key: &str, default: u64) -> Result<u64> {
-        self.value(key).map_or(Ok(default), |v| v.as_u64().ok_or_else(|| self.wrong_type(key, "a non-negative integer")))
+        self.value(key)
+            .map_or(Ok(default), |v| v.as_u64().ok_or_else(|| self.wrong_type(key, "a non-negative integer")))
     }
 
     pub(super) fn flag(&self, key: &str, default: bool) -> Result<bool> {
@@ -193,7 +199,9 @@ fn parse(text: &str) -> std::result::Result<Map<String, Value>, String> {
 /// the second down from `end`, and the compiled kernel fuses each `a + step·i` into one FMA.
 fn torch_linspace(start: f32, end: f32, n: usize) -> Vec<f32> {
     let step = (end - start) / (n - 1) as f32;
-    (0..n).map(|i| if i < n / 2 { step.mul_add(i as f32, start) } else { (-step).mul_add((n - 1 - i) as f32, end) }).collect()
+    (0..n)
+        .map(|i| if i < n / 2 { step.mul_add(i as f32, start) } else { (-step).mul_add((n - 1 - i) as f32, end) })
+        .collect()
 }
 
 #[cfg(test)]

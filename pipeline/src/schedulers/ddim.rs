@@ -29,15 +29,23 @@ impl Ddim {
             return Err(Error::Config(format!("ddim: {steps} steps exceed the {train} training timesteps")));
         }
         let timesteps: Vec<f64> = match config.spacing("leading")? {
-            Spacing::Linspace => numpy_linspace(0.0, (train - 1) as f64, steps).iter().rev().map(|t| t.round_ties_even()).collect(),
+            Spacing::Linspace => {
+                numpy_linspace(0.0, (train - 1) as f64, steps).iter().rev().map(|t| t.round_ties_even()).collect()
+            }
             spacing => spaced_timesteps(spacing, steps, train, config.steps_offset()?),
         };
         // diffusers would index ᾱ from the end (or past it) here.
         if let Some(t) = timesteps.iter().find(|&&t| t < 0.0 || t >= train as f64) {
-            return Err(Error::Config(format!("ddim: {steps} steps with this spacing give timestep {t}, outside 0..{train}")));
+            return Err(Error::Config(format!(
+                "ddim: {steps} steps with this spacing give timestep {t}, outside 0..{train}"
+            )));
         }
         let final_alpha_cumprod = if config.flag("set_alpha_to_one", true)? { 1.0 } else { alphas_cumprod[0] };
-        let clip = config.flag("clip_sample", true)?.then(|| config.number("clip_sample_range", 1.0)).transpose()?.map(|r| r as f32);
+        let clip = config
+            .flag("clip_sample", true)?
+            .then(|| config.number("clip_sample_range", 1.0))
+            .transpose()?
+            .map(|r| r as f32);
         Ok(Ddim {
             timesteps: timesteps.iter().map(|&t| t as f32).collect(),
             alphas_cumprod,

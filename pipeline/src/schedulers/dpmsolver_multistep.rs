@@ -37,8 +37,11 @@ impl DpmSolverMultistep {
         let (timesteps, sigmas): (Vec<f32>, Vec<f64>) = if karras {
             // The full training range (unless overridden), timesteps rounded to integers.
             let (sigma_min, sigma_max) = config.karras_range()?;
-            let sigmas =
-                karras_sigmas(sigma_min.unwrap_or(f64::from(train[0])), sigma_max.unwrap_or(f64::from(train[train.len() - 1])), steps);
+            let sigmas = karras_sigmas(
+                sigma_min.unwrap_or(f64::from(train[0])),
+                sigma_max.unwrap_or(f64::from(train[train.len() - 1])),
+                steps,
+            );
             let logs = log_sigmas(&train);
             (sigmas.iter().map(|&s| sigma_to_t(s, &logs).round_ties_even() as f32).collect(), sigmas)
         } else {
@@ -48,8 +51,9 @@ impl DpmSolverMultistep {
         };
         let last = if final_sigma_min { train[0] } else { 0.0 };
         let sigmas: Vec<f32> = sigmas.iter().map(|&s| s as f32).chain([last]).collect();
-        let first_order_final =
-            config.flag("euler_at_final", false)? || (config.flag("lower_order_final", true)? && timesteps.len() < 15) || !final_sigma_min;
+        let first_order_final = config.flag("euler_at_final", false)?
+            || (config.flag("lower_order_final", true)? && timesteps.len() < 15)
+            || !final_sigma_min;
         Ok(DpmSolverMultistep { timesteps, sigmas, prediction, first_order_final, previous: None })
     }
 }
@@ -61,7 +65,9 @@ fn dpm_timesteps(spacing: Spacing, steps: usize, train: usize, offset: u64) -> V
             let ratio = (train / (steps + 1)) as f64;
             (1..=steps).rev().map(|k| k as f64 * ratio + offset as f64).collect()
         }
-        Spacing::Linspace => numpy_linspace(0.0, (train - 1) as f64, steps + 1)[1..].iter().rev().map(|t| t.round_ties_even()).collect(),
+        Spacing::Linspace => {
+            numpy_linspace(0.0, (train - 1) as f64, steps + 1)[1..].iter().rev().map(|t| t.round_ties_even()).collect()
+        }
         Spacing::Trailing => trailing_timesteps(train, steps),
     };
     timesteps.iter().map(|&t| t as f32).collect()

@@ -2,7 +2,8 @@
 
 use super::config::{Prediction, SchedulerConfig, Spacing};
 use super::{
-    add_sigma_noise, denoised, euler_init_noise_sigma, interp, karras_sigmas, log_sigmas, scale_by_sigma, sigma_to_t, spaced_timesteps, train_sigmas, Solver,
+    add_sigma_noise, denoised, euler_init_noise_sigma, interp, karras_sigmas, log_sigmas, scale_by_sigma, sigma_to_t,
+    spaced_timesteps, train_sigmas, Solver,
 };
 use crate::rng::TorchCpuRng;
 use crate::Result;
@@ -41,7 +42,8 @@ pub(super) fn sigma_schedule(
     final_sigma_min: bool,
 ) -> Result<(Vec<f32>, Vec<f32>)> {
     let train = train_sigmas(&config.alphas_cumprod()?);
-    let mut timesteps: Vec<f32> = spaced_timesteps(spacing, steps, train.len(), config.steps_offset()?).iter().map(|&t| t as f32).collect();
+    let mut timesteps: Vec<f32> =
+        spaced_timesteps(spacing, steps, train.len(), config.steps_offset()?).iter().map(|&t| t as f32).collect();
     // σ linearly interpolated in t (numpy, float64) at the float32 timesteps.
     let mut sigmas: Vec<f64> = timesteps.iter().map(|&t| interp(f64::from(t), &train)).collect();
     if karras {

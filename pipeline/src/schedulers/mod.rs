@@ -82,7 +82,9 @@ impl Sampler {
         }
         let solver: Box<dyn Solver> = match kind {
             SamplerKind::Euler => Box::new(euler_discrete::EulerDiscrete::new(config, karras, steps)?),
-            SamplerKind::EulerAncestral => Box::new(euler_ancestral_discrete::EulerAncestralDiscrete::new(config, steps)?),
+            SamplerKind::EulerAncestral => {
+                Box::new(euler_ancestral_discrete::EulerAncestralDiscrete::new(config, steps)?)
+            }
             SamplerKind::DpmSolver2M => Box::new(dpmsolver_multistep::DpmSolverMultistep::new(config, karras, steps)?),
             SamplerKind::Ddim => Box::new(ddim::Ddim::new(config, steps)?),
         };
@@ -90,7 +92,9 @@ impl Sampler {
         // past the end of its schedule.
         if let [first, second, ..] = solver.timesteps() {
             if first == second {
-                return Err(Error::Config(format!("{steps} steps are too many for {kind}: its first timestep {first} repeats")));
+                return Err(Error::Config(format!(
+                    "{steps} steps are too many for {kind}: its first timestep {first} repeats"
+                )));
             }
         }
         Ok(Sampler { solver })
@@ -213,7 +217,10 @@ fn interp(t: f64, ys: &[f32]) -> f64 {
 fn karras_sigmas(sigma_min: f64, sigma_max: f64, steps: usize) -> Vec<f64> {
     const RHO: f64 = 7.0;
     let (min_inv_rho, max_inv_rho) = (sigma_min.powf(1.0 / RHO), sigma_max.powf(1.0 / RHO));
-    numpy_linspace(0.0, 1.0, steps).iter().map(|ramp| (max_inv_rho + ramp * (min_inv_rho - max_inv_rho)).powf(RHO)).collect()
+    numpy_linspace(0.0, 1.0, steps)
+        .iter()
+        .map(|ramp| (max_inv_rho + ramp * (min_inv_rho - max_inv_rho)).powf(RHO))
+        .collect()
 }
 
 /// The fractional training timestep of `sigma`: log-σ interpolation between its neighbours

@@ -33,7 +33,11 @@ pub fn job(case: &Value) -> TextToImage {
                 target: pair(&case["target_size"]).map(|(h, w)| (w, h)),
             },
             strength: case["strength"].as_f64(),
-            prompt_syntax: if case["prompt_syntax"] == "weighted" { PromptSyntax::Weighted } else { PromptSyntax::Plain },
+            prompt_syntax: if case["prompt_syntax"] == "weighted" {
+                PromptSyntax::Weighted
+            } else {
+                PromptSyntax::Plain
+            },
         },
     }
 }

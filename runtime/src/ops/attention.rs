@@ -4,8 +4,8 @@ use super::bands::{bands, elem, fit, rows_per_band, span_view};
 use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u};
 use crate::context::Context;
 use crate::error::{ensure, Error, Result};
-use crate::tensor::Dtype;
 use crate::recorder::Recorder;
+use crate::tensor::Dtype;
 use crate::tensor::Tensor;
 
 /// Where attention's operands live. Element (b, token, head, d) of each is at
@@ -63,20 +63,43 @@ impl AttentionLayout {
 const WIDTHS: [u32; 3] = [4, 8, 16];
 
 /// out = softmax(scale · Q·Kᵀ)·V for every batch and head.
-pub fn attention(rec: &mut Recorder, q: &Tensor, k: &Tensor, v: &Tensor, out: &Tensor, l: &AttentionLayout, scale: f32) -> Result<()> {
+pub fn attention(
+    rec: &mut Recorder,
+    q: &Tensor,
+    k: &Tensor,
+    v: &Tensor,
+    out: &Tensor,
+    l: &AttentionLayout,
+    scale: f32,
+) -> Result<()> {
     let dtype = same_dtype(rec.context(), "attention", &[q, k, v, out])?;
-    ensure(l.batch > 0 && l.heads > 0 && l.q_tokens > 0 && l.kv_tokens > 0, || format!("attention: empty layout {l:?}"))?;
-    ensure(!l.causal || l.q_tokens == l.kv_tokens, || format!("attention: a causal mask needs as many queries as keys, got {l:?}"))?;
+    ensure(l.batch > 0 && l.heads > 0 && l.q_tokens > 0 && l.kv_tokens > 0, || {
+        format!("attention: empty layout {l:?}")
+    })?;
+    ensure(!l.causal || l.q_tokens == l.kv_tokens, || {
+        format!("attention: a causal mask needs as many queries as keys, got {l:?}")
+    })?;
     let need = |ld: usize, bs: usize, tokens: usize| (l.batch - 1) * bs + (tokens - 1) * ld + l.heads * l.head_dim;
     let need_at = |off: usize, ld: usize, bs: usize, tokens: usize| off + need(ld, bs, tokens);
-    ensure(q.numel() >= need_at(l.q_offset, l.q_ld, l.q_batch, l.q_tokens), || format!("attention: Q {:?} too small", q.shape()))?;
-    ensure(k.numel() >= need_at(l.k_offset, l.k_ld, l.k_batch, l.kv_tokens), || format!("attention: K {:?} too small", k.shape()))?;
-    ensure(v.numel() >= need_at(l.v_offset, l.v_ld, l.v_batch, l.kv_tokens), || format!("attention: V {:?} too small", v.shape()))?;
-    ensure(out.numel() >= need(l.o_ld, l.o_batch, l.q_tokens), || format!("attention: output {:?} too small", out.shape()))?;
+    ensure(q.numel() >= need_at(l.q_offset, l.q_ld, l.q_batch, l.q_tokens), || {
+        format!("attention: Q {:?} too small", q.shape())
+    })?;
+    ensure(k.numel() >= need_at(l.k_offset, l.k_ld, l.k_batch, l.kv_tokens), || {
+        format!("attention: K {:?} too small", k.shape())
+    })?;
+    ensure(v.numel() >= need_at(l.v_offset, l.v_ld, l.v_batch, l.kv_tokens), || {
+        format!("attention: V {:?} too small", v.shape())
+    })?;
+    ensure(out.numel() >= need(l.o_ld, l.o_batch, l.q_tokens), || {
+        format!("attention: output {:?} too small", out.shape())
+    })?;
     if !fit(rec.context(), &[q, k, v, out]) {
         return attention_banded(rec, [q, k, v], out, l, scale);
     }
-    let strides = [l.head_dim, l.q_ld, l.k_ld, l.v_ld, l.o_ld, l.q_batch, l.k_batch, l.v_batch, l.o_batch, l.q_offset, l.k_offset, l.v_offset];
+    let strides = [
+        l.head_dim, l.q_ld, l.k_ld, l.v_ld, l.o_ld, l.q_batch, l.k_batch, l.v_batch, l.o_batch, l.q_offset, l.k_offset,
+        l.v_offset,
+    ];
     if strides.iter().any(|s| s % 4 != 0) {
         return padded_attention(rec, [q, k, v], out, l, scale);
     }
@@ -92,8 +115,21 @@ pub fn attention(rec: &mut Recorder, q: &Tensor, k: &Tensor, v: &Tensor, out: &T
     let tm = variant.param("TM").unwrap() as usize;
     let kern = ctx.kernel(variant, 4)?;
     let push = [
-        u(l.q_tokens), u(l.kv_tokens), u(l.head_dim), u(l.q_ld), u(l.k_ld), u(l.v_ld), u(l.o_ld),
-        u(l.q_batch), u(l.k_batch), u(l.v_batch), u(l.o_batch), f(scale), u(l.q_offset), u(l.k_offset), u(l.v_offset),
+        u(l.q_tokens),
+        u(l.kv_tokens),
+        u(l.head_dim),
+        u(l.q_ld),
+        u(l.k_ld),
+        u(l.v_ld),
+        u(l.o_ld),
+        u(l.q_batch),
+        u(l.k_batch),
+        u(l.v_batch),
+        u(l.o_batch),
+        f(scale),
+        u(l.q_offset),
+        u(l.k_offset),
+        u(l.v_offset),
         l.causal as u32,
     ];
     rec.dispatch(&kern, &[q, k, v], &[out], &push, [u(l.q_tokens.div_ceil(tm)), u(l.heads), u(l.batch)])
@@ -118,7 +154,13 @@ fn subgroup_variant(ctx: &Context, dtype: Dtype, slots: u32) -> Option<&'static 
 
 /// Attention on operands past the binding limit: one batch at a time on views of its rows
 /// where those fit, else in groups of heads copied into dense operands that do.
-fn attention_banded(rec: &mut Recorder, [q, k, v]: [&Tensor; 3], out: &Tensor, l: &AttentionLayout, scale: f32) -> Result<()> {
+fn attention_banded(
+    rec: &mut Recorder,
+    [q, k, v]: [&Tensor; 3],
+    out: &Tensor,
+    l: &AttentionLayout,
+    scale: f32,
+) -> Result<()> {
     let ctx = rec.context().clone();
     let span = |offset: usize, batch: usize, ld: usize, tokens: usize, b: usize| {
         let start = offset + b * batch;
@@ -142,17 +184,32 @@ fn attention_banded(rec: &mut Recorder, [q, k, v]: [&Tensor; 3], out: &Tensor, l
 
 /// Batch `b` of attention in groups of heads, each copied into dense operands that fit one
 /// binding (heads padded to a multiple of 4), attended, and copied back.
-fn attention_by_heads(rec: &mut Recorder, [q, k, v]: [&Tensor; 3], out: &Tensor, l: &AttentionLayout, b: usize, scale: f32) -> Result<()> {
+fn attention_by_heads(
+    rec: &mut Recorder,
+    [q, k, v]: [&Tensor; 3],
+    out: &Tensor,
+    l: &AttentionLayout,
+    b: usize,
+    scale: f32,
+) -> Result<()> {
     let ctx = rec.context().clone();
     let padded = l.head_dim.next_multiple_of(4);
     let head_bytes = l.q_tokens.max(l.kv_tokens) * padded * elem(q);
     let per = (ctx.binding_limit() as usize / head_bytes).min(l.heads);
-    ensure(per > 0, || format!("attention: one head of {head_bytes} bytes does not fit the {} byte binding limit", ctx.binding_limit()))?;
+    ensure(per > 0, || {
+        format!("attention: one head of {head_bytes} bytes does not fit the {} byte binding limit", ctx.binding_limit())
+    })?;
     for heads in bands(l.heads, per) {
         let n = heads.len();
-        let dense = AttentionLayout { causal: l.causal, ..AttentionLayout::dense(1, n, padded, l.q_tokens, l.kv_tokens) };
+        let dense =
+            AttentionLayout { causal: l.causal, ..AttentionLayout::dense(1, n, padded, l.q_tokens, l.kv_tokens) };
         let dense_span = HeadSpan { offset: 0, ld: n * padded, batch: 0, head_dim: padded };
-        let strided = |offset: usize, batch: usize, ld: usize| HeadSpan { offset: offset + b * batch + heads.start * l.head_dim, ld, batch: 0, head_dim: l.head_dim };
+        let strided = |offset: usize, batch: usize, ld: usize| HeadSpan {
+            offset: offset + b * batch + heads.start * l.head_dim,
+            ld,
+            batch: 0,
+            head_dim: l.head_dim,
+        };
         let gather = |rec: &mut Recorder, t: &Tensor, from: HeadSpan, tokens: usize| -> Result<Tensor> {
             let to = ctx.zeros(&[tokens, n * padded], t.dtype())?;
             copy_heads(rec, t, &to, from, dense_span, 1, tokens, n)?;
@@ -171,10 +228,19 @@ fn attention_by_heads(rec: &mut Recorder, [q, k, v]: [&Tensor; 3], out: &Tensor,
 /// Attention on operands whose head size or strides are not multiples of 4 (the kernel reads
 /// vec4s): each copied into a dense layout with its heads padded by zeros to a multiple of 4,
 /// which add nothing to Q·Kᵀ and only make output columns that are then left behind.
-fn padded_attention(rec: &mut Recorder, [q, k, v]: [&Tensor; 3], out: &Tensor, l: &AttentionLayout, scale: f32) -> Result<()> {
+fn padded_attention(
+    rec: &mut Recorder,
+    [q, k, v]: [&Tensor; 3],
+    out: &Tensor,
+    l: &AttentionLayout,
+    scale: f32,
+) -> Result<()> {
     let ctx = rec.context().clone();
     let padded = l.head_dim.next_multiple_of(4);
-    let dense = AttentionLayout { causal: l.causal, ..AttentionLayout::dense(l.batch, l.heads, padded, l.q_tokens, l.kv_tokens) };
+    let dense = AttentionLayout {
+        causal: l.causal,
+        ..AttentionLayout::dense(l.batch, l.heads, padded, l.q_tokens, l.kv_tokens)
+    };
     let span = |offset, ld, batch, head_dim| HeadSpan { offset, ld, batch, head_dim };
     let dense_span = |tokens: usize| span(0, l.heads * padded, tokens * l.heads * padded, padded);
     let pad = |rec: &mut Recorder, t: &Tensor, from: HeadSpan, tokens: usize| -> Result<Tensor> {
@@ -187,7 +253,16 @@ fn padded_attention(rec: &mut Recorder, [q, k, v]: [&Tensor; 3], out: &Tensor, l
     let v_dense = pad(rec, v, span(l.v_offset, l.v_ld, l.v_batch, l.head_dim), l.kv_tokens)?;
     let o_dense = ctx.zeros(&[l.batch, l.q_tokens, l.heads * padded], out.dtype())?;
     attention(rec, &q_dense, &k_dense, &v_dense, &o_dense, &dense, scale)?;
-    copy_heads(rec, &o_dense, out, dense_span(l.q_tokens), span(0, l.o_ld, l.o_batch, l.head_dim), l.batch, l.q_tokens, l.heads)
+    copy_heads(
+        rec,
+        &o_dense,
+        out,
+        dense_span(l.q_tokens),
+        span(0, l.o_ld, l.o_batch, l.head_dim),
+        l.batch,
+        l.q_tokens,
+        l.heads,
+    )
 }
 
 /// Where the heads of one operand lie: element (b, token, head, d) at
@@ -203,19 +278,48 @@ pub struct HeadSpan {
 /// Copies every head of `src` into `dst`'s layout: the first min(head sizes) values of each
 /// head, and zeros where `dst`'s heads are wider.
 #[allow(clippy::too_many_arguments)]
-pub fn copy_heads(rec: &mut Recorder, src: &Tensor, dst: &Tensor, from: HeadSpan, to: HeadSpan, batch: usize, tokens: usize, heads: usize) -> Result<()> {
+pub fn copy_heads(
+    rec: &mut Recorder,
+    src: &Tensor,
+    dst: &Tensor,
+    from: HeadSpan,
+    to: HeadSpan,
+    batch: usize,
+    tokens: usize,
+    heads: usize,
+) -> Result<()> {
     let dtype = same_dtype(rec.context(), "copy_heads", &[src, dst])?;
     let extent = |s: HeadSpan| s.offset + (batch - 1) * s.batch + (tokens - 1) * s.ld + heads * s.head_dim;
-    ensure(batch > 0 && tokens > 0 && heads > 0 && from.head_dim > 0 && to.head_dim > 0, || "copy_heads: empty layout".into())?;
+    ensure(batch > 0 && tokens > 0 && heads > 0 && from.head_dim > 0 && to.head_dim > 0, || {
+        "copy_heads: empty layout".into()
+    })?;
     ensure(src.numel() >= extent(from) && dst.numel() >= extent(to), || {
-        format!("copy_heads: {from:?} of {:?} into {to:?} of {:?} for {batch}×{tokens}×{heads} heads", src.shape(), dst.shape())
+        format!(
+            "copy_heads: {from:?} of {:?} into {to:?} of {:?} for {batch}×{tokens}×{heads} heads",
+            src.shape(),
+            dst.shape()
+        )
     })?;
     let k = kernel(rec.context(), "copy_heads", dtype, &[], 2)?;
-    let record = |rec: &mut Recorder, src: &Tensor, dst: &Tensor, from: HeadSpan, to: HeadSpan, batch: usize, tokens: usize| {
-        let n = batch * tokens * heads * to.head_dim;
-        let push = [n, tokens, heads, from.head_dim, to.head_dim, from.ld, to.ld, from.batch, to.batch, from.offset, to.offset].map(u);
-        dispatch_flat(rec, &k, &[src], &[dst], &push, element_groups(n))
-    };
+    let record =
+        |rec: &mut Recorder, src: &Tensor, dst: &Tensor, from: HeadSpan, to: HeadSpan, batch: usize, tokens: usize| {
+            let n = batch * tokens * heads * to.head_dim;
+            let push = [
+                n,
+                tokens,
+                heads,
+                from.head_dim,
+                to.head_dim,
+                from.ld,
+                to.ld,
+                from.batch,
+                to.batch,
+                from.offset,
+                to.offset,
+            ]
+            .map(u);
+            dispatch_flat(rec, &k, &[src], &[dst], &push, element_groups(n))
+        };
     if fit(rec.context(), &[src, dst]) {
         return record(rec, src, dst, from, to, batch, tokens);
     }
@@ -234,7 +338,15 @@ pub fn copy_heads(rec: &mut Recorder, src: &Tensor, dst: &Tensor, from: HeadSpan
         for band in bands(tokens, per) {
             let (sv, src_offset) = span_view(src, rows(from, b, &band))?;
             let (dv, dst_offset) = span_view(dst, rows(to, b, &band))?;
-            record(rec, &sv, &dv, HeadSpan { offset: src_offset, batch: 0, ..from }, HeadSpan { offset: dst_offset, batch: 0, ..to }, 1, band.len())?;
+            record(
+                rec,
+                &sv,
+                &dv,
+                HeadSpan { offset: src_offset, batch: 0, ..from },
+                HeadSpan { offset: dst_offset, batch: 0, ..to },
+                1,
+                band.len(),
+            )?;
         }
     }
     Ok(())

@@ -29,19 +29,33 @@ pub(super) fn image_rows(t: &Tensor, b: usize, rows: Range<usize>) -> Result<Ten
 /// The most rows one binding holds of tensors whose rows take `row_bytes` bytes each (plus
 /// `halo` further rows), such that every band starts on the device's binding alignment in each
 /// tensor, and as a multiple of `multiple` when possible.
-pub(super) fn rows_per_band(ctx: &Context, what: &str, row_bytes: &[usize], halo: usize, multiple: usize) -> Result<usize> {
+pub(super) fn rows_per_band(
+    ctx: &Context,
+    what: &str,
+    row_bytes: &[usize],
+    halo: usize,
+    multiple: usize,
+) -> Result<usize> {
     let widest = row_bytes.iter().copied().max().unwrap_or(1).max(1);
     let fit = (ctx.binding_limit() as usize / widest).saturating_sub(halo);
-    ensure(fit > 0, || format!("{what}: one row of {widest} bytes does not fit the {} byte binding limit", ctx.binding_limit()))?;
+    ensure(fit > 0, || {
+        format!("{what}: one row of {widest} bytes does not fit the {} byte binding limit", ctx.binding_limit())
+    })?;
     let align = ctx.info().binding_alignment() as usize;
     let aligned = row_bytes.iter().fold(1, |step, &b| lcm(step, align / gcd(align, b.max(1))));
-    ensure(fit >= aligned, || format!("{what}: {fit} rows fit the binding limit, fewer than the {aligned} that keep bands on the device's {align}-byte alignment"))?;
+    ensure(fit >= aligned, || {
+        format!("{what}: {fit} rows fit the binding limit, fewer than the {aligned} that keep bands on the device's {align}-byte alignment")
+    })?;
     let step = if fit >= lcm(aligned, multiple) { lcm(aligned, multiple) } else { aligned };
     Ok(fit - fit % step)
 }
 
 fn gcd(a: usize, b: usize) -> usize {
-    if b == 0 { a } else { gcd(b, a % b) }
+    if b == 0 {
+        a
+    } else {
+        gcd(b, a % b)
+    }
 }
 
 fn lcm(a: usize, b: usize) -> usize {

@@ -60,14 +60,26 @@ pub fn oihw_to_ohwi(w: &[f32], cout: usize, cin: usize, kh: usize, kw: usize) ->
 /// out[B, Ho, Wo, Cout] = conv(x[B, H, W, Cin], w[Cout, KH, KW, Cin]) (+ bias) (+ out) (ReLU), with the
 /// output size implied by stride and padding. Input or output past the binding limit is
 /// convolved in bands of output rows, each reading its input rows plus the kernel's halo.
-pub fn conv2d(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor, p: &ConvParams) -> Result<()> {
+pub fn conv2d(
+    rec: &mut Recorder,
+    x: &Tensor,
+    w: &Tensor,
+    bias: Option<&Tensor>,
+    out: &Tensor,
+    p: &ConvParams,
+) -> Result<()> {
     if fit(rec.context(), &[x, out]) || x.shape().len() != 4 || out.shape().len() != 4 || w.shape().len() != 4 {
         return conv2d_whole(rec, x, w, bias, out, p);
     }
     let [b, h, wd, cin] = [x.shape()[0], x.shape()[1], x.shape()[2], x.shape()[3]];
     let [ho, wo, cout] = [out.shape()[1], out.shape()[2], out.shape()[3]];
     let (kh, kw, s) = (w.shape()[1], w.shape()[2], p.stride.max(1));
-    let expect = [b, (h + p.pad.top + p.pad.bottom).saturating_sub(kh) / s + 1, (wd + p.pad.left + p.pad.right).saturating_sub(kw) / s + 1, w.shape()[0]];
+    let expect = [
+        b,
+        (h + p.pad.top + p.pad.bottom).saturating_sub(kh) / s + 1,
+        (wd + p.pad.left + p.pad.right).saturating_sub(kw) / s + 1,
+        w.shape()[0],
+    ];
     ensure(out.shape() == expect, || format!("conv2d: output {:?}, expected {expect:?}", out.shape()))?;
     let ctx = rec.context().clone();
     let by_out = rows_per_band(&ctx, "conv2d", &[wo * cout * elem(out)], 0, 1)?;
@@ -86,26 +98,60 @@ pub fn conv2d(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>,
     Ok(())
 }
 
-fn conv2d_whole(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor, p: &ConvParams) -> Result<()> {
+fn conv2d_whole(
+    rec: &mut Recorder,
+    x: &Tensor,
+    w: &Tensor,
+    bias: Option<&Tensor>,
+    out: &Tensor,
+    p: &ConvParams,
+) -> Result<()> {
     let (stride, pad) = (p.stride, p.pad);
     let dtype = same_dtype(rec.context(), "conv2d", &[x, w, out])?;
     ensure(x.shape().len() == 4 && w.shape().len() == 4 && out.shape().len() == 4, || {
-        format!("conv2d: want NHWC input, OHWI weight, NHWC output; got {:?}, {:?}, {:?}", x.shape(), w.shape(), out.shape())
+        format!(
+            "conv2d: want NHWC input, OHWI weight, NHWC output; got {:?}, {:?}, {:?}",
+            x.shape(),
+            w.shape(),
+            out.shape()
+        )
     })?;
     let [b, h, wd, cin] = [x.shape()[0], x.shape()[1], x.shape()[2], x.shape()[3]];
     let [cout, kh, kw, wcin] = [w.shape()[0], w.shape()[1], w.shape()[2], w.shape()[3]];
     ensure(wcin == cin, || format!("conv2d: weight {:?} takes {wcin} channels, input has {cin}", w.shape()))?;
-    ensure(stride > 0 && h + pad.top + pad.bottom >= kh && wd + pad.left + pad.right >= kw, || "conv2d: kernel larger than padded input".into())?;
+    ensure(stride > 0 && h + pad.top + pad.bottom >= kh && wd + pad.left + pad.right >= kw, || {
+        "conv2d: kernel larger than padded input".into()
+    })?;
     let ho = (h + pad.top + pad.bottom - kh) / stride + 1;
     let wo = (wd + pad.left + pad.right - kw) / stride + 1;
-    ensure(out.shape() == [b, ho, wo, cout], || format!("conv2d: output {:?}, expected {:?}", out.shape(), [b, ho, wo, cout]))?;
+    ensure(out.shape() == [b, ho, wo, cout], || {
+        format!("conv2d: output {:?}, expected {:?}", out.shape(), [b, ho, wo, cout])
+    })?;
     if let Some(bias) = bias {
-        ensure(bias.numel() == cout && bias.dtype() == dtype, || format!("conv2d: bias {:?} for {cout} channels", bias.shape()))?;
+        ensure(bias.numel() == cout && bias.dtype() == dtype, || {
+            format!("conv2d: bias {:?} for {cout} channels", bias.shape())
+        })?;
     }
     let (m, n, k) = (b * ho * wo, cout, kh * kw * cin);
     let push = [
-        u(m), u(n), u(k), u(k), u(n), 0, 0, bias.is_some() as u32 | (p.accumulate as u32) << 1 | (p.relu as u32) << 2, f(1.0),
-        u(h), u(wd), u(cin), u(ho), u(wo), u(kw), u(stride), u(pad.top), u(pad.left),
+        u(m),
+        u(n),
+        u(k),
+        u(k),
+        u(n),
+        0,
+        0,
+        bias.is_some() as u32 | (p.accumulate as u32) << 1 | (p.relu as u32) << 2,
+        f(1.0),
+        u(h),
+        u(wd),
+        u(cin),
+        u(ho),
+        u(wo),
+        u(kw),
+        u(stride),
+        u(pad.top),
+        u(pad.left),
     ];
     // Without a bias the kernel never reads binding 2; the output stands in for it.
     let bias = bias.unwrap_or(out);

@@ -3,9 +3,9 @@
 use super::bands::{bands, elem, fit, image_rows, row_view, rows_per_band};
 use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u};
 use crate::error::{ensure, Result};
-use std::ops::Range;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
+use std::ops::Range;
 
 /// Unary functions, numbered as in `kernels/wgsl/unary.wgsl`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -44,11 +44,23 @@ pub fn unary(rec: &mut Recorder, op: UnaryOp, x: &Tensor, out: &Tensor, alpha: f
 
 /// out = a op b, where b's flat index is `(i / b_outer)·b_inner + i % b_inner` (see binary.wgsl).
 /// Past the binding limit, in runs of elements, each binding the part of b it reads.
-pub fn binary(rec: &mut Recorder, op: BinaryOp, a: &Tensor, b: &Tensor, out: &Tensor, b_inner: usize, b_outer: usize) -> Result<()> {
+pub fn binary(
+    rec: &mut Recorder,
+    op: BinaryOp,
+    a: &Tensor,
+    b: &Tensor,
+    out: &Tensor,
+    b_inner: usize,
+    b_outer: usize,
+) -> Result<()> {
     let dtype = same_dtype(rec.context(), "binary", &[a, b, out])?;
     let n = a.numel();
-    ensure(out.numel() == n && b_inner > 0 && b_outer > 0, || format!("{op:?}: {:?} into {:?}", a.shape(), out.shape()))?;
-    ensure((n - 1) / b_outer * b_inner + b_inner.min(n) <= b.numel(), || format!("{op:?}: {:?} cannot broadcast over {:?}", b.shape(), a.shape()))?;
+    ensure(out.numel() == n && b_inner > 0 && b_outer > 0, || {
+        format!("{op:?}: {:?} into {:?}", a.shape(), out.shape())
+    })?;
+    ensure((n - 1) / b_outer * b_inner + b_inner.min(n) <= b.numel(), || {
+        format!("{op:?}: {:?} cannot broadcast over {:?}", b.shape(), a.shape())
+    })?;
     let k = kernel(rec.context(), "binary", dtype, &[("OP", op as u32)], 3)?;
     if fit(rec.context(), &[a, b, out]) {
         return dispatch_flat(rec, &k, &[a, b], &[out], &[u(n), u(b_inner), u(b_outer), 0, 0], element_groups(n));
@@ -60,7 +72,8 @@ pub fn binary(rec: &mut Recorder, op: BinaryOp, a: &Tensor, b: &Tensor, out: &Te
     for run in bands(n, per) {
         let reads = broadcast_span(run.clone(), b_inner, b_outer);
         let first = reads.start - reads.start % slack;
-        let (xs, ys, bs) = (row_view(a, 1, run.clone())?, row_view(out, 1, run.clone())?, row_view(b, 1, first..reads.end)?);
+        let (xs, ys, bs) =
+            (row_view(a, 1, run.clone())?, row_view(out, 1, run.clone())?, row_view(b, 1, first..reads.end)?);
         let push = [u(run.len()), u(b_inner), u(b_outer), u(run.start), u(first)];
         dispatch_flat(rec, &k, &[&xs, &bs], &[&ys], &push, element_groups(run.len()))?;
     }
@@ -111,10 +124,16 @@ pub fn mul(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor) -> Result<(
 pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
     let dtype = same_dtype(rec.context(), "geglu", &[x, out])?;
     let two_f = *x.shape().last().unwrap_or(&0);
-    ensure(two_f.is_multiple_of(2) && two_f > 0 && out.numel() * 2 == x.numel(), || format!("geglu: {:?} into {:?}", x.shape(), out.shape()))?;
+    ensure(two_f.is_multiple_of(2) && two_f > 0 && out.numel() * 2 == x.numel(), || {
+        format!("geglu: {:?} into {:?}", x.shape(), out.shape())
+    })?;
     let k = kernel(rec.context(), "geglu", dtype, &[], 2)?;
     let rows = x.numel() / two_f;
-    let per = if fit(rec.context(), &[x, out]) { rows } else { rows_per_band(rec.context(), "geglu", &[two_f * elem(x), two_f / 2 * elem(x)], 0, 64)? };
+    let per = if fit(rec.context(), &[x, out]) {
+        rows
+    } else {
+        rows_per_band(rec.context(), "geglu", &[two_f * elem(x), two_f / 2 * elem(x)], 0, 64)?
+    };
     for band in bands(rows, per) {
         let (xs, ys) = (row_view(x, two_f, band.clone())?, row_view(out, two_f / 2, band)?);
         dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(ys.numel()), u(two_f / 2)], element_groups(ys.numel()))?;
@@ -127,16 +146,38 @@ pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
 pub fn upsample_nearest2x(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
     let dtype = same_dtype(rec.context(), "upsample", &[x, out])?;
     let s = x.shape().to_vec();
-    ensure(s.len() == 4 && out.shape() == [s[0], 2 * s[1], 2 * s[2], s[3]], || format!("upsample: {:?} into {:?}", s, out.shape()))?;
+    ensure(s.len() == 4 && out.shape() == [s[0], 2 * s[1], 2 * s[2], s[3]], || {
+        format!("upsample: {:?} into {:?}", s, out.shape())
+    })?;
     let k = kernel(rec.context(), "upsample_nearest2x", dtype, &[], 2)?;
     if fit(rec.context(), &[x, out]) {
-        return dispatch_flat(rec, &k, &[x], &[out], &[u(out.numel()), u(s[1]), u(s[2]), u(s[3])], element_groups(out.numel()));
+        return dispatch_flat(
+            rec,
+            &k,
+            &[x],
+            &[out],
+            &[u(out.numel()), u(s[1]), u(s[2]), u(s[3])],
+            element_groups(out.numel()),
+        );
     }
-    let per = rows_per_band(rec.context(), "upsample", &[2 * out.shape()[2] * s[3] * elem(out), s[2] * s[3] * elem(x)], 0, 1)?;
+    let per = rows_per_band(
+        rec.context(),
+        "upsample",
+        &[2 * out.shape()[2] * s[3] * elem(out), s[2] * s[3] * elem(x)],
+        0,
+        1,
+    )?;
     for image in 0..s[0] {
         for rows in bands(s[1], per) {
             let (xs, ys) = (image_rows(x, image, rows.clone())?, image_rows(out, image, 2 * rows.start..2 * rows.end)?);
-            dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(ys.numel()), u(rows.len()), u(s[2]), u(s[3])], element_groups(ys.numel()))?;
+            dispatch_flat(
+                rec,
+                &k,
+                &[&xs],
+                &[&ys],
+                &[u(ys.numel()), u(rows.len()), u(s[2]), u(s[3])],
+                element_groups(ys.numel()),
+            )?;
         }
     }
     Ok(())
@@ -147,14 +188,20 @@ pub fn concat_channels(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor)
     let dtype = same_dtype(rec.context(), "concat", &[a, b, out])?;
     let (c1, c2) = (*a.shape().last().unwrap_or(&0), *b.shape().last().unwrap_or(&0));
     let lead = |t: &Tensor| t.shape()[..t.shape().len() - 1].to_vec();
-    ensure(c1 > 0 && c2 > 0 && lead(a) == lead(b) && lead(out) == lead(a) && out.shape().last() == Some(&(c1 + c2)), || {
-        format!("concat: {:?} + {:?} into {:?}", a.shape(), b.shape(), out.shape())
-    })?;
+    ensure(
+        c1 > 0 && c2 > 0 && lead(a) == lead(b) && lead(out) == lead(a) && out.shape().last() == Some(&(c1 + c2)),
+        || format!("concat: {:?} + {:?} into {:?}", a.shape(), b.shape(), out.shape()),
+    )?;
     let k = kernel(rec.context(), "concat_channels", dtype, &[], 3)?;
     let rows = a.numel() / c1;
-    let per = if fit(rec.context(), &[a, b, out]) { rows } else { rows_per_band(rec.context(), "concat", &[c1 * elem(a), c2 * elem(a), (c1 + c2) * elem(a)], 0, 64)? };
+    let per = if fit(rec.context(), &[a, b, out]) {
+        rows
+    } else {
+        rows_per_band(rec.context(), "concat", &[c1 * elem(a), c2 * elem(a), (c1 + c2) * elem(a)], 0, 64)?
+    };
     for band in bands(rows, per) {
-        let (av, bv, ov) = (row_view(a, c1, band.clone())?, row_view(b, c2, band.clone())?, row_view(out, c1 + c2, band)?);
+        let (av, bv, ov) =
+            (row_view(a, c1, band.clone())?, row_view(b, c2, band.clone())?, row_view(out, c1 + c2, band)?);
         dispatch_flat(rec, &k, &[&av, &bv], &[&ov], &[u(ov.numel()), u(c1), u(c2)], element_groups(ov.numel()))?;
     }
     Ok(())
@@ -171,10 +218,21 @@ pub fn copy_into_channels(rec: &mut Recorder, x: &Tensor, out: &Tensor, offset: 
     })?;
     let k = kernel(rec.context(), "copy_channels", dtype, &[], 2)?;
     let rows = x.numel() / c;
-    let per = if fit(rec.context(), &[x, out]) { rows } else { rows_per_band(rec.context(), "copy_into_channels", &[c * elem(x), c_out * elem(x)], 0, 64)? };
+    let per = if fit(rec.context(), &[x, out]) {
+        rows
+    } else {
+        rows_per_band(rec.context(), "copy_into_channels", &[c * elem(x), c_out * elem(x)], 0, 64)?
+    };
     for band in bands(rows, per) {
         let (xv, ov) = (row_view(x, c, band.clone())?, row_view(out, c_out, band)?);
-        dispatch_flat(rec, &k, &[&xv], &[&ov], &[u(xv.numel()), u(c), u(c_out), u(offset)], element_groups(xv.numel()))?;
+        dispatch_flat(
+            rec,
+            &k,
+            &[&xv],
+            &[&ov],
+            &[u(xv.numel()), u(c), u(c_out), u(offset)],
+            element_groups(xv.numel()),
+        )?;
     }
     Ok(())
 }
@@ -194,7 +252,9 @@ pub fn timestep_embedding(rec: &mut Recorder, timesteps: &Tensor, out: &Tensor, 
     ensure(timesteps.dtype() == Dtype::F32, || "timestep_embedding: timesteps must be f32".into())?;
     let dtype = same_dtype(rec.context(), "timestep_embedding", &[out])?;
     let b = timesteps.numel();
-    ensure(out.shape() == [b, e.dim], || format!("timestep_embedding: output {:?}, expected [{b}, {}]", out.shape(), e.dim))?;
+    ensure(out.shape() == [b, e.dim], || {
+        format!("timestep_embedding: output {:?}, expected [{b}, {}]", out.shape(), e.dim)
+    })?;
     let k = kernel(rec.context(), "timestep_embedding", dtype, &[], 2)?;
     let push = [u(e.dim), u(b), e.flip_sin_to_cos as u32, f(e.downscale_freq_shift), f(e.max_period.ln()), f(e.scale)];
     rec.dispatch(&k, &[timesteps], &[out], &push, [u((b * e.dim).div_ceil(64)), 1, 1])

@@ -49,7 +49,9 @@ impl Matmul {
     }
 
     fn fits_vec4(&self) -> bool {
-        [self.n, self.k, self.lda, self.ldb, self.ldc, self.a_batch, self.b_batch, self.c_batch].iter().all(|x| x % 4 == 0)
+        [self.n, self.k, self.lda, self.ldb, self.ldc, self.a_batch, self.b_batch, self.c_batch]
+            .iter()
+            .all(|x| x % 4 == 0)
     }
 
     /// Highest element index + 1 an operand is read or written at.
@@ -60,7 +62,14 @@ impl Matmul {
 
 /// Records C = alpha·A·B (+ bias) (+ C) as described by `spec`. A single product whose A or C
 /// passes the binding limit runs in bands of rows, each a product of its own.
-pub fn matmul(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>, c: &Tensor, spec: &Matmul) -> Result<()> {
+pub fn matmul(
+    rec: &mut Recorder,
+    a: &Tensor,
+    b: &Tensor,
+    bias: Option<&Tensor>,
+    c: &Tensor,
+    spec: &Matmul,
+) -> Result<()> {
     if spec.batch > 1 && !fit(rec.context(), &[a, b, c]) {
         return matmul_per_batch(rec, a, b, bias, c, spec);
     }
@@ -69,11 +78,16 @@ pub fn matmul(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>,
     }
     let rows_of = |t: &Tensor, ld: usize| t.numel().is_multiple_of(ld).then(|| t.numel() / ld);
     ensure(rows_of(a, spec.lda) >= Some(spec.m) && rows_of(c, spec.ldc) >= Some(spec.m), || {
-        format!("matmul: A {:?} or C {:?} pass the binding limit and are not whole rows of {spec:?}", a.shape(), c.shape())
+        format!(
+            "matmul: A {:?} or C {:?} pass the binding limit and are not whole rows of {spec:?}",
+            a.shape(),
+            c.shape()
+        )
     })?;
     let per = rows_per_band(rec.context(), "matmul", &[spec.lda * elem(a), spec.ldc * elem(c)], 0, 64)?;
     for rows in bands(spec.m, per) {
-        let band = Matmul { m: rows.len(), a_batch: rows.len() * spec.lda, c_batch: rows.len() * spec.ldc, ..spec.clone() };
+        let band =
+            Matmul { m: rows.len(), a_batch: rows.len() * spec.lda, c_batch: rows.len() * spec.ldc, ..spec.clone() };
         matmul_whole(rec, &row_view(a, spec.lda, rows.clone())?, b, bias, &row_view(c, spec.ldc, rows)?, &band)?;
     }
     Ok(())
@@ -81,7 +95,14 @@ pub fn matmul(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>,
 
 /// A batched product past the binding limit: one product per batch entry, each on views of
 /// its own operands (shared ones whole), which must start on the binding alignment.
-fn matmul_per_batch(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>, c: &Tensor, spec: &Matmul) -> Result<()> {
+fn matmul_per_batch(
+    rec: &mut Recorder,
+    a: &Tensor,
+    b: &Tensor,
+    bias: Option<&Tensor>,
+    c: &Tensor,
+    spec: &Matmul,
+) -> Result<()> {
     let (b_rows, b_cols) = if spec.b_transposed { (spec.n, spec.k) } else { (spec.k, spec.n) };
     for i in 0..spec.batch {
         let view = |t: &Tensor, stride: usize, rows: usize, ld: usize, cols: usize| -> Result<Tensor> {
@@ -90,29 +111,62 @@ fn matmul_per_batch(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Te
             }
             let start = i * stride;
             let (v, before) = span_view(t, start..start + Matmul::extent(1, 0, rows, ld, cols))?;
-            ensure(before == 0, || format!("matmul: batch {i} of {:?} starts off the device's binding alignment", t.shape()))?;
+            ensure(before == 0, || {
+                format!("matmul: batch {i} of {:?} starts off the device's binding alignment", t.shape())
+            })?;
             Ok(v)
         };
         let one = Matmul { batch: 1, ..spec.clone() };
-        let (av, bv, cv) = (view(a, spec.a_batch, spec.m, spec.lda, spec.k)?, view(b, spec.b_batch, b_rows, spec.ldb, b_cols)?, view(c, spec.c_batch, spec.m, spec.ldc, spec.n)?);
+        let (av, bv, cv) = (
+            view(a, spec.a_batch, spec.m, spec.lda, spec.k)?,
+            view(b, spec.b_batch, b_rows, spec.ldb, b_cols)?,
+            view(c, spec.c_batch, spec.m, spec.ldc, spec.n)?,
+        );
         matmul(rec, &av, &bv, bias, &cv, &one)?;
     }
     Ok(())
 }
 
-fn matmul_whole(rec: &mut Recorder, a: &Tensor, b: &Tensor, bias: Option<&Tensor>, c: &Tensor, spec: &Matmul) -> Result<()> {
+fn matmul_whole(
+    rec: &mut Recorder,
+    a: &Tensor,
+    b: &Tensor,
+    bias: Option<&Tensor>,
+    c: &Tensor,
+    spec: &Matmul,
+) -> Result<()> {
     let s = spec;
     ensure(s.batch > 0 && s.m > 0 && s.n > 0 && s.k > 0, || format!("matmul: empty shape {s:?}"))?;
     let dtype = same_dtype(rec.context(), "matmul", &[a, b, c])?;
     let (b_rows, b_cols) = if s.b_transposed { (s.n, s.k) } else { (s.k, s.n) };
-    ensure(a.numel() >= Matmul::extent(s.batch, s.a_batch, s.m, s.lda, s.k), || format!("matmul: A {:?} too small for {s:?}", a.shape()))?;
-    ensure(b.numel() >= Matmul::extent(s.batch, s.b_batch, b_rows, s.ldb, b_cols), || format!("matmul: B {:?} too small for {s:?}", b.shape()))?;
-    ensure(c.numel() >= Matmul::extent(s.batch, s.c_batch, s.m, s.ldc, s.n), || format!("matmul: C {:?} too small for {s:?}", c.shape()))?;
+    ensure(a.numel() >= Matmul::extent(s.batch, s.a_batch, s.m, s.lda, s.k), || {
+        format!("matmul: A {:?} too small for {s:?}", a.shape())
+    })?;
+    ensure(b.numel() >= Matmul::extent(s.batch, s.b_batch, b_rows, s.ldb, b_cols), || {
+        format!("matmul: B {:?} too small for {s:?}", b.shape())
+    })?;
+    ensure(c.numel() >= Matmul::extent(s.batch, s.c_batch, s.m, s.ldc, s.n), || {
+        format!("matmul: C {:?} too small for {s:?}", c.shape())
+    })?;
     if let Some(bias) = bias {
-        ensure(bias.numel() >= s.n && bias.dtype() == dtype, || format!("matmul: bias {:?} for N = {}", bias.shape(), s.n))?;
+        ensure(bias.numel() >= s.n && bias.dtype() == dtype, || {
+            format!("matmul: bias {:?} for N = {}", bias.shape(), s.n)
+        })?;
     }
     let flags = bias.is_some() as u32 | (s.accumulate as u32) << 1;
-    let common = [u(s.m), u(s.n), u(s.k), u(s.ldb), u(s.ldc), u(s.b_batch), u(s.c_batch), flags, f(s.alpha), u(s.lda), u(s.a_batch)];
+    let common = [
+        u(s.m),
+        u(s.n),
+        u(s.k),
+        u(s.ldb),
+        u(s.ldc),
+        u(s.b_batch),
+        u(s.c_batch),
+        flags,
+        f(s.alpha),
+        u(s.lda),
+        u(s.a_batch),
+    ];
     // Without a bias the kernel never reads binding 2; C stands in for it.
     let bias = bias.unwrap_or(c);
     let shape = GemmShape { m: s.m, n: s.n, batch: s.batch, fits_subgroup: s.fits_vec4() };
@@ -141,9 +195,16 @@ pub(super) fn dispatch_gemm_family(
     push: &[u32],
 ) -> Result<()> {
     let ctx = rec.context().clone();
-    let width = ctx.info().gemm_subgroup_width().filter(|_| ctx.gemm_family() == GemmFamily::Subgroup && s.fits_subgroup);
+    let width =
+        ctx.info().gemm_subgroup_width().filter(|_| ctx.gemm_family() == GemmFamily::Subgroup && s.fits_subgroup);
     if let Some(sg) = width {
-        let tm: u32 = if s.m >= 1024 && sg < 16 && tall_tiles_compile_fast(ctx.info()) { 64 } else if s.m >= 256 { 32 } else { 16 };
+        let tm: u32 = if s.m >= 1024 && sg < 16 && tall_tiles_compile_fast(ctx.info()) {
+            64
+        } else if s.m >= 256 {
+            32
+        } else {
+            16
+        };
         let want: Vec<(&str, u32)> = [("SG", sg), ("TM", tm)].into_iter().chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.0, dtype, &want, 4)?;
         let columns = u(s.n.div_ceil(8 * sg as usize));

@@ -11,7 +11,10 @@ mod pool;
 
 pub use attention::{attention, copy_heads, AttentionLayout, HeadSpan};
 pub use conv::{conv2d, oihw_to_ohwi, ConvParams, Padding};
-pub use elementwise::{add, binary, concat_channels, copy_into_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x, BinaryOp, TimestepEmbedding, UnaryOp};
+pub use elementwise::{
+    add, binary, concat_channels, copy_into_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x,
+    BinaryOp, TimestepEmbedding, UnaryOp,
+};
 pub use gemm::{linear, matmul, Matmul};
 pub use norm::{group_norm, layer_norm, softmax};
 pub use pool::{pool2d, resize_tf1, upload_image_bytes, Pool, PoolOp};
@@ -34,7 +37,9 @@ fn kernel(ctx: &Context, name: &'static str, dtype: Dtype, want: &[(&str, u32)],
 fn same_dtype(ctx: &Context, op: &str, tensors: &[&Tensor]) -> Result<Dtype> {
     let dtype = tensors[0].dtype();
     ensure(tensors.iter().all(|t| t.dtype() == dtype), || format!("{op}: tensors mix f32 and f16"))?;
-    ensure(dtype == Dtype::F32 || ctx.info().supports_f16(), || format!("{op}: device `{}` has no f16 storage", ctx.info().name))?;
+    ensure(dtype == Dtype::F32 || ctx.info().supports_f16(), || {
+        format!("{op}: device `{}` has no f16 storage", ctx.info().name)
+    })?;
     Ok(dtype)
 }
 
@@ -46,7 +51,14 @@ fn element_groups(n: usize) -> usize {
     n.div_ceil(64)
 }
 
-fn dispatch_flat(rec: &mut Recorder, k: &Arc<Kernel>, reads: &[&Tensor], writes: &[&Tensor], push: &[u32], groups: usize) -> Result<()> {
+fn dispatch_flat(
+    rec: &mut Recorder,
+    k: &Arc<Kernel>,
+    reads: &[&Tensor],
+    writes: &[&Tensor],
+    push: &[u32],
+    groups: usize,
+) -> Result<()> {
     let gx = groups.clamp(1, 65535);
     let words: Vec<u32> = push.iter().copied().chain([gx as u32]).collect();
     rec.dispatch(k, reads, writes, &words, [gx as u32, groups.div_ceil(gx) as u32, 1])

@@ -2,18 +2,29 @@
 
 use super::bands::{bands, elem, fit, row_view, rows_per_band};
 use super::{dispatch_flat, f, kernel, rows_of, same_dtype, u};
-use crate::tensor::Dtype;
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
+use crate::tensor::Dtype;
 use crate::tensor::Tensor;
 
 /// GroupNorm of x[B, ..., C] (channels last) with `groups` groups, optionally followed by SiLU.
-pub fn group_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor, out: &Tensor, groups: usize, eps: f32, silu: bool) -> Result<()> {
+pub fn group_norm(
+    rec: &mut Recorder,
+    x: &Tensor,
+    gamma: &Tensor,
+    beta: &Tensor,
+    out: &Tensor,
+    groups: usize,
+    eps: f32,
+    silu: bool,
+) -> Result<()> {
     let dtype = same_dtype(rec.context(), "group_norm", &[x, gamma, beta, out])?;
     ensure(x.shape().len() >= 2, || format!("group_norm: want [B, ..., C], got {:?}", x.shape()))?;
     let (b, c) = (x.shape()[0], *x.shape().last().unwrap());
     ensure(groups > 0 && c % groups == 0, || format!("group_norm: {c} channels do not split into {groups} groups"))?;
-    ensure(gamma.numel() == c && beta.numel() == c && out.shape() == x.shape(), || "group_norm: affine or output shape mismatch".into())?;
+    ensure(gamma.numel() == c && beta.numel() == c && out.shape() == x.shape(), || {
+        "group_norm: affine or output shape mismatch".into()
+    })?;
     let hw = x.numel() / (b * c);
     if !fit(rec.context(), &[x, out]) {
         return group_norm_banded(rec, [x, gamma, beta, out], (b, hw, c), groups, eps, silu);
@@ -24,7 +35,14 @@ pub fn group_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor,
 
 /// GroupNorm over bands of pixels: every band's statistics first, then each band normalised
 /// with its image's merged statistics, so the result equals the whole-tensor one.
-fn group_norm_banded(rec: &mut Recorder, [x, gamma, beta, out]: [&Tensor; 4], (b, hw, c): (usize, usize, usize), groups: usize, eps: f32, silu: bool) -> Result<()> {
+fn group_norm_banded(
+    rec: &mut Recorder,
+    [x, gamma, beta, out]: [&Tensor; 4],
+    (b, hw, c): (usize, usize, usize),
+    groups: usize,
+    eps: f32,
+    silu: bool,
+) -> Result<()> {
     let ctx = rec.context().clone();
     let per = rows_per_band(&ctx, "group_norm", &[c * elem(x)], 0, 64)?;
     let parts = hw.div_ceil(per);
@@ -52,7 +70,9 @@ fn group_norm_banded(rec: &mut Recorder, [x, gamma, beta, out]: [&Tensor; 4], (b
 pub fn layer_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor, out: &Tensor, eps: f32) -> Result<()> {
     let dtype = same_dtype(rec.context(), "layer_norm", &[x, gamma, beta, out])?;
     let (rows, c) = rows_of(x, "layer_norm")?;
-    ensure(gamma.numel() == c && beta.numel() == c && out.shape() == x.shape(), || "layer_norm: affine or output shape mismatch".into())?;
+    ensure(gamma.numel() == c && beta.numel() == c && out.shape() == x.shape(), || {
+        "layer_norm: affine or output shape mismatch".into()
+    })?;
     let k = kernel(rec.context(), "layer_norm", dtype, &[], 4)?;
     for band in row_bands(rec, "layer_norm", x, out, rows, c)? {
         let (xs, ys) = (row_view(x, c, band.clone())?, row_view(out, c, band.clone())?);
@@ -62,8 +82,16 @@ pub fn layer_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor,
 }
 
 /// Bands of whole rows of `x` and `out` that fit one binding (one band when both fit).
-fn row_bands(rec: &Recorder, what: &str, x: &Tensor, out: &Tensor, rows: usize, c: usize) -> Result<impl Iterator<Item = std::ops::Range<usize>>> {
-    let per = if fit(rec.context(), &[x, out]) { rows } else { rows_per_band(rec.context(), what, &[c * elem(x)], 0, 1)? };
+fn row_bands(
+    rec: &Recorder,
+    what: &str,
+    x: &Tensor,
+    out: &Tensor,
+    rows: usize,
+    c: usize,
+) -> Result<impl Iterator<Item = std::ops::Range<usize>>> {
+    let per =
+        if fit(rec.context(), &[x, out]) { rows } else { rows_per_band(rec.context(), what, &[c * elem(x)], 0, 1)? };
     Ok(bands(rows, per))
 }
 

@@ -1,0 +1,15 @@
+//! Image files as 8-bit RGB, exactly as Pillow gives them: PNG through the `png` crate and JPEG
+//! through our own decoder written to libjpeg-turbo's arithmetic.
+
+mod jpeg;
+mod read;
+
+pub use read::{decode_image, read_control_image, read_image};
+
+/// 8-bit RGB pixels, row-major, 3 bytes per pixel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RgbImage {
+    pub width: usize,
+    pub height: usize,
+    pub pixels: Vec<u8>,
+}

@@ -1,0 +1,17 @@
+//! The file formats vkdiff reads and writes, below the networks and the metrics that use them:
+//! safetensors (memory-mapped), PyTorch `.pth` files (a state dict, read without running pickled
+//! code), and PNG/JPEG images decoded as `PIL.Image.open(path).convert("RGB")` decodes them.
+
+mod error;
+pub mod image;
+mod safetensors;
+mod torch_pickle;
+mod torch_pth;
+
+pub use error::{Error, Result};
+pub use image::RgbImage;
+pub use safetensors::{
+    decode, f32_file_bytes as safetensors_f32_bytes, write_f32 as write_safetensors_f32, Entry, SafeTensors,
+    SourceDtype,
+};
+pub use torch_pth::TorchPth;

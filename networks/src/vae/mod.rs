@@ -1,0 +1,9 @@
+//! diffusers' `AutoencoderKL`: the VAE's encoder and decoder, in the diffusers and the original
+//! single-file layouts.
+
+mod autoencoder_kl;
+mod config;
+mod names;
+
+pub use autoencoder_kl::AutoencoderKl;
+pub use config::{VaeConfig, SDXL_VAE_CONFIG};

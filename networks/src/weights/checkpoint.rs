@@ -1,0 +1,394 @@
+//! Checkpoints: safetensors files (or random weights, for benchmarks) seen through the names of
+//! the diffusers module tree. Each module asks a [`Weights`] view scoped to its own prefix for its
+//! tensors; the single-file layout is a renaming at this level, not a second path through the
+//! networks.
+
+use crate::error::{Error, Result};
+use crate::weights::original_names::{OriginalNames, StoredAs};
+use crate::weights::parameters::{ParamLayout, Parameter, Parameters};
+use std::collections::{BTreeSet, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use vkdiff_formats::{decode, SafeTensors, SourceDtype};
+use vkdiff_runtime::ops::oihw_to_ohwi;
+use vkdiff_runtime::{Context, Dtype, Tensor};
+
+// One per checkpoint, so the size of the file variant costs nothing worth a box.
+#[allow(clippy::large_enum_variant)]
+enum Source {
+    Files {
+        files: Vec<SafeTensors>,
+        /// Stored name → index into `files`.
+        index: HashMap<String, usize>,
+        /// Prefix stored names carry below the requested ones.
+        prefix: String,
+        /// Renaming from diffusers names to the original layout's, for single files.
+        original: Option<OriginalNames>,
+        /// A leading module level of the requested names that the files leave out.
+        omitted: Option<String>,
+        describe: String,
+    },
+    /// Every tensor drawn on request with a fan-in scale: full-size networks for benchmarks.
+    Random { seed: u64 },
+}
+
+/// Weights for one network, converted to the run precision as they are uploaded.
+pub struct Checkpoint {
+    ctx: Context,
+    dtype: Dtype,
+    source: Source,
+    used: Mutex<BTreeSet<String>>,
+    placed: Mutex<Parameters>,
+}
+
+impl Checkpoint {
+    /// The weights `stem[.fp16].safetensors` (sharded or not) of a diffusers component folder.
+    pub(crate) fn diffusers(ctx: &Context, folder: &Path, stem: &str, dtype: Dtype) -> Result<Checkpoint> {
+        let files = diffusers_weight_files(folder, stem, dtype)?;
+        Ok(Checkpoint::from_files(ctx, dtype, files, "", None, format!("{} (diffusers layout)", folder.display())))
+    }
+
+    /// The tensors under `prefix` of an original single-file checkpoint, renamed by `names`.
+    pub(crate) fn single_file_part(
+        ctx: &Context,
+        file: SafeTensors,
+        prefix: &str,
+        names: Option<OriginalNames>,
+        dtype: Dtype,
+    ) -> Checkpoint {
+        let describe = format!("{} (single-file layout)", file.path.display());
+        Checkpoint::from_files(ctx, dtype, vec![file], prefix, names, describe)
+    }
+
+    /// Random weights of whatever shapes the network asks for (benchmarks of full-size models).
+    pub fn random(ctx: &Context, dtype: Dtype, seed: u64) -> Checkpoint {
+        Checkpoint {
+            ctx: ctx.clone(),
+            dtype,
+            source: Source::Random { seed },
+            used: Mutex::default(),
+            placed: Mutex::default(),
+        }
+    }
+
+    fn from_files(
+        ctx: &Context,
+        dtype: Dtype,
+        files: Vec<SafeTensors>,
+        prefix: &str,
+        original: Option<OriginalNames>,
+        describe: String,
+    ) -> Checkpoint {
+        let mut index = HashMap::new();
+        for (i, f) in files.iter().enumerate() {
+            for name in f.entries.keys() {
+                index.insert(name.clone(), i);
+            }
+        }
+        let source = Source::Files { files, index, prefix: prefix.into(), original, omitted: None, describe };
+        Checkpoint { ctx: ctx.clone(), dtype, source, used: Mutex::default(), placed: Mutex::default() }
+    }
+
+    /// The whole checkpoint as a view.
+    pub fn root(&self) -> Weights<'_> {
+        Weights { ckpt: self, prefix: String::new() }
+    }
+
+    /// The run precision weights are converted to.
+    pub fn dtype(&self) -> Dtype {
+        self.dtype
+    }
+
+    /// Every weight uploaded so far, by diffusers name: after a network is built from this
+    /// checkpoint, its parameters on the device.
+    pub fn parameters(&self) -> Parameters {
+        self.placed.lock().unwrap().clone()
+    }
+
+    fn place(&self, name: String, tensor: Tensor, torch_shape: &[usize], layout: ParamLayout) {
+        self.placed.lock().unwrap().insert(name, Parameter { tensor, torch_shape: torch_shape.to_vec(), layout });
+    }
+
+    /// Stored tensors under the network's prefix that no module asked for.
+    pub fn unused(&self) -> Vec<String> {
+        let Source::Files { index, prefix, .. } = &self.source else { return Vec::new() };
+        let used = self.used.lock().unwrap();
+        let mut out: Vec<String> =
+            index.keys().filter(|k| k.starts_with(prefix.as_str()) && !used.contains(*k)).cloned().collect();
+        out.sort();
+        out
+    }
+
+    /// This checkpoint with `level` (such as `text_model.`) left out of the stored names unless
+    /// some stored name has it: transformers 5 saves `CLIPTextModel` without its `text_model`
+    /// level, and loads either form.
+    pub(crate) fn level_optional(mut self, level: &str) -> Checkpoint {
+        if let Source::Files { index, prefix, omitted, .. } = &mut self.source {
+            let with_level = format!("{prefix}{level}");
+            if !index.keys().any(|k| k.starts_with(&with_level)) {
+                *omitted = Some(level.to_string());
+            }
+        }
+        self
+    }
+
+    /// Where a diffusers-named tensor is stored.
+    fn stored_as(&self, name: &str) -> Option<StoredAs> {
+        match &self.source {
+            Source::Files { prefix, original, omitted, .. } => {
+                let name = omitted.as_deref().and_then(|o| name.strip_prefix(o)).unwrap_or(name);
+                let mut s = match original {
+                    Some(o) => o.rename(name)?,
+                    None => StoredAs::plain(name.to_string()),
+                };
+                s.name = format!("{prefix}{}", s.name);
+                Some(s)
+            }
+            Source::Random { .. } => Some(StoredAs::plain(name.to_string())),
+        }
+    }
+
+    fn describe_missing(&self, name: &str) -> String {
+        match (&self.source, self.stored_as(name)) {
+            (Source::Files { describe, .. }, Some(s)) if s.name != name => {
+                format!("tensor `{}` (diffusers `{name}`) is missing from {describe}", s.name)
+            }
+            (Source::Files { describe, .. }, _) => format!("tensor `{name}` is missing from {describe}"),
+            (Source::Random { .. }, _) => format!("tensor `{name}` is missing"),
+        }
+    }
+
+    /// The stored shape of a diffusers-named tensor, if the checkpoint has it.
+    pub(crate) fn stored_shape(&self, name: &str) -> Option<Vec<usize>> {
+        match &self.source {
+            Source::Files { files, index, .. } => {
+                let at = self.stored_as(name)?;
+                Some(files[*index.get(&at.name)?].entries[&at.name].shape.clone())
+            }
+            Source::Random { .. } => None,
+        }
+    }
+
+    fn has(&self, name: &str) -> bool {
+        match &self.source {
+            Source::Files { index, .. } => self.stored_as(name).is_some_and(|s| index.contains_key(&s.name)),
+            Source::Random { .. } => true,
+        }
+    }
+
+    /// The stored bytes of `name` (its rows, for a part of a fused tensor), checked against the
+    /// expected shape (trailing 1-sized dimensions are ignored, so a 1×1 conv and a linear weight
+    /// read the same), and whether they hold the transpose.
+    fn stored(&self, name: &str, shape: &[usize]) -> Result<Option<(SourceDtype, &[u8], bool)>> {
+        let Source::Files { files, index, .. } = &self.source else { return Ok(None) };
+        let at = self
+            .stored_as(name)
+            .filter(|s| index.contains_key(&s.name))
+            .ok_or_else(|| Error::Checkpoint(self.describe_missing(name)))?;
+        let file = &files[index[&at.name]];
+        let entry = &file.entries[&at.name];
+        let trim = |s: &[usize]| s[..s.iter().rposition(|&d| d != 1).map_or(0, |i| i + 1)].to_vec();
+        let mut want = trim(shape);
+        if at.transposed {
+            want.reverse();
+        }
+        if let (Some((_, parts)), Some(first)) = (at.rows, want.first_mut()) {
+            *first *= parts;
+        }
+        if trim(&entry.shape) != want {
+            return Err(Error::Checkpoint(format!(
+                "tensor `{}` in {} has shape {:?}; the config expects {want:?}",
+                at.name,
+                file.path.display(),
+                entry.shape
+            )));
+        }
+        if let SourceDtype::Other(what) = entry.dtype {
+            return Err(Error::Checkpoint(format!(
+                "tensor `{}` in {} is {what}; vkdiff reads F32, F16 and BF16",
+                at.name,
+                file.path.display()
+            )));
+        }
+        let mut bytes = file.bytes(entry);
+        if let Some((part, parts)) = at.rows {
+            let len = bytes.len() / parts;
+            bytes = &bytes[part * len..(part + 1) * len];
+        }
+        self.used.lock().unwrap().insert(at.name);
+        Ok(Some((entry.dtype, bytes, at.transposed)))
+    }
+
+    /// Values of `name` as f32 on the host.
+    fn host(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>> {
+        Ok(match self.stored(name, shape)? {
+            Some((dtype, bytes, transposed)) => {
+                let values = decode(dtype, bytes).expect("dtype checked by Checkpoint::stored");
+                if transposed {
+                    transpose(&values, shape[1], shape[0])
+                } else {
+                    values
+                }
+            }
+            None => {
+                let Source::Random { seed } = self.source else { unreachable!() };
+                random_values(seed, name, shape)
+            }
+        })
+    }
+
+    /// `name` on the device in the run precision; bytes already in it are streamed unconverted.
+    fn tensor(&self, name: &str, shape: &[usize]) -> Result<Tensor> {
+        if let Some((src, bytes, false)) = self.stored(name, shape)? {
+            if matches!((src, self.dtype), (SourceDtype::F16, Dtype::F16) | (SourceDtype::F32, Dtype::F32)) {
+                return Ok(self.ctx.upload_bytes(shape, self.dtype, bytes)?);
+            }
+        }
+        self.upload(shape, &self.host(name, shape)?)
+    }
+
+    fn upload(&self, shape: &[usize], data: &[f32]) -> Result<Tensor> {
+        Ok(self.ctx.upload(shape, self.dtype, data)?)
+    }
+}
+
+/// A checkpoint seen from one module: names are relative to its prefix.
+#[derive(Clone)]
+pub struct Weights<'a> {
+    ckpt: &'a Checkpoint,
+    prefix: String,
+}
+
+impl<'a> Weights<'a> {
+    /// The view of a child module (`w.sub("down_blocks.1").sub("resnets.0")`).
+    pub fn sub(&self, name: &str) -> Weights<'a> {
+        Weights { ckpt: self.ckpt, prefix: self.path(name) }
+    }
+
+    /// The dotted module path this view is rooted at.
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    fn path(&self, name: &str) -> String {
+        if self.prefix.is_empty() {
+            name.to_string()
+        } else {
+            format!("{}.{name}", self.prefix)
+        }
+    }
+
+    pub fn has(&self, name: &str) -> bool {
+        self.ckpt.has(&self.path(name))
+    }
+
+    /// A tensor as stored, in the run precision.
+    pub fn tensor(&self, name: &str, shape: &[usize]) -> Result<Tensor> {
+        let t = self.ckpt.tensor(&self.path(name), shape)?;
+        self.ckpt.place(self.path(name), t.clone(), shape, ParamLayout::AsStored);
+        Ok(t)
+    }
+
+    /// A tensor's values on the host, as f32.
+    pub fn host(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>> {
+        self.ckpt.host(&self.path(name), shape)
+    }
+
+    /// A PyTorch conv weight [out, in, kh, kw] re-laid out as the kernels read it, [out, kh, kw, in].
+    pub fn conv_weight(&self, name: &str, [o, i, kh, kw]: [usize; 4]) -> Result<Tensor> {
+        let oihw = self.host(name, &[o, i, kh, kw])?;
+        let t = self.ckpt.upload(&[o, kh, kw, i], &oihw_to_ohwi(&oihw, o, i, kh, kw))?;
+        self.ckpt.place(self.path(name), t.clone(), &[o, i, kh, kw], ParamLayout::ConvOhwi);
+        Ok(t)
+    }
+
+    /// Several [rows_k, cols] weights stacked into one [Σ rows_k, cols] tensor (fused projections).
+    /// Each part is placed as its row range where the device can bind it on its own.
+    pub fn stacked(&self, names: &[&str], rows: usize, cols: usize) -> Result<Tensor> {
+        // Grown as the parts are read: each part's shape is checked first, so a config asking
+        // for absurd sizes fails on the stored shape instead of on the allocation.
+        let mut data = Vec::new();
+        for n in names {
+            data.extend(self.host(n, &[rows, cols])?);
+        }
+        let t = self.ckpt.upload(&[names.len() * rows, cols], &data)?;
+        for (k, n) in names.iter().enumerate() {
+            if let Ok(part) = t.narrow(k * rows, rows) {
+                let shape = if cols == 1 { vec![rows] } else { vec![rows, cols] };
+                self.ckpt.place(self.path(n), part, &shape, ParamLayout::AsStored);
+            }
+        }
+        Ok(t)
+    }
+}
+
+pub(crate) fn component_folder(dir: &Path, sub: &str) -> Result<PathBuf> {
+    let folder = if dir.join(sub).join("config.json").is_file() { dir.join(sub) } else { dir.to_path_buf() };
+    if !folder.join("config.json").is_file() {
+        return Err(Error::Checkpoint(format!(
+            "{}: no config.json (expected a diffusers model folder or its {sub}/ subfolder)",
+            dir.display()
+        )));
+    }
+    Ok(folder)
+}
+
+/// The weight files of a diffusers component: one file or shards listed by an index, preferring
+/// the fp16 variant for f16 runs and the full-precision one for f32 runs.
+fn diffusers_weight_files(dir: &Path, stem: &str, dtype: Dtype) -> Result<Vec<SafeTensors>> {
+    let plain = [format!("{stem}.safetensors"), format!("{stem}.safetensors.index.json")];
+    let fp16 = [format!("{stem}.fp16.safetensors"), format!("{stem}.safetensors.index.fp16.json")];
+    let order = if dtype == Dtype::F16 { [fp16, plain] } else { [plain, fp16] };
+    for [single, index] in &order {
+        if dir.join(single).is_file() {
+            return Ok(vec![SafeTensors::open(&dir.join(single))?]);
+        }
+        if dir.join(index).is_file() {
+            return shards(&dir.join(index));
+        }
+    }
+    Err(Error::Checkpoint(format!("{}: no {stem}[.fp16].safetensors or sharded index", dir.display())))
+}
+
+fn shards(index_path: &Path) -> Result<Vec<SafeTensors>> {
+    let bad = |why: String| Error::Format { path: index_path.to_path_buf(), why };
+    let text =
+        std::fs::read_to_string(index_path).map_err(|e| Error::Io { path: index_path.to_path_buf(), source: e })?;
+    let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
+    let map = json.get("weight_map").and_then(|m| m.as_object()).ok_or_else(|| bad("no `weight_map`".into()))?;
+    let names: BTreeSet<&str> = map.values().filter_map(|v| v.as_str()).collect();
+    let dir: PathBuf = index_path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let files = names.iter().map(|n| SafeTensors::open(&dir.join(n))).collect::<vkdiff_formats::Result<Vec<_>>>()?;
+    for (tensor, file) in map {
+        let f = files.iter().find(|f| f.path.file_name().and_then(|s| s.to_str()) == file.as_str());
+        if !f.is_some_and(|f| f.entries.contains_key(tensor)) {
+            return Err(bad(format!("tensor `{tensor}` is listed in {file} but that shard does not hold it")));
+        }
+    }
+    Ok(files)
+}
+
+/// The transpose of a row-major [rows, cols] matrix.
+fn transpose(values: &[f32], rows: usize, cols: usize) -> Vec<f32> {
+    (0..cols * rows).map(|i| values[(i % rows) * cols + i / rows]).collect()
+}
+
+/// Deterministic per-name values: U(−1, 1)/√fan_in for weights, 1 ± 0.1 for norm scales,
+/// ±0.1 for biases, so a random full-size network stays in f16 range.
+fn random_values(seed: u64, name: &str, shape: &[usize]) -> Vec<f32> {
+    let mut state =
+        name.bytes().fold(seed ^ 0xcbf2_9ce4_8422_2325, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3)) | 1;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+    };
+    let numel: usize = shape.iter().product();
+    let (base, scale) = match shape.len() {
+        1 if name.ends_with("weight") => (1.0, 0.1),
+        1 => (0.0, 0.1),
+        _ => (0.0, 1.0 / ((numel / shape[0]) as f32).sqrt()),
+    };
+    (0..numel).map(|_| base + scale * next()).collect()
+}

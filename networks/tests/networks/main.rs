@@ -1,0 +1,10 @@
+//! The SDXL UNet against diffusers on tiny random models (tools/make_unet_fixtures.py), in both
+//! checkpoint layouts and both precisions, with ControlNet residuals and IP-Adapter tokens.
+
+mod controlnet;
+mod errors;
+mod forward;
+mod inception;
+mod ip_adapter;
+mod malformed;
+mod text_and_vae;

@@ -1,0 +1,159 @@
+//! Fused attention against an f64 softmax(QKᵀ)V, for self- and cross-attention and many head sizes.
+
+use vkdiff_runtime::ops::{attention, AttentionLayout};
+use vkdiff_runtime::{Context, Dtype};
+use vkdiff_testkit::*;
+
+fn reference(q: &[f32], k: &[f32], v: &[f32], l: &AttentionLayout, scale: f64) -> Vec<f64> {
+    let d = l.head_dim;
+    let mut out = vec![0.0f64; l.batch * l.q_tokens * l.heads * d];
+    let mut scores = vec![0.0f64; l.kv_tokens];
+    for b in 0..l.batch {
+        for h in 0..l.heads {
+            for i in 0..l.q_tokens {
+                let qi = &q[l.q_offset + b * l.q_batch + i * l.q_ld + h * d..][..d];
+                for (j, s) in scores.iter_mut().enumerate() {
+                    if l.causal && j > i {
+                        *s = f64::NEG_INFINITY;
+                        continue;
+                    }
+                    let kj = &k[l.k_offset + b * l.k_batch + j * l.k_ld + h * d..][..d];
+                    *s = scale * qi.iter().zip(kj).map(|(&x, &y)| x as f64 * y as f64).sum::<f64>();
+                }
+                let m = scores.iter().cloned().fold(f64::MIN, f64::max);
+                let total: f64 = scores.iter().map(|s| (s - m).exp()).sum();
+                for (j, s) in scores.iter().enumerate() {
+                    let p = (s - m).exp() / total;
+                    let vj = &v[l.v_offset + b * l.v_batch + j * l.v_ld + h * d..][..d];
+                    for (e, &vv) in vj.iter().enumerate() {
+                        out[((b * l.q_tokens + i) * l.heads + h) * d + e] += p * vv as f64;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Runs attention on random Q, K, V laid out as `l` (output dense) and compares, with the
+/// device's own kernel choice and on the GPU paths (workgroup attention).
+fn check(dtype: Dtype, l: &AttentionLayout, seed: u64) {
+    for ctx in [ctx(), gpu_ctx()] {
+        check_on(&ctx, dtype, l, seed);
+    }
+}
+
+fn check_on(ctx: &Context, dtype: Dtype, l: &AttentionLayout, seed: u64) {
+    let extent =
+        |off: usize, ld: usize, bs: usize, n: usize| off + (l.batch - 1) * bs + (n - 1) * ld + l.heads * l.head_dim;
+    let q = stored(&random(extent(l.q_offset, l.q_ld, l.q_batch, l.q_tokens), seed), dtype);
+    let k = stored(&random(extent(l.k_offset, l.k_ld, l.k_batch, l.kv_tokens), seed + 1), dtype);
+    let v = stored(&random(extent(l.v_offset, l.v_ld, l.v_batch, l.kv_tokens), seed + 2), dtype);
+    let tq = ctx.upload(&[q.len()], dtype, &q).unwrap();
+    let tk = ctx.upload(&[k.len()], dtype, &k).unwrap();
+    let tv = ctx.upload(&[v.len()], dtype, &v).unwrap();
+    let width = l.heads * l.head_dim;
+    let out = ctx.zeros(&[l.batch, l.q_tokens, width], dtype).unwrap();
+    let mut dense = l.clone();
+    dense.o_ld = width;
+    dense.o_batch = l.q_tokens * width;
+    // Scores of O(4): the softmax is peaked enough that a wrong max or sum shows.
+    let scale = 4.0 / (l.head_dim as f32).sqrt();
+    ctx.run(|rec| attention(rec, &tq, &tk, &tv, &out, &dense, scale)).unwrap();
+    let want = reference(&q, &k, &v, l, scale as f64);
+    // Outputs are convex combinations of V (|v| ≤ 1): f32 error stays under 1e-5 absolute.
+    let atol = match dtype {
+        Dtype::F32 => 1e-5,
+        Dtype::F16 => 1e-3,
+    };
+    let what = format!(
+        "attention (GPU paths: {}) {dtype:?} b{} h{} d{} {}x{}",
+        ctx.gpu_paths(),
+        l.batch,
+        l.heads,
+        l.head_dim,
+        l.q_tokens,
+        l.kv_tokens
+    );
+    assert_close(&what, &out.download().unwrap(), &want, atol, storage_rtol(dtype));
+}
+
+#[test]
+fn self_attention_4096_tokens_head_dim_64() {
+    for dtype in DTYPES {
+        check(dtype, &AttentionLayout::dense(1, 2, 64, 4096, 4096), 41);
+    }
+}
+
+#[test]
+fn cross_attention_77_tokens() {
+    for dtype in DTYPES {
+        check(dtype, &AttentionLayout::dense(2, 5, 64, 300, 77), 42);
+    }
+}
+
+#[test]
+fn head_sizes() {
+    // 8 and 40: tiny models and SD1.x; 24: two slots per lane at 4 lanes; 80: CLIP ViT-H vision; 104: ViT-bigG; 160: the 8-slot
+    // variant; 512: the VAE's single-head mid-block attention; 1024: past every subgroup variant. Token counts off every tile size.
+    for (d, nq, nk) in
+        [(8, 19, 23), (24, 15, 9), (40, 33, 77), (80, 21, 50), (104, 9, 13), (160, 11, 19), (512, 17, 29), (1024, 5, 7)]
+    {
+        for dtype in DTYPES {
+            check(dtype, &AttentionLayout::dense(2, 2, d, nq, nk), 43 + d as u64);
+        }
+    }
+}
+
+#[test]
+fn strided_operands_from_a_fused_projection() {
+    // Q, K, V as column blocks of [B, N, 3·H·D] projections (at column offsets 0, H·D and 2·H·D),
+    // batch strides included.
+    let (b, h, d, n) = (2, 3, 64, 70);
+    let w = h * d;
+    let mut l = AttentionLayout::dense(b, h, d, n, n);
+    l.q_ld = 3 * w;
+    l.k_ld = 3 * w;
+    l.v_ld = 3 * w;
+    l.q_batch = n * 3 * w;
+    l.k_batch = n * 3 * w;
+    l.v_batch = n * 3 * w;
+    l.k_offset = w;
+    l.v_offset = 2 * w;
+    for dtype in DTYPES {
+        check(dtype, &l, 50);
+    }
+}
+
+#[test]
+fn causal_self_attention_like_clip_text() {
+    // 77 tokens (CLIP's context) over chunk and row-tile edges, plus a longer sequence.
+    for (n, d) in [(77, 64), (150, 16)] {
+        let mut l = AttentionLayout::dense(2, 2, d, n, n);
+        l.causal = true;
+        for dtype in DTYPES {
+            check(dtype, &l, 60 + n as u64);
+        }
+    }
+}
+
+#[test]
+fn head_sizes_and_strides_off_the_vec4_grid() {
+    // 10 (a 40-wide encoder over 4 heads), 1, 3 and 33: padded by zeros into the vec4 kernel.
+    for (d, nq, nk) in [(10, 17, 23), (1, 9, 5), (3, 20, 77), (33, 11, 13)] {
+        for dtype in DTYPES {
+            check(dtype, &AttentionLayout::dense(2, 4, d, nq, nk), 70 + d as u64);
+        }
+    }
+    // A fused projection of odd width, causal, with an odd offset on every operand.
+    let (b, h, d, n) = (2, 3, 5, 21);
+    let w = h * d;
+    let mut l = AttentionLayout::dense(b, h, d, n, n);
+    (l.q_ld, l.k_ld, l.v_ld) = (3 * w + 1, 3 * w + 1, 3 * w + 1);
+    (l.q_batch, l.k_batch, l.v_batch) = (n * (3 * w + 1), n * (3 * w + 1), n * (3 * w + 1));
+    (l.q_offset, l.k_offset, l.v_offset) = (1, w + 1, 2 * w + 1);
+    l.causal = true;
+    for dtype in DTYPES {
+        check(dtype, &l, 80);
+    }
+}

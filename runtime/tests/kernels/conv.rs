@@ -1,0 +1,258 @@
+//! conv2d (implicit GEMM, NHWC) against an f64 direct convolution.
+
+use vkdiff_runtime::ops::{conv2d, oihw_to_ohwi, ConvParams, Padding};
+use vkdiff_runtime::{Dtype, GemmFamily};
+use vkdiff_testkit::*;
+
+struct Case {
+    b: usize,
+    h: usize,
+    w: usize,
+    cin: usize,
+    cout: usize,
+    /// Kernel height and width.
+    k: [usize; 2],
+    stride: usize,
+    pad: Padding,
+    /// Adds into an output that already holds values (a fused residual).
+    accumulate: bool,
+    /// max(·, 0) fused into the store.
+    relu: bool,
+}
+
+fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) {
+    let ctx = ctx_with(family);
+    let [kh, kw] = c.k;
+    let ho = (c.h + c.pad.top + c.pad.bottom - kh) / c.stride + 1;
+    let wo = (c.w + c.pad.left + c.pad.right - kw) / c.stride + 1;
+    let x = stored(&random(c.b * c.h * c.w * c.cin, seed), dtype);
+    // Weights come as PyTorch stores them and are re-laid out, as the loaders will do.
+    let w_oihw = stored(&random(c.cout * c.cin * kh * kw, seed + 1), dtype);
+    let bias = stored(&random(c.cout, seed + 2), dtype);
+    let tx = ctx.upload(&[c.b, c.h, c.w, c.cin], dtype, &x).unwrap();
+    let tw = ctx.upload(&[c.cout, kh, kw, c.cin], dtype, &oihw_to_ohwi(&w_oihw, c.cout, c.cin, kh, kw)).unwrap();
+    let tb = ctx.upload(&[c.cout], dtype, &bias).unwrap();
+    let prior = if c.accumulate {
+        stored(&random(c.b * ho * wo * c.cout, seed + 3), dtype)
+    } else {
+        vec![0.0; c.b * ho * wo * c.cout]
+    };
+    let out = ctx.upload(&[c.b, ho, wo, c.cout], dtype, &prior).unwrap();
+    let params = ConvParams { stride: c.stride, pad: c.pad, accumulate: c.accumulate, relu: c.relu };
+    ctx.run(|rec| conv2d(rec, &tx, &tw, Some(&tb), &out, &params)).unwrap();
+    let mut want = vec![0.0f64; out.numel()];
+    let mut mag = vec![0.0f64; out.numel()];
+    for n in 0..c.b {
+        for oy in 0..ho {
+            for ox in 0..wo {
+                for o in 0..c.cout {
+                    let before = prior[((n * ho + oy) * wo + ox) * c.cout + o] as f64;
+                    let (mut acc, mut abs) = (bias[o] as f64 + before, bias[o].abs() as f64 + before.abs());
+                    for ky in 0..kh {
+                        for kx in 0..kw {
+                            let iy = (oy * c.stride + ky) as isize - c.pad.top as isize;
+                            let ix = (ox * c.stride + kx) as isize - c.pad.left as isize;
+                            if iy < 0 || ix < 0 || iy >= c.h as isize || ix >= c.w as isize {
+                                continue;
+                            }
+                            for i in 0..c.cin {
+                                let xv = x[((n * c.h + iy as usize) * c.w + ix as usize) * c.cin + i] as f64;
+                                let wv = w_oihw[((o * c.cin + i) * kh + ky) * kw + kx] as f64;
+                                acc += xv * wv;
+                                abs += (xv * wv).abs();
+                            }
+                        }
+                    }
+                    let at = ((n * ho + oy) * wo + ox) * c.cout + o;
+                    want[at] = if c.relu { acc.max(0.0) } else { acc };
+                    mag[at] = abs;
+                }
+            }
+        }
+    }
+    let rtol = storage_rtol(dtype);
+    let what = format!(
+        "{family:?} {dtype:?} {}x{}x{}x{} -> {} k{:?} s{} {:?} accumulate {} relu {}",
+        c.b, c.h, c.w, c.cin, c.cout, c.k, c.stride, c.pad, c.accumulate, c.relu
+    );
+    // Same bound as GEMM: 1e-5 of Σ|x·w| for f32 accumulation, plus output storage rounding.
+    assert_within(&what, &out.download().unwrap(), &want, |i| 1e-6 + 1e-5 * mag[i] + rtol * want[i].abs());
+}
+
+fn all(c: Case, seed: u64) {
+    for family in [GemmFamily::Subgroup, GemmFamily::Tiled] {
+        for dtype in DTYPES {
+            check(family, dtype, &c, seed);
+        }
+    }
+}
+
+#[test]
+fn conv3x3_stride1_pad1() {
+    all(
+        Case {
+            b: 2,
+            h: 9,
+            w: 7,
+            cin: 16,
+            cout: 24,
+            k: [3, 3],
+            stride: 1,
+            pad: Padding::same(1),
+            accumulate: true,
+            relu: false,
+        },
+        21,
+    );
+}
+
+#[test]
+fn conv3x3_stride2_pad1() {
+    all(
+        Case {
+            b: 1,
+            h: 10,
+            w: 12,
+            cin: 8,
+            cout: 36,
+            k: [3, 3],
+            stride: 2,
+            pad: Padding::same(1),
+            accumulate: false,
+            relu: false,
+        },
+        22,
+    );
+}
+
+#[test]
+fn conv3x3_stride2_vae_padding() {
+    // diffusers' VAE Downsample2D pads (0, 1, 0, 1) then convolves with stride 2, no padding.
+    let pad = Padding { top: 0, left: 0, bottom: 1, right: 1 };
+    all(Case { b: 1, h: 8, w: 8, cin: 12, cout: 8, k: [3, 3], stride: 2, pad, accumulate: false, relu: false }, 23);
+}
+
+#[test]
+fn conv_large_images_take_the_large_row_tiles() {
+    // 34×34 = 1156 and 2·13·13 = 338 output pixels select the 64- and 32-row variants.
+    all(
+        Case {
+            b: 1,
+            h: 34,
+            w: 34,
+            cin: 8,
+            cout: 12,
+            k: [3, 3],
+            stride: 1,
+            pad: Padding::same(1),
+            accumulate: false,
+            relu: false,
+        },
+        26,
+    );
+    all(
+        Case {
+            b: 2,
+            h: 13,
+            w: 13,
+            cin: 4,
+            cout: 8,
+            k: [3, 3],
+            stride: 1,
+            pad: Padding::same(1),
+            accumulate: false,
+            relu: false,
+        },
+        27,
+    );
+}
+
+#[test]
+fn conv1x1() {
+    all(
+        Case {
+            b: 2,
+            h: 6,
+            w: 5,
+            cin: 40,
+            cout: 20,
+            k: [1, 1],
+            stride: 1,
+            pad: Padding::same(0),
+            accumulate: true,
+            relu: false,
+        },
+        24,
+    );
+}
+
+#[test]
+fn conv_rgb_input_any_channel_count() {
+    // Cin = 3 (the VAE encoder's conv_in) and Cout = 5 take the scalar path on every device.
+    all(
+        Case {
+            b: 1,
+            h: 7,
+            w: 6,
+            cin: 3,
+            cout: 5,
+            k: [3, 3],
+            stride: 1,
+            pad: Padding::same(1),
+            accumulate: true,
+            relu: false,
+        },
+        25,
+    );
+}
+
+#[test]
+fn conv_asymmetric_kernels_with_relu() {
+    // Inception's factorised 1×7 / 7×1 and 1×3 / 3×1 convolutions, each followed by ReLU.
+    let pad = |y, x| Padding { top: y, left: x, bottom: y, right: x };
+    all(
+        Case {
+            b: 2,
+            h: 9,
+            w: 8,
+            cin: 12,
+            cout: 16,
+            k: [1, 7],
+            stride: 1,
+            pad: pad(0, 3),
+            accumulate: false,
+            relu: true,
+        },
+        28,
+    );
+    all(
+        Case {
+            b: 1,
+            h: 9,
+            w: 8,
+            cin: 12,
+            cout: 16,
+            k: [7, 1],
+            stride: 1,
+            pad: pad(3, 0),
+            accumulate: true,
+            relu: true,
+        },
+        29,
+    );
+    all(
+        Case {
+            b: 1,
+            h: 11,
+            w: 10,
+            cin: 3,
+            cout: 8,
+            k: [3, 3],
+            stride: 2,
+            pad: pad(0, 0),
+            accumulate: false,
+            relu: true,
+        },
+        30,
+    );
+}

@@ -1,0 +1,146 @@
+//! GEMM / linear against an f64 reference, for both kernel families and both storage dtypes.
+
+use vkdiff_runtime::ops::{linear, matmul, Matmul};
+use vkdiff_runtime::{Dtype, GemmFamily};
+use vkdiff_testkit::*;
+
+/// Reference C and Σ|a·b| per element (the scale that bounds rounding error of a dot product).
+fn reference(a: &[f32], b: &[f32], bias: Option<&[f32]>, c0: &[f32], s: &Matmul) -> (Vec<f64>, Vec<f64>) {
+    let mut c = vec![0.0; c0.len()];
+    let mut mag = vec![0.0; c0.len()];
+    for bi in 0..s.batch {
+        for i in 0..s.m {
+            for j in 0..s.n {
+                let (mut acc, mut abs) = (0.0f64, 0.0f64);
+                for k in 0..s.k {
+                    let av = a[bi * s.a_batch + i * s.lda + k] as f64;
+                    let bv = if s.b_transposed {
+                        b[bi * s.b_batch + j * s.ldb + k]
+                    } else {
+                        b[bi * s.b_batch + k * s.ldb + j]
+                    } as f64;
+                    acc += av * bv;
+                    abs += (av * bv).abs();
+                }
+                let at = bi * s.c_batch + i * s.ldc + j;
+                let mut v = s.alpha as f64 * acc + bias.map_or(0.0, |b| b[j] as f64);
+                if s.accumulate {
+                    v += c0[at] as f64;
+                }
+                c[at] = v;
+                mag[at] = s.alpha.abs() as f64 * abs + v.abs();
+            }
+        }
+    }
+    (c, mag)
+}
+
+/// Accumulation error per unit of Σ|a·b|: f32 sums of up to ~2k terms stay well under 1e-5.
+fn accumulation_tol() -> f64 {
+    1e-5
+}
+
+fn check(family: GemmFamily, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64) {
+    let ctx = ctx_with(family);
+    let (b_rows, b_cols) = if s.b_transposed { (s.n, s.k) } else { (s.k, s.n) };
+    let a_len = (s.batch - 1) * s.a_batch + (s.m - 1) * s.lda + s.k;
+    let b_len = (s.batch - 1) * s.b_batch + (b_rows - 1) * s.ldb + b_cols;
+    let c_len = (s.batch - 1) * s.c_batch + (s.m - 1) * s.ldc + s.n;
+    let a = stored(&random(a_len, seed), dtype);
+    let b = stored(&random(b_len, seed + 1), dtype);
+    let bias = stored(&random(s.n, seed + 2), dtype);
+    let c0 = stored(&random(c_len, seed + 3), dtype);
+    let ta = ctx.upload(&[a_len], dtype, &a).unwrap();
+    let tb = ctx.upload(&[b_len], dtype, &b).unwrap();
+    let tbias = ctx.upload(&[s.n], dtype, &bias).unwrap();
+    let tc = ctx.upload(&[c_len], dtype, &c0).unwrap();
+    ctx.run(|rec| matmul(rec, &ta, &tb, with_bias.then_some(&tbias), &tc, s)).unwrap();
+    let got = tc.download().unwrap();
+    let (want, mag) = reference(&a, &b, with_bias.then_some(&bias[..]), &c0, s);
+    // Elements the product does not cover (strided C) must be untouched.
+    let want: Vec<f64> =
+        want.iter().zip(&c0).zip(&mag).map(|((&w, &c), &m)| if m == 0.0 { c as f64 } else { w }).collect();
+    let rtol = storage_rtol(dtype);
+    assert_within(&format!("{family:?} {dtype:?} {s:?}"), &got, &want, |i| {
+        1e-6 + accumulation_tol() * mag[i] + rtol * want[i].abs()
+    });
+}
+
+fn both(s: Matmul, bias: bool, seed: u64) {
+    for family in [GemmFamily::Subgroup, GemmFamily::Tiled] {
+        for dtype in DTYPES {
+            check(family, dtype, &s, bias, seed);
+        }
+    }
+}
+
+#[test]
+fn square_and_rectangular() {
+    both(Matmul::dense(64, 64, 64, false), false, 1);
+    both(Matmul::dense(130, 72, 36, false), true, 2);
+    both(Matmul::dense(33, 200, 516, true), true, 3);
+}
+
+#[test]
+fn tall_shapes_take_the_large_row_tiles() {
+    // M ≥ 256 and ≥ 1024 select the 32- and 64-row subgroup variants; M off their multiples.
+    both(Matmul::dense(300, 68, 36, true), true, 8);
+    both(Matmul::dense(1030, 40, 44, false), false, 9);
+}
+
+#[test]
+fn shapes_off_the_vec4_grid() {
+    // N, K not multiples of 4: the subgroup family must fall back to the tiled kernel.
+    both(Matmul::dense(17, 13, 27, false), true, 4);
+    both(Matmul::dense(5, 3, 7, true), false, 5);
+}
+
+#[test]
+fn batched_strided_alpha_accumulate() {
+    let mut s = Matmul::dense(40, 24, 32, false);
+    s.batch = 3;
+    s.lda = 36;
+    s.a_batch = 40 * 36 + 4;
+    s.b_batch = 32 * 24;
+    s.ldc = 28;
+    s.c_batch = 40 * 28 + 8;
+    s.alpha = 0.37;
+    s.accumulate = true;
+    both(s.clone(), true, 6);
+    s.b_transposed = true;
+    s.ldb = 32;
+    s.b_batch = 0;
+    both(s, false, 7);
+}
+
+#[test]
+fn linear_layer_shapes() {
+    for dtype in DTYPES {
+        let ctx = ctx();
+        let (rows, k, n) = (2 * 77, 64, 96);
+        let x = stored(&random(rows * k, 11), dtype);
+        let w = stored(&random(n * k, 12), dtype);
+        let bias = stored(&random(n, 13), dtype);
+        let tx = ctx.upload(&[2, 77, k], dtype, &x).unwrap();
+        let tw = ctx.upload(&[n, k], dtype, &w).unwrap();
+        let tb = ctx.upload(&[n], dtype, &bias).unwrap();
+        let out = ctx.zeros(&[2, 77, n], dtype).unwrap();
+        ctx.run(|rec| linear(rec, &tx, &tw, Some(&tb), &out)).unwrap();
+        let s = Matmul::dense(rows, n, k, true);
+        let (want, mag) = reference(&x, &w, Some(&bias), &vec![0.0; rows * n], &s);
+        let rtol = storage_rtol(dtype);
+        assert_within(&format!("linear {dtype:?}"), &out.download().unwrap(), &want, |i| {
+            1e-6 + accumulation_tol() * mag[i] + rtol * want[i].abs()
+        });
+    }
+}
+
+#[test]
+fn wrong_shapes_are_errors() {
+    let ctx = ctx();
+    let x = ctx.zeros(&[4, 8], Dtype::F32).unwrap();
+    let w = ctx.zeros(&[6, 7], Dtype::F32).unwrap();
+    let out = ctx.zeros(&[4, 6], Dtype::F32).unwrap();
+    let err = ctx.run(|rec| linear(rec, &x, &w, None, &out)).unwrap_err().to_string();
+    assert!(err.contains("does not end in 7"), "{err}");
+}

@@ -1,0 +1,11 @@
+//! Every kernel against an f64 CPU reference on the Vulkan device (lavapipe in CI), for f32 and
+//! f16 storage, with the tolerance each test states.
+
+mod attention;
+mod bands;
+mod conv;
+mod elementwise;
+mod gemm;
+mod norm;
+mod pool;
+mod runtime;

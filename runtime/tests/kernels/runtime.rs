@@ -1,0 +1,148 @@
+//! The runtime around the kernels: replay, barriers between dependent dispatches, profiling,
+//! memory accounting, views and device errors.
+
+use vkdiff_runtime::ops::{self, UnaryOp};
+use vkdiff_runtime::{Arena, Context, Dtype, Recorder};
+use vkdiff_testkit::*;
+
+#[test]
+fn recording_replays_with_new_inputs() {
+    let ctx = ctx();
+    let x = ctx.upload(&[256], Dtype::F32, &random(256, 71)).unwrap();
+    let y = ctx.zeros(&[256], Dtype::F32).unwrap();
+    let mut rec = Recorder::new(&ctx, false).unwrap();
+    ops::unary(&mut rec, UnaryOp::Scale, &x, &y, 3.0).unwrap();
+    let recording = rec.finish().unwrap();
+    for seed in [72, 73] {
+        let data = random(256, seed);
+        x.write(&data).unwrap();
+        recording.run().unwrap();
+        let want: Vec<f64> = data.iter().map(|&v| 3.0 * v as f64).collect();
+        assert_close("replay", &y.download().unwrap(), &want, 0.0, 1e-7);
+    }
+}
+
+#[test]
+fn dependent_dispatches_see_each_other() {
+    // A chain of 40 in-place updates on one buffer plus a ping-pong between two: any missing
+    // barrier lets a dispatch read stale data on a parallel device.
+    let ctx = ctx();
+    let n = 100_000;
+    let a = ctx.upload(&[n], Dtype::F32, &vec![1.0; n]).unwrap();
+    let b = ctx.zeros(&[n], Dtype::F32).unwrap();
+    ctx.run(|rec| {
+        for _ in 0..20 {
+            ops::unary(rec, UnaryOp::Scale, &a, &b, 2.0)?;
+            ops::add(rec, &b, &a, &a)?;
+        }
+        Ok(())
+    })
+    .unwrap();
+    // a ← a + 2a = 3a, twenty times.
+    let want = vec![3f64.powi(20); n];
+    assert_close("chain", &a.download().unwrap(), &want, 0.0, 1e-6);
+}
+
+#[test]
+fn profiling_times_every_dispatch() {
+    let ctx = ctx();
+    let x = ctx.upload(&[4096], Dtype::F32, &random(4096, 74)).unwrap();
+    let mut rec = Recorder::new(&ctx, true).unwrap();
+    for _ in 0..300 {
+        ops::unary(&mut rec, UnaryOp::Silu, &x, &x, 0.0).unwrap();
+    }
+    let recording = rec.finish().unwrap();
+    let timings = recording.run_profiled().unwrap();
+    assert_eq!(timings.len(), 300, "one timing per dispatch, across query pools");
+    assert!(timings.iter().all(|t| t.kernel == "unary" && t.nanos > 0.0), "{:?}", &timings[..3]);
+}
+
+#[test]
+fn memory_accounting_tracks_live_and_peak() {
+    // A private context: other tests allocate concurrently on the shared one.
+    let ctx = Context::new(None).unwrap();
+    let before = ctx.live_bytes();
+    let t = ctx.zeros(&[1 << 20], Dtype::F32).unwrap();
+    let h = ctx.zeros(&[1 << 20], Dtype::F16).unwrap();
+    assert_eq!(ctx.live_bytes() - before, (4 << 20) + (2 << 20));
+    drop(t);
+    assert_eq!(ctx.live_bytes() - before, 2 << 20);
+    assert!(ctx.peak_bytes() >= before + (6 << 20));
+    ctx.reset_peak();
+    assert_eq!(ctx.peak_bytes(), ctx.live_bytes());
+    drop(h);
+    assert_eq!(ctx.live_bytes(), before);
+}
+
+#[test]
+fn views_and_uploads_round_trip() {
+    let ctx = ctx();
+    // Rows as wide as the device's binding alignment (lavapipe 16 bytes, AMD 4, others up to 256).
+    let cols = 32.max(ctx.info().min_storage_offset_alignment as usize / 2);
+    let data = random(8 * cols, 75);
+    for dtype in DTYPES {
+        let t = ctx.upload(&[8, cols], dtype, &data).unwrap();
+        let rows = t.narrow(2, 3).unwrap();
+        let want: Vec<f64> = stored(&data[2 * cols..5 * cols], dtype).iter().map(|&v| v as f64).collect();
+        assert_close("narrow", &rows.download().unwrap(), &want, 0.0, 0.0);
+        // Writing through a view changes only its rows.
+        rows.write(&vec![0.5; 3 * cols]).unwrap();
+        let all = t.download().unwrap();
+        assert!(
+            all[2 * cols..5 * cols].iter().all(|&v| v == 0.5)
+                && all[..2 * cols] == stored(&data[..2 * cols], dtype)[..]
+        );
+    }
+    // 10 bytes in: off every alignment a device may have (at least 4).
+    let t = ctx.zeros(&[3, 5], Dtype::F16).unwrap();
+    assert!(t.narrow(1, 1).unwrap_err().to_string().contains("alignment"));
+    assert!(t.reshape(&[4, 4]).is_err());
+}
+
+#[test]
+fn odd_length_f16_tensors_are_filled_and_copied_whole() {
+    // A 7-element f16 tensor is 14 bytes: the fill and staging copies must reach its last one.
+    for ctx in [ctx(), gpu_ctx()] {
+        // Memory freed with values in it is where the allocator places the next tensor.
+        drop(ctx.upload(&[7], Dtype::F16, &[9.0; 7]).unwrap());
+        let t = ctx.zeros(&[7], Dtype::F16).unwrap();
+        assert_eq!(t.download().unwrap(), vec![0.0; 7]);
+        let x = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0];
+        let u = ctx.upload(&[7], Dtype::F16, &x).unwrap();
+        ctx.run(|rec| vkdiff_runtime::ops::add(rec, &u, &u, &t)).unwrap();
+        assert_eq!(t.download().unwrap(), x.map(|v| 2.0 * v));
+    }
+}
+
+#[test]
+fn bad_device_index_is_one_clear_error() {
+    let err = Context::new(Some(99)).err().expect("device 99 should not exist").to_string();
+    assert!(err.contains("device 99") && err.contains("vkdiff devices"), "{err}");
+}
+
+#[test]
+fn arena_reuses_a_dropped_buffer_within_one_recording() {
+    // x → a = 2x (arena) → y = a + 1·a … then a is dropped, b takes its buffer and is written
+    // while the recording still has to order it after a's last read (a WAR hazard).
+    let ctx = Context::new(None).unwrap();
+    let x: Vec<f32> = (0..1000).map(|i| i as f32).collect();
+    let tx = ctx.upload(&[1000], Dtype::F32, &x).unwrap();
+    let ty = ctx.zeros(&[1000], Dtype::F32).unwrap();
+    let tz = ctx.zeros(&[1000], Dtype::F32).unwrap();
+    let arena = Arena::new(&ctx);
+    let mut rec = Recorder::new(&ctx, false).unwrap();
+    let a = arena.tensor(&[1000], Dtype::F32).unwrap();
+    ops::unary(&mut rec, UnaryOp::Scale, &tx, &a, 2.0).unwrap();
+    ops::add(&mut rec, &a, &a, &ty).unwrap();
+    let live = ctx.live_bytes();
+    drop(a);
+    let b = arena.tensor(&[900], Dtype::F32).unwrap();
+    assert_eq!(ctx.live_bytes(), live, "a similar-sized request takes the dropped buffer");
+    assert_eq!(arena.idle_bytes(), 0);
+    ops::unary(&mut rec, UnaryOp::Scale, &tx.narrow(0, 900).unwrap(), &b, -1.0).unwrap();
+    ops::add(&mut rec, &b, &b, &tz.narrow(0, 900).unwrap()).unwrap();
+    rec.finish().unwrap().run().unwrap();
+    assert_eq!(ty.download().unwrap(), x.iter().map(|v| 4.0 * v).collect::<Vec<_>>());
+    let z = tz.download().unwrap();
+    assert_eq!(&z[..900], &x[..900].iter().map(|v| -2.0 * v).collect::<Vec<_>>()[..]);
+}

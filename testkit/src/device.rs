@@ -1,0 +1,35 @@
+//! The device tests run on: lavapipe in CI, whatever `Context::new` picks elsewhere.
+
+use std::sync::OnceLock;
+use vkdiff_runtime::{Context, GemmFamily};
+
+/// The Vulkan device the tests share. No device is a failure, not a skip.
+pub fn ctx() -> Context {
+    static CTX: OnceLock<Context> = OnceLock::new();
+    CTX.get_or_init(open).clone()
+}
+
+/// A private context on the GPU paths (`VKDIFF_GPU_PATHS=1`'s configuration: device memory
+/// through staging, the tiled GEMM family, workgroup attention), so every pass also runs them.
+pub fn gpu_ctx() -> Context {
+    static CTX: OnceLock<Context> = OnceLock::new();
+    CTX.get_or_init(|| {
+        let c = open();
+        c.set_gpu_paths(true);
+        c
+    })
+    .clone()
+}
+
+/// A private context with a fixed GEMM family, so tests of both families can run in parallel.
+pub fn ctx_with(family: GemmFamily) -> Context {
+    let c = open();
+    c.set_gemm_family(family);
+    c
+}
+
+fn open() -> Context {
+    Context::new(None).unwrap_or_else(|e| {
+        panic!("vkdiff's tests need a Vulkan device and found none usable: {e}\n(on Debian: apt-get install -y mesa-vulkan-drivers libvulkan1)")
+    })
+}

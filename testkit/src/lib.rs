@@ -1,0 +1,11 @@
+//! What vkdiff's tests share, as a dev-dependency of every crate: the Vulkan device (no device is
+//! a failure that says what to install, never a skip), deterministic data, the repository's
+//! fixture paths, scratch folders, and comparisons that name the worst element.
+
+mod compare;
+mod device;
+mod paths;
+
+pub use compare::{assert_close, assert_within, random, storage_rtol, stored, DTYPES};
+pub use device::{ctx, ctx_with, gpu_ctx};
+pub use paths::{fixture, repo, scratch};
