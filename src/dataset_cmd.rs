@@ -1,17 +1,18 @@
 //! `vkdiff dataset`: scenes made into photoreal, exactly annotated training images; and
 //! `vkdiff dataset merge DIR`.
 
-use crate::model_args::{ModelArgs, SamplingArgs};
-use crate::progress::Progress;
-use crate::scene_cmd::{CropArgs, SceneSettings};
 use anyhow::{Context as _, Result};
 use clap::{Args, Subcommand};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+use vkdiff_args::Progress;
+use vkdiff_args::{CropArgs, SceneSettings};
+use vkdiff_args::{ModelArgs, SamplingArgs};
 use vkdiff_pipeline::dataset::{
-    generate, merge, Crops, Dataset, DatasetSettings, Progress as Event, Report, RunOptions, Shard,
+    merge, read_prompts, Crops, DatasetEvent, DatasetJob, DatasetSettings, Finish, Merged, Progress as Event, Report,
+    RunOptions, ShardRequest,
 };
-use vkdiff_pipeline::{read_images, Sampling, Sdxl, WorkflowModels};
+use vkdiff_pipeline::Sampling;
 use vkdiff_runtime::Context;
 
 /// Render scenes and make each into photoreal images with exact masks: one folder with the
@@ -75,93 +76,68 @@ enum DatasetCommand {
 pub fn run(args: &DatasetArgs) -> Result<()> {
     if let Some(DatasetCommand::Merge { dir }) = &args.command {
         let merged = merge(dir)?;
-        println!(
-            "wrote {}: {} images, {} annotations",
-            dir.join("annotations.json").display(),
-            merged.images,
-            merged.annotations
-        );
+        print_merged(dir, &merged);
         return Ok(());
     }
     let out = args.out.as_deref().context("--out DIR is required")?;
-    let settings = settings(args)?;
-    let (shard, source) = Shard::resolve(args.shard.as_deref(), args.shards, &|k| std::env::var(k).ok())?;
-    if args.batch == 0 {
-        anyhow::bail!("--batch must be at least 1");
-    }
-    let styles = settings.ip_sets.iter().map(|set| read_images(set)).collect::<vkdiff_pipeline::Result<Vec<_>>>()?;
-    let dataset = Dataset::open(out, &settings)?;
-    let pending = dataset.pending(shard)?;
-    for why in &pending.redo {
+    let shard = ShardRequest { shard: args.shard.clone(), shards: args.shards };
+    let options = RunOptions { batch: args.batch, threads: args.scene.threads };
+    let mut job = DatasetJob::new(settings(args)?, out, shard, options, &|k| std::env::var(k).ok())?;
+    for why in job.redo() {
         eprintln!("making again: {why}");
     }
-    let todo = pending.images();
-    eprintln!(
-        "{}: {} images of {}×{} from {} scenes; shard {}/{} ({source}): {todo} to make, {} already done",
-        out.display(),
-        settings.images(),
-        settings.sampling.width,
-        settings.sampling.height,
-        settings.count,
-        shard.index,
-        shard.count,
-        pending.done
-    );
-    if todo > 0 {
+    eprintln!("{}", job.plan_line());
+    if job.todo() > 0 {
         let ctx = Context::new(args.model.device)?;
         eprintln!("device: {}", ctx.info().name);
-        let start = Instant::now();
-        let models = WorkflowModels::load(&ctx, &settings.models, &mut |line| eprintln!("{line}"))?;
-        crate::gen_cmd::warn_cut_prompts(
-            &models.sdxl,
-            settings.sampling.prompt_syntax,
-            settings.prompts.iter().chain(&settings.negative_prompt),
-        );
-        eprintln!("loaded in {:.1} s", start.elapsed().as_secs_f64());
-        let done = pending.done as usize;
-        let total = done + todo as usize;
-        let bar = Progress::resuming("images", "image", done);
+        let done = job.done() as usize;
+        let total = done + job.todo() as usize;
+        // The bar and the clock start once the models are loaded: the closing line's per-image
+        // figure is the loop's.
+        let mut bar = Progress::resuming("images", "image", done);
+        let mut start = Instant::now();
         let mut made = done;
-        let options = RunOptions { batch: args.batch, threads: args.scene.threads };
-        let start = Instant::now();
-        let report = generate(&dataset, &settings, &models, &styles, pending, &options, &mut |event| match event {
-            Event::Images { done, .. } => {
+        let report = job.run(&ctx, &mut |event| match event {
+            DatasetEvent::Note(line) => eprintln!("{line}"),
+            DatasetEvent::Loaded(time) => {
+                eprintln!("loaded in {:.1} s", time.as_secs_f64());
+                bar = Progress::resuming("images", "image", done);
+                start = Instant::now();
+            }
+            DatasetEvent::Progress(Event::Images { done, .. }) => {
                 made = done as usize;
                 bar.show(made, total, "", true);
             }
-            Event::Step { step, steps } => bar.show(made, total, &format!("  (step {step}/{steps})"), false),
+            DatasetEvent::Progress(Event::Step { step, steps }) => {
+                bar.show(made, total, &format!("  (step {step}/{steps})"), false)
+            }
         })?;
         eprintln!("{}", closing_line(&report, start.elapsed(), ctx.peak_bytes()));
     }
-    // The process that finds every image done merges: the whole run, or the last shard to finish
-    // (shards finishing together write the same bytes, each file renamed into place whole).
-    let recorded = Dataset::read(out)?.recorded();
-    if recorded == settings.images() {
-        let merged = merge(out)?;
-        println!(
-            "wrote {}: {} images, {} annotations",
-            out.join("annotations.json").display(),
-            merged.images,
-            merged.annotations
-        );
-    } else {
-        println!(
-            "shard {}/{} done; {} of {} images are made. Once every shard is: vkdiff dataset merge {}",
-            shard.index,
-            shard.count,
-            recorded,
-            settings.images(),
+    match job.finish()? {
+        Finish::Merged(merged) => print_merged(out, &merged),
+        Finish::ShardDone { recorded, total } => println!(
+            "shard {} done; {recorded} of {total} images are made. Once every shard is: vkdiff dataset merge {}",
+            job.shard_name(),
             out.display()
-        );
+        ),
     }
     Ok(())
+}
+
+fn print_merged(dir: &Path, merged: &Merged) {
+    println!(
+        "wrote {}: {} images, {} annotations",
+        dir.join("annotations.json").display(),
+        merged.images,
+        merged.annotations
+    );
 }
 
 fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
     let mut prompts = args.prompt.clone();
     if let Some(file) = &args.prompts {
-        let text = std::fs::read_to_string(file).with_context(|| format!("--prompts {}", file.display()))?;
-        prompts.extend(text.lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from));
+        prompts.extend(read_prompts(file)?);
     }
     let mut ip_sets = Vec::new();
     if !args.ip_image.is_empty() {
@@ -172,9 +148,6 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
             .iter()
             .map(|set| set.split(',').map(str::trim).filter(|p| !p.is_empty()).map(PathBuf::from).collect()),
     );
-    let models = args.model.settings()?;
-    models.check()?;
-    let multiple = Sdxl::probe_pixel_multiple(&models.model)?;
     let crops =
         Crops { count: args.crops.crops, size: args.crops.crop_size, min_fraction: args.crops.crop_min_fraction };
     Ok(DatasetSettings::new(
@@ -183,12 +156,11 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
         args.scene.config(),
         crops,
         args.model.control_depth(),
-        models,
+        args.model.settings()?,
         prompts,
         args.sampling.negative_prompt.clone(),
         Sampling { strength: args.init_strength, ..args.sampling.sampling(0, 0) },
         ip_sets,
-        multiple,
     )?)
 }
 

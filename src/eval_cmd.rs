@@ -1,10 +1,10 @@
 //! `vkdiff eval`: COCO results scored against COCO ground truth as pycocotools' COCOeval does,
 //! plus F1, instance mIoU and foreground IoU.
 
-use anyhow::{bail, Context, Result};
+use anyhow::Result;
 use serde_json::Value;
-use std::path::{Path, PathBuf};
-use vkdiff_eval::{evaluate, foreground_iou, AreaRule, AreaSource, Dataset, EvalParams, Geometry, IouType};
+use std::path::PathBuf;
+use vkdiff_eval::{summarize, AreaRule, AreaSource, IouType, SummaryRequest};
 
 #[derive(clap::Args)]
 pub struct EvalArgs {
@@ -42,75 +42,33 @@ enum AreaFromArg {
     Mask,
 }
 
-fn read_json(path: &Path) -> Result<Value> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{} is not JSON", path.display()))
-}
-
-/// 2·a·b / (a + b), -1 where either is undefined.
-fn f1(a: f64, b: f64) -> f64 {
-    if a < 0.0 || b < 0.0 {
-        -1.0
-    } else if a + b == 0.0 {
-        0.0
-    } else {
-        2.0 * a * b / (a + b)
-    }
-}
-
 pub fn run(args: &EvalArgs) -> Result<()> {
     let iou_type = if args.iou_type == "bbox" { IouType::Bbox } else { IouType::Segm };
     let max_dets: [usize; 3] =
         args.max_dets.clone().try_into().map_err(|_| anyhow::anyhow!("--max-dets takes three numbers"))?;
-    let masks = iou_type == IouType::Segm;
-    let gt = Dataset::ground_truth(&read_json(&args.gt)?, masks).with_context(|| format!("{}", args.gt.display()))?;
-    let pred = read_json(&args.pred)?;
     let rule = match args.area_from {
         AreaFromArg::Loadres => AreaRule::LoadRes,
         AreaFromArg::Mask => AreaRule::Mask,
     };
-    let areas = AreaSource::of_results(&pred, rule).with_context(|| format!("{}", args.pred.display()))?;
-    let dt = Dataset::results(&pred, &gt, masks, areas).with_context(|| format!("{}", args.pred.display()))?;
-    if gt.annotations.is_empty() {
-        bail!("{} holds no annotations", args.gt.display());
+    let summary = summarize(&SummaryRequest {
+        gt: &args.gt,
+        pred: &args.pred,
+        iou_type,
+        max_dets,
+        score_threshold: args.score_threshold,
+        area_rule: rule,
+    })?;
+    for warning in &summary.warnings {
+        eprintln!("{warning}");
     }
-    if gt.annotations.iter().any(|a| a.id == 0) {
-        eprintln!("warning: {} has annotation id 0 (Roboflow exports start there); pycocotools counts matches to it as false positives, vkdiff counts them as matches", args.gt.display());
-    }
-    let stats = evaluate(&gt, &dt, &EvalParams { iou_type, max_dets })?;
-    let v = &stats.values;
-    // Recall at IoU 0.5 over categories, at the last cap: AR's partner for AP50.
-    let [_, _, k_n, a_n, m_n] = stats.dims;
-    let r50: Vec<f64> = (0..k_n).map(|k| stats.recall[(k * a_n) * m_n + 2]).filter(|&r| r > -1.0).collect();
-    let ar50 = if r50.is_empty() { -1.0 } else { r50.iter().sum::<f64>() / r50.len() as f64 };
-    let mut rows: Vec<(String, f64)> = stats.names.iter().cloned().zip(v.iter().copied()).collect();
-    rows.push((format!("AR50@{}", max_dets[2]), ar50));
-    rows.push(("F1".into(), f1(v[0], v[8])));
-    rows.push(("F1_50".into(), f1(v[1], ar50)));
-    if masks {
-        rows.push(("mIoU".into(), stats.mean_instance_iou));
-        rows.push(("mIoU_matched".into(), stats.mean_matched_iou));
-        let mut per_image: std::collections::BTreeMap<u64, (Vec<_>, Vec<_>)> =
-            gt.images.keys().map(|&i| (i, (vec![], vec![]))).collect();
-        for a in &gt.annotations {
-            if let (Geometry::Mask(r), Some(e)) = (&a.geometry, per_image.get_mut(&a.image_id)) {
-                e.0.push(r);
-            }
-        }
-        for a in dt.annotations.iter().filter(|a| a.score >= args.score_threshold) {
-            if let (Geometry::Mask(r), Some(e)) = (&a.geometry, per_image.get_mut(&a.image_id)) {
-                e.1.push(r);
-            }
-        }
-        rows.push(("foreground_IoU".into(), foreground_iou(&per_image.into_values().collect::<Vec<_>>())));
-    }
+    let areas = summary.areas;
     let rule_name = match rule {
         AreaRule::LoadRes => "loadres",
         AreaRule::Mask => "mask",
     };
     if args.json {
         let mut map: serde_json::Map<String, Value> =
-            rows.iter().map(|(k, x)| (k.clone(), serde_json::json!(x))).collect();
+            summary.rows.iter().map(|(k, x)| (k.clone(), serde_json::json!(x))).collect();
         map.insert("area_from".into(), areas.name().into());
         map.insert("area_rule".into(), rule_name.into());
         println!("{}", serde_json::to_string_pretty(&Value::Object(map))?);
@@ -118,10 +76,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     }
     println!(
         "{} images, {} ground-truth annotations, {} predictions, iou type {}",
-        gt.images.len(),
-        gt.annotations.len(),
-        dt.annotations.len(),
-        args.iou_type
+        summary.images, summary.gt_annotations, summary.predictions, args.iou_type
     );
     let why = match (rule, areas) {
         (AreaRule::Mask, _) => "--area-from mask",
@@ -131,7 +86,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         (_, AreaSource::Mask) => "as pycocotools' loadRes: the first result has no bbox",
     };
     println!("detection areas from each {} ({why})", areas.name());
-    for (name, x) in rows {
+    for (name, x) in &summary.rows {
         println!("{name:<16} {x:.4}");
     }
     Ok(())

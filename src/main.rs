@@ -1,13 +1,11 @@
-//! `vkdiff`: command-line parsing and nothing else; every subcommand lives in its own module.
+//! `vkdiff`: the command line. Each command parses its flags, calls its one library entry, and
+//! prints; the benchmarks live in `vkdiff-bench`, the shared flags in `vkdiff-args`.
 
-mod bench;
 mod dataset_cmd;
 mod devices_cmd;
 mod eval_cmd;
 mod fid_cmd;
 mod gen_cmd;
-mod model_args;
-mod progress;
 mod scene_cmd;
 
 use clap::{Parser, Subcommand};
@@ -40,7 +38,7 @@ enum Command {
     Fid(fid_cmd::FidArgs),
     /// Measure speed: kernels, networks, scene generation.
     #[command(subcommand)]
-    Bench(bench::BenchCommand),
+    Bench(vkdiff_bench::BenchCommand),
 }
 
 fn main() {
@@ -52,10 +50,27 @@ fn main() {
         Command::Devices(args) => devices_cmd::run(&args),
         Command::Eval(args) => eval_cmd::run(&args),
         Command::Fid(args) => fid_cmd::run(&args),
-        Command::Bench(cmd) => bench::run(cmd),
+        Command::Bench(cmd) => vkdiff_bench::run(cmd),
     };
     if let Err(e) = result {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", one_line(&e));
         std::process::exit(1);
     }
+}
+
+/// The error and its causes joined by `: `, each said once: an error that already ends with its
+/// cause's text (a file error naming the path and the OS's reason) does not repeat it.
+fn one_line(error: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in error.chain() {
+        let text = cause.to_string();
+        if line.ends_with(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
 }

@@ -488,6 +488,14 @@ fn bad_dataset_arguments_print_one_error_line_and_write_nothing() {
         String::from_utf8_lossy(&result.stderr)
     );
     assert_eq!(std::fs::read_dir(&foreign).unwrap().count(), 1, "nothing written into someone else's folder");
+    // A file where the folder should be: the OS's reason, said once.
+    let file = dir.join("afile");
+    std::fs::write(&file, "mine").unwrap();
+    let mut args = base(&file);
+    args.extend(["--prompt", "x"].map(String::from));
+    let stderr = String::from_utf8_lossy(&vk().args(&args).output().unwrap().stderr).into_owned();
+    assert!(stderr.lines().any(|l| l.starts_with("error:") && l.contains("afile")), "{stderr}");
+    assert_eq!(stderr.matches("(os error").count(), 1, "the OS's reason repeated: {stderr}");
     let result = vkdiff(&["dataset", "merge", dir.to_str().unwrap()]);
     assert!(String::from_utf8_lossy(&result.stderr).contains("not a vkdiff dataset folder"));
 }

@@ -6,10 +6,12 @@ mod cocoeval;
 mod dataset;
 pub mod fid;
 mod masks;
+mod summary;
 
 pub use cocoeval::{evaluate, EvalParams, IouType, Stats};
 pub use dataset::{Annotation, AreaRule, AreaSource, Dataset, Geometry};
 pub use masks::{bbox_iou, foreground_iou, mask_iou, polygon_rle, union};
+pub use summary::{summarize, Summary, SummaryRequest};
 
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]

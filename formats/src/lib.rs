@@ -1,7 +1,9 @@
 //! The file formats vkdiff reads and writes, below the networks and the metrics that use them:
 //! safetensors (memory-mapped), PyTorch `.pth` files (a state dict, read without running pickled
-//! code), and PNG/JPEG images decoded as `PIL.Image.open(path).convert("RGB")` decodes them.
+//! code), and PNG/JPEG images decoded as `PIL.Image.open(path).convert("RGB")` decodes them; and
+//! files written atomically (whole or not at all).
 
+pub mod atomic;
 mod error;
 pub mod image;
 mod safetensors;

@@ -172,15 +172,10 @@ fn parse_entry(v: &Value) -> Option<Entry> {
     (start <= end).then_some(Entry { dtype, shape, element_size, start, end })
 }
 
-/// Writes f32 tensors as a safetensors file with string metadata, atomically (a temporary file
-/// renamed into place), so an interrupted run leaves no truncated file.
+/// Writes f32 tensors as a safetensors file with string metadata, atomically, so an interrupted
+/// run leaves no truncated file.
 pub fn write_f32(path: &Path, tensors: &[(&str, &[usize], &[f32])], metadata: &BTreeMap<String, String>) -> Result<()> {
-    let tmp = path.with_extension("safetensors.partial");
-    let written = std::fs::write(&tmp, f32_file_bytes(tensors, metadata)).and_then(|()| std::fs::rename(&tmp, path));
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    written.map_err(|e| Error::Io { path: path.to_path_buf(), source: e })
+    crate::atomic::write_atomic(path, &f32_file_bytes(tensors, metadata))
 }
 
 /// The bytes of a safetensors file of f32 tensors with string metadata.

@@ -66,17 +66,20 @@ impl ClipTokenizer {
     /// The built-in CLIP vocabulary (single-file checkpoints carry no tokenizer), padding with
     /// `pad_token`: `<|endoftext|>` for CLIP-L (id 49407), `!` for OpenCLIP bigG (id 0).
     pub fn builtin(pad_token: &str) -> Result<ClipTokenizer> {
-        // open_clip's order: byte symbols, the same with `</w>`, each merge joined, the specials.
-        let symbols: Vec<String> = byte_symbols().into_iter().map(|(_, c)| c.to_string()).collect();
-        let mut vocab = symbols.clone();
-        vocab.extend(symbols.iter().map(|s| format!("{s}{END_OF_WORD}")));
-        vocab.extend(
-            merge_lines(BUILTIN_MERGES).filter_map(|(_, line)| line.split_once(' ').map(|(a, b)| format!("{a}{b}"))),
-        );
-        vocab.extend([BOS.to_string(), EOS.to_string()]);
-        let vocab = vocab.into_iter().zip(0..).collect();
+        let vocab = builtin_vocab().into_iter().zip(0..).collect();
         let origin = Path::new("built-in CLIP vocabulary");
         Self::new(vocab, BUILTIN_MERGES, pad_token, origin, origin)
+    }
+
+    /// The built-in vocabulary as files transformers' `CLIPTokenizer` reads: `dir/vocab.json` and
+    /// `dir/merges.txt` (for references that must tokenize as vkdiff does).
+    pub fn write_builtin(dir: &Path) -> Result<()> {
+        let io = |source| Error::Io { path: dir.to_path_buf(), source };
+        std::fs::create_dir_all(dir).map_err(io)?;
+        let vocab: serde_json::Map<String, serde_json::Value> =
+            builtin_vocab().into_iter().zip(0u32..).map(|(token, id)| (token, id.into())).collect();
+        std::fs::write(dir.join("vocab.json"), serde_json::Value::Object(vocab).to_string()).map_err(io)?;
+        std::fs::write(dir.join("merges.txt"), BUILTIN_MERGES).map_err(io)
     }
 
     fn new(
@@ -236,4 +239,17 @@ fn read(path: &Path) -> Result<String> {
 
 fn format_error(path: &Path, e: serde_json::Error) -> Error {
     Error::Format { path: path.to_path_buf(), why: e.to_string() }
+}
+
+/// open_clip's vocabulary in id order: byte symbols, the same with `</w>`, each merge joined, the
+/// specials.
+fn builtin_vocab() -> Vec<String> {
+    let symbols: Vec<String> = byte_symbols().into_iter().map(|(_, c)| c.to_string()).collect();
+    let mut vocab = symbols.clone();
+    vocab.extend(symbols.iter().map(|s| format!("{s}{END_OF_WORD}")));
+    vocab.extend(
+        merge_lines(BUILTIN_MERGES).filter_map(|(_, line)| line.split_once(' ').map(|(a, b)| format!("{a}{b}"))),
+    );
+    vocab.extend([BOS.to_string(), EOS.to_string()]);
+    vocab
 }

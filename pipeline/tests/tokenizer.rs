@@ -2,10 +2,8 @@
 //! tools/make_tokenizer_fixtures.py.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use vkdiff_pipeline::ClipTokenizer;
-
-const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/pipeline");
 
 struct Case {
     text: String,
@@ -20,7 +18,7 @@ struct Corpus {
 }
 
 fn corpus() -> Corpus {
-    let path = Path::new(FIXTURES).join("tokenizer_corpus.json");
+    let path = vkdiff_testkit::fixture("pipeline").join("tokenizer_corpus.json");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
     let pads = json["pad_tokens"].as_object().unwrap();
@@ -66,7 +64,7 @@ fn check(corpus: &Corpus, tokenizer: &ClipTokenizer, folder: &str, what: &str) {
 }
 
 fn folder(name: &str) -> PathBuf {
-    Path::new(FIXTURES).join("clip-tokenizer").join(name)
+    vkdiff_testkit::fixture("pipeline").join("clip-tokenizer").join(name)
 }
 
 #[test]
@@ -117,4 +115,16 @@ fn pad_token_forms() {
     let from_object = ClipTokenizer::from_dir(&dir).unwrap().pad_id();
     std::fs::remove_dir_all(&dir).unwrap();
     assert_eq!((without_config, from_object), (49407, 0));
+}
+
+#[test]
+fn the_builtin_vocabulary_is_written_as_transformers_files() {
+    // What `vkdiff bench gen` hands diffusers' tokenizers: the files transformers saved.
+    let dir = vkdiff_testkit::scratch("builtin-tokenizer");
+    ClipTokenizer::write_builtin(&dir).unwrap();
+    let saved = vkdiff_testkit::fixture("pipeline/clip-tokenizer/tokenizer");
+    let vocab =
+        |path: PathBuf| -> serde_json::Value { serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap() };
+    assert_eq!(vocab(dir.join("vocab.json")), vocab(saved.join("vocab.json")));
+    assert_eq!(std::fs::read(dir.join("merges.txt")).unwrap(), std::fs::read(saved.join("merges.txt")).unwrap());
 }

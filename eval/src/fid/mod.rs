@@ -3,9 +3,11 @@
 
 mod cache;
 mod features;
+mod job;
 pub mod numpy_rng;
 pub mod stats;
 
 pub use cache::FeatureCache;
 pub use features::{check_images, file_stamp, list_images, open_weights, FeatureExtractor};
+pub use job::{CacheDir, FidJob, FidOutcome, FidRequest, FolderFeatures};
 pub use stats::{fid, kid, Kid, KidOptions};

@@ -46,6 +46,7 @@ fn fnv1a(text: &str) -> String {
 }
 
 /// What the images of a shard still need.
+#[derive(Default)]
 pub struct Pending {
     /// Scenes with images to make, each with those images' indices.
     pub scenes: Vec<(u64, Vec<u64>)>,
@@ -209,7 +210,7 @@ impl Dataset {
         let record = ImageRecord { fingerprint: self.fingerprint.clone(), files, image, annotations };
         let mut text = serde_json::to_string(&record).expect("records serialise");
         text.push('\n');
-        write_atomic(&self.dir.join(self.files(index).record), text.as_bytes())
+        Ok(write_atomic(&self.dir.join(self.files(index).record), text.as_bytes())?)
     }
 }
 

@@ -4,6 +4,7 @@
 //! the folder, and merged into one `annotations.json` at the end.
 
 mod folder;
+mod job;
 mod merge;
 mod plan;
 mod run;
@@ -11,7 +12,8 @@ mod scenes;
 mod settings;
 
 pub use folder::{Dataset, ImageRecord, Pending, ANNOTATIONS, MANIFEST};
+pub use job::{DatasetEvent, DatasetJob, Finish, ShardRequest};
 pub use merge::{merge, Merged};
 pub use plan::{choose, image_seed, Choice, ImageFiles, Shard};
 pub use run::{generate, Progress, Report, RunOptions, StageTimes};
-pub use settings::{Crops, DatasetSettings};
+pub use settings::{read_prompts, Crops, DatasetSettings};

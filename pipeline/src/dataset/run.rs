@@ -6,13 +6,13 @@ use super::folder::{Dataset, Pending};
 use super::plan::{choose, image_seed, Choice};
 use super::scenes::{render_scenes, SceneImage};
 use super::settings::DatasetSettings;
-use crate::denoiser::{Denoiser, ItemInputs};
 use crate::error::{Error, Result};
 use crate::files::png_bytes;
-use crate::gen_settings::GenSettings;
-use crate::prompt_encoding::Conditioning;
-use crate::sampling::TextToImage;
-use crate::workflow_models::WorkflowModels;
+use crate::sdxl::denoiser::{Denoiser, ItemInputs};
+use crate::sdxl::prompt_encoding::Conditioning;
+use crate::sdxl::WorkflowModels;
+use crate::settings::sampling::TextToImage;
+use crate::settings::GenSettings;
 use crate::RgbImage;
 use serde_json::{json, Value};
 use std::collections::{HashMap, VecDeque};
@@ -87,9 +87,6 @@ pub fn generate(
     options: &RunOptions,
     on_progress: &mut dyn FnMut(Progress),
 ) -> Result<Report> {
-    if options.batch == 0 {
-        return Err(Error::Config("--batch must be at least 1".into()));
-    }
     let total = pending.done + pending.images();
     // Every prompt once, first: batches group images by their prompts' token counts.
     let sampling = &settings.sampling;

@@ -3,12 +3,13 @@
 //! flag names, so a run with other settings into the same folder is refused naming the flag.
 
 use crate::error::{Error, Result};
-use crate::gen_settings::{control_depth_name, precision_name, schedule_name, ModelSettings, RNG};
-use crate::ip_scale::IpScale;
-use crate::prompt_syntax::PromptSyntax;
-use crate::sampling::{Sampling, SizeConditioning};
+use crate::sdxl::Sdxl;
+use crate::settings::ip_scale::IpScale;
+use crate::settings::prompt_syntax::PromptSyntax;
+use crate::settings::sampling::{Sampling, SizeConditioning};
+use crate::settings::{control_depth_name, precision_name, schedule_name, ModelSettings, RNG};
 use serde_json::{json, Map, Value};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use vkdiff_render::control::ControlDepth;
 use vkdiff_render::crops::{centered, centered_window, validate_min_fraction, CropWindow};
 use vkdiff_render::scene::SceneConfig;
@@ -44,7 +45,7 @@ pub struct DatasetSettings {
 
 impl DatasetSettings {
     /// Checks every setting and fixes the image size: crops of `crops.size`, or the frame cut to
-    /// sides that are multiples of `pixel_multiple` (the model's; see `Sdxl::pixel_multiple`).
+    /// sides that are multiples of the model's pixel multiple (`Sdxl::probe_pixel_multiple`).
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         seed: u64,
@@ -57,7 +58,6 @@ impl DatasetSettings {
         negative_prompt: Option<String>,
         mut sampling: Sampling,
         ip_sets: Vec<Vec<PathBuf>>,
-        pixel_multiple: usize,
     ) -> Result<DatasetSettings> {
         scene.validate()?;
         validate_min_fraction(crops.min_fraction)?;
@@ -89,7 +89,7 @@ impl DatasetSettings {
         for prompt in prompts.iter().chain(&negative_prompt) {
             sampling.prompt_syntax.check(prompt)?;
         }
-        let multiple = pixel_multiple as u32;
+        let multiple = Sdxl::probe_pixel_multiple(&models.model)? as u32;
         let (width, height) = if crops.count > 0 {
             if crops.size == 0 || crops.size > scene.width.min(scene.height) {
                 return Err(Error::Config(format!(
@@ -250,4 +250,11 @@ pub fn first_difference(recorded: &Value, wanted: &Value) -> Option<String> {
         };
         format!("{flag} was {} there, {} now", show(a.get(k)), show(b.get(k)))
     })
+}
+
+/// The prompts of a `--prompts` file: one a line, trimmed, blank lines skipped.
+pub fn read_prompts(path: &Path) -> Result<Vec<String>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::Context(format!("--prompts {}", path.display()), Box::new(Error::Config(e.to_string()))))?;
+    Ok(text.lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect())
 }

@@ -2,9 +2,7 @@
 //! (random weights) on the device, restoring, and re-merging, beside the same merge arithmetic
 //! in torch on this machine's CPU in the same run.
 
-use anyhow::{Context as _, Result};
-use std::io::Write as _;
-use std::process::Stdio;
+use anyhow::Result;
 use std::time::Instant;
 use vkdiff_lora::{LoraFile, LoraMerger, Targets};
 use vkdiff_networks::{Checkpoint, UNet, UNetConfig};
@@ -19,8 +17,8 @@ pub struct LoraArgs {
     device: Option<usize>,
     #[arg(long, default_value_t = 32)]
     rank: usize,
-    #[arg(long, value_enum, default_value_t = crate::model_args::Precision::F16)]
-    precision: crate::model_args::Precision,
+    #[arg(long, value_enum, default_value_t = vkdiff_args::Precision::F16)]
+    precision: vkdiff_args::Precision,
     /// Skip torch on the CPU (needs python with torch: $VKDIFF_REFERENCE_PYTHON or python3).
     #[arg(long)]
     no_cpu_reference: bool,
@@ -52,7 +50,7 @@ pub fn run(args: &LoraArgs) -> Result<()> {
         args.rank,
         first.weights,
         params as f64 / 1e9,
-        super::kernels::dtype_name(dtype),
+        crate::kernels::dtype_name(dtype),
         first_s,
         again.seconds,
         restore_s
@@ -102,22 +100,7 @@ pub(super) fn write_lora(path: &std::path::Path, shapes: &[(String, [usize; 2])]
 }
 
 fn reference(shapes: &[(String, [usize; 2])], rank: usize) -> std::result::Result<f64, String> {
-    let (python, mut command) = super::cpu_reference::reference_python();
     let job = serde_json::json!({ "rank": rank, "shapes": shapes.iter().map(|(_, s)| s).collect::<Vec<_>>() });
-    let mut child = command
-        .arg("-c")
-        .arg(REFERENCE)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .map_err(|e| format!("{python} not runnable ({e})"))?;
-    child.stdin.take().expect("piped").write_all(job.to_string().as_bytes()).map_err(|e| e.to_string())?;
-    let out = child.wait_with_output().map_err(|e| e.to_string())?;
-    if !out.status.success() {
-        return Err(format!("{python}: {}", String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or("failed")));
-    }
-    let v: serde_json::Value =
-        serde_json::from_slice(&out.stdout).context("reference output is not JSON").map_err(|e| e.to_string())?;
+    let v = crate::cpu_reference::run_python_reference(REFERENCE, [] as [&str; 0], Some(&job.to_string()))?;
     v["merge_s"].as_f64().ok_or_else(|| "no merge_s in the reference output".into())
 }

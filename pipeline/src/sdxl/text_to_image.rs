@@ -3,12 +3,12 @@
 //! guidance on a batch of [negative, positive], the scheduler's steps, then the VAE. One image is a
 //! batch of one through [`Denoiser`].
 
-use crate::controlnet_guide::{ControlGuide, ControlNetUse};
-use crate::denoiser::{Denoiser, IpAdapterUse, ItemInputs};
 use crate::error::{finite, Error, Result};
-use crate::ip_adapter_guide::ImageGuide;
-use crate::sampling::{Sampling, TextToImage};
+use crate::sdxl::controlnet_guide::{ControlGuide, ControlNetUse};
+use crate::sdxl::denoiser::{Denoiser, IpAdapterUse, ItemInputs};
+use crate::sdxl::ImageGuide;
 use crate::sdxl::Sdxl;
+use crate::settings::sampling::{Sampling, TextToImage};
 use crate::RgbImage;
 use std::time::{Duration, Instant};
 use vkdiff_networks::nchw_to_nhwc;

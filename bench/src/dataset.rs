@@ -4,7 +4,7 @@
 //! one `vkdiff gen` per image pays: the load and LoRA merge, and a single image with its guides
 //! prepared and its passes recorded on its own.
 
-use super::workflow::{style_images, RandomGuides};
+use crate::random_models::{gradient_depth, style_images, RandomGuides};
 use anyhow::Result;
 use std::time::{Duration, Instant};
 use vkdiff_lora::LoraFile;
@@ -33,8 +33,8 @@ pub struct DatasetArgs {
     batch: usize,
     #[arg(long, default_value_t = 32)]
     lora_rank: usize,
-    #[arg(long, value_enum, default_value_t = crate::model_args::Precision::F16)]
-    precision: crate::model_args::Precision,
+    #[arg(long, value_enum, default_value_t = vkdiff_args::Precision::F16)]
+    precision: vkdiff_args::Precision,
     /// Steps per image in production, for the share of time that is not denoising.
     #[arg(long, default_value_t = 30)]
     production_steps: usize,
@@ -46,6 +46,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         "--size {} must be a multiple of 32, at least 64",
         args.size
     );
+    anyhow::ensure!(args.batch > 0, "--batch must be at least 1");
     let dtype = args.precision.dtype();
     let ctx = Context::new(args.device)?;
     let start = Instant::now();
@@ -121,7 +122,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         images,
         args.steps,
         args.batch,
-        super::kernels::dtype_name(dtype),
+        crate::kernels::dtype_name(dtype),
         t.setup.as_secs_f64(),
         per(wall - t.setup),
         per(t.guides),
@@ -198,10 +199,4 @@ fn dataset_settings(args: &DatasetArgs, models: &ModelSettings) -> DatasetSettin
         sampling,
         ip_sets: vec![vec!["style-1.png".into(), "style-2.png".into()]],
     }
-}
-
-/// A depth-like control image for the single `gen` image.
-fn gradient_depth(size: usize) -> vkdiff_pipeline::RgbImage {
-    let pixels = (0..size * size).flat_map(|i| [((i % size) * 255 / size) as u8; 3]).collect();
-    vkdiff_pipeline::RgbImage { width: size, height: size, pixels }
 }

@@ -2,14 +2,15 @@
 //! the CPU's practical GEMM peak (numpy → OpenBLAS, float32, `tools/cpu_gemm_peak.py`) and the
 //! diffusers / torch-fidelity / torch scripts of the other benchmarks.
 
-use std::process::Command;
+use std::io::Write;
+use std::process::{Command, Stdio};
 
 /// Settings some machines export for older OpenBLAS builds, which force a slower kernel family
 /// (e.g. Haswell's AVX2 kernels on an AVX-512 CPU): a reference runs with OpenBLAS's own choice.
 const SLOWING_VARIABLES: [&str; 2] = ["OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE"];
 
 /// `$VKDIFF_REFERENCE_PYTHON` (else python3), ready to run a reference script.
-pub fn reference_python() -> (String, Command) {
+fn reference_python() -> (String, Command) {
     let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
     let mut command = Command::new(&python);
     for name in SLOWING_VARIABLES {
@@ -35,13 +36,7 @@ pub struct CpuGemm {
 /// GFLOP/s for each (M, N, K), or why it could not be measured (no python3 or numpy).
 pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String> {
     let args: Vec<String> = shapes.iter().flat_map(|&(m, n, k)| [m, n, k]).map(|x| x.to_string()).collect();
-    let (python, mut command) = reference_python();
-    let out = command.arg("-c").arg(SCRIPT).args(&args).output().map_err(|e| format!("{python} not runnable ({e})"))?;
-    if !out.status.success() {
-        let err = String::from_utf8_lossy(&out.stderr);
-        return Err(format!("numpy reference failed: {}", err.lines().last().unwrap_or("")));
-    }
-    String::from_utf8_lossy(&out.stdout)
+    run_script(SCRIPT, args, None)?
         .lines()
         .map(|line| {
             let v: serde_json::Value = serde_json::from_str(line).map_err(|e| e.to_string())?;
@@ -62,20 +57,37 @@ pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String>
         .collect()
 }
 
-/// Runs a reference script with `$VKDIFF_REFERENCE_PYTHON` (else python3) and `args`, and reads
-/// the JSON line it prints last; or why it could not run.
-pub fn run_python_reference<S: AsRef<std::ffi::OsStr>>(
+/// Runs `script` with `$VKDIFF_REFERENCE_PYTHON` (else python3), `args` and, if given, `input` on
+/// its standard input; its standard output, or why it could not run (the last line of its errors).
+fn run_script<S: AsRef<std::ffi::OsStr>>(
     script: &str,
     args: impl IntoIterator<Item = S>,
-) -> Result<serde_json::Value, String> {
+    input: Option<&str>,
+) -> Result<String, String> {
     let (python, mut command) = reference_python();
-    let out = command.arg("-c").arg(script).args(args).output().map_err(|e| format!("{python} not runnable ({e})"))?;
+    command.arg("-c").arg(script).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    let mut child = command.spawn().map_err(|e| format!("{python} not runnable ({e})"))?;
+    let mut stdin = child.stdin.take().expect("piped");
+    if let Some(input) = input {
+        stdin.write_all(input.as_bytes()).map_err(|e| format!("{python}: {e}"))?;
+    }
+    drop(stdin);
+    let out = child.wait_with_output().map_err(|e| format!("{python}: {e}"))?;
     if !out.status.success() {
         let err = String::from_utf8_lossy(&out.stderr);
         return Err(format!("{python}: {}", err.lines().last().unwrap_or("failed")));
     }
-    let text = String::from_utf8_lossy(&out.stdout);
-    serde_json::from_str(text.lines().last().unwrap_or("")).map_err(|e| format!("reference output is not JSON: {e}"))
+    Ok(String::from_utf8_lossy(&out.stdout).into_owned())
+}
+
+/// Runs a reference script (see `run_script`) and reads the JSON line it prints last.
+pub fn run_python_reference<S: AsRef<std::ffi::OsStr>>(
+    script: &str,
+    args: impl IntoIterator<Item = S>,
+    input: Option<&str>,
+) -> Result<serde_json::Value, String> {
+    let out = run_script(script, args, input)?;
+    serde_json::from_str(out.lines().last().unwrap_or("")).map_err(|e| format!("reference output is not JSON: {e}"))
 }
 
 #[cfg(test)]

@@ -2,10 +2,10 @@
 //! architecture with random weights) over a folder of PNGs, decoding included, on the device,
 //! beside torch-fidelity on this machine's CPU over the same folder in the same run.
 
-use crate::model_args::Precision;
 use anyhow::{Context as _, Result};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+use vkdiff_args::Precision;
 use vkdiff_eval::fid::FeatureExtractor;
 use vkdiff_formats::write_safetensors_f32;
 use vkdiff_networks::RandomInception;
@@ -15,9 +15,8 @@ const REFERENCE: &str = include_str!("../../tools/fid_cpu_reference.py");
 
 #[derive(clap::Args)]
 pub struct FidArgs {
-    /// Vulkan device index (see `vkdiff devices`).
-    #[arg(long)]
-    device: Option<usize>,
+    #[command(flatten)]
+    common: crate::common::Common,
     /// Images in the folder.
     #[arg(long, default_value_t = 32)]
     images: usize,
@@ -29,12 +28,6 @@ pub struct FidArgs {
     batch: usize,
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     precision: Precision,
-    /// Skip torch-fidelity on the CPU (needs python with torch, torch-fidelity and safetensors).
-    #[arg(long)]
-    no_cpu_reference: bool,
-    /// Print one JSON line instead of a table.
-    #[arg(long)]
-    json: bool,
 }
 
 #[derive(serde::Serialize)]
@@ -61,14 +54,11 @@ pub fn run(args: &FidArgs) -> Result<()> {
     let result = bench(args, &dir);
     let _ = std::fs::remove_dir_all(&dir);
     let row = result?;
-    if args.json {
-        println!("{}", serde_json::to_string(&row)?);
-        return Ok(());
-    }
+    args.common.print(&row, |row| {
     let reference = row
         .cpu_reference_images_per_s
         .map_or(row.cpu_reference.clone(), |r| format!("{r:.2} images/s ({})", row.cpu_reference));
-    println!(
+    format!(
         "{} | FID features, {} PNGs of {}², batch {} {}: {:.2} images/s (load {:.1} s, peak {:.0} MiB) | torch-fidelity CPU f32: {reference} | speed-up {}",
         row.device,
         row.images,
@@ -79,8 +69,8 @@ pub fn run(args: &FidArgs) -> Result<()> {
         row.load_s,
         row.peak_mib,
         row.ratio_to_cpu.map_or("-".into(), |r| format!("{r:.2}×")),
-    );
-    Ok(())
+    )
+    })
 }
 
 fn bench(args: &FidArgs, dir: &Path) -> Result<Row> {
@@ -88,7 +78,7 @@ fn bench(args: &FidArgs, dir: &Path) -> Result<Row> {
     let weights = dir.join("inception-random.safetensors");
     write_safetensors_f32(&weights, &RandomInception::new().tensors(), &Default::default())?;
     let mut row = {
-        let ctx = vkdiff_runtime::Context::new(args.device)?;
+        let ctx = vkdiff_runtime::Context::new(args.common.device)?;
         let start = Instant::now();
         let extractor = FeatureExtractor::new(&ctx, &weights, args.precision.dtype(), args.batch)?;
         let load_s = start.elapsed().as_secs_f64();
@@ -111,7 +101,7 @@ fn bench(args: &FidArgs, dir: &Path) -> Result<Row> {
             ratio_to_cpu: None,
         }
     };
-    if args.no_cpu_reference {
+    if args.common.no_cpu_reference {
         row.cpu_reference = "not run (--no-cpu-reference)".into();
     } else {
         match reference(&weights, dir, args.batch) {
@@ -155,9 +145,10 @@ fn write_images(dir: &Path, n: usize, size: usize) -> Result<Vec<PathBuf>> {
 
 /// torch-fidelity on the CPU: images per second and what ran it.
 fn reference(weights: &Path, dir: &Path, batch: usize) -> std::result::Result<(f64, String), String> {
-    let v = super::cpu_reference::run_python_reference(
+    let v = crate::cpu_reference::run_python_reference(
         REFERENCE,
         [weights.as_os_str(), dir.as_os_str(), batch.to_string().as_ref()],
+        None,
     )?;
     let rate = v["images_per_s"].as_f64().ok_or("no images_per_s")?;
     Ok((

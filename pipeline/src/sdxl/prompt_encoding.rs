@@ -2,8 +2,8 @@
 //! penultimate hidden states side by side (CLIP-L first) and bigG's pooled projection.
 
 use crate::error::{finite, Error, Result};
-use crate::prompt_syntax::PromptSyntax;
 use crate::sdxl::Sdxl;
+use crate::settings::prompt_syntax::PromptSyntax;
 use crate::tokenizer::CONTEXT;
 
 /// One prompt's conditioning for the UNet, rows [negative, positive] with guidance, else
@@ -36,6 +36,25 @@ impl Sdxl {
     /// Tokens of `prompt` past the 75 that [`PromptSyntax::Plain`] reads (0 when it fits).
     pub fn tokens_cut(&self, prompt: &str) -> usize {
         self.tokenizers[0].tokens(prompt).len().saturating_sub(CONTEXT - 2)
+    }
+
+    /// One warning per plain prompt past CLIP's 75 tokens, which loses its end as in diffusers.
+    pub fn cut_prompt_warnings<'a>(
+        &self,
+        syntax: PromptSyntax,
+        prompts: impl Iterator<Item = &'a String>,
+    ) -> Vec<String> {
+        if syntax != PromptSyntax::Plain {
+            return Vec::new();
+        }
+        prompts
+            .filter_map(|prompt| {
+                let cut = self.tokens_cut(prompt);
+                (cut > 0).then(|| {
+                    format!("warning: the last {cut} tokens of \"{prompt}\" are cut (CLIP reads 75); --prompt-syntax weighted reads any length")
+                })
+            })
+            .collect()
     }
 
     /// Encodes `prompt` (and `negative`, or zeros where the model asks for them when it is

@@ -2,19 +2,18 @@
 //! encoder, and the LoRAs merged into the weights. `vkdiff gen` loads it for one image,
 //! `vkdiff dataset` for thousands.
 
-use crate::controlnet_guide::{check_control_settings, ControlGuide, ControlNetUse};
-use crate::denoiser::IpAdapterUse;
-use crate::error::{Error, Result};
-use crate::gen_settings::{GenSettings, ModelSettings};
-use crate::images::{load_control_image, read_image, ClipPreprocess};
-use crate::ip_adapter_guide::ImageGuide;
+use crate::error::Result;
+use crate::images::ClipPreprocess;
+use crate::sdxl::controlnet_guide::{ControlGuide, ControlNetUse};
+use crate::sdxl::denoiser::IpAdapterUse;
+use crate::sdxl::Guides;
+use crate::sdxl::ImageGuide;
 use crate::sdxl::Sdxl;
-use crate::text_to_image::Guides;
+use crate::settings::{flagged, GuideInputs, ModelSettings};
 use crate::RgbImage;
 use std::path::Path;
-use vkdiff_formats::SafeTensors;
 use vkdiff_lora::LoraFile;
-use vkdiff_networks::{ClipVisionConfig, ClipVisionModelWithProjection, ControlNetConfig, ControlNetModel, IpAdapter};
+use vkdiff_networks::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter};
 use vkdiff_runtime::Context;
 
 /// An IP-Adapter with the encoder and preprocessing of its style images.
@@ -29,65 +28,6 @@ pub struct WorkflowModels {
     pub controlnet: Option<ControlNetModel>,
     pub style: Option<StyleModels>,
     pub settings: ModelSettings,
-}
-
-/// `result`'s error, prefixed by the flag and file it came from.
-pub(crate) fn flagged<T, E: Into<Error>>(flag: &str, path: &Path, result: std::result::Result<T, E>) -> Result<T> {
-    result.map_err(|e| Error::Context(format!("{flag} {}", path.display()), Box::new(e.into())))
-}
-
-impl ModelSettings {
-    /// Flag values that are wrong whatever the model, before anything loads.
-    pub fn check(&self) -> Result<()> {
-        if let Some(c) = &self.controlnet {
-            check_control_settings(c.scale, c.start, c.end)?;
-        }
-        if let Some(ip) = &self.ip_adapter {
-            // The blocks named must hold cross-attentions of this UNet.
-            let crosses = flagged(
-                "--model",
-                &self.model,
-                vkdiff_networks::read_unet_config(&self.model).and_then(|c| c.cross_attentions()),
-            )?;
-            ip.scale.per_layer(&crosses)?;
-        }
-        for (path, flag) in self.files() {
-            if !path.exists() {
-                return Err(Error::Config(format!("{flag} {}: no such file or folder", path.display())));
-            }
-        }
-        // Headers and configs only: a file that is not what its flag wants fails before the
-        // model loads.
-        for lora in &self.loras {
-            flagged("--lora", &lora.path, LoraFile::open(&lora.path))?;
-        }
-        if let Some(c) = &self.controlnet {
-            let checked = if c.model.is_dir() {
-                ControlNetConfig::from_file(&c.model.join("config.json")).map(drop)
-            } else {
-                SafeTensors::open(&c.model).map(drop).map_err(Into::into)
-            };
-            flagged("--controlnet", &c.model, checked)?;
-        }
-        if let Some(ip) = &self.ip_adapter {
-            flagged("--image-encoder", &ip.encoder, ClipVisionConfig::from_file(&ip.encoder.join("config.json")))?;
-            if ip.adapter.extension().is_some_and(|e| e == "safetensors") {
-                flagged("--ip-adapter", &ip.adapter, SafeTensors::open(&ip.adapter))?;
-            }
-        }
-        Ok(())
-    }
-
-    /// Every file or folder the settings name, with its flag.
-    fn files(&self) -> Vec<(&Path, &'static str)> {
-        let mut files = vec![(self.model.as_path(), "--model")];
-        files.extend(self.controlnet.iter().map(|c| (c.model.as_path(), "--controlnet")));
-        if let Some(ip) = &self.ip_adapter {
-            files.extend([(ip.adapter.as_path(), "--ip-adapter"), (ip.encoder.as_path(), "--image-encoder")]);
-        }
-        files.extend(self.loras.iter().map(|l| (l.path.as_path(), "--lora")));
-        files
-    }
 }
 
 impl WorkflowModels {
@@ -177,39 +117,4 @@ fn load_style(
     };
     let adapter = flagged("--ip-adapter", adapter, IpAdapter::load(ctx, adapter, sdxl.unet(), sdxl.dtype()))?;
     Ok(StyleModels { adapter, encoder: encoder_model, preprocess })
-}
-
-/// The images one generation's guides read: the ControlNet's and the style images.
-#[derive(Default)]
-pub struct GuideInputs {
-    pub control: Option<RgbImage>,
-    pub style: Vec<RgbImage>,
-    /// img2img's init image.
-    pub init: Option<RgbImage>,
-}
-
-impl GenSettings {
-    /// Reads the input images the settings name (before any model loads, so a bad file fails fast).
-    pub fn read_inputs(&self) -> Result<GuideInputs> {
-        let control = match (&self.models.controlnet, &self.depth) {
-            (Some(c), Some(depth)) => Some(flagged("--depth", depth, load_control_image(depth, c.depth_mode))?),
-            (Some(_), None) => return Err(Error::Config("--controlnet needs --depth".into())),
-            (None, _) => None,
-        };
-        let style = if self.models.ip_adapter.is_some() {
-            if self.ip_images.is_empty() {
-                return Err(Error::Config("--ip-adapter needs at least one --ip-image".into()));
-            }
-            read_images(&self.ip_images)?
-        } else {
-            Vec::new()
-        };
-        let init = self.init_image.as_ref().map(|p| flagged("--init-image", p, read_image(p))).transpose()?;
-        Ok(GuideInputs { control, style, init })
-    }
-}
-
-/// Style images, each error naming its `--ip-image`.
-pub fn read_images(paths: &[std::path::PathBuf]) -> Result<Vec<RgbImage>> {
-    paths.iter().map(|p| flagged("--ip-image", p, read_image(p))).collect()
 }

@@ -1,6 +1,6 @@
 //! `vkdiff bench kernels`: each kernel on SDXL-sized shapes, timed on the device.
 
-use super::cpu_reference::{self, CpuGemm};
+use crate::cpu_reference::{self, CpuGemm};
 use anyhow::Result;
 use std::time::{Duration, Instant};
 use vkdiff_runtime::ops::{self, AttentionLayout, ConvParams, Matmul, UnaryOp};
@@ -8,21 +8,14 @@ use vkdiff_runtime::{Context, Dtype, Recorder, Tensor};
 
 #[derive(clap::Args)]
 pub struct KernelsArgs {
-    /// Vulkan device index (see `vkdiff devices`); default: VKDIFF_DEVICE, else the best device.
-    #[arg(long)]
-    device: Option<usize>,
-    /// Print JSON instead of a table.
-    #[arg(long)]
-    json: bool,
+    #[command(flatten)]
+    common: crate::common::Common,
     /// Only run kernels whose name contains this.
     #[arg(long)]
     filter: Option<String>,
     /// Timed samples per kernel; the best is reported.
     #[arg(long, default_value_t = 3)]
     samples: usize,
-    /// Skip the numpy/OpenBLAS reference.
-    #[arg(long)]
-    no_cpu_reference: bool,
 }
 
 /// What one run of a case does, for the throughput figure.
@@ -210,12 +203,12 @@ fn time_case(ctx: &Context, case: &Case, samples: usize) -> Result<Duration> {
 }
 
 pub fn run(args: &KernelsArgs) -> Result<()> {
-    let ctx = Context::new(args.device)?;
+    let ctx = Context::new(args.common.device)?;
     let info = ctx.info().clone();
     let dtypes: Vec<Dtype> = if info.supports_f16() { vec![Dtype::F32, Dtype::F16] } else { vec![Dtype::F32] };
     let mut rows = Vec::new();
     let mut gemm_shapes = Vec::new();
-    if !args.json {
+    if !args.common.json {
         println!(
             "device: {} ({}, {}), GEMM kernels: {:?}",
             info.name,
@@ -248,7 +241,7 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
                 cpu_gflops: None,
                 ratio_to_cpu: None,
             };
-            if !args.json {
+            if !args.common.json {
                 let show = |x: Option<f64>| x.map_or(String::from("-"), |v| format!("{v:.1}"));
                 println!(
                     "{:<26} {:<5} {:<32} {:>10.3} {:>9} {:>8}",
@@ -264,8 +257,11 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
         }
     }
     gemm_shapes.dedup();
-    let cpu: Result<Vec<CpuGemm>, String> =
-        if args.no_cpu_reference || gemm_shapes.is_empty() { Ok(vec![]) } else { cpu_reference::measure(&gemm_shapes) };
+    let cpu: Result<Vec<CpuGemm>, String> = if args.common.no_cpu_reference || gemm_shapes.is_empty() {
+        Ok(vec![])
+    } else {
+        cpu_reference::measure(&gemm_shapes)
+    };
     if let Ok(cpu) = &cpu {
         for (row, gemm) in &mut rows {
             if let Some(c) = cpu.iter().find(|c| Some((c.m, c.n, c.k)) == *gemm) {
@@ -274,7 +270,7 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             }
         }
     }
-    if args.json {
+    if args.common.json {
         let out = serde_json::json!({
             "device": info.name, "driver": info.driver, "kind": info.kind.label(), "gemm_family": format!("{:?}", ctx.gemm_family()),
             "kernels": rows.iter().map(|(r, _)| r).collect::<Vec<_>>(),

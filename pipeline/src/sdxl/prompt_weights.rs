@@ -10,9 +10,9 @@
 //! negative instead of padding it.
 
 use crate::error::{Error, Result};
-use crate::prompt_encoding::Conditioning;
-use crate::prompt_syntax::parse_attention;
+use crate::sdxl::prompt_encoding::Conditioning;
 use crate::sdxl::Sdxl;
+use crate::settings::prompt_syntax::parse_attention;
 use half::f16;
 
 /// Tokens per chunk between BOS and EOS.

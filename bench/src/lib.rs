@@ -1,11 +1,16 @@
-//! `vkdiff bench …`: speed figures, with the device named and a reference measured in the same run.
+//! `vkdiff bench …`: speed figures, with the device named and a reference measured in the same run
+//! (numpy/OpenBLAS, diffusers, torch-fidelity or torch on this machine's CPU, run by one Python
+//! runner, `cpu_reference`). The networks are full size with random weights.
 
+mod common;
 mod cpu_reference;
 mod dataset;
 mod fid;
 mod gen;
 mod kernels;
 mod lora;
+mod random_models;
+mod scene;
 mod unet;
 mod workflow;
 
@@ -16,7 +21,7 @@ pub enum BenchCommand {
     /// GFLOP/s or GB/s per kernel on SDXL-sized shapes.
     Kernels(kernels::KernelsArgs),
     /// Frames per second of depth + masks + COCO at 1920×1080, against the paper's Blender.
-    Scene(crate::scene_cmd::BenchSceneArgs),
+    Scene(scene::BenchSceneArgs),
     /// Milliseconds per SDXL UNet evaluation (real architecture, random weights) and peak memory,
     /// against diffusers on the CPU.
     Unet(unet::UnetArgs),
@@ -40,7 +45,7 @@ pub enum BenchCommand {
 pub fn run(cmd: BenchCommand) -> Result<()> {
     match cmd {
         BenchCommand::Kernels(args) => kernels::run(&args),
-        BenchCommand::Scene(args) => crate::scene_cmd::run_bench_scene(args),
+        BenchCommand::Scene(args) => scene::run(&args),
         BenchCommand::Unet(args) => unet::run(&args),
         BenchCommand::Gen(args) => gen::run(&args),
         BenchCommand::Lora(args) => lora::run(&args),

@@ -1,7 +1,7 @@
 //! The flags `vkdiff gen` and `vkdiff dataset` share: the model with its guides and LoRAs, and
 //! how images are sampled.
 
-use crate::scene_cmd::ControlMode;
+use crate::scene::ControlMode;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 use vkdiff_pipeline::{

@@ -5,31 +5,22 @@
 use anyhow::Result;
 use std::time::Instant;
 use vkdiff_networks::{SDXL_BASE_CONFIG, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
-use vkdiff_pipeline::{Guides, SamplerKind, Sampling, Sdxl, TextToImage};
+use vkdiff_pipeline::{ClipTokenizer, Guides, SamplerKind, Sampling, Sdxl, TextToImage};
 use vkdiff_runtime::{Context, Dtype};
 
 const REFERENCE: &str = include_str!("../../tools/gen_cpu_reference.py");
-/// The CLIP vocabulary in the layout transformers reads, for the reference's tokenizers.
-const TOKENIZERS: &str = "tests/fixtures/pipeline/clip-tokenizer";
 
 #[derive(clap::Args)]
 pub struct GenArgs {
-    /// Vulkan device index (see `vkdiff devices`).
-    #[arg(long)]
-    device: Option<usize>,
+    #[command(flatten)]
+    common: crate::common::Common,
     /// Image sizes in pixels (square).
     #[arg(long, value_delimiter = ',', default_values_t = [512, 1024])]
     size: Vec<usize>,
     #[arg(long, default_value_t = 4)]
     steps: usize,
-    #[arg(long, value_enum, default_value_t = crate::model_args::Precision::F16)]
-    precision: crate::model_args::Precision,
-    /// Skip diffusers on the CPU (needs python with torch, diffusers and transformers).
-    #[arg(long)]
-    no_cpu_reference: bool,
-    /// Print JSON lines instead of a table.
-    #[arg(long)]
-    json: bool,
+    #[arg(long, value_enum, default_value_t = vkdiff_args::Precision::F16)]
+    precision: vkdiff_args::Precision,
 }
 
 #[derive(serde::Serialize, Default)]
@@ -53,28 +44,26 @@ pub fn run(args: &GenArgs) -> Result<()> {
     let dtype = args.precision.dtype();
     for &size in &args.size {
         let mut row = measure(args, dtype, size)?;
-        if !args.no_cpu_reference {
+        if !args.common.no_cpu_reference {
             let r = reference(size, args.steps);
             row.step_ratio_to_cpu = r.as_ref().ok().and_then(|v| v["step_s"].as_f64()).map(|cpu| cpu / row.step_s);
             row.cpu_reference = Some(r.unwrap_or_else(|why| serde_json::json!({ "unavailable": why })));
         }
-        if args.json {
-            println!("{}", serde_json::to_string(&row)?);
-        } else {
-            println!(
+        args.common.print(&row, |row| {
+            format!(
                 "{} | SDXL gen {size}² {} steps {}: text {:.2} s, {:.1} s/step, VAE {:.1} s, total {:.1} s (load {:.1} s, record {:.1} s), peak {:.0} MiB | diffusers CPU f32: {} | step speed-up {}",
                 row.device, row.steps, row.precision, row.text_s, row.step_s, row.vae_s, row.total_s, row.load_s, row.record_s, row.peak_mib,
                 row.cpu_reference.as_ref().map_or("-".into(), |v| v.to_string()),
                 row.step_ratio_to_cpu.map_or("-".into(), |r| format!("{r:.2}×")),
-            );
-        }
+            )
+        })?;
     }
     Ok(())
 }
 
 /// Our run; the device and every buffer are released before the reference runs.
 fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
-    let ctx = Context::new(args.device)?;
+    let ctx = Context::new(args.common.device)?;
     let start = Instant::now();
     let model = Sdxl::random_sdxl_base(&ctx, dtype)?;
     let load_s = start.elapsed().as_secs_f64();
@@ -89,7 +78,7 @@ fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
         device: ctx.info().name.clone(),
         size,
         steps: t.steps.len(),
-        precision: super::kernels::dtype_name(dtype).into(),
+        precision: crate::kernels::dtype_name(dtype).into(),
         load_s,
         text_s: t.text_encoding.as_secs_f64(),
         record_s: t.record.as_secs_f64(),
@@ -122,10 +111,19 @@ pub(super) fn bench_job(size: usize, steps: usize) -> TextToImage {
 }
 
 fn reference(size: usize, steps: usize) -> std::result::Result<serde_json::Value, String> {
-    let configs =
-        [SDXL_BASE_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_BIGG_CONFIG, SDXL_VAE_CONFIG, TOKENIZERS].map(String::from);
-    super::cpu_reference::run_python_reference(
-        REFERENCE,
-        configs.into_iter().chain([size.to_string(), steps.to_string()]),
-    )
+    // The reference's tokenizers read vkdiff's built-in vocabulary, written where it can find it.
+    let tokenizers = std::env::temp_dir().join(format!("vkdiff-bench-gen-tokenizers-{}", std::process::id()));
+    let written =
+        ["tokenizer", "tokenizer_2"].iter().try_for_each(|sub| ClipTokenizer::write_builtin(&tokenizers.join(sub)));
+    let result = written.map_err(|e| e.to_string()).and_then(|()| {
+        let configs = [SDXL_BASE_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_BIGG_CONFIG, SDXL_VAE_CONFIG].map(String::from);
+        let tokenizers = tokenizers.display().to_string();
+        crate::cpu_reference::run_python_reference(
+            REFERENCE,
+            configs.into_iter().chain([tokenizers, size.to_string(), steps.to_string()]),
+            None,
+        )
+    });
+    let _ = std::fs::remove_dir_all(&tokenizers);
+    result
 }

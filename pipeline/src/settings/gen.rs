@@ -6,49 +6,16 @@
 //! No chunk is named `prompt` or `workflow`: ComfyUI reads those as its graph JSON and refuses
 //! the file when they are not, before it looks at `parameters`.
 
-use crate::ip_scale::IpScale;
-use crate::prompt_syntax::PromptSyntax;
-use crate::sampling::{Sampling, SizeConditioning, TextToImage};
+use crate::error::{Error, Result};
+use crate::images::{load_control_image, read_image};
 use crate::schedulers::SamplerKind;
+use crate::settings::models::{flagged, ModelSettings};
+use crate::settings::names::{control_depth_name, precision_name, schedule_name, RNG};
+use crate::settings::prompt_syntax::PromptSyntax;
+use crate::settings::sampling::{SizeConditioning, TextToImage};
+use crate::RgbImage;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use vkdiff_render::control::ControlDepth;
-use vkdiff_runtime::Dtype;
-
-/// The depth ControlNet and how it steers.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ControlNetSettings {
-    pub model: PathBuf,
-    /// How a depth EXR maps to brightness.
-    pub depth_mode: ControlDepth,
-    pub scale: f32,
-    pub start: f64,
-    pub end: f64,
-}
-
-/// The IP-Adapter, its image encoder and its weight.
-#[derive(Clone, Debug, PartialEq)]
-pub struct IpAdapterSettings {
-    pub adapter: PathBuf,
-    pub encoder: PathBuf,
-    pub scale: IpScale,
-}
-
-#[derive(Clone, Debug, PartialEq)]
-pub struct LoraSetting {
-    pub path: PathBuf,
-    pub strength: f32,
-}
-
-/// What loads once per process: the model, its guides and the LoRAs merged into it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ModelSettings {
-    pub model: PathBuf,
-    pub precision: Dtype,
-    pub controlnet: Option<ControlNetSettings>,
-    pub ip_adapter: Option<IpAdapterSettings>,
-    pub loras: Vec<LoraSetting>,
-}
 
 /// A value as A1111 writes it: in quotes where a comma or colon would split it.
 fn quoted(value: &str) -> String {
@@ -70,31 +37,6 @@ pub struct GenSettings {
     pub ip_images: Vec<PathBuf>,
     /// img2img's init image, as given.
     pub init_image: Option<PathBuf>,
-}
-
-/// The noise generator's name (the only one: torch's CPU generator, bit for bit).
-pub const RNG: &str = "torch-cpu";
-
-pub fn precision_name(dtype: Dtype) -> &'static str {
-    match dtype {
-        Dtype::F16 => "f16",
-        Dtype::F32 => "f32",
-    }
-}
-
-pub fn control_depth_name(mode: ControlDepth) -> &'static str {
-    match mode {
-        ControlDepth::Inverse => "inverse",
-        ControlDepth::Linear => "linear",
-    }
-}
-
-pub fn schedule_name(sampling: &Sampling) -> &'static str {
-    if sampling.karras {
-        "karras"
-    } else {
-        "default"
-    }
 }
 
 /// A1111's name of a sampler, as its `parameters` text and ComfyUI's importer spell it.
@@ -119,13 +61,6 @@ fn model_name(path: &Path) -> String {
 
 fn join_paths(paths: &[PathBuf], separator: &str) -> String {
     paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(separator)
-}
-
-impl ModelSettings {
-    /// The LoRAs as `--lora` takes them, FILE:STRENGTH.
-    pub fn lora_flags(&self) -> Vec<String> {
-        self.loras.iter().map(|l| format!("{}:{}", l.path.display(), l.strength)).collect()
-    }
 }
 
 impl GenSettings {
@@ -224,4 +159,39 @@ impl GenSettings {
         let negative = job.negative_prompt.as_deref().unwrap_or("");
         format!("{}{loras}\nNegative prompt: {negative}\n{}", job.prompt, pairs.join(", "))
     }
+}
+
+/// The images one generation's guides read: the ControlNet's and the style images.
+#[derive(Default)]
+pub struct GuideInputs {
+    pub control: Option<RgbImage>,
+    pub style: Vec<RgbImage>,
+    /// img2img's init image.
+    pub init: Option<RgbImage>,
+}
+
+impl GenSettings {
+    /// Reads the input images the settings name (before any model loads, so a bad file fails fast).
+    pub fn read_inputs(&self) -> Result<GuideInputs> {
+        let control = match (&self.models.controlnet, &self.depth) {
+            (Some(c), Some(depth)) => Some(flagged("--depth", depth, load_control_image(depth, c.depth_mode))?),
+            (Some(_), None) => return Err(Error::Config("--controlnet needs --depth".into())),
+            (None, _) => None,
+        };
+        let style = if self.models.ip_adapter.is_some() {
+            if self.ip_images.is_empty() {
+                return Err(Error::Config("--ip-adapter needs at least one --ip-image".into()));
+            }
+            read_images(&self.ip_images)?
+        } else {
+            Vec::new()
+        };
+        let init = self.init_image.as_ref().map(|p| flagged("--init-image", p, read_image(p))).transpose()?;
+        Ok(GuideInputs { control, style, init })
+    }
+}
+
+/// Style images, each error naming its `--ip-image`.
+pub fn read_images(paths: &[std::path::PathBuf]) -> Result<Vec<RgbImage>> {
+    paths.iter().map(|p| flagged("--ip-image", p, read_image(p))).collect()
 }

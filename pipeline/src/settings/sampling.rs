@@ -2,8 +2,8 @@
 //! conditioning, and one image's prompt and seed; each checked once, before any work.
 
 use crate::error::{Error, Result};
-use crate::prompt_syntax::PromptSyntax;
 use crate::schedulers::{Sampler, SamplerKind, SchedulerConfig};
+use crate::settings::prompt_syntax::PromptSyntax;
 
 /// How every image of a run is sampled: the settings a batch shares.
 #[derive(Clone, Debug, PartialEq)]

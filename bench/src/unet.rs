@@ -1,10 +1,10 @@
 //! `vkdiff bench unet`: one SDXL UNet evaluation (the real architecture, random weights) per
 //! latent size, timed on the device, beside diffusers on this machine's CPU in the same run.
 
-use super::kernels::{dtype_name, rand_tensor};
-use crate::model_args::Precision;
+use crate::kernels::{dtype_name, rand_tensor};
 use anyhow::{Context as _, Result};
 use std::time::Instant;
+use vkdiff_args::Precision;
 use vkdiff_networks::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
 use vkdiff_runtime::{Context, Dtype};
 
@@ -12,9 +12,8 @@ const REFERENCE: &str = include_str!("../../tools/unet_cpu_reference.py");
 
 #[derive(clap::Args)]
 pub struct UnetArgs {
-    /// Vulkan device index (see `vkdiff devices`); default: VKDIFF_DEVICE, else the best device.
-    #[arg(long)]
-    device: Option<usize>,
+    #[command(flatten)]
+    common: crate::common::Common,
     /// Image sizes in pixels (square); the latent is 1/8 of it.
     #[arg(long, value_delimiter = ',', default_values_t = [512, 1024])]
     size: Vec<usize>,
@@ -26,12 +25,6 @@ pub struct UnetArgs {
     /// Timed evaluations per size; the best is reported.
     #[arg(long, default_value_t = 1)]
     samples: usize,
-    /// Skip diffusers on the CPU (needs python with torch and diffusers: $VKDIFF_REFERENCE_PYTHON or python3).
-    #[arg(long)]
-    no_cpu_reference: bool,
-    /// Print JSON lines instead of a table.
-    #[arg(long)]
-    json: bool,
 }
 
 #[derive(serde::Serialize)]
@@ -57,7 +50,7 @@ pub fn run(args: &UnetArgs) -> Result<()> {
     for &size in &args.size {
         anyhow::ensure!(size % 32 == 0 && size > 0, "--size {size}: SDXL needs a multiple of 32 pixels");
         let mut row = measure(args, &config, dtype, size)?;
-        if !args.no_cpu_reference {
+        if !args.common.no_cpu_reference {
             match reference(size / 8, args.batch, args.samples) {
                 Ok(r) => {
                     row.ratio_to_cpu = Some(r.ms / row.ms);
@@ -67,10 +60,8 @@ pub fn run(args: &UnetArgs) -> Result<()> {
                 Err(why) => row.cpu_reference = format!("unavailable: {why}"),
             }
         }
-        if args.json {
-            println!("{}", serde_json::to_string(&row)?);
-        } else {
-            println!(
+        args.common.print(&row, |row| {
+            format!(
                 "{} | SDXL UNet {size}² batch {} {}: {:.0} ms/eval (load {:.1} s, record {:.2} s), weights {:.0} MiB, peak {:.0} MiB | diffusers CPU f32: {} | speed-up {}",
                 row.device,
                 row.batch,
@@ -86,15 +77,15 @@ pub fn run(args: &UnetArgs) -> Result<()> {
                     row.cpu_reference
                 )),
                 row.ratio_to_cpu.map_or("-".into(), |r| format!("{r:.2}×")),
-            );
-        }
+            )
+        })?;
     }
     Ok(())
 }
 
 /// Our evaluation; the device and every buffer are released before the reference runs.
 fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> Result<Row> {
-    let ctx = Context::new(args.device)?;
+    let ctx = Context::new(args.common.device)?;
     let start = Instant::now();
     let ckpt = Checkpoint::random(&ctx, dtype, 0);
     let unet = UNet::load(config, &ckpt)?;
@@ -161,7 +152,7 @@ fn reference(latent: usize, batch: usize, samples: usize) -> std::result::Result
         batch.to_string(),
         samples.max(1).to_string(),
     ];
-    let v = super::cpu_reference::run_python_reference(REFERENCE, args)?;
+    let v = crate::cpu_reference::run_python_reference(REFERENCE, args, None)?;
     let ms = v["ms"].as_f64().context("no ms").map_err(|e| e.to_string())?;
     let what = format!(
         "torch {} / diffusers {}, {} threads",

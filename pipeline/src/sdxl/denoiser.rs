@@ -4,15 +4,15 @@
 //! replays the passes. Each image keeps its own generator, sampler state and latents, so an
 //! image's result does not depend on the images beside it.
 
-use crate::controlnet_guide::{ControlNetUse, ControlRun, SharedInputs};
 use crate::error::{finite, Error, Result};
-use crate::img2img::InitLatents;
-use crate::ip_scale::IpScale;
-use crate::prompt_encoding::Conditioning;
 use crate::rng::TorchCpuRng;
-use crate::sampling::Sampling;
 use crate::schedulers::Sampler;
+use crate::sdxl::controlnet_guide::{ControlNetUse, ControlRun, SharedInputs};
+use crate::sdxl::prompt_encoding::Conditioning;
+use crate::sdxl::InitLatents;
 use crate::sdxl::Sdxl;
+use crate::settings::ip_scale::IpScale;
+use crate::settings::sampling::Sampling;
 use crate::RgbImage;
 use std::time::{Duration, Instant};
 use vkdiff_networks::{nchw_to_nhwc, nhwc_to_nchw, IpAdapter, IpAdapterInput, UNetInputs, UNetPass};
@@ -77,9 +77,7 @@ impl<'m> Denoiser<'m> {
         tokens: usize,
     ) -> Result<Denoiser<'m>> {
         model.check_sampling(sampling)?;
-        if batch == 0 {
-            return Err(Error::Config("--batch must be at least 1".into()));
-        }
+        assert!(batch > 0, "a denoiser runs batches of at least one image (the entries check --batch)");
         let scale = model.vae_scale();
         let latent = [sampling.height / scale, sampling.width / scale, model.unet_config.in_channels];
         let rows = batch * sampling.rows_per_image();

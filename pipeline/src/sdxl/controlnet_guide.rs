@@ -4,6 +4,7 @@
 
 use crate::error::{Error, Result};
 use crate::images::control_tensor;
+use crate::settings::check_control_settings;
 use crate::RgbImage;
 use vkdiff_networks::{nchw_to_nhwc, ControlNetInputs, ControlNetModel, ControlNetPass, ControlResiduals};
 use vkdiff_runtime::Tensor;
@@ -19,19 +20,6 @@ pub struct ControlGuide<'a> {
     /// as diffusers compares them.
     pub start: f64,
     pub end: f64,
-}
-
-/// The scale must be a number and the range a non-empty part of [0, 1].
-pub fn check_control_settings(scale: f32, start: f64, end: f64) -> Result<()> {
-    if !scale.is_finite() {
-        return Err(Error::Config(format!("--control-scale {scale} is not a number")));
-    }
-    if !(0.0..=1.0).contains(&start) || !(0.0..=1.0).contains(&end) || start >= end {
-        return Err(Error::Config(format!(
-            "--control-start {start} and --control-end {end} must satisfy 0 <= start < end <= 1"
-        )));
-    }
-    Ok(())
 }
 
 /// A control image must have the image's shape: resized to another, it would be stretched and

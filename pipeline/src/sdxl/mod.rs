@@ -1,5 +1,24 @@
 //! An SDXL model on the device: both tokenizers and text encoders, the UNet, the VAE and the
-//! scheduler config, from a diffusers folder or an original single file.
+//! scheduler config, from a diffusers folder or an original single file; and everything it runs:
+//! prompt encoding (plain and weighted), the batched denoiser with its ControlNet and IP-Adapter
+//! guides, img2img's init latents, text-to-image, and the paper's workflow loaded once.
+
+pub(crate) mod controlnet_guide;
+pub(crate) mod denoiser;
+mod img2img;
+mod ip_adapter_guide;
+pub(crate) mod prompt_encoding;
+mod prompt_weights;
+mod text_to_image;
+mod workflow_models;
+
+pub use controlnet_guide::{check_control_shape, ControlGuide, ControlNetUse};
+pub use denoiser::{BatchOutput, Denoiser, IpAdapterUse, ItemInputs};
+pub use img2img::InitLatents;
+pub use ip_adapter_guide::ImageGuide;
+pub use prompt_encoding::Conditioning;
+pub use text_to_image::{Denoised, Generated, Guides, Timings};
+pub use workflow_models::{StyleModels, WorkflowModels};
 
 use crate::error::{Error, Result};
 use crate::schedulers::SchedulerConfig;

@@ -5,7 +5,7 @@
 
 use crate::error::{Error, Result};
 use crate::images::ClipPreprocess;
-use crate::ip_scale::IpScale;
+use crate::settings::ip_scale::IpScale;
 use crate::RgbImage;
 use vkdiff_networks::{ClipVisionModelWithProjection, ImageFeature, IpAdapter};
 

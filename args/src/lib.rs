@@ -1,0 +1,12 @@
+//! vkdiff's command-line flags as clap types, shared by the commands (the `vkdiff` binary) and
+//! the benchmarks (`vkdiff-bench`): the model with its guides and LoRAs, how images are sampled,
+//! the precision, and the scene and its crops. Parsing only: each turns into the libraries'
+//! settings, which check themselves.
+
+mod model;
+mod progress;
+mod scene;
+
+pub use model::{ModelArgs, Precision, SamplingArgs};
+pub use progress::Progress;
+pub use scene::{ControlMode, CropArgs, SceneSettings};

@@ -1,0 +1,145 @@
+//! `vkdiff dataset`'s one entry: the settings checked, the shard resolved, the style images read
+//! and the folder opened before any model loads; then the run, and the merge by the process that
+//! finds every image done (the whole run, or the last shard to finish: shards finishing together
+//! write the same bytes, each file renamed into place whole).
+
+use crate::dataset::folder::{Dataset, Pending};
+use crate::dataset::merge::{merge, Merged};
+use crate::dataset::plan::Shard;
+use crate::dataset::run::{generate, Progress, Report, RunOptions};
+use crate::dataset::settings::DatasetSettings;
+use crate::error::{Error, Result};
+use crate::sdxl::WorkflowModels;
+use crate::settings::read_images;
+use crate::RgbImage;
+use std::path::Path;
+use std::time::{Duration, Instant};
+use vkdiff_runtime::Context;
+
+/// Which part of the set this process makes: `--shard I/N`, or `--shards N` with the index from
+/// the environment (Slurm, Kubernetes), or the whole set.
+pub struct ShardRequest {
+    pub shard: Option<String>,
+    pub shards: Option<u64>,
+}
+
+/// A checked dataset run of one process.
+pub struct DatasetJob {
+    settings: DatasetSettings,
+    dataset: Dataset,
+    styles: Vec<Vec<RgbImage>>,
+    pending: Pending,
+    shard: Shard,
+    /// Where the shard came from, for the log.
+    shard_source: String,
+    options: RunOptions,
+}
+
+/// What a run tells as it goes.
+pub enum DatasetEvent<'a> {
+    /// A line for the user: what is loading, what a LoRA touched, a prompt that is cut.
+    Note(&'a str),
+    /// Every model is loaded, in this time.
+    Loaded(Duration),
+    /// The loop's progress.
+    Progress(Progress),
+}
+
+/// How the process ends once its images are made.
+pub enum Finish {
+    /// Every image of the set is made: `annotations.json` is written.
+    Merged(Merged),
+    /// Images of other shards are still to make.
+    ShardDone { recorded: u64, total: u64 },
+}
+
+impl DatasetJob {
+    /// Checks the run's options, resolves the shard (`env` reads the environment), reads the
+    /// style images and opens (or resumes) the folder, before anything loads.
+    pub fn new(
+        settings: DatasetSettings,
+        out: &Path,
+        shard: ShardRequest,
+        options: RunOptions,
+        env: &dyn Fn(&str) -> Option<String>,
+    ) -> Result<DatasetJob> {
+        let (shard, shard_source) = Shard::resolve(shard.shard.as_deref(), shard.shards, env)?;
+        if options.batch == 0 {
+            return Err(Error::Config("--batch must be at least 1".into()));
+        }
+        let styles = settings.ip_sets.iter().map(|set| read_images(set)).collect::<Result<Vec<_>>>()?;
+        let dataset = Dataset::open(out, &settings)?;
+        let pending = dataset.pending(shard)?;
+        Ok(DatasetJob { settings, dataset, styles, pending, shard, shard_source, options })
+    }
+
+    pub fn settings(&self) -> &DatasetSettings {
+        &self.settings
+    }
+
+    /// Records found but not whole, each with why; their images are made again.
+    pub fn redo(&self) -> &[String] {
+        &self.pending.redo
+    }
+
+    /// One line: the set, this shard, what is left to make.
+    pub fn plan_line(&self) -> String {
+        let s = &self.settings;
+        format!(
+            "{}: {} images of {}×{} from {} scenes; shard {}/{} ({}): {} to make, {} already done",
+            self.dataset.dir.display(),
+            s.images(),
+            s.sampling.width,
+            s.sampling.height,
+            s.count,
+            self.shard.index,
+            self.shard.count,
+            self.shard_source,
+            self.pending.images(),
+            self.pending.done
+        )
+    }
+
+    /// This process's shard, `I/N`.
+    pub fn shard_name(&self) -> String {
+        format!("{}/{}", self.shard.index, self.shard.count)
+    }
+
+    /// Images this process still has to make.
+    pub fn todo(&self) -> u64 {
+        self.pending.images()
+    }
+
+    /// Images of this shard made by earlier runs.
+    pub fn done(&self) -> u64 {
+        self.pending.done
+    }
+
+    /// Loads the models on `ctx` and makes this shard's pending images (after which none are
+    /// pending).
+    pub fn run(&mut self, ctx: &Context, events: &mut dyn FnMut(DatasetEvent)) -> Result<Report> {
+        let start = Instant::now();
+        let models = WorkflowModels::load(ctx, &self.settings.models, &mut |line| events(DatasetEvent::Note(line)))?;
+        let s = &self.settings;
+        let prompts = s.prompts.iter().chain(&s.negative_prompt);
+        for warning in models.sdxl.cut_prompt_warnings(s.sampling.prompt_syntax, prompts) {
+            events(DatasetEvent::Note(&warning));
+        }
+        events(DatasetEvent::Loaded(start.elapsed()));
+        let pending = std::mem::take(&mut self.pending);
+        generate(&self.dataset, s, &models, &self.styles, pending, &self.options, &mut |p| {
+            events(DatasetEvent::Progress(p))
+        })
+    }
+
+    /// Merges the set if every image of it is made, by this process or others.
+    pub fn finish(&self) -> Result<Finish> {
+        let dir = &self.dataset.dir;
+        let (recorded, total) = (Dataset::read(dir)?.recorded(), self.settings.images());
+        if recorded == total {
+            Ok(Finish::Merged(merge(dir)?))
+        } else {
+            Ok(Finish::ShardDone { recorded, total })
+        }
+    }
+}

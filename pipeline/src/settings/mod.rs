@@ -1,0 +1,19 @@
+//! Every setting of a generation as data, shared by `gen` and `dataset`: the models, how each
+//! image is sampled, the prompt syntax, the IP-Adapter's per-block scales, the names they are
+//! recorded under, and `vkdiff gen`'s whole job.
+
+mod gen;
+pub(crate) mod ip_scale;
+mod models;
+pub(crate) mod names;
+pub(crate) mod prompt_syntax;
+pub(crate) mod sampling;
+
+pub use gen::{read_images, GenSettings, GuideInputs};
+pub use ip_scale::{IpBlock, IpMode, IpScale};
+pub use models::check_control_settings;
+pub(crate) use models::flagged;
+pub use models::{ControlNetSettings, IpAdapterSettings, LoraSetting, ModelSettings};
+pub use names::{control_depth_name, precision_name, schedule_name, RNG};
+pub use prompt_syntax::{parse_attention, PromptSyntax};
+pub use sampling::{Sampling, SizeConditioning, TextToImage};
