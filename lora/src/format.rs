@@ -4,21 +4,12 @@
 //! (`diffusion_model.<original path>`, `text_encoders.clip_l.transformer.…`), read into one list
 //! of modules, each a pair of factors with its scale (reference/sdxl.md §8.1–8.2).
 
+use crate::component::Component;
 use crate::error::{Error, Result};
 use crate::metadata::PeftConfigs;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::SafeTensors;
-
-/// Which network a module adapts.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Component {
-    Unet,
-    /// CLIP ViT-L (`lora_te1_`, `lora_te_`, `text_encoder.`).
-    TextEncoder1,
-    /// OpenCLIP bigG (`lora_te2_`, `text_encoder_2.`).
-    TextEncoder2,
-}
 
 /// How a module names the weight it adapts.
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -10,13 +10,15 @@
 //! merger.restore()?;
 //! ```
 
+mod component;
 mod error;
 mod format;
 mod merge;
 mod metadata;
 mod names;
 
+pub use component::Component;
 pub use error::{Error, Result};
-pub use format::{Address, Component, LoraFile, Module};
+pub use format::{Address, LoraFile, Module};
 pub use merge::{LoraMerger, LoraSummary, Summary};
 pub use names::Targets;

@@ -2,8 +2,9 @@
 //! accumulating into each weight's own view; and restoring the exact original bytes, kept on the
 //! host before the first merge touches a weight (as ComfyUI keeps its backups on the CPU).
 
+use crate::component::Component;
 use crate::error::{Error, Result};
-use crate::format::{Component, LoraFile, Module};
+use crate::format::{LoraFile, Module};
 use crate::names::{dictionaries, Resolved, Targets};
 use half::f16;
 use std::collections::BTreeMap;

@@ -3,8 +3,8 @@
 //! the component, `unet.lora_alpha`, `text_encoder.alpha_pattern`, ...), resolved the way PEFT
 //! resolves them into a per-module scale.
 
+use crate::component::Component;
 use crate::error::{Error, Result};
-use crate::format::Component;
 use regex::Regex;
 use serde_json::{Map, Value};
 use std::collections::HashMap;

@@ -2,8 +2,9 @@
 //! paths and the diffusers paths for the UNet, transformers paths for the text encoders) to the
 //! device parameters of the loaded networks, built from the networks' own names.
 
+use crate::component::Component;
 use crate::error::Result;
-use crate::format::{Address, Component};
+use crate::format::Address;
 use std::collections::HashMap;
 use vkdiff_networks::{unet_names, ClipTextModel, Parameter, Parameters, UNet, UNetConfig};
 

@@ -68,7 +68,7 @@ fn time_frame(seed: u64, config: &SceneConfig) -> Result<([Duration; STAGES.len(
     lap(1);
     let raster = rasterize(config.width, config.height, &triangles);
     lap(2);
-    let frame = Frame::from_raster(raster, &scene);
+    let frame = Frame::from_raster(raster, &scene.camera, &scene.bed);
     lap(3);
     let annotations = coco_json(&frame, &instance_masks(&frame), json!({}));
     lap(4);

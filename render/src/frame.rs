@@ -5,9 +5,9 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::bed::Bed;
 use crate::camera::Camera;
 use crate::raster::RasterImage;
-use crate::scene::Scene;
 
 /// What an instance is, written next to its mask in the COCO annotation.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -46,13 +46,13 @@ impl Frame {
     }
 
     /// Keeps the visible mushrooms of `raster` (raster id = bed index + 1), numbered 1..K in bed
-    /// order.
-    pub fn from_raster(raster: RasterImage, scene: &Scene) -> Frame {
-        let counts = pixel_counts(&raster.ids, scene.bed.instances.len() + 1);
+    /// order; `camera` and `bed` are the scene's it was rasterized from.
+    pub fn from_raster(raster: RasterImage, camera: &Camera, bed: &Bed) -> Frame {
+        let counts = pixel_counts(&raster.ids, bed.instances.len() + 1);
         let mut ids = raster.ids;
         let kept = renumber(&mut ids, counts.len(), |raw| counts[raw] > 0);
-        let instances = kept.iter().map(|&raw| instance_info(scene, raw - 1)).collect();
-        Frame { camera: scene.camera.clone(), depth: raster.depth, ids, instances }
+        let instances = kept.iter().map(|&raw| instance_info(bed, raw - 1)).collect();
+        Frame { camera: camera.clone(), depth: raster.depth, ids, instances }
     }
 }
 
@@ -83,9 +83,9 @@ pub fn pixel_counts(ids: &[u16], labels: usize) -> Vec<u64> {
         )
 }
 
-fn instance_info(scene: &Scene, bed_index: usize) -> InstanceInfo {
-    let instance = &scene.bed.instances[bed_index];
-    let variant = &scene.bed.variants[instance.variant];
+fn instance_info(bed: &Bed, bed_index: usize) -> InstanceInfo {
+    let instance = &bed.instances[bed_index];
+    let variant = &bed.variants[instance.variant];
     InstanceInfo {
         bed_index,
         age: variant.params.age,

@@ -91,6 +91,6 @@ impl Scene {
     /// The whole pipeline: project, rasterize, label.
     pub fn render(&self) -> Frame {
         let raster = rasterize(self.camera.width, self.camera.height, &self.project());
-        Frame::from_raster(raster, self)
+        Frame::from_raster(raster, &self.camera, &self.bed)
     }
 }

@@ -2,13 +2,14 @@
 
 use crate::device::{self, DeviceInfo, DeviceKind};
 use crate::error::{Error, Result, VkContext};
-use crate::pipeline::PipelineCache;
+use crate::pipeline::{Kernel, PipelineCache};
 use crate::validation::Validation;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+use vkdiff_kernels::Variant;
 
 /// Which family of GEMM/convolution kernels a context uses (see kernels/src/spec.rs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -186,6 +187,12 @@ impl Context {
 
     pub fn info(&self) -> &DeviceInfo {
         &self.shared.info
+    }
+
+    /// The pipeline for `variant`, created on first use and kept for the context's lifetime.
+    pub fn kernel(&self, variant: &'static Variant, bindings: u32) -> Result<Arc<Kernel>> {
+        let pinned_subgroups = self.shared.info.subgroup_size_range.is_some();
+        self.shared.pipelines.kernel(&self.shared.device, pinned_subgroups, variant, bindings)
     }
 
     /// Bytes of device memory held by live tensors now.

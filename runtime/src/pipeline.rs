@@ -1,6 +1,5 @@
 //! Compute pipelines, created once per kernel variant and cached for the context's lifetime.
 
-use crate::context::Context;
 use crate::error::{Result, VkContext};
 use ash::vk;
 use std::collections::HashMap;
@@ -35,71 +34,81 @@ impl PipelineCache {
     }
 }
 
-impl Context {
-    /// The pipeline for `variant`, created on first use.
-    pub fn kernel(&self, variant: &'static Variant, bindings: u32) -> Result<Arc<Kernel>> {
+impl PipelineCache {
+    /// The pipeline for `variant` on `device`, created on first use; `pinned_subgroups`: the
+    /// device can require a subgroup size (`VK_EXT_subgroup_size_control`).
+    pub(crate) fn kernel(
+        &self,
+        device: &ash::Device,
+        pinned_subgroups: bool,
+        variant: &'static Variant,
+        bindings: u32,
+    ) -> Result<Arc<Kernel>> {
         let key = variant as *const Variant as usize;
-        let mut cache = self.shared.pipelines.kernels.lock().unwrap();
+        let mut cache = self.kernels.lock().unwrap();
         if let Some(k) = cache.get(&key) {
             return Ok(k.clone());
         }
-        let kernel = Arc::new(self.create_kernel(variant, bindings)?);
+        let kernel = Arc::new(create_kernel(device, pinned_subgroups, variant, bindings)?);
         cache.insert(key, kernel.clone());
         Ok(kernel)
     }
+}
 
-    fn create_kernel(&self, variant: &'static Variant, bindings: u32) -> Result<Kernel> {
-        let device = &self.shared.device;
-        let layout_bindings: Vec<_> = (0..bindings)
-            .map(|b| {
-                vk::DescriptorSetLayoutBinding::default()
-                    .binding(b)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .descriptor_count(1)
-                    .stage_flags(vk::ShaderStageFlags::COMPUTE)
-            })
-            .collect();
-        let words = variant.words();
-        // SAFETY: all create infos point at locals that outlive the calls; handles are destroyed
-        // with the cache or right here when pipeline creation fails.
-        unsafe {
-            let set_layout = device
-                .create_descriptor_set_layout(
-                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&layout_bindings),
-                    None,
-                )
-                .vk("vkCreateDescriptorSetLayout")?;
-            let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).size(PUSH_BYTES)];
-            let set_layouts = [set_layout];
-            let layout = device
-                .create_pipeline_layout(
-                    &vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&ranges),
-                    None,
-                )
-                .vk("vkCreatePipelineLayout")?;
-            let module = device
-                .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
-                .vk("vkCreateShaderModule")?;
-            let mut required = vk::PipelineShaderStageRequiredSubgroupSizeCreateInfo::default();
-            let mut stage = vk::PipelineShaderStageCreateInfo::default()
-                .stage(vk::ShaderStageFlags::COMPUTE)
-                .module(module)
-                .name(c"main");
-            // Kernels built for a subgroup width are pinned to it where the device allows.
-            if let (Some(sg), Some(_)) = (variant.param("SG"), self.shared.info.subgroup_size_range) {
-                required = required.required_subgroup_size(sg);
-                stage =
-                    stage.flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS).push_next(&mut required);
-            }
-            // DISPATCH_BASE: grids past the workgroup-count limit run as based dispatches.
-            let info = [vk::ComputePipelineCreateInfo::default()
-                .flags(vk::PipelineCreateFlags::DISPATCH_BASE)
-                .stage(stage)
-                .layout(layout)];
-            let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
-            device.destroy_shader_module(module, None);
-            let pipeline = created.map_err(|(_, e)| e).vk("vkCreateComputePipelines")?[0];
-            Ok(Kernel { name: variant.kernel, pipeline, layout, set_layout, bindings })
+fn create_kernel(
+    device: &ash::Device,
+    pinned_subgroups: bool,
+    variant: &'static Variant,
+    bindings: u32,
+) -> Result<Kernel> {
+    let layout_bindings: Vec<_> = (0..bindings)
+        .map(|b| {
+            vk::DescriptorSetLayoutBinding::default()
+                .binding(b)
+                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                .descriptor_count(1)
+                .stage_flags(vk::ShaderStageFlags::COMPUTE)
+        })
+        .collect();
+    let words = variant.words();
+    // SAFETY: all create infos point at locals that outlive the calls; handles are destroyed
+    // with the cache or right here when pipeline creation fails.
+    unsafe {
+        let set_layout = device
+            .create_descriptor_set_layout(
+                &vk::DescriptorSetLayoutCreateInfo::default().bindings(&layout_bindings),
+                None,
+            )
+            .vk("vkCreateDescriptorSetLayout")?;
+        let ranges = [vk::PushConstantRange::default().stage_flags(vk::ShaderStageFlags::COMPUTE).size(PUSH_BYTES)];
+        let set_layouts = [set_layout];
+        let layout = device
+            .create_pipeline_layout(
+                &vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts).push_constant_ranges(&ranges),
+                None,
+            )
+            .vk("vkCreatePipelineLayout")?;
+        let module = device
+            .create_shader_module(&vk::ShaderModuleCreateInfo::default().code(&words), None)
+            .vk("vkCreateShaderModule")?;
+        let mut required = vk::PipelineShaderStageRequiredSubgroupSizeCreateInfo::default();
+        let mut stage = vk::PipelineShaderStageCreateInfo::default()
+            .stage(vk::ShaderStageFlags::COMPUTE)
+            .module(module)
+            .name(c"main");
+        // Kernels built for a subgroup width are pinned to it where the device allows.
+        if let (Some(sg), true) = (variant.param("SG"), pinned_subgroups) {
+            required = required.required_subgroup_size(sg);
+            stage = stage.flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS).push_next(&mut required);
         }
+        // DISPATCH_BASE: grids past the workgroup-count limit run as based dispatches.
+        let info = [vk::ComputePipelineCreateInfo::default()
+            .flags(vk::PipelineCreateFlags::DISPATCH_BASE)
+            .stage(stage)
+            .layout(layout)];
+        let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
+        device.destroy_shader_module(module, None);
+        let pipeline = created.map_err(|(_, e)| e).vk("vkCreateComputePipelines")?[0];
+        Ok(Kernel { name: variant.kernel, pipeline, layout, set_layout, bindings })
     }
 }

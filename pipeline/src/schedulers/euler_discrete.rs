@@ -1,4 +1,7 @@
-//! diffusers `EulerDiscreteScheduler` without churn: x ← x + (x − x₀)/σ · (σ_next − σ).
+//! diffusers' `EulerDiscreteScheduler` without churn (x ← x + (x − x₀)/σ · (σ_next − σ)) and
+//! `EulerAncestralDiscreteScheduler` (η = 1: an Euler step down to σ_down, then fresh noise of
+//! scale σ_up, drawn at every step, the last one, where σ_up = 0, included): one σ schedule, two
+//! steps.
 
 use super::config::{Prediction, SchedulerConfig, Spacing};
 use super::{
@@ -13,6 +16,8 @@ pub(super) struct EulerDiscrete {
     sigmas: Vec<f32>,
     init_noise_sigma: f32,
     prediction: Prediction,
+    /// Euler-ancestral's step.
+    ancestral: bool,
 }
 
 impl EulerDiscrete {
@@ -28,13 +33,21 @@ impl EulerDiscrete {
         let spacing = config.spacing("linspace")?;
         let (timesteps, sigmas) = sigma_schedule(config, spacing, steps, karras, config.final_sigma_is_min()?)?;
         let init_noise_sigma = euler_init_noise_sigma(&sigmas, spacing);
-        Ok(EulerDiscrete { timesteps, sigmas, init_noise_sigma, prediction })
+        Ok(EulerDiscrete { timesteps, sigmas, init_noise_sigma, prediction, ancestral: false })
+    }
+
+    /// `EulerAncestralDiscreteScheduler`: the same schedule, without Karras or a `sigma_min` end.
+    pub(super) fn ancestral(config: &SchedulerConfig, steps: usize) -> Result<EulerDiscrete> {
+        let prediction = config.prediction()?;
+        let spacing = config.spacing("linspace")?;
+        let (timesteps, sigmas) = sigma_schedule(config, spacing, steps, false, false)?;
+        let init_noise_sigma = euler_init_noise_sigma(&sigmas, spacing);
+        Ok(EulerDiscrete { timesteps, sigmas, init_noise_sigma, prediction, ancestral: true })
     }
 }
 
-/// The timesteps and σ's (with the final one appended) of `EulerDiscreteScheduler.set_timesteps`;
-/// Euler-ancestral's are the same without Karras or a `sigma_min` end.
-pub(super) fn sigma_schedule(
+/// The timesteps and σ's (with the final one appended) of `EulerDiscreteScheduler.set_timesteps`.
+fn sigma_schedule(
     config: &SchedulerConfig,
     spacing: Spacing,
     steps: usize,
@@ -79,12 +92,23 @@ impl Solver for EulerDiscrete {
         scale_by_sigma(x, self.sigmas[step])
     }
 
-    fn step(&mut self, step: usize, eps: &[f32], x: &mut [f32], _rng: &mut TorchCpuRng) {
-        let sigma = self.sigmas[step];
-        let dt = self.sigmas[step + 1] - sigma;
-        for (x, &eps) in x.iter_mut().zip(eps) {
-            let derivative = (*x - denoised(self.prediction, sigma, *x, eps)) / sigma;
-            *x += derivative * dt;
+    fn step(&mut self, step: usize, eps: &[f32], x: &mut [f32], rng: &mut TorchCpuRng) {
+        let (from, to) = (self.sigmas[step], self.sigmas[step + 1]);
+        if !self.ancestral {
+            let dt = to - from;
+            for (x, &eps) in x.iter_mut().zip(eps) {
+                let derivative = (*x - denoised(self.prediction, from, *x, eps)) / from;
+                *x += derivative * dt;
+            }
+            return;
+        }
+        let sigma_up = (to * to * (from * from - to * to) / (from * from)).sqrt();
+        let sigma_down = (to * to - sigma_up * sigma_up).sqrt();
+        let dt = sigma_down - from;
+        let noise = rng.randn(x.len());
+        for ((x, &eps), noise) in x.iter_mut().zip(eps).zip(noise) {
+            let derivative = (*x - denoised(self.prediction, from, *x, eps)) / from;
+            *x = (*x + derivative * dt) + noise * sigma_up;
         }
     }
 }

@@ -8,7 +8,6 @@
 mod config;
 mod ddim;
 mod dpmsolver_multistep;
-mod euler_ancestral_discrete;
 mod euler_discrete;
 
 pub use config::SchedulerConfig;
@@ -82,9 +81,7 @@ impl Sampler {
         }
         let solver: Box<dyn Solver> = match kind {
             SamplerKind::Euler => Box::new(euler_discrete::EulerDiscrete::new(config, karras, steps)?),
-            SamplerKind::EulerAncestral => {
-                Box::new(euler_ancestral_discrete::EulerAncestralDiscrete::new(config, steps)?)
-            }
+            SamplerKind::EulerAncestral => Box::new(euler_discrete::EulerDiscrete::ancestral(config, steps)?),
             SamplerKind::DpmSolver2M => Box::new(dpmsolver_multistep::DpmSolverMultistep::new(config, karras, steps)?),
             SamplerKind::Ddim => Box::new(ddim::Ddim::new(config, steps)?),
         };
