@@ -115,7 +115,12 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     let gen_image = load_once.as_secs_f64() + single_wall.as_secs_f64() - single_steps + at * step;
     let dataset_image = overhead + at * step;
     println!(
-        "{} | dataset, SDXL + depth ControlNet + IP-Adapter (ViT-H, 2 images) + 2 rank-{} LoRAs, {}² crops, {} images, {} steps, batch {}, {}: once {:.1} s (prompt, styles, recording); per image {:.1} s = guides {:.2} + denoise {:.1} ({:.1} s/step) + VAE {:.2} + rest {:.2}; beside it per image: scene {:.2}, write {:.2}, waited {:.2} | at {} steps: {:.2} s/image not denoising = {:.2} % | one gen per image at {} steps: load + LoRA merge {:.1} s + {:.1} s not denoising + steps = {:.0} s/image, the dataset {:.0} s/image ({:.2}× faster, {:.0} s saved per image) | peak {} MiB",
+        "{} | dataset, SDXL + depth ControlNet + IP-Adapter (ViT-H, 2 images) + 2 rank-{} LoRAs, {}² crops, {} \
+            images, {} steps, batch {}, {}: once {:.1} s (prompt, styles, recording); per image {:.1} s = guides \
+            {:.2} + denoise {:.1} ({:.1} s/step) + VAE {:.2} + rest {:.2}; beside it per image: scene {:.2}, write \
+            {:.2}, waited {:.2} | at {} steps: {:.2} s/image not denoising = {:.2} % | one gen per image at {} steps: \
+            load + LoRA merge {:.1} s + {:.1} s not denoising + steps = {:.0} s/image, the dataset {:.0} s/image \
+            ({:.2}× faster, {:.0} s saved per image) | peak {} MiB",
         ctx.info().name,
         args.lora_rank,
         args.size,

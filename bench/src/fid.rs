@@ -55,21 +55,22 @@ pub fn run(args: &FidArgs) -> Result<()> {
     let _ = std::fs::remove_dir_all(&dir);
     let row = result?;
     args.common.print(&row, |row| {
-    let reference = row
-        .cpu_reference_images_per_s
-        .map_or(row.cpu_reference.clone(), |r| format!("{r:.2} images/s ({})", row.cpu_reference));
-    format!(
-        "{} | FID features, {} PNGs of {}², batch {} {}: {:.2} images/s (load {:.1} s, peak {:.0} MiB) | torch-fidelity CPU f32: {reference} | speed-up {}",
-        row.device,
-        row.images,
-        row.size,
-        row.batch,
-        row.precision,
-        row.images_per_s,
-        row.load_s,
-        row.peak_mib,
-        row.ratio_to_cpu.map_or("-".into(), |r| format!("{r:.2}×")),
-    )
+        let reference = row
+            .cpu_reference_images_per_s
+            .map_or(row.cpu_reference.clone(), |r| format!("{r:.2} images/s ({})", row.cpu_reference));
+        format!(
+            "{} | FID features, {} PNGs of {}², batch {} {}: {:.2} images/s (load {:.1} s, peak {:.0} MiB) | \
+            torch-fidelity CPU f32: {reference} | speed-up {}",
+            row.device,
+            row.images,
+            row.size,
+            row.batch,
+            row.precision,
+            row.images_per_s,
+            row.load_s,
+            row.peak_mib,
+            row.ratio_to_cpu.map_or("-".into(), |r| format!("{r:.2}×")),
+        )
     })
 }
 

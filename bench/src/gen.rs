@@ -51,8 +51,18 @@ pub fn run(args: &GenArgs) -> Result<()> {
         }
         args.common.print(&row, |row| {
             format!(
-                "{} | SDXL gen {size}² {} steps {}: text {:.2} s, {:.1} s/step, VAE {:.1} s, total {:.1} s (load {:.1} s, record {:.1} s), peak {:.0} MiB | diffusers CPU f32: {} | step speed-up {}",
-                row.device, row.steps, row.precision, row.text_s, row.step_s, row.vae_s, row.total_s, row.load_s, row.record_s, row.peak_mib,
+                "{} | SDXL gen {size}² {} steps {}: text {:.2} s, {:.1} s/step, VAE {:.1} s, total {:.1} s (load \
+                    {:.1} s, record {:.1} s), peak {:.0} MiB | diffusers CPU f32: {} | step speed-up {}",
+                row.device,
+                row.steps,
+                row.precision,
+                row.text_s,
+                row.step_s,
+                row.vae_s,
+                row.total_s,
+                row.load_s,
+                row.record_s,
+                row.peak_mib,
                 row.cpu_reference.as_ref().map_or("-".into(), |v| v.to_string()),
                 row.step_ratio_to_cpu.map_or("-".into(), |r| format!("{r:.2}×")),
             )

@@ -45,7 +45,8 @@ pub fn run(args: &LoraArgs) -> Result<()> {
     let restore_s = start.elapsed().as_secs_f64();
     let params: usize = shapes.iter().map(|(_, [o, i])| o * i).sum();
     println!(
-        "{} | rank-{} LoRA on {} SDXL UNet linears ({:.2} G weights, {}): first merge {:.2} s (with host backups), merge {:.2} s, restore {:.2} s",
+        "{} | rank-{} LoRA on {} SDXL UNet linears ({:.2} G weights, {}): first merge {:.2} s (with host backups), \
+            merge {:.2} s, restore {:.2} s",
         ctx.info().name,
         args.rank,
         first.weights,

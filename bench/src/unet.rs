@@ -62,7 +62,8 @@ pub fn run(args: &UnetArgs) -> Result<()> {
         }
         args.common.print(&row, |row| {
             format!(
-                "{} | SDXL UNet {size}² batch {} {}: {:.0} ms/eval (load {:.1} s, record {:.2} s), weights {:.0} MiB, peak {:.0} MiB | diffusers CPU f32: {} | speed-up {}",
+                "{} | SDXL UNet {size}² batch {} {}: {:.0} ms/eval (load {:.1} s, record {:.2} s), weights {:.0} MiB, \
+                    peak {:.0} MiB | diffusers CPU f32: {} | speed-up {}",
                 row.device,
                 row.batch,
                 row.precision,

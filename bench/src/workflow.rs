@@ -64,7 +64,10 @@ pub fn run(args: &WorkflowArgs) -> Result<()> {
         let t = &out.timings;
         let step = mean_step(&t.steps);
         println!(
-            "{} | SDXL + depth ControlNet + IP-Adapter (ViT-H, 2 images) + 2 rank-{} LoRAs, {size}², {}: {step:.1} s/step ({:.2}× a plain step of {base_step:.1} s measured in this run), prepare + record {:.1} s, text {:.2} s, total without VAE {total_s:.1} s | load {load_s:.1} s, LoRA merge {merge:.1} s, peak {:.0} MiB",
+            "{} | SDXL + depth ControlNet + IP-Adapter (ViT-H, 2 images) + 2 rank-{} LoRAs, {size}², {}: {step:.1} \
+                s/step ({:.2}× a plain step of {base_step:.1} s measured in this run), prepare + record {:.1} s, text \
+                {:.2} s, total without VAE {total_s:.1} s | load {load_s:.1} s, LoRA merge {merge:.1} s, peak {:.0} \
+                MiB",
             ctx.info().name,
             args.lora_rank,
             crate::kernels::dtype_name(dtype),

@@ -227,7 +227,10 @@ impl Dataset {
             let (geometry, area, bbox) = match areas {
                 AreaSource::Box => {
                     let b = a.get("bbox").ok_or_else(|| {
-                        err(format!("{what} has no `bbox`, but results[0] has one: pycocotools' loadRes reads every result by the first one's keys (give every result a box, or pass --area-from mask)"))
+                        err(format!(
+                            "{what} has no `bbox`, but results[0] has one: pycocotools' loadRes reads every \
+                            result by the first one's keys (give every result a box, or pass --area-from mask)"
+                        ))
                     })?;
                     let b = bbox(b, &what)?;
                     let geometry = match (masks, a.get("segmentation")) {

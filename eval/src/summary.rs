@@ -69,7 +69,11 @@ pub fn summarize(request: &SummaryRequest) -> Result<Summary> {
     }
     let mut warnings = Vec::new();
     if gt.annotations.iter().any(|a| a.id == 0) {
-        warnings.push(format!("warning: {} has annotation id 0 (Roboflow exports start there); pycocotools counts matches to it as false positives, vkdiff counts them as matches", gt_path.display()));
+        warnings.push(format!(
+            "warning: {} has annotation id 0 (Roboflow exports start there); pycocotools counts \
+            matches to it as false positives, vkdiff counts them as matches",
+            gt_path.display()
+        ));
     }
     let stats = evaluate(&gt, &dt, &EvalParams { iou_type, max_dets })?;
     let v = &stats.values;

@@ -386,7 +386,8 @@ fn zip_entries(data: &[u8]) -> Parsed<HashMap<String, Range<usize>>> {
         let [uncompressed, size, local] = sizes;
         if method != 0 || flags & 1 != 0 {
             return Err(format!(
-                "zip entry `{name}` is compressed or encrypted (method {method}); torch.save stores entries, so re-save it with torch"
+                "zip entry `{name}` is compressed or encrypted (method {method}); torch.save stores entries, so \
+                    re-save it with torch"
             ));
         }
         if size != uncompressed {

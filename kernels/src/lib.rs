@@ -65,7 +65,8 @@ mod compile_tests {
 
     #[test]
     fn unrolled_blocks_keep_line_numbers() {
-        let body = "var<workgroup> w: array<u32, 4>;\n@compute @workgroup_size(1)\nfn main() {\n    // #unroll I N\n    w[I] = I; // a comment\n    // #end\n    let y = ;\n}\n";
+        let body = "var<workgroup> w: array<u32, 4>;\n@compute @workgroup_size(1)\nfn main() \
+            {\n    // #unroll I N\n    w[I] = I; // a comment\n    // #end\n    let y = ;\n}\n";
         let err = compile(one_file(body), &[("N", 2)], "kernel `t`").unwrap_err();
         assert!(err.starts_with("kernels/wgsl/broken.wgsl:7:"), "{err}");
     }

@@ -140,7 +140,8 @@ impl LoraFile {
                 || up_shape[2..].iter().any(|&d| d != 1)
             {
                 return Err(bad(format!(
-                    "module `{key}`: down {down_shape:?} and up {up_shape:?} are not LoRA factors ([r, in(, kh, kw)] and [out, r(, 1, 1)])"
+                    "module `{key}`: down {down_shape:?} and up {up_shape:?} are not LoRA factors ([r, in(, kh, kw)] \
+                        and [out, r(, 1, 1)])"
                 )));
             }
             let scale = match (&parts.alpha, &address) {
@@ -198,9 +199,12 @@ fn classify(key: &str) -> std::result::Result<(Component, Address, String, Role)
         return diffusers_key(component, prefix, rest.strip_prefix(PEFT_WRAPPER).unwrap_or(rest));
     }
     if unwrapped != key {
-        return Err("a PEFT adapter without its component (`unet.` / `text_encoder.` / `text_encoder_2.`): which network it adapts is not in the file".into());
+        return Err("a PEFT adapter without its component (`unet.` / `text_encoder.` / `text_encoder_2.`): which \
+            network it adapts is not in the file"
+            .into());
     }
-    Err("not part of any LoRA layout vkdiff knows (kohya `lora_unet_` / `lora_te1_` / `lora_te2_`, diffusers `unet.` / `text_encoder.` / `text_encoder_2.`, ComfyUI `diffusion_model.` / `text_encoders.`)"
+    Err("not part of any LoRA layout vkdiff knows (kohya `lora_unet_` / `lora_te1_` / `lora_te2_`, diffusers `unet.` \
+        / `text_encoder.` / `text_encoder_2.`, ComfyUI `diffusion_model.` / `text_encoders.`)"
         .into())
 }
 

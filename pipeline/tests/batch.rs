@@ -108,7 +108,13 @@ fn check(precision: Dtype, size: (usize, usize), binding_limit: Option<u64>) {
     let (alone, together) = alone_and_together(&ctx, precision, size, binding_limit);
     for (k, (a, t)) in alone.iter().zip(&together).enumerate() {
         let differ = a.iter().zip(t).filter(|(x, y)| x.to_bits() != y.to_bits()).count();
-        assert_eq!(differ, 0, "{precision:?}, limit {binding_limit:?}: image {k} differs in {differ} of {} latents between batch 1 and batch 3", a.len());
+        assert_eq!(
+            differ,
+            0,
+            "{precision:?}, limit {binding_limit:?}: image {k} differs in {differ} of {} latents \
+            between batch 1 and batch 3",
+            a.len()
+        );
     }
     assert_ne!(together[0], together[2], "images with other seeds and styles differ");
 }

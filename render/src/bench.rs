@@ -117,7 +117,14 @@ impl fmt::Display for BenchReport {
         }
         let annotate = self.seconds_per_frame(ANNOTATION_STAGES);
         let all = self.seconds_per_frame(STAGES.len());
-        writeln!(f, "depth + masks + COCO: {:.1} ms/frame = {:.1} frames/s, {:.0}× the paper's {PAPER_SECONDS_PER_FRAME} s/frame", annotate * 1e3, 1.0 / annotate, PAPER_SECONDS_PER_FRAME / annotate)?;
+        writeln!(
+            f,
+            "depth + masks + COCO: {:.1} ms/frame = {:.1} frames/s, {:.0}× the paper's \
+            {PAPER_SECONDS_PER_FRAME} s/frame",
+            annotate * 1e3,
+            1.0 / annotate,
+            PAPER_SECONDS_PER_FRAME / annotate
+        )?;
         writeln!(
             f,
             "with every file encoded (EXR, PNGs, JSON, preview): {:.1} ms/frame = {:.1} frames/s",

@@ -3,7 +3,10 @@ use ash::vk;
 /// Everything the runtime can fail with; each message is one line a user can act on.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("no Vulkan loader found ({0}); install libvulkan1 and a driver (mesa-vulkan-drivers gives the CPU device lavapipe)")]
+    #[error(
+        "no Vulkan loader found ({0}); install libvulkan1 and a driver (mesa-vulkan-drivers gives the CPU device \
+        lavapipe)"
+    )]
     NoLoader(String),
     #[error("no Vulkan device found; install a driver (mesa-vulkan-drivers gives the CPU device lavapipe)")]
     NoDevice,

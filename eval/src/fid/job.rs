@@ -112,7 +112,12 @@ impl FidJob {
     pub fn warning(&self) -> Option<String> {
         let asked = self.request.kid_subset_size;
         let size = self.subset_size;
-        (size < asked).then(|| format!("warning: KID subsets of {size} images, not {asked}: the smaller set has {size} (torch-fidelity would refuse; pass --kid-subset-size {size} to it to compare)"))
+        (size < asked).then(|| {
+            format!(
+                "warning: KID subsets of {size} images, not {asked}: the smaller set has \
+            {size} (torch-fidelity would refuse; pass --kid-subset-size {size} to it to compare)"
+            )
+        })
     }
 
     /// Encodes both folders on `ctx` and computes FID and KID; `progress(stage, done, total)`

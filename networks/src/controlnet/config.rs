@@ -126,7 +126,11 @@ impl ControlNetConfig {
         encoder.reverse_transformer_layers_per_block = None;
         let shape = |name: &str| ckpt.stored_shape(&format!("controlnet_cond_embedding.{name}.weight"));
         let conv_in = shape("conv_in").ok_or_else(|| {
-            Error::Checkpoint("ControlNet file has no conditioning encoder (`controlnet_cond_embedding.conv_in` / `input_hint_block.0`)".into())
+            Error::Checkpoint(
+                "ControlNet file has no conditioning encoder (`controlnet_cond_embedding.conv_in` / \
+                `input_hint_block.0`)"
+                    .into(),
+            )
         })?;
         let [out, conditioning_channels, _, _] = conv_in[..] else {
             return Err(Error::Checkpoint(format!(

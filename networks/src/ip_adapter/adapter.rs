@@ -118,7 +118,8 @@ impl IpAdapter {
             Projection::Plain(ImageProjModel::load(&w, s[1], s[0] / dim, dim)?)
         } else {
             return Err(Error::Checkpoint(format!(
-                "{at}: no `image_proj.latents` (Plus) or `image_proj.proj.weight` (plain) tensor; other IP-Adapter variants (Full, FaceID) are not supported"
+                "{at}: no `image_proj.latents` (Plus) or `image_proj.proj.weight` (plain) tensor; other IP-Adapter \
+                    variants (Full, FaceID) are not supported"
             )));
         };
         let layers = load_layers(&ckpt, unet)?;
@@ -258,7 +259,8 @@ fn check_layers(at: &str, shapes: &BTreeMap<String, Vec<usize>>, unet: &UNet) ->
             _ => "none".to_string(),
         };
         return Err(Error::Checkpoint(format!(
-            "{at}: the adapter has per-layer weights for {} (`ip_adapter.N.*`) but this UNet has {} cross-attentions (odd N 1..={}); an adapter for another UNet?",
+            "{at}: the adapter has per-layer weights for {} (`ip_adapter.N.*`) but this UNet has {} cross-attentions \
+                (odd N 1..={}); an adapter for another UNet?",
             list(&ids),
             crosses.len(),
             (2 * crosses.len()).saturating_sub(1)
@@ -269,9 +271,12 @@ fn check_layers(at: &str, shapes: &BTreeMap<String, Vec<usize>>, unet: &UNet) ->
             let name = format!("ip_adapter.{}.{which}.weight", 2 * k + 1);
             match shapes.get(&name) {
                 Some(s) if *s == [c, dim] => {}
-                Some(s) => return Err(Error::Checkpoint(format!(
-                    "{at}: `{name}` is {s:?}; this UNet's cross-attention {k} wants [{c}, {dim}] (channels, cross_attention_dim): an adapter for another UNet?"
-                ))),
+                Some(s) => {
+                    return Err(Error::Checkpoint(format!(
+                        "{at}: `{name}` is {s:?}; this UNet's cross-attention {k} wants [{c}, {dim}] (channels, \
+                        cross_attention_dim): an adapter for another UNet?"
+                    )))
+                }
                 None => return Err(Error::Checkpoint(format!("{at}: tensor `{name}` is missing"))),
             }
         }

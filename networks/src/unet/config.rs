@@ -173,7 +173,11 @@ impl UNetConfig {
         if self.addition_embed_type.is_some()
             && (self.addition_time_embed_dim.is_none() || self.projection_class_embeddings_input_dim.is_none())
         {
-            return Err(Error::Config("config `addition_embed_type` text_time needs addition_time_embed_dim and projection_class_embeddings_input_dim".into()));
+            return Err(Error::Config(
+                "config `addition_embed_type` text_time needs addition_time_embed_dim and \
+                projection_class_embeddings_input_dim"
+                    .into(),
+            ));
         }
         for (key, set) in [
             ("class_embed_type", self.class_embed_type.is_some()),

@@ -61,7 +61,8 @@ fn single_file_unet(
 fn single_file_unet_config(file: &SafeTensors) -> Result<UNetConfig> {
     if !file.entries.keys().any(|k| k.starts_with(SINGLE_FILE_UNET)) {
         return Err(Error::Checkpoint(format!(
-            "{}: no `{SINGLE_FILE_UNET}*` tensors; not an original-layout SDXL checkpoint (for a diffusers model pass its folder)",
+            "{}: no `{SINGLE_FILE_UNET}*` tensors; not an original-layout SDXL checkpoint (for a diffusers model pass \
+                its folder)",
             file.path.display()
         )));
     }

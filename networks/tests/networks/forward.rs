@@ -100,7 +100,11 @@ fn check_loaded(fixture_name: &str, model: &Path, dtype: Dtype, (config, ckpt): 
             "{fixture_name} {} {dtype:?} {variant}: relative L2 error {rel:.2e}, worst {worst:.2e} RMS",
             model.display()
         );
-        assert!(rel < tolerance && worst < 20.0 * tolerance, "{fixture_name} {dtype:?} {variant}: relative L2 error {rel:.3e}, worst element {worst:.3e} of the RMS (bound {tolerance:.0e})");
+        assert!(
+            rel < tolerance && worst < 20.0 * tolerance,
+            "{fixture_name} {dtype:?} {variant}: relative L2 error \
+            {rel:.3e}, worst element {worst:.3e} of the RMS (bound {tolerance:.0e})"
+        );
     }
 }
 

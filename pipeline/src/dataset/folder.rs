@@ -81,14 +81,19 @@ impl Dataset {
         let recorded = read_manifest(&path)?;
         if recorded["vkdiff"] != wanted["vkdiff"] || recorded["format"] != wanted["format"] {
             return Err(Error::Config(format!(
-                "{} was made by vkdiff {} ({}); this is vkdiff {VERSION}: finish it with that version, or give another --out",
+                "{} was made by vkdiff {} ({}); this is vkdiff {VERSION}: finish it with that version, or give \
+                    another --out",
                 dir.display(),
                 recorded["vkdiff"],
                 recorded["format"]
             )));
         }
         if let Some(diff) = first_difference(&recorded["settings"], &wanted["settings"]) {
-            return Err(Error::Config(format!("{} holds a dataset made with other settings: {diff}; use the same settings to finish it, or another --out", dir.display())));
+            return Err(Error::Config(format!(
+                "{} holds a dataset made with other settings: {diff}; use the same \
+                settings to finish it, or another --out",
+                dir.display()
+            )));
         }
         for folder in FOLDERS {
             std::fs::create_dir_all(dir.join(folder)).map_err(io(&dir.join(folder)))?;

@@ -38,7 +38,8 @@ pub fn merge(dir: &Path) -> Result<Merged> {
         let first: Vec<String> =
             missing.iter().take(5).map(|(i, _)| format!("image {i} (scene {})", i / per)).collect();
         return Err(Error::Config(format!(
-            "{}: {} of {} images are not done yet ({}{}); run the shards that own them (vkdiff dataset with the same settings) before merging",
+            "{}: {} of {} images are not done yet ({}{}); run the shards that own them (vkdiff dataset with the same \
+                settings) before merging",
             dir.display(),
             missing.len(),
             dataset.images,

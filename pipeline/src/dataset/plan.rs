@@ -92,11 +92,18 @@ impl Shard {
         if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
             let (min, count) = match (number("SLURM_ARRAY_TASK_MIN")?, number("SLURM_ARRAY_TASK_COUNT")?) {
                 (Some(min), Some(count)) => (min, count),
-                _ => return Err(Error::Config("SLURM_ARRAY_TASK_ID is set without SLURM_ARRAY_TASK_MIN and SLURM_ARRAY_TASK_COUNT; give --shard I/N".into())),
+                _ => {
+                    return Err(Error::Config(
+                        "SLURM_ARRAY_TASK_ID is set without SLURM_ARRAY_TASK_MIN and \
+                    SLURM_ARRAY_TASK_COUNT; give --shard I/N"
+                            .into(),
+                    ))
+                }
             };
             if number("SLURM_ARRAY_TASK_STEP")?.is_some_and(|step| step != 1) || id < min || id - min >= count {
                 return Err(Error::Config(format!(
-                    "Slurm array task {id} (min {min}, count {count}) is not in a contiguous array: submit --array=0-{} (no step), or give --shard I/N",
+                    "Slurm array task {id} (min {min}, count {count}) is not in a contiguous array: submit \
+                        --array=0-{} (no step), or give --shard I/N",
                     count.saturating_sub(1)
                 )));
             }

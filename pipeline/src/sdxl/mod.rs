@@ -136,7 +136,8 @@ impl Sdxl {
         let time_ids = 6 * self.unet_config.addition_time_embed_dim.unwrap_or(0);
         if self.unet_config.projection_class_embeddings_input_dim != Some(pooled + time_ids) {
             return Err(Error::Config(format!(
-                "the UNet's added conditioning takes {:?} features; pooled text ({pooled}) + time ids ({time_ids}) give {}",
+                "the UNet's added conditioning takes {:?} features; pooled text ({pooled}) + time ids ({time_ids}) \
+                    give {}",
                 self.unet_config.projection_class_embeddings_input_dim,
                 pooled + time_ids
             )));

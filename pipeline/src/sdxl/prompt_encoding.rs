@@ -51,7 +51,10 @@ impl Sdxl {
             .filter_map(|prompt| {
                 let cut = self.tokens_cut(prompt);
                 (cut > 0).then(|| {
-                    format!("warning: the last {cut} tokens of \"{prompt}\" are cut (CLIP reads 75); --prompt-syntax weighted reads any length")
+                    format!(
+                        "warning: the last {cut} tokens of \"{prompt}\" are cut (CLIP reads 75); --prompt-syntax \
+                        weighted reads any length"
+                    )
                 })
             })
             .collect()

@@ -19,7 +19,10 @@ pub struct IpBlock {
 impl IpBlock {
     fn parse(text: &str) -> Result<IpBlock> {
         let bad = || {
-            Error::Config(format!("--ip-scale {text}: name a block as mid, down.I, up.I, down.I.J or up.I.J (diffusers' down/up block_I, attention J)"))
+            Error::Config(format!(
+                "--ip-scale {text}: name a block as mid, down.I, up.I, down.I.J or up.I.J \
+                (diffusers' down/up block_I, attention J)"
+            ))
         };
         let parts: Vec<&str> = text.split('.').collect();
         let index = |s: &str| s.parse::<usize>().map_err(|_| bad());

@@ -56,7 +56,11 @@ pub fn parse_attention(text: &str) -> Result<Vec<(String, f64)>> {
             }
             (p, _) => {
                 if word_break.is_match(p) {
-                    return Err(Error::Config("prompt: BREAK is not supported by --prompt-syntax weighted (diffusers' pipeline reads it as a word)".into()));
+                    return Err(Error::Config(
+                        "prompt: BREAK is not supported by --prompt-syntax weighted (diffusers' \
+                        pipeline reads it as a word)"
+                            .into(),
+                    ));
                 }
                 runs.push((p.to_string(), 1.0));
             }

@@ -44,7 +44,10 @@ pub(super) fn rows_per_band(
     let align = ctx.info().binding_alignment() as usize;
     let aligned = row_bytes.iter().fold(1, |step, &b| lcm(step, align / gcd(align, b.max(1))));
     ensure(fit >= aligned, || {
-        format!("{what}: {fit} rows fit the binding limit, fewer than the {aligned} that keep bands on the device's {align}-byte alignment")
+        format!(
+            "{what}: {fit} rows fit the binding limit, fewer than the {aligned} that keep bands on the device's \
+            {align}-byte alignment"
+        )
     })?;
     let step = if fit >= lcm(aligned, multiple) { lcm(aligned, multiple) } else { aligned };
     Ok(fit - fit % step)

@@ -297,7 +297,12 @@ pub(super) fn decode(data: &[u8]) -> Result<Frame, String> {
                 frame = Some(Frame::parse(segment(data, &mut pos)?, marker == 0xC2)?);
             }
             0xC3 | 0xC5..=0xC7 | 0xC9..=0xCB | 0xCD..=0xCF => {
-                return Err(format!("{} JPEG (SOF{}) is not supported; Pillow-compatible decoding covers baseline and progressive Huffman JPEG", sof_kind(marker), marker - 0xC0));
+                return Err(format!(
+                    "{} JPEG (SOF{}) is not supported; Pillow-compatible decoding covers baseline and \
+                    progressive Huffman JPEG",
+                    sof_kind(marker),
+                    marker - 0xC0
+                ));
             }
             0xC4 => tables.read_huffman(segment(data, &mut pos)?)?,
             0xDB => tables.read_quant(segment(data, &mut pos)?)?,
