@@ -1,4 +1,4 @@
-// GEMM core for CPU-like devices (lavapipe), after toolchain.md §3: a workgroup is one subgroup of
+// GEMM core for CPU-like devices (lavapipe), after a kernel study on lavapipe: a workgroup is one subgroup of
 // SG lanes; each lane owns 8 consecutive output columns for TM rows, reads A once as vec4 along K
 // and hands it to the other lanes by subgroup shuffles, so no shared memory and few loads per FMA.
 // Needs N, K and every stride to be multiples of 4. B is K×N (BT = 0) or N×K (BT = 1).
