@@ -43,8 +43,8 @@ fn main() {
                 fs::write(Path::new(&out).join(&file), bytes).unwrap();
                 writeln!(
                     table,
-                    "    Variant \
-                        {{ kernel: {:?}, dtype: Dtype::{dtype:?}, params: &{params:?}, spirv: include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{file}\")) }},",
+                    "    Variant {{ kernel: {:?}, dtype: Dtype::{dtype:?}, params: &{params:?}, \
+                        spirv: include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{file}\")) }},",
                     spec.name
                 )
                 .unwrap();

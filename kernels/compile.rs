@@ -65,7 +65,9 @@ fn unroll(text: &str, params: &[(&str, u32)]) -> Result<String, String> {
         .parse()
         .ok()
         .or_else(|| params.iter().find(|(p, _)| *p == count).map(|(_, v)| *v))
-        .ok_or_else(|| format!("line {}: `// #unroll {name} {count}`: count is neither a number nor a parameter", start + 1))?;
+        .ok_or_else(|| {
+            format!("line {}: `// #unroll {name} {count}`: count is neither a number nor a parameter", start + 1)
+        })?;
     // Comments would swallow the rest of the joined line.
     let body: Vec<&str> = lines[start + 1..end].iter().map(|l| l.split("//").next().unwrap()).collect();
     let body = body.join(" ");

@@ -75,7 +75,8 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
                 serde_json::json!({
                     "index": d.index, "name": d.name, "kind": d.kind.label(), "driver": d.driver,
                     "vulkan": format!("{}.{}.{}", d.api_version.0, d.api_version.1, d.api_version.2),
-                    "f16": d.supports_f16(), "subgroup_size": d.subgroup_size, "subgroup_size_range": d.subgroup_size_range,
+                    "f16": d.supports_f16(), "subgroup_size": d.subgroup_size,
+                    "subgroup_size_range": d.subgroup_size_range,
                     "cooperative_matrix": d.cooperative_matrix, "device_memory_bytes": d.device_local_bytes,
                     "max_storage_buffer_range": d.max_storage_buffer_range, "usable": d.unsupported_reason().is_none(),
                     "unusable_reason": d.unsupported_reason(), "selected": chosen == Some(d.index),

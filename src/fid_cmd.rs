@@ -77,7 +77,13 @@ pub fn run(args: &FidArgs) -> Result<()> {
     })?;
     let k = &out.kid;
     if args.json {
-        let side = |dir: &Path, f: &FolderFeatures| serde_json::json!({ "dir": dir.display().to_string(), "images": f.images, "cached": f.cached });
+        let side = |dir: &Path, f: &FolderFeatures| {
+            serde_json::json!({
+                "dir": dir.display().to_string(),
+                "images": f.images,
+                "cached": f.cached,
+            })
+        };
         let json = serde_json::json!({
             "fid": out.fid,
             "kid_mean": k.mean,

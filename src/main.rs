@@ -43,6 +43,9 @@ enum Command {
 
 fn main() {
     let cli = Cli::parse();
+    // The libraries name settings as data; errors here name them by this command's flags.
+    let names = if matches!(cli.command, Command::Dataset(_)) { vkdiff_args::dataset_flag } else { vkdiff_args::flag };
+    vkdiff_setting::name_settings_with(names);
     let result = match cli.command {
         Command::Scene(args) => scene_cmd::run_scene(args),
         Command::Gen(args) => gen_cmd::run(&args),

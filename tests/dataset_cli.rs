@@ -465,10 +465,7 @@ fn bad_dataset_arguments_print_one_error_line_and_write_nothing() {
         ),
         (vec!["--prompt", "x", "--sampler", "ddim", "--scheduler", "karras"], "Karras"),
         (vec!["--prompt", "x", "--density", "-1"], "--density"),
-        (
-            vec!["--prompt", "x", "--init-strength", "0"],
-            "a strength of 0 (--strength, --init-strength) must be in (0, 1]",
-        ),
+        (vec!["--prompt", "x", "--init-strength", "0"], "--init-strength 0 must be in (0, 1]"),
         (vec!["--prompt", "(x:1.2.3)", "--prompt-syntax", "weighted"], "weight `1.2.3`"),
     ] {
         let mut args = base(&out);

@@ -110,11 +110,11 @@ fn bad_gen_arguments_print_one_error_line_and_write_nothing() {
         (vec!["--model", &model, "--steps", "0"], "needs at least 1 step"),
         (vec!["--model", &model, "--original-size", "1024"], "not WIDTHxHEIGHT"),
         (vec!["--model", &model, "--crops-coords-top-left", "0;0"], "not TOP,LEFT"),
+        (vec!["--model", &model, "--init-image", &init, "--strength", "1.5"], "--strength 1.5 must be in (0, 1]"),
         (
-            vec!["--model", &model, "--init-image", &init, "--strength", "1.5"],
-            "a strength of 1.5 (--strength, --init-strength) must be in (0, 1]",
+            vec!["--model", &model, "--init-image", &init, "--strength", "0.2", "--steps", "4"],
+            "runs none of them; raise --steps or --strength",
         ),
-        (vec!["--model", &model, "--init-image", &init, "--strength", "0.2", "--steps", "4"], "runs none of them"),
         (vec!["--model", &model, "--init-image", missing.to_str().unwrap()], "--init-image"),
         (
             vec!["--model", &model, "--prompt-syntax", "weighted", "--negative-prompt", "BREAK it"],

@@ -3,10 +3,12 @@
 //! the precision, and the scene and its crops. Parsing only: each turns into the libraries'
 //! settings, which check themselves.
 
+mod flags;
 mod model;
 mod progress;
 mod scene;
 
+pub use flags::{dataset_flag, flag};
 pub use model::{ModelArgs, Precision, SamplingArgs};
 pub use progress::Progress;
 pub use scene::{ControlMode, CropArgs, SceneSettings};

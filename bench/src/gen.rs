@@ -78,6 +78,7 @@ fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
     let model = Sdxl::random_sdxl_base(&ctx, dtype)?;
     let load_s = start.elapsed().as_secs_f64();
     let job = bench_job(size, args.steps);
+    model.check_sampling(&job.sampling)?;
     let start = Instant::now();
     let out =
         model.text_to_image(&job, &Guides::default(), &mut |done, total| eprintln!("{size}²: step {done}/{total}"))?;

@@ -272,9 +272,13 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
     }
     if args.common.json {
         let out = serde_json::json!({
-            "device": info.name, "driver": info.driver, "kind": info.kind.label(), "gemm_family": format!("{:?}", ctx.gemm_family()),
+            "device": info.name, "driver": info.driver, "kind": info.kind.label(),
+            "gemm_family": format!("{:?}", ctx.gemm_family()),
             "kernels": rows.iter().map(|(r, _)| r).collect::<Vec<_>>(),
-            "cpu_reference": cpu.as_ref().map(|c| serde_json::to_value(c).unwrap()).unwrap_or_else(|e| serde_json::Value::String(e.clone())),
+            "cpu_reference": cpu
+                .as_ref()
+                .map(|c| serde_json::to_value(c).unwrap())
+                .unwrap_or_else(|e| serde_json::Value::String(e.clone())),
         });
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());

@@ -14,8 +14,9 @@ use vkdiff_runtime::{Context, Dtype};
 
 /// h94's `models/image_encoder` (OpenCLIP ViT-H/14 vision tower, 632 M parameters), the encoder of
 /// ip-adapter_sdxl_vit-h.
-const VIT_H_CONFIG: &str = r#"{"hidden_size": 1280, "intermediate_size": 5120, "num_hidden_layers": 32, "num_attention_heads": 16,
-    "image_size": 224, "patch_size": 14, "projection_dim": 1024, "hidden_act": "gelu", "layer_norm_eps": 1e-5}"#;
+const VIT_H_CONFIG: &str = r#"{"hidden_size": 1280, "intermediate_size": 5120, "num_hidden_layers": 32,
+    "num_attention_heads": 16, "image_size": 224, "patch_size": 14, "projection_dim": 1024, "hidden_act": "gelu",
+    "layer_norm_eps": 1e-5}"#;
 
 /// The paper's guides with full-size architectures and random weights: a depth ControlNet, a
 /// ViT-H image encoder with a plain SDXL IP-Adapter, and two rank-r LoRAs (strengths 0.8, 0.6).

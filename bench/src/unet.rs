@@ -1,5 +1,6 @@
 //! `vkdiff bench unet`: one SDXL UNet evaluation (the real architecture, random weights) per
-//! latent size, timed on the device, beside diffusers on this machine's CPU in the same run.
+//! latent size, timed on the device, beside diffusers in the same run: on this machine's CPU, or
+//! with `--reference-device cuda` on its NVIDIA GPU at the same precision.
 
 use crate::kernels::{dtype_name, rand_tensor};
 use anyhow::{Context as _, Result};
@@ -8,7 +9,16 @@ use vkdiff_args::Precision;
 use vkdiff_networks::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
 use vkdiff_runtime::{Context, Dtype};
 
-const REFERENCE: &str = include_str!("../../tools/unet_cpu_reference.py");
+const REFERENCE: &str = include_str!("../../tools/unet_reference.py");
+
+/// Where diffusers runs beside us.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ReferenceDevice {
+    /// float32 on the CPU.
+    Cpu,
+    /// The CUDA GPU, at `--precision`.
+    Cuda,
+}
 
 #[derive(clap::Args)]
 pub struct UnetArgs {
@@ -25,6 +35,9 @@ pub struct UnetArgs {
     /// Timed evaluations per size; the best is reported.
     #[arg(long, default_value_t = 1)]
     samples: usize,
+    /// Where the diffusers reference runs.
+    #[arg(long, value_enum, default_value_t = ReferenceDevice::Cpu)]
+    reference_device: ReferenceDevice,
 }
 
 #[derive(serde::Serialize)]
@@ -38,10 +51,11 @@ struct Row {
     ms: f64,
     weights_mib: f64,
     peak_mib: f64,
-    cpu_reference_ms: Option<f64>,
-    cpu_reference_peak_mib: Option<f64>,
-    cpu_reference: String,
-    ratio_to_cpu: Option<f64>,
+    reference_ms: Option<f64>,
+    reference_peak_mib: Option<f64>,
+    /// What ran the reference, or why it could not run.
+    reference: String,
+    ratio_to_reference: Option<f64>,
 }
 
 pub fn run(args: &UnetArgs) -> Result<()> {
@@ -51,19 +65,18 @@ pub fn run(args: &UnetArgs) -> Result<()> {
         anyhow::ensure!(size % 32 == 0 && size > 0, "--size {size}: SDXL needs a multiple of 32 pixels");
         let mut row = measure(args, &config, dtype, size)?;
         if !args.common.no_cpu_reference {
-            match reference(size / 8, args.batch, args.samples) {
+            match reference(size / 8, args) {
                 Ok(r) => {
-                    row.ratio_to_cpu = Some(r.ms / row.ms);
-                    (row.cpu_reference_ms, row.cpu_reference_peak_mib, row.cpu_reference) =
-                        (Some(r.ms), Some(r.peak_mib), r.what);
+                    row.ratio_to_reference = Some(r.ms / row.ms);
+                    (row.reference_ms, row.reference_peak_mib, row.reference) = (Some(r.ms), Some(r.peak_mib), r.what);
                 }
-                Err(why) => row.cpu_reference = format!("unavailable: {why}"),
+                Err(why) => row.reference = format!("unavailable: {why}"),
             }
         }
         args.common.print(&row, |row| {
             format!(
                 "{} | SDXL UNet {size}² batch {} {}: {:.0} ms/eval (load {:.1} s, record {:.2} s), weights {:.0} MiB, \
-                    peak {:.0} MiB | diffusers CPU f32: {} | speed-up {}",
+                    peak {:.0} MiB | diffusers: {} | speed-up {}",
                 row.device,
                 row.batch,
                 row.precision,
@@ -72,12 +85,12 @@ pub fn run(args: &UnetArgs) -> Result<()> {
                 row.record_s,
                 row.weights_mib,
                 row.peak_mib,
-                row.cpu_reference_ms.map_or(row.cpu_reference.clone(), |ms| format!(
-                    "{ms:.0} ms, peak RSS {:.0} MiB ({})",
-                    row.cpu_reference_peak_mib.unwrap_or(0.0),
-                    row.cpu_reference
+                row.reference_ms.map_or(row.reference.clone(), |ms| format!(
+                    "{ms:.0} ms, peak {:.0} MiB ({})",
+                    row.reference_peak_mib.unwrap_or(0.0),
+                    row.reference
                 )),
-                row.ratio_to_cpu.map_or("-".into(), |r| format!("{r:.2}×")),
+                row.ratio_to_reference.map_or("-".into(), |r| format!("{r:.2}×")),
             )
         })?;
     }
@@ -130,36 +143,38 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
         ms: best * 1e3,
         weights_mib: mib(weights),
         peak_mib: mib(ctx.peak_bytes()),
-        cpu_reference_ms: None,
-        cpu_reference_peak_mib: None,
-        cpu_reference: String::new(),
-        ratio_to_cpu: None,
+        reference_ms: None,
+        reference_peak_mib: None,
+        reference: String::new(),
+        ratio_to_reference: None,
     })
 }
 
-/// diffusers on the CPU: best milliseconds per evaluation, the process's peak resident memory,
-/// and what ran it.
+/// diffusers: best milliseconds per evaluation, its peak memory, and what ran it.
 struct Reference {
     ms: f64,
     peak_mib: f64,
     what: String,
 }
 
-fn reference(latent: usize, batch: usize, samples: usize) -> std::result::Result<Reference, String> {
-    let args = [
+fn reference(latent: usize, args: &UnetArgs) -> std::result::Result<Reference, String> {
+    let mut script_args = vec![
         SDXL_BASE_CONFIG.to_string(),
         latent.to_string(),
         latent.to_string(),
-        batch.to_string(),
-        samples.max(1).to_string(),
+        args.batch.to_string(),
+        args.samples.max(1).to_string(),
     ];
-    let v = crate::cpu_reference::run_python_reference(REFERENCE, args, None)?;
+    if args.reference_device == ReferenceDevice::Cuda {
+        script_args.extend(["cuda".to_string(), dtype_name(args.precision.dtype()).to_string()]);
+    }
+    let v = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
     let ms = v["ms"].as_f64().context("no ms").map_err(|e| e.to_string())?;
     let what = format!(
-        "torch {} / diffusers {}, {} threads",
+        "{}, torch {} / diffusers {}",
+        v["where"].as_str().unwrap_or("?"),
         v["torch"].as_str().unwrap_or("?"),
         v["diffusers"].as_str().unwrap_or("?"),
-        v["threads"]
     );
     Ok(Reference { ms, peak_mib: v["peak_mib"].as_f64().unwrap_or(0.0), what })
 }

@@ -162,7 +162,7 @@ type ImageMatches<'a> = (Vec<&'a Annotation>, Vec<&'a Annotation>, Vec<Vec<f64>>
 /// Runs `COCOeval.evaluate()`, `accumulate()` and `summarize()` on `dt` against `gt`.
 pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
     if !(p.max_dets[0] <= p.max_dets[1] && p.max_dets[1] <= p.max_dets[2] && p.max_dets[0] > 0) {
-        return Err(EvalError(format!("max detections {:?} must be positive and ascending", p.max_dets)));
+        return Err(EvalError::Invalid(format!("max detections {:?} must be positive and ascending", p.max_dets)));
     }
     let thresholds = linspace(0.5, 0.95, 10);
     let rec_thrs = linspace(0.0, 1.0, 101);

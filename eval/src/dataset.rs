@@ -6,6 +6,7 @@ use crate::{EvalError, Result};
 use serde_json::Value;
 use std::collections::HashMap;
 use vkdiff_render::rle::Rle;
+use vkdiff_setting::Message;
 
 /// What an annotation outlines.
 #[derive(Clone, Debug)]
@@ -81,7 +82,7 @@ pub struct Dataset {
 }
 
 fn err(what: String) -> EvalError {
-    EvalError(what)
+    EvalError::Invalid(what)
 }
 
 fn number(v: &Value, what: &str) -> Result<f64> {
@@ -227,10 +228,14 @@ impl Dataset {
             let (geometry, area, bbox) = match areas {
                 AreaSource::Box => {
                     let b = a.get("bbox").ok_or_else(|| {
-                        err(format!(
-                            "{what} has no `bbox`, but results[0] has one: pycocotools' loadRes reads every \
-                            result by the first one's keys (give every result a box, or pass --area-from mask)"
-                        ))
+                        EvalError::Setting(
+                            Message::text(format!(
+                                "{what} has no `bbox`, but results[0] has one: pycocotools' loadRes reads every \
+                                result by the first one's keys (give every result a box, or pass "
+                            ))
+                            .and("area_from")
+                            .then(" mask)"),
+                        )
                     })?;
                     let b = bbox(b, &what)?;
                     let geometry = match (masks, a.get("segmentation")) {

@@ -47,13 +47,14 @@ fn f1(a: f64, b: f64) -> f64 {
 }
 
 fn read_json(path: &Path) -> Result<Value> {
-    let text = std::fs::read_to_string(path).map_err(|e| EvalError(format!("cannot read {}: {e}", path.display())))?;
-    serde_json::from_str(&text).map_err(|e| EvalError(format!("{} is not JSON: {e}", path.display())))
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| EvalError::Invalid(format!("cannot read {}: {e}", path.display())))?;
+    serde_json::from_str(&text).map_err(|e| EvalError::Invalid(format!("{} is not JSON: {e}", path.display())))
 }
 
 /// `result`'s error prefixed by the file it came from.
 fn in_file<T>(path: &Path, result: Result<T>) -> Result<T> {
-    result.map_err(|e| EvalError(format!("{}: {e}", path.display())))
+    result.map_err(|e| EvalError::Invalid(format!("{}: {e}", path.display())))
 }
 
 /// Scores the predictions against the ground truth.
@@ -65,7 +66,7 @@ pub fn summarize(request: &SummaryRequest) -> Result<Summary> {
     let areas = in_file(pred_path, AreaSource::of_results(&pred, request.area_rule))?;
     let dt = in_file(pred_path, Dataset::results(&pred, &gt, masks, areas))?;
     if gt.annotations.is_empty() {
-        return Err(EvalError(format!("{} holds no annotations", gt_path.display())));
+        return Err(EvalError::Invalid(format!("{} holds no annotations", gt_path.display())));
     }
     let mut warnings = Vec::new();
     if gt.annotations.iter().any(|a| a.id == 0) {

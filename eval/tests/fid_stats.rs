@@ -88,13 +88,16 @@ fn fid_is_zero_for_a_set_with_itself_and_symmetric() {
 #[test]
 fn bad_features_are_clear_errors() {
     let x: Vec<f32> = (0..12).map(|i| i as f32).collect();
-    assert!(fid(&x[..3], &x, 3).unwrap_err().0.contains("1 feature row(s); at least 2"));
-    assert!(fid(&x[..11], &x, 3).unwrap_err().0.contains("11 values are not rows of dimension 3"));
+    assert!(fid(&x[..3], &x, 3).unwrap_err().to_string().contains("1 feature row(s); at least 2"));
+    assert!(fid(&x[..11], &x, 3).unwrap_err().to_string().contains("11 values are not rows of dimension 3"));
     let mut nan = x.clone();
     nan[7] = f32::NAN;
-    assert!(kid(&x, &nan, 3, &KidOptions::default()).unwrap_err().0.contains("KID set 2: row 2 has a non-finite"));
+    assert!(kid(&x, &nan, 3, &KidOptions::default())
+        .unwrap_err()
+        .to_string()
+        .contains("KID set 2: row 2 has a non-finite"));
     let no_subsets = KidOptions { subsets: 0, ..KidOptions::default() };
-    assert!(kid(&x, &x, 3, &no_subsets).unwrap_err().0.contains("at least 1 subset"));
+    assert!(kid(&x, &x, 3, &no_subsets).unwrap_err().to_string().contains("at least 1 subset"));
 }
 
 /// torch-fidelity refuses a KID subset larger than a set; we clamp to the smaller set.

@@ -89,7 +89,7 @@ fn a_result_without_the_first_ones_box_is_refused_with_the_rule_named() {
     json.as_array_mut().unwrap()[4].as_object_mut().unwrap().remove("bbox");
     let areas = AreaSource::of_results(&json, AreaRule::LoadRes).unwrap();
     let e = Dataset::results(&json, &gt, true, areas).unwrap_err().to_string();
-    assert!(e.contains("results[4] has no `bbox`") && e.contains("--area-from mask"), "{e}");
+    assert!(e.contains("results[4] has no `bbox`") && e.contains("area_from mask"), "{e}");
     // Detectron2's rule needs no boxes.
     Dataset::results(&json, &gt, true, AreaSource::of_results(&json, AreaRule::Mask).unwrap()).unwrap();
 }

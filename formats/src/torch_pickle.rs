@@ -315,7 +315,8 @@ impl Unpickler<'_> {
     fn call(&mut self, func: Id, args: Id) -> Obj {
         let empty_args = matches!(&self.objs[args], Obj::Tuple(a) if a.is_empty());
         if empty_args
-            && matches!(&self.objs[func], Obj::Global { module, name } if module == "collections" && name == "OrderedDict")
+            && matches!(&self.objs[func],
+                Obj::Global { module, name } if module == "collections" && name == "OrderedDict")
         {
             return Obj::Dict(Vec::new());
         }

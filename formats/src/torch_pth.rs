@@ -105,8 +105,8 @@ impl TorchPth {
         self.tensors.get(name).map(|t| t.shape.clone())
     }
 
-    /// A tensor's values as f32 in row-major (C-contiguous) order of its shape, honouring the storage offset and strides torch saved
-    /// (non-contiguous/transposed views, shared storages).
+    /// A tensor's values as f32 in row-major (C-contiguous) order of its shape, honouring the
+    /// storage offset and strides torch saved (non-contiguous/transposed views, shared storages).
     pub fn values(&self, name: &str) -> Result<(Vec<usize>, Vec<f32>)> {
         let t = self
             .tensors
@@ -210,7 +210,8 @@ fn read_legacy(data: &[u8]) -> Parsed<BTreeMap<String, Tensor>> {
         .ok_or("the storage keys are not a list")?
         .iter()
         .map(|&k| keys.str(k).ok_or("a storage key is not a string"));
-    // Each storage: its element count (8 bytes, little-endian), then its data; the element size is the dtype its tensors name.
+    // Each storage: its element count (8 bytes, little-endian), then its data; the element size
+    // is the dtype its tensors name.
     let mut dtypes = HashMap::new();
     for t in tensors.values() {
         if *dtypes.entry(t.key.as_str()).or_insert(t.dtype) != t.dtype {
@@ -375,7 +376,8 @@ fn zip_entries(data: &[u8]) -> Parsed<HashMap<String, Range<usize>>> {
         let (name_len, extra_len, comment_len) = (field(at + 28, 2)?, field(at + 30, 2)?, field(at + 32, 2)?);
         let name = String::from_utf8_lossy(data.get(at + 46..at + 46 + name_len).ok_or_else(truncated)?).into_owned();
         let extra = data.get(at + 46 + name_len..at + 46 + name_len + extra_len).ok_or_else(truncated)?;
-        // Uncompressed size, compressed size, local header offset; saturated ones are in the zip64 extra field, in this order.
+        // Uncompressed size, compressed size, local header offset; saturated ones are in the zip64
+        // extra field, in this order.
         let mut sizes = [field(at + 24, 4)?, field(at + 20, 4)?, field(at + 42, 4)?];
         if let Some(mut zip64) = extra_field(extra, 1) {
             for v in sizes.iter_mut().filter(|v| **v == 0xffff_ffff) {
@@ -393,7 +395,8 @@ fn zip_entries(data: &[u8]) -> Parsed<HashMap<String, Range<usize>>> {
         if size != uncompressed {
             return Err(format!("zip entry `{name}` is stored with {size} bytes for {uncompressed}"));
         }
-        // The data follows the local header, whose own name and extra field (torch pads it to align the data) set where.
+        // The data follows the local header, whose own name and extra field (torch pads it to align
+        // the data) set where.
         if field(local, 4)? != 0x0403_4b50 {
             return Err(format!("zip entry `{name}` has no local header"));
         }

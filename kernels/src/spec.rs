@@ -70,10 +70,22 @@ pub const KERNELS: &[KernelSpec] = &[
         files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv.wgsl", "gemm_tiled.wgsl"],
         params: &[&[("BT", 1)]],
     },
-    KernelSpec { name: "group_norm", files: &["reduce.wgsl", "group_moments.wgsl", "group_apply.wgsl", "group_norm.wgsl"], params: NONE },
+    KernelSpec {
+        name: "group_norm",
+        files: &["reduce.wgsl", "group_moments.wgsl", "group_apply.wgsl", "group_norm.wgsl"],
+        params: NONE,
+    },
     // GroupNorm in bands, for tensors past the binding limit.
-    KernelSpec { name: "group_norm_stats", files: &["reduce.wgsl", "group_moments.wgsl", "group_norm_stats.wgsl"], params: NONE },
-    KernelSpec { name: "group_norm_apply", files: &["reduce.wgsl", "group_apply.wgsl", "group_norm_apply.wgsl"], params: NONE },
+    KernelSpec {
+        name: "group_norm_stats",
+        files: &["reduce.wgsl", "group_moments.wgsl", "group_norm_stats.wgsl"],
+        params: NONE,
+    },
+    KernelSpec {
+        name: "group_norm_apply",
+        files: &["reduce.wgsl", "group_apply.wgsl", "group_norm_apply.wgsl"],
+        params: NONE,
+    },
     KernelSpec { name: "layer_norm", files: &["reduce.wgsl", "layer_norm.wgsl"], params: NONE },
     KernelSpec { name: "softmax", files: &["reduce.wgsl", "softmax.wgsl"], params: NONE },
     // Flash attention; DV = vec4 slots of the head per lane, TM = query rows per workgroup. The
@@ -100,7 +112,11 @@ pub const KERNELS: &[KernelSpec] = &[
     KernelSpec {
         name: "attention_wg",
         files: &["attention_common.wgsl", "attention_wg.wgsl"],
-        params: &[&[("W", 64), ("DV", 1), ("TM", 8)], &[("W", 64), ("DV", 2), ("TM", 4)], &[("W", 64), ("DV", 4), ("TM", 2)]],
+        params: &[
+            &[("W", 64), ("DV", 1), ("TM", 8)],
+            &[("W", 64), ("DV", 2), ("TM", 4)],
+            &[("W", 64), ("DV", 4), ("TM", 2)],
+        ],
     },
     KernelSpec {
         name: "unary",

@@ -4,19 +4,20 @@ use std::path::PathBuf;
 /// the tensor or module at fault.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{}: {source}", path.display())]
-    Io { path: PathBuf, source: std::io::Error },
-    /// A file that is not a readable LoRA (bad header, missing partner tensor, odd shapes).
-    #[error("{}: {why}", path.display())]
-    Format { path: PathBuf, why: String },
     /// A tensor of a LoRA-like format vkdiff does not merge (LoHa, LoKr, DoRA, ...).
-    #[error("{}: tensor `{key}` is {what}, which vkdiff cannot merge (it reads kohya and diffusers/PEFT LoRA)", path.display())]
+    #[error(
+        "{}: tensor `{key}` is {what}, which vkdiff cannot merge (it reads kohya and diffusers/PEFT LoRA)",
+        path.display()
+    )]
     Unsupported { path: PathBuf, key: String, what: String },
     /// LoRA modules that name no weight of the loaded networks.
     #[error("{}: {count} LoRA module(s) match no weight of the loaded networks: {listed}", path.display())]
     Unmatched { path: PathBuf, count: usize, listed: String },
     /// A module whose product does not have its weight's shape.
-    #[error("{}: module `{key}` makes a delta of shape {found:?} but `{weight}` has shape {expected:?}", path.display())]
+    #[error(
+        "{}: module `{key}` makes a delta of shape {found:?} but `{weight}` has shape {expected:?}",
+        path.display()
+    )]
     Shape { path: PathBuf, key: String, weight: String, expected: Vec<usize>, found: Vec<usize> },
     #[error(transparent)]
     Network(#[from] vkdiff_networks::Error),

@@ -9,6 +9,7 @@ use crate::error::{Error, Result};
 use crate::metadata::PeftConfigs;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use vkdiff_formats::Error as FileError;
 use vkdiff_formats::SafeTensors;
 
 /// How a module names the weight it adapts.
@@ -105,7 +106,7 @@ impl LoraFile {
     pub fn open(path: &Path) -> Result<LoraFile> {
         let file = SafeTensors::open(path)?;
         let peft = PeftConfigs::read(path)?;
-        let bad = |why: String| Error::Format { path: path.to_path_buf(), why };
+        let bad = |why: String| Error::from(FileError::Format { path: path.to_path_buf(), why });
         let mut grouped: BTreeMap<(Component, String), (Address, Parts)> = BTreeMap::new();
         for key in file.entries.keys() {
             let (component, address, module_key, role) = classify(key).map_err(|what| Error::Unsupported {

@@ -10,6 +10,7 @@ use serde_json::{Map, Value};
 use std::collections::HashMap;
 use std::io::Read;
 use std::path::Path;
+use vkdiff_formats::Error as FileError;
 
 const METADATA_KEY: &str = "lora_adapter_metadata";
 /// PEFT's `LoraConfig.lora_alpha` default, used when a config is present but names no alpha.
@@ -30,7 +31,7 @@ pub(crate) struct PeftConfigs {
 
 impl PeftConfigs {
     pub fn read(path: &Path) -> Result<PeftConfigs> {
-        let bad = |why: String| Error::Format { path: path.to_path_buf(), why };
+        let bad = |why: String| Error::from(FileError::Format { path: path.to_path_buf(), why });
         let Some(raw) = header_metadata(path)?.remove(METADATA_KEY) else { return Ok(PeftConfigs::default()) };
         let json: Map<String, Value> =
             serde_json::from_str(&raw).map_err(|e| bad(format!("`{METADATA_KEY}` is not a JSON object: {e}")))?;
@@ -91,7 +92,7 @@ impl PeftConfigs {
 
 /// The string entries of a safetensors header's `__metadata__` (the shared reader skips them).
 fn header_metadata(path: &Path) -> Result<HashMap<String, String>> {
-    let io = |e| Error::Io { path: path.to_path_buf(), source: e };
+    let io = |e| Error::from(FileError::Io { path: path.to_path_buf(), source: e });
     let mut file = std::fs::File::open(path).map_err(io)?;
     let mut len = [0u8; 8];
     file.read_exact(&mut len).map_err(io)?;
@@ -99,7 +100,7 @@ fn header_metadata(path: &Path) -> Result<HashMap<String, String>> {
     // SafeTensors::open has already checked the length against the file.
     file.read_exact(&mut header).map_err(io)?;
     let json: Value = serde_json::from_slice(&header)
-        .map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("header is not JSON: {e}") })?;
+        .map_err(|e| FileError::Format { path: path.to_path_buf(), why: format!("header is not JSON: {e}") })?;
     let Some(Value::Object(meta)) = json.get("__metadata__") else { return Ok(HashMap::new()) };
     Ok(meta.iter().filter_map(|(k, v)| Some((k.clone(), v.as_str()?.to_string()))).collect())
 }

@@ -1,13 +1,7 @@
-use std::path::PathBuf;
-
 /// What loading or running a network can fail with; each message is one line naming the file,
 /// tensor or setting at fault.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{}: {source}", path.display())]
-    Io { path: PathBuf, source: std::io::Error },
-    #[error("{}: {why}", path.display())]
-    Format { path: PathBuf, why: String },
     /// A tensor that is missing, has the wrong shape or an unreadable dtype.
     #[error("{0}")]
     Checkpoint(String),

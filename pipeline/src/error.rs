@@ -1,22 +1,24 @@
-use std::path::PathBuf;
+use vkdiff_setting::Message;
 
 /// What driving the networks can fail with; each message is one line naming the file or setting
 /// at fault.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    #[error("{}: {source}", path.display())]
-    Io { path: PathBuf, source: std::io::Error },
-    #[error("{}: {why}", path.display())]
-    Format { path: PathBuf, why: String },
     /// A setting (sampler, scheduler, size, …) that cannot be used as given.
     #[error("{0}")]
     Config(String),
+    /// A setting refused, every setting it names kept as data (printed as the front end says).
+    #[error("{0}")]
+    Setting(Message),
     /// A network's output that is not a number: never written out as a black image.
-    #[error("{0} holds NaN or infinite values; f16 may have overflowed there: try --precision f32")]
-    NotFinite(String),
-    /// An error prefixed by what it happened to (a flag and its file, an image of a dataset).
+    #[error(
+        "{stage} holds NaN or infinite values; f16 may have overflowed there: try {} f32",
+        Message::setting("precision")
+    )]
+    NotFinite { stage: String },
+    /// An error prefixed by what it happened to (a setting and its file).
     #[error("{0}: {1}")]
-    Context(String, Box<Error>),
+    Context(Message, Box<Error>),
     #[error(transparent)]
     File(#[from] vkdiff_formats::Error),
     #[error(transparent)]
@@ -36,6 +38,6 @@ pub fn finite<'a>(values: &'a [f32], stage: &dyn Fn() -> String) -> Result<&'a [
     if values.iter().all(|v| v.is_finite()) {
         Ok(values)
     } else {
-        Err(Error::NotFinite(stage()))
+        Err(Error::NotFinite { stage: stage() })
     }
 }

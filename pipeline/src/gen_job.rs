@@ -10,6 +10,7 @@ use crate::settings::{GenSettings, GuideInputs};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use vkdiff_runtime::Context;
+use vkdiff_setting::Message;
 
 /// The size without a depth or init image to take it from.
 const DEFAULT_SIDE: usize = 1024;
@@ -56,14 +57,14 @@ impl GenJob {
     /// fixes it: output files, model files, input images, then the image settings.
     pub fn new(request: GenRequest) -> Result<GenJob> {
         let GenRequest { mut settings, width, height, strength, out, latents_out, replace } = request;
-        for (flag, path) in std::iter::once(("--out", &out)).chain(latents_out.iter().map(|p| ("--latents-out", p))) {
-            check_output(flag, path, replace)?;
+        for (setting, path) in std::iter::once(("out", &out)).chain(latents_out.iter().map(|p| ("latents_out", p))) {
+            check_output(setting, path, replace)?;
         }
         if out.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() != Some("png") {
-            return Err(Error::Config(format!(
-                "--out {}: the image is written as PNG; give a .png path",
-                out.display()
-            )));
+            return Err(Error::Setting(
+                Message::setting("out")
+                    .then(format!(" {}: the image is written as PNG; give a .png path", out.display())),
+            ));
         }
         settings.models.check()?;
         let inputs = settings.read_inputs()?;
@@ -118,13 +119,22 @@ impl GenJob {
 }
 
 /// An output file's folder must exist, and the file must not unless it may be replaced.
-fn check_output(flag: &str, path: &Path, replace: bool) -> Result<()> {
+fn check_output(setting: &str, path: &Path, replace: bool) -> Result<()> {
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if !parent.is_dir() {
-        return Err(Error::Config(format!("{flag} {}: folder {} does not exist", path.display(), parent.display())));
+        return Err(Error::Setting(Message::setting(setting).then(format!(
+            " {}: folder {} does not exist",
+            path.display(),
+            parent.display()
+        ))));
     }
     if path.exists() && !replace {
-        return Err(Error::Config(format!("{flag} {} exists; give --force to replace it", path.display())));
+        return Err(Error::Setting(
+            Message::setting(setting)
+                .then(format!(" {} exists; give ", path.display()))
+                .and("replace")
+                .then(" to replace it"),
+        ));
     }
     Ok(())
 }

@@ -11,6 +11,7 @@ use regex::Regex;
 use std::collections::HashMap;
 use std::path::Path;
 use unicode_normalization::UnicodeNormalization;
+use vkdiff_formats::Error as FileError;
 
 const BOS: &str = "<|startoftext|>";
 const EOS: &str = "<|endoftext|>";
@@ -74,7 +75,7 @@ impl ClipTokenizer {
     /// The built-in vocabulary as files transformers' `CLIPTokenizer` reads: `dir/vocab.json` and
     /// `dir/merges.txt` (for references that must tokenize as vkdiff does).
     pub fn write_builtin(dir: &Path) -> Result<()> {
-        let io = |source| Error::Io { path: dir.to_path_buf(), source };
+        let io = |source| Error::from(FileError::Io { path: dir.to_path_buf(), source });
         std::fs::create_dir_all(dir).map_err(io)?;
         let vocab: serde_json::Map<String, serde_json::Value> =
             builtin_vocab().into_iter().zip(0u32..).map(|(token, id)| (token, id.into())).collect();
@@ -90,7 +91,7 @@ impl ClipTokenizer {
         vocab_path: &Path,
     ) -> Result<ClipTokenizer> {
         let id = |token: &str| {
-            vocab.get(token).copied().ok_or_else(|| Error::Format {
+            vocab.get(token).copied().ok_or_else(|| FileError::Format {
                 path: vocab_path.to_path_buf(),
                 why: format!("token {token:?} is not in the vocabulary"),
             })
@@ -106,8 +107,10 @@ impl ClipTokenizer {
         }
         let mut merges = HashMap::new();
         for (rank, (line_no, line)) in (0..).zip(merge_lines(merges_text)) {
-            let bad =
-                |why: String| Error::Format { path: merges_path.to_path_buf(), why: format!("line {line_no}: {why}") };
+            let bad = |why: String| FileError::Format {
+                path: merges_path.to_path_buf(),
+                why: format!("line {line_no}: {why}"),
+            };
             let (a, b) = line
                 .split_once(' ')
                 .filter(|(_, b)| !b.contains(' '))
@@ -227,18 +230,18 @@ fn pad_token(path: &Path) -> Result<Option<String>> {
         None | Some(serde_json::Value::Null) => return Ok(None),
         Some(pad) => pad.as_str().or_else(|| pad.get("content").and_then(|c| c.as_str())),
     };
-    pad.map(|p| Some(p.to_string())).ok_or_else(|| Error::Format {
+    Ok(pad.map(|p| Some(p.to_string())).ok_or_else(|| FileError::Format {
         path: path.to_path_buf(),
         why: "pad_token is neither a string nor an object with a string \"content\"".into(),
-    })
+    })?)
 }
 
 fn read(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })
+    Ok(std::fs::read_to_string(path).map_err(|source| FileError::Io { path: path.to_path_buf(), source })?)
 }
 
 fn format_error(path: &Path, e: serde_json::Error) -> Error {
-    Error::Format { path: path.to_path_buf(), why: e.to_string() }
+    FileError::Format { path: path.to_path_buf(), why: e.to_string() }.into()
 }
 
 /// open_clip's vocabulary in id order: byte symbols, the same with `</w>`, each merge joined, the

@@ -42,10 +42,10 @@ impl Default for BedConfig {
 impl BedConfig {
     pub fn validate(&self) -> Result<()> {
         if !(self.density.is_finite() && self.density >= 0.0) {
-            return Err(RenderError::invalid("--density", self.density, "must be a number ≥ 0 (mushrooms per m²)"));
+            return Err(RenderError::invalid("density", self.density, "must be a number ≥ 0 (mushrooms per m²)"));
         }
         if !(0.0..=1.0).contains(&self.clumping.clustered_fraction) {
-            return Err(RenderError::invalid("--clumping", self.clumping.clustered_fraction, "must lie in [0, 1]"));
+            return Err(RenderError::invalid("clumping", self.clumping.clustered_fraction, "must lie in [0, 1]"));
         }
         MushroomParams { age: self.first_age, randomness: self.randomness, seed: 0 }.validate()
     }

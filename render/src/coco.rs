@@ -3,7 +3,7 @@
 //! from the mask, `iscrowd` 0, and what each mushroom is as extra fields.
 
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::frame::{Frame, InstanceInfo};
@@ -63,10 +63,10 @@ fn instance_bounds(ids: &[u16], width: usize, count: usize) -> Vec<Option<PixelB
 }
 
 #[derive(Serialize)]
-struct CocoFile<'a> {
+struct CocoFile {
     info: Value,
     images: [Image; 1],
-    annotations: Vec<Annotation<'a>>,
+    annotations: Vec<Annotation>,
     categories: [Category; 1],
     licenses: [(); 0],
 }
@@ -80,66 +80,81 @@ struct Image {
 }
 
 #[derive(Serialize)]
-struct Category {
-    id: u32,
-    name: &'static str,
-    supercategory: &'static str,
+pub struct Category {
+    pub id: u32,
+    pub name: &'static str,
+    pub supercategory: &'static str,
 }
 
-#[derive(Serialize)]
-struct Segmentation {
-    size: [u32; 2],
-    counts: String,
+/// A compressed RLE mask, as pycocotools' `encode` writes it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Segmentation {
+    pub size: [u32; 2],
+    pub counts: String,
 }
 
-#[derive(Serialize)]
-struct Annotation<'a> {
-    id: usize,
-    image_id: u32,
-    category_id: u32,
-    segmentation: Segmentation,
-    area: u64,
-    bbox: [u32; 4],
-    iscrowd: u8,
+/// One COCO annotation as vkdiff writes it, with what the mushroom is as extra fields.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Annotation {
+    /// None only in a dataset's per-image records, which are numbered when merged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id: Option<u64>,
+    pub image_id: u64,
+    pub category_id: u32,
+    pub segmentation: Segmentation,
+    pub area: u64,
+    pub bbox: [u32; 4],
+    pub iscrowd: u8,
+    /// In a dataset: the instance's value in the image's mask PNG (the annotation ids run over
+    /// the whole set there, so they are not the mask's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask_id: Option<u64>,
     #[serde(flatten)]
-    instance: &'a InstanceInfo,
+    pub instance: InstanceInfo,
+}
+
+impl Annotation {
+    /// This frame-local annotation as image `image_id` of a dataset holds it: its id becomes the
+    /// mask id, and the set-wide id is left for the merge.
+    pub fn in_dataset(self, image_id: u64) -> Annotation {
+        Annotation { mask_id: self.id, id: None, image_id, ..self }
+    }
+
+    /// As a JSON object with its keys sorted: the order a dataset's records and merged
+    /// annotations.json have always had.
+    pub fn sorted_json(&self) -> Value {
+        serde_json::to_value(self).expect("COCO structures always serialise")
+    }
+}
+
+/// Serialises a list of annotations with sorted keys (see [`Annotation::sorted_json`]).
+pub fn serialize_sorted<S: serde::Serializer>(annotations: &[Annotation], s: S) -> Result<S::Ok, S::Error> {
+    s.collect_seq(annotations.iter().map(Annotation::sorted_json))
 }
 
 /// The annotations of `frame`, id k for the instance with id k in the mask, image id 1.
-fn annotations<'a>(frame: &'a Frame, masks: &[InstanceMask]) -> Vec<Annotation<'a>> {
+pub fn annotations(frame: &Frame, masks: &[InstanceMask]) -> Vec<Annotation> {
     let (w, h) = (frame.camera.width, frame.camera.height);
     masks
         .iter()
         .zip(&frame.instances)
         .enumerate()
         .map(|(k, (mask, instance))| Annotation {
-            id: k + 1,
+            id: Some(k as u64 + 1),
             image_id: 1,
-            category_id: 1,
+            category_id: CATEGORY.id,
             segmentation: Segmentation { size: [h, w], counts: mask.rle.to_coco_string() },
             area: mask.area,
             bbox: mask.bbox.to_xywh(),
             iscrowd: 0,
-            instance,
+            mask_id: None,
+            instance: instance.clone(),
         })
         .collect()
 }
 
-/// The annotations of `frame` as JSON objects, as annotations.json holds them (id = the
-/// instance's id in the mask, image id 1), for writers that combine frames.
-pub fn annotation_values(frame: &Frame, masks: &[InstanceMask]) -> Vec<Value> {
-    annotations(frame, masks)
-        .iter()
-        .map(|a| serde_json::to_value(a).expect("COCO structures always serialise"))
-        .collect()
-}
-
 /// The COCO category every annotation belongs to.
-pub fn categories() -> Value {
-    serde_json::to_value([CATEGORY]).expect("COCO structures always serialise")
-}
-
-const CATEGORY: Category = Category { id: 1, name: "mushroom", supercategory: "mushroom" };
+pub const CATEGORY: Category = Category { id: 1, name: "mushroom", supercategory: "mushroom" };
 
 /// annotations.json for `frame`, whose masks are `masks`; `info` records where it came from.
 pub fn coco_json(frame: &Frame, masks: &[InstanceMask], info: Value) -> String {

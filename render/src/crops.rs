@@ -6,6 +6,7 @@
 use crate::error::{RenderError, Result};
 use crate::frame::{pixel_counts, renumber, Frame};
 use crate::rng::{Rng, Stream};
+use vkdiff_setting::Message;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CropWindow {
@@ -21,10 +22,11 @@ pub struct CropWindow {
 pub fn centered_window(width: u32, height: u32, multiple: u32) -> Result<CropWindow> {
     let (w, h) = (width - width % multiple.max(1), height - height % multiple.max(1));
     if w == 0 || h == 0 {
-        return Err(RenderError::invalid(
-            "--width/--height",
-            format!("{width}×{height}"),
-            format!("the model needs sides of at least {multiple} pixels"),
+        return Err(RenderError::Setting(
+            Message::setting("width")
+                .then("/")
+                .and("height")
+                .then(format!(" {width}×{height}: the model needs sides of at least {multiple} pixels")),
         ));
     }
     Ok(centered(width, height, w, h))
@@ -40,7 +42,7 @@ pub fn centered(width: u32, height: u32, w: u32, h: u32) -> CropWindow {
 pub fn crop_windows(seed: u64, count: usize, size: u32, width: u32, height: u32) -> Result<Vec<CropWindow>> {
     if count > 0 && (size == 0 || size > width || size > height) {
         return Err(RenderError::invalid(
-            "--crop-size",
+            "crop_size",
             size,
             format!("must lie in [1, {}] to fit the {width}×{height} frame", width.min(height)),
         ));
@@ -78,7 +80,7 @@ pub fn validate_min_fraction(min_fraction: f64) -> Result<()> {
     if (0.0..=1.0).contains(&min_fraction) {
         Ok(())
     } else {
-        Err(RenderError::invalid("--crop-min-fraction", min_fraction, "must lie in [0, 1]"))
+        Err(RenderError::invalid("crop_min_fraction", min_fraction, "must lie in [0, 1]"))
     }
 }
 
@@ -96,7 +98,7 @@ mod tests {
         assert_ne!(crop_windows(1, 3, 512, 1920, 1080).unwrap(), crop_windows(2, 3, 512, 1920, 1080).unwrap());
         assert_eq!(crop_windows(0, 1, 1080, 1920, 1080).unwrap()[0].y0, 0);
         let err = crop_windows(0, 3, 2000, 1920, 1080).unwrap_err().to_string();
-        assert!(err.contains("--crop-size 2000"), "{err}");
+        assert!(err.contains("crop_size 2000"), "{err}");
         assert!(crop_windows(0, 0, 2000, 1920, 1080).unwrap().is_empty(), "no crops, nothing to check");
     }
 

@@ -3,14 +3,14 @@
 //! annotation ids one to one.
 
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::bed::Bed;
 use crate::camera::Camera;
 use crate::raster::RasterImage;
 
 /// What an instance is, written next to its mask in the COCO annotation.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct InstanceInfo {
     /// Index of the mushroom in the bed: the same mushroom has the same index in the full frame
     /// and in every crop.

@@ -18,6 +18,7 @@ use crate::png_out::{gray16, rgb8};
 use crate::preview::preview_image;
 use crate::scene::{Scene, SceneConfig};
 use crate::staging::StagingDir;
+use vkdiff_setting::Message;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct OutputOptions {
@@ -72,7 +73,12 @@ pub fn scene_files(seed: u64, config: &SceneConfig, options: &OutputOptions) -> 
         .map(|(k, &window)| {
             let crop = crop_frame(&frame, window, options.crop_min_fraction);
             let mut info = info.clone();
-            info["crop"] = json!({"index": k, "offset_px": [window.x0, window.y0], "size_px": window.width, "min_fraction": options.crop_min_fraction});
+            info["crop"] = json!({
+                "index": k,
+                "offset_px": [window.x0, window.y0],
+                "size_px": window.width,
+                "min_fraction": options.crop_min_fraction,
+            });
             frame_files(&crop, info, options.control, &format!("crops/{k}/"))
         })
         .collect();
@@ -152,13 +158,14 @@ pub fn write_dataset(
 ) -> Result<DatasetReport> {
     validate(config, options)?;
     if count == 0 {
-        return Err(RenderError::invalid("--count", count, "must be at least 1"));
+        return Err(RenderError::invalid("count", count, "must be at least 1"));
     }
     if first_seed.checked_add(count).is_none() {
-        return Err(RenderError::invalid(
-            "--count",
-            count,
-            format!("runs past the largest seed from --seed {first_seed}"),
+        return Err(RenderError::Setting(
+            Message::setting("count")
+                .then(format!(" {count}: runs past the largest seed from "))
+                .and("seed")
+                .then(format!(" {first_seed}")),
         ));
     }
     let outcomes: Vec<bool> = (first_seed..first_seed + count)

@@ -42,9 +42,9 @@ pub const MAX_SIDE: u32 = 16384;
 
 impl SceneConfig {
     pub fn validate(&self) -> Result<()> {
-        for (flag, value) in [("--width", self.width), ("--height", self.height)] {
+        for (setting, value) in [("width", self.width), ("height", self.height)] {
             if !(16..=MAX_SIDE).contains(&value) {
-                return Err(RenderError::invalid(flag, value, format!("must lie in [16, {MAX_SIDE}] pixels")));
+                return Err(RenderError::invalid(setting, value, format!("must lie in [16, {MAX_SIDE}] pixels")));
             }
         }
         self.bed.validate()

@@ -17,7 +17,7 @@ pub struct StagingDir {
 
 /// A hidden sibling of `target` that no other process or call uses.
 fn sibling(target: &Path, tag: &str) -> Result<PathBuf> {
-    let name = target.file_name().ok_or_else(|| RenderError::invalid("--out", target.display(), "names no folder"))?;
+    let name = target.file_name().ok_or_else(|| RenderError::invalid("out", target.display(), "names no folder"))?;
     let unique =
         format!(".{}.{tag}-{}-{}", name.to_string_lossy(), std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed));
     Ok(target.with_file_name(unique))

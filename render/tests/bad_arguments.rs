@@ -35,7 +35,7 @@ fn fails(name: &str, config: &SceneConfig, options: &OutputOptions) -> String {
 #[test]
 fn a_crop_larger_than_the_frame_is_refused() {
     let err = fails("crop-too-big", &small(), &OutputOptions { crops: 3, crop_size: 200, ..OutputOptions::default() });
-    assert_eq!(err, "--crop-size 200: must lie in [1, 180] to fit the 320×180 frame");
+    assert_eq!(err, "crop_size 200: must lie in [1, 180] to fit the 320×180 frame");
 }
 
 #[test]
@@ -44,23 +44,23 @@ fn negative_density_and_out_of_range_settings_are_refused() {
     config.bed.density = -1.0;
     assert_eq!(
         fails("negative-density", &config, &OutputOptions::default()),
-        "--density -1: must be a number ≥ 0 (mushrooms per m²)"
+        "density -1: must be a number ≥ 0 (mushrooms per m²)"
     );
     config.bed.density = f64::NAN;
-    assert!(fails("nan-density", &config, &OutputOptions::default()).starts_with("--density NaN"));
+    assert!(fails("nan-density", &config, &OutputOptions::default()).starts_with("density NaN"));
     let config = SceneConfig { width: 8, ..small() };
-    assert!(fails("tiny-frame", &config, &OutputOptions::default()).starts_with("--width 8"));
+    assert!(fails("tiny-frame", &config, &OutputOptions::default()).starts_with("width 8"));
     let options = OutputOptions { crop_min_fraction: 1.5, ..OutputOptions::default() };
-    assert!(fails("min-fraction", &small(), &options).starts_with("--crop-min-fraction 1.5"));
+    assert!(fails("min-fraction", &small(), &options).starts_with("crop_min_fraction 1.5"));
 }
 
 #[test]
 fn a_dataset_needs_scenes_and_seeds() {
     let root = common::scratch("count");
     let err = write_dataset(&root.join("beds"), 0, 0, &small(), &OutputOptions::default()).unwrap_err();
-    assert_eq!(err.to_string(), "--count 0: must be at least 1");
+    assert_eq!(err.to_string(), "count 0: must be at least 1");
     let err = write_dataset(&root.join("beds"), u64::MAX, 2, &small(), &OutputOptions::default()).unwrap_err();
-    assert!(err.to_string().starts_with("--count 2: runs past the largest seed"), "{err}");
+    assert!(err.to_string().starts_with("count 2: runs past the largest seed"), "{err}");
     assert!(entries(&root).is_empty());
 }
 
@@ -84,7 +84,7 @@ fn an_existing_scene_is_kept_unless_replacing() {
     std::fs::create_dir(&dir).unwrap();
     std::fs::write(dir.join("mine.txt"), b"keep").unwrap();
     let err = write_scene(&dir, 1, &small(), &OutputOptions::default()).unwrap_err();
-    assert_eq!(err.to_string(), format!("{}: output exists already (pass --force to replace it)", dir.display()));
+    assert_eq!(err.to_string(), format!("{}: output exists already (pass replace to replace it)", dir.display()));
     assert_eq!(entries(&dir), ["mine.txt"]);
     write_scene(&dir, 1, &small(), &OutputOptions { replace: true, ..OutputOptions::default() }).unwrap();
     assert_eq!(

@@ -4,6 +4,7 @@ use crate::error::{Error, Result, VkContext};
 use crate::validation::Validation;
 use ash::vk;
 use std::ffi::CStr;
+use vkdiff_setting::Message;
 
 /// What kind of device this is, in the order vkdiff prefers them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -251,22 +252,23 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>> {
     infos
 }
 
-/// Which device to use: `requested` (from `--device`), else `VKDIFF_DEVICE`, else the first
+/// Which device to use: `requested` (the `device` setting), else `VKDIFF_DEVICE`, else the first
 /// usable discrete GPU, then integrated, virtual, CPU (lavapipe).
 pub fn choose(devices: &[DeviceInfo], requested: Option<usize>) -> Result<usize> {
     let from_env = std::env::var("VKDIFF_DEVICE").ok().filter(|s| !s.is_empty());
-    let (index, source_name) = match (requested, from_env) {
-        (Some(i), _) => (Some(i), "--device"),
-        (None, Some(s)) => {
-            (Some(s.trim().parse().map_err(|_| Error::BadDeviceSpec(format!("VKDIFF_DEVICE={s}")))?), "VKDIFF_DEVICE")
-        }
-        (None, None) => (None, ""),
+    let (index, requested_by) = match (requested, from_env) {
+        (Some(i), _) => (Some(i), Message::setting("device")),
+        (None, Some(s)) => (
+            Some(s.trim().parse().map_err(|_| Error::BadDeviceSpec(format!("VKDIFF_DEVICE={s}")))?),
+            Message::text("VKDIFF_DEVICE"),
+        ),
+        (None, None) => (None, Message::default()),
     };
     if devices.is_empty() {
         return Err(Error::NoDevice);
     }
     if let Some(index) = index {
-        let d = devices.get(index).ok_or(Error::BadDeviceIndex { index, count: devices.len(), source_name })?;
+        let d = devices.get(index).ok_or(Error::BadDeviceIndex { index, count: devices.len(), requested_by })?;
         if let Some(reason) = d.unsupported_reason() {
             return Err(Error::Unsupported { device: d.name.clone(), reason });
         }

@@ -1,4 +1,5 @@
 use ash::vk;
+use vkdiff_setting::Message;
 
 /// Everything the runtime can fail with; each message is one line a user can act on.
 #[derive(Debug, thiserror::Error)]
@@ -10,8 +11,8 @@ pub enum Error {
     NoLoader(String),
     #[error("no Vulkan device found; install a driver (mesa-vulkan-drivers gives the CPU device lavapipe)")]
     NoDevice,
-    #[error("device {index} requested ({source_name}) but only {count} Vulkan device(s) exist; see `vkdiff devices`")]
-    BadDeviceIndex { index: usize, count: usize, source_name: &'static str },
+    #[error("device {index} requested ({requested_by}) but only {count} Vulkan device(s) exist; see `vkdiff devices`")]
+    BadDeviceIndex { index: usize, count: usize, requested_by: Message },
     #[error("{0} is not a device index (expected a number; see `vkdiff devices`)")]
     BadDeviceSpec(String),
     #[error("device `{device}` cannot run vkdiff: {reason}")]

@@ -10,6 +10,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use vkdiff_formats::{write_safetensors_f32, SafeTensors};
 use vkdiff_networks::INCEPTION_FEATURES;
+use vkdiff_setting::Message;
 
 pub struct FeatureCache {
     path: PathBuf,
@@ -25,8 +26,9 @@ impl FeatureCache {
     /// The cache of `folder` under `cache_dir` for features made with `fingerprint` (weights and
     /// precision); an unreadable or stale cache file is treated as empty.
     pub fn open(cache_dir: &Path, folder: &Path, fingerprint: &str) -> Result<FeatureCache> {
-        std::fs::create_dir_all(cache_dir)
-            .map_err(|e| EvalError(format!("--cache-dir {}: {e}", cache_dir.display())))?;
+        std::fs::create_dir_all(cache_dir).map_err(|e| {
+            EvalError::Setting(Message::setting("cache_dir").then(format!(" {}: {e}", cache_dir.display())))
+        })?;
         let folder = std::fs::canonicalize(folder).unwrap_or_else(|_| folder.to_path_buf());
         let key = fnv1a64(format!("{}\n{fingerprint}", folder.display()).as_bytes());
         let name = folder.file_name().map_or("root".into(), |n| n.to_string_lossy().into_owned());
@@ -80,7 +82,7 @@ impl FeatureCache {
         ]);
         let values = rows.concat();
         write_safetensors_f32(&self.path, &[("features", &[files.len(), INCEPTION_FEATURES], &values)], &metadata)
-            .map_err(|e| EvalError(format!("cannot write the feature cache: {e}")))?;
+            .map_err(|e| EvalError::Invalid(format!("cannot write the feature cache: {e}")))?;
         self.loaded_stamps = stamps;
         Ok(())
     }

@@ -10,6 +10,7 @@ use crate::{EvalError, Result};
 use std::path::{Path, PathBuf};
 use vkdiff_networks::INCEPTION_FEATURES;
 use vkdiff_runtime::{Context, Dtype};
+use vkdiff_setting::Message;
 
 /// What to compare and how.
 pub struct FidRequest {
@@ -39,8 +40,11 @@ fn default_cache_dir() -> Result<PathBuf> {
     let base = std::env::var_os("XDG_CACHE_HOME")
         .map(PathBuf::from)
         .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")));
-    let base =
-        base.ok_or_else(|| EvalError("--cache: neither XDG_CACHE_HOME nor HOME is set; give --cache-dir".into()))?;
+    let base = base.ok_or_else(|| {
+        EvalError::Setting(
+            Message::setting("cache").then(": neither XDG_CACHE_HOME nor HOME is set; give ").and("cache_dir"),
+        )
+    })?;
     Ok(base.join("vkdiff/fid"))
 }
 
@@ -70,11 +74,11 @@ pub struct FidOutcome {
 /// The images of a folder, refused unless there are at least two.
 fn images_of(dir: &Path, what: &str) -> Result<Vec<PathBuf>> {
     if !dir.is_dir() {
-        return Err(EvalError(format!("{what} {}: not a folder", dir.display())));
+        return Err(EvalError::Invalid(format!("{what} {}: not a folder", dir.display())));
     }
     let files = list_images(dir)?;
     if files.len() < 2 {
-        return Err(EvalError(format!(
+        return Err(EvalError::Invalid(format!(
             "{what} {}: {} png/jpg/jpeg images; FID and KID need at least 2",
             dir.display(),
             files.len()
@@ -86,16 +90,21 @@ fn images_of(dir: &Path, what: &str) -> Result<Vec<PathBuf>> {
 impl FidJob {
     pub fn new(request: FidRequest) -> Result<FidJob> {
         if !request.inception.is_file() {
-            return Err(EvalError(format!(
-                "--inception {}: no such file (torch-fidelity's weights-inception-2015-12-05-6726825d.pth)",
+            return Err(EvalError::Setting(Message::setting("inception").then(format!(
+                " {}: no such file (torch-fidelity's weights-inception-2015-12-05-6726825d.pth)",
                 request.inception.display()
-            )));
+            ))));
         }
         if request.kid_subsets == 0 || request.kid_subset_size < 2 {
-            return Err(EvalError("--kid-subsets must be positive and --kid-subset-size at least 2".into()));
+            return Err(EvalError::Setting(
+                Message::setting("kid_subsets")
+                    .then(" must be positive and ")
+                    .and("kid_subset_size")
+                    .then(" at least 2"),
+            ));
         }
         if request.batch == 0 {
-            return Err(EvalError("--batch must be positive".into()));
+            return Err(EvalError::Setting(Message::setting("batch").then(" must be positive")));
         }
         let real = images_of(&request.real, "real")?;
         let fake = images_of(&request.fake, "fake")?;
@@ -151,7 +160,7 @@ impl FidJob {
         // torch-fidelity draws each KID subset from input1 (the generated set) first.
         let kid = kid(&fake_features, &real_features, INCEPTION_FEATURES, &opts)?;
         if !fid_value.is_finite() {
-            return Err(EvalError("FID is not finite: the features hold NaN or infinity".into()));
+            return Err(EvalError::Invalid("FID is not finite: the features hold NaN or infinity".into()));
         }
         Ok(FidOutcome { fid: fid_value, kid, real, fake })
     }

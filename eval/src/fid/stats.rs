@@ -76,9 +76,9 @@ fn r_factor(mut a: Mat<f64>) -> Mat<f64> {
 fn trace_sqrt_product(f1: MatRef<f64>, f2: MatRef<f64>) -> Result<f64> {
     let mut c = Mat::<f64>::zeros(f1.nrows(), f2.nrows());
     matmul(c.as_mut(), Accum::Replace, f1, f2.transpose(), 1.0, get_global_parallelism());
-    let s = c
-        .singular_values()
-        .map_err(|e| EvalError(format!("FID: the SVD of the cross-covariance factor did not converge ({e:?})")))?;
+    let s = c.singular_values().map_err(|e| {
+        EvalError::Invalid(format!("FID: the SVD of the cross-covariance factor did not converge ({e:?})"))
+    })?;
     Ok(s.iter().sum())
 }
 
@@ -121,7 +121,7 @@ pub fn kid(a: &[f32], b: &[f32], dim: usize, opts: &KidOptions) -> Result<Kid> {
     let n2 = rows(b, dim, "KID set 2")?;
     let m = opts.subset_size.min(n1).min(n2);
     if opts.subsets == 0 || m < 2 {
-        return Err(EvalError(format!(
+        return Err(EvalError::Invalid(format!(
             "KID: needs at least 1 subset of at least 2 rows (got {} subsets of {})",
             opts.subsets, opts.subset_size
         )));
@@ -244,14 +244,14 @@ fn block_sum(k: &Mat<f64>, rows: &[usize], cols: &[usize]) -> f64 {
 /// Number of rows of a feature set, after checking its shape and values.
 fn rows(x: &[f32], dim: usize, name: &str) -> Result<usize> {
     if dim == 0 || !x.len().is_multiple_of(dim) {
-        return Err(EvalError(format!("{name}: {} values are not rows of dimension {dim}", x.len())));
+        return Err(EvalError::Invalid(format!("{name}: {} values are not rows of dimension {dim}", x.len())));
     }
     let n = x.len() / dim;
     if n < 2 {
-        return Err(EvalError(format!("{name}: {n} feature row(s); at least 2 are needed")));
+        return Err(EvalError::Invalid(format!("{name}: {n} feature row(s); at least 2 are needed")));
     }
     if let Some(i) = x.iter().position(|v| !v.is_finite()) {
-        return Err(EvalError(format!("{name}: row {} has a non-finite feature ({})", i / dim, x[i])));
+        return Err(EvalError::Invalid(format!("{name}: row {} has a non-finite feature ({})", i / dim, x[i])));
     }
     Ok(n)
 }

@@ -18,11 +18,13 @@ fn default_eos() -> u32 {
 }
 
 /// SDXL base 1.0's text_encoder/config.json (CLIP ViT-L/14 text tower).
-pub const SDXL_CLIP_L_CONFIG: &str = r#"{"vocab_size": 49408, "hidden_size": 768, "intermediate_size": 3072, "num_hidden_layers": 12,
-    "num_attention_heads": 12, "max_position_embeddings": 77, "hidden_act": "quick_gelu", "layer_norm_eps": 1e-5, "eos_token_id": 2}"#;
+pub const SDXL_CLIP_L_CONFIG: &str = r#"{"vocab_size": 49408, "hidden_size": 768, "intermediate_size": 3072,
+    "num_hidden_layers": 12, "num_attention_heads": 12, "max_position_embeddings": 77, "hidden_act": "quick_gelu",
+    "layer_norm_eps": 1e-5, "eos_token_id": 2}"#;
 /// SDXL base 1.0's text_encoder_2/config.json (OpenCLIP ViT-bigG/14 text tower with projection).
-pub const SDXL_BIGG_CONFIG: &str = r#"{"vocab_size": 49408, "hidden_size": 1280, "intermediate_size": 5120, "num_hidden_layers": 32,
-    "num_attention_heads": 20, "max_position_embeddings": 77, "hidden_act": "gelu", "layer_norm_eps": 1e-5, "projection_dim": 1280, "eos_token_id": 2}"#;
+pub const SDXL_BIGG_CONFIG: &str = r#"{"vocab_size": 49408, "hidden_size": 1280, "intermediate_size": 5120,
+    "num_hidden_layers": 32, "num_attention_heads": 20, "max_position_embeddings": 77, "hidden_act": "gelu",
+    "layer_norm_eps": 1e-5, "projection_dim": 1280, "eos_token_id": 2}"#;
 
 /// The keys of a transformers `CLIPTextConfig` (text_encoder/config.json) vkdiff reads.
 #[derive(Clone, Debug, Deserialize)]

@@ -8,6 +8,7 @@ use crate::layers::nn::{Graph, LayerNorm, Linear};
 use crate::weights::{component_folder, Checkpoint};
 use serde::Deserialize;
 use std::path::Path;
+use vkdiff_formats::Error as FileError;
 use vkdiff_runtime::ops::{self, Matmul, UnaryOp};
 use vkdiff_runtime::{Context, Dtype, Tensor};
 
@@ -48,8 +49,8 @@ impl ClipVisionConfig {
     /// A `config.json` holding a `CLIPVisionConfig`, or a full `CLIPConfig` whose `vision_config`
     /// is used (as transformers does when loading a vision model from it).
     pub fn from_file(path: &Path) -> Result<ClipVisionConfig> {
-        let bad = |why: String| Error::Format { path: path.to_path_buf(), why };
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
+        let bad = |why: String| Error::from(FileError::Format { path: path.to_path_buf(), why });
+        let text = std::fs::read_to_string(path).map_err(|e| FileError::Io { path: path.to_path_buf(), source: e })?;
         let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
         let mut vision = json.get("vision_config").cloned().unwrap_or_else(|| json.clone());
         // A nested vision_config without its own projection_dim takes the CLIPConfig's.

@@ -8,6 +8,7 @@ use crate::weights::Checkpoint;
 use crate::weights::{Inner, OriginalNames};
 use serde::Deserialize;
 use std::path::Path;
+use vkdiff_formats::Error as FileError;
 
 /// `diffusers/controlnet-depth-sdxl-1.0`'s config.json (reference/sdxl.md §6.1).
 pub const SDXL_CONTROLNET_CONFIG: &str = r#"{
@@ -89,7 +90,7 @@ impl ControlNetConfig {
     }
 
     pub fn from_file(path: &Path) -> Result<ControlNetConfig> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
+        let text = std::fs::read_to_string(path).map_err(|e| FileError::Io { path: path.to_path_buf(), source: e })?;
         Self::from_json(&text, &path.display().to_string())
     }
 

@@ -1,5 +1,6 @@
 //! The InceptionV3 that FID and KID are defined with (TensorFlow's 2015-12-05 graph, as
-//! torch-fidelity's `FeatureExtractorInceptionV3` runs it): TF 1.x bilinear resize to 299², (x − 128)/128, the network, and the 2048 pooled features. Each `BasicConv2d` is one
+//! torch-fidelity's `FeatureExtractorInceptionV3` runs it): TF 1.x bilinear resize to 299²,
+//! (x − 128)/128, the network, and the 2048 pooled features. Each `BasicConv2d` is one
 //! convolution with its batch norm folded in and ReLU fused into the store.
 
 use crate::error::{Error, Result};

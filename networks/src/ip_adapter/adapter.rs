@@ -11,6 +11,7 @@ use crate::unet::unet_2d_condition::UNet;
 use crate::weights::{Checkpoint, Weights};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
+use vkdiff_formats::Error as FileError;
 use vkdiff_formats::SafeTensors;
 use vkdiff_runtime::{Context, Dtype, Tensor};
 
@@ -79,14 +80,14 @@ impl IpAdapter {
     /// Reads an h94-style adapter (`image_proj.*`, `ip_adapter.{N}.to_{k,v}_ip.weight`) and checks
     /// every per-layer weight against `unet`'s cross-attentions.
     pub fn load(ctx: &Context, path: &Path, unet: &UNet, dtype: Dtype) -> Result<IpAdapter> {
-        let pickle = || Error::Format {
+        let pickle = || FileError::Format {
             path: path.to_path_buf(),
             why: "a PyTorch pickle (.bin); vkdiff reads IP-Adapters as .safetensors (h94/IP-Adapter ships both)".into(),
         };
         if pickle_extension(path) {
-            return Err(pickle());
+            return Err(pickle().into());
         }
-        let file = SafeTensors::open(path).map_err(|e| if pickle_magic(path) { pickle() } else { e.into() })?;
+        let file = SafeTensors::open(path).map_err(|e| if pickle_magic(path) { pickle() } else { e })?;
         let shapes: BTreeMap<String, Vec<usize>> =
             file.entries.iter().map(|(k, e)| (k.clone(), e.shape.clone())).collect();
         let at = path.display().to_string();

@@ -29,7 +29,8 @@ fn default_act() -> String {
 pub const SDXL_VAE_CONFIG: &str = r#"{"in_channels": 3, "out_channels": 3, "block_out_channels": [128, 256, 512, 512],
     "down_block_types": ["DownEncoderBlock2D", "DownEncoderBlock2D", "DownEncoderBlock2D", "DownEncoderBlock2D"],
     "up_block_types": ["UpDecoderBlock2D", "UpDecoderBlock2D", "UpDecoderBlock2D", "UpDecoderBlock2D"],
-    "layers_per_block": 2, "latent_channels": 4, "norm_num_groups": 32, "scaling_factor": 0.13025, "force_upcast": true, "sample_size": 1024}"#;
+    "layers_per_block": 2, "latent_channels": 4, "norm_num_groups": 32, "scaling_factor": 0.13025,
+    "force_upcast": true, "sample_size": 1024}"#;
 
 /// The keys of a diffusers `AutoencoderKL` config.json vkdiff reads.
 #[derive(Clone, Debug, Deserialize)]

@@ -9,6 +9,7 @@ use crate::weights::parameters::{ParamLayout, Parameter, Parameters};
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
+use vkdiff_formats::Error as FileError;
 use vkdiff_formats::{decode, SafeTensors, SourceDtype};
 use vkdiff_runtime::ops::oihw_to_ohwi;
 use vkdiff_runtime::{Context, Dtype, Tensor};
@@ -351,9 +352,9 @@ fn diffusers_weight_files(dir: &Path, stem: &str, dtype: Dtype) -> Result<Vec<Sa
 }
 
 fn shards(index_path: &Path) -> Result<Vec<SafeTensors>> {
-    let bad = |why: String| Error::Format { path: index_path.to_path_buf(), why };
+    let bad = |why: String| Error::from(FileError::Format { path: index_path.to_path_buf(), why });
     let text =
-        std::fs::read_to_string(index_path).map_err(|e| Error::Io { path: index_path.to_path_buf(), source: e })?;
+        std::fs::read_to_string(index_path).map_err(|e| FileError::Io { path: index_path.to_path_buf(), source: e })?;
     let json: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
     let map = json.get("weight_map").and_then(|m| m.as_object()).ok_or_else(|| bad("no `weight_map`".into()))?;
     let names: BTreeSet<&str> = map.values().filter_map(|v| v.as_str()).collect();

@@ -11,6 +11,9 @@ use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use vkdiff_formats::Error as FileError;
+use vkdiff_render::coco::{serialize_sorted, Annotation};
+use vkdiff_setting::Message;
 
 pub const MANIFEST: &str = "dataset.json";
 pub const ANNOTATIONS: &str = "annotations.json";
@@ -24,7 +27,8 @@ pub struct ImageRecord {
     pub fingerprint: String,
     pub files: BTreeMap<String, u64>,
     pub image: Value,
-    pub annotations: Vec<Value>,
+    #[serde(serialize_with = "serialize_sorted")]
+    pub annotations: Vec<Annotation>,
 }
 
 /// An opened dataset folder whose settings are this run's.
@@ -71,7 +75,7 @@ impl Dataset {
         let path = dir.join(MANIFEST);
         let io = |p: &Path| {
             let p = p.to_path_buf();
-            move |e| Error::Io { path: p, source: e }
+            move |e| FileError::Io { path: p, source: e }
         };
         if !path.is_file() {
             refuse_foreign_folder(dir)?;
@@ -80,20 +84,24 @@ impl Dataset {
         }
         let recorded = read_manifest(&path)?;
         if recorded["vkdiff"] != wanted["vkdiff"] || recorded["format"] != wanted["format"] {
-            return Err(Error::Config(format!(
-                "{} was made by vkdiff {} ({}); this is vkdiff {VERSION}: finish it with that version, or give \
-                    another --out",
-                dir.display(),
-                recorded["vkdiff"],
-                recorded["format"]
-            )));
+            return Err(Error::Setting(
+                Message::text(format!(
+                    "{} was made by vkdiff {} ({}); this is vkdiff {VERSION}: finish it with that version, or give \
+                    another ",
+                    dir.display(),
+                    recorded["vkdiff"],
+                    recorded["format"]
+                ))
+                .and("out"),
+            ));
         }
         if let Some(diff) = first_difference(&recorded["settings"], &wanted["settings"]) {
-            return Err(Error::Config(format!(
-                "{} holds a dataset made with other settings: {diff}; use the same \
-                settings to finish it, or another --out",
-                dir.display()
-            )));
+            return Err(Error::Setting(
+                Message::text(format!("{} holds a dataset made with other settings: ", dir.display()))
+                    .append(diff)
+                    .then("; use the same settings to finish it, or another ")
+                    .and("out"),
+            ));
         }
         for folder in FOLDERS {
             std::fs::create_dir_all(dir.join(folder)).map_err(io(&dir.join(folder)))?;
@@ -188,7 +196,7 @@ impl Dataset {
     pub(crate) fn remove_partials(&self, owned: &dyn Fn(u64) -> bool) -> Result<()> {
         for folder in FOLDERS {
             let dir = self.dir.join(folder);
-            let entries = std::fs::read_dir(&dir).map_err(|e| Error::Io { path: dir.clone(), source: e })?;
+            let entries = std::fs::read_dir(&dir).map_err(|e| FileError::Io { path: dir.clone(), source: e })?;
             for entry in entries.flatten() {
                 let name = entry.file_name().to_string_lossy().into_owned();
                 if name.starts_with('.') && name.contains(PARTIAL) && index_of(&name).is_some_and(owned) {
@@ -205,7 +213,7 @@ impl Dataset {
         index: u64,
         outputs: &[(&str, &[u8])],
         image: Value,
-        annotations: Vec<Value>,
+        annotations: Vec<Annotation>,
     ) -> Result<()> {
         let mut files = BTreeMap::new();
         for (name, bytes) in outputs {
@@ -248,16 +256,16 @@ fn to_text(v: &Value) -> String {
 }
 
 fn read_manifest(path: &Path) -> Result<Value> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
+    let text = std::fs::read_to_string(path).map_err(|e| FileError::Io { path: path.to_path_buf(), source: e })?;
     let value: Value = serde_json::from_str(&text)
-        .map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("not JSON ({e})") })?;
+        .map_err(|e| FileError::Format { path: path.to_path_buf(), why: format!("not JSON ({e})") })?;
     if !value["format"].is_string()
         || !value["settings"].is_object()
         || !value["images"].is_u64()
         || !value["scenes"].is_u64()
         || !value["fingerprint"].is_string()
     {
-        return Err(Error::Format { path: path.to_path_buf(), why: "not a vkdiff dataset manifest".into() });
+        return Err(FileError::Format { path: path.to_path_buf(), why: "not a vkdiff dataset manifest".into() }.into());
     }
     Ok(value)
 }
@@ -266,7 +274,7 @@ fn read_manifest(path: &Path) -> Result<Value> {
 /// is linked into place whole, and the loser's copy is dropped.
 fn create_once(path: &Path, text: &str) -> Result<()> {
     let tmp = partial_path(path);
-    let io = |e| Error::Io { path: path.to_path_buf(), source: e };
+    let io = |e| Error::from(FileError::Io { path: path.to_path_buf(), source: e });
     std::fs::write(&tmp, text).map_err(io)?;
     let linked = std::fs::File::open(&tmp).and_then(|f| f.sync_all()).and_then(|_| std::fs::hard_link(&tmp, path));
     let _ = std::fs::remove_file(&tmp);
@@ -286,10 +294,10 @@ fn refuse_foreign_folder(dir: &Path) -> Result<()> {
     let foreign: Vec<String> =
         entries.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).filter(|n| !ours(n)).collect();
     if let Some(first) = foreign.first() {
-        return Err(Error::Config(format!(
-            "--out {}: the folder holds other files ({first}, …) and no {MANIFEST}; give a new or empty folder",
+        return Err(Error::Setting(Message::setting("out").then(format!(
+            " {}: the folder holds other files ({first}, …) and no {MANIFEST}; give a new or empty folder",
             dir.display()
-        )));
+        ))));
     }
     Ok(())
 }

@@ -15,6 +15,7 @@ use crate::RgbImage;
 use std::path::Path;
 use std::time::{Duration, Instant};
 use vkdiff_runtime::Context;
+use vkdiff_setting::Message;
 
 /// Which part of the set this process makes: `--shard I/N`, or `--shards N` with the index from
 /// the environment (Slurm, Kubernetes), or the whole set.
@@ -65,7 +66,7 @@ impl DatasetJob {
     ) -> Result<DatasetJob> {
         let (shard, shard_source) = Shard::resolve(shard.shard.as_deref(), shard.shards, env)?;
         if options.batch == 0 {
-            return Err(Error::Config("--batch must be at least 1".into()));
+            return Err(Error::Setting(Message::setting("batch").then(" must be at least 1")));
         }
         let styles = settings.ip_sets.iter().map(|set| read_images(set)).collect::<Result<Vec<_>>>()?;
         let dataset = Dataset::open(out, &settings)?;

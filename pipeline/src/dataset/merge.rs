@@ -55,7 +55,7 @@ pub fn merge(dir: &Path) -> Result<Merged> {
             "settings": dataset.settings,
         },
         "licenses": [],
-        "categories": vkdiff_render::coco::categories(),
+        "categories": [vkdiff_render::coco::CATEGORY],
     });
     // Streamed: a large set's annotations need not fit in memory at once.
     write_atomic_with(&dir.join(ANNOTATIONS), &mut |w| {
@@ -71,9 +71,9 @@ pub fn merge(dir: &Path) -> Result<Merged> {
             })?;
             for mut annotation in record.annotations {
                 id += 1;
-                annotation["id"] = json!(id);
+                annotation.id = Some(id);
                 w.write_all(if id == 1 { b"" } else { b"," })?;
-                serde_json::to_writer(&mut *w, &annotation)?;
+                serde_json::to_writer(&mut *w, &annotation.sorted_json())?;
             }
         }
         w.write_all(b"]}\n")

@@ -3,6 +3,7 @@
 //! the shard count, the thread count or what an earlier run got through.
 
 use crate::error::{Error, Result};
+use vkdiff_setting::Message;
 
 /// splitmix64's finaliser: a bijection of u64 that scatters nearby inputs.
 fn mix(mut x: u64) -> u64 {
@@ -52,7 +53,11 @@ impl Shard {
 
     /// `I/N`, 0-based as Slurm and Kubernetes number.
     pub fn parse(text: &str) -> Result<Shard> {
-        let bad = || Error::Config(format!("--shard {text}: expected I/N with 0 <= I < N (0-based, e.g. 0/4)"));
+        let bad = || {
+            Error::Setting(
+                Message::setting("shard").then(format!(" {text}: expected I/N with 0 <= I < N (0-based, e.g. 0/4)")),
+            )
+        };
         let (i, n) = text.split_once('/').ok_or_else(bad)?;
         let (index, count) = (i.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
         Shard::new(index, count).map_err(|_| bad())
@@ -76,11 +81,15 @@ impl Shard {
     ) -> Result<(Shard, String)> {
         if let Some(text) = flag {
             if shards.is_some() {
-                return Err(Error::Config(
-                    "give --shard I/N or --shards N (with JOB_COMPLETION_INDEX), not both".into(),
+                return Err(Error::Setting(
+                    Message::text("give ")
+                        .and("shard")
+                        .then(" I/N or ")
+                        .and("shards")
+                        .then(" N (with JOB_COMPLETION_INDEX), not both"),
                 ));
             }
-            return Ok((Shard::parse(text)?, "--shard".into()));
+            return Ok((Shard::parse(text)?, Message::setting("shard").to_string()));
         }
         let number = |name: &str| -> Result<Option<u64>> {
             env(name)
@@ -90,43 +99,55 @@ impl Shard {
                 .transpose()
         };
         if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
-            let (min, count) = match (number("SLURM_ARRAY_TASK_MIN")?, number("SLURM_ARRAY_TASK_COUNT")?) {
-                (Some(min), Some(count)) => (min, count),
-                _ => {
-                    return Err(Error::Config(
-                        "SLURM_ARRAY_TASK_ID is set without SLURM_ARRAY_TASK_MIN and \
-                    SLURM_ARRAY_TASK_COUNT; give --shard I/N"
-                            .into(),
-                    ))
-                }
-            };
+            let (min, count) =
+                match (number("SLURM_ARRAY_TASK_MIN")?, number("SLURM_ARRAY_TASK_COUNT")?) {
+                    (Some(min), Some(count)) => (min, count),
+                    _ => return Err(Error::Setting(
+                        Message::text(
+                            "SLURM_ARRAY_TASK_ID is set without SLURM_ARRAY_TASK_MIN and SLURM_ARRAY_TASK_COUNT; give ",
+                        )
+                        .and("shard")
+                        .then(" I/N"),
+                    )),
+                };
             if number("SLURM_ARRAY_TASK_STEP")?.is_some_and(|step| step != 1) || id < min || id - min >= count {
-                return Err(Error::Config(format!(
-                    "Slurm array task {id} (min {min}, count {count}) is not in a contiguous array: submit \
-                        --array=0-{} (no step), or give --shard I/N",
-                    count.saturating_sub(1)
-                )));
+                return Err(Error::Setting(
+                    Message::text(format!(
+                        "Slurm array task {id} (min {min}, count {count}) is not in a contiguous array: submit \
+                        --array=0-{} (no step), or give ",
+                        count.saturating_sub(1)
+                    ))
+                    .and("shard")
+                    .then(" I/N"),
+                ));
             }
             if shards.is_some_and(|n| n != count) {
-                return Err(Error::Config(format!(
-                    "--shards {} disagrees with SLURM_ARRAY_TASK_COUNT={count}",
-                    shards.unwrap_or(0)
-                )));
+                return Err(Error::Setting(
+                    Message::setting("shards")
+                        .then(format!(" {} disagrees with SLURM_ARRAY_TASK_COUNT={count}", shards.unwrap_or(0))),
+                ));
             }
             return Ok((Shard::new(id - min, count)?, format!("Slurm array task {id}")));
         }
         match (number("JOB_COMPLETION_INDEX")?, shards) {
             (Some(index), Some(count)) => {
                 let shard = Shard::new(index, count).map_err(|_| {
-                    Error::Config(format!("JOB_COMPLETION_INDEX={index} is not below --shards {count}"))
+                    Error::Setting(
+                        Message::text(format!("JOB_COMPLETION_INDEX={index} is not below "))
+                            .and("shards")
+                            .then(format!(" {count}")),
+                    )
                 })?;
                 Ok((shard, format!("JOB_COMPLETION_INDEX={index}")))
             }
-            (Some(_), None) => {
-                Err(Error::Config("JOB_COMPLETION_INDEX is set: give --shards N, the Job's completions".into()))
-            }
-            (None, Some(_)) => Err(Error::Config(
-                "--shards N needs JOB_COMPLETION_INDEX (a Kubernetes Indexed Job); elsewhere give --shard I/N".into(),
+            (Some(_), None) => Err(Error::Setting(
+                Message::text("JOB_COMPLETION_INDEX is set: give ").and("shards").then(" N, the Job's completions"),
+            )),
+            (None, Some(_)) => Err(Error::Setting(
+                Message::setting("shards")
+                    .then(" N needs JOB_COMPLETION_INDEX (a Kubernetes Indexed Job); elsewhere give ")
+                    .and("shard")
+                    .then(" I/N"),
             )),
             (None, None) => Ok((Shard::ALL, "the whole set".into())),
         }
@@ -204,7 +225,7 @@ mod tests {
             assert_eq!(shards.iter().filter(|s| s.owns_scene(scene)).count(), 1);
         }
         for bad in ["3/3", "1", "a/2", "0/0", "-1/2"] {
-            assert!(Shard::parse(bad).unwrap_err().to_string().contains("--shard"), "{bad}");
+            assert!(Shard::parse(bad).unwrap_err().to_string().contains("shard"), "{bad}");
         }
     }
 
@@ -228,8 +249,8 @@ mod tests {
         assert!(Shard::resolve(None, None, &partial).unwrap_err().to_string().contains("SLURM_ARRAY_TASK_MIN"));
         let k8s = env(&[("JOB_COMPLETION_INDEX", "3")]);
         assert_eq!(Shard::resolve(None, Some(5), &k8s).unwrap().0, Shard { index: 3, count: 5 });
-        assert!(Shard::resolve(None, None, &k8s).unwrap_err().to_string().contains("--shards"));
-        assert!(Shard::resolve(None, Some(3), &k8s).unwrap_err().to_string().contains("not below --shards 3"));
+        assert!(Shard::resolve(None, None, &k8s).unwrap_err().to_string().contains("shards"));
+        assert!(Shard::resolve(None, Some(3), &k8s).unwrap_err().to_string().contains("not below shards 3"));
         assert!(Shard::resolve(None, Some(3), &none).unwrap_err().to_string().contains("JOB_COMPLETION_INDEX"));
         assert!(Shard::resolve(None, None, &env(&[("JOB_COMPLETION_INDEX", "x")]))
             .unwrap_err()

@@ -334,18 +334,7 @@ fn start_writer(dataset: Dataset, batch: usize) -> (SyncSender<Finished>, JoinHa
             let files = dataset.files(f.index);
             let png = png_bytes(&f.image, &f.text)?;
             let image_id = f.index + 1;
-            let annotations = f
-                .scene
-                .annotations
-                .into_iter()
-                .map(|mut a| {
-                    let object = a.as_object_mut().expect("annotations are objects");
-                    let mask_id = object.remove("id").unwrap_or(Value::Null);
-                    object.insert("mask_id".into(), mask_id);
-                    object.insert("image_id".into(), json!(image_id));
-                    a
-                })
-                .collect();
+            let annotations = f.scene.annotations.into_iter().map(|a| a.in_dataset(image_id)).collect();
             let mut outputs: Vec<(&str, &[u8])> = vec![
                 (&files.depth, &f.scene.depth_exr),
                 (&files.control, &f.scene.control_png),

@@ -9,7 +9,7 @@ use serde_json::{json, Value};
 use std::sync::mpsc::{sync_channel, Receiver};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
-use vkdiff_render::coco::{annotation_values, instance_masks};
+use vkdiff_render::coco::{annotations, instance_masks, Annotation};
 use vkdiff_render::control::control_image;
 use vkdiff_render::crops::crop_frame;
 use vkdiff_render::exr::encode_single_channel;
@@ -34,7 +34,7 @@ pub struct SceneImage {
     /// img2img's start (`--init-strength`): the crop's shaded render, and as a PNG.
     pub init: Option<(RgbImage, Vec<u8>)>,
     /// COCO annotations, ids = the instance ids in the mask.
-    pub annotations: Vec<Value>,
+    pub annotations: Vec<Annotation>,
 }
 
 /// The renderer thread: images arrive in the order of `scenes`; the thread's busy time is
@@ -106,12 +106,16 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
                 scene_seed: seed,
                 crop: cropped.then_some(k),
                 window: json!({"offset_px": [window.x0, window.y0], "size_px": [window.width, window.height]}),
-                camera: json!({"K": camera["K"], "crop_offset_px": camera["crop_offset_px"], "T_world_camera_opencv": camera["T_world_camera_opencv"]["matrix"]}),
+                camera: json!({
+                    "K": camera["K"],
+                    "crop_offset_px": camera["crop_offset_px"],
+                    "T_world_camera_opencv": camera["T_world_camera_opencv"]["matrix"],
+                }),
                 depth_exr: encode_single_channel(w, h, "Z", &part.depth),
                 control_png: rgb8(w, h, &pixels),
                 mask_png: gray16(w, h, &part.ids),
                 init,
-                annotations: annotation_values(&part, &instance_masks(&part)),
+                annotations: annotations(&part, &instance_masks(&part)),
                 control: RgbImage { width: w as usize, height: h as usize, pixels },
             }
         })

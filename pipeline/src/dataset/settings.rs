@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 use vkdiff_render::control::ControlDepth;
 use vkdiff_render::crops::{centered, centered_window, validate_min_fraction, CropWindow};
 use vkdiff_render::scene::SceneConfig;
+use vkdiff_setting::Message;
 
 /// How each scene's frame is cut into images.
 #[derive(Clone, Debug, PartialEq)]
@@ -62,27 +63,44 @@ impl DatasetSettings {
         scene.validate()?;
         validate_min_fraction(crops.min_fraction)?;
         if count == 0 {
-            return Err(Error::Config("--count must be at least 1".into()));
+            return Err(Error::Setting(Message::setting("count").then(" must be at least 1")));
         }
         if seed.checked_add(count).is_none() {
-            return Err(Error::Config(format!("--count {count} runs past the largest seed from --seed {seed}")));
+            return Err(Error::Setting(
+                Message::setting("count")
+                    .then(format!(" {count} runs past the largest seed from "))
+                    .and("seed")
+                    .then(format!(" {seed}")),
+            ));
         }
         if prompts.is_empty() || prompts.iter().any(|p| p.trim().is_empty()) {
-            return Err(Error::Config(
-                "--prompt (or --prompts FILE) must give at least one prompt, none of them empty".into(),
+            return Err(Error::Setting(
+                Message::setting("prompt")
+                    .then(" (or ")
+                    .and("prompts")
+                    .then(" FILE) must give at least one prompt, none of them empty"),
             ));
         }
         match (&models.ip_adapter, ip_sets.is_empty()) {
             (Some(_), true) => {
-                return Err(Error::Config(
-                    "--ip-adapter needs style images: --ip-image (one set) or --ip-set A,B (repeatable)".into(),
+                return Err(Error::Setting(
+                    Message::setting("ip_adapter")
+                        .then(" needs style images: ")
+                        .and("ip_image")
+                        .then(" (one set) or ")
+                        .and("ip_set")
+                        .then(" A,B (repeatable)"),
                 ))
             }
-            (None, false) => return Err(Error::Config("--ip-image/--ip-set need --ip-adapter".into())),
+            (None, false) => {
+                return Err(Error::Setting(
+                    Message::setting("ip_image").then("/").and("ip_set").then(" need ").and("ip_adapter"),
+                ))
+            }
             _ => {}
         }
         if ip_sets.iter().any(|set| set.is_empty()) {
-            return Err(Error::Config("--ip-set: a set names no image".into()));
+            return Err(Error::Setting(Message::setting("ip_set").then(": a set names no image")));
         }
         models.check()?;
         sampling.check()?;
@@ -92,19 +110,19 @@ impl DatasetSettings {
         let multiple = Sdxl::probe_pixel_multiple(&models.model)? as u32;
         let (width, height) = if crops.count > 0 {
             if crops.size == 0 || crops.size > scene.width.min(scene.height) {
-                return Err(Error::Config(format!(
-                    "--crop-size {} must lie in [1, {}] to fit the {}×{} frame",
+                return Err(Error::Setting(Message::setting("crop_size").then(format!(
+                    " {} must lie in [1, {}] to fit the {}×{} frame",
                     crops.size,
                     scene.width.min(scene.height),
                     scene.width,
                     scene.height
-                )));
+                ))));
             }
             if !crops.size.is_multiple_of(multiple) {
-                return Err(Error::Config(format!(
-                    "--crop-size {} must be a multiple of {multiple}, the sizes this model makes",
-                    crops.size
-                )));
+                return Err(Error::Setting(
+                    Message::setting("crop_size")
+                        .then(format!(" {} must be a multiple of {multiple}, the sizes this model makes", crops.size)),
+                ));
             }
             (crops.size, crops.size)
         } else {
@@ -236,25 +254,34 @@ fn object(v: Value) -> Map<String, Value> {
     }
 }
 
-/// The first setting in which `recorded` and `wanted` differ, as a one-line refusal.
-pub fn first_difference(recorded: &Value, wanted: &Value) -> Option<String> {
+/// The first setting in which `recorded` and `wanted` differ, as a one-line refusal (the keys
+/// of dataset.json's settings are the settings' names with dashes).
+pub fn first_difference(recorded: &Value, wanted: &Value) -> Option<Message> {
     let (a, b) = (recorded.as_object()?, wanted.as_object()?);
     let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
     keys.into_iter().find(|k| a.get(*k) != b.get(*k)).map(|k| {
         let show = |v: Option<&Value>| v.map_or("(not set)".to_string(), |v| v.to_string());
-        let flag = match k.as_str() {
-            "image-size" => "the image size (from --crop-size, or the frame and the model)".to_string(),
-            "ip-set" => "--ip-image/--ip-set".to_string(),
-            "prompt" => "--prompt/--prompts".to_string(),
-            other => format!("--{other}"),
+        let named = match k.as_str() {
+            "image-size" => {
+                Message::text("the image size (from ").and("crop_size").then(", or the frame and the model)")
+            }
+            "ip-set" => Message::setting("ip_image").then("/").and("ip_set"),
+            "prompt" => Message::setting("prompt").then("/").and("prompts"),
+            "cfg" => Message::setting("guidance_scale"),
+            "init-strength" => Message::setting("strength"),
+            other => Message::setting(other.replace('-', "_")),
         };
-        format!("{flag} was {} there, {} now", show(a.get(k)), show(b.get(k)))
+        named.then(format!(" was {} there, {} now", show(a.get(k)), show(b.get(k))))
     })
 }
 
-/// The prompts of a `--prompts` file: one a line, trimmed, blank lines skipped.
+/// The prompts of a `prompts` file: one a line, trimmed, blank lines skipped.
 pub fn read_prompts(path: &Path) -> Result<Vec<String>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::Context(format!("--prompts {}", path.display()), Box::new(Error::Config(e.to_string()))))?;
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        Error::Context(
+            Message::setting("prompts").then(format!(" {}", path.display())),
+            Box::new(Error::Config(e.to_string())),
+        )
+    })?;
     Ok(text.lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect())
 }

@@ -4,11 +4,12 @@
 //! larger) and rescale + normalise fused in float32 as `(x - mean/r) / (std/r)`.
 
 use std::path::Path;
+use vkdiff_formats::Error as FileError;
 
 use serde::Deserialize;
 
 use super::resample::{resize_torch, Filter};
-use crate::{Error, Result, RgbImage};
+use crate::{Result, RgbImage};
 
 const CLIP_MEAN: [f32; 3] = [0.481_454_66, 0.457_827_5, 0.408_210_73];
 const CLIP_STD: [f32; 3] = [0.268_629_55, 0.261_302_6, 0.275_777_1];
@@ -106,8 +107,9 @@ impl ClipPreprocess {
 
     /// Reads a preprocessor_config.json; keys not listed here are ignored.
     pub fn from_file(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
-        Self::from_json(&text).map_err(|why| Error::Format { path: path.to_path_buf(), why })
+        let text =
+            std::fs::read_to_string(path).map_err(|source| FileError::Io { path: path.to_path_buf(), source })?;
+        Ok(Self::from_json(&text).map_err(|why| FileError::Format { path: path.to_path_buf(), why })?)
     }
 
     pub fn from_json(text: &str) -> std::result::Result<Self, String> {

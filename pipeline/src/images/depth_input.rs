@@ -2,6 +2,7 @@
 //! reads every compression OpenEXR tools write (ZIP, PIZ, RLE, PXR24, B44, …).
 
 use std::path::Path;
+use vkdiff_formats::Error as FileError;
 
 use exr::prelude::{read_all_flat_layers_from_file, FlatSamples};
 use vkdiff_render::control::{control_image, ControlDepth};
@@ -32,7 +33,7 @@ fn pick(names: &[String]) -> std::result::Result<usize, String> {
 
 /// Depth values (row-major) and (width, height) of the depth channel of an EXR file.
 pub fn read_depth_exr(path: &Path) -> Result<(Vec<f32>, usize, usize)> {
-    let fail = |why: String| Error::Format { path: path.to_path_buf(), why };
+    let fail = |why: String| Error::from(FileError::Format { path: path.to_path_buf(), why });
     let image = read_all_flat_layers_from_file(path).map_err(|e| fail(format!("bad OpenEXR file: {e}")))?;
     // Every channel of every part, named `<part>.<channel>` for named parts.
     let mut names = Vec::new();
@@ -58,10 +59,11 @@ pub fn read_depth_exr(path: &Path) -> Result<(Vec<f32>, usize, usize)> {
 pub fn depth_control_image(path: &Path, mode: ControlDepth) -> Result<RgbImage> {
     let (depth, width, height) = read_depth_exr(path)?;
     if !depth.iter().any(|&z| z.is_finite() && z > 0.0) {
-        return Err(Error::Format {
+        return Err(FileError::Format {
             path: path.to_path_buf(),
             why: "no pixel holds a valid depth (all are 0, negative, infinite or NaN)".into(),
-        });
+        }
+        .into());
     }
     Ok(RgbImage { width, height, pixels: control_image(&depth, mode) })
 }

@@ -6,7 +6,8 @@
 //!   chosen per axis from the largest weight, and Keys' cubic written in another order.
 //!
 //! Both: two passes with an 8-bit intermediate, horizontal first (Pillow goes vertical first
-//! when that shrinks much more); an axis whose size does not change is not touched; each output value is `(Σ k·p + half) >> precision`, clamped.
+//! when that shrinks much more); an axis whose size does not change is not touched; each output
+//! value is `(Σ k·p + half) >> precision`, clamped.
 
 use crate::RgbImage;
 
@@ -225,7 +226,8 @@ fn resize_with(
 
 /// `image.resize((width, height), resample=filter)` of Pillow, for an RGB image.
 pub fn resize_pil(image: &RgbImage, width: usize, height: usize, filter: Filter) -> RgbImage {
-    // Pillow 13 (Resample.c) runs the vertical pass first when the vertical shrink is more than twice the horizontal one.
+    // Pillow 13 (Resample.c) runs the vertical pass first when the vertical shrink is more than
+    // twice the horizontal one.
     let (dh, dw) = (image.height as i64 - height as i64, image.width as i64 - width as i64);
     resize_with(image, width, height, pil_kernel, filter, dh > 0 && dh > dw * 2)
 }

@@ -8,6 +8,7 @@
 use crate::{Error, Result};
 use serde_json::{Map, Value};
 use std::path::Path;
+use vkdiff_formats::Error as FileError;
 
 /// stabilityai/stable-diffusion-xl-base-1.0 `scheduler/scheduler_config.json`.
 const SDXL_BASE: &str = r#"{
@@ -54,8 +55,9 @@ pub(super) enum Spacing {
 
 impl SchedulerConfig {
     pub fn load(path: &Path) -> Result<SchedulerConfig> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
-        let keys = parse(&text).map_err(|why| Error::Format { path: path.to_path_buf(), why })?;
+        let text =
+            std::fs::read_to_string(path).map_err(|source| FileError::Io { path: path.to_path_buf(), source })?;
+        let keys = parse(&text).map_err(|why| FileError::Format { path: path.to_path_buf(), why })?;
         Ok(SchedulerConfig { source: path.display().to_string(), keys })
     }
 
@@ -217,6 +219,9 @@ mod tests {
     #[test]
     fn missing_file_is_an_io_error_naming_it() {
         let err = SchedulerConfig::load(Path::new("/nonexistent/scheduler_config.json")).unwrap_err();
-        assert!(matches!(err, Error::Io { .. }) && err.to_string().contains("/nonexistent/scheduler_config.json"));
+        assert!(
+            matches!(err, Error::File(FileError::Io { .. }))
+                && err.to_string().contains("/nonexistent/scheduler_config.json")
+        );
     }
 }

@@ -8,6 +8,7 @@ use crate::settings::check_control_settings;
 use crate::RgbImage;
 use vkdiff_networks::{nchw_to_nhwc, ControlNetInputs, ControlNetModel, ControlNetPass, ControlResiduals};
 use vkdiff_runtime::Tensor;
+use vkdiff_setting::Message;
 
 /// The `--controlnet` settings of one generation.
 pub struct ControlGuide<'a> {
@@ -32,11 +33,20 @@ pub fn check_control_shape(control: &RgbImage, width: usize, height: usize, mult
         return Ok(());
     }
     let suggested = ((fitted_height / multiple as f64).round() as usize).max(1) * multiple;
-    Err(Error::Config(format!(
-        "--depth is {}x{} and the image {width}x{height}: the control image would be stretched against its masks; \
-         give a size of its shape (--width {width} --height {suggested}) or cut the depth to the image's shape first (vkdiff scene --crops)",
-        control.width, control.height
-    )))
+    Err(Error::Setting(
+        Message::setting("depth")
+            .then(format!(
+                " is {}x{} and the image {width}x{height}: the control image would be stretched against its masks; \
+                 give a size of its shape (",
+                control.width, control.height
+            ))
+            .and("width")
+            .then(format!(" {width} "))
+            .and("height")
+            .then(format!(" {suggested}) or cut the depth to the image's shape first (vkdiff scene "))
+            .and("crops")
+            .then(")"),
+    ))
 }
 
 /// A ControlNet and how strongly, and when, it steers: what a batch of images shares.

@@ -8,6 +8,7 @@ use crate::images::ClipPreprocess;
 use crate::settings::ip_scale::IpScale;
 use crate::RgbImage;
 use vkdiff_networks::{ClipVisionModelWithProjection, ImageFeature, IpAdapter};
+use vkdiff_setting::Message;
 
 /// The `--ip-adapter` settings of one generation.
 pub struct ImageGuide<'a> {
@@ -24,7 +25,7 @@ impl ImageGuide<'_> {
     /// (`guided`) or [positive], row-major.
     pub fn tokens(&self, guided: bool) -> Result<Vec<f32>> {
         if self.images.is_empty() {
-            return Err(Error::Config("--ip-adapter needs at least one --ip-image".into()));
+            return Err(Error::Setting(Message::setting("ip_adapter").then(" needs at least one ").and("ip_image")));
         }
         let feature = self.adapter.kind().feature();
         let mut pixels = Vec::new();

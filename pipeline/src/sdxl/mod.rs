@@ -24,6 +24,7 @@ use crate::error::{Error, Result};
 use crate::schedulers::SchedulerConfig;
 use crate::tokenizer::ClipTokenizer;
 use std::path::Path;
+use vkdiff_formats::Error as FileError;
 use vkdiff_lora::{LoraFile, LoraMerger, Summary, Targets};
 use vkdiff_networks::{
     read_unet_config, unet_checkpoint, AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig,
@@ -203,8 +204,8 @@ fn builtin<T: serde::de::DeserializeOwned>(text: &str) -> T {
 }
 
 fn read_force_zeros(path: &Path) -> Result<bool> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
+    let text = std::fs::read_to_string(path).map_err(|e| FileError::Io { path: path.to_path_buf(), source: e })?;
     let json: serde_json::Value = serde_json::from_str(&text)
-        .map_err(|e| Error::Format { path: path.to_path_buf(), why: format!("not JSON: {e}") })?;
+        .map_err(|e| FileError::Format { path: path.to_path_buf(), why: format!("not JSON: {e}") })?;
     Ok(json.get("force_zeros_for_empty_prompt").and_then(|v| v.as_bool()).unwrap_or(true))
 }

@@ -5,6 +5,7 @@ use crate::error::{finite, Error, Result};
 use crate::sdxl::Sdxl;
 use crate::settings::prompt_syntax::PromptSyntax;
 use crate::tokenizer::CONTEXT;
+use vkdiff_setting::Message;
 
 /// One prompt's conditioning for the UNet, rows [negative, positive] with guidance, else
 /// [positive].
@@ -52,8 +53,9 @@ impl Sdxl {
                 let cut = self.tokens_cut(prompt);
                 (cut > 0).then(|| {
                     format!(
-                        "warning: the last {cut} tokens of \"{prompt}\" are cut (CLIP reads 75); --prompt-syntax \
-                        weighted reads any length"
+                        "warning: the last {cut} tokens of \"{prompt}\" are cut (CLIP reads 75); {} weighted reads any \
+                        length",
+                        Message::setting("prompt_syntax")
                     )
                 })
             })

@@ -51,6 +51,8 @@ pub struct Denoised {
 
 impl Sdxl {
     /// Generates one image; `on_step(done, total)` is called after every denoising step.
+    /// `job.sampling` must have passed [`Sdxl::check_sampling`] (the entries, `GenJob` and
+    /// `DatasetSettings`, check it once, before any model loads).
     pub fn text_to_image(
         &self,
         job: &TextToImage,
@@ -64,7 +66,8 @@ impl Sdxl {
         Ok(Generated { latents, latent_shape, image, timings })
     }
 
-    /// The latents of one generation, without decoding them.
+    /// The latents of one generation, without decoding them; the sampling is checked as for
+    /// [`Sdxl::text_to_image`].
     pub fn denoise(
         &self,
         job: &TextToImage,
@@ -72,7 +75,6 @@ impl Sdxl {
         on_step: &mut dyn FnMut(usize, usize),
     ) -> Result<Denoised> {
         let sampling = &job.sampling;
-        self.check_sampling(sampling)?;
         let mut timings = Timings::default();
         let start = Instant::now();
         let text = self.encode_prompt_as(

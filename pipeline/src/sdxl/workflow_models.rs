@@ -39,11 +39,7 @@ impl WorkflowModels {
         let controlnet = match &settings.controlnet {
             Some(c) => {
                 log(&format!("loading ControlNet {}", c.model.display()));
-                Some(flagged(
-                    "--controlnet",
-                    &c.model,
-                    ControlNetModel::load(ctx, &c.model, sdxl.unet_config(), dtype),
-                )?)
+                Some(flagged("controlnet", &c.model, ControlNetModel::load(ctx, &c.model, sdxl.unet_config(), dtype))?)
             }
             None => None,
         };
@@ -52,7 +48,7 @@ impl WorkflowModels {
         let loras = settings
             .loras
             .iter()
-            .map(|l| Ok((flagged("--lora", &l.path, LoraFile::open(&l.path))?, l.strength)))
+            .map(|l| Ok((flagged("lora", &l.path, LoraFile::open(&l.path))?, l.strength)))
             .collect::<Result<Vec<_>>>()?;
         let refs: Vec<(&LoraFile, f32)> = loras.iter().map(|(f, s)| (f, *s)).collect();
         if let Some(summary) = sdxl.set_loras(&refs)? {
@@ -107,14 +103,14 @@ fn load_style(
 ) -> Result<StyleModels> {
     log(&format!("loading IP-Adapter {} and image encoder {}", adapter.display(), encoder.display()));
     let encoder_model =
-        flagged("--image-encoder", encoder, ClipVisionModelWithProjection::load_folder(ctx, encoder, sdxl.dtype()))?;
+        flagged("image_encoder", encoder, ClipVisionModelWithProjection::load_folder(ctx, encoder, sdxl.dtype()))?;
     let config = [encoder.join("preprocessor_config.json"), encoder.join("image_encoder/preprocessor_config.json")]
         .into_iter()
         .find(|p| p.is_file());
     let preprocess = match config {
-        Some(path) => flagged("--image-encoder", encoder, ClipPreprocess::from_file(&path))?,
+        Some(path) => flagged("image_encoder", encoder, ClipPreprocess::from_file(&path))?,
         None => ClipPreprocess::square(encoder_model.config().image_size),
     };
-    let adapter = flagged("--ip-adapter", adapter, IpAdapter::load(ctx, adapter, sdxl.unet(), sdxl.dtype()))?;
+    let adapter = flagged("ip_adapter", adapter, IpAdapter::load(ctx, adapter, sdxl.unet(), sdxl.dtype()))?;
     Ok(StyleModels { adapter, encoder: encoder_model, preprocess })
 }

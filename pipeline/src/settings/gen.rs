@@ -16,6 +16,7 @@ use crate::settings::sampling::{SizeConditioning, TextToImage};
 use crate::RgbImage;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use vkdiff_setting::Message;
 
 /// A value as A1111 writes it: in quotes where a comma or colon would split it.
 fn quoted(value: &str) -> String {
@@ -174,24 +175,26 @@ impl GenSettings {
     /// Reads the input images the settings name (before any model loads, so a bad file fails fast).
     pub fn read_inputs(&self) -> Result<GuideInputs> {
         let control = match (&self.models.controlnet, &self.depth) {
-            (Some(c), Some(depth)) => Some(flagged("--depth", depth, load_control_image(depth, c.depth_mode))?),
-            (Some(_), None) => return Err(Error::Config("--controlnet needs --depth".into())),
+            (Some(c), Some(depth)) => Some(flagged("depth", depth, load_control_image(depth, c.depth_mode))?),
+            (Some(_), None) => return Err(Error::Setting(Message::setting("controlnet").then(" needs ").and("depth"))),
             (None, _) => None,
         };
         let style = if self.models.ip_adapter.is_some() {
             if self.ip_images.is_empty() {
-                return Err(Error::Config("--ip-adapter needs at least one --ip-image".into()));
+                return Err(Error::Setting(
+                    Message::setting("ip_adapter").then(" needs at least one ").and("ip_image"),
+                ));
             }
             read_images(&self.ip_images)?
         } else {
             Vec::new()
         };
-        let init = self.init_image.as_ref().map(|p| flagged("--init-image", p, read_image(p))).transpose()?;
+        let init = self.init_image.as_ref().map(|p| flagged("init_image", p, read_image(p))).transpose()?;
         Ok(GuideInputs { control, style, init })
     }
 }
 
-/// Style images, each error naming its `--ip-image`.
+/// Style images, each error naming its `ip_image`.
 pub fn read_images(paths: &[std::path::PathBuf]) -> Result<Vec<RgbImage>> {
-    paths.iter().map(|p| flagged("--ip-image", p, read_image(p))).collect()
+    paths.iter().map(|p| flagged("ip_image", p, read_image(p))).collect()
 }

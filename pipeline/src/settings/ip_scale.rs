@@ -6,6 +6,7 @@
 use crate::error::{Error, Result};
 use std::fmt;
 use vkdiff_networks::CrossAttention;
+use vkdiff_setting::Message;
 
 /// A part of the UNet: `mid`, `down.I`/`up.I` (every attention of block I), or
 /// `down.I.J`/`up.I.J` (its J-th `Transformer2DModel`).
@@ -19,10 +20,10 @@ pub struct IpBlock {
 impl IpBlock {
     fn parse(text: &str) -> Result<IpBlock> {
         let bad = || {
-            Error::Config(format!(
-                "--ip-scale {text}: name a block as mid, down.I, up.I, down.I.J or up.I.J \
-                (diffusers' down/up block_I, attention J)"
-            ))
+            Error::Setting(Message::setting("ip_scale").then(format!(
+                " {text}: name a block as mid, down.I, up.I, down.I.J or up.I.J (diffusers' down/up block_I, \
+                attention J)"
+            )))
         };
         let parts: Vec<&str> = text.split('.').collect();
         let index = |s: &str| s.parse::<usize>().map_err(|_| bad());
@@ -72,7 +73,9 @@ impl IpScale {
         let number = |v: &str| -> Result<f32> {
             match v.trim().parse::<f32>() {
                 Ok(s) if s.is_finite() => Ok(s),
-                _ => Err(Error::Config(format!("--ip-scale {v} is not a number (or BLOCK=SCALE)"))),
+                _ => Err(Error::Setting(
+                    Message::setting("ip_scale").then(format!(" {v} is not a number (or BLOCK=SCALE)")),
+                )),
             }
         };
         let single = match values {
@@ -85,13 +88,16 @@ impl IpScale {
             (Some(s), Some(mode)) => {
                 Ok(IpScale::Blocks(mode.blocks().iter().map(|b| Ok((IpBlock::parse(b)?, s))).collect::<Result<_>>()?))
             }
-            (None, Some(_)) => {
-                Err(Error::Config("--ip-mode gives the blocks; with it, --ip-scale is one number".into()))
-            }
+            (None, Some(_)) => Err(Error::Setting(
+                Message::setting("ip_mode").then(" gives the blocks; with it, ").and("ip_scale").then(" is one number"),
+            )),
             (None, None) => {
                 let entries = values.iter().map(|v| {
                     let (block, scale) = v.split_once('=').ok_or_else(|| {
-                        Error::Config(format!("--ip-scale {v}: give one number, or BLOCK=SCALE entries only"))
+                        Error::Setting(
+                            Message::setting("ip_scale")
+                                .then(format!(" {v}: give one number, or BLOCK=SCALE entries only")),
+                        )
                     })?;
                     Ok((IpBlock::parse(block.trim())?, number(scale)?))
                 });
@@ -104,13 +110,17 @@ impl IpScale {
     /// a named block the UNet has no cross-attention in is an error, as in diffusers.
     pub fn per_layer(&self, crosses: &[CrossAttention]) -> Result<Vec<f32>> {
         let blocks = match self {
-            IpScale::All(s) if !s.is_finite() => return Err(Error::Config(format!("--ip-scale {s} is not a number"))),
+            IpScale::All(s) if !s.is_finite() => {
+                return Err(Error::Setting(Message::setting("ip_scale").then(format!(" {s} is not a number"))))
+            }
             IpScale::All(s) => return Ok(vec![*s; crosses.len()]),
             IpScale::Blocks(blocks) => blocks,
         };
         let inside = |block: &IpBlock, cross: &CrossAttention| format!("{}.", cross.name).starts_with(&block.prefix);
         if let Some((block, _)) = blocks.iter().find(|(b, _)| !crosses.iter().any(|c| inside(b, c))) {
-            return Err(Error::Config(format!("--ip-scale {}: this UNet has no cross-attention there", block.text)));
+            return Err(Error::Setting(
+                Message::setting("ip_scale").then(format!(" {}: this UNet has no cross-attention there", block.text)),
+            ));
         }
         Ok(crosses.iter().map(|c| blocks.iter().rev().find(|(b, _)| inside(b, c)).map_or(0.0, |(_, s)| *s)).collect())
     }
@@ -183,7 +193,7 @@ mod tests {
     fn blocks_the_unet_lacks_and_malformed_entries_are_refused() {
         let crosses = sdxl();
         let err = IpScale::parse(&["down.0=1".into()], None).unwrap().per_layer(&crosses).unwrap_err().to_string();
-        assert!(err.contains("--ip-scale down.0") && err.contains("no cross-attention"), "{err}");
+        assert!(err.contains("ip_scale down.0") && err.contains("no cross-attention"), "{err}");
         for bad in ["side.1=1", "up.x=1", "up.0.1.2=1", "up.0=high"] {
             assert!(IpScale::parse(&[bad.into()], None).is_err(), "{bad}");
         }

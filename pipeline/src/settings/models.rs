@@ -9,6 +9,7 @@ use vkdiff_lora::LoraFile;
 use vkdiff_networks::{ClipVisionConfig, ControlNetConfig};
 use vkdiff_render::control::ControlDepth;
 use vkdiff_runtime::Dtype;
+use vkdiff_setting::Message;
 
 /// The depth ControlNet and how it steers.
 #[derive(Clone, Debug, PartialEq)]
@@ -51,7 +52,7 @@ impl ModelSettings {
         self.loras.iter().map(|l| format!("{}:{}", l.path.display(), l.strength)).collect()
     }
 
-    /// Flag values that are wrong whatever the model, before anything loads.
+    /// Settings that are wrong whatever the model, before anything loads.
     pub fn check(&self) -> Result<()> {
         if let Some(c) = &self.controlnet {
             check_control_settings(c.scale, c.start, c.end)?;
@@ -59,21 +60,23 @@ impl ModelSettings {
         if let Some(ip) = &self.ip_adapter {
             // The blocks named must hold cross-attentions of this UNet.
             let crosses = flagged(
-                "--model",
+                "model",
                 &self.model,
                 vkdiff_networks::read_unet_config(&self.model).and_then(|c| c.cross_attentions()),
             )?;
             ip.scale.per_layer(&crosses)?;
         }
-        for (path, flag) in self.files() {
+        for (path, setting) in self.files() {
             if !path.exists() {
-                return Err(Error::Config(format!("{flag} {}: no such file or folder", path.display())));
+                return Err(Error::Setting(
+                    Message::setting(setting).then(format!(" {}: no such file or folder", path.display())),
+                ));
             }
         }
         // Headers and configs only: a file that is not what its flag wants fails before the
         // model loads.
         for lora in &self.loras {
-            flagged("--lora", &lora.path, LoraFile::open(&lora.path))?;
+            flagged("lora", &lora.path, LoraFile::open(&lora.path))?;
         }
         if let Some(c) = &self.controlnet {
             let checked = if c.model.is_dir() {
@@ -81,43 +84,47 @@ impl ModelSettings {
             } else {
                 SafeTensors::open(&c.model).map(drop).map_err(Into::into)
             };
-            flagged("--controlnet", &c.model, checked)?;
+            flagged("controlnet", &c.model, checked)?;
         }
         if let Some(ip) = &self.ip_adapter {
-            flagged("--image-encoder", &ip.encoder, ClipVisionConfig::from_file(&ip.encoder.join("config.json")))?;
+            flagged("image_encoder", &ip.encoder, ClipVisionConfig::from_file(&ip.encoder.join("config.json")))?;
             if ip.adapter.extension().is_some_and(|e| e == "safetensors") {
-                flagged("--ip-adapter", &ip.adapter, SafeTensors::open(&ip.adapter))?;
+                flagged("ip_adapter", &ip.adapter, SafeTensors::open(&ip.adapter))?;
             }
         }
         Ok(())
     }
 
-    /// Every file or folder the settings name, with its flag.
+    /// Every file or folder the settings name, with the setting's name.
     fn files(&self) -> Vec<(&Path, &'static str)> {
-        let mut files = vec![(self.model.as_path(), "--model")];
-        files.extend(self.controlnet.iter().map(|c| (c.model.as_path(), "--controlnet")));
+        let mut files = vec![(self.model.as_path(), "model")];
+        files.extend(self.controlnet.iter().map(|c| (c.model.as_path(), "controlnet")));
         if let Some(ip) = &self.ip_adapter {
-            files.extend([(ip.adapter.as_path(), "--ip-adapter"), (ip.encoder.as_path(), "--image-encoder")]);
+            files.extend([(ip.adapter.as_path(), "ip_adapter"), (ip.encoder.as_path(), "image_encoder")]);
         }
-        files.extend(self.loras.iter().map(|l| (l.path.as_path(), "--lora")));
+        files.extend(self.loras.iter().map(|l| (l.path.as_path(), "lora")));
         files
     }
 }
 
-/// `result`'s error, prefixed by the flag and file it came from.
-pub(crate) fn flagged<T, E: Into<Error>>(flag: &str, path: &Path, result: std::result::Result<T, E>) -> Result<T> {
-    result.map_err(|e| Error::Context(format!("{flag} {}", path.display()), Box::new(e.into())))
+/// `result`'s error, prefixed by the setting and file it came from.
+pub(crate) fn flagged<T, E: Into<Error>>(setting: &str, path: &Path, result: std::result::Result<T, E>) -> Result<T> {
+    result
+        .map_err(|e| Error::Context(Message::setting(setting).then(format!(" {}", path.display())), Box::new(e.into())))
 }
 
 /// The scale must be a number and the range a non-empty part of [0, 1].
 pub fn check_control_settings(scale: f32, start: f64, end: f64) -> Result<()> {
     if !scale.is_finite() {
-        return Err(Error::Config(format!("--control-scale {scale} is not a number")));
+        return Err(Error::Setting(Message::setting("control_scale").then(format!(" {scale} is not a number"))));
     }
     if !(0.0..=1.0).contains(&start) || !(0.0..=1.0).contains(&end) || start >= end {
-        return Err(Error::Config(format!(
-            "--control-start {start} and --control-end {end} must satisfy 0 <= start < end <= 1"
-        )));
+        return Err(Error::Setting(
+            Message::setting("control_start")
+                .then(format!(" {start} and "))
+                .and("control_end")
+                .then(format!(" {end} must satisfy 0 <= start < end <= 1")),
+        ));
     }
     Ok(())
 }

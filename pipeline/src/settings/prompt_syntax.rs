@@ -4,6 +4,7 @@
 
 use crate::error::{Error, Result};
 use regex::Regex;
+use vkdiff_setting::Message;
 
 /// How `--prompt` text is read.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -56,10 +57,11 @@ pub fn parse_attention(text: &str) -> Result<Vec<(String, f64)>> {
             }
             (p, _) => {
                 if word_break.is_match(p) {
-                    return Err(Error::Config(
-                        "prompt: BREAK is not supported by --prompt-syntax weighted (diffusers' \
-                        pipeline reads it as a word)"
-                            .into(),
+                    return Err(Error::Setting(
+                        Message::setting("prompt")
+                            .then(": BREAK is not supported by ")
+                            .and("prompt_syntax")
+                            .then(" weighted (diffusers' pipeline reads it as a word)"),
                     ));
                 }
                 runs.push((p.to_string(), 1.0));

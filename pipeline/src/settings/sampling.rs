@@ -4,6 +4,7 @@
 use crate::error::{Error, Result};
 use crate::schedulers::{Sampler, SamplerKind, SchedulerConfig};
 use crate::settings::prompt_syntax::PromptSyntax;
+use vkdiff_setting::Message;
 
 /// How every image of a run is sampled: the settings a batch shares.
 #[derive(Clone, Debug, PartialEq)]
@@ -51,7 +52,9 @@ impl Sampling {
     /// the sampler does not have, a strength that leaves no step.
     pub fn check(&self) -> Result<()> {
         if !self.guidance_scale.is_finite() {
-            return Err(Error::Config(format!("--cfg {} is not a number", self.guidance_scale)));
+            return Err(Error::Setting(
+                Message::setting("guidance_scale").then(format!(" {} is not a number", self.guidance_scale)),
+            ));
         }
         Sampler::new(self.sampler, &SchedulerConfig::sdxl_base(), self.karras, self.steps)?;
         self.first_step().map(|_| ())
@@ -62,27 +65,28 @@ impl Sampling {
     pub fn first_step(&self) -> Result<usize> {
         let Some(strength) = self.strength else { return Ok(0) };
         if !(strength > 0.0 && strength <= 1.0) {
-            return Err(Error::Config(format!(
-                "a strength of {strength} (--strength, --init-strength) must be in (0, 1]"
-            )));
+            return Err(Error::Setting(Message::setting("strength").then(format!(" {strength} must be in (0, 1]"))));
         }
         let run = ((self.steps as f64 * strength) as usize).min(self.steps);
         if run == 0 {
-            return Err(Error::Config(format!(
-                "a strength of {strength} over {} steps runs none of them; raise --steps or the strength",
-                self.steps
-            )));
+            return Err(Error::Setting(
+                Message::text(format!("a strength of {strength} over {} steps runs none of them; raise ", self.steps))
+                    .and("steps")
+                    .then(" or ")
+                    .and("strength"),
+            ));
         }
         Ok(self.steps - run)
     }
 
     /// The size must be a positive multiple of the model's `multiple` ([`crate::Sdxl::pixel_multiple`]).
     pub fn check_size(&self, multiple: usize) -> Result<()> {
-        for (flag, v) in [("--width", self.width), ("--height", self.height)] {
+        for (setting, v) in [("width", self.width), ("height", self.height)] {
             if v == 0 || !v.is_multiple_of(multiple) {
-                return Err(Error::Config(format!(
-                    "{flag} {v} must be a positive multiple of {multiple} for this model"
-                )));
+                return Err(Error::Setting(
+                    Message::setting(setting)
+                        .then(format!(" {v} must be a positive multiple of {multiple} for this model")),
+                ));
             }
         }
         Ok(())
@@ -106,4 +110,38 @@ pub struct TextToImage {
     pub negative_prompt: Option<String>,
     pub seed: u64,
     pub sampling: Sampling,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sampling() -> Sampling {
+        Sampling {
+            steps: 4,
+            guidance_scale: 5.0,
+            sampler: SamplerKind::Euler,
+            karras: false,
+            width: 64,
+            height: 64,
+            size_conditioning: SizeConditioning::default(),
+            strength: None,
+            prompt_syntax: PromptSyntax::default(),
+        }
+    }
+
+    /// Refusals name settings as data; without a front end's names they read as the fields.
+    #[test]
+    fn refusals_carry_the_settings_they_name() {
+        let named = |s: Sampling| match s.check() {
+            Err(Error::Setting(m)) => (m.settings().map(String::from).collect::<Vec<_>>(), m.to_string()),
+            other => panic!("{other:?}"),
+        };
+        let nan = named(Sampling { guidance_scale: f32::NAN, ..sampling() });
+        assert_eq!(nan, (vec!["guidance_scale".into()], "guidance_scale NaN is not a number".into()));
+        let (names, text) = named(Sampling { strength: Some(0.2), ..sampling() });
+        assert_eq!(names, ["steps", "strength"], "{text}");
+        assert!(text.ends_with("runs none of them; raise steps or strength"), "{text}");
+        assert!(sampling().check().is_ok());
+    }
 }

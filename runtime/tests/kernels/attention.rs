@@ -94,8 +94,9 @@ fn cross_attention_77_tokens() {
 
 #[test]
 fn head_sizes() {
-    // 8 and 40: tiny models and SD1.x; 24: two slots per lane at 4 lanes; 80: CLIP ViT-H vision; 104: ViT-bigG; 160: the 8-slot
-    // variant; 512: the VAE's single-head mid-block attention; 1024: past every subgroup variant. Token counts off every tile size.
+    // 8 and 40: tiny models and SD1.x; 24: two slots per lane at 4 lanes; 80: CLIP ViT-H vision;
+    // 104: ViT-bigG; 160: the 8-slot variant; 512: the VAE's single-head mid-block attention;
+    // 1024: past every subgroup variant. Token counts off every tile size.
     for (d, nq, nk) in
         [(8, 19, 23), (24, 15, 9), (40, 33, 77), (80, 21, 50), (104, 9, 13), (160, 11, 19), (512, 17, 29), (1024, 5, 7)]
     {
