@@ -30,8 +30,9 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
         (GemmFamily::Subgroup, Some(lanes)) => format!("subgroup-register, {lanes} lanes (CPU)"),
         _ => "shared-memory tiles (GPU)".into(),
     };
-    let paths =
-        if gpu_paths { " (VKDIFF_GPU_PATHS=1: device memory through staging, workgroup attention)" } else { "" };
+    let attention =
+        if d.subgroup_attention(gpu_paths) { "subgroup-register (CPU)" } else { "query rows per invocation (GPU)" };
+    let paths = if gpu_paths { " (VKDIFF_GPU_PATHS=1: device memory through staging, GPU kernels)" } else { "" };
     [
         format!("[{}] {} — {}", d.index, d.name, verdict),
         format!(
@@ -57,7 +58,7 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
             d.max_shared_memory / 1024
         ),
         format!(
-            "    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, timestamps: {}{paths}",
+            "    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, attention: {attention}, timestamps: {}{paths}",
             if d.supports_f16() { "f16 and f32" } else { "f32 only" },
             yes(d.timestamps)
         ),

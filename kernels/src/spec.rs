@@ -108,6 +108,13 @@ pub const KERNELS: &[KernelSpec] = &[
             &[("SG", 16), ("DV", 8), ("TM", 4)],
         ],
     },
+    // GPU attention, one query row per invocation: DS = vec4 slots of the head, KC = keys per
+    // chunk in workgroup memory (2·KC·DS vec4s: 32 KiB at most).
+    KernelSpec {
+        name: "attention_rows",
+        files: &["attention_common.wgsl", "attention_rows.wgsl"],
+        params: &[&[("DS", 16), ("KC", 64)], &[("DS", 32), ("KC", 32)]],
+    },
     // Workgroup-memory attention: W invocations, no subgroup operations.
     KernelSpec {
         name: "attention_wg",

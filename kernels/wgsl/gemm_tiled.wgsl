@@ -1,15 +1,21 @@
 // GEMM core for GPUs and for shapes the vec4 variant cannot take: 64×64 output tiles staged
-// through workgroup memory in K-steps of 16, 16×16 invocations each computing 4×4 outputs.
-// Any M, N, K and strides. B is K×N (BT = 0) or N×K (BT = 1).
+// through workgroup memory in K-steps of 16, 16×16 invocations each computing 4×4 outputs
+// spaced 16 apart (rows lid.y + 16·i, columns lid.x + 16·j), so tile reads and C stores are
+// consecutive across a subgroup. Any M, N, K and strides. B is K×N (BT = 0) or N×K (BT = 1).
+// An operand whose rows run along K (A, and B when BT = 1) is read k-fastest, 16 consecutive
+// values of a row per 16 invocations, and stored transposed into a tile padded to 65 columns,
+// which keeps those stores nearly free of bank conflicts. Register arrays are indexed only by
+// unrolled constants: GPU compilers spill dynamically indexed ones to memory.
 @group(0) @binding(1) var<storage, read> b: array<S>;
 @group(0) @binding(2) var<storage, read> bias: array<S>;
 @group(0) @binding(3) var<storage, read_write> c: array<S>;
 
 const TILE: u32 = 64u;
 const BK: u32 = 16u;
+const LD: u32 = 65u; // row length of the [BK][LD] tiles
 
-var<workgroup> a_tile: array<f32, 1024>; // [BK][TILE]
-var<workgroup> b_tile: array<f32, 1024>; // [BK][TILE]
+var<workgroup> a_tile: array<f32, 1040>;
+var<workgroup> b_tile: array<f32, 1040>;
 
 fn load_b1(boff: u32, k: u32, n: u32) -> f32 {
     if k >= p.g.k || n >= p.g.n {
@@ -31,55 +37,62 @@ fn main(
     let col0 = wg.x * TILE;
     let batch = wg.z;
     let boff = batch * p.g.b_batch;
+    // This invocation stages k = k0 + tk of tile rows (A) and columns (B, BT = 1) tr + 16·i.
     let tk = t % BK;
-    // This invocation stages rows t/16 + 16·i of the A tile.
+    let tr = t / BK;
     var rows: array<RowCtx, 4>;
-    for (var i = 0u; i < 4u; i++) {
-        rows[i] = row_ctx(batch, row0 + t / BK + 16u * i);
-    }
+    // #unroll I 4
+    rows[I] = row_ctx(batch, row0 + tr + 16u * I);
+    // #end
     var acc: array<f32, 16>;
     for (var k0 = 0u; k0 < p.g.k; k0 += BK) {
         let ka = k0 + tk;
         let kc = k_ctx(ka);
-        for (var i = 0u; i < 4u; i++) {
-            a_tile[tk * TILE + t / BK + 16u * i] = select(0.0, load_a1(rows[i], kc), ka < p.g.k);
-            let e = t + 256u * i;
-            b_tile[e] = load_b1(boff, k0 + e / TILE, col0 + e % TILE);
+        // #unroll I 4
+        a_tile[tk * LD + tr + 16u * I] = select(0.0, load_a1(rows[I], kc), ka < p.g.k);
+        if BT == 1u {
+            b_tile[tk * LD + tr + 16u * I] = load_b1(boff, ka, col0 + tr + 16u * I);
+        } else {
+            b_tile[(t / TILE + 4u * I) * LD + t % TILE] = load_b1(boff, k0 + t / TILE + 4u * I, col0 + t % TILE);
         }
+        // #end
         workgroupBarrier();
         for (var kk = 0u; kk < BK; kk++) {
             var av: array<f32, 4>;
             var bv: array<f32, 4>;
-            for (var i = 0u; i < 4u; i++) {
-                av[i] = a_tile[kk * TILE + lid.y * 4u + i];
-                bv[i] = b_tile[kk * TILE + lid.x * 4u + i];
-            }
-            for (var i = 0u; i < 4u; i++) {
-                for (var j = 0u; j < 4u; j++) {
-                    acc[4u * i + j] += av[i] * bv[j];
-                }
-            }
+            // #unroll I 4
+            av[I] = a_tile[kk * LD + lid.y + 16u * I];
+            bv[I] = b_tile[kk * LD + lid.x + 16u * I];
+            // #end
+            // #unroll I 4
+            // #unroll J 4
+            acc[4u * I + J] += av[I] * bv[J];
+            // #end
+            // #end
         }
         workgroupBarrier();
     }
-    for (var i = 0u; i < 4u; i++) {
-        let row = row0 + lid.y * 4u + i;
-        for (var j = 0u; j < 4u; j++) {
-            let col = col0 + lid.x * 4u + j;
-            if row < p.g.m && col < p.g.n {
-                let at = batch * p.g.c_batch + row * p.g.ldc + col;
-                var v = p.g.alpha * acc[4u * i + j];
-                if (p.g.flags & FLAG_BIAS) != 0u {
-                    v += f32(bias[col]);
-                }
-                if (p.g.flags & FLAG_ACCUMULATE) != 0u {
-                    v += f32(c[at]);
-                }
-                if (p.g.flags & FLAG_RELU) != 0u {
-                    v = max(v, 0.0);
-                }
-                c[at] = S(v);
-            }
-        }
+    // #unroll I 4
+    // #unroll J 4
+    store(batch, row0 + lid.y + 16u * I, col0 + lid.x + 16u * J, acc[4u * I + J]);
+    // #end
+    // #end
+}
+
+fn store(batch: u32, row: u32, col: u32, sum: f32) {
+    if row >= p.g.m || col >= p.g.n {
+        return;
     }
+    let at = batch * p.g.c_batch + row * p.g.ldc + col;
+    var v = p.g.alpha * sum;
+    if (p.g.flags & FLAG_BIAS) != 0u {
+        v += f32(bias[col]);
+    }
+    if (p.g.flags & FLAG_ACCUMULATE) != 0u {
+        v += f32(c[at]);
+    }
+    if (p.g.flags & FLAG_RELU) != 0u {
+        v = max(v, 0.0);
+    }
+    c[at] = S(v);
 }

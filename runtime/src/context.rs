@@ -35,6 +35,13 @@ impl DeviceInfo {
             GemmFamily::Tiled
         }
     }
+
+    /// Whether attention may take the subgroup-register variants: on CPU devices, as the GEMM
+    /// (their ~300 floats per lane suit lavapipe, not a GPU's register file); GPUs take
+    /// `attention_rows`, or `attention_wg` for heads past it.
+    pub fn subgroup_attention(&self, gpu_paths: bool) -> bool {
+        !gpu_paths && self.kind == DeviceKind::Cpu
+    }
 }
 
 pub(crate) struct Shared {

@@ -105,14 +105,15 @@ pub fn attention(
     }
     let ctx = rec.context().clone();
     let slots = u(l.head_dim / 4);
-    let variant = match subgroup_variant(&ctx, dtype, slots) {
+    let variant = match subgroup_variant(&ctx, dtype, slots).or_else(|| rows_variant(dtype, slots)) {
         Some(v) => v,
         None => vkdiff_kernels::variants("attention_wg", dtype)
             .filter(|v| v.param("DV").unwrap() * v.param("W").unwrap() >= slots)
             .min_by_key(|v| v.param("DV"))
             .ok_or_else(|| Error::Shape(format!("attention: head size {} is past the widest variant", l.head_dim)))?,
     };
-    let tm = variant.param("TM").unwrap() as usize;
+    // Query rows per workgroup: TM, or attention_rows' one per invocation.
+    let tm = variant.param("TM").unwrap_or(ROWS_PER_WORKGROUP) as usize;
     let kern = ctx.kernel(variant, 4)?;
     let push = [
         u(l.q_tokens),
@@ -135,11 +136,21 @@ pub fn attention(
     rec.dispatch(&kern, &[q, k, v], &[out], &push, [u(l.q_tokens.div_ceil(tm)), u(l.heads), u(l.batch)])
 }
 
+/// attention_rows' workgroup: 64 invocations, one query row each.
+const ROWS_PER_WORKGROUP: u32 = 64;
+
+/// The GPU attention variant with the fewest slots that hold a head of `slots` vec4s.
+fn rows_variant(dtype: Dtype, slots: u32) -> Option<&'static vkdiff_kernels::Variant> {
+    vkdiff_kernels::variants("attention_rows", dtype)
+        .filter(|v| v.param("DS").unwrap() >= slots)
+        .min_by_key(|v| v.param("DS"))
+}
+
 /// The subgroup attention variant for a head of `slots` vec4s at a width this device can pin,
-/// its native width first, with the fewest slots per lane; none under `VKDIFF_GPU_PATHS=1` (GPUs
-/// run `attention_wg`) or where no width fits.
+/// its native width first, with the fewest slots per lane; none where the device takes no
+/// subgroup attention ([`crate::DeviceInfo::subgroup_attention`]) or no width fits.
 fn subgroup_variant(ctx: &Context, dtype: Dtype, slots: u32) -> Option<&'static vkdiff_kernels::Variant> {
-    if ctx.gpu_paths() {
+    if !ctx.info().subgroup_attention(ctx.gpu_paths()) {
         return None;
     }
     let native = ctx.info().subgroup_size;
