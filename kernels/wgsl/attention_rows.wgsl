@@ -27,7 +27,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
     var l = 0.0;
     for (var j0 = 0u; j0 < p.nk; j0 += KC) {
         // Consecutive invocations copy consecutive slots of a key row; keys past the end are
-        // clamped here and masked below.
+        // clamped here and masked below. Slots past the head are never written and stay zero
+        // (workgroup memory starts zeroed: the runtime requires it), matching Q's zero slots.
         for (var i = t; i < KC * slots; i += ROWS) {
             let key = min(j0 + i / slots, p.nk - 1u);
             let s = i % slots;
