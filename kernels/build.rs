@@ -31,24 +31,24 @@ fn main() {
     println!("cargo::rerun-if-changed=wgsl");
     let out = env::var("OUT_DIR").unwrap();
     let mut table = String::from("pub static VARIANTS: &[Variant] = &[\n");
-    for spec in KERNELS {
+    let scalar = KERNELS.iter().flat_map(|spec| [(spec, Dtype::F32, false), (spec, Dtype::F16, false)]);
+    let cooperative = COOPERATIVE_KERNELS.iter().map(|spec| (spec, Dtype::F16, true));
+    for (spec, dtype, cooperative) in scalar.chain(cooperative) {
         let files = read_files(spec);
-        for dtype in [Dtype::F32, Dtype::F16] {
-            for (i, params) in spec.params.iter().enumerate() {
-                let src = Source::new(&prelude(dtype == Dtype::F16, params), &files);
-                let what = format!("kernel `{}` ({dtype:?}, {params:?})", spec.name);
-                let words = compile(src, params, &what).unwrap_or_else(|e| fail(&e));
-                let file = format!("{}.{dtype:?}.{i}.spv", spec.name);
-                let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-                fs::write(Path::new(&out).join(&file), bytes).unwrap();
-                writeln!(
-                    table,
-                    "    Variant {{ kernel: {:?}, dtype: Dtype::{dtype:?}, params: &{params:?}, \
-                        spirv: include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{file}\")) }},",
-                    spec.name
-                )
-                .unwrap();
-            }
+        for (i, params) in spec.params.iter().enumerate() {
+            let src = Source::new(&prelude(dtype == Dtype::F16, params, cooperative), &files);
+            let what = format!("kernel `{}` ({dtype:?}, {params:?})", spec.name);
+            let words = compile(src, params, cooperative, &what).unwrap_or_else(|e| fail(&e));
+            let file = format!("{}.{dtype:?}.{i}.spv", spec.name);
+            let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
+            fs::write(Path::new(&out).join(&file), bytes).unwrap();
+            writeln!(
+                table,
+                "    Variant {{ kernel: {:?}, dtype: Dtype::{dtype:?}, params: &{params:?}, \
+                    spirv: include_bytes!(concat!(env!(\"OUT_DIR\"), \"/{file}\")) }},",
+                spec.name
+            )
+            .unwrap();
         }
     }
     table.push_str("];\n");

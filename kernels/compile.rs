@@ -35,11 +35,22 @@ impl Source {
     }
 }
 
-/// The prelude of a variant: the storage type `S` and the parameters as constants.
-fn prelude(f16: bool, params: &[(&str, u32)]) -> String {
-    let mut text = String::from(if f16 { "enable f16; alias S = f16;" } else { "alias S = f32;" });
+/// The prelude of a variant: the storage type `S` and the parameters as constants; for
+/// cooperative kernels also the fragment types FA, FB (f16 operands) and FC (f32 accumulator)
+/// of the variant's CM×CM shape.
+fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
+    let mut text = String::from(match (f16, cooperative) {
+        (_, true) => "enable f16; enable wgpu_cooperative_matrix; alias S = f16;",
+        (true, false) => "enable f16; alias S = f16;",
+        (false, false) => "alias S = f32;",
+    });
     for (name, value) in params {
         text.push_str(&format!(" const {name}: u32 = {value}u;"));
+    }
+    if let Some((_, cm)) = params.iter().find(|(name, _)| *name == "CM") {
+        for (alias, scalar, role) in [("FA", "f16", "A"), ("FB", "f16", "B"), ("FC", "f32", "C")] {
+            text.push_str(&format!(" alias {alias} = coop_mat{cm}x{cm}<{scalar}, {role}>;"));
+        }
     }
     text
 }
@@ -61,13 +72,12 @@ fn unroll(text: &str, params: &[(&str, u32)]) -> Result<String, String> {
         .ok_or_else(|| format!("line {}: `// #end` without `// #unroll`", end + 1))?;
     let words: Vec<&str> = lines[start].split_whitespace().collect();
     let (name, count) = (words.get(2).copied().unwrap_or(""), words.get(3).copied().unwrap_or(""));
-    let count: u32 = count
-        .parse()
-        .ok()
-        .or_else(|| params.iter().find(|(p, _)| *p == count).map(|(_, v)| *v))
-        .ok_or_else(|| {
-            format!("line {}: `// #unroll {name} {count}`: count is neither a number nor a parameter", start + 1)
-        })?;
+    let count = unroll_count(count, params).ok_or_else(|| {
+        format!(
+            "line {}: `// #unroll {name} {count}`: count is not numbers and parameters joined by * and /",
+            start + 1
+        )
+    })?;
     // Comments would swallow the rest of the joined line.
     let body: Vec<&str> = lines[start + 1..end].iter().map(|l| l.split("//").next().unwrap()).collect();
     let body = body.join(" ");
@@ -77,6 +87,25 @@ fn unroll(text: &str, params: &[(&str, u32)]) -> Result<String, String> {
     out.extend(std::iter::repeat_n(String::new(), end - start));
     out.extend(lines[end + 1..].iter().map(|s| s.to_string()));
     unroll(&out.join("\n"), params)
+}
+
+/// The value of an unroll count: numbers and parameters joined by `*` and `/`, left to right
+/// (`2*CM*CM/SG`); None for anything else or a division that leaves a remainder.
+fn unroll_count(text: &str, params: &[(&str, u32)]) -> Option<u32> {
+    let value = |word: &str| word.parse().ok().or_else(|| params.iter().find(|(p, _)| *p == word).map(|(_, v)| *v));
+    let mut words = text.split_inclusive(['*', '/']);
+    let first = words.next()?;
+    let (mut acc, mut op) = (value(first.trim_end_matches(['*', '/']))?, first.chars().last()?);
+    for word in words {
+        let x = value(word.trim_end_matches(['*', '/']))?;
+        acc = match op {
+            '*' => acc.checked_mul(x)?,
+            '/' if x != 0 && acc % x == 0 => acc / x,
+            _ => return None,
+        };
+        op = word.chars().last()?;
+    }
+    (!matches!(op, '*' | '/')).then_some(acc)
 }
 
 /// Replaces whole-word occurrences of `word` (identifier boundaries) in `text`.
@@ -102,14 +131,15 @@ fn replace_word(text: &str, word: &str, with: &str) -> String {
 
 /// SPIR-V words for `src`; on failure one message starting with `file:line: what: `, followed
 /// by naga's rendering of the error.
-fn compile(mut src: Source, params: &[(&str, u32)], what: &str) -> Result<Vec<u32>, String> {
+fn compile(mut src: Source, params: &[(&str, u32)], cooperative: bool, what: &str) -> Result<Vec<u32>, String> {
     use naga::{back::spv, valid};
     src.text = unroll(&src.text, params).map_err(|e| format!("{what}: {e}"))?;
     let module = naga::front::wgsl::parse_str(&src.text).map_err(|e| {
         let at = e.location(&src.text).map(|l| src.locate(l.line_number as usize));
         format!("{}: {what}: {}\n{}", at.unwrap_or_default(), e.message(), e.emit_to_string(&src.text))
     })?;
-    let caps = valid::Capabilities::IMMEDIATES | valid::Capabilities::SHADER_FLOAT16 | valid::Capabilities::SUBGROUP;
+    let mut caps = valid::Capabilities::IMMEDIATES | valid::Capabilities::SHADER_FLOAT16 | valid::Capabilities::SUBGROUP;
+    caps.set(valid::Capabilities::COOPERATIVE_MATRIX, cooperative);
     let info = valid::Validator::new(valid::ValidationFlags::all(), caps)
         .subgroup_stages(valid::ShaderStages::COMPUTE)
         .subgroup_operations(valid::SubgroupOperationSet::all())

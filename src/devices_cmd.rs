@@ -26,15 +26,23 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
         None => format!("usable (--device {})", d.index),
     };
     let gpu_paths = gpu_paths_requested();
-    let gemm = match (d.gemm_family(gpu_paths), d.gemm_subgroup_width()) {
-        (GemmFamily::Subgroup, Some(lanes)) => format!("subgroup-register, {lanes} lanes (CPU)"),
+    let gemm = match (d.gemm_family(gpu_paths), d.gemm_subgroup_width(), d.cooperative_variant()) {
+        (GemmFamily::Subgroup, Some(lanes), _) => format!("subgroup-register, {lanes} lanes (CPU)"),
+        (GemmFamily::Cooperative, _, Some((size, lanes))) => {
+            format!("matrix units, {size}×{size}×{size} f16→f32 fragments, {lanes} lanes (f32 products: shared-memory tiles)")
+        }
         _ => "shared-memory tiles (GPU)".into(),
     };
     let attention =
         if d.subgroup_attention(gpu_paths) { "subgroup-register (CPU)" } else { "query rows per invocation (GPU)" };
+    let widened = if d.lavapipe_mesa.is_some() && vkdiff_runtime::lavapipe_vectors_widened() {
+        " (vkdiff set LP_NATIVE_VECTOR_WIDTH=512 for this AVX-512 CPU; set it yourself to choose)"
+    } else {
+        ""
+    };
     let paths = if gpu_paths { " (VKDIFF_GPU_PATHS=1: device memory through staging, GPU kernels)" } else { "" };
     [
-        format!("[{}] {} — {}", d.index, d.name, verdict),
+        format!("[{}] {}{widened} — {}", d.index, d.name, verdict),
         format!(
             "    kind: {}, Vulkan {}.{}.{}, driver: {}",
             d.kind.label(),
@@ -44,12 +52,12 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
             d.driver
         ),
         format!(
-            "    f16 storage+arith: {}, subgroup size: {sizes}, shuffle: {}, arithmetic: {}, cooperative matrix: {}",
+            "    f16 storage+arith: {}, subgroup size: {sizes}, shuffle: {}, arithmetic: {}",
             yes(d.supports_f16()),
             yes(d.subgroup_shuffle),
             yes(d.subgroup_arithmetic),
-            yes(d.cooperative_matrix)
         ),
+        format!("    cooperative matrix: {}", matrix_units(d)),
         format!(
             "    device memory: {}, max allocation: {}, max storage binding: {}, shared memory: {} KiB",
             mib(d.device_local_bytes),
@@ -66,6 +74,22 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
     .join("\n")
 }
 
+/// The shapes the device's matrix units list, and whether a cooperative variant fits them.
+fn matrix_units(d: &DeviceInfo) -> String {
+    if d.matrix_shapes.is_empty() {
+        return "no (VK_KHR_cooperative_matrix not offered)".into();
+    }
+    let shapes: Vec<String> = d.matrix_shapes.iter().map(|s| s.label()).collect();
+    let verdict = match d.cooperative_variant() {
+        Some((size, lanes)) => format!("vkdiff's {size}×{size} variant at {lanes} lanes fits"),
+        None if !d.cooperative_features => "not usable: no cooperativeMatrix or vulkanMemoryModel feature".into(),
+        None => "no vkdiff variant fits them (f16·f16+f32 square 8 or 16 at subgroup scope, a width built \
+            for): f16 products take the tiled kernels"
+            .into(),
+    };
+    format!("{}; {verdict}", shapes.join(", "))
+}
+
 pub fn run(args: &DevicesArgs) -> Result<()> {
     let devices = list_devices()?;
     let chosen = choose(&devices, None).ok();
@@ -78,7 +102,8 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
                     "vulkan": format!("{}.{}.{}", d.api_version.0, d.api_version.1, d.api_version.2),
                     "f16": d.supports_f16(), "subgroup_size": d.subgroup_size,
                     "subgroup_size_range": d.subgroup_size_range,
-                    "cooperative_matrix": d.cooperative_matrix, "device_memory_bytes": d.device_local_bytes,
+                    "cooperative_matrix_shapes": d.matrix_shapes.iter().map(|s| s.label()).collect::<Vec<_>>(),
+                    "cooperative_variant": d.cooperative_variant(), "device_memory_bytes": d.device_local_bytes,
                     "max_storage_buffer_range": d.max_storage_buffer_range, "usable": d.unsupported_reason().is_none(),
                     "unusable_reason": d.unsupported_reason(), "selected": chosen == Some(d.index),
                 })

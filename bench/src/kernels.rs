@@ -1,10 +1,11 @@
 //! `vkdiff bench kernels`: each kernel on SDXL-sized shapes, timed on the device.
 
 use crate::cpu_reference::{self, CpuGemm};
+use crate::peaks;
 use anyhow::Result;
 use std::time::{Duration, Instant};
 use vkdiff_runtime::ops::{self, AttentionLayout, ConvParams, Matmul, UnaryOp};
-use vkdiff_runtime::{Context, Dtype, Recorder, Tensor};
+use vkdiff_runtime::{Context, Dtype, GemmFamily, Recorder, Tensor};
 
 #[derive(clap::Args)]
 pub struct KernelsArgs {
@@ -31,6 +32,8 @@ struct Case {
     work: Work,
     /// The GEMM shape to hold against the CPU, if any.
     gemm: Option<(usize, usize, usize)>,
+    /// Whether it runs on the GEMM/convolution family (timed on each family the device has).
+    on_gemm_family: bool,
     tensors: Vec<Tensor>,
     record: fn(&mut Recorder, &[Tensor]) -> vkdiff_runtime::Result<()>,
 }
@@ -39,10 +42,14 @@ struct Case {
 struct Row {
     kernel: &'static str,
     dtype: String,
+    /// The GEMM/convolution kernels it ran on, for products.
+    family: Option<String>,
     shape: String,
     ms: f64,
     gflops: Option<f64>,
     gbps: Option<f64>,
+    /// GFLOP/s as a share of the GPU's f16 matrix-unit peak ("unknown" off the table).
+    matrix_peak_share: Option<String>,
     cpu_gflops: Option<f64>,
     ratio_to_cpu: Option<f64>,
 }
@@ -69,6 +76,7 @@ fn gemm_case(ctx: &Context, dtype: Dtype, m: usize, n: usize, k: usize, linear: 
         shape: format!("M={m} N={n} K={k}"),
         work: Work::Flops(2.0 * (m * n * k) as f64),
         gemm: Some((m, n, k)),
+        on_gemm_family: true,
         tensors: vec![
             rand_tensor(ctx, &[m, k], dtype, 1)?,
             rand_tensor(ctx, &b_shape, dtype, 2)?,
@@ -97,6 +105,7 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             shape: "64x64, 640->640, stride 1".into(),
             work: Work::Flops(2.0 * (hw * c * 9 * c) as f64),
             gemm: None,
+            on_gemm_family: true,
             tensors: vec![
                 rand_tensor(ctx, &[1, 64, 64, c], dtype, 3)?,
                 rand_tensor(ctx, &[c, 3, 3, c], dtype, 4)?,
@@ -110,6 +119,7 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             shape: "4096 tokens, 10 heads x 64".into(),
             work: Work::Flops(4.0 * 4096.0 * 4096.0 * 64.0 * 10.0),
             gemm: None,
+            on_gemm_family: false,
             tensors: (0..4)
                 .map(|i| rand_tensor(ctx, &[1, 4096, 640], dtype, 6 + i))
                 .collect::<vkdiff_runtime::Result<_>>()?,
@@ -123,6 +133,7 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             shape: "4096 x 77 tokens, 10 heads x 64".into(),
             work: Work::Flops(4.0 * 4096.0 * 77.0 * 64.0 * 10.0),
             gemm: None,
+            on_gemm_family: false,
             tensors: vec![
                 rand_tensor(ctx, &[1, 4096, 640], dtype, 10)?,
                 rand_tensor(ctx, &[1, 77, 640], dtype, 11)?,
@@ -139,6 +150,7 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             shape: "64x64x640, 32 groups".into(),
             work: Work::Bytes(4.0 * bytes(hw * c)),
             gemm: None,
+            on_gemm_family: false,
             tensors: vec![
                 rand_tensor(ctx, &[1, hw, c], dtype, 13)?,
                 rand_tensor(ctx, &[c], dtype, 14)?,
@@ -152,6 +164,7 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             shape: "4096 x 640".into(),
             work: Work::Bytes(4.0 * bytes(hw * c)),
             gemm: None,
+            on_gemm_family: false,
             tensors: vec![
                 rand_tensor(ctx, &[hw, c], dtype, 16)?,
                 rand_tensor(ctx, &[c], dtype, 17)?,
@@ -165,6 +178,7 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             shape: "64x64x640".into(),
             work: Work::Bytes(2.0 * bytes(hw * c)),
             gemm: None,
+            on_gemm_family: false,
             tensors: vec![rand_tensor(ctx, &[hw * c], dtype, 19)?, ctx.zeros(&[hw * c], dtype)?],
             record: |rec, t| ops::unary(rec, UnaryOp::Silu, &t[0], &t[1], 1.0),
         },
@@ -173,6 +187,7 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             shape: "4096 x 2x2560".into(),
             work: Work::Bytes(3.0 * bytes(hw * 2560)),
             gemm: None,
+            on_gemm_family: false,
             tensors: vec![rand_tensor(ctx, &[hw, 5120], dtype, 20)?, ctx.zeros(&[hw, 2560], dtype)?],
             record: |rec, t| ops::geglu(rec, &t[0], &t[1]),
         },
@@ -202,6 +217,42 @@ fn time_case(ctx: &Context, case: &Case, samples: usize) -> Result<Duration> {
     Ok(if reps > 1 { once(reps)? } else { first })
 }
 
+/// One case timed on the context's current family.
+fn time_row(ctx: &Context, case: &Case, dtype: Dtype, product: bool, samples: usize) -> Result<Row> {
+    let t = time_case(ctx, case, samples)?.as_secs_f64();
+    let (gflops, gbps) = match case.work {
+        Work::Flops(f) => (Some(f / t / 1e9), None),
+        Work::Bytes(b) => (None, Some(b / t / 1e9)),
+    };
+    Ok(Row {
+        kernel: case.name,
+        dtype: dtype_name(dtype).into(),
+        family: product.then(|| peaks::family_label(ctx, dtype)),
+        shape: case.shape.clone(),
+        ms: t * 1e3,
+        gflops,
+        gbps,
+        matrix_peak_share: gflops.map(|g| peaks::share_label(ctx, g * 1e9)),
+        cpu_gflops: None,
+        ratio_to_cpu: None,
+    })
+}
+
+fn print_row(row: &Row) {
+    let show = |x: Option<f64>| x.map_or(String::from("-"), |v| format!("{v:.1}"));
+    println!(
+        "{:<26} {:<5} {:<20} {:<32} {:>10.3} {:>9} {:>8} {:>10}",
+        row.kernel,
+        row.dtype,
+        row.family.as_deref().unwrap_or("-"),
+        row.shape,
+        row.ms,
+        show(row.gflops),
+        show(row.gbps),
+        row.matrix_peak_share.as_deref().unwrap_or("-"),
+    );
+}
+
 pub fn run(args: &KernelsArgs) -> Result<()> {
     let ctx = Context::new(args.common.device)?;
     let info = ctx.info().clone();
@@ -216,44 +267,37 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             info.driver,
             ctx.gemm_family()
         );
-        println!("{:<26} {:<5} {:<32} {:>10} {:>9} {:>8}", "kernel", "dtype", "shape", "ms", "GFLOP/s", "GB/s");
+        println!(
+            "{:<26} {:<5} {:<20} {:<32} {:>10} {:>9} {:>8} {:>10}",
+            "kernel", "dtype", "GEMM kernels", "shape", "ms", "GFLOP/s", "GB/s", "of matrix peak"
+        );
     }
+    let default_family = ctx.gemm_family();
     for dtype in dtypes {
         for case in cases(&ctx, dtype)? {
             if args.filter.as_ref().is_some_and(|f| !case.name.contains(f.as_str())) {
                 continue;
             }
-            let t = time_case(&ctx, &case, args.samples)?.as_secs_f64();
-            let (gflops, gbps) = match case.work {
-                Work::Flops(f) => (Some(f / t / 1e9), None),
-                Work::Bytes(b) => (None, Some(b / t / 1e9)),
+            // Products run on each family the device has, so one run compares them.
+            let families = match (case.on_gemm_family, default_family) {
+                (false, _) => vec![None],
+                (true, GemmFamily::Cooperative) if dtype == Dtype::F16 => {
+                    vec![Some(GemmFamily::Cooperative), Some(GemmFamily::Tiled)]
+                }
+                (true, family) => vec![Some(family)],
             };
-            if let Some(g) = case.gemm {
-                gemm_shapes.push(g);
+            for family in families {
+                ctx.set_gemm_family(family.unwrap_or(default_family));
+                let row = time_row(&ctx, &case, dtype, family.is_some(), args.samples)?;
+                if !args.common.json {
+                    print_row(&row);
+                }
+                if let Some(g) = case.gemm {
+                    gemm_shapes.push(g);
+                }
+                rows.push((row, case.gemm));
             }
-            let row = Row {
-                kernel: case.name,
-                dtype: dtype_name(dtype).into(),
-                shape: case.shape.clone(),
-                ms: t * 1e3,
-                gflops,
-                gbps,
-                cpu_gflops: None,
-                ratio_to_cpu: None,
-            };
-            if !args.common.json {
-                let show = |x: Option<f64>| x.map_or(String::from("-"), |v| format!("{v:.1}"));
-                println!(
-                    "{:<26} {:<5} {:<32} {:>10.3} {:>9} {:>8}",
-                    row.kernel,
-                    row.dtype,
-                    row.shape,
-                    row.ms,
-                    show(row.gflops),
-                    show(row.gbps)
-                );
-            }
-            rows.push((row, case.gemm));
+            ctx.set_gemm_family(default_family);
         }
     }
     gemm_shapes.dedup();

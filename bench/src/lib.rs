@@ -9,6 +9,7 @@ mod fid;
 mod gen;
 mod kernels;
 mod lora;
+mod peaks;
 mod random_models;
 mod scene;
 mod unet;

@@ -3,6 +3,7 @@
 //! with `--reference-device cuda` on its NVIDIA GPU at the same precision.
 
 use crate::kernels::{dtype_name, rand_tensor};
+use crate::peaks;
 use anyhow::{Context as _, Result};
 use std::time::Instant;
 use vkdiff_args::Precision;
@@ -35,9 +36,20 @@ pub struct UnetArgs {
     /// Timed evaluations per size; the best is reported.
     #[arg(long, default_value_t = 1)]
     samples: usize,
+    /// Also time every dispatch of one more evaluation and list the kernels by device time.
+    #[arg(long)]
+    profile: bool,
     /// Where the diffusers reference runs.
     #[arg(long, value_enum, default_value_t = ReferenceDevice::Cpu)]
     reference_device: ReferenceDevice,
+}
+
+/// One kernel's share of a profiled evaluation.
+#[derive(serde::Serialize)]
+struct KernelTime {
+    kernel: &'static str,
+    dispatches: usize,
+    ms: f64,
 }
 
 #[derive(serde::Serialize)]
@@ -46,9 +58,16 @@ struct Row {
     size: usize,
     batch: usize,
     precision: &'static str,
+    /// The kernels the products ran on (`matrix units 16×16`, `tiled`, …).
+    gemm_kernels: String,
     load_s: f64,
     record_s: f64,
     ms: f64,
+    /// Matrix-product arithmetic of one evaluation, counted from the recorded dispatches.
+    tflop: f64,
+    tflops: f64,
+    /// `tflops` as a share of the GPU's f16 matrix-unit peak ("unknown" off the table).
+    matrix_peak_share: String,
     weights_mib: f64,
     peak_mib: f64,
     reference_ms: Option<f64>,
@@ -56,6 +75,8 @@ struct Row {
     /// What ran the reference, or why it could not run.
     reference: String,
     ratio_to_reference: Option<f64>,
+    /// With `--profile`: device time per kernel, largest first.
+    profile: Vec<KernelTime>,
 }
 
 pub fn run(args: &UnetArgs) -> Result<()> {
@@ -75,12 +96,17 @@ pub fn run(args: &UnetArgs) -> Result<()> {
         }
         args.common.print(&row, |row| {
             format!(
-                "{} | SDXL UNet {size}² batch {} {}: {:.0} ms/eval (load {:.1} s, record {:.2} s), weights {:.0} MiB, \
-                    peak {:.0} MiB | diffusers: {} | speed-up {}",
+                "{} | SDXL UNet {size}² batch {} {} on {}: {:.0} ms/eval, {:.2} TFLOP at {:.1} TFLOP/s ({} of the \
+                    matrix peak) (load {:.1} s, record {:.2} s), weights {:.0} MiB, peak {:.0} MiB | diffusers: {} | \
+                    speed-up {}",
                 row.device,
                 row.batch,
                 row.precision,
+                row.gemm_kernels,
                 row.ms,
+                row.tflop,
+                row.tflops,
+                row.matrix_peak_share,
                 row.load_s,
                 row.record_s,
                 row.weights_mib,
@@ -91,7 +117,7 @@ pub fn run(args: &UnetArgs) -> Result<()> {
                     row.reference
                 )),
                 row.ratio_to_reference.map_or("-".into(), |r| format!("{r:.2}×")),
-            )
+            ) + &profile_lines(&row.profile)
         })?;
     }
     Ok(())
@@ -115,14 +141,15 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
     let px = size as f32;
     let ids = ctx.upload(&[b, 6], Dtype::F32, &[px, px, 0.0, 0.0, px, px].repeat(b))?;
     let start = Instant::now();
-    let pass = unet.record(&UNetInputs {
+    let inputs = UNetInputs {
         sample: &sample,
         timesteps: &timesteps,
         encoder_hidden_states: &context,
         added: Some((&text, &ids)),
         control: None,
         ip: &[],
-    })?;
+    };
+    let pass = unet.record(&inputs)?;
     let record_s = start.elapsed().as_secs_f64();
     let mut best = f64::INFINITY;
     for _ in 0..args.samples.max(1) {
@@ -131,6 +158,9 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
         best = best.min(start.elapsed().as_secs_f64());
     }
     let out = pass.output.download()?;
+    let tflop = pass.flops() / 1e12;
+    drop(pass);
+    let profile = if args.profile { profile(&ctx, &unet, &inputs)? } else { Vec::new() };
     anyhow::ensure!(out.iter().all(|v| v.is_finite()), "the UNet output holds NaN or infinity");
     let mib = |b: u64| b as f64 / (1 << 20) as f64;
     Ok(Row {
@@ -138,16 +168,54 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
         size,
         batch: b,
         precision: dtype_name(dtype),
+        gemm_kernels: peaks::family_label(&ctx, dtype),
         load_s,
         record_s,
         ms: best * 1e3,
+        tflop,
+        tflops: tflop / best,
+        matrix_peak_share: peaks::share_label(&ctx, tflop * 1e12 / best),
         weights_mib: mib(weights),
         peak_mib: mib(ctx.peak_bytes()),
         reference_ms: None,
         reference_peak_mib: None,
         reference: String::new(),
         ratio_to_reference: None,
+        profile,
     })
+}
+
+/// The profile as indented lines under the summary, empty without `--profile`.
+fn profile_lines(profile: &[KernelTime]) -> String {
+    let total: f64 = profile.iter().map(|k| k.ms).sum();
+    profile
+        .iter()
+        .map(|k| {
+            format!(
+                "\n  {:<22} {:>5} dispatches {:>9.2} ms {:>5.1} %",
+                k.kernel,
+                k.dispatches,
+                k.ms,
+                100.0 * k.ms / total
+            )
+        })
+        .collect()
+}
+
+/// Device time per kernel over one evaluation recorded with timestamps, largest first.
+fn profile(ctx: &Context, unet: &UNet, inputs: &UNetInputs) -> Result<Vec<KernelTime>> {
+    ctx.set_profiling(true);
+    let pass = unet.record(inputs);
+    ctx.set_profiling(false);
+    let mut by_kernel: Vec<KernelTime> = Vec::new();
+    for t in pass?.run_profiled()? {
+        match by_kernel.iter_mut().find(|k| k.kernel == t.kernel) {
+            Some(k) => (k.dispatches, k.ms) = (k.dispatches + 1, k.ms + t.nanos / 1e6),
+            None => by_kernel.push(KernelTime { kernel: t.kernel, dispatches: 1, ms: t.nanos / 1e6 }),
+        }
+    }
+    by_kernel.sort_by(|a, b| b.ms.total_cmp(&a.ms));
+    Ok(by_kernel)
 }
 
 /// diffusers: best milliseconds per evaluation, its peak memory, and what ran it.

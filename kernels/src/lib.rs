@@ -44,22 +44,23 @@ mod compile_tests {
 
     fn one_file(body: &str) -> Source {
         Source::new(
-            &prelude(false, &[("N", 2)]),
+            &prelude(false, &[("N", 2)], false),
             &[("a.wgsl".into(), "// line 1\n".into()), ("broken.wgsl".into(), body.into())],
         )
     }
 
     #[test]
     fn parse_errors_name_the_file_and_line() {
-        let err = compile(one_file("@compute @workgroup_size(1)\nfn main() {\n    let x = ;\n}\n"), &[], "kernel `t`")
-            .unwrap_err();
+        let err =
+            compile(one_file("@compute @workgroup_size(1)\nfn main() {\n    let x = ;\n}\n"), &[], false, "kernel `t`")
+                .unwrap_err();
         assert!(err.starts_with("kernels/wgsl/broken.wgsl:3: kernel `t`"), "{err}");
     }
 
     #[test]
     fn validation_errors_name_the_file_and_line() {
         let body = "@compute @workgroup_size(1)\nfn main() {\n    var x: u32 = 1u;\n    x = 1.5 + x;\n}\n";
-        let err = compile(one_file(body), &[], "kernel `t`").unwrap_err();
+        let err = compile(one_file(body), &[], false, "kernel `t`").unwrap_err();
         assert!(err.starts_with("kernels/wgsl/broken.wgsl:4:"), "{err}");
     }
 
@@ -67,7 +68,7 @@ mod compile_tests {
     fn unrolled_blocks_keep_line_numbers() {
         let body = "var<workgroup> w: array<u32, 4>;\n@compute @workgroup_size(1)\nfn main() \
             {\n    // #unroll I N\n    w[I] = I; // a comment\n    // #end\n    let y = ;\n}\n";
-        let err = compile(one_file(body), &[("N", 2)], "kernel `t`").unwrap_err();
+        let err = compile(one_file(body), &[("N", 2)], false, "kernel `t`").unwrap_err();
         assert!(err.starts_with("kernels/wgsl/broken.wgsl:7:"), "{err}");
     }
 
@@ -75,12 +76,23 @@ mod compile_tests {
     fn unroll_substitutes_whole_words_only() {
         let text = "a\n// #unroll R 2\nx[R] = RR + R;\n// #end\nb";
         assert_eq!(unroll(text, &[]).unwrap(), "a\nx[0u] = RR + 0u; x[1u] = RR + 1u;\n\n\nb");
-        assert!(unroll("// #unroll R Q\n// #end", &[]).unwrap_err().contains("neither a number nor a parameter"));
+        assert!(unroll("// #unroll R Q\n// #end", &[]).unwrap_err().contains("count is not numbers and parameters"));
+    }
+
+    #[test]
+    fn unroll_counts_are_products_and_quotients_of_parameters() {
+        let params = [("CM", 16), ("SG", 32)];
+        assert_eq!(unroll_count("2*CM*CM/SG", &params), Some(16));
+        assert_eq!(unroll_count("SG", &params), Some(32));
+        assert_eq!(unroll_count("CM/3", &params), None, "a remainder");
+        assert_eq!(unroll_count("CM*", &params), None);
+        assert_eq!(unroll_count("CM+1", &params), None);
+        assert_eq!(unroll_count("CM/0", &params), None);
     }
 
     #[test]
     fn a_valid_kernel_compiles_to_spirv() {
-        let words = compile(one_file("@compute @workgroup_size(N)\nfn main() {}\n"), &[], "kernel `t`").unwrap();
+        let words = compile(one_file("@compute @workgroup_size(N)\nfn main() {}\n"), &[], false, "kernel `t`").unwrap();
         assert_eq!(words[0], 0x0723_0203, "SPIR-V magic number");
     }
 }

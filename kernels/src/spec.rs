@@ -62,12 +62,12 @@ pub const KERNELS: &[KernelSpec] = &[
     // Shared-memory tiled GEMM: any shape, the variant for GPUs.
     KernelSpec {
         name: "gemm_tiled",
-        files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix.wgsl", "gemm_tiled.wgsl"],
+        files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix.wgsl", "gemm_store.wgsl", "gemm_tiled.wgsl"],
         params: &[&[("BT", 0)], &[("BT", 1)]],
     },
     KernelSpec {
         name: "conv_tiled",
-        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv.wgsl", "gemm_tiled.wgsl"],
+        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv.wgsl", "gemm_store.wgsl", "gemm_tiled.wgsl"],
         params: &[&[("BT", 1)]],
     },
     KernelSpec {
@@ -140,4 +140,56 @@ pub const KERNELS: &[KernelSpec] = &[
     KernelSpec { name: "pool2d", files: &["grid.wgsl", "pool2d.wgsl"], params: &[&[("OP", 0)], &[("OP", 1)]] },
     KernelSpec { name: "resize_tf1", files: &["grid.wgsl", "resize_tf1.wgsl"], params: NONE },
     KernelSpec { name: "timestep_embedding", files: &["timestep.wgsl"], params: NONE },
+];
+
+/// Kernels on the device's matrix units (`VK_KHR_cooperative_matrix`), compiled in f16 only:
+/// their operands are f16, so f32 products keep the scalar kernels' precision by not using
+/// them. CM = fragment size (8: lavapipe's 8×8×8; 16: the 16×16×16 NVIDIA and AMD list), SG =
+/// the subgroup width the workgroup's four subgroups are pinned to, WT = fragments per side of
+/// a subgroup's tile (4 for products large enough to fill a GPU with the larger tiles). Intel's
+/// 8×16×16 has no naga type (naga 30 spells only square 8×8 and 16×16 fragments), so Intel
+/// takes the tiled kernels.
+pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
+    KernelSpec {
+        name: "gemm_coop",
+        files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix.wgsl", "gemm_store.wgsl", "gemm_coop.wgsl"],
+        params: &[
+            &[("CM", 8), ("SG", 4), ("WT", 2), ("BT", 0)],
+            &[("CM", 8), ("SG", 4), ("WT", 2), ("BT", 1)],
+            &[("CM", 8), ("SG", 4), ("WT", 4), ("BT", 0)],
+            &[("CM", 8), ("SG", 4), ("WT", 4), ("BT", 1)],
+            &[("CM", 8), ("SG", 8), ("WT", 2), ("BT", 0)],
+            &[("CM", 8), ("SG", 8), ("WT", 2), ("BT", 1)],
+            &[("CM", 8), ("SG", 8), ("WT", 4), ("BT", 0)],
+            &[("CM", 8), ("SG", 8), ("WT", 4), ("BT", 1)],
+            &[("CM", 8), ("SG", 16), ("WT", 2), ("BT", 0)],
+            &[("CM", 8), ("SG", 16), ("WT", 2), ("BT", 1)],
+            &[("CM", 8), ("SG", 16), ("WT", 4), ("BT", 0)],
+            &[("CM", 8), ("SG", 16), ("WT", 4), ("BT", 1)],
+            &[("CM", 16), ("SG", 32), ("WT", 2), ("BT", 0)],
+            &[("CM", 16), ("SG", 32), ("WT", 2), ("BT", 1)],
+            &[("CM", 16), ("SG", 32), ("WT", 4), ("BT", 0)],
+            &[("CM", 16), ("SG", 32), ("WT", 4), ("BT", 1)],
+            &[("CM", 16), ("SG", 64), ("WT", 2), ("BT", 0)],
+            &[("CM", 16), ("SG", 64), ("WT", 2), ("BT", 1)],
+            &[("CM", 16), ("SG", 64), ("WT", 4), ("BT", 0)],
+            &[("CM", 16), ("SG", 64), ("WT", 4), ("BT", 1)],
+        ],
+    },
+    KernelSpec {
+        name: "conv_coop",
+        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv.wgsl", "gemm_store.wgsl", "gemm_coop.wgsl"],
+        params: &[
+            &[("CM", 8), ("SG", 4), ("WT", 2), ("BT", 1)],
+            &[("CM", 8), ("SG", 4), ("WT", 4), ("BT", 1)],
+            &[("CM", 8), ("SG", 8), ("WT", 2), ("BT", 1)],
+            &[("CM", 8), ("SG", 8), ("WT", 4), ("BT", 1)],
+            &[("CM", 8), ("SG", 16), ("WT", 2), ("BT", 1)],
+            &[("CM", 8), ("SG", 16), ("WT", 4), ("BT", 1)],
+            &[("CM", 16), ("SG", 32), ("WT", 2), ("BT", 1)],
+            &[("CM", 16), ("SG", 32), ("WT", 4), ("BT", 1)],
+            &[("CM", 16), ("SG", 64), ("WT", 2), ("BT", 1)],
+            &[("CM", 16), ("SG", 64), ("WT", 4), ("BT", 1)],
+        ],
+    },
 ];

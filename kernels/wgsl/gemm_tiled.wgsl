@@ -7,8 +7,6 @@
 // which keeps those stores nearly free of bank conflicts. Register arrays are indexed only by
 // unrolled constants: GPU compilers spill dynamically indexed ones to memory.
 @group(0) @binding(1) var<storage, read> b: array<S>;
-@group(0) @binding(2) var<storage, read> bias: array<S>;
-@group(0) @binding(3) var<storage, read_write> c: array<S>;
 
 const TILE: u32 = 64u;
 const BK: u32 = 16u;
@@ -77,22 +75,4 @@ fn main(
     store(batch, row0 + lid.y + 16u * I, col0 + lid.x + 16u * J, acc[4u * I + J]);
     // #end
     // #end
-}
-
-fn store(batch: u32, row: u32, col: u32, sum: f32) {
-    if row >= p.g.m || col >= p.g.n {
-        return;
-    }
-    let at = batch * p.g.c_batch + row * p.g.ldc + col;
-    var v = p.g.alpha * sum;
-    if (p.g.flags & FLAG_BIAS) != 0u {
-        v += f32(bias[col]);
-    }
-    if (p.g.flags & FLAG_ACCUMULATE) != 0u {
-        v += f32(c[at]);
-    }
-    if (p.g.flags & FLAG_RELU) != 0u {
-        v = max(v, 0.0);
-    }
-    c[at] = S(v);
 }

@@ -18,6 +18,9 @@ pub enum GemmFamily {
     Subgroup,
     /// Shared-memory tiles: the GPU kernel, and the fallback for shapes `Subgroup` cannot take.
     Tiled,
+    /// The device's matrix units (`VK_KHR_cooperative_matrix`) for f16 products; f32 products,
+    /// and devices whose units fit no variant, take `Tiled`.
+    Cooperative,
 }
 
 /// Whether `VKDIFF_GPU_PATHS=1` asks for the discrete-GPU configuration (see [`Context::gpu_paths`]).
@@ -25,12 +28,23 @@ pub fn gpu_paths_requested() -> bool {
     std::env::var("VKDIFF_GPU_PATHS").is_ok_and(|v| v == "1")
 }
 
+/// `VKDIFF_COOPERATIVE=0` keeps the GPU on its tiled kernels (a driver's matrix units
+/// misbehaving, or a comparison of the two).
+fn cooperative_allowed() -> bool {
+    std::env::var("VKDIFF_COOPERATIVE").map_or(true, |v| v != "0")
+}
+
 impl DeviceInfo {
     /// The GEMM/convolution family a context on this device starts with: the subgroup-register
-    /// kernels on CPU devices with a width they are built for, else the tiled ones.
+    /// kernels on CPU devices with a width they are built for; on GPUs (and on the GPU paths)
+    /// the matrix units where a cooperative variant fits them and `VKDIFF_COOPERATIVE=0` does
+    /// not turn them off, else the tiled kernels.
     pub fn gemm_family(&self, gpu_paths: bool) -> GemmFamily {
-        if !gpu_paths && self.kind == DeviceKind::Cpu && self.gemm_subgroup_width().is_some() {
+        let cpu = !gpu_paths && self.kind == DeviceKind::Cpu;
+        if cpu && self.gemm_subgroup_width().is_some() {
             GemmFamily::Subgroup
+        } else if !cpu && self.cooperative_variant().is_some() && cooperative_allowed() {
+            GemmFamily::Cooperative
         } else {
             GemmFamily::Tiled
         }
@@ -62,6 +76,8 @@ pub(crate) struct Shared {
     pub(crate) workgroup_limit: Mutex<[u32; 3]>,
     /// `VKDIFF_GPU_PATHS=1`: run as a discrete GPU would (see [`Context::gpu_paths`]).
     pub(crate) gpu_paths: AtomicBool,
+    /// Whether every recording times its dispatches (see [`Context::set_profiling`]).
+    pub(crate) profiling: AtomicBool,
 }
 
 impl Drop for Shared {
@@ -91,7 +107,7 @@ impl Context {
     pub fn new(requested: Option<usize>) -> Result<Context> {
         let entry = device::load_entry()?;
         let (instance, validation) = device::create_instance(&entry)?;
-        match Self::open(&instance, requested) {
+        match Self::open(&entry, &instance, requested) {
             Ok((device, pd, info, queue_family)) => {
                 Self::finish(entry, (instance, validation), device, pd, info, queue_family)
             }
@@ -109,12 +125,14 @@ impl Context {
     }
 
     fn open(
+        entry: &ash::Entry,
         instance: &ash::Instance,
         requested: Option<usize>,
     ) -> Result<(ash::Device, vk::PhysicalDevice, DeviceInfo, u32)> {
         // SAFETY: valid instance.
         let pds = unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
-        let infos: Vec<DeviceInfo> = pds.iter().enumerate().map(|(i, &pd)| device::describe(instance, pd, i)).collect();
+        let infos: Vec<DeviceInfo> =
+            pds.iter().enumerate().map(|(i, &pd)| device::describe(entry, instance, pd, i)).collect();
         let index = device::choose(&infos, requested)?;
         let info = infos[index].clone();
         let pd = pds[index];
@@ -123,7 +141,10 @@ impl Context {
         let mut f11 = vk::PhysicalDeviceVulkan11Features::default()
             .storage_buffer16_bit_access(info.storage_16bit)
             .uniform_and_storage_buffer16_bit_access(info.storage_16bit);
-        let mut f12 = vk::PhysicalDeviceVulkan12Features::default().shader_float16(info.shader_f16);
+        let mut f12 = vk::PhysicalDeviceVulkan12Features::default()
+            .shader_float16(info.shader_f16)
+            .vulkan_memory_model(info.cooperative_features);
+        let mut cooperative = vk::PhysicalDeviceCooperativeMatrixFeaturesKHR::default().cooperative_matrix(true);
         let size_control = info.subgroup_size_range.is_some();
         let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
             .subgroup_size_control(size_control)
@@ -144,6 +165,10 @@ impl Context {
         } else if info.zero_init_extension {
             extensions.push(ash::khr::zero_initialize_workgroup_memory::NAME.as_ptr());
             create = create.push_next(&mut zero_init);
+        }
+        if info.cooperative_features {
+            extensions.push(ash::khr::cooperative_matrix::NAME.as_ptr());
+            create = create.push_next(&mut cooperative);
         }
         let create = create.enabled_extension_names(&extensions);
         // SAFETY: pd belongs to the instance; the create info outlives the call.
@@ -187,6 +212,7 @@ impl Context {
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
             workgroup_limit: Mutex::new(info.max_workgroup_count),
             gpu_paths: AtomicBool::new(gpu_paths),
+            profiling: AtomicBool::new(false),
             info,
         };
         Ok(Context { shared: Arc::new(shared) })
@@ -244,12 +270,22 @@ impl Context {
     }
 
     /// Turns the GPU paths on or off for this context (tests run both on one device); turning
-    /// them on also selects the tiled GEMM family.
+    /// them on also selects the GEMM family a GPU would take (cooperative where it fits, else tiled).
     pub fn set_gpu_paths(&self, on: bool) {
         self.shared.gpu_paths.store(on, Ordering::SeqCst);
         if on {
-            self.set_gemm_family(GemmFamily::Tiled);
+            self.set_gemm_family(self.shared.info.gemm_family(true));
         }
+    }
+
+    /// Makes every recording started from now on time its dispatches, so a network's
+    /// recording can be profiled without threading a flag through its layers.
+    pub fn set_profiling(&self, on: bool) {
+        self.shared.profiling.store(on, Ordering::SeqCst);
+    }
+
+    pub(crate) fn profiling(&self) -> bool {
+        self.shared.profiling.load(Ordering::SeqCst)
     }
 
     /// The most workgroups one dispatch may have per dimension.

@@ -1,6 +1,7 @@
 //! Vulkan instance, physical-device discovery and the choice of device.
 
 use crate::error::{Error, Result, VkContext};
+use crate::matrix_units::{self, MatrixShape};
 use crate::validation::Validation;
 use ash::vk;
 use std::ffi::CStr;
@@ -63,7 +64,11 @@ pub struct DeviceInfo {
     pub subgroup_size_range: Option<(u32, u32)>,
     pub subgroup_shuffle: bool,
     pub subgroup_arithmetic: bool,
-    pub cooperative_matrix: bool,
+    /// The product shapes `VK_KHR_cooperative_matrix` lists (empty without it).
+    pub matrix_shapes: Vec<MatrixShape>,
+    /// Whether the cooperative kernels can run: the extension with its `cooperativeMatrix`
+    /// feature, and `vulkanMemoryModel` (naga's cooperative SPIR-V declares the Vulkan model).
+    pub cooperative_features: bool,
     pub max_storage_buffer_range: u64,
     pub max_shared_memory: u32,
     pub max_workgroup_invocations: u32,
@@ -105,6 +110,16 @@ impl DeviceInfo {
     /// Whether f16 storage with f32 arithmetic (`--precision f16`) can run here.
     pub fn supports_f16(&self) -> bool {
         self.shader_f16 && self.storage_16bit
+    }
+
+    /// The cooperative GEMM/convolution variant this device runs, as (fragment size, subgroup
+    /// width); None where its matrix units fit no variant or it cannot run them (f16 storage
+    /// and arithmetic, the features above).
+    pub fn cooperative_variant(&self) -> Option<(u32, u32)> {
+        if !self.cooperative_features || !self.supports_f16() {
+            return None;
+        }
+        matrix_units::pick(&self.matrix_shapes, |width| self.can_use_subgroup(width))
     }
 
     /// Whether a kernel written for a subgroup of exactly `size` lanes can be pinned to it.
@@ -153,7 +168,12 @@ pub(crate) fn is_portability_subset(instance: &ash::Instance, pd: vk::PhysicalDe
     has_extension(instance, pd, ash::khr::portability_subset::NAME)
 }
 
-pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: usize) -> DeviceInfo {
+pub(crate) fn describe(
+    entry: &ash::Entry,
+    instance: &ash::Instance,
+    pd: vk::PhysicalDevice,
+    index: usize,
+) -> DeviceInfo {
     let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
     let mut size_control = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
     let mut driver = vk::PhysicalDeviceDriverProperties::default();
@@ -168,11 +188,16 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
     let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
     let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default();
     let zero_init_extension = has_extension(instance, pd, ash::khr::zero_initialize_workgroup_memory::NAME);
+    let mut cooperative = vk::PhysicalDeviceCooperativeMatrixFeaturesKHR::default();
+    let cooperative_extension = has_extension(instance, pd, ash::khr::cooperative_matrix::NAME);
     let mut feats2 = vk::PhysicalDeviceFeatures2::default()
         .push_next(&mut f11)
         .push_next(&mut f12)
         .push_next(&mut f13)
         .push_next(&mut zero_init);
+    if cooperative_extension {
+        feats2 = feats2.push_next(&mut cooperative);
+    }
     // SAFETY: pd comes from this instance; the chained structs live until the calls return.
     let (mem, families) = unsafe {
         instance.get_physical_device_properties2(pd, &mut props2);
@@ -219,7 +244,8 @@ pub(crate) fn describe(instance: &ash::Instance, pd: vk::PhysicalDevice, index: 
             && ops.contains(vk::SubgroupFeatureFlags::SHUFFLE),
         subgroup_arithmetic: subgroup.supported_stages.contains(compute)
             && ops.contains(vk::SubgroupFeatureFlags::ARITHMETIC),
-        cooperative_matrix: has_extension(instance, pd, ash::khr::cooperative_matrix::NAME),
+        matrix_shapes: if cooperative_extension { matrix_units::query(entry, instance, pd) } else { Vec::new() },
+        cooperative_features: cooperative.cooperative_matrix == vk::TRUE && f12.vulkan_memory_model == vk::TRUE,
         max_storage_buffer_range: p.limits.max_storage_buffer_range as u64,
         max_shared_memory: p.limits.max_compute_shared_memory_size,
         max_workgroup_invocations: p.limits.max_compute_work_group_invocations,
@@ -241,7 +267,7 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>> {
     // SAFETY: the instance is valid until destroyed below.
     let infos = unsafe { instance.enumerate_physical_devices() }
         .vk("vkEnumeratePhysicalDevices")
-        .map(|pds| pds.iter().enumerate().map(|(i, &pd)| describe(&instance, pd, i)).collect());
+        .map(|pds| pds.iter().enumerate().map(|(i, &pd)| describe(&entry, &instance, pd, i)).collect());
     // SAFETY: nothing created from the instance outlives it; the messenger goes first.
     unsafe {
         if let Some(v) = &validation {
@@ -306,7 +332,8 @@ mod tests {
             subgroup_size_range: None,
             subgroup_shuffle: usable,
             subgroup_arithmetic: true,
-            cooperative_matrix: false,
+            matrix_shapes: Vec::new(),
+            cooperative_features: false,
             max_storage_buffer_range: 1 << 27,
             max_shared_memory: 32768,
             max_workgroup_invocations: 1024,

@@ -3,8 +3,10 @@
 
 mod arena;
 mod context;
+mod cpu_vectors;
 mod device;
 mod error;
+mod matrix_units;
 mod memory;
 pub mod ops;
 mod pipeline;
@@ -15,8 +17,10 @@ mod validation;
 
 pub use arena::Arena;
 pub use context::{gpu_paths_requested, Context, GemmFamily};
+pub use cpu_vectors::{lavapipe_vectors_widened, widen_lavapipe_vectors};
 pub use device::{choose, list_devices, DeviceInfo, DeviceKind};
 pub use error::{Error, Result};
+pub use matrix_units::MatrixShape;
 pub use pipeline::Kernel;
 pub use recorder::{Recorder, Recording, Timing};
 pub use tensor::{dtype_size, Dtype, Tensor};

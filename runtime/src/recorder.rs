@@ -32,6 +32,7 @@ pub struct Recorder {
     written: HashSet<vk::Buffer>,
     read: HashSet<vk::Buffer>,
     profile: bool,
+    flops: f64,
 }
 
 /// Vulkan objects owned by a recording, destroyed with it.
@@ -62,8 +63,10 @@ impl Drop for Resources {
 }
 
 impl Recorder {
-    /// Starts a recording; with `profile`, every dispatch is timed with timestamp queries.
+    /// Starts a recording; with `profile` (or the context's [`Context::set_profiling`]), every
+    /// dispatch is timed with timestamp queries.
     pub fn new(ctx: &Context, profile: bool) -> Result<Recorder> {
+        let profile = profile || ctx.profiling();
         ensure(!profile || ctx.info().timestamps, || {
             format!("device `{}` has no timestamp queries to profile with", ctx.info().name)
         })?;
@@ -99,6 +102,7 @@ impl Recorder {
                 written: HashSet::new(),
                 read: HashSet::new(),
                 profile,
+                flops: 0.0,
             };
             // What earlier submissions wrote (kernels, staging copies, fills) is made visible
             // to this recording's kernels: a fence wait alone does not.
@@ -308,7 +312,12 @@ impl Recorder {
             );
             self.ctx.shared.device.end_command_buffer(self.cmd).vk("vkEndCommandBuffer")?;
         }
-        Ok(Recording { ctx: self.ctx, cmd: self.cmd, res: self.res })
+        Ok(Recording { ctx: self.ctx, cmd: self.cmd, res: self.res, flops: self.flops })
+    }
+
+    /// Counts the arithmetic of a matrix product just recorded (ops call it; see [`Recording::flops`]).
+    pub(crate) fn count_flops(&mut self, flops: f64) {
+        self.flops += flops;
     }
 }
 
@@ -317,6 +326,7 @@ pub struct Recording {
     ctx: Context,
     cmd: vk::CommandBuffer,
     res: Resources,
+    flops: f64,
 }
 
 impl Recording {
@@ -350,6 +360,12 @@ impl Recording {
             .zip(stamps.chunks_exact(2))
             .map(|(&kernel, t)| Timing { kernel, nanos: t[1].saturating_sub(t[0]) as f64 * period })
             .collect())
+    }
+
+    /// Floating-point operations of the matrix products one run does (GEMMs, convolutions and
+    /// both products of attention, 2 per multiply-add), to hold a run's time against a peak.
+    pub fn flops(&self) -> f64 {
+        self.flops
     }
 
     /// Number of timed dispatches.

@@ -22,8 +22,19 @@ pub fn gpu_ctx() -> Context {
 }
 
 /// A private context with a fixed GEMM family, so tests of both families can run in parallel.
+/// Under `VKDIFF_EXPECT_COOPERATIVE=1` (the CI pass on a driver with matrix units) a device
+/// whose units fit no cooperative variant fails the test instead of testing the tiled kernels twice.
 pub fn ctx_with(family: GemmFamily) -> Context {
     let c = open();
+    if family == GemmFamily::Cooperative && std::env::var("VKDIFF_EXPECT_COOPERATIVE").is_ok_and(|v| v == "1") {
+        let info = c.info();
+        assert!(
+            info.cooperative_variant().is_some(),
+            "VKDIFF_EXPECT_COOPERATIVE=1, but no cooperative variant fits `{}`: {:?}",
+            info.name,
+            info.matrix_shapes
+        );
+    }
     c.set_gemm_family(family);
     c
 }

@@ -48,6 +48,17 @@ impl UNetPass {
     pub fn run(&self) -> Result<()> {
         Ok(self.recording.run()?)
     }
+
+    /// Runs one evaluation and returns each dispatch's device time (recorded while the context
+    /// was profiling: [`vkdiff_runtime::Context::set_profiling`]).
+    pub fn run_profiled(&self) -> Result<Vec<vkdiff_runtime::Timing>> {
+        Ok(self.recording.run_profiled()?)
+    }
+
+    /// The matrix-product arithmetic of one evaluation ([`vkdiff_runtime::Recording::flops`]).
+    pub fn flops(&self) -> f64 {
+        self.recording.flops()
+    }
 }
 
 pub struct UNet {

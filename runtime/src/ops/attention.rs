@@ -133,6 +133,7 @@ pub fn attention(
         u(l.v_offset),
         l.causal as u32,
     ];
+    rec.count_flops(4.0 * (l.batch * l.heads * l.q_tokens) as f64 * (l.kv_tokens * l.head_dim) as f64);
     rec.dispatch(&kern, &[q, k, v], &[out], &push, [u(l.q_tokens.div_ceil(tm)), u(l.heads), u(l.batch)])
 }
 

@@ -1,7 +1,7 @@
 //! 2-D convolution on NHWC tensors as an implicit GEMM (no im2col buffer).
 
 use super::bands::{bands, elem, fit, image_rows, rows_per_band};
-use super::gemm::{dispatch_gemm_family, GemmShape};
+use super::gemm::{dispatch_gemm_family, GemmKernels, GemmShape};
 use super::{f, same_dtype, u};
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
@@ -155,6 +155,7 @@ fn conv2d_whole(
     ];
     // Without a bias the kernel never reads binding 2; the output stands in for it.
     let bias = bias.unwrap_or(out);
-    let shape = GemmShape { m, n, batch: 1, fits_subgroup: cin % 4 == 0 && cout % 4 == 0 };
-    dispatch_gemm_family(rec, (("conv_sg", "conv_tiled"), dtype, &[]), &shape, &[x, w, bias], out, &push)
+    let shape = GemmShape { m, n, k, batch: 1, fits_subgroup: cin % 4 == 0 && cout % 4 == 0 };
+    let kernels = GemmKernels { subgroup: "conv_sg", tiled: "conv_tiled", cooperative: "conv_coop" };
+    dispatch_gemm_family(rec, (kernels, dtype, &[]), &shape, &[x, w, bias], out, &push)
 }

@@ -169,8 +169,8 @@ fn matmul_whole(
     ];
     // Without a bias the kernel never reads binding 2; C stands in for it.
     let bias = bias.unwrap_or(c);
-    let shape = GemmShape { m: s.m, n: s.n, batch: s.batch, fits_subgroup: s.fits_vec4() };
-    let kernels = (("gemm_sg", "gemm_tiled"), dtype, &[("BT", s.b_transposed as u32)][..]);
+    let shape = GemmShape { m: s.m, n: s.n, k: s.k, batch: s.batch, fits_subgroup: s.fits_vec4() };
+    let kernels = (GemmKernels::MATMUL, dtype, &[("BT", s.b_transposed as u32)][..]);
     dispatch_gemm_family(rec, kernels, &shape, &[a, b, bias], c, &common)
 }
 
@@ -178,25 +178,49 @@ fn matmul_whole(
 pub(super) struct GemmShape {
     pub m: usize,
     pub n: usize,
+    pub k: usize,
     pub batch: usize,
     /// Whether the subgroup kernel can take the operands (vec4-aligned sizes and strides).
     pub fits_subgroup: bool,
 }
 
-/// Records a GEMM-shaped kernel: the subgroup variant (`names.0`) where the device prefers it
-/// and the shape fits, with more rows per workgroup for taller products, else the tiled one
-/// (`names.1`). `params` are the variant parameters both share; bindings are `reads` then `out`.
+/// The kernels of one GEMM-shaped op, one per family.
+pub(super) struct GemmKernels {
+    pub subgroup: &'static str,
+    pub tiled: &'static str,
+    pub cooperative: &'static str,
+}
+
+impl GemmKernels {
+    const MATMUL: GemmKernels = GemmKernels { subgroup: "gemm_sg", tiled: "gemm_tiled", cooperative: "gemm_coop" };
+}
+
+/// Records a GEMM-shaped kernel: the cooperative variant where the context uses the matrix units
+/// and the storage is f16; the subgroup variant where the device prefers it and the shape
+/// fits, with more rows per workgroup for taller products; else the tiled one. `params` are
+/// the variant parameters all share; bindings are `reads` then `out`.
 pub(super) fn dispatch_gemm_family(
     rec: &mut Recorder,
-    (names, dtype, params): ((&'static str, &'static str), Dtype, &[(&str, u32)]),
+    (names, dtype, params): (GemmKernels, Dtype, &[(&str, u32)]),
     s: &GemmShape,
     reads: &[&Tensor],
     out: &Tensor,
     push: &[u32],
 ) -> Result<()> {
     let ctx = rec.context().clone();
-    let width =
-        ctx.info().gemm_subgroup_width().filter(|_| ctx.gemm_family() == GemmFamily::Subgroup && s.fits_subgroup);
+    rec.count_flops(2.0 * (s.batch * s.m) as f64 * (s.n * s.k) as f64);
+    let family = ctx.gemm_family();
+    let cooperative =
+        ctx.info().cooperative_variant().filter(|_| family == GemmFamily::Cooperative && dtype == Dtype::F16);
+    if let Some((cm, sg)) = cooperative {
+        let wt = cooperative_fragments_per_side(s, cm as usize);
+        let want: Vec<(&str, u32)> =
+            [("CM", cm), ("SG", sg), ("WT", wt)].into_iter().chain(params.iter().copied()).collect();
+        let k = kernel(&ctx, names.cooperative, dtype, &want, 4)?;
+        let tile = (2 * wt * cm) as usize;
+        return rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(tile)), u(s.m.div_ceil(tile)), u(s.batch)]);
+    }
+    let width = ctx.info().gemm_subgroup_width().filter(|_| family == GemmFamily::Subgroup && s.fits_subgroup);
     if let Some(sg) = width {
         let tm: u32 = if s.m >= 1024 && sg < 16 && tall_tiles_compile_fast(ctx.info()) {
             64
@@ -206,12 +230,23 @@ pub(super) fn dispatch_gemm_family(
             16
         };
         let want: Vec<(&str, u32)> = [("SG", sg), ("TM", tm)].into_iter().chain(params.iter().copied()).collect();
-        let k = kernel(&ctx, names.0, dtype, &want, 4)?;
+        let k = kernel(&ctx, names.subgroup, dtype, &want, 4)?;
         let columns = u(s.n.div_ceil(8 * sg as usize));
         return rec.dispatch(&k, reads, &[out], push, [columns, u(s.m.div_ceil(tm as usize)), u(s.batch)]);
     }
-    let k = kernel(&ctx, names.1, dtype, params, 4)?;
+    let k = kernel(&ctx, names.tiled, dtype, params, 4)?;
     rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(64)), u(s.m.div_ceil(64)), u(s.batch)])
+}
+
+/// Fragments per side of a subgroup's tile in the cooperative kernels: 4 (tiles of 8·CM) where
+/// the product still makes 128 such tiles, enough to keep a GPU's 100+ compute units busy, else 2.
+fn cooperative_fragments_per_side(s: &GemmShape, cm: usize) -> u32 {
+    let big = 8 * cm;
+    if s.m.div_ceil(big) * s.n.div_ceil(big) * s.batch >= 128 {
+        4
+    } else {
+        2
+    }
 }
 
 /// Whether taller products may take 64 rows per workgroup (fastest on Mesa 22.3's lavapipe). 16

@@ -80,7 +80,7 @@ fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) {
 }
 
 fn all(c: Case, seed: u64) {
-    for family in [GemmFamily::Subgroup, GemmFamily::Tiled] {
+    for family in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative] {
         for dtype in DTYPES {
             check(family, dtype, &c, seed);
         }
@@ -130,6 +130,26 @@ fn conv3x3_stride2_vae_padding() {
     // diffusers' VAE Downsample2D pads (0, 1, 0, 1) then convolves with stride 2, no padding.
     let pad = Padding { top: 0, left: 0, bottom: 1, right: 1 };
     all(Case { b: 1, h: 8, w: 8, cin: 12, cout: 8, k: [3, 3], stride: 2, pad, accumulate: false, relu: false }, 23);
+}
+
+#[test]
+fn conv_large_products_take_the_large_cooperative_tiles() {
+    // 66·66 = 4356 output pixels × 130 channels: over 128 tiles of 64 (lavapipe's 8×8 fragments).
+    all(
+        Case {
+            b: 1,
+            h: 66,
+            w: 66,
+            cin: 4,
+            cout: 130,
+            k: [3, 3],
+            stride: 1,
+            pad: Padding::same(1),
+            accumulate: true,
+            relu: true,
+        },
+        28,
+    );
 }
 
 #[test]

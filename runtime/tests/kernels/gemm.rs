@@ -67,7 +67,7 @@ fn check(family: GemmFamily, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u6
 }
 
 fn both(s: Matmul, bias: bool, seed: u64) {
-    for family in [GemmFamily::Subgroup, GemmFamily::Tiled] {
+    for family in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative] {
         for dtype in DTYPES {
             check(family, dtype, &s, bias, seed);
         }
@@ -86,6 +86,14 @@ fn tall_shapes_take_the_large_row_tiles() {
     // M ≥ 256 and ≥ 1024 select the 32- and 64-row subgroup variants; M off their multiples.
     both(Matmul::dense(300, 68, 36, true), true, 8);
     both(Matmul::dense(1030, 40, 44, false), false, 9);
+}
+
+#[test]
+fn large_products_take_the_large_cooperative_tiles() {
+    // At least 128 tiles of 8·CM (64 on lavapipe, 128 on NVIDIA/AMD) select 4×4 fragments per
+    // subgroup; M, N and K off every tile's multiple.
+    both(Matmul::dense(1030, 2050, 24, true), true, 10);
+    both(Matmul::dense(520, 1000, 40, false), false, 11);
 }
 
 #[test]
