@@ -192,4 +192,17 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
             &[("CM", 16), ("SG", 64), ("WT", 4), ("BT", 1)],
         ],
     },
+    // Attention with both products on the matrix units, heads of up to DH = 64 (SDXL's, CLIP's);
+    // wider heads take attention_rows.
+    KernelSpec {
+        name: "attention_coop",
+        files: &["attention_common.wgsl", "attention_coop.wgsl"],
+        params: &[
+            &[("CM", 8), ("SG", 4), ("DH", 64)],
+            &[("CM", 8), ("SG", 8), ("DH", 64)],
+            &[("CM", 8), ("SG", 16), ("DH", 64)],
+            &[("CM", 16), ("SG", 32), ("DH", 64)],
+            &[("CM", 16), ("SG", 64), ("DH", 64)],
+        ],
+    },
 ];

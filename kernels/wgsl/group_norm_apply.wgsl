@@ -1,6 +1,7 @@
-// GroupNorm of one band from the partial statistics of all bands of its image (slots
-// first..first + parts, merged with Chan's parallel-variance formula), then the affine map and
-// optional SiLU, as group_norm does for tensors that fit one binding.
+// GroupNorm of bands of pixels (laid out as in group_norm_stats: workgroup (group, part, image))
+// from the partial statistics of all bands of the image (slots first + image·parts ..
+// + parts, merged with Chan's parallel-variance formula), then the affine map and optional
+// SiLU, as group_norm does in one workgroup per group.
 @group(0) @binding(0) var<storage, read> x: array<S>;
 @group(0) @binding(1) var<storage, read> gamma: array<S>;
 @group(0) @binding(2) var<storage, read> beta: array<S>;
@@ -15,6 +16,7 @@ struct Params {
     silu: u32,
     first: u32,
     parts: u32,
+    band: u32,
 }
 
 var<immediate> p: Params;
@@ -23,11 +25,12 @@ var<immediate> p: Params;
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let cg = p.c / p.groups;
     let c0 = wg.x * cg;
+    let slot0 = p.first + wg.z * p.parts;
     var n = 0.0;
     var mean = 0.0;
     var m2 = 0.0;
     for (var i = 0u; i < p.parts; i++) {
-        let at = ((p.first + i) * p.groups + wg.x) * 3u;
+        let at = ((slot0 + i) * p.groups + wg.x) * 3u;
         let nb = stats[at];
         let d = stats[at + 1u] - mean;
         let total = n + nb;
@@ -35,5 +38,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         m2 += stats[at + 2u] + d * d * n * nb / total;
         n = total;
     }
-    group_apply(c0, p.hw * cg, cg, p.c, c0, mean, inverseSqrt(m2 / n + p.eps), p.silu != 0u, lid);
+    let first = wg.y * p.band;
+    let count = min(p.band, p.hw - first) * cg;
+    let base = (wg.z * p.hw + first) * p.c + c0;
+    group_apply(base, count, cg, p.c, c0, mean, inverseSqrt(m2 / n + p.eps), p.silu != 0u, lid);
 }

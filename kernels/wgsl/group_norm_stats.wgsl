@@ -1,6 +1,8 @@
-// GroupNorm statistics of one band of pixels of one image (a tensor too large for one binding is
-// normalised band by band): one workgroup per group writes the band's (count, mean, M2) to
-// `stats` at slot·groups + group; group_norm_apply merges the slots of an image.
+// GroupNorm statistics of bands of pixels: workgroup (group, part, image) writes the (count,
+// mean, M2) of its group over pixels part·band .. part·band + band of its image to `stats` at
+// slot (slot + image·parts + part)·groups + group; group_norm_apply merges the slots of an image.
+// GPUs split every image so that enough workgroups run; a tensor too large for one binding is
+// normalised one band per dispatch.
 @group(0) @binding(0) var<storage, read> x: array<S>;
 @group(0) @binding(1) var<storage, read_write> stats: array<f32>;
 
@@ -9,6 +11,8 @@ struct Params {
     c: u32,
     groups: u32,
     slot: u32,
+    band: u32,
+    parts: u32,
 }
 
 var<immediate> p: Params;
@@ -16,10 +20,11 @@ var<immediate> p: Params;
 @compute @workgroup_size(WG)
 fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let cg = p.c / p.groups;
-    let count = p.hw * cg;
-    let m = group_moments(wg.x * cg, count, cg, p.c, lid);
+    let first = wg.y * p.band;
+    let count = min(p.band, p.hw - first) * cg;
+    let m = group_moments((wg.z * p.hw + first) * p.c + wg.x * cg, count, cg, p.c, lid);
     if lid == 0u {
-        let at = (p.slot * p.groups + wg.x) * 3u;
+        let at = ((p.slot + wg.z * p.parts + wg.y) * p.groups + wg.x) * 3u;
         stats[at] = f32(count);
         stats[at + 1u] = m.x;
         stats[at + 2u] = m.y;

@@ -2,7 +2,7 @@
 
 use super::bands::{bands, elem, fit, rows_per_band, span_view};
 use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u};
-use crate::context::Context;
+use crate::context::{Context, GemmFamily};
 use crate::error::{ensure, Error, Result};
 use crate::recorder::Recorder;
 use crate::tensor::Dtype;
@@ -105,15 +105,18 @@ pub fn attention(
     }
     let ctx = rec.context().clone();
     let slots = u(l.head_dim / 4);
-    let variant = match subgroup_variant(&ctx, dtype, slots).or_else(|| rows_variant(dtype, slots)) {
+    let found = cooperative_variant(&ctx, dtype, l.head_dim)
+        .or_else(|| subgroup_variant(&ctx, dtype, slots))
+        .or_else(|| rows_variant(dtype, slots));
+    let variant = match found {
         Some(v) => v,
         None => vkdiff_kernels::variants("attention_wg", dtype)
             .filter(|v| v.param("DV").unwrap() * v.param("W").unwrap() >= slots)
             .min_by_key(|v| v.param("DV"))
             .ok_or_else(|| Error::Shape(format!("attention: head size {} is past the widest variant", l.head_dim)))?,
     };
-    // Query rows per workgroup: TM, or attention_rows' one per invocation.
-    let tm = variant.param("TM").unwrap_or(ROWS_PER_WORKGROUP) as usize;
+    // Query rows per workgroup: TM, 4·CM on the matrix units, or attention_rows' one per invocation.
+    let tm = variant.param("TM").or(variant.param("CM").map(|cm| 4 * cm)).unwrap_or(ROWS_PER_WORKGROUP) as usize;
     let kern = ctx.kernel(variant, 4)?;
     let push = [
         u(l.q_tokens),
@@ -139,6 +142,16 @@ pub fn attention(
 
 /// attention_rows' workgroup: 64 invocations, one query row each.
 const ROWS_PER_WORKGROUP: u32 = 64;
+
+/// The matrix-unit attention for f16 heads of up to 64 values, where the context runs its GEMMs
+/// on the matrix units (the same fragment size and subgroup width).
+fn cooperative_variant(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<&'static vkdiff_kernels::Variant> {
+    let (cm, sg) = ctx.info().cooperative_variant()?;
+    if ctx.gemm_family() != GemmFamily::Cooperative || dtype != Dtype::F16 || head_dim > 64 {
+        return None;
+    }
+    vkdiff_kernels::find("attention_coop", dtype, &[("CM", cm), ("SG", sg), ("DH", 64)])
+}
 
 /// The GPU attention variant with the fewest slots that hold a head of `slots` vec4s.
 fn rows_variant(dtype: Dtype, slots: u32) -> Option<&'static vkdiff_kernels::Variant> {
