@@ -33,8 +33,13 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
         }
         _ => "shared-memory tiles (GPU)".into(),
     };
-    let attention =
-        if d.subgroup_attention(gpu_paths) { "subgroup-register (CPU)" } else { "query rows per invocation (GPU)" };
+    let attention = if d.subgroup_attention(gpu_paths) {
+        "subgroup-register (CPU)"
+    } else if d.gemm_family(gpu_paths) == GemmFamily::Cooperative {
+        "matrix units for f16 heads up to 64, else query rows per invocation (GPU)"
+    } else {
+        "query rows per invocation (GPU)"
+    };
     let widened = if d.lavapipe_mesa.is_some() && vkdiff_runtime::lavapipe_vectors_widened() {
         " (vkdiff set LP_NATIVE_VECTOR_WIDTH=512 for this AVX-512 CPU; set it yourself to choose)"
     } else {
