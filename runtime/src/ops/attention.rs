@@ -147,10 +147,18 @@ const ROWS_PER_WORKGROUP: u32 = 64;
 /// on the matrix units (the same fragment size and subgroup width).
 fn cooperative_variant(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<&'static vkdiff_kernels::Variant> {
     let (cm, sg) = ctx.info().cooperative_variant()?;
-    if ctx.gemm_family() != GemmFamily::Cooperative || dtype != Dtype::F16 || head_dim > 64 {
+    let fits = cooperative_workgroup_bytes(cm) <= ctx.info().max_shared_memory;
+    if ctx.gemm_family() != GemmFamily::Cooperative || dtype != Dtype::F16 || head_dim > 64 || !fits {
         return None;
     }
     vkdiff_kernels::find("attention_coop", dtype, &[("CM", cm), ("SG", sg), ("DH", 64)])
+}
+
+/// Workgroup memory of attention_coop.wgsl at fragment size `cm` (heads of 64): K and V rows
+/// (f16), scores (f32), probabilities (f16), output rows (f32), and each row's maximum and sum.
+fn cooperative_workgroup_bytes(cm: u32) -> u32 {
+    let (keys, rows) = (2 * cm, 4 * cm);
+    2 * keys * (64 + 8) * 2 + rows * (keys + 4) * 4 + rows * (keys + 8) * 2 + rows * (64 + 4) * 4 + 2 * rows * 4
 }
 
 /// The GPU attention variant with the fewest slots that hold a head of `slots` vec4s.

@@ -2,6 +2,7 @@
 
 use super::bands::{bands, elem, fit, row_view, rows_per_band};
 use super::{dispatch_flat, f, kernel, rows_of, same_dtype, u};
+use crate::context::Context;
 use crate::device::DeviceKind;
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
@@ -30,23 +31,25 @@ pub fn group_norm(
     if !fit(rec.context(), &[x, out]) {
         return group_norm_banded(rec, [x, gamma, beta, out], (b, hw, c), groups, eps, silu);
     }
-    let ctx = rec.context().clone();
-    let parts = gpu_parts(b * groups, hw);
-    if (ctx.gpu_paths() || ctx.info().kind != DeviceKind::Cpu) && parts > 1 {
-        return group_norm_split(rec, [x, gamma, beta, out], (b, hw, c), groups, (eps, silu), parts);
+    if let Some(band) = gpu_band(rec.context(), groups, hw) {
+        return group_norm_split(rec, [x, gamma, beta, out], (b, hw, c), groups, (eps, silu), band);
     }
     let k = kernel(rec.context(), "group_norm", dtype, &[], 4)?;
     rec.dispatch(&k, &[x, gamma, beta], &[out], &[u(hw), u(c), u(groups), f(eps), silu as u32], [u(groups), u(b), 1])
 }
 
-/// Bands per image on a GPU: enough for about 1024 workgroups of (group, band) in all, each
-/// band at least 64 pixels. One workgroup per group (as on CPU devices) is 64 in all for SDXL's
-/// 32 groups and a CFG batch, a fraction of a GPU (GroupNorm ran at 40 GB/s on an H200).
-fn gpu_parts(groups_in_all: usize, hw: usize) -> usize {
-    1024usize.div_ceil(groups_in_all).min(hw / 64).max(1)
+/// Pixels per band on a GPU, where an image splits into more than one: enough bands for about
+/// 1024 workgroups of (group, band) per image, each band at least 64 pixels. One workgroup per
+/// group (as on CPU devices) is 64 in all for SDXL's 32 groups and a CFG batch, a fraction of a
+/// GPU (GroupNorm ran at 40 GB/s on an H200). The bands depend on the image alone, never on the
+/// batch or the binding limit, so an image's result is the same bits in any batch.
+fn gpu_band(ctx: &Context, groups: usize, hw: usize) -> Option<usize> {
+    let parts = 1024usize.div_ceil(groups).min(hw / 64);
+    let gpu = ctx.gpu_paths() || ctx.info().kind != DeviceKind::Cpu;
+    (gpu && parts > 1).then(|| hw.div_ceil(parts))
 }
 
-/// GroupNorm of a tensor in one binding, each image split into `parts` bands of pixels: the
+/// GroupNorm of a tensor in one binding, each image split into bands of `band` pixels: the
 /// bands' statistics in one dispatch, then every band normalised with its image's merged ones.
 fn group_norm_split(
     rec: &mut Recorder,
@@ -54,10 +57,9 @@ fn group_norm_split(
     (b, hw, c): (usize, usize, usize),
     groups: usize,
     (eps, silu): (f32, bool),
-    parts: usize,
+    band: usize,
 ) -> Result<()> {
     let ctx = rec.context().clone();
-    let band = hw.div_ceil(parts);
     let parts = hw.div_ceil(band);
     let stats = ctx.zeros(&[b * parts * groups * 3], Dtype::F32)?;
     let grid = [u(groups), u(parts), u(b)];
@@ -80,6 +82,8 @@ fn group_norm_banded(
 ) -> Result<()> {
     let ctx = rec.context().clone();
     let per = rows_per_band(&ctx, "group_norm", &[c * elem(x)], 0, 64)?;
+    // A GPU's own bands where they fit the binding, so the result is the split path's bits.
+    let per = gpu_band(&ctx, groups, hw).filter(|&band| band <= per).unwrap_or(per);
     let parts = hw.div_ceil(per);
     let stats = ctx.zeros(&[b * parts * groups * 3], Dtype::F32)?;
     let pixels = |image: usize, band: &std::ops::Range<usize>| image * hw + band.start..image * hw + band.end;
