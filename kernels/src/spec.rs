@@ -59,7 +59,7 @@ pub const KERNELS: &[KernelSpec] = &[
             &[("SG", 16), ("TM", 32), ("BT", 1)],
         ],
     },
-    // Shared-memory tiled GEMM: any shape, the variant for GPUs.
+    // Shared-memory tiled GEMM: any shape; GPUs without matrix units, and f32 products on any GPU.
     KernelSpec {
         name: "gemm_tiled",
         files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix.wgsl", "gemm_store.wgsl", "gemm_tiled.wgsl"],

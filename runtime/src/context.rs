@@ -263,8 +263,9 @@ impl Context {
     }
 
     /// Whether `VKDIFF_GPU_PATHS=1` runs this device as a discrete GPU would: device-only memory
-    /// reached through staging buffers, the tiled GEMM/convolution kernels and the workgroup
-    /// attention kernel. On lavapipe this proves the code a GPU runs.
+    /// reached through staging buffers, the GPU GEMM/convolution kernels (on the matrix units
+    /// where they fit, else tiled) and the GPU attention kernels. On lavapipe this proves the
+    /// code a GPU runs.
     pub fn gpu_paths(&self) -> bool {
         self.shared.gpu_paths.load(Ordering::SeqCst)
     }

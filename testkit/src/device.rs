@@ -10,7 +10,7 @@ pub fn ctx() -> Context {
 }
 
 /// A private context on the GPU paths (`VKDIFF_GPU_PATHS=1`'s configuration: device memory
-/// through staging, the tiled GEMM family, workgroup attention), so every pass also runs them.
+/// through staging, the GPU GEMM family, GPU attention), so every pass also runs them.
 pub fn gpu_ctx() -> Context {
     static CTX: OnceLock<Context> = OnceLock::new();
     CTX.get_or_init(|| {
