@@ -1,6 +1,7 @@
 //! lavapipe's vector width on CPUs with AVX-512. Mesa picks 256 bits unless
-//! `LP_NATIVE_VECTOR_WIDTH` says otherwise; on an AVX-512 EPYC, 512 ran the SDXL UNet 1.67× faster
-//! and GEMMs 1.3× (BENCHMARKS.md), with the 16-lane kernel variants.
+//! `LP_NATIVE_VECTOR_WIDTH` says otherwise. On an AMD EPYC with AVX-512, 512 bits ran the SDXL UNet
+//! 1.67× faster end to end (issue 23's report), with the 16-lane kernel variants; on a 2-vCPU
+//! Xeon the kernels alone were even (BENCHMARKS.md, "Drivers and subgroup widths").
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
