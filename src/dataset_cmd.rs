@@ -13,7 +13,6 @@ use vkdiff_pipeline::dataset::{
     RunOptions, ShardRequest,
 };
 use vkdiff_pipeline::Sampling;
-use vkdiff_runtime::Context;
 
 /// Render scenes and make each into photoreal images with exact masks: one folder with the
 /// images, their depth, control images and instance masks, and COCO annotations. Resumable and
@@ -88,8 +87,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     }
     eprintln!("{}", job.plan_line());
     if job.todo() > 0 {
-        let ctx = Context::new(args.model.device)?;
-        eprintln!("device: {}", ctx.info().name);
+        let ctx = crate::open_device(args.model.device)?;
         let done = job.done() as usize;
         let total = done + job.todo() as usize;
         // The bar and the clock start once the models are loaded: the closing line's per-image

@@ -45,6 +45,11 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
     } else {
         ""
     };
+    let compile = match (d.lavapipe_mesa, d.quick_compile()) {
+        (Some(_), true) => ", kernels compiled at first use, small products on the quickly compiled variants",
+        (Some(_), false) => ", kernels compiled at first use",
+        (None, _) => "",
+    };
     let paths = if gpu_paths { " (VKDIFF_GPU_PATHS=1: device memory through staging, GPU kernels)" } else { "" };
     [
         format!("[{}] {}{widened} — {}", d.index, d.name, verdict),
@@ -71,7 +76,7 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
             d.max_shared_memory / 1024
         ),
         format!(
-            "    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, attention: {attention}, timestamps: {}{paths}",
+            "    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, attention: {attention}, timestamps: {}{compile}{paths}",
             if d.supports_f16() { "f16 and f32" } else { "f32 only" },
             yes(d.timestamps)
         ),
@@ -110,7 +115,7 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
                     "cooperative_matrix_shapes": d.matrix_shapes.iter().map(|s| s.label()).collect::<Vec<_>>(),
                     "cooperative_variant": d.cooperative_variant(), "device_memory_bytes": d.device_local_bytes,
                     "max_storage_buffer_range": d.max_storage_buffer_range, "usable": d.unsupported_reason().is_none(),
-                    "unusable_reason": d.unsupported_reason(), "selected": chosen == Some(d.index),
+                    "unusable_reason": d.unsupported_reason(), "selected": chosen == Some(d.index), "quick_compile": d.quick_compile(),
                 })
             })
             .collect();

@@ -65,7 +65,7 @@ pub fn run(args: &FidArgs) -> Result<()> {
     if let Some(warning) = job.warning() {
         eprintln!("{warning}");
     }
-    let ctx = vkdiff_runtime::Context::new(args.device)?;
+    let ctx = crate::open_device(args.device)?;
     let mut bar: Option<(&str, Progress)> = None;
     let out = job.run(&ctx, &mut |stage, done, total| {
         if bar.as_ref().is_none_or(|(shown, _)| *shown != stage) {

@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use vkdiff_args::Progress;
 use vkdiff_args::{ModelArgs, SamplingArgs};
 use vkdiff_pipeline::{GenEvent, GenJob, GenRequest, GenSettings, TextToImage};
-use vkdiff_runtime::Context;
 
 /// Text-to-image with an SDXL model (diffusers folder or single .safetensors file).
 #[derive(Args, Debug)]
@@ -75,8 +74,7 @@ pub fn run(args: &GenArgs) -> Result<()> {
         latents_out: args.latents_out.clone(),
         replace: args.force,
     })?;
-    let ctx = Context::new(args.model.device)?;
-    eprintln!("device: {}", ctx.info().name);
+    let ctx = crate::open_device(args.model.device)?;
     // The bar starts once the models are loaded, so its rate is the denoiser's.
     let mut progress = None;
     let t = job.run(&ctx, &mut |event| match event {

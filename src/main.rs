@@ -63,6 +63,20 @@ fn main() {
     }
 }
 
+/// Opens the Vulkan device `index` (else the default) and has it say when lavapipe compiles
+/// kernels, which on a cold shader cache can take minutes before the first image.
+fn open_device(index: Option<usize>) -> vkdiff_runtime::Result<vkdiff_runtime::Context> {
+    let ctx = vkdiff_runtime::Context::new(index)?;
+    eprintln!("device: {}", ctx.info().name);
+    ctx.on_compile(std::sync::Arc::new(|kernels| {
+        // On a terminal, the line clears a progress bar, which redraws below it.
+        let clear = if std::io::IsTerminal::is_terminal(&std::io::stderr()) { "\r\x1b[K" } else { "" };
+        let plural = if kernels == 1 { "" } else { "s" };
+        eprintln!("{clear}compiling {kernels} kernel{plural} for this driver, once (Mesa's shader cache keeps them)");
+    }));
+    Ok(ctx)
+}
+
 /// The error and its causes joined by `: `, each said once: an error that already ends with its
 /// cause's text (a file error naming the path and the OS's reason) does not repeat it.
 fn one_line(error: &anyhow::Error) -> String {

@@ -50,6 +50,19 @@ impl DeviceInfo {
         }
     }
 
+    /// Whether this device compiles kernels slowly enough to prefer the variants that compile
+    /// quickly where a product is small: lavapipe after Mesa 22, whose JIT (at a kernel's first
+    /// dispatch, once per kernel: Mesa's shader cache keeps it) took 7× longer than 22.3's on the
+    /// subgroup GEMM on Mesa 25 and 2.4× on 26.1 (measured, 8 lanes). `VKDIFF_QUICK_COMPILE=1`
+    /// or `0` overrides it.
+    pub fn quick_compile(&self) -> bool {
+        match std::env::var("VKDIFF_QUICK_COMPILE").as_deref() {
+            Ok("1") => true,
+            Ok("0") => false,
+            _ => self.lavapipe_mesa.is_some_and(|(major, _)| major > 22),
+        }
+    }
+
     /// Whether attention may take the subgroup-register variants: on CPU devices, as the GEMM
     /// (their ~300 floats per lane suit lavapipe, not a GPU's register file); GPUs take
     /// `attention_rows`, or `attention_wg` for heads past it.
@@ -78,7 +91,14 @@ pub(crate) struct Shared {
     pub(crate) gpu_paths: AtomicBool,
     /// Whether every recording times its dispatches (see [`Context::set_profiling`]).
     pub(crate) profiling: AtomicBool,
+    /// See [`Context::quick_compile`].
+    pub(crate) quick_compile: AtomicBool,
+    /// Told how many kernels a submission compiles (see [`Context::on_compile`]).
+    pub(crate) compile_notice: Mutex<Option<CompileNotice>>,
 }
+
+/// Called before a submission whose kernels the driver compiles then, with their number.
+pub type CompileNotice = Arc<dyn Fn(usize) + Send + Sync>;
 
 impl Drop for Shared {
     fn drop(&mut self) {
@@ -213,6 +233,8 @@ impl Context {
             workgroup_limit: Mutex::new(info.max_workgroup_count),
             gpu_paths: AtomicBool::new(gpu_paths),
             profiling: AtomicBool::new(false),
+            quick_compile: AtomicBool::new(info.quick_compile()),
+            compile_notice: Mutex::new(None),
             info,
         };
         Ok(Context { shared: Arc::new(shared) })
@@ -287,6 +309,26 @@ impl Context {
 
     pub(crate) fn profiling(&self) -> bool {
         self.shared.profiling.load(Ordering::SeqCst)
+    }
+
+    /// Whether small products take the kernel variants that compile quickly rather than those
+    /// that run fastest (8 rows per workgroup for the subgroup GEMM and convolution with fewer
+    /// than 2¹⁷ weights or at most 8 rows, the workgroup attention for fewer than 256 channels:
+    /// tiny models, whose products take milliseconds); starts as [`DeviceInfo::quick_compile`].
+    pub fn quick_compile(&self) -> bool {
+        self.shared.quick_compile.load(Ordering::SeqCst)
+    }
+
+    /// Overrides [`Context::quick_compile`] (tests run both).
+    pub fn set_quick_compile(&self, on: bool) {
+        self.shared.quick_compile.store(on, Ordering::SeqCst);
+    }
+
+    /// Sets what to call before a submission on a device that compiles its kernels at their
+    /// first dispatch (lavapipe) when kernels that never ran in this process are in it: the
+    /// first runs on a cold Mesa shader cache can take minutes, so say what the wait is.
+    pub fn on_compile(&self, notice: CompileNotice) {
+        *self.shared.compile_notice.lock().unwrap() = Some(notice);
     }
 
     /// The most workgroups one dispatch may have per dimension.

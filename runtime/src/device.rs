@@ -231,7 +231,8 @@ pub(crate) fn describe(
         vendor_id: p.vendor_id,
         driver: format!("{} {}", text(&driver.driver_name), text(&driver.driver_info)).trim().to_string(),
         lavapipe_mesa: (driver.driver_id == vk::DriverId::MESA_LLVMPIPE)
-            .then(|| (vk::api_version_major(p.driver_version), vk::api_version_minor(p.driver_version))),
+            .then(|| mesa_version(&text(&driver.driver_info)))
+            .flatten(),
         api_version,
         shader_f16: f12.shader_float16 == vk::TRUE,
         storage_16bit: f11.storage_buffer16_bit_access == vk::TRUE
@@ -311,9 +312,26 @@ pub fn choose(devices: &[DeviceInfo], requested: Option<usize>) -> Result<usize>
         })
 }
 
+/// Mesa's (major, minor) from lavapipe's driver info ("Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"):
+/// lavapipe reports `driverVersion` as 1, not Mesa's version.
+fn mesa_version(driver_info: &str) -> Option<(u32, u32)> {
+    let version = driver_info.split_whitespace().skip_while(|w| *w != "Mesa").nth(1)?;
+    let mut numbers = version.split(|c: char| !c.is_ascii_digit()).map(str::parse::<u32>);
+    Some((numbers.next()?.ok()?, numbers.next()?.ok()?))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reads_mesa_versions_from_lavapipe_driver_info() {
+        assert_eq!(mesa_version("Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"), Some((25, 0)));
+        assert_eq!(mesa_version("Mesa 22.3.6 (LLVM 15.0.6)"), Some((22, 3)));
+        assert_eq!(mesa_version("Mesa 26.1.0-devel (git-1a2b3c4)"), Some((26, 1)));
+        assert_eq!(mesa_version("(LLVM 19.1.7)"), None);
+        assert_eq!(mesa_version("Mesa"), None);
+    }
 
     fn device(index: usize, kind: DeviceKind, usable: bool) -> DeviceInfo {
         DeviceInfo {

@@ -16,7 +16,7 @@ mod tensor;
 mod validation;
 
 pub use arena::Arena;
-pub use context::{gpu_paths_requested, Context, GemmFamily};
+pub use context::{gpu_paths_requested, CompileNotice, Context, GemmFamily};
 pub use cpu_vectors::{lavapipe_vectors_widened, widen_lavapipe_vectors};
 pub use device::{choose, list_devices, DeviceInfo, DeviceKind};
 pub use error::{Error, Result};

@@ -3,6 +3,7 @@
 use crate::error::{Result, VkContext};
 use ash::vk;
 use std::collections::HashMap;
+use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 use vkdiff_kernels::Variant;
 
@@ -16,6 +17,8 @@ pub struct Kernel {
     pub(crate) layout: vk::PipelineLayout,
     pub(crate) set_layout: vk::DescriptorSetLayout,
     pub(crate) bindings: u32,
+    /// Whether a submission in this process has dispatched it (JIT drivers compile it then).
+    pub(crate) dispatched: AtomicBool,
 }
 
 #[derive(Default)]
@@ -109,6 +112,6 @@ fn create_kernel(
         let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
         device.destroy_shader_module(module, None);
         let pipeline = created.map_err(|(_, e)| e).vk("vkCreateComputePipelines")?[0];
-        Ok(Kernel { name: variant.kernel, pipeline, layout, set_layout, bindings })
+        Ok(Kernel { name: variant.kernel, pipeline, layout, set_layout, bindings, dispatched: AtomicBool::new(false) })
     }
 }

@@ -9,6 +9,7 @@ use crate::submit::{memory_barrier, submit_and_wait};
 use crate::tensor::Tensor;
 use ash::vk;
 use std::collections::HashSet;
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 const SETS_PER_POOL: u32 = 256;
@@ -332,7 +333,21 @@ pub struct Recording {
 impl Recording {
     /// Runs the recording to completion.
     pub fn run(&self) -> Result<()> {
+        self.tell_compiles();
         submit_and_wait(&self.ctx, self.cmd)
+    }
+
+    /// Tells the context's compile notice how many of this recording's kernels lavapipe will
+    /// compile in this submission: those no earlier submission in this process dispatched.
+    fn tell_compiles(&self) {
+        if self.ctx.info().lavapipe_mesa.is_none() {
+            return;
+        }
+        let fresh = self.res.kernels.iter().filter(|k| !k.dispatched.swap(true, Ordering::SeqCst)).count();
+        let notice = self.ctx.shared.compile_notice.lock().unwrap().clone();
+        if let (Some(notice), true) = (notice, fresh > 0) {
+            notice(fresh);
+        }
     }
 
     /// Runs the recording and returns each dispatch's device time (recorded with `profile`).

@@ -13,9 +13,21 @@ pub fn ctx() -> Context {
 /// through staging, the GPU GEMM family, GPU attention), so every pass also runs them.
 pub fn gpu_ctx() -> Context {
     static CTX: OnceLock<Context> = OnceLock::new();
-    CTX.get_or_init(|| {
+    configured(&CTX, |c| c.set_gpu_paths(true))
+}
+
+/// A private context that takes the quickly compiled kernels for small products, as lavapipe
+/// after Mesa 22 does by default ([`Context::quick_compile`]), so every driver tests them.
+pub fn quick_ctx() -> Context {
+    static CTX: OnceLock<Context> = OnceLock::new();
+    configured(&CTX, |c| c.set_quick_compile(true))
+}
+
+/// The context in `cell`, opened and configured by `setup` on first use.
+fn configured(cell: &OnceLock<Context>, setup: fn(&Context)) -> Context {
+    cell.get_or_init(|| {
         let c = open();
-        c.set_gpu_paths(true);
+        setup(&c);
         c
     })
     .clone()

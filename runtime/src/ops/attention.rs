@@ -105,9 +105,13 @@ pub fn attention(
     }
     let ctx = rec.context().clone();
     let slots = u(l.head_dim / 4);
+    // With quick compiles, narrow attention (tiny models) takes attention_wg, which Mesa 25's
+    // JIT compiles in about a second, against 12–16 s for the subgroup variants and 34–94 s for
+    // attention_rows (measured).
+    let quick = ctx.quick_compile() && l.heads * l.head_dim < SMALL_CHANNELS;
     let found = cooperative_variant(&ctx, dtype, l.head_dim)
-        .or_else(|| subgroup_variant(&ctx, dtype, slots))
-        .or_else(|| rows_variant(dtype, slots));
+        .or_else(|| subgroup_variant(&ctx, dtype, slots).filter(|_| !quick))
+        .or_else(|| rows_variant(dtype, slots).filter(|_| !quick));
     let variant = match found {
         Some(v) => v,
         None => vkdiff_kernels::variants("attention_wg", dtype)
@@ -139,6 +143,10 @@ pub fn attention(
     rec.count_flops(4.0 * (l.batch * l.heads * l.q_tokens) as f64 * (l.kv_tokens * l.head_dim) as f64);
     rec.dispatch(&kern, &[q, k, v], &[out], &push, [u(l.q_tokens.div_ceil(tm)), u(l.heads), u(l.batch)])
 }
+
+/// Attention with fewer channels (heads × head size) than this is small enough to take the
+/// quickly compiled kernel: every SDXL, CLIP and VAE attention has 320 or more.
+const SMALL_CHANNELS: usize = 256;
 
 /// attention_rows' workgroup: 64 invocations, one query row each.
 const ROWS_PER_WORKGROUP: u32 = 64;

@@ -222,13 +222,7 @@ pub(super) fn dispatch_gemm_family(
     }
     let width = ctx.info().gemm_subgroup_width().filter(|_| family == GemmFamily::Subgroup && s.fits_subgroup);
     if let Some(sg) = width {
-        let tm: u32 = if s.m >= 1024 && sg < 16 && tall_tiles_compile_fast(ctx.info()) {
-            64
-        } else if s.m >= 256 {
-            32
-        } else {
-            16
-        };
+        let tm = subgroup_rows(s, sg, ctx.quick_compile());
         let want: Vec<(&str, u32)> = [("SG", sg), ("TM", tm)].into_iter().chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.subgroup, dtype, &want, 4)?;
         let columns = u(s.n.div_ceil(8 * sg as usize));
@@ -249,12 +243,27 @@ fn cooperative_fragments_per_side(s: &GemmShape, cm: usize) -> u32 {
     }
 }
 
-/// Whether taller products may take 64 rows per workgroup (fastest on Mesa 22.3's lavapipe). 16
-/// lanes stop at 32 (code size), and so does every lavapipe but 22.x: Mesa 25's JIT takes three
-/// minutes over one 64-row variant (measured), against a fraction of a second at 32.
-fn tall_tiles_compile_fast(info: &DeviceInfo) -> bool {
-    info.lavapipe_mesa.is_none_or(|(major, _)| major <= 22)
+/// Rows per workgroup of the subgroup kernels: more rows load each B value fewer times (64 ran
+/// fastest on Mesa 22.3's lavapipe; 16 lanes stop at 32, for code size), but later Mesa's JIT
+/// time grows about with the square of the rows (Mesa 25, 8 lanes, measured: 8 rows 5 s, 16 14 s,
+/// 32 57 s, 64 minutes). With `quick` compiles, no product takes 64, and products with fewer
+/// weights than [`SMALL_WEIGHTS`] (tiny models: milliseconds each) or at most 8 rows take 8.
+fn subgroup_rows(s: &GemmShape, sg: u32, quick: bool) -> u32 {
+    if quick && (s.n * s.k < SMALL_WEIGHTS || s.m <= 8) {
+        8
+    } else if s.m >= 1024 && sg < 16 && !quick {
+        64
+    } else if s.m >= 256 {
+        32
+    } else {
+        16
+    }
 }
+
+/// Products with fewer weights than this (2¹⁷: none of SDXL's, CLIP's or the VAE's layers but
+/// the first and last convolutions; every layer of the tiny test models) are small enough to
+/// take the quickly compiled kernels.
+const SMALL_WEIGHTS: usize = 1 << 17;
 
 impl DeviceInfo {
     /// The width of the subgroup GEMM/convolution variants this device runs: its native

@@ -107,6 +107,17 @@ fn head_sizes() {
 }
 
 #[test]
+fn quick_compiles_take_the_workgroup_attention() {
+    // Where compiles are quick, attention with fewer than 256 channels takes attention_wg
+    // (elsewhere the device's own choice); heads of 8 to 64, token counts off every tile.
+    for (heads, d, nq, nk) in [(2, 8, 19, 23), (3, 24, 15, 9), (4, 40, 33, 77), (2, 64, 70, 70)] {
+        for dtype in DTYPES {
+            check_on(&quick_ctx(), dtype, &AttentionLayout::dense(2, heads, d, nq, nk), 60 + d as u64);
+        }
+    }
+}
+
+#[test]
 fn strided_operands_from_a_fused_projection() {
     // Q, K, V as column blocks of [B, N, 3·H·D] projections (at column offsets 0, H·D and 2·H·D),
     // batch strides included.

@@ -1,7 +1,7 @@
 //! conv2d (implicit GEMM, NHWC) against an f64 direct convolution.
 
 use vkdiff_runtime::ops::{conv2d, oihw_to_ohwi, ConvParams, Padding};
-use vkdiff_runtime::{Dtype, GemmFamily};
+use vkdiff_runtime::{Context, Dtype, GemmFamily};
 use vkdiff_testkit::*;
 
 struct Case {
@@ -21,7 +21,11 @@ struct Case {
 }
 
 fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) {
-    let ctx = ctx_with(family);
+    check_on(&ctx_with(family), dtype, c, seed);
+}
+
+fn check_on(ctx: &Context, dtype: Dtype, c: &Case, seed: u64) {
+    let family = (ctx.gemm_family(), if ctx.quick_compile() { "quick" } else { "" });
     let [kh, kw] = c.k;
     let ho = (c.h + c.pad.top + c.pad.bottom - kh) / c.stride + 1;
     let wo = (c.w + c.pad.left + c.pad.right - kw) / c.stride + 1;
@@ -185,6 +189,27 @@ fn conv_large_images_take_the_large_row_tiles() {
         },
         27,
     );
+}
+
+#[test]
+fn conv_quick_compiles_take_the_eight_row_tiles() {
+    // Where compiles are quick, convolutions with fewer than 2¹⁷ weights take the 8-row
+    // subgroup variants (elsewhere the family the device has); 2·7·9 output pixels.
+    let case = Case {
+        b: 2,
+        h: 7,
+        w: 9,
+        cin: 12,
+        cout: 16,
+        k: [3, 3],
+        stride: 1,
+        pad: Padding::same(1),
+        accumulate: true,
+        relu: false,
+    };
+    for dtype in DTYPES {
+        check_on(&quick_ctx(), dtype, &case, 29);
+    }
 }
 
 #[test]

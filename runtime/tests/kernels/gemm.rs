@@ -1,7 +1,7 @@
 //! GEMM / linear against an f64 reference, for both kernel families and both storage dtypes.
 
 use vkdiff_runtime::ops::{linear, matmul, Matmul};
-use vkdiff_runtime::{Dtype, GemmFamily};
+use vkdiff_runtime::{Context, Dtype, GemmFamily};
 use vkdiff_testkit::*;
 
 /// Reference C and Σ|a·b| per element (the scale that bounds rounding error of a dot product).
@@ -41,7 +41,11 @@ fn accumulation_tol() -> f64 {
 }
 
 fn check(family: GemmFamily, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64) {
-    let ctx = ctx_with(family);
+    check_on(&ctx_with(family), dtype, s, with_bias, seed);
+}
+
+fn check_on(ctx: &Context, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64) {
+    let family = (ctx.gemm_family(), if ctx.quick_compile() { "quick" } else { "" });
     let (b_rows, b_cols) = if s.b_transposed { (s.n, s.k) } else { (s.k, s.n) };
     let a_len = (s.batch - 1) * s.a_batch + (s.m - 1) * s.lda + s.k;
     let b_len = (s.batch - 1) * s.b_batch + (b_rows - 1) * s.ldb + b_cols;
@@ -86,6 +90,23 @@ fn tall_shapes_take_the_large_row_tiles() {
     // M ≥ 256 and ≥ 1024 select the 32- and 64-row subgroup variants; M off their multiples.
     both(Matmul::dense(300, 68, 36, true), true, 8);
     both(Matmul::dense(1030, 40, 44, false), false, 9);
+}
+
+#[test]
+fn quick_compiles_take_the_eight_row_tiles() {
+    // Where compiles are quick, products with fewer than 2¹⁷ weights or at most 8 rows take the
+    // 8-row subgroup variants (elsewhere the family the device has); M off multiples of 8.
+    let ctx = quick_ctx();
+    for (s, seed) in [
+        (Matmul::dense(37, 68, 36, true), 12),
+        (Matmul::dense(300, 40, 44, false), 13),
+        (Matmul::dense(5, 520, 260, true), 14),
+        (Matmul::dense(3, 260, 520, false), 15),
+    ] {
+        for dtype in DTYPES {
+            check_on(&ctx, dtype, &s, true, seed);
+        }
+    }
 }
 
 #[test]
