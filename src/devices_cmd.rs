@@ -45,7 +45,7 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
     } else {
         ""
     };
-    let compile = match (d.lavapipe_mesa, d.quick_compile()) {
+    let compile = match (d.lavapipe_mesa, d.quick_compile(gpu_paths)) {
         (Some(_), true) => ", kernels compiled at first use, small products on the quickly compiled variants",
         (Some(_), false) => ", kernels compiled at first use",
         (None, _) => "",
@@ -104,6 +104,7 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
     let devices = list_devices()?;
     let chosen = choose(&devices, None).ok();
     if args.json {
+        let gpu_paths = gpu_paths_requested();
         let list: Vec<_> = devices
             .iter()
             .map(|d| {
@@ -115,7 +116,7 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
                     "cooperative_matrix_shapes": d.matrix_shapes.iter().map(|s| s.label()).collect::<Vec<_>>(),
                     "cooperative_variant": d.cooperative_variant(), "device_memory_bytes": d.device_local_bytes,
                     "max_storage_buffer_range": d.max_storage_buffer_range, "usable": d.unsupported_reason().is_none(),
-                    "unusable_reason": d.unsupported_reason(), "selected": chosen == Some(d.index), "quick_compile": d.quick_compile(),
+                    "unusable_reason": d.unsupported_reason(), "selected": chosen == Some(d.index), "quick_compile": d.quick_compile(gpu_paths),
                 })
             })
             .collect();

@@ -1,8 +1,10 @@
 // GEMM core for CPU-like devices (lavapipe), after a kernel study on lavapipe: a workgroup is one subgroup of
 // SG lanes; each lane owns 8 consecutive output columns for TM rows, reads A once as vec4 along K
 // and hands it to the other lanes by subgroup shuffles, so no shared memory and few loads per FMA.
-// The loop over the lanes whose A is shared stays a loop: unrolled, it ran no faster on Mesa
-// 22.3's lavapipe and took Mesa 25's JIT 34 s instead of 14 s (TM 16, 8 lanes).
+// The loop over the lanes whose A is shared stays rolled in the 8-row variants (LU = 1, for
+// quick compiles): a shuffle from a varying lane, which took Mesa 25's JIT 14 s instead of 34 s
+// at 16 rows. The others unroll it (LU = SG), a broadcast from a constant lane: rolled, the
+// networks' tests ran 1.6× slower at 16 lanes.
 // Needs N, K and every stride to be multiples of 4. B is K×N (BT = 0) or N×K (BT = 1).
 @group(0) @binding(1) var<storage, read> b: array<vec4<S>>;
 @group(0) @binding(2) var<storage, read> bias: array<vec4<S>>;
@@ -53,13 +55,28 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         // #unroll R TM
         av[R] = select(vec4<f32>(0.0), load_a(rows[R], kc), ka < p.g.k);
         // #end
-        for (var source = 0u; source < SG; source++) {
-            let bv = load_b(boff, k0 + 4u * source, n);
-            // #unroll R TM
+        if LU == 1u {
+            for (var source = 0u; source < SG; source++) {
+                let bv = load_b(boff, k0 + 4u * source, n);
+                // #unroll R TM
+                {
+                    let x = subgroupShuffle(av[R], source);
+                    acc[2u * R] += x.x * bv[0] + x.y * bv[2] + x.z * bv[4] + x.w * bv[6];
+                    acc[2u * R + 1u] += x.x * bv[1] + x.y * bv[3] + x.z * bv[5] + x.w * bv[7];
+                }
+                // #end
+            }
+        } else {
+            // #unroll L SG
             {
-                let x = subgroupShuffle(av[R], source);
-                acc[2u * R] += x.x * bv[0] + x.y * bv[2] + x.z * bv[4] + x.w * bv[6];
-                acc[2u * R + 1u] += x.x * bv[1] + x.y * bv[3] + x.z * bv[5] + x.w * bv[7];
+                let bv = load_b(boff, k0 + 4u * L, n);
+                // #unroll R TM
+                {
+                    let x = subgroupBroadcast(av[R], L);
+                    acc[2u * R] += x.x * bv[0] + x.y * bv[2] + x.z * bv[4] + x.w * bv[6];
+                    acc[2u * R + 1u] += x.x * bv[1] + x.y * bv[3] + x.z * bv[5] + x.w * bv[7];
+                }
+                // #end
             }
             // #end
         }

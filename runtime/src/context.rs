@@ -54,13 +54,14 @@ impl DeviceInfo {
     /// quickly where a product is small: lavapipe after Mesa 22, whose JIT (at a kernel's first
     /// dispatch, once per kernel: Mesa's shader cache keeps it) took 7× longer than 22.3's on the
     /// subgroup GEMM on Mesa 25 and 2.4× on 26.1 (measured, 8 lanes). `VKDIFF_QUICK_COMPILE=1`
-    /// or `0` overrides it.
-    pub fn quick_compile(&self) -> bool {
-        match std::env::var("VKDIFF_QUICK_COMPILE").as_deref() {
-            Ok("1") => true,
-            Ok("0") => false,
-            _ => self.lavapipe_mesa.is_some_and(|(major, _)| major > 22),
-        }
+    /// or `0` overrides it. Never on the GPU paths, which run the kernels a GPU runs.
+    pub fn quick_compile(&self, gpu_paths: bool) -> bool {
+        !gpu_paths
+            && match std::env::var("VKDIFF_QUICK_COMPILE").as_deref() {
+                Ok("1") => true,
+                Ok("0") => false,
+                _ => self.lavapipe_mesa.is_some_and(|(major, _)| major > 22),
+            }
     }
 
     /// Whether attention may take the subgroup-register variants: on CPU devices, as the GEMM
@@ -233,7 +234,7 @@ impl Context {
             workgroup_limit: Mutex::new(info.max_workgroup_count),
             gpu_paths: AtomicBool::new(gpu_paths),
             profiling: AtomicBool::new(false),
-            quick_compile: AtomicBool::new(info.quick_compile()),
+            quick_compile: AtomicBool::new(info.quick_compile(gpu_paths)),
             compile_notice: Mutex::new(None),
             info,
         };
@@ -293,11 +294,13 @@ impl Context {
     }
 
     /// Turns the GPU paths on or off for this context (tests run both on one device); turning
-    /// them on also selects the GEMM family a GPU would take (cooperative where it fits, else tiled).
+    /// them on also selects the GEMM family a GPU would take (cooperative where it fits, else
+    /// tiled) and, as on a GPU, the kernels that run fastest whatever their compile time.
     pub fn set_gpu_paths(&self, on: bool) {
         self.shared.gpu_paths.store(on, Ordering::SeqCst);
         if on {
             self.set_gemm_family(self.shared.info.gemm_family(true));
+            self.set_quick_compile(self.shared.info.quick_compile(true));
         }
     }
 
