@@ -87,7 +87,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     }
     eprintln!("{}", job.plan_line());
     if job.todo() > 0 {
-        let ctx = crate::open_device(args.model.device)?;
+        let ctx = crate::open_device(&args.model.device)?;
         let done = job.done() as usize;
         let total = done + job.todo() as usize;
         // The bar and the clock start once the models are loaded: the closing line's per-image

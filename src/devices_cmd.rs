@@ -62,6 +62,12 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
             d.driver
         ),
         format!(
+            "    UUID: {}, PCI: {}, compute queue family: {}",
+            d.uuid_text(),
+            d.pci.map_or("unknown (no VK_EXT_pci_bus_info)".into(), |p| p.to_string()),
+            d.compute_queue_family.map_or("none".into(), |f| f.to_string())
+        ),
+        format!(
             "    f16 storage+arith: {}, subgroup size: {sizes}, shuffle: {}, arithmetic: {}",
             yes(d.supports_f16()),
             yes(d.subgroup_shuffle),
@@ -78,7 +84,7 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
         format!(
             "    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, attention: {attention}, timestamps: {}{compile}{paths}",
             if d.supports_f16() { "f16 and f32" } else { "f32 only" },
-            yes(d.timestamps)
+            yes(d.timestamps())
         ),
     ]
     .join("\n")
@@ -102,7 +108,7 @@ fn matrix_units(d: &DeviceInfo) -> String {
 
 pub fn run(args: &DevicesArgs) -> Result<()> {
     let devices = list_devices()?;
-    let chosen = choose(&devices, None).ok();
+    let chosen = choose(&devices, &Default::default()).ok();
     if args.json {
         let gpu_paths = gpu_paths_requested();
         let list: Vec<_> = devices
@@ -117,6 +123,7 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
                     "cooperative_variant": d.cooperative_variant(), "device_memory_bytes": d.device_local_bytes,
                     "max_storage_buffer_range": d.max_storage_buffer_range, "usable": d.unsupported_reason().is_none(),
                     "unusable_reason": d.unsupported_reason(), "selected": chosen == Some(d.index), "quick_compile": d.quick_compile(gpu_paths),
+                    "uuid": d.uuid_text(), "pci": d.pci.map(|p| p.to_string()),
                 })
             })
             .collect();
@@ -129,5 +136,7 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
     for d in &devices {
         println!("{}", describe(d, chosen == Some(d.index)));
     }
+    let icds = vkdiff_runtime::loader_icds(&|name| std::env::var(name).ok());
+    println!("Vulkan driver manifests the loader reads: {}", icds.join(", "));
     Ok(())
 }

@@ -38,9 +38,8 @@ pub struct FidArgs {
     /// f32 matches torch-fidelity to ~1e-6; f16 is faster on GPUs and off by ~1e-3 in features.
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     precision: Precision,
-    /// Vulkan device index (see `vkdiff devices`).
-    #[arg(long)]
-    device: Option<usize>,
+    #[command(flatten)]
+    device: vkdiff_args::DeviceArgs,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -65,7 +64,7 @@ pub fn run(args: &FidArgs) -> Result<()> {
     if let Some(warning) = job.warning() {
         eprintln!("{warning}");
     }
-    let ctx = crate::open_device(args.device)?;
+    let ctx = crate::open_device(&args.device)?;
     let mut bar: Option<(&str, Progress)> = None;
     let out = job.run(&ctx, &mut |stage, done, total| {
         if bar.as_ref().is_none_or(|(shown, _)| *shown != stage) {

@@ -74,7 +74,7 @@ pub fn run(args: &GenArgs) -> Result<()> {
         latents_out: args.latents_out.clone(),
         replace: args.force,
     })?;
-    let ctx = crate::open_device(args.model.device)?;
+    let ctx = crate::open_device(&args.model.device)?;
     // The bar starts once the models are loaded, so its rate is the denoiser's.
     let mut progress = None;
     let t = job.run(&ctx, &mut |event| match event {

@@ -63,11 +63,25 @@ fn main() {
     }
 }
 
-/// Opens the Vulkan device `index` (else the default) and has it say when lavapipe compiles
-/// kernels, which on a cold shader cache can take minutes before the first image.
-fn open_device(index: Option<usize>) -> vkdiff_runtime::Result<vkdiff_runtime::Context> {
-    let ctx = vkdiff_runtime::Context::new(index)?;
-    eprintln!("device: {}", ctx.info().name);
+/// Opens the Vulkan device `args` choose and has it say when lavapipe compiles kernels, which on
+/// a cold shader cache can take minutes before the first image. A CPU device taken for want of
+/// a GPU says so, with the drivers the loader found.
+fn open_device(args: &vkdiff_args::DeviceArgs) -> vkdiff_runtime::Result<vkdiff_runtime::Context> {
+    let ctx = vkdiff_runtime::Context::new(&args.choice())?;
+    let info = ctx.info();
+    let fallback = info.kind == vkdiff_runtime::DeviceKind::Cpu
+        && args.device.is_none()
+        && std::env::var_os("VKDIFF_DEVICE").is_none();
+    if fallback {
+        let icds = vkdiff_runtime::loader_icds(&|name| std::env::var(name).ok()).join(", ");
+        eprintln!(
+            "device: {} — the CPU, no GPU's Vulkan driver was found (driver manifests: {icds}); --require-gpu \
+            refuses to run so",
+            info.name
+        );
+    } else {
+        eprintln!("device: {}", info.name);
+    }
     ctx.on_compile(std::sync::Arc::new(|kernels| {
         // On a terminal, the line clears a progress bar, which redraws below it.
         let clear = if std::io::IsTerminal::is_terminal(&std::io::stderr()) { "\r\x1b[K" } else { "" };

@@ -226,3 +226,18 @@ fn a_plain_prompt_past_77_tokens_is_cut_with_a_warning() {
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(result.status.success() && !stderr.contains("warning"), "{stderr}");
 }
+
+#[test]
+fn a_cpu_device_is_refused_when_a_gpu_is_required() {
+    // CI's only device is lavapipe: `--require-gpu` refuses it before any work, naming the
+    // drivers the loader reads, and writes nothing.
+    let dir = scratch("require-gpu");
+    let out = dir.join("x.png");
+    let model = tiny();
+    let args = ["gen", "--model", &model, "--prompt", "x", "--steps", "1", "--out", out.to_str().unwrap()];
+    let line = error_line(&[&args[..], &["--require-gpu"]].concat());
+    assert!(line.contains("a GPU is required") && line.contains("is a CPU") && line.contains("lvp_icd"), "{line}");
+    assert!(!out.exists());
+    let line = error_line(&[&args[..], &["--device", "0000:99:00.0"]].concat());
+    assert!(line.contains("--device names device PCI 0000:99:00.0") && line.contains("vkdiff devices"), "{line}");
+}

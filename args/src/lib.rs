@@ -3,11 +3,13 @@
 //! the precision, and the scene and its crops. Parsing only: each turns into the libraries'
 //! settings, which check themselves.
 
+mod device;
 mod flags;
 mod model;
 mod progress;
 mod scene;
 
+pub use device::DeviceArgs;
 pub use flags::{dataset_flag, flag};
 pub use model::{ModelArgs, Precision, SamplingArgs};
 pub use progress::Progress;

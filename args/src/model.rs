@@ -65,9 +65,8 @@ pub struct ModelArgs {
     model: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = Precision::F16)]
     precision: Precision,
-    /// Vulkan device index (see `vkdiff devices`).
-    #[arg(long)]
-    pub device: Option<usize>,
+    #[command(flatten)]
+    pub device: crate::DeviceArgs,
     /// Depth ControlNet: a diffusers folder, or one .safetensors in the diffusers or original
     /// (cldm) layout.
     #[arg(long)]

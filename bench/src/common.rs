@@ -6,9 +6,8 @@ use anyhow::Result;
 /// The flags of every benchmark that runs a CPU reference.
 #[derive(clap::Args)]
 pub struct Common {
-    /// Vulkan device index (see `vkdiff devices`).
-    #[arg(long)]
-    pub device: Option<usize>,
+    #[command(flatten)]
+    pub device: vkdiff_args::DeviceArgs,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,

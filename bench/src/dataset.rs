@@ -19,9 +19,8 @@ use vkdiff_runtime::Context;
 
 #[derive(clap::Args)]
 pub struct DatasetArgs {
-    /// Vulkan device index (see `vkdiff devices`).
-    #[arg(long)]
-    device: Option<usize>,
+    #[command(flatten)]
+    device: vkdiff_args::DeviceArgs,
     /// Image side (square crops of a frame 1920×1080 scaled by size/1024, three per scene).
     #[arg(long, default_value_t = 512)]
     size: usize,
@@ -48,7 +47,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     );
     anyhow::ensure!(args.batch > 0, "--batch must be at least 1");
     let dtype = args.precision.dtype();
-    let ctx = Context::new(args.device)?;
+    let ctx = Context::new(&args.device.choice())?;
     let start = Instant::now();
     let sdxl = Sdxl::random_sdxl_base(&ctx, dtype)?;
     let RandomGuides { controlnet, encoder, adapter, loras } = RandomGuides::build(&ctx, &sdxl, dtype, args.lora_rank)?;

@@ -73,7 +73,7 @@ pub fn run(args: &GenArgs) -> Result<()> {
 
 /// Our run; the device and every buffer are released before the reference runs.
 fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
-    let ctx = Context::new(args.common.device)?;
+    let ctx = Context::new(&args.common.device.choice())?;
     let start = Instant::now();
     let model = Sdxl::random_sdxl_base(&ctx, dtype)?;
     let load_s = start.elapsed().as_secs_f64();

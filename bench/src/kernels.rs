@@ -254,7 +254,7 @@ fn print_row(row: &Row) {
 }
 
 pub fn run(args: &KernelsArgs) -> Result<()> {
-    let ctx = Context::new(args.common.device)?;
+    let ctx = Context::new(&args.common.device.choice())?;
     let info = ctx.info().clone();
     let dtypes: Vec<Dtype> = if info.supports_f16() { vec![Dtype::F32, Dtype::F16] } else { vec![Dtype::F32] };
     let mut rows = Vec::new();

@@ -12,9 +12,8 @@ const REFERENCE: &str = include_str!("../../tools/lora_merge_cpu_reference.py");
 
 #[derive(clap::Args)]
 pub struct LoraArgs {
-    /// Vulkan device index (see `vkdiff devices`).
-    #[arg(long)]
-    device: Option<usize>,
+    #[command(flatten)]
+    device: vkdiff_args::DeviceArgs,
     #[arg(long, default_value_t = 32)]
     rank: usize,
     #[arg(long, value_enum, default_value_t = vkdiff_args::Precision::F16)]
@@ -26,7 +25,7 @@ pub struct LoraArgs {
 
 pub fn run(args: &LoraArgs) -> Result<()> {
     let dtype = args.precision.dtype();
-    let ctx = Context::new(args.device)?;
+    let ctx = Context::new(&args.device.choice())?;
     let unet = UNet::load(&UNetConfig::sdxl_base(), &Checkpoint::random(&ctx, dtype, 0))?;
     let shapes = transformer_linears(&unet);
     let path = std::env::temp_dir().join(format!("vkdiff-bench-lora-{}.safetensors", std::process::id()));

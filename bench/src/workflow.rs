@@ -13,9 +13,8 @@ use vkdiff_runtime::Context;
 
 #[derive(clap::Args)]
 pub struct WorkflowArgs {
-    /// Vulkan device index (see `vkdiff devices`).
-    #[arg(long)]
-    device: Option<usize>,
+    #[command(flatten)]
+    device: vkdiff_args::DeviceArgs,
     /// Image sizes in pixels (square).
     #[arg(long, value_delimiter = ',', default_values_t = [1024])]
     size: Vec<usize>,
@@ -29,7 +28,7 @@ pub struct WorkflowArgs {
 
 pub fn run(args: &WorkflowArgs) -> Result<()> {
     let dtype = args.precision.dtype();
-    let ctx = Context::new(args.device)?;
+    let ctx = Context::new(&args.device.choice())?;
     let start = Instant::now();
     let mut model = Sdxl::random_sdxl_base(&ctx, dtype)?;
     let RandomGuides { controlnet, encoder, adapter, loras } =

@@ -104,7 +104,7 @@ fn alone_and_together(
 
 fn check(precision: Dtype, size: (usize, usize), binding_limit: Option<u64>) {
     let ctx =
-        Context::new(None).unwrap_or_else(|e| panic!("these tests need a Vulkan device and found none usable: {e}"));
+        Context::new(&Default::default()).unwrap_or_else(|e| panic!("these tests need a Vulkan device and found none usable: {e}"));
     let (alone, together) = alone_and_together(&ctx, precision, size, binding_limit);
     for (k, (a, t)) in alone.iter().zip(&together).enumerate() {
         let differ = a.iter().zip(t).filter(|(x, y)| x.to_bits() != y.to_bits()).count();

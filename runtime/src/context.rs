@@ -1,6 +1,7 @@
 //! The device context: logical device, queue, allocator, pipeline cache and memory figures.
 
 use crate::device::{self, DeviceInfo, DeviceKind};
+use crate::device_choice::{choose, DeviceChoice};
 use crate::error::{Error, Result, VkContext};
 use crate::pipeline::{Kernel, PipelineCache};
 use crate::validation::Validation;
@@ -86,6 +87,8 @@ pub(crate) struct Shared {
     pub(crate) pipelines: PipelineCache,
     pub(crate) gemm_family: Mutex<GemmFamily>,
     pub(crate) binding_limit: AtomicU64,
+    /// The largest buffer one allocation may hold (`maxMemoryAllocationSize`).
+    pub(crate) allocation_limit: AtomicU64,
     /// The most workgroups one dispatch may have per dimension; larger grids are split.
     pub(crate) workgroup_limit: Mutex<[u32; 3]>,
     /// `VKDIFF_GPU_PATHS=1`: run as a discrete GPU would (see [`Context::gpu_paths`]).
@@ -124,11 +127,13 @@ pub struct Context {
 }
 
 impl Context {
-    /// Opens the device `requested` (or `VKDIFF_DEVICE`, or the best one; see [`device::choose`]).
-    pub fn new(requested: Option<usize>) -> Result<Context> {
+    /// Opens the device `choice` names (or `VKDIFF_DEVICE`, the scheduler's, or the best one;
+    /// see [`crate::choose`]).
+    pub fn new(choice: &DeviceChoice) -> Result<Context> {
         let entry = device::load_entry()?;
-        let (instance, validation) = device::create_instance(&entry)?;
-        match Self::open(&entry, &instance, requested) {
+        let api = device::api_limit()?;
+        let (instance, validation) = device::create_instance(&entry, api)?;
+        match Self::open(&entry, &instance, choice, api) {
             Ok((device, pd, info, queue_family)) => {
                 Self::finish(entry, (instance, validation), device, pd, info, queue_family)
             }
@@ -148,13 +153,14 @@ impl Context {
     fn open(
         entry: &ash::Entry,
         instance: &ash::Instance,
-        requested: Option<usize>,
+        choice: &DeviceChoice,
+        api: (u32, u32),
     ) -> Result<(ash::Device, vk::PhysicalDevice, DeviceInfo, u32)> {
         // SAFETY: valid instance.
         let pds = unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
         let infos: Vec<DeviceInfo> =
-            pds.iter().enumerate().map(|(i, &pd)| device::describe(entry, instance, pd, i)).collect();
-        let index = device::choose(&infos, requested)?;
+            pds.iter().enumerate().map(|(i, &pd)| device::describe(entry, instance, pd, (i, api))).collect();
+        let index = choose(&infos, choice)?;
         let info = infos[index].clone();
         let pd = pds[index];
         let family = info.compute_queue_family.expect("checked by choose");
@@ -173,6 +179,8 @@ impl Context {
             .shader_zero_initialize_workgroup_memory(info.zero_init_workgroup);
         let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default()
             .shader_zero_initialize_workgroup_memory(true);
+        let mut size_control_extension =
+            vk::PhysicalDeviceSubgroupSizeControlFeatures::default().subgroup_size_control(true).compute_full_subgroups(true);
         let priorities = [1.0f32];
         let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&priorities)];
         let mut extensions = Vec::new();
@@ -181,11 +189,17 @@ impl Context {
         }
         let mut create =
             vk::DeviceCreateInfo::default().queue_create_infos(&queues).push_next(&mut f11).push_next(&mut f12);
+        // A 1.2 device takes the extensions of the 1.3 features (and no 1.3 struct).
         if info.api_version >= (1, 3, 0) {
             create = create.push_next(&mut f13);
-        } else if info.zero_init_extension {
+        }
+        if info.zero_init_extension {
             extensions.push(ash::khr::zero_initialize_workgroup_memory::NAME.as_ptr());
             create = create.push_next(&mut zero_init);
+        }
+        if info.size_control_extension {
+            extensions.push(ash::ext::subgroup_size_control::NAME.as_ptr());
+            create = create.push_next(&mut size_control_extension);
         }
         if info.cooperative_features {
             extensions.push(ash::khr::cooperative_matrix::NAME.as_ptr());
@@ -231,6 +245,7 @@ impl Context {
             pipelines: PipelineCache::default(),
             gemm_family: Mutex::new(gemm_family),
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
+            allocation_limit: AtomicU64::new(info.max_allocation),
             workgroup_limit: Mutex::new(info.max_workgroup_count),
             gpu_paths: AtomicBool::new(gpu_paths),
             profiling: AtomicBool::new(false),
@@ -283,6 +298,14 @@ impl Context {
     /// small tensors); values above the device limit are clamped to it.
     pub fn set_binding_limit(&self, bytes: u64) {
         self.shared.binding_limit.store(bytes.min(self.shared.info.max_storage_buffer_range), Ordering::SeqCst);
+    }
+
+    /// Lowers the largest allocation below the device's `maxMemoryAllocationSize` (tests
+    /// exercise the refusal with small tensors); values above the device's are clamped to it.
+    pub fn set_allocation_limit(&self, bytes: u64) {
+        let device = self.shared.info.max_allocation;
+        let bytes = if device > 0 { bytes.min(device) } else { bytes };
+        self.shared.allocation_limit.store(bytes, Ordering::SeqCst);
     }
 
     /// Whether `VKDIFF_GPU_PATHS=1` runs this device as a discrete GPU would: device-only memory

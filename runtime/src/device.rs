@@ -1,11 +1,11 @@
 //! Vulkan instance, physical-device discovery and the choice of device.
 
+use crate::device_choice::PciAddress;
 use crate::error::{Error, Result, VkContext};
 use crate::matrix_units::{self, MatrixShape};
 use crate::validation::Validation;
 use ash::vk;
 use std::ffi::CStr;
-use vkdiff_setting::Message;
 
 /// What kind of device this is, in the order vkdiff prefers them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -60,6 +60,9 @@ pub struct DeviceInfo {
     pub zero_init_workgroup: bool,
     /// Whether `zero_init_workgroup` comes from the extension, which must then be enabled.
     pub zero_init_extension: bool,
+    /// Whether `subgroup_size_range` comes from `VK_EXT_subgroup_size_control` (a 1.2 device),
+    /// which must then be enabled.
+    pub size_control_extension: bool,
     pub subgroup_size: u32,
     pub subgroup_size_range: Option<(u32, u32)>,
     pub subgroup_shuffle: bool,
@@ -78,11 +81,34 @@ pub struct DeviceInfo {
     pub device_local_bytes: u64,
     pub min_storage_offset_alignment: u64,
     pub timestamp_period_ns: f32,
-    pub timestamps: bool,
+    /// The bits of a timestamp the compute queue writes (0: no timestamps).
+    pub timestamp_bits: u32,
+    /// A queue family with compute: one without graphics where the device has it (NVIDIA's
+    /// and AMD's compute queues, which a desktop's rendering does not share).
     pub compute_queue_family: Option<u32>,
+    /// `VkPhysicalDeviceIDProperties::deviceUUID` (NVIDIA's equals the CUDA UUID).
+    pub uuid: [u8; 16],
+    /// The PCI address, where the driver offers `VK_EXT_pci_bus_info`.
+    pub pci: Option<PciAddress>,
 }
 
 impl DeviceInfo {
+    /// The UUID as `vkdiff devices` prints it: 32 lowercase hex digits in 8-4-4-4-12 groups.
+    pub fn uuid_text(&self) -> String {
+        let hex = self.uuid_hex();
+        format!("{}-{}-{}-{}-{}", &hex[..8], &hex[8..12], &hex[12..16], &hex[16..20], &hex[20..])
+    }
+
+    /// The UUID as 32 lowercase hex digits.
+    pub fn uuid_hex(&self) -> String {
+        self.uuid.iter().map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// Whether the compute queue writes timestamps (`vkdiff bench --profile`).
+    pub fn timestamps(&self) -> bool {
+        self.timestamp_bits > 0
+    }
+
     /// Why vkdiff cannot run on this device, if it cannot.
     pub fn unsupported_reason(&self) -> Option<String> {
         if self.api_version < (1, 2, 0) {
@@ -136,13 +162,24 @@ pub(crate) fn load_entry() -> Result<ash::Entry> {
     unsafe { ash::Entry::load() }.map_err(|e| Error::NoLoader(e.to_string()))
 }
 
-/// vkdiff's instance, validated under `VKDIFF_VALIDATE=1`. Where the loader offers
-/// `VK_KHR_portability_enumeration`, portability devices (MoltenVK) are listed too.
-pub(crate) fn create_instance(entry: &ash::Entry) -> Result<(ash::Instance, Option<Validation>)> {
+/// The newest Vulkan version vkdiff asks for: 1.3, or 1.2 under `VKDIFF_VULKAN_API=1.2`, which
+/// runs the 1.2 paths (extensions where 1.3 has core features) on a 1.3 driver.
+pub fn api_limit() -> Result<(u32, u32)> {
+    match std::env::var("VKDIFF_VULKAN_API").as_deref() {
+        Err(_) | Ok("") | Ok("1.3") => Ok((1, 3)),
+        Ok("1.2") => Ok((1, 2)),
+        Ok(other) => Err(Error::BadDeviceSpec(format!("VKDIFF_VULKAN_API={other}: vkdiff runs Vulkan 1.2 or 1.3"))),
+    }
+}
+
+/// vkdiff's instance for Vulkan up to `api` (major, minor), validated under `VKDIFF_VALIDATE=1`.
+/// Where the loader offers `VK_KHR_portability_enumeration`, portability devices (MoltenVK) are
+/// listed too.
+pub(crate) fn create_instance(entry: &ash::Entry, api: (u32, u32)) -> Result<(ash::Instance, Option<Validation>)> {
     let app = vk::ApplicationInfo::default()
         .application_name(c"vkdiff")
         .engine_name(c"vkdiff")
-        .api_version(vk::API_VERSION_1_3);
+        .api_version(vk::make_api_version(0, api.0, api.1, 0));
     // SAFETY: a plain query of the loader.
     let available =
         unsafe { entry.enumerate_instance_extension_properties(None) }.vk("vkEnumerateInstanceExtensionProperties")?;
@@ -172,29 +209,53 @@ pub(crate) fn describe(
     entry: &ash::Entry,
     instance: &ash::Instance,
     pd: vk::PhysicalDevice,
-    index: usize,
+    (index, api): (usize, (u32, u32)),
 ) -> DeviceInfo {
+    // SAFETY: pd comes from this instance.
+    let reported = unsafe { instance.get_physical_device_properties(pd) }.api_version;
+    let reported = (vk::api_version_major(reported), vk::api_version_minor(reported), vk::api_version_patch(reported));
+    let api_version = if (reported.0, reported.1) > api { (api.0, api.1, 0) } else { reported };
+    let core13 = api_version >= (1, 3, 0);
+    // 1.3 structs only on 1.3 devices; the 1.2 path reads their extensions' equivalents.
+    let extension = |name: &CStr| has_extension(instance, pd, name);
+    let size_control_extension = !core13 && extension(ash::ext::subgroup_size_control::NAME);
+    let zero_init_extension = !core13 && extension(ash::khr::zero_initialize_workgroup_memory::NAME);
+    let cooperative_extension = extension(ash::khr::cooperative_matrix::NAME);
+    let pci_extension = extension(ash::ext::pci_bus_info::NAME);
+
     let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
     let mut size_control = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
     let mut driver = vk::PhysicalDeviceDriverProperties::default();
     let mut maintenance3 = vk::PhysicalDeviceMaintenance3Properties::default();
+    let mut ids = vk::PhysicalDeviceIDProperties::default();
+    let mut pci = vk::PhysicalDevicePCIBusInfoPropertiesEXT::default();
     let mut props2 = vk::PhysicalDeviceProperties2::default()
         .push_next(&mut subgroup)
         .push_next(&mut maintenance3)
-        .push_next(&mut size_control)
+        .push_next(&mut ids)
         .push_next(&mut driver);
+    if core13 || size_control_extension {
+        props2 = props2.push_next(&mut size_control);
+    }
+    if pci_extension {
+        props2 = props2.push_next(&mut pci);
+    }
     let mut f11 = vk::PhysicalDeviceVulkan11Features::default();
     let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
     let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
+    let mut size_control_features = vk::PhysicalDeviceSubgroupSizeControlFeatures::default();
     let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default();
-    let zero_init_extension = has_extension(instance, pd, ash::khr::zero_initialize_workgroup_memory::NAME);
     let mut cooperative = vk::PhysicalDeviceCooperativeMatrixFeaturesKHR::default();
-    let cooperative_extension = has_extension(instance, pd, ash::khr::cooperative_matrix::NAME);
-    let mut feats2 = vk::PhysicalDeviceFeatures2::default()
-        .push_next(&mut f11)
-        .push_next(&mut f12)
-        .push_next(&mut f13)
-        .push_next(&mut zero_init);
+    let mut feats2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f11).push_next(&mut f12);
+    if core13 {
+        feats2 = feats2.push_next(&mut f13);
+    }
+    if size_control_extension {
+        feats2 = feats2.push_next(&mut size_control_features);
+    }
+    if zero_init_extension {
+        feats2 = feats2.push_next(&mut zero_init);
+    }
     if cooperative_extension {
         feats2 = feats2.push_next(&mut cooperative);
     }
@@ -204,11 +265,11 @@ pub(crate) fn describe(
         instance.get_physical_device_features2(pd, &mut feats2);
         (instance.get_physical_device_memory_properties(pd), instance.get_physical_device_queue_family_properties(pd))
     };
+    let subgroup_size_control = if core13 { f13.subgroup_size_control } else { size_control_features.subgroup_size_control };
+    let zero_init_workgroup =
+        if core13 { f13.shader_zero_initialize_workgroup_memory } else { zero_init.shader_zero_initialize_workgroup_memory };
     let p = props2.properties;
-    let v = p.api_version;
-    let api_version = (vk::api_version_major(v), vk::api_version_minor(v), vk::api_version_patch(v));
-    let family = families.iter().position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE)).map(|i| i as u32);
-    let timestamps = family.is_some_and(|f| families[f as usize].timestamp_valid_bits > 0);
+    let family = compute_family(&families);
     let device_local_bytes = mem.memory_heaps[..mem.memory_heap_count as usize]
         .iter()
         .filter(|h| h.flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL))
@@ -217,7 +278,7 @@ pub(crate) fn describe(
         .unwrap_or(0);
     let compute = vk::ShaderStageFlags::COMPUTE;
     let ops = subgroup.supported_operations;
-    let size_range = (f13.subgroup_size_control == vk::TRUE
+    let size_range = (subgroup_size_control == vk::TRUE
         && size_control.required_subgroup_size_stages.contains(compute))
     .then_some((size_control.min_subgroup_size, size_control.max_subgroup_size));
     let text = |s: &[std::ffi::c_char]| {
@@ -237,8 +298,9 @@ pub(crate) fn describe(
         shader_f16: f12.shader_float16 == vk::TRUE,
         storage_16bit: f11.storage_buffer16_bit_access == vk::TRUE
             && f11.uniform_and_storage_buffer16_bit_access == vk::TRUE,
-        zero_init_workgroup: zero_init.shader_zero_initialize_workgroup_memory == vk::TRUE,
-        zero_init_extension: api_version < (1, 3, 0) && zero_init_extension,
+        zero_init_workgroup: zero_init_workgroup == vk::TRUE,
+        zero_init_extension,
+        size_control_extension: size_control_extension && size_range.is_some(),
         subgroup_size: subgroup.subgroup_size,
         subgroup_size_range: size_range,
         subgroup_shuffle: subgroup.supported_stages.contains(compute)
@@ -256,19 +318,35 @@ pub(crate) fn describe(
         device_local_bytes,
         min_storage_offset_alignment: p.limits.min_storage_buffer_offset_alignment,
         timestamp_period_ns: p.limits.timestamp_period,
-        timestamps,
+        timestamp_bits: family.map_or(0, |f| families[f as usize].timestamp_valid_bits),
         compute_queue_family: family,
+        uuid: ids.device_uuid,
+        pci: pci_extension.then_some(PciAddress {
+            domain: pci.pci_domain,
+            bus: pci.pci_bus,
+            device: pci.pci_device,
+            function: pci.pci_function,
+        }),
     }
+}
+
+/// The queue family to compute on: the first with compute and without graphics, else the first
+/// with compute.
+fn compute_family(families: &[vk::QueueFamilyProperties]) -> Option<u32> {
+    let compute = |f: &&vk::QueueFamilyProperties| f.queue_flags.contains(vk::QueueFlags::COMPUTE);
+    let dedicated = families.iter().position(|f| compute(&f) && !f.queue_flags.contains(vk::QueueFlags::GRAPHICS));
+    dedicated.or_else(|| families.iter().position(|f| compute(&f))).map(|i| i as u32)
 }
 
 /// Every Vulkan device on this machine, described.
 pub fn list_devices() -> Result<Vec<DeviceInfo>> {
     let entry = load_entry()?;
-    let (instance, validation) = create_instance(&entry)?;
+    let api = api_limit()?;
+    let (instance, validation) = create_instance(&entry, api)?;
     // SAFETY: the instance is valid until destroyed below.
     let infos = unsafe { instance.enumerate_physical_devices() }
         .vk("vkEnumeratePhysicalDevices")
-        .map(|pds| pds.iter().enumerate().map(|(i, &pd)| describe(&entry, &instance, pd, i)).collect());
+        .map(|pds| pds.iter().enumerate().map(|(i, &pd)| describe(&entry, &instance, pd, (i, api))).collect());
     // SAFETY: nothing created from the instance outlives it; the messenger goes first.
     unsafe {
         if let Some(v) = &validation {
@@ -277,39 +355,6 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>> {
         instance.destroy_instance(None)
     };
     infos
-}
-
-/// Which device to use: `requested` (the `device` setting), else `VKDIFF_DEVICE`, else the first
-/// usable discrete GPU, then integrated, virtual, CPU (lavapipe).
-pub fn choose(devices: &[DeviceInfo], requested: Option<usize>) -> Result<usize> {
-    let from_env = std::env::var("VKDIFF_DEVICE").ok().filter(|s| !s.is_empty());
-    let (index, requested_by) = match (requested, from_env) {
-        (Some(i), _) => (Some(i), Message::setting("device")),
-        (None, Some(s)) => (
-            Some(s.trim().parse().map_err(|_| Error::BadDeviceSpec(format!("VKDIFF_DEVICE={s}")))?),
-            Message::text("VKDIFF_DEVICE"),
-        ),
-        (None, None) => (None, Message::default()),
-    };
-    if devices.is_empty() {
-        return Err(Error::NoDevice);
-    }
-    if let Some(index) = index {
-        let d = devices.get(index).ok_or(Error::BadDeviceIndex { index, count: devices.len(), requested_by })?;
-        if let Some(reason) = d.unsupported_reason() {
-            return Err(Error::Unsupported { device: d.name.clone(), reason });
-        }
-        return Ok(index);
-    }
-    devices
-        .iter()
-        .filter(|d| d.unsupported_reason().is_none())
-        .min_by_key(|d| (d.kind, d.index))
-        .map(|d| d.index)
-        .ok_or_else(|| Error::Unsupported {
-            device: devices[0].name.clone(),
-            reason: devices[0].unsupported_reason().unwrap_or_default(),
-        })
 }
 
 /// Mesa's (major, minor) from lavapipe's driver info ("Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"):
@@ -321,19 +366,11 @@ fn mesa_version(driver_info: &str) -> Option<(u32, u32)> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    #[test]
-    fn reads_mesa_versions_from_lavapipe_driver_info() {
-        assert_eq!(mesa_version("Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"), Some((25, 0)));
-        assert_eq!(mesa_version("Mesa 22.3.6 (LLVM 15.0.6)"), Some((22, 3)));
-        assert_eq!(mesa_version("Mesa 26.1.0-devel (git-1a2b3c4)"), Some((26, 1)));
-        assert_eq!(mesa_version("(LLVM 19.1.7)"), None);
-        assert_eq!(mesa_version("Mesa"), None);
-    }
-
-    fn device(index: usize, kind: DeviceKind, usable: bool) -> DeviceInfo {
+    /// A usable 1.3 device of `kind` for the choice tests (`usable: false` lacks shuffles).
+    pub(crate) fn device(index: usize, kind: DeviceKind, usable: bool) -> DeviceInfo {
         DeviceInfo {
             index,
             name: format!("dev{index}"),
@@ -346,6 +383,7 @@ mod tests {
             storage_16bit: true,
             zero_init_workgroup: true,
             zero_init_extension: false,
+            size_control_extension: false,
             subgroup_size: 32,
             subgroup_size_range: None,
             subgroup_shuffle: usable,
@@ -361,47 +399,29 @@ mod tests {
             device_local_bytes: 1 << 31,
             min_storage_offset_alignment: 16,
             timestamp_period_ns: 1.0,
-            timestamps: true,
+            timestamp_bits: 64,
             compute_queue_family: Some(0),
+            uuid: [index as u8; 16],
+            pci: None,
         }
     }
 
     #[test]
-    fn prefers_discrete_then_integrated_then_cpu() {
-        // Run without VKDIFF_DEVICE influence: only `requested` paths read it after None.
-        let devs = [
-            device(0, DeviceKind::Cpu, true),
-            device(1, DeviceKind::Integrated, true),
-            device(2, DeviceKind::Discrete, true),
-        ];
-        assert_eq!(choose(&devs, Some(0)).unwrap(), 0);
-        if std::env::var("VKDIFF_DEVICE").is_err() {
-            assert_eq!(choose(&devs, None).unwrap(), 2);
-            assert_eq!(choose(&devs[..2], None).unwrap(), 1);
-            assert_eq!(choose(&devs[..1], None).unwrap(), 0);
-        }
+    fn reads_mesa_versions_from_lavapipe_driver_info() {
+        assert_eq!(mesa_version("Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"), Some((25, 0)));
+        assert_eq!(mesa_version("Mesa 22.3.6 (LLVM 15.0.6)"), Some((22, 3)));
+        assert_eq!(mesa_version("Mesa 26.1.0-devel (git-1a2b3c4)"), Some((26, 1)));
+        assert_eq!(mesa_version("(LLVM 19.1.7)"), None);
+        assert_eq!(mesa_version("Mesa"), None);
     }
 
     #[test]
-    fn skips_unusable_devices_and_rejects_them_when_asked() {
-        let devs = [device(0, DeviceKind::Discrete, false), device(1, DeviceKind::Cpu, true)];
-        if std::env::var("VKDIFF_DEVICE").is_err() {
-            assert_eq!(choose(&devs, None).unwrap(), 1);
-        }
-        let err = choose(&devs, Some(0)).unwrap_err().to_string();
-        assert!(err.contains("dev0") && err.contains("subgroup"), "{err}");
-        assert!(choose(&devs, Some(5)).unwrap_err().to_string().contains("only 2"));
-        assert!(matches!(choose(&[], None), Err(Error::NoDevice)));
-    }
-
-    #[test]
-    fn a_device_without_what_the_kernels_declare_is_refused_by_name() {
-        let mut dev = device(0, DeviceKind::Discrete, true);
-        dev.zero_init_workgroup = false;
-        let err = choose(&[dev], Some(0)).unwrap_err().to_string();
-        assert!(err.contains("shaderZeroInitializeWorkgroupMemory"), "{err}");
-        let mut dev = device(0, DeviceKind::Discrete, true);
-        dev.storage_16bit = false;
-        assert!(!dev.supports_f16(), "f16 kernels need 16-bit storage access");
+    fn computes_on_a_queue_without_graphics_where_there_is_one() {
+        let family = |flags| vk::QueueFamilyProperties { queue_flags: flags, queue_count: 1, ..Default::default() };
+        let (g, c, t) = (vk::QueueFlags::GRAPHICS, vk::QueueFlags::COMPUTE, vk::QueueFlags::TRANSFER);
+        // NVIDIA: graphics+compute, transfer, compute; lavapipe: one family with everything.
+        assert_eq!(compute_family(&[family(g | c | t), family(t), family(c | t)]), Some(2));
+        assert_eq!(compute_family(&[family(g | c | t)]), Some(0));
+        assert_eq!(compute_family(&[family(g), family(t)]), None);
     }
 }

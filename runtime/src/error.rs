@@ -13,8 +13,14 @@ pub enum Error {
     NoDevice,
     #[error("device {index} requested ({requested_by}) but only {count} Vulkan device(s) exist; see `vkdiff devices`")]
     BadDeviceIndex { index: usize, count: usize, requested_by: Message },
-    #[error("{0} is not a device index (expected a number; see `vkdiff devices`)")]
+    #[error("{0}")]
     BadDeviceSpec(String),
+    #[error("{requested_by} names device {spec}, but {why}; see `vkdiff devices`")]
+    NoSuchDevice { spec: String, why: &'static str, requested_by: Message },
+    #[error("{0}")]
+    NotVisible(String),
+    #[error("a GPU is required (--require-gpu or VKDIFF_REQUIRE_GPU=1), but {0}")]
+    NoGpu(String),
     #[error("device `{device}` cannot run vkdiff: {reason}")]
     Unsupported { device: String, reason: String },
     #[error("Vulkan call {call} failed: {result}")]

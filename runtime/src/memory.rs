@@ -22,6 +22,15 @@ impl Buffer {
     pub(crate) fn new(shared: &Arc<Shared>, size: u64, location: MemoryLocation, name: &str) -> Result<Arc<Buffer>> {
         // Whole words: fills (vkCmdFillBuffer) and vec4 kernels then cover an odd-length f16 tensor.
         let size = size.max(4).next_multiple_of(4);
+        let limit = shared.allocation_limit.load(Ordering::SeqCst);
+        if limit > 0 && size > limit {
+            return Err(Error::Memory(format!(
+                "`{name}` needs one {} MiB buffer, past this device's {} MiB maxMemoryAllocationSize; a smaller \
+                image or batch needs less",
+                size >> 20,
+                limit >> 20
+            )));
+        }
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST;

@@ -68,7 +68,7 @@ impl Recorder {
     /// dispatch is timed with timestamp queries.
     pub fn new(ctx: &Context, profile: bool) -> Result<Recorder> {
         let profile = profile || ctx.profiling();
-        ensure(!profile || ctx.info().timestamps, || {
+        ensure(!profile || ctx.info().timestamps(), || {
             format!("device `{}` has no timestamp queries to profile with", ctx.info().name)
         })?;
         let device = &ctx.shared.device;
@@ -176,7 +176,8 @@ impl Recorder {
         // SAFETY: the command buffer is recording; every handle is kept alive by `res`.
         unsafe {
             device.update_descriptor_sets(&descriptor_writes, &[]);
-            if hazard {
+            // A timed dispatch waits for those before it, so its stamps bracket it alone.
+            if hazard || timed.is_some() {
                 let compute = vk::PipelineStageFlags::COMPUTE_SHADER;
                 self.barrier(
                     compute,
@@ -188,7 +189,8 @@ impl Recorder {
                 self.read.clear();
             }
             if let Some((pool, q)) = timed {
-                device.cmd_write_timestamp(self.cmd, vk::PipelineStageFlags::TOP_OF_PIPE, pool, q);
+                // Written once every earlier dispatch has finished (the barrier above).
+                device.cmd_write_timestamp(self.cmd, vk::PipelineStageFlags::COMPUTE_SHADER, pool, q);
             }
             device.cmd_bind_pipeline(self.cmd, vk::PipelineBindPoint::COMPUTE, kernel.pipeline);
             device.cmd_bind_descriptor_sets(self.cmd, vk::PipelineBindPoint::COMPUTE, kernel.layout, 0, &[set], &[]);
@@ -368,12 +370,13 @@ impl Recording {
             .vk("vkGetQueryPoolResults")?;
         }
         let period = self.ctx.info().timestamp_period_ns as f64;
+        let bits = self.ctx.info().timestamp_bits;
         Ok(self
             .res
             .labels
             .iter()
             .zip(stamps.chunks_exact(2))
-            .map(|(&kernel, t)| Timing { kernel, nanos: t[1].saturating_sub(t[0]) as f64 * period })
+            .map(|(&kernel, t)| Timing { kernel, nanos: stamp_ticks(t[0], t[1], bits) as f64 * period })
             .collect())
     }
 
@@ -387,6 +390,13 @@ impl Recording {
     pub fn dispatches(&self) -> usize {
         self.res.labels.len()
     }
+}
+
+/// Ticks from `start` to `end` on a counter of `bits` valid bits (`timestampValidBits`): the
+/// bits above are undefined, and the counter may wrap between the two.
+fn stamp_ticks(start: u64, end: u64, bits: u32) -> u64 {
+    let mask = if bits >= 64 { u64::MAX } else { (1u64 << bits) - 1 };
+    end.wrapping_sub(start) & mask
 }
 
 /// "3 MiB" from 1 MiB up, else "2048 bytes".
@@ -404,5 +414,19 @@ impl Context {
         let mut rec = Recorder::new(self, false)?;
         f(&mut rec)?;
         rec.finish()?.run()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::stamp_ticks;
+
+    #[test]
+    fn timestamps_keep_their_valid_bits_and_wrap() {
+        assert_eq!(stamp_ticks(100, 250, 64), 150);
+        // 36 valid bits (some GPUs): garbage above them, and a wrap between the stamps.
+        let garbage = 0xabc0_0000_0000_0000;
+        assert_eq!(stamp_ticks(garbage | 100, 250, 36), 150);
+        assert_eq!(stamp_ticks((1 << 36) - 10, 5, 36), 15);
     }
 }

@@ -52,7 +52,7 @@ pub fn ctx_with(family: GemmFamily) -> Context {
 }
 
 fn open() -> Context {
-    Context::new(None).unwrap_or_else(|e| {
+    Context::new(&Default::default()).unwrap_or_else(|e| {
         panic!(
             "vkdiff's tests need a Vulkan device and found none usable: {e}\n(on Debian: apt-get install -y \
             mesa-vulkan-drivers libvulkan1)"

@@ -60,7 +60,7 @@ fn profiling_times_every_dispatch() {
 #[test]
 fn memory_accounting_tracks_live_and_peak() {
     // A private context: other tests allocate concurrently on the shared one.
-    let ctx = Context::new(None).unwrap();
+    let ctx = Context::new(&Default::default()).unwrap();
     let before = ctx.live_bytes();
     let t = ctx.zeros(&[1 << 20], Dtype::F32).unwrap();
     let h = ctx.zeros(&[1 << 20], Dtype::F16).unwrap();
@@ -116,7 +116,7 @@ fn odd_length_f16_tensors_are_filled_and_copied_whole() {
 
 #[test]
 fn bad_device_index_is_one_clear_error() {
-    let err = Context::new(Some(99)).err().expect("device 99 should not exist").to_string();
+    let err = Context::new(&vkdiff_runtime::DeviceChoice::index(99)).err().expect("device 99 should not exist").to_string();
     assert!(err.contains("device 99") && err.contains("vkdiff devices"), "{err}");
 }
 
@@ -124,7 +124,7 @@ fn bad_device_index_is_one_clear_error() {
 fn arena_reuses_a_dropped_buffer_within_one_recording() {
     // x → a = 2x (arena) → y = a + 1·a … then a is dropped, b takes its buffer and is written
     // while the recording still has to order it after a's last read (a WAR hazard).
-    let ctx = Context::new(None).unwrap();
+    let ctx = Context::new(&Default::default()).unwrap();
     let x: Vec<f32> = (0..1000).map(|i| i as f32).collect();
     let tx = ctx.upload(&[1000], Dtype::F32, &x).unwrap();
     let ty = ctx.zeros(&[1000], Dtype::F32).unwrap();
@@ -145,4 +145,13 @@ fn arena_reuses_a_dropped_buffer_within_one_recording() {
     assert_eq!(ty.download().unwrap(), x.iter().map(|v| 4.0 * v).collect::<Vec<_>>());
     let z = tz.download().unwrap();
     assert_eq!(&z[..900], &x[..900].iter().map(|v| -2.0 * v).collect::<Vec<_>>()[..]);
+}
+
+#[test]
+fn a_buffer_past_the_allocation_limit_is_refused_by_name() {
+    let ctx = Context::new(&Default::default()).unwrap();
+    ctx.set_allocation_limit(1 << 20);
+    let err = ctx.zeros(&[1 << 19], Dtype::F32).err().expect("a 2 MiB tensor past a 1 MiB limit").to_string();
+    assert!(err.contains("one 2 MiB buffer") && err.contains("1 MiB maxMemoryAllocationSize"), "{err}");
+    assert!(ctx.zeros(&[1 << 18], Dtype::F32).is_ok(), "1 MiB fits");
 }
