@@ -519,6 +519,8 @@ fn deploy(shell: &str, script: &[&str], dir: &Path, args: &Path, env: &[(&str, &
         command.env_remove(var);
     }
     command.envs([
+        // The jobs refuse a CPU device, and CI has only lavapipe.
+        ("VKDIFF_REQUIRE_GPU", "0"),
         ("VKDIFF", env!("CARGO_BIN_EXE_vkdiff")),
         ("DATASET_DIR", dir.to_str().unwrap()),
         ("DATASET_ARGS", args.to_str().unwrap()),
@@ -542,6 +544,18 @@ fn the_slurm_array_and_its_merge_make_the_one_run() {
     std::fs::remove_file(dir.join("annotations.json")).unwrap(); // the last task merged; so must the merge job
     wait_ok(deploy("bash", &["deploy/slurm/merge.sbatch"], &dir, &args, &[]));
     assert_same_folder(&dir, reference());
+}
+
+#[test]
+fn the_slurm_task_refuses_a_node_without_a_gpu_driver() {
+    let root = scratch("dataset-slurm-cpu");
+    let (dir, args) = (root.join("set"), args_file(&root));
+    let out = deploy("bash", &["deploy/slurm/dataset.sbatch"], &dir, &args, &[("VKDIFF_REQUIRE_GPU", "")])
+        .wait_with_output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && stderr.contains("error: a GPU is required"), "{stderr}");
+    assert!(!dir.join("annotations.json").exists());
 }
 
 #[test]
