@@ -1,14 +1,15 @@
 //! Batching is free of side effects: images denoised together, B per UNet pass, come out bit for
 //! bit as each does alone, with the whole workflow (ControlNet, IP-Adapter, LoRAs, guidance,
-//! ancestral noise), in f16 and f32, and with tensors split into bands past the binding limit.
-//! A private device context: the binding limit is lowered here.
+//! ancestral noise), in f16 and f32, with tensors split into bands past the binding limit, and
+//! with the recording split into one submission per dispatch. A private device context: the
+//! binding limit and the submission budget are changed here.
 
 use vkdiff_pipeline::images::{read_image, ControlDepth};
 use vkdiff_pipeline::{
     ControlNetSettings, Denoiser, IpAdapterSettings, IpScale, ItemInputs, LoraSetting, ModelSettings, SamplerKind,
     Sampling, WorkflowModels,
 };
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_runtime::{Context, Dtype, SubmitBudget};
 use vkdiff_testkit::fixture;
 
 fn settings(precision: Dtype) -> ModelSettings {
@@ -31,14 +32,27 @@ fn settings(precision: Dtype) -> ModelSettings {
     }
 }
 
-/// Latents of three images: each alone, then all in one batch; the denoiser (not the encoders,
-/// whose weights are larger than the tensors split) with `binding_limit`.
+/// How the batch of three is run besides: tensors split past a binding limit (the denoiser's,
+/// not the encoders', whose weights are larger than the tensors split), or its recording
+/// submitted one dispatch at a time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Split {
+    None,
+    Bands(u64),
+    Submissions,
+}
+
+/// Latents of three images: each alone, then all in one batch, run as `split` says.
 fn alone_and_together(
     ctx: &Context,
     precision: Dtype,
     size: (usize, usize),
-    binding_limit: Option<u64>,
+    split: Split,
 ) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
+    let binding_limit = match split {
+        Split::Bands(limit) => Some(limit),
+        _ => None,
+    };
     let models = WorkflowModels::load(ctx, &settings(precision), &mut |_| {}).unwrap();
     let sampling = Sampling {
         steps: if binding_limit.is_some() { 1 } else { 3 },
@@ -98,20 +112,23 @@ fn alone_and_together(
         .map(|item| one.run(std::slice::from_ref(item), &mut |_, _| {}).unwrap().latents.remove(0))
         .collect();
     drop(one);
+    if split == Split::Submissions {
+        ctx.set_submit_budget(SubmitBudget { flops: 0.0, dispatches: 1, ..ctx.submit_budget() });
+    }
     let together = record(3).run(&items, &mut |_, _| {}).unwrap().latents;
     (alone, together)
 }
 
-fn check(precision: Dtype, size: (usize, usize), binding_limit: Option<u64>) {
-    let ctx =
-        Context::new(&Default::default()).unwrap_or_else(|e| panic!("these tests need a Vulkan device and found none usable: {e}"));
-    let (alone, together) = alone_and_together(&ctx, precision, size, binding_limit);
+fn check(precision: Dtype, size: (usize, usize), split: Split) {
+    let ctx = Context::new(&Default::default())
+        .unwrap_or_else(|e| panic!("these tests need a Vulkan device and found none usable: {e}"));
+    let (alone, together) = alone_and_together(&ctx, precision, size, split);
     for (k, (a, t)) in alone.iter().zip(&together).enumerate() {
         let differ = a.iter().zip(t).filter(|(x, y)| x.to_bits() != y.to_bits()).count();
         assert_eq!(
             differ,
             0,
-            "{precision:?}, limit {binding_limit:?}: image {k} differs in {differ} of {} latents \
+            "{precision:?}, {split:?}: image {k} differs in {differ} of {} latents \
             between batch 1 and batch 3",
             a.len()
         );
@@ -121,17 +138,24 @@ fn check(precision: Dtype, size: (usize, usize), binding_limit: Option<u64>) {
 
 #[test]
 fn a_batch_gives_each_image_bit_for_bit_in_f16() {
-    check(Dtype::F16, (64, 96), None);
+    check(Dtype::F16, (64, 96), Split::None);
 }
 
 #[test]
 fn a_batch_gives_each_image_bit_for_bit_in_f32() {
-    check(Dtype::F32, (64, 96), None);
+    check(Dtype::F32, (64, 96), Split::None);
 }
 
 #[test]
 fn a_batch_split_into_bands_gives_each_image_bit_for_bit() {
     // 1 MiB: above every weight; the batch's activations, skip concatenations and attention
     // operands pass it, and many of one image's too.
-    check(Dtype::F32, (256, 384), Some(1 << 20));
+    check(Dtype::F32, (256, 384), Split::Bands(1 << 20));
+}
+
+#[test]
+fn a_batch_submitted_one_dispatch_at_a_time_gives_each_image_bit_for_bit() {
+    // What a small submission budget does on a GPU with a short watchdog: the same commands,
+    // each chunk opened by a barrier over everything before it.
+    check(Dtype::F16, (64, 96), Split::Submissions);
 }

@@ -4,6 +4,7 @@ use crate::device::{self, DeviceInfo, DeviceKind};
 use crate::device_choice::{choose, DeviceChoice};
 use crate::error::{Error, Result, VkContext};
 use crate::pipeline::{Kernel, PipelineCache};
+use crate::submit_budget::SubmitBudget;
 use crate::validation::Validation;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
@@ -99,6 +100,10 @@ pub(crate) struct Shared {
     pub(crate) quick_compile: AtomicBool,
     /// Told how many kernels a submission compiles (see [`Context::on_compile`]).
     pub(crate) compile_notice: Mutex<Option<CompileNotice>>,
+    /// See [`Context::submit_budget`].
+    pub(crate) submit_budget: Mutex<SubmitBudget>,
+    /// A wait for the device timed out: what it may still run is never freed.
+    pub(crate) hung: AtomicBool,
 }
 
 /// Called before a submission whose kernels the driver compiles then, with their number.
@@ -106,6 +111,9 @@ pub type CompileNotice = Arc<dyn Fn(usize) + Send + Sync>;
 
 impl Drop for Shared {
     fn drop(&mut self) {
+        if self.hung.load(Ordering::SeqCst) {
+            return; // the device may still run work on these objects; the process ends anyway
+        }
         // SAFETY: every buffer and recording holds an Arc<Shared>, so none is alive any more.
         unsafe {
             let _ = self.device.device_wait_idle();
@@ -179,8 +187,9 @@ impl Context {
             .shader_zero_initialize_workgroup_memory(info.zero_init_workgroup);
         let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default()
             .shader_zero_initialize_workgroup_memory(true);
-        let mut size_control_extension =
-            vk::PhysicalDeviceSubgroupSizeControlFeatures::default().subgroup_size_control(true).compute_full_subgroups(true);
+        let mut size_control_extension = vk::PhysicalDeviceSubgroupSizeControlFeatures::default()
+            .subgroup_size_control(true)
+            .compute_full_subgroups(true);
         let priorities = [1.0f32];
         let queues = [vk::DeviceQueueCreateInfo::default().queue_family_index(family).queue_priorities(&priorities)];
         let mut extensions = Vec::new();
@@ -232,6 +241,7 @@ impl Context {
         .map_err(|e| Error::Memory(e.to_string()))?;
         let gpu_paths = gpu_paths_requested();
         let gemm_family = info.gemm_family(gpu_paths);
+        let submit_budget = SubmitBudget::for_device(&info, &|name| std::env::var(name).ok())?;
         let shared = Shared {
             _entry: entry,
             instance,
@@ -251,6 +261,8 @@ impl Context {
             profiling: AtomicBool::new(false),
             quick_compile: AtomicBool::new(info.quick_compile(gpu_paths)),
             compile_notice: Mutex::new(None),
+            submit_budget: Mutex::new(submit_budget),
+            hung: AtomicBool::new(false),
             info,
         };
         Ok(Context { shared: Arc::new(shared) })
@@ -355,6 +367,18 @@ impl Context {
     /// first runs on a cold Mesa shader cache can take minutes, so say what the wait is.
     pub fn on_compile(&self, notice: CompileNotice) {
         *self.shared.compile_notice.lock().unwrap() = Some(notice);
+    }
+
+    /// Where recordings split into submissions and how long a wait for one may last (see
+    /// [`SubmitBudget`]).
+    pub fn submit_budget(&self) -> SubmitBudget {
+        *self.shared.submit_budget.lock().unwrap()
+    }
+
+    /// Sets the submission budget for recordings started from now on (tests split recordings
+    /// at every dispatch, benchmarks measure what splitting costs).
+    pub fn set_submit_budget(&self, budget: SubmitBudget) {
+        *self.shared.submit_budget.lock().unwrap() = budget;
     }
 
     /// The most workgroups one dispatch may have per dimension.

@@ -265,9 +265,13 @@ pub(crate) fn describe(
         instance.get_physical_device_features2(pd, &mut feats2);
         (instance.get_physical_device_memory_properties(pd), instance.get_physical_device_queue_family_properties(pd))
     };
-    let subgroup_size_control = if core13 { f13.subgroup_size_control } else { size_control_features.subgroup_size_control };
-    let zero_init_workgroup =
-        if core13 { f13.shader_zero_initialize_workgroup_memory } else { zero_init.shader_zero_initialize_workgroup_memory };
+    let subgroup_size_control =
+        if core13 { f13.subgroup_size_control } else { size_control_features.subgroup_size_control };
+    let zero_init_workgroup = if core13 {
+        f13.shader_zero_initialize_workgroup_memory
+    } else {
+        zero_init.shader_zero_initialize_workgroup_memory
+    };
     let p = props2.properties;
     let family = compute_family(&families);
     let device_local_bytes = mem.memory_heaps[..mem.memory_heap_count as usize]

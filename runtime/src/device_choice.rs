@@ -161,11 +161,15 @@ fn best(devices: &[DeviceInfo]) -> Result<usize> {
 fn find(devices: &[DeviceInfo], spec: &DeviceSpec, requested_by: Message) -> Result<usize> {
     let matches: Vec<usize> = match spec {
         DeviceSpec::Index(index) => {
-            return (*index < devices.len())
-                .then_some(*index)
-                .ok_or(Error::BadDeviceIndex { index: *index, count: devices.len(), requested_by })
+            return (*index < devices.len()).then_some(*index).ok_or(Error::BadDeviceIndex {
+                index: *index,
+                count: devices.len(),
+                requested_by,
+            })
         }
-        DeviceSpec::Uuid(hex) => devices.iter().filter(|d| d.uuid_hex().starts_with(hex.as_str())).map(|d| d.index).collect(),
+        DeviceSpec::Uuid(hex) => {
+            devices.iter().filter(|d| d.uuid_hex().starts_with(hex.as_str())).map(|d| d.index).collect()
+        }
         DeviceSpec::Pci(address) => devices.iter().filter(|d| d.pci == Some(*address)).map(|d| d.index).collect(),
     };
     match matches[..] {
@@ -259,7 +263,12 @@ pub fn loader_icds(env: &dyn Fn(&str) -> Option<String>) -> Vec<String> {
                 env("XDG_DATA_HOME").unwrap_or(home),
                 env("XDG_DATA_DIRS").unwrap_or_else(|| "/usr/local/share:/usr/share".into()),
             ];
-            bases.iter().flat_map(|b| b.split(':')).filter(|b| !b.is_empty()).map(|b| format!("{b}/vulkan/icd.d").into()).collect()
+            bases
+                .iter()
+                .flat_map(|b| b.split(':'))
+                .filter(|b| !b.is_empty())
+                .map(|b| format!("{b}/vulkan/icd.d").into())
+                .collect()
         }
     };
     let mut icds = Vec::new();

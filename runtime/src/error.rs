@@ -1,3 +1,4 @@
+use crate::submit_budget::DEFAULT_SUBMIT_GFLOP;
 use ash::vk;
 use vkdiff_setting::Message;
 
@@ -25,6 +26,19 @@ pub enum Error {
     Unsupported { device: String, reason: String },
     #[error("Vulkan call {call} failed: {result}")]
     Vulkan { call: &'static str, result: vk::Result },
+    #[error(
+        "the Vulkan device was lost in {0}: the driver reset the GPU, most often because one submission ran past \
+        the system's GPU watchdog (Windows TDR: 2 s; Linux amdgpu: lockup_timeout) or the driver crashed; \
+        VKDIFF_SUBMIT_GFLOP below its default of {DEFAULT_SUBMIT_GFLOP} makes each submission shorter"
+    )]
+    DeviceLost(&'static str),
+    #[error(
+        "a submission to the device did not finish in {seconds} s: the device hangs, or runs far slower than \
+        expected (VKDIFF_SUBMIT_TIMEOUT=SECONDS waits longer)"
+    )]
+    SubmitTimeout { seconds: f64 },
+    #[error("{0}")]
+    BadSetting(String),
     #[error("device memory: {0}")]
     Memory(String),
     #[error("VKDIFF_VALIDATE=1 needs the Khronos validation layer (Debian: apt-get install vulkan-validationlayers)")]
@@ -44,7 +58,10 @@ pub(crate) trait VkContext<T> {
 
 impl<T> VkContext<T> for std::result::Result<T, vk::Result> {
     fn vk(self, call: &'static str) -> Result<T> {
-        self.map_err(|result| Error::Vulkan { call, result })
+        self.map_err(|result| match result {
+            vk::Result::ERROR_DEVICE_LOST => Error::DeviceLost(call),
+            result => Error::Vulkan { call, result },
+        })
     }
 }
 
@@ -54,5 +71,20 @@ pub(crate) fn ensure(cond: bool, message: impl FnOnce() -> String) -> Result<()>
         Ok(())
     } else {
         Err(Error::Shape(message()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_lost_device_names_the_likely_cause_and_the_setting() {
+        let lost: std::result::Result<(), vk::Result> = Err(vk::Result::ERROR_DEVICE_LOST);
+        let text = lost.vk("vkWaitForFences").unwrap_err().to_string();
+        assert!(text.starts_with("the Vulkan device was lost in vkWaitForFences"), "{text}");
+        assert!(text.contains("TDR") && text.contains("VKDIFF_SUBMIT_GFLOP below its default of 100"), "{text}");
+        let other: std::result::Result<(), vk::Result> = Err(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY);
+        assert!(matches!(other.vk("vkQueueSubmit"), Err(Error::Vulkan { .. })));
     }
 }

@@ -13,6 +13,7 @@ pub mod ops;
 mod pipeline;
 mod recorder;
 mod submit;
+mod submit_budget;
 mod tensor;
 mod validation;
 
@@ -25,4 +26,5 @@ pub use error::{Error, Result};
 pub use matrix_units::MatrixShape;
 pub use pipeline::Kernel;
 pub use recorder::{Recorder, Recording, Timing};
+pub use submit_budget::{SubmitBudget, DEFAULT_SUBMIT_GFLOP, DISPATCHES_PER_SUBMIT};
 pub use tensor::{dtype_size, Dtype, Tensor};

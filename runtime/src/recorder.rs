@@ -5,7 +5,8 @@ use crate::context::Context;
 use crate::error::{ensure, Result, VkContext};
 use crate::memory::Buffer;
 use crate::pipeline::{Kernel, PUSH_BYTES};
-use crate::submit::{memory_barrier, submit_and_wait};
+use crate::submit::{memory_barrier, submit_chunks_and_wait};
+use crate::submit_budget::SubmitBudget;
 use crate::tensor::Tensor;
 use ash::vk;
 use std::collections::HashSet;
@@ -28,18 +29,25 @@ pub struct Timing {
 pub struct Recorder {
     ctx: Context,
     res: Resources,
+    /// The chunk being recorded; `res.chunks` holds those before it.
     cmd: vk::CommandBuffer,
     sets_left: u32,
     written: HashSet<vk::Buffer>,
     read: HashSet<vk::Buffer>,
     profile: bool,
     flops: f64,
+    budget: SubmitBudget,
+    /// FLOPs and dispatches recorded into `cmd` so far.
+    chunk_flops: f64,
+    chunk_dispatches: u32,
 }
 
 /// Vulkan objects owned by a recording, destroyed with it.
 struct Resources {
     ctx: Context,
     command_pool: vk::CommandPool,
+    /// The finished chunks, submitted in order (see [`SubmitBudget`]).
+    chunks: Vec<vk::CommandBuffer>,
     descriptor_pools: Vec<vk::DescriptorPool>,
     query_pools: Vec<vk::QueryPool>,
     labels: Vec<&'static str>,
@@ -49,6 +57,11 @@ struct Resources {
 
 impl Drop for Resources {
     fn drop(&mut self) {
+        if self.ctx.shared.hung.load(Ordering::SeqCst) {
+            // A timed-out run may still use these: leave them (the process ends anyway).
+            std::mem::forget(std::mem::take(&mut self.buffers));
+            return;
+        }
         let device = &self.ctx.shared.device;
         // SAFETY: recordings are only run synchronously, so nothing is pending.
         unsafe {
@@ -83,38 +96,69 @@ impl Recorder {
             let res = Resources {
                 ctx: ctx.clone(),
                 command_pool,
+                chunks: Vec::new(),
                 descriptor_pools: Vec::new(),
                 query_pools: Vec::new(),
                 labels: Vec::new(),
                 buffers: Vec::new(),
                 kernels: Vec::new(),
             };
-            let cmd = device
-                .allocate_command_buffers(
-                    &vk::CommandBufferAllocateInfo::default().command_pool(command_pool).command_buffer_count(1),
-                )
-                .vk("vkAllocateCommandBuffers")?[0];
-            device.begin_command_buffer(cmd, &vk::CommandBufferBeginInfo::default()).vk("vkBeginCommandBuffer")?;
-            let rec = Recorder {
+            let mut rec = Recorder {
                 ctx: ctx.clone(),
                 res,
-                cmd,
+                cmd: vk::CommandBuffer::null(),
                 sets_left: 0,
                 written: HashSet::new(),
                 read: HashSet::new(),
                 profile,
                 flops: 0.0,
+                budget: ctx.submit_budget(),
+                chunk_flops: 0.0,
+                chunk_dispatches: 0,
             };
-            // What earlier submissions wrote (kernels, staging copies, fills) is made visible
-            // to this recording's kernels: a fence wait alone does not.
-            rec.barrier(
+            rec.begin_chunk()?;
+            Ok(rec)
+        }
+    }
+
+    /// Starts a command buffer for the next chunk. Its first barrier makes what earlier
+    /// submissions wrote (kernels, staging copies, fills, the chunk before) visible to its
+    /// kernels: a fence wait alone does not, and submission order alone orders no memory.
+    fn begin_chunk(&mut self) -> Result<()> {
+        let device = &self.ctx.shared.device;
+        // SAFETY: the pool belongs to this recording; the buffer is ended before submission.
+        unsafe {
+            self.cmd = device
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(self.res.command_pool)
+                        .command_buffer_count(1),
+                )
+                .vk("vkAllocateCommandBuffers")?[0];
+            device.begin_command_buffer(self.cmd, &vk::CommandBufferBeginInfo::default()).vk("vkBeginCommandBuffer")?;
+            self.barrier(
                 vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
                 vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE,
                 vk::PipelineStageFlags::COMPUTE_SHADER,
                 vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
             );
-            Ok(rec)
         }
+        self.written.clear();
+        self.read.clear();
+        self.chunk_flops = 0.0;
+        self.chunk_dispatches = 0;
+        Ok(())
+    }
+
+    /// Ends the chunk being recorded and starts the next once it holds its budget's worth.
+    fn split_when_full(&mut self) -> Result<()> {
+        if self.chunk_flops < self.budget.flops && self.chunk_dispatches < self.budget.dispatches {
+            return Ok(());
+        }
+        // SAFETY: the command buffer is recording.
+        unsafe { self.ctx.shared.device.end_command_buffer(self.cmd) }.vk("vkEndCommandBuffer")?;
+        self.res.chunks.push(self.cmd);
+        self.begin_chunk()
     }
 
     pub fn context(&self) -> &Context {
@@ -151,6 +195,8 @@ impl Recorder {
         if groups.contains(&0) {
             return Ok(());
         }
+        self.split_when_full()?;
+        self.chunk_dispatches += 1;
         let hazard = reads.iter().any(|t| self.written.contains(&t.buf.raw))
             || writes.iter().any(|t| self.written.contains(&t.buf.raw) || self.read.contains(&t.buf.raw));
         let set = self.allocate_set(kernel)?;
@@ -315,28 +361,42 @@ impl Recorder {
             );
             self.ctx.shared.device.end_command_buffer(self.cmd).vk("vkEndCommandBuffer")?;
         }
-        Ok(Recording { ctx: self.ctx, cmd: self.cmd, res: self.res, flops: self.flops })
+        let mut res = self.res;
+        res.chunks.push(self.cmd);
+        Ok(Recording { ctx: self.ctx, res, flops: self.flops })
     }
 
-    /// Counts the arithmetic of a matrix product just recorded (ops call it; see [`Recording::flops`]).
+    /// Counts the arithmetic of a matrix product just recorded (ops call it; see
+    /// [`Recording::flops`]); it fills the chunk's budget too.
     pub(crate) fn count_flops(&mut self, flops: f64) {
         self.flops += flops;
+        self.chunk_flops += flops;
     }
 }
 
 /// A finished command buffer that can be run any number of times.
 pub struct Recording {
     ctx: Context,
-    cmd: vk::CommandBuffer,
     res: Resources,
     flops: f64,
 }
 
 impl Recording {
-    /// Runs the recording to completion.
+    /// Runs the recording to completion, one submission per chunk.
     pub fn run(&self) -> Result<()> {
+        self.run_submissions().map(drop)
+    }
+
+    /// Runs the recording and returns about how long each submission ran: from the end of the
+    /// one before (the first: from its submission) to its own end, as the host saw them.
+    pub fn run_submissions(&self) -> Result<Vec<std::time::Duration>> {
         self.tell_compiles();
-        submit_and_wait(&self.ctx, self.cmd)
+        submit_chunks_and_wait(&self.ctx, &self.res.chunks)
+    }
+
+    /// The submissions one run makes (see [`SubmitBudget`]).
+    pub fn submissions(&self) -> usize {
+        self.res.chunks.len()
     }
 
     /// Tells the context's compile notice how many of this recording's kernels lavapipe will

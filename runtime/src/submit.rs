@@ -1,8 +1,9 @@
 //! One-off command buffers for transfers outside a recording (staging copies, fills).
 
 use crate::context::Context;
-use crate::error::{Result, VkContext};
+use crate::error::{Error, Result, VkContext};
 use ash::vk;
+use std::time::{Duration, Instant};
 
 /// Records `f` into a fresh command buffer, submits it and waits for it to finish.
 pub(crate) fn submit_once(ctx: &Context, f: impl FnOnce(&ash::Device, vk::CommandBuffer)) -> Result<()> {
@@ -57,18 +58,50 @@ pub(crate) fn submit_once(ctx: &Context, f: impl FnOnce(&ash::Device, vk::Comman
 
 /// Submits one recorded command buffer and blocks until the device has finished it.
 pub(crate) fn submit_and_wait(ctx: &Context, cmd: vk::CommandBuffer) -> Result<()> {
+    submit_chunks_and_wait(ctx, &[cmd]).map(drop)
+}
+
+/// Submits `chunks` in order, one `vkQueueSubmit` each (a GPU watchdog times each alone), then
+/// waits for each in turn, at most the context's submission timeout apiece. Returns the time
+/// between one chunk's end and the next's (the first's from the submission): queued back to
+/// back, about each chunk's run time.
+pub(crate) fn submit_chunks_and_wait(ctx: &Context, chunks: &[vk::CommandBuffer]) -> Result<Vec<Duration>> {
     let device = &ctx.shared.device;
-    // SAFETY: cmd is fully recorded; the queue is externally synchronised by its mutex.
+    let timeout = ctx.submit_budget().timeout;
+    let mut fences = Vec::with_capacity(chunks.len());
+    let mut times = Vec::with_capacity(chunks.len());
+    // SAFETY: each chunk is fully recorded; the queue is externally synchronised by its mutex;
+    // the fences are destroyed only once signalled (or never, on a hung device).
     unsafe {
-        let fence = device.create_fence(&vk::FenceCreateInfo::default(), None).vk("vkCreateFence")?;
-        let cmds = [cmd];
-        let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
-        let result = {
-            let queue = ctx.shared.queue.lock().unwrap();
-            device.queue_submit(*queue, &submit, fence).vk("vkQueueSubmit")
+        let result = (|| {
+            for &cmd in chunks {
+                let fence = device.create_fence(&vk::FenceCreateInfo::default(), None).vk("vkCreateFence")?;
+                fences.push(fence);
+                let cmds = [cmd];
+                let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
+                let queue = ctx.shared.queue.lock().unwrap();
+                device.queue_submit(*queue, &submit, fence).vk("vkQueueSubmit")?;
+            }
+            let mut last = Instant::now();
+            for fence in &fences {
+                match device.wait_for_fences(&[*fence], true, timeout.as_nanos().min(u64::MAX as u128) as u64) {
+                    Err(vk::Result::TIMEOUT) => {
+                        // The device may still run these chunks: nothing they use is freed.
+                        ctx.shared.hung.store(true, std::sync::atomic::Ordering::SeqCst);
+                        return Err(Error::SubmitTimeout { seconds: timeout.as_secs_f64() });
+                    }
+                    other => other.vk("vkWaitForFences")?,
+                }
+                times.push(last.elapsed());
+                last = Instant::now();
+            }
+            Ok(times)
+        })();
+        if !ctx.shared.hung.load(std::sync::atomic::Ordering::SeqCst) {
+            for fence in fences {
+                device.destroy_fence(fence, None);
+            }
         }
-        .and_then(|_| device.wait_for_fences(&[fence], true, u64::MAX).vk("vkWaitForFences"));
-        device.destroy_fence(fence, None);
         result
     }
 }

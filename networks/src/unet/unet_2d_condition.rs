@@ -59,6 +59,12 @@ impl UNetPass {
     pub fn flops(&self) -> f64 {
         self.recording.flops()
     }
+
+    /// Runs one evaluation and returns about how long each submission ran
+    /// ([`vkdiff_runtime::Recording::run_submissions`]).
+    pub fn run_submissions(&self) -> Result<Vec<std::time::Duration>> {
+        Ok(self.recording.run_submissions()?)
+    }
 }
 
 pub struct UNet {

@@ -147,7 +147,8 @@ fn lists_the_driver_manifests_of_the_loaders_search_path() {
         std::fs::write(icd.join(name), "{}").unwrap();
     }
     let base = dir.display().to_string();
-    let env = [("XDG_DATA_DIRS", base.as_str()), ("XDG_CONFIG_DIRS", "/nonexistent"), ("XDG_DATA_HOME", "/nonexistent")];
+    let env =
+        [("XDG_DATA_DIRS", base.as_str()), ("XDG_CONFIG_DIRS", "/nonexistent"), ("XDG_DATA_HOME", "/nonexistent")];
     let found = loader_icds(&env_of(&env));
     std::fs::remove_dir_all(&dir).unwrap();
     // /etc/vulkan/icd.d is always searched; this machine's own manifests may come first.

@@ -2,7 +2,7 @@
 //! memory accounting, views and device errors.
 
 use vkdiff_runtime::ops::{self, UnaryOp};
-use vkdiff_runtime::{Arena, Context, Dtype, Recorder};
+use vkdiff_runtime::{Arena, Context, Dtype, Error, Recorder, SubmitBudget};
 use vkdiff_testkit::*;
 
 #[test]
@@ -116,7 +116,8 @@ fn odd_length_f16_tensors_are_filled_and_copied_whole() {
 
 #[test]
 fn bad_device_index_is_one_clear_error() {
-    let err = Context::new(&vkdiff_runtime::DeviceChoice::index(99)).err().expect("device 99 should not exist").to_string();
+    let err =
+        Context::new(&vkdiff_runtime::DeviceChoice::index(99)).err().expect("device 99 should not exist").to_string();
     assert!(err.contains("device 99") && err.contains("vkdiff devices"), "{err}");
 }
 
@@ -151,7 +152,66 @@ fn arena_reuses_a_dropped_buffer_within_one_recording() {
 fn a_buffer_past_the_allocation_limit_is_refused_by_name() {
     let ctx = Context::new(&Default::default()).unwrap();
     ctx.set_allocation_limit(1 << 20);
-    let err = ctx.zeros(&[1 << 19], Dtype::F32).err().expect("a 2 MiB tensor past a 1 MiB limit").to_string();
+    let Err(err) = ctx.zeros(&[1 << 19], Dtype::F32) else { panic!("a 2 MiB tensor past a 1 MiB limit") };
+    let err = err.to_string();
     assert!(err.contains("one 2 MiB buffer") && err.contains("1 MiB maxMemoryAllocationSize"), "{err}");
     assert!(ctx.zeros(&[1 << 18], Dtype::F32).is_ok(), "1 MiB fits");
+}
+
+/// Runs `chain` (a GEMM, then 40 dependent element-wise updates) under `budget` on a fresh context
+/// and returns the result and the number of submissions one run made.
+fn chain_under(budget: Option<SubmitBudget>) -> (Vec<f32>, usize) {
+    let ctx = Context::new(&Default::default()).unwrap();
+    if let Some(budget) = budget {
+        ctx.set_submit_budget(budget);
+    }
+    let (m, k, n) = (64, 96, 80);
+    let a = ctx.upload(&[m, k], Dtype::F32, &random(m * k, 81)).unwrap();
+    let w = ctx.upload(&[n, k], Dtype::F32, &random(k * n, 82)).unwrap();
+    let y = ctx.zeros(&[m, n], Dtype::F32).unwrap();
+    let t = ctx.zeros(&[m, n], Dtype::F32).unwrap();
+    let mut rec = Recorder::new(&ctx, false).unwrap();
+    ops::linear(&mut rec, &a, &w, None, &y).unwrap();
+    for _ in 0..20 {
+        ops::unary(&mut rec, UnaryOp::Silu, &y, &t, 0.0).unwrap();
+        ops::add(&mut rec, &t, &y, &y).unwrap();
+    }
+    let recording = rec.finish().unwrap();
+    recording.run().unwrap();
+    (y.download().unwrap(), recording.submissions())
+}
+
+#[test]
+fn recordings_split_into_submissions_give_the_same_bits() {
+    let (whole, submissions) = chain_under(None);
+    assert_eq!(submissions, 1, "41 small dispatches fit one default submission");
+    let every = SubmitBudget { flops: 1e12, dispatches: 1, timeout: std::time::Duration::from_secs(600) };
+    let (split, submissions) = chain_under(Some(every));
+    assert_eq!(submissions, 41);
+    assert!(whole.iter().zip(&split).all(|(a, b)| a.to_bits() == b.to_bits()), "one dispatch per submission");
+    // A FLOP budget below the GEMM's ends the chunk after it, whatever the dispatch count.
+    let (split, submissions) = chain_under(Some(SubmitBudget { flops: 1e3, dispatches: 1000, ..every }));
+    assert_eq!(submissions, 2);
+    assert!(whole.iter().zip(&split).all(|(a, b)| a.to_bits() == b.to_bits()), "split after the GEMM");
+}
+
+#[test]
+fn a_wait_past_the_timeout_is_one_clear_error() {
+    // A zero timeout: the first chunk cannot have finished when its wait starts. The context is
+    // then taken as hung and frees nothing the device may still use.
+    let ctx = Context::new(&Default::default()).unwrap();
+    ctx.set_submit_budget(SubmitBudget { timeout: std::time::Duration::ZERO, ..ctx.submit_budget() });
+    let n = 256;
+    let a = ctx.upload(&[n, n], Dtype::F32, &random(n * n, 83)).unwrap();
+    let y = ctx.zeros(&[n, n], Dtype::F32).unwrap();
+    let err = ctx
+        .run(|rec| {
+            for _ in 0..8 {
+                ops::linear(rec, &a, &a, None, &y)?;
+            }
+            Ok(())
+        })
+        .expect_err("eight 256³ products take longer than no time");
+    assert!(matches!(err, Error::SubmitTimeout { .. }), "{err}");
+    assert!(err.to_string().contains("VKDIFF_SUBMIT_TIMEOUT"), "{err}");
 }
