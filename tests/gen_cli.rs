@@ -1,10 +1,14 @@
 //! `vkdiff gen` as a user runs it, on the tiny SDXL pipeline (tools/make_pipeline_fixtures.py):
-//! the PNG and latents files, their metadata, and one-line errors that write nothing.
+//! the PNG and latents files, their metadata, one-line errors that write nothing, and the VAE's
+//! memory plan under a device memory budget (`VKDIFF_MEMORY_BUDGET`, enforced on every
+//! allocation): diffusers' tiles when the whole decode would not fit, recorded in the PNG, and a
+//! whole decode that cannot fit refused before any denoising.
 
 mod cli;
 
 use cli::{png_text, scratch, vkdiff};
 use std::path::Path;
+use std::process::{Command, Output};
 
 fn fixture(name: &str) -> String {
     format!("{}/tests/fixtures/pipeline/{name}", env!("CARGO_MANIFEST_DIR"))
@@ -228,4 +232,71 @@ fn gen_img2img_writes_the_latents_diffusers_wrote() {
     let text = png_text(&png);
     let parameters = &text.iter().find(|(k, _)| k == "parameters").unwrap().1;
     assert!(parameters.contains("Denoising strength: 0.75") && parameters.contains("Size: 64x64"), "{parameters}");
+}
+
+/// A 128² tiny-model generation (for the VAE's memory plan) into `out` with `flags`, under `budget` where given.
+fn gen(out: &std::path::Path, budget: Option<&str>, flags: &[&str]) -> Output {
+    let model = fixture("tiny-sdxl");
+    let mut command = Command::new(env!("CARGO_BIN_EXE_vkdiff"));
+    command.args([
+        "gen",
+        "--model",
+        &model,
+        "--prompt",
+        "a mushroom",
+        "--steps",
+        "2",
+        "--width",
+        "128",
+        "--height",
+        "128",
+    ]);
+    command.args(["--out", out.to_str().unwrap()]).args(flags);
+    match budget {
+        Some(budget) => command.env("VKDIFF_MEMORY_BUDGET", budget),
+        None => command.env_remove("VKDIFF_MEMORY_BUDGET"),
+    };
+    command.output().unwrap()
+}
+
+#[test]
+fn a_decode_past_the_budget_runs_in_tiles_and_one_that_must_be_whole_fails_first() {
+    let dir = scratch("vae-budget");
+    // The tiny model's weights take about 10 MiB, its 128² decode about 20 MiB whole, 5 in
+    // 64-px tiles (the VAE's sample_size, diffusers' default tile).
+    let tiled = dir.join("tiled.png");
+    let result = gen(&tiled, Some("16M"), &[]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(result.status.success(), "{stderr}");
+    assert!(stderr.contains("VAE: 128×128 decodes in 64-px tiles"), "{stderr}");
+    let text = png_text(&tiled);
+    assert!(text.iter().any(|(k, v)| k == "vae_tile" && v == "64"), "{text:?}");
+    // The same tiles asked for by hand, without a budget: the same file.
+    let by_hand = dir.join("by-hand.png");
+    let result = gen(&by_hand, None, &["--vae-tiling", "on"]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    assert_eq!(std::fs::read(&tiled).unwrap(), std::fs::read(&by_hand).unwrap());
+    // Without a budget the decode is whole, and no tile is recorded.
+    let whole = dir.join("whole.png");
+    assert!(gen(&whole, None, &[]).status.success());
+    assert!(!png_text(&whole).iter().any(|(k, _)| k == "vae_tile"));
+    assert_ne!(std::fs::read(&whole).unwrap(), std::fs::read(&tiled).unwrap());
+    // A whole decode that cannot fit fails before the first step, writing nothing.
+    let refused = dir.join("refused.png");
+    let result = gen(&refused, Some("16M"), &["--vae-tiling", "off"]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+    assert!(!result.status.success() && errors.len() == 1, "{stderr}");
+    assert!(
+        errors[0].starts_with("error: --vae-tiling off: the VAE decode of 1×128×128 needs")
+            && errors[0].contains("VKDIFF_MEMORY_BUDGET")
+            && errors[0].contains("auto decodes in tiles"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("denoising"), "refused before denoising: {stderr}");
+    assert!(!refused.exists());
+    // A tile that breaks diffusers' geometry is refused by name.
+    let result = gen(&refused, None, &["--vae-tiling", "40"]);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains("--vae-tiling 40: a VAE tile must be a positive multiple of 32 pixels"), "{stderr}");
 }

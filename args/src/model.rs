@@ -6,7 +6,7 @@ use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 use vkdiff_pipeline::{
     ControlNetSettings, IpAdapterSettings, IpMode, IpScale, LoraSetting, ModelSettings, PromptSyntax, SamplerKind,
-    Sampling, SizeConditioning,
+    Sampling, SizeConditioning, VaeTilingSetting,
 };
 use vkdiff_runtime::Dtype;
 
@@ -67,6 +67,12 @@ pub struct ModelArgs {
     precision: Precision,
     #[command(flatten)]
     pub device: crate::DeviceArgs,
+    /// The VAE decode: auto (whole where it fits the device's free memory, else in the largest
+    /// diffusers tiles that fit), off (whole, or fail before denoising), on (tiles of the VAE's
+    /// sample_size, as diffusers' enable_tiling) or a tile side in pixels. Tiled images differ
+    /// slightly from whole ones; PNGs record the tile as `vae_tile`.
+    #[arg(long, default_value = "auto", value_name = "auto|off|on|PIXELS")]
+    vae_tiling: VaeTilingSetting,
     /// Depth ControlNet: a diffusers folder, or one .safetensors in the diffusers or original
     /// (cldm) layout.
     #[arg(long)]
@@ -146,7 +152,14 @@ impl ModelArgs {
         };
         // Required by the parser wherever these flags are read (not for `dataset merge`).
         let model = self.model.clone().unwrap_or_default();
-        Ok(ModelSettings { model, precision: self.precision.dtype(), controlnet, ip_adapter, loras: self.lora.clone() })
+        Ok(ModelSettings {
+            model,
+            precision: self.precision.dtype(),
+            controlnet,
+            ip_adapter,
+            loras: self.lora.clone(),
+            vae_tiling: self.vae_tiling,
+        })
     }
 }
 

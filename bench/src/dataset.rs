@@ -174,6 +174,7 @@ fn model_settings(precision: vkdiff_runtime::Dtype, loras: &[(LoraFile, f32); 2]
             .enumerate()
             .map(|(k, (_, s))| LoraSetting { path: format!("random-lora-{k}").into(), strength: *s })
             .collect(),
+        vae_tiling: Default::default(),
     }
 }
 

@@ -28,5 +28,5 @@ pub use unet::{
     read_unet_config, single_file_unet_checkpoint, unet_checkpoint, unet_names, ControlResiduals, UNet, UNetConfig,
     UNetInputs, UNetPass, SDXL_BASE_CONFIG,
 };
-pub use vae::{AutoencoderKl, VaeConfig, SDXL_VAE_CONFIG};
+pub use vae::{AutoencoderKl, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
 pub use weights::{Checkpoint, Inner, OriginalNames, ParamLayout, Parameter, Parameters, StoredAs, Weights};

@@ -96,16 +96,24 @@ impl GenJob {
     /// Loads the models on `ctx`, generates, and writes the files; where the time went.
     pub fn run(&self, ctx: &Context, events: &mut dyn FnMut(GenEvent)) -> Result<Timings> {
         let start = Instant::now();
-        let models = WorkflowModels::load(ctx, &self.settings.models, &mut |line| events(GenEvent::Note(line)))?;
+        let mut models = WorkflowModels::load(ctx, &self.settings.models, &mut |line| events(GenEvent::Note(line)))?;
         events(GenEvent::Loaded(start.elapsed()));
         let job = &self.settings.job;
+        let (width, height) = (job.sampling.width, job.sampling.height);
+        let vae = models.sdxl.plan_vae(self.settings.models.vae_tiling, 1, width, height)?;
+        if let Some(note) = vae.note(width, height) {
+            events(GenEvent::Note(&note));
+        }
         let prompts = std::iter::once(&job.prompt).chain(&job.negative_prompt);
         for warning in models.sdxl.cut_prompt_warnings(job.sampling.prompt_syntax, prompts) {
             events(GenEvent::Note(&warning));
         }
         let guides = models.guides(&self.inputs);
         let out = models.sdxl.text_to_image(job, &guides, &mut |done, total| events(GenEvent::Step { done, total }))?;
-        let text = self.settings.png_text();
+        let mut text = self.settings.png_text();
+        if let Some(tiling) = vae.tiling {
+            text.insert("vae_tile".into(), tiling.tile.to_string());
+        }
         let png = png_bytes(&out.image, &text)?;
         let latents = self
             .latents_out

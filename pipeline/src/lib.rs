@@ -19,12 +19,12 @@ pub use rng::TorchCpuRng;
 pub use schedulers::{Sampler, SamplerKind, SchedulerConfig};
 pub use sdxl::{
     check_control_shape, BatchOutput, Conditioning, ControlGuide, ControlNetUse, Denoised, Denoiser, Generated, Guides,
-    ImageGuide, InitLatents, IpAdapterUse, ItemInputs, Sdxl, StyleModels, Timings, WorkflowModels,
+    ImageGuide, InitLatents, IpAdapterUse, ItemInputs, Sdxl, StyleModels, Timings, VaePlan, WorkflowModels,
 };
 pub use settings::{
     check_control_settings, control_depth_name, parse_attention, precision_name, read_images, ControlNetSettings,
     GenSettings, GuideInputs, IpAdapterSettings, IpBlock, IpMode, IpScale, LoraSetting, ModelSettings, PromptSyntax,
-    Sampling, SizeConditioning, TextToImage, RNG,
+    Sampling, SizeConditioning, TextToImage, VaeTilingSetting, RNG,
 };
 pub use tokenizer::ClipTokenizer;
 pub use vkdiff_formats::RgbImage;

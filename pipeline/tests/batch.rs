@@ -29,6 +29,7 @@ fn settings(precision: Dtype) -> ModelSettings {
             scale: IpScale::All(0.6),
         }),
         loras: vec![LoraSetting { path: fixture("workflow/lora-peft.safetensors"), strength: 0.5 }],
+        vae_tiling: Default::default(),
     }
 }
 

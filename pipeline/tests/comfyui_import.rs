@@ -124,6 +124,7 @@ fn settings(prompt: &str, negative: Option<&str>, sampler: &str, karras: bool) -
                 LoraSetting { path: "/loras/mushroom_style.safetensors".into(), strength: 0.7 },
                 LoraSetting { path: "/loras/macro, detail.safetensors".into(), strength: 1.0 },
             ],
+            vae_tiling: Default::default(),
         },
         job: TextToImage {
             prompt: prompt.into(),

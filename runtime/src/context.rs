@@ -76,7 +76,8 @@ impl DeviceInfo {
 
 pub(crate) struct Shared {
     _entry: ash::Entry,
-    instance: ash::Instance,
+    pub(crate) instance: ash::Instance,
+    pub(crate) physical_device: vk::PhysicalDevice,
     validation: Option<Validation>,
     pub(crate) device: ash::Device,
     pub(crate) queue: Mutex<vk::Queue>,
@@ -104,6 +105,11 @@ pub(crate) struct Shared {
     pub(crate) submit_budget: Mutex<SubmitBudget>,
     /// A wait for the device timed out: what it may still run is never freed.
     pub(crate) hung: AtomicBool,
+    /// `VKDIFF_MEMORY_BUDGET`: the most device memory live tensors may hold (see
+    /// [`Context::memory_room`]).
+    pub(crate) memory_budget: Option<u64>,
+    /// Whether `VK_EXT_memory_budget` is enabled.
+    pub(crate) memory_budget_extension: bool,
 }
 
 /// Called before a submission whose kernels the driver compiles then, with their number.
@@ -214,6 +220,9 @@ impl Context {
             extensions.push(ash::khr::cooperative_matrix::NAME.as_ptr());
             create = create.push_next(&mut cooperative);
         }
+        if info.memory_budget {
+            extensions.push(ash::ext::memory_budget::NAME.as_ptr());
+        }
         let create = create.enabled_extension_names(&extensions);
         // SAFETY: pd belongs to the instance; the create info outlives the call.
         let device = unsafe { instance.create_device(pd, &create, None) }.vk("vkCreateDevice")?;
@@ -241,10 +250,15 @@ impl Context {
         .map_err(|e| Error::Memory(e.to_string()))?;
         let gpu_paths = gpu_paths_requested();
         let gemm_family = info.gemm_family(gpu_paths);
-        let submit_budget = SubmitBudget::for_device(&info, &|name| std::env::var(name).ok())?;
+        let env = |name: &str| std::env::var(name).ok();
+        let submit_budget = SubmitBudget::for_device(&info, &env)?;
+        let memory_budget = crate::memory_budget::budget_override(&env)?;
         let shared = Shared {
             _entry: entry,
             instance,
+            physical_device: pd,
+            memory_budget,
+            memory_budget_extension: info.memory_budget,
             validation,
             device,
             queue: Mutex::new(queue),

@@ -90,6 +90,8 @@ pub struct DeviceInfo {
     pub uuid: [u8; 16],
     /// The PCI address, where the driver offers `VK_EXT_pci_bus_info`.
     pub pci: Option<PciAddress>,
+    /// `VK_EXT_memory_budget`: how much of its heaps this process may use now.
+    pub memory_budget: bool,
 }
 
 impl DeviceInfo {
@@ -222,6 +224,7 @@ pub(crate) fn describe(
     let zero_init_extension = !core13 && extension(ash::khr::zero_initialize_workgroup_memory::NAME);
     let cooperative_extension = extension(ash::khr::cooperative_matrix::NAME);
     let pci_extension = extension(ash::ext::pci_bus_info::NAME);
+    let memory_budget = extension(ash::ext::memory_budget::NAME);
 
     let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
     let mut size_control = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
@@ -331,6 +334,7 @@ pub(crate) fn describe(
             device: pci.pci_device,
             function: pci.pci_function,
         }),
+        memory_budget,
     }
 }
 
@@ -407,6 +411,7 @@ pub(crate) mod tests {
             compute_queue_family: Some(0),
             uuid: [index as u8; 16],
             pci: None,
+            memory_budget: false,
         }
     }
 

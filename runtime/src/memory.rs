@@ -35,6 +35,18 @@ impl Buffer {
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST;
         let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
+        let counted = location == MemoryLocation::GpuOnly;
+        if let Some(budget) = shared.memory_budget.filter(|_| counted) {
+            let live = shared.live_bytes.load(Ordering::SeqCst);
+            if live + size > budget {
+                return Err(Error::Memory(format!(
+                    "`{name}` needs {} MiB more with {} MiB in use, past VKDIFF_MEMORY_BUDGET ({} MiB)",
+                    size.div_ceil(1 << 20),
+                    live >> 20,
+                    budget >> 20
+                )));
+            }
+        }
         let device = &shared.device;
         // SAFETY: valid device and create info.
         let raw = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
@@ -58,7 +70,6 @@ impl Buffer {
             })?;
         // SAFETY: the allocation satisfies the buffer's requirements and is unused.
         unsafe { device.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) }.vk("vkBindBufferMemory")?;
-        let counted = location == MemoryLocation::GpuOnly;
         if counted {
             let live = shared.live_bytes.fetch_add(size, Ordering::SeqCst) + size;
             shared.peak_bytes.fetch_max(live, Ordering::SeqCst);

@@ -24,6 +24,18 @@ fn default_true() -> bool {
 fn default_act() -> String {
     "silu".into()
 }
+/// diffusers' default `sample_size`.
+fn default_sample_size() -> SampleSize {
+    SampleSize::Side(32)
+}
+
+/// `sample_size`: one side, or [height, width] (diffusers tiles by the first).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum SampleSize {
+    Side(usize),
+    Sides(Vec<usize>),
+}
 
 /// SDXL base 1.0's vae/config.json.
 pub const SDXL_VAE_CONFIG: &str = r#"{"in_channels": 3, "out_channels": 3, "block_out_channels": [128, 256, 512, 512],
@@ -65,6 +77,9 @@ pub struct VaeConfig {
     pub use_post_quant_conv: bool,
     #[serde(default = "default_act")]
     pub act_fn: String,
+    /// The image side the VAE was trained at: diffusers' default tile for a tiled decode.
+    #[serde(default = "default_sample_size")]
+    pub sample_size: SampleSize,
 }
 
 impl VaeConfig {
@@ -93,6 +108,14 @@ impl VaeConfig {
             ));
         }
         Ok(())
+    }
+
+    /// diffusers' default tile side for a tiled decode (`tile_sample_min_size`), in pixels.
+    pub fn tile_sample_size(&self) -> usize {
+        match &self.sample_size {
+            SampleSize::Side(side) => *side,
+            SampleSize::Sides(sides) => sides.first().copied().unwrap_or(32),
+        }
     }
 
     /// Pixels per latent along each side.

@@ -4,6 +4,8 @@
 mod autoencoder_kl;
 mod config;
 mod names;
+mod tiled_decode;
 
 pub use autoencoder_kl::AutoencoderKl;
 pub use config::{VaeConfig, SDXL_VAE_CONFIG};
+pub use tiled_decode::VaeTiling;

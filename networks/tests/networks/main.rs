@@ -8,3 +8,4 @@ mod inception;
 mod ip_adapter;
 mod malformed;
 mod text_and_vae;
+mod vae_tiling;

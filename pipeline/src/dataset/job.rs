@@ -120,8 +120,14 @@ impl DatasetJob {
     /// pending).
     pub fn run(&mut self, ctx: &Context, events: &mut dyn FnMut(DatasetEvent)) -> Result<Report> {
         let start = Instant::now();
-        let models = WorkflowModels::load(ctx, &self.settings.models, &mut |line| events(DatasetEvent::Note(line)))?;
+        let mut models =
+            WorkflowModels::load(ctx, &self.settings.models, &mut |line| events(DatasetEvent::Note(line)))?;
         let s = &self.settings;
+        // Each image decodes alone.
+        let (width, height) = (s.sampling.width, s.sampling.height);
+        if let Some(note) = models.sdxl.plan_vae(s.models.vae_tiling, 1, width, height)?.note(width, height) {
+            events(DatasetEvent::Note(&note));
+        }
         let prompts = s.prompts.iter().chain(&s.negative_prompt);
         for warning in models.sdxl.cut_prompt_warnings(s.sampling.prompt_syntax, prompts) {
             events(DatasetEvent::Note(&warning));

@@ -320,7 +320,11 @@ impl<'a> Loop<'a> {
         if item.style.is_some() {
             entry["ip_images"] = json!(ip_images.iter().map(|p| p.display().to_string()).collect::<Vec<_>>());
         }
-        Finished { index, text: gen.png_text(), scene: item.scene, image, entry }
+        let mut text = gen.png_text();
+        if let Some(tiling) = self.models.sdxl.vae_tiling() {
+            text.insert("vae_tile".into(), tiling.tile.to_string());
+        }
+        Finished { index, text, scene: item.scene, image, entry }
     }
 }
 

@@ -10,6 +10,7 @@ mod ip_adapter_guide;
 pub(crate) mod prompt_encoding;
 mod prompt_weights;
 mod text_to_image;
+mod vae_plan;
 mod workflow_models;
 
 pub use controlnet_guide::{check_control_shape, ControlGuide, ControlNetUse};
@@ -18,6 +19,7 @@ pub use img2img::InitLatents;
 pub use ip_adapter_guide::ImageGuide;
 pub use prompt_encoding::Conditioning;
 pub use text_to_image::{Denoised, Generated, Guides, Timings};
+pub use vae_plan::VaePlan;
 pub use workflow_models::{StyleModels, WorkflowModels};
 
 use crate::error::{Error, Result};
@@ -28,7 +30,7 @@ use vkdiff_formats::Error as FileError;
 use vkdiff_lora::{LoraFile, LoraMerger, Summary, Targets};
 use vkdiff_networks::{
     read_unet_config, unet_checkpoint, AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig,
-    VaeConfig, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG,
+    VaeConfig, VaeTiling, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG,
 };
 use vkdiff_runtime::{Context, Dtype};
 
@@ -46,6 +48,8 @@ pub struct Sdxl {
     pub(crate) force_zeros_for_empty_prompt: bool,
     /// The LoRAs merged into the weights, and the originals to restore.
     loras: LoraMerger,
+    /// The tiles the VAE decodes in (None: whole), as [`Sdxl::plan_vae`] chose.
+    vae_tiling: Option<VaeTiling>,
 }
 
 impl Sdxl {
@@ -91,6 +95,7 @@ impl Sdxl {
             scheduler,
             force_zeros_for_empty_prompt,
             loras: LoraMerger::new(),
+            vae_tiling: None,
         };
         model.check_widths()?;
         Ok(model)
@@ -120,6 +125,7 @@ impl Sdxl {
             scheduler,
             force_zeros_for_empty_prompt: true,
             loras: LoraMerger::new(),
+            vae_tiling: None,
         })
     }
 

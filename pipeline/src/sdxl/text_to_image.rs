@@ -114,12 +114,16 @@ impl Sdxl {
         sampling.check_size(self.pixel_multiple())
     }
 
-    /// diffusers' image: the decoder's output mapped from [-1, 1], clamped, and rounded to 8 bits.
+    /// diffusers' image: the decoder's output mapped from [-1, 1], clamped, and rounded to 8 bits;
+    /// decoded whole or in the tiles [`Sdxl::plan_vae`] chose.
     pub fn decode(&self, latents: &[f32], [b, c, h, w]: [usize; 4]) -> Result<RgbImage> {
         let factor = self.vae.config().scaling_factor;
         let scaled: Vec<f32> = latents.iter().map(|v| v / factor).collect();
-        let (out, [_, height, width, channels]) =
-            self.vae.decode(&nchw_to_nhwc(&scaled, [b, c, h, w]), [b, h, w, c])?;
+        let (latents, shape) = (nchw_to_nhwc(&scaled, [b, c, h, w]), [b, h, w, c]);
+        let (out, [_, height, width, channels]) = match self.vae_tiling {
+            Some(tiling) => self.vae.decode_tiled(&latents, shape, tiling)?,
+            None => self.vae.decode(&latents, shape)?,
+        };
         finite(&out, &|| "the VAE decoder's output".into())?;
         if channels != 3 {
             return Err(Error::Config(format!("the VAE decodes {channels} channels; an RGB image needs 3")));

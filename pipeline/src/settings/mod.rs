@@ -8,6 +8,7 @@ mod models;
 pub(crate) mod names;
 pub(crate) mod prompt_syntax;
 pub(crate) mod sampling;
+mod vae_tiling;
 
 pub use gen::{read_images, GenSettings, GuideInputs};
 pub use ip_scale::{IpBlock, IpMode, IpScale};
@@ -17,3 +18,4 @@ pub use models::{ControlNetSettings, IpAdapterSettings, LoraSetting, ModelSettin
 pub use names::{control_depth_name, precision_name, schedule_name, RNG};
 pub use prompt_syntax::{parse_attention, PromptSyntax};
 pub use sampling::{Sampling, SizeConditioning, TextToImage};
+pub use vae_tiling::VaeTilingSetting;

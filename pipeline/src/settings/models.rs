@@ -3,6 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::settings::ip_scale::IpScale;
+use crate::settings::VaeTilingSetting;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::SafeTensors;
 use vkdiff_lora::LoraFile;
@@ -44,6 +45,8 @@ pub struct ModelSettings {
     pub controlnet: Option<ControlNetSettings>,
     pub ip_adapter: Option<IpAdapterSettings>,
     pub loras: Vec<LoraSetting>,
+    /// Whole or tiled VAE decodes (`--vae-tiling`).
+    pub vae_tiling: VaeTilingSetting,
 }
 
 impl ModelSettings {

@@ -1,0 +1,86 @@
+//! How much device memory this process may still take: `VKDIFF_MEMORY_BUDGET` where set (and
+//! then enforced: an allocation past it fails), else `VK_EXT_memory_budget`'s heap budget less
+//! the heap's use, else the device-local heap less vkdiff's own live buffers.
+
+use crate::context::Context;
+use crate::error::{Error, Result};
+use ash::vk;
+use std::sync::atomic::Ordering;
+
+/// The memory a plan may count on, and where the figure comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MemoryRoom {
+    /// Bytes still free to this process.
+    pub free: u64,
+    /// The whole budget they are part of.
+    pub budget: u64,
+    pub source: &'static str,
+}
+
+/// `VKDIFF_MEMORY_BUDGET`: bytes, or a number with K, M, G (powers of 1024; `GiB`, `GB` read
+/// the same).
+pub(crate) fn budget_override(env: &dyn Fn(&str) -> Option<String>) -> Result<Option<u64>> {
+    let Some(text) = env("VKDIFF_MEMORY_BUDGET").filter(|v| !v.trim().is_empty()) else { return Ok(None) };
+    let bad =
+        || Error::BadSetting(format!("VKDIFF_MEMORY_BUDGET={text}: expected bytes, or a size such as 8G or 512M"));
+    let t = text.trim().trim_end_matches(['B', 'b']).trim_end_matches(['i', 'I']);
+    let (number, scale) = match t.chars().last().map(|c| c.to_ascii_uppercase()) {
+        Some('K') => (&t[..t.len() - 1], 1u64 << 10),
+        Some('M') => (&t[..t.len() - 1], 1 << 20),
+        Some('G') => (&t[..t.len() - 1], 1 << 30),
+        Some('T') => (&t[..t.len() - 1], 1 << 40),
+        _ => (t, 1),
+    };
+    let value: f64 = number.trim().parse().map_err(|_| bad())?;
+    if !value.is_finite() || value <= 0.0 {
+        return Err(bad());
+    }
+    Ok(Some((value * scale as f64) as u64))
+}
+
+impl Context {
+    /// The device memory this process may still allocate (see the module's comment).
+    pub fn memory_room(&self) -> MemoryRoom {
+        let shared = &self.shared;
+        let live = shared.live_bytes.load(Ordering::SeqCst);
+        if let Some(budget) = shared.memory_budget {
+            return MemoryRoom { free: budget.saturating_sub(live), budget, source: "VKDIFF_MEMORY_BUDGET" };
+        }
+        if shared.memory_budget_extension {
+            let mut budget = vk::PhysicalDeviceMemoryBudgetPropertiesEXT::default();
+            let mut props = vk::PhysicalDeviceMemoryProperties2::default().push_next(&mut budget);
+            // SAFETY: the physical device belongs to the live instance; the struct outlives the call.
+            unsafe { shared.instance.get_physical_device_memory_properties2(shared.physical_device, &mut props) };
+            let heaps = props.memory_properties.memory_heaps;
+            let count = props.memory_properties.memory_heap_count as usize;
+            let heap = (0..count)
+                .filter(|&i| heaps[i].flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL))
+                .max_by_key(|&i| heaps[i].size);
+            if let Some(i) = heap {
+                let (total, used) = (budget.heap_budget[i], budget.heap_usage[i]);
+                return MemoryRoom { free: total.saturating_sub(used), budget: total, source: "VK_EXT_memory_budget" };
+            }
+        }
+        let heap = shared.info.device_local_bytes;
+        MemoryRoom { free: heap.saturating_sub(live), budget: heap, source: "the device-local heap" }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::budget_override;
+
+    #[test]
+    fn reads_sizes_with_units() {
+        let read = |v: &str| budget_override(&|_| Some(v.to_string()));
+        assert_eq!(read("8G").unwrap(), Some(8 << 30));
+        assert_eq!(read("8GiB").unwrap(), Some(8 << 30));
+        assert_eq!(read("512M").unwrap(), Some(512 << 20));
+        assert_eq!(read("1.5g").unwrap(), Some(3 << 29));
+        assert_eq!(read("4096").unwrap(), Some(4096));
+        assert_eq!(read("").unwrap(), None);
+        for bad in ["lots", "-1G", "0", "G"] {
+            assert!(read(bad).unwrap_err().to_string().starts_with(&format!("VKDIFF_MEMORY_BUDGET={bad}:")), "{bad}");
+        }
+    }
+}
