@@ -71,25 +71,8 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     let folder = Dataset::open(&dir, &dataset)?;
     let pending = folder.pending(Shard::ALL)?;
     let styles = vec![style_images().to_vec()];
-    let images = pending.images();
-    let start = Instant::now();
-    let report = generate(
-        &folder,
-        &dataset,
-        &models,
-        &styles,
-        pending,
-        &RunOptions { batch: args.batch, threads: 0 },
-        &mut |event| {
-            if let vkdiff_pipeline::dataset::Progress::Images { done, total } = event {
-                eprintln!("{done}/{total} images");
-            }
-        },
-    )?;
-    let wall = start.elapsed();
-    std::fs::remove_dir_all(&dir)?;
-
-    // One image as `vkdiff gen` makes it: its own text encoding, guides and recording.
+    // One image as `vkdiff gen` makes it: its own text encoding, guides and recording (first:
+    // the set releases the text encoders once its prompts are encoded).
     let inputs = GuideInputs { control: Some(gradient_depth(args.size)), style: style_images().to_vec(), init: None };
     let job = TextToImage {
         prompt: dataset.prompts[0].clone(),
@@ -102,6 +85,23 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         eprintln!("single image: step {done}/{total}")
     })?;
     let single_wall = start.elapsed();
+    let images = pending.images();
+    let start = Instant::now();
+    let report = generate(
+        &folder,
+        &dataset,
+        &mut models,
+        &styles,
+        pending,
+        &RunOptions { batch: args.batch, threads: 0 },
+        &mut |event| {
+            if let vkdiff_pipeline::dataset::Progress::Images { done, total } = event {
+                eprintln!("{done}/{total} images");
+            }
+        },
+    )?;
+    let wall = start.elapsed();
+    std::fs::remove_dir_all(&dir)?;
 
     let per = |d: Duration| d.as_secs_f64() / images.max(1) as f64;
     let t = &report.times;

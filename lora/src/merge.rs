@@ -128,6 +128,12 @@ impl LoraMerger {
         Ok(Summary { loras: summaries, weights: self.backups.len(), seconds: start.elapsed().as_secs_f64() })
     }
 
+    /// Drops the backups of `component`'s weights, whose network is being freed: they could
+    /// not be restored, and the backups would keep its device memory alive.
+    pub fn forget(&mut self, component: Component) {
+        self.backups.retain(|(c, _), _| *c != component);
+    }
+
     /// Puts back the original weights, bit for bit.
     pub fn restore(&mut self) -> Result<()> {
         if !self.merged {

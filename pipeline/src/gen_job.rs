@@ -108,8 +108,16 @@ impl GenJob {
         for warning in models.sdxl.cut_prompt_warnings(job.sampling.prompt_syntax, prompts) {
             events(GenEvent::Note(&warning));
         }
+        // The prompts are encoded once: the encoders' memory goes before the denoiser's comes.
+        let start = Instant::now();
+        let text = models.sdxl.encode_job(job)?;
+        let encoding = start.elapsed();
+        models.sdxl.release_text_encoders();
         let guides = models.guides(&self.inputs);
-        let out = models.sdxl.text_to_image(job, &guides, &mut |done, total| events(GenEvent::Step { done, total }))?;
+        let mut out = models
+            .sdxl
+            .text_to_image_encoded(job, &text, &guides, &mut |done, total| events(GenEvent::Step { done, total }))?;
+        out.timings.text_encoding = encoding;
         let mut text = self.settings.png_text();
         if let Some(tiling) = vae.tiling {
             text.insert("vae_tile".into(), tiling.tile.to_string());

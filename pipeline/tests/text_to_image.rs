@@ -68,3 +68,23 @@ fn every_sampler_matches_diffusers_in_f16() {
 fn single_file_matches_diffusers() {
     check("tiny-sdxl.safetensors", Dtype::F32, 1e-4, 50.0, Some(3));
 }
+
+#[test]
+fn released_text_encoders_free_their_memory_and_later_prompts_fail_clearly() {
+    // A private context: its live bytes are this test's alone.
+    let ctx = vkdiff_runtime::Context::new(&Default::default()).unwrap();
+    let load = || Sdxl::load(&ctx, &fixture("pipeline").join("tiny-sdxl"), Dtype::F32, &mut |_| {}).unwrap();
+    let case = &cases()[1];
+    let mut sdxl = load();
+    let text = sdxl.encode_job(&job(case)).unwrap();
+    let before = ctx.live_bytes();
+    let freed = sdxl.release_text_encoders();
+    assert!(freed > 0 && ctx.live_bytes() == before - freed, "freed {freed} of {before} bytes");
+    let released = sdxl.text_to_image_encoded(&job(case), &text, &Guides::default(), &mut |_, _| {}).unwrap();
+    let err = sdxl.encode_job(&job(case)).unwrap_err().to_string();
+    assert!(err.contains("text encoders were released"), "{err}");
+    drop(sdxl);
+    // The encodings made before the release give the image the whole pipeline gives.
+    let whole = load().text_to_image(&job(case), &Guides::default(), &mut |_, _| {}).unwrap();
+    assert_eq!(released.image.pixels, whole.image.pixels);
+}

@@ -134,7 +134,7 @@ impl DatasetJob {
         }
         events(DatasetEvent::Loaded(start.elapsed()));
         let pending = std::mem::take(&mut self.pending);
-        generate(&self.dataset, s, &models, &self.styles, pending, &self.options, &mut |p| {
+        generate(&self.dataset, s, &mut models, &self.styles, pending, &self.options, &mut |p| {
             events(DatasetEvent::Progress(p))
         })
     }

@@ -76,12 +76,12 @@ struct Item {
     style: Option<usize>,
 }
 
-/// Makes the `pending` images of `dataset` with `models`; `styles` are the loaded images of each
-/// of `settings.ip_sets`.
+/// Makes the `pending` images of `dataset` with `models` (whose text encoders it releases once
+/// the prompts are encoded); `styles` are the loaded images of each of `settings.ip_sets`.
 pub fn generate(
     dataset: &Dataset,
     settings: &DatasetSettings,
-    models: &WorkflowModels,
+    models: &mut WorkflowModels,
     styles: &[Vec<RgbImage>],
     pending: Pending,
     options: &RunOptions,
@@ -103,6 +103,9 @@ pub fn generate(
             ))
         })
         .collect::<Result<HashMap<usize, Conditioning>>>()?;
+    // Every prompt is encoded: the encoders' memory goes before the denoiser's comes.
+    models.sdxl.release_text_encoders();
+    let models = &*models;
     let stream = render_scenes(settings, pending.scenes, options.threads, 2 * options.batch);
     let (to_writer, writer) = start_writer(dataset.clone(), options.batch);
     let mut run =

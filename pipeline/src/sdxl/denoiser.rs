@@ -85,7 +85,7 @@ impl<'m> Denoiser<'m> {
         let sample = ctx.zeros(&[rows, latent[0], latent[1], latent[2]], dt)?;
         let timesteps = ctx.zeros(&[rows], Dtype::F32)?;
         let context = ctx.zeros(&[rows, tokens, model.unet_config.cross_attention_dim], dt)?;
-        let pooled_width = model.text_encoders[1].config().projection_dim.unwrap_or(0);
+        let pooled_width = model.text_widths.1;
         let pooled = ctx.zeros(&[rows, pooled_width], dt)?;
         let time_ids: Vec<f32> = (0..rows).flat_map(|_| sampling.time_ids()).collect();
         let time_ids = ctx.upload(&[rows, 6], Dtype::F32, &time_ids)?;

@@ -27,7 +27,7 @@ use crate::schedulers::SchedulerConfig;
 use crate::tokenizer::ClipTokenizer;
 use std::path::Path;
 use vkdiff_formats::Error as FileError;
-use vkdiff_lora::{LoraFile, LoraMerger, Summary, Targets};
+use vkdiff_lora::{Component, LoraFile, LoraMerger, Summary, Targets};
 use vkdiff_networks::{
     read_unet_config, unet_checkpoint, AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig,
     VaeConfig, VaeTiling, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG,
@@ -38,7 +38,11 @@ pub struct Sdxl {
     pub(crate) ctx: Context,
     pub(crate) dtype: Dtype,
     pub(crate) tokenizers: [ClipTokenizer; 2],
-    pub(crate) text_encoders: [ClipTextModel; 2],
+    /// None once released ([`Sdxl::release_text_encoders`]).
+    text_encoders: Option<[ClipTextModel; 2]>,
+    /// The encoders' widths, kept past their release: features per token of each, and the
+    /// pooled projection's.
+    pub(crate) text_widths: ([usize; 2], usize),
     pub(crate) unet_config: UNetConfig,
     pub(crate) unet: UNet,
     pub(crate) vae: AutoencoderKl,
@@ -88,7 +92,8 @@ impl Sdxl {
             ctx: ctx.clone(),
             dtype,
             tokenizers,
-            text_encoders,
+            text_widths: text_widths(&text_encoders),
+            text_encoders: Some(text_encoders),
             unet_config,
             unet,
             vae,
@@ -118,7 +123,8 @@ impl Sdxl {
             ctx: ctx.clone(),
             dtype,
             tokenizers,
-            text_encoders,
+            text_widths: text_widths(&text_encoders),
+            text_encoders: Some(text_encoders),
             unet_config,
             unet,
             vae,
@@ -131,7 +137,7 @@ impl Sdxl {
 
     /// The text encoders' widths must be what the UNet was trained on.
     fn check_widths(&self) -> Result<()> {
-        let [a, b] = [self.text_encoders[0].config(), self.text_encoders[1].config()];
+        let [a, b] = self.text_encoders()?.each_ref().map(|e| e.config());
         let context = a.hidden_size + b.hidden_size;
         if context != self.unet_config.cross_attention_dim {
             return Err(Error::Config(format!(
@@ -200,9 +206,39 @@ impl Sdxl {
             self.loras.restore()?;
             return Ok(None);
         }
-        let targets = Targets::sdxl(&self.unet, &self.text_encoders[0], &self.text_encoders[1]);
+        let [first, second] = self
+            .text_encoders
+            .as_ref()
+            .ok_or_else(|| Error::Config("LoRAs cannot be merged once the text encoders are released".into()))?;
+        let targets = Targets::sdxl(&self.unet, first, second);
         Ok(Some(self.loras.apply(&targets, loras)?))
     }
+}
+
+impl Sdxl {
+    /// Both text encoders, unless released.
+    pub(crate) fn text_encoders(&self) -> Result<&[ClipTextModel; 2]> {
+        self.text_encoders.as_ref().ok_or_else(|| {
+            Error::Config("the text encoders were released once the prompts were encoded; nothing more can be".into())
+        })
+    }
+
+    /// Frees the text encoders' device memory (1.6 GiB for SDXL in f16) once every prompt a
+    /// run needs is encoded, and returns the bytes freed. Prompts cannot be encoded after it,
+    /// nor LoRAs merged anew.
+    pub fn release_text_encoders(&mut self) -> u64 {
+        let before = self.ctx.live_bytes();
+        self.text_encoders = None;
+        self.loras.forget(Component::TextEncoder1);
+        self.loras.forget(Component::TextEncoder2);
+        before.saturating_sub(self.ctx.live_bytes())
+    }
+}
+
+/// What [`Sdxl::text_widths`] keeps of the encoders.
+fn text_widths([first, second]: &[ClipTextModel; 2]) -> ([usize; 2], usize) {
+    let hidden = [first.config().hidden_size, second.config().hidden_size];
+    (hidden, second.config().projection_dim.unwrap_or(0))
 }
 
 fn builtin<T: serde::de::DeserializeOwned>(text: &str) -> T {

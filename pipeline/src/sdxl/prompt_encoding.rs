@@ -74,13 +74,13 @@ impl Sdxl {
         let encoded: Vec<_> = self
             .tokenizers
             .iter()
-            .zip(&self.text_encoders)
+            .zip(self.text_encoders()?)
             .map(|(tok, enc)| enc.encode(&prompts.iter().map(|p| tok.encode(p)).collect::<Vec<_>>()))
             .collect::<std::result::Result<_, _>>()?;
         let (first, second) = (&encoded[0], &encoded[1]);
         let pooled =
             second.pooled.as_deref().ok_or_else(|| Error::Config("text encoder 2 gave no pooled output".into()))?;
-        let (w1, w2) = (self.text_encoders[0].config().hidden_size, self.text_encoders[1].config().hidden_size);
+        let [w1, w2] = self.text_widths.0;
         let mut context: Vec<f32> = first
             .penultimate
             .chunks_exact(w1)

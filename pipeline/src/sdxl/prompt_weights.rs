@@ -76,7 +76,7 @@ impl Sdxl {
 
     /// One row: its chunks' weighted features side by side, and the last chunk's pooled output.
     fn encode_chunks(&self, row: &Weighted) -> Result<(Vec<f32>, Vec<f32>)> {
-        let (w1, w2) = (self.text_encoders[0].config().hidden_size, self.text_encoders[1].config().hidden_size);
+        let [w1, w2] = self.text_widths.0;
         let width = w1 + w2;
         let (mut context, mut pooled) = (Vec::new(), Vec::new());
         for start in (0..row.weights.len()).step_by(CHUNK) {
@@ -90,8 +90,9 @@ impl Sdxl {
                         .collect()
                 })
                 .collect();
-            let first = self.text_encoders[0].encode(std::slice::from_ref(&ids[0]))?;
-            let second = self.text_encoders[1].encode(std::slice::from_ref(&ids[1]))?;
+            let [first, second] = self.text_encoders()?;
+            let first = first.encode(std::slice::from_ref(&ids[0]))?;
+            let second = second.encode(std::slice::from_ref(&ids[1]))?;
             let mut chunk: Vec<f32> = first
                 .penultimate
                 .chunks_exact(w1)

@@ -6,8 +6,8 @@
 use crate::error::{finite, Error, Result};
 use crate::sdxl::controlnet_guide::{ControlGuide, ControlNetUse};
 use crate::sdxl::denoiser::{Denoiser, IpAdapterUse, ItemInputs};
-use crate::sdxl::ImageGuide;
 use crate::sdxl::Sdxl;
+use crate::sdxl::{Conditioning, ImageGuide};
 use crate::settings::sampling::{Sampling, TextToImage};
 use crate::RgbImage;
 use std::time::{Duration, Instant};
@@ -59,11 +59,44 @@ impl Sdxl {
         guides: &Guides,
         on_step: &mut dyn FnMut(usize, usize),
     ) -> Result<Generated> {
-        let Denoised { latents, latent_shape, mut timings } = self.denoise(job, guides, on_step)?;
+        let (mut out, encoding) =
+            self.with_encoding(job, |text| self.text_to_image_encoded(job, text, guides, on_step))?;
+        out.timings.text_encoding = encoding;
+        Ok(out)
+    }
+
+    /// Encodes `job`'s prompts and runs `then` on them; with the encoding's time.
+    fn with_encoding<T>(
+        &self,
+        job: &TextToImage,
+        then: impl FnOnce(&Conditioning) -> Result<T>,
+    ) -> Result<(T, Duration)> {
+        let start = Instant::now();
+        let text = self.encode_job(job)?;
+        let encoding = start.elapsed();
+        Ok((then(&text)?, encoding))
+    }
+
+    /// [`Sdxl::text_to_image`] with the prompts already encoded ([`Sdxl::encode_job`]), so the
+    /// text encoders may be released before the denoising takes its memory.
+    pub fn text_to_image_encoded(
+        &self,
+        job: &TextToImage,
+        text: &Conditioning,
+        guides: &Guides,
+        on_step: &mut dyn FnMut(usize, usize),
+    ) -> Result<Generated> {
+        let Denoised { latents, latent_shape, mut timings } = self.denoise_encoded(job, text, guides, on_step)?;
         let start = Instant::now();
         let image = self.decode(&latents, latent_shape)?;
         timings.vae = start.elapsed();
         Ok(Generated { latents, latent_shape, image, timings })
+    }
+
+    /// Both prompts of `job`, encoded as its sampling says.
+    pub fn encode_job(&self, job: &TextToImage) -> Result<Conditioning> {
+        let sampling = &job.sampling;
+        self.encode_prompt_as(sampling.prompt_syntax, &job.prompt, job.negative_prompt.as_deref(), sampling.guided())
     }
 
     /// The latents of one generation, without decoding them; the sampling is checked as for
@@ -74,17 +107,21 @@ impl Sdxl {
         guides: &Guides,
         on_step: &mut dyn FnMut(usize, usize),
     ) -> Result<Denoised> {
+        let (mut out, encoding) = self.with_encoding(job, |text| self.denoise_encoded(job, text, guides, on_step))?;
+        out.timings.text_encoding = encoding;
+        Ok(out)
+    }
+
+    /// [`Sdxl::denoise`] with the prompts already encoded.
+    pub fn denoise_encoded(
+        &self,
+        job: &TextToImage,
+        text: &Conditioning,
+        guides: &Guides,
+        on_step: &mut dyn FnMut(usize, usize),
+    ) -> Result<Denoised> {
         let sampling = &job.sampling;
         let mut timings = Timings::default();
-        let start = Instant::now();
-        let text = self.encode_prompt_as(
-            sampling.prompt_syntax,
-            &job.prompt,
-            job.negative_prompt.as_deref(),
-            sampling.guided(),
-        )?;
-        timings.text_encoding = start.elapsed();
-
         let start = Instant::now();
         let ip_tokens = guides.image.as_ref().map(|g| g.tokens(sampling.guided())).transpose()?;
         let control =
@@ -96,7 +133,7 @@ impl Sdxl {
         let init = guides.init.map(|image| self.encode_init(image, sampling.width, sampling.height)).transpose()?;
         let item = ItemInputs {
             seed: job.seed,
-            text: &text,
+            text,
             control_image: guides.control.as_ref().map(|g| g.image),
             ip_tokens: ip_tokens.as_deref(),
             init: init.as_ref(),
