@@ -13,6 +13,7 @@ mod peaks;
 mod random_models;
 mod scene;
 mod unet;
+mod vae;
 mod workflow;
 
 use anyhow::Result;
@@ -38,6 +39,9 @@ pub enum BenchCommand {
     /// Seconds per image of `vkdiff dataset` with the paper's workflow (random full-size
     /// weights) by stage, against one `vkdiff gen` per image measured in the same run.
     Dataset(dataset::DatasetArgs),
+    /// Seconds and activation memory of SDXL's VAE decode (random weights), whole and in
+    /// diffusers' tiles, beside the memory plan's estimates.
+    Vae(vae::VaeArgs),
     /// Images per second of FID features (torch-fidelity's InceptionV3, random weights) over a
     /// folder of PNGs, against torch-fidelity on the CPU.
     Fid(fid::FidArgs),
@@ -53,5 +57,6 @@ pub fn run(cmd: BenchCommand) -> Result<()> {
         BenchCommand::Workflow(args) => workflow::run(&args),
         BenchCommand::Dataset(args) => dataset::run(&args),
         BenchCommand::Fid(args) => fid::run(&args),
+        BenchCommand::Vae(args) => vae::run(&args),
     }
 }
