@@ -90,6 +90,9 @@ impl Buffer {
 
 impl Drop for Buffer {
     fn drop(&mut self) {
+        if self.shared.hung.load(Ordering::SeqCst) {
+            return; // a timed-out submission may still use it; the process ends anyway
+        }
         if let Some(allocation) = self.allocation.lock().unwrap().take() {
             let _ = self.shared.allocator.lock().unwrap().free(allocation);
         }

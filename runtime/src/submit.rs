@@ -51,7 +51,9 @@ pub(crate) fn submit_once(ctx: &Context, f: impl FnOnce(&ash::Device, vk::Comman
             device.end_command_buffer(cmd).vk("vkEndCommandBuffer")?;
             submit_and_wait(ctx, cmd)
         })();
-        device.destroy_command_pool(pool, None);
+        if !ctx.shared.hung.load(std::sync::atomic::Ordering::SeqCst) {
+            device.destroy_command_pool(pool, None);
+        }
         result
     }
 }

@@ -200,10 +200,11 @@ fn a_wait_past_the_timeout_is_one_clear_error() {
     // A zero timeout: the first chunk cannot have finished when its wait starts. The context is
     // then taken as hung and frees nothing the device may still use.
     let ctx = Context::new(&Default::default()).unwrap();
-    ctx.set_submit_budget(SubmitBudget { timeout: std::time::Duration::ZERO, ..ctx.submit_budget() });
     let n = 256;
     let a = ctx.upload(&[n, n], Dtype::F32, &random(n * n, 83)).unwrap();
     let y = ctx.zeros(&[n, n], Dtype::F32).unwrap();
+    // After the uploads, which on the GPU paths are submissions too.
+    ctx.set_submit_budget(SubmitBudget { timeout: std::time::Duration::ZERO, ..ctx.submit_budget() });
     let err = ctx
         .run(|rec| {
             for _ in 0..8 {
