@@ -170,7 +170,7 @@ pub fn api_limit() -> Result<(u32, u32)> {
     match std::env::var("VKDIFF_VULKAN_API").as_deref() {
         Err(_) | Ok("") | Ok("1.3") => Ok((1, 3)),
         Ok("1.2") => Ok((1, 2)),
-        Ok(other) => Err(Error::BadDeviceSpec(format!("VKDIFF_VULKAN_API={other}: vkdiff runs Vulkan 1.2 or 1.3"))),
+        Ok(other) => Err(Error::BadSetting(format!("VKDIFF_VULKAN_API={other}: vkdiff runs Vulkan 1.2 or 1.3"))),
     }
 }
 
