@@ -167,13 +167,14 @@ fn closing_line(report: &Report, elapsed: Duration, peak: u64) -> String {
     let t = &report.times;
     let s = |d: Duration| format!("{:.1} s", d.as_secs_f64());
     format!(
-        "made {} images in {} ({:.2} s/image): scene {} (on its own threads), prompts/styles/recording {}, guides {}, \
-            denoise {}, VAE {}, write {} (on its own thread), waited for scenes {}; peak device memory {} MiB",
+        "made {} images in {} ({:.2} s/image): scene {} (on its own threads), prompts/styles/recording {} (recorded {}×), \
+            guides {}, denoise {}, VAE {}, write {} (on its own thread), waited for scenes {}; peak device memory {} MiB",
         report.made,
         s(elapsed),
         elapsed.as_secs_f64() / report.made.max(1) as f64,
         s(t.scene),
         s(t.setup),
+        report.recordings,
         s(t.guides),
         s(t.denoise),
         s(t.vae),

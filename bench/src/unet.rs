@@ -156,6 +156,7 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
         ip: &[],
     };
     let pass = unet.record(&inputs)?;
+    pass.project_conditioning()?;
     let record_s = start.elapsed().as_secs_f64();
     let (mut best, mut longest) = (f64::INFINITY, Default::default());
     for _ in 0..args.samples.max(1) {
@@ -218,8 +219,10 @@ fn profile(ctx: &Context, unet: &UNet, inputs: &UNetInputs) -> Result<Vec<Kernel
     ctx.set_profiling(true);
     let pass = unet.record(inputs);
     ctx.set_profiling(false);
+    let pass = pass?;
+    pass.project_conditioning()?;
     let mut by_kernel: Vec<KernelTime> = Vec::new();
-    for t in pass?.run_profiled()? {
+    for t in pass.run_profiled()? {
         match by_kernel.iter_mut().find(|k| k.kernel == t.kernel) {
             Some(k) => (k.dispatches, k.ms) = (k.dispatches + 1, k.ms + t.nanos / 1e6),
             None => by_kernel.push(KernelTime { kernel: t.kernel, dispatches: 1, ms: t.nanos / 1e6 }),

@@ -77,9 +77,11 @@ fn released_text_encoders_free_their_memory_and_later_prompts_fail_clearly() {
     let case = &cases()[1];
     let mut sdxl = load();
     let text = sdxl.encode_job(&job(case)).unwrap();
-    let before = ctx.live_bytes();
+    let held = || ctx.live_bytes() + ctx.host_bytes();
+    let (before, device) = (held(), ctx.live_bytes());
     let freed = sdxl.release_text_encoders();
-    assert!(freed > 0 && ctx.live_bytes() == before - freed, "freed {freed} of {before} bytes");
+    assert!(freed > 0 && held() == before - freed, "freed {freed} of {before} bytes");
+    assert_eq!(ctx.live_bytes(), device, "the text encoders' weights are in host memory, not the device's");
     let released = sdxl.text_to_image_encoded(&job(case), &text, &Guides::default(), &mut |_, _| {}).unwrap();
     let err = sdxl.encode_job(&job(case)).unwrap_err().to_string();
     assert!(err.contains("text encoders were released"), "{err}");

@@ -9,9 +9,8 @@
 
 use crate::context::Context;
 use crate::error::Result;
-use crate::memory::Buffer;
+use crate::memory::{Buffer, BufferUse, Placement};
 use crate::tensor::{dtype_size, Dtype, Tensor};
-use gpu_allocator::MemoryLocation;
 use std::sync::{Arc, Mutex};
 
 /// A pool of device buffers; clones share it.
@@ -63,7 +62,12 @@ impl Arena {
             .map(|(i, _)| i);
         let buf = match best {
             Some(i) => free.swap_remove(i),
-            None => Buffer::new(&self.inner.ctx.shared, size_class(bytes), MemoryLocation::GpuOnly, "arena tensor")?,
+            None => Buffer::new(
+                &self.inner.ctx.shared,
+                size_class(bytes),
+                BufferUse::Tensor(Placement::Device),
+                "arena tensor",
+            )?,
         };
         drop(free);
         let lease = Arc::new(Lease { buf: buf.clone(), arena: self.inner.clone() });

@@ -86,6 +86,8 @@ pub(crate) struct Shared {
     pub(crate) info: DeviceInfo,
     pub(crate) live_bytes: AtomicU64,
     pub(crate) peak_bytes: AtomicU64,
+    /// Bytes of tensors in host memory ([`crate::Placement::Host`]).
+    pub(crate) host_bytes: AtomicU64,
     pub(crate) pipelines: PipelineCache,
     pub(crate) gemm_family: Mutex<GemmFamily>,
     pub(crate) binding_limit: AtomicU64,
@@ -266,6 +268,7 @@ impl Context {
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             live_bytes: AtomicU64::new(0),
             peak_bytes: AtomicU64::new(0),
+            host_bytes: AtomicU64::new(0),
             pipelines: PipelineCache::default(),
             gemm_family: Mutex::new(gemm_family),
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
@@ -300,6 +303,11 @@ impl Context {
     /// The most device memory held at once since the context opened or [`Context::reset_peak`].
     pub fn peak_bytes(&self) -> u64 {
         self.shared.peak_bytes.load(Ordering::SeqCst)
+    }
+
+    /// Bytes of host memory held by live tensors placed there ([`crate::Placement::Host`]).
+    pub fn host_bytes(&self) -> u64 {
+        self.shared.host_bytes.load(Ordering::SeqCst)
     }
 
     pub fn reset_peak(&self) {

@@ -25,6 +25,7 @@ pub use device::{api_limit, list_devices, DeviceInfo, DeviceKind};
 pub use device_choice::{choose, loader_icds, DeviceChoice, DeviceSpec, PciAddress};
 pub use error::{Error, Result};
 pub use matrix_units::MatrixShape;
+pub use memory::Placement;
 pub use memory_budget::MemoryRoom;
 pub use pipeline::Kernel;
 pub use recorder::{Recorder, Recording, Timing};

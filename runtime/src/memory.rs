@@ -8,18 +8,50 @@ use gpu_allocator::MemoryLocation;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 
+/// Where a tensor's memory lives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Placement {
+    /// Device-local memory: counted in the context's live and peak bytes and against
+    /// `VKDIFF_MEMORY_BUDGET`.
+    Device,
+    /// Host memory the device reads over the bus (the same memory on lavapipe and integrated
+    /// GPUs): for weights read once per prompt or style image, not once per step. Counted apart
+    /// ([`crate::Context::host_bytes`]).
+    Host,
+}
+
+/// What a buffer is for: its memory type and the figure it counts towards.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum BufferUse {
+    Tensor(Placement),
+    UploadStaging,
+    DownloadStaging,
+}
+
+impl BufferUse {
+    fn location(self) -> MemoryLocation {
+        match self {
+            BufferUse::Tensor(Placement::Device) => MemoryLocation::GpuOnly,
+            // Host-cached system memory where the device has it, never the device-local
+            // host-visible window (ReBAR) that CpuToGpu may pick.
+            BufferUse::Tensor(Placement::Host) | BufferUse::DownloadStaging => MemoryLocation::GpuToCpu,
+            BufferUse::UploadStaging => MemoryLocation::CpuToGpu,
+        }
+    }
+}
+
 /// One Vulkan buffer and its memory; freed (and uncounted) on drop.
 pub struct Buffer {
     pub(crate) raw: vk::Buffer,
     pub(crate) size: u64,
     allocation: Mutex<Option<Allocation>>,
-    /// Device-only buffers count towards the context's memory figures; staging buffers do not.
-    counted: bool,
+    /// Tensors count towards the context's memory figures; staging buffers do not.
+    placement: Option<Placement>,
     pub(crate) shared: Arc<Shared>,
 }
 
 impl Buffer {
-    pub(crate) fn new(shared: &Arc<Shared>, size: u64, location: MemoryLocation, name: &str) -> Result<Arc<Buffer>> {
+    pub(crate) fn new(shared: &Arc<Shared>, size: u64, use_: BufferUse, name: &str) -> Result<Arc<Buffer>> {
         // Whole words: fills (vkCmdFillBuffer) and vec4 kernels then cover an odd-length f16 tensor.
         let size = size.max(4).next_multiple_of(4);
         let limit = shared.allocation_limit.load(Ordering::SeqCst);
@@ -35,7 +67,11 @@ impl Buffer {
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST;
         let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
-        let counted = location == MemoryLocation::GpuOnly;
+        let placement = match use_ {
+            BufferUse::Tensor(p) => Some(p),
+            BufferUse::UploadStaging | BufferUse::DownloadStaging => None,
+        };
+        let counted = placement == Some(Placement::Device);
         if let Some(budget) = shared.memory_budget.filter(|_| counted) {
             let live = shared.live_bytes.load(Ordering::SeqCst);
             if live + size > budget {
@@ -59,7 +95,7 @@ impl Buffer {
             .allocate(&AllocationCreateDesc {
                 name,
                 requirements,
-                location,
+                location: use_.location(),
                 linear: true,
                 allocation_scheme: AllocationScheme::GpuAllocatorManaged,
             })
@@ -70,17 +106,23 @@ impl Buffer {
             })?;
         // SAFETY: the allocation satisfies the buffer's requirements and is unused.
         unsafe { device.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) }.vk("vkBindBufferMemory")?;
-        if counted {
-            let live = shared.live_bytes.fetch_add(size, Ordering::SeqCst) + size;
-            shared.peak_bytes.fetch_max(live, Ordering::SeqCst);
+        match placement {
+            Some(Placement::Device) => {
+                let live = shared.live_bytes.fetch_add(size, Ordering::SeqCst) + size;
+                shared.peak_bytes.fetch_max(live, Ordering::SeqCst);
+            }
+            Some(Placement::Host) => {
+                shared.host_bytes.fetch_add(size, Ordering::SeqCst);
+            }
+            None => {}
         }
-        Ok(Arc::new(Buffer { raw, size, allocation: Mutex::new(Some(allocation)), counted, shared: shared.clone() }))
+        Ok(Arc::new(Buffer { raw, size, allocation: Mutex::new(Some(allocation)), placement, shared: shared.clone() }))
     }
 
     /// Runs `f` on the buffer's host mapping, if the memory is host-visible (always on lavapipe)
     /// and, under `VKDIFF_GPU_PATHS=1`, not device-only memory (which then goes through staging).
     pub(crate) fn with_mapped<R>(&self, f: impl FnOnce(&mut [u8]) -> R) -> Option<R> {
-        if self.counted && self.shared.gpu_paths.load(Ordering::SeqCst) {
+        if self.placement == Some(Placement::Device) && self.shared.gpu_paths.load(Ordering::SeqCst) {
             return None;
         }
         let mut guard = self.allocation.lock().unwrap();
@@ -96,9 +138,11 @@ impl Drop for Buffer {
         if let Some(allocation) = self.allocation.lock().unwrap().take() {
             let _ = self.shared.allocator.lock().unwrap().free(allocation);
         }
-        if self.counted {
-            self.shared.live_bytes.fetch_sub(self.size, Ordering::SeqCst);
-        }
+        match self.placement {
+            Some(Placement::Device) => self.shared.live_bytes.fetch_sub(self.size, Ordering::SeqCst),
+            Some(Placement::Host) => self.shared.host_bytes.fetch_sub(self.size, Ordering::SeqCst),
+            None => 0,
+        };
         // SAFETY: recordings keep their buffers alive, so no pending work uses this one.
         unsafe { self.shared.device.destroy_buffer(self.raw, None) };
     }

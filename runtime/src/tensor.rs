@@ -3,10 +3,9 @@
 use crate::arena::Lease;
 use crate::context::Context;
 use crate::error::{ensure, Error, Result};
-use crate::memory::Buffer;
+use crate::memory::{Buffer, BufferUse, Placement};
 use crate::submit::submit_once;
 use ash::vk;
-use gpu_allocator::MemoryLocation;
 use half::f16;
 use std::sync::Arc;
 pub use vkdiff_kernels::Dtype;
@@ -102,7 +101,7 @@ impl Tensor {
         if self.buf.with_mapped(|m| m[offset..offset + len].copy_from_slice(bytes)).is_some() {
             return Ok(());
         }
-        let staging = Buffer::new(&self.buf.shared, len as u64, MemoryLocation::CpuToGpu, "upload staging")?;
+        let staging = Buffer::new(&self.buf.shared, len as u64, BufferUse::UploadStaging, "upload staging")?;
         staging.with_mapped(|m| m[..len].copy_from_slice(bytes)).ok_or_else(not_host_visible)?;
         copy(&staging, 0, &self.buf, self.offset, len as u64)
     }
@@ -114,7 +113,7 @@ impl Tensor {
         if let Some(bytes) = self.buf.with_mapped(|m| m[offset..offset + len].to_vec()) {
             return Ok(decode(&bytes, self.dtype));
         }
-        let staging = Buffer::new(&self.buf.shared, len as u64, MemoryLocation::GpuToCpu, "download staging")?;
+        let staging = Buffer::new(&self.buf.shared, len as u64, BufferUse::DownloadStaging, "download staging")?;
         copy(&self.buf, self.offset, &staging, 0, len as u64)?;
         staging.with_mapped(|m| decode(&m[..len], self.dtype)).ok_or_else(not_host_visible)
     }
@@ -153,7 +152,7 @@ impl Context {
     pub fn zeros(&self, shape: &[usize], dtype: Dtype) -> Result<Tensor> {
         let numel: usize = shape.iter().product();
         let size = (numel * dtype_size(dtype)) as u64;
-        let buf = Buffer::new(&self.shared, size, MemoryLocation::GpuOnly, "tensor")?;
+        let buf = Buffer::new(&self.shared, size, BufferUse::Tensor(Placement::Device), "tensor")?;
         if buf.with_mapped(|m| m.fill(0)).is_none() {
             submit_once(self, |device, cmd| {
                 // SAFETY: the buffer is alive; fill size is whole buffer.
@@ -165,18 +164,28 @@ impl Context {
 
     /// A tensor holding `data` (row-major, converted to `dtype`).
     pub fn upload(&self, shape: &[usize], dtype: Dtype, data: &[f32]) -> Result<Tensor> {
+        self.upload_to(Placement::Device, shape, dtype, data)
+    }
+
+    /// [`Context::upload`] into memory placed as `placement` says.
+    pub fn upload_to(&self, placement: Placement, shape: &[usize], dtype: Dtype, data: &[f32]) -> Result<Tensor> {
         let numel: usize = shape.iter().product();
         ensure(numel == data.len(), || format!("{} values for shape {shape:?}", data.len()))?;
-        self.upload_bytes(shape, dtype, &encode(data, dtype))
+        self.upload_bytes_to(placement, shape, dtype, &encode(data, dtype))
     }
 
     /// A tensor holding `bytes`, already encoded in `dtype` (weights streamed from a file).
     pub fn upload_bytes(&self, shape: &[usize], dtype: Dtype, bytes: &[u8]) -> Result<Tensor> {
+        self.upload_bytes_to(Placement::Device, shape, dtype, bytes)
+    }
+
+    /// [`Context::upload_bytes`] into memory placed as `placement` says.
+    pub fn upload_bytes_to(&self, placement: Placement, shape: &[usize], dtype: Dtype, bytes: &[u8]) -> Result<Tensor> {
         let numel: usize = shape.iter().product();
         ensure(numel * dtype_size(dtype) == bytes.len(), || {
             format!("{} bytes for {dtype:?} shape {shape:?}", bytes.len())
         })?;
-        let buf = Buffer::new(&self.shared, bytes.len() as u64, MemoryLocation::GpuOnly, "tensor")?;
+        let buf = Buffer::new(&self.shared, bytes.len() as u64, BufferUse::Tensor(placement), "tensor")?;
         let t = Tensor::owned(buf, shape, dtype);
         t.write_bytes(bytes)?;
         Ok(t)

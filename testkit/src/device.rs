@@ -33,6 +33,12 @@ fn configured(cell: &OnceLock<Context>, setup: fn(&Context)) -> Context {
     .clone()
 }
 
+/// A context of its own, for a test that reads its memory figures (other tests' tensors
+/// would count in a shared one's).
+pub fn private_ctx() -> Context {
+    open()
+}
+
 /// A private context with a fixed GEMM family, so tests of both families can run in parallel.
 /// Under `VKDIFF_EXPECT_COOPERATIVE=1` (the CI pass on a driver with matrix units) a device
 /// whose units fit no cooperative variant fails the test instead of testing the tiled kernels twice.

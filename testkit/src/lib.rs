@@ -7,5 +7,5 @@ mod device;
 mod paths;
 
 pub use compare::{assert_close, assert_within, random, storage_rtol, stored, DTYPES};
-pub use device::{ctx, ctx_with, gpu_ctx, quick_ctx};
+pub use device::{ctx, ctx_with, gpu_ctx, private_ctx, quick_ctx};
 pub use paths::{fixture, repo, scratch};

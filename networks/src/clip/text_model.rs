@@ -108,7 +108,9 @@ impl ClipTextModel {
     /// Builds the encoder from its config; with `pooled`, also the final norm and projection.
     pub fn load(ctx: &Context, config: ClipTextConfig, ckpt: &Checkpoint, pooled: bool) -> Result<ClipTextModel> {
         config.validate()?;
-        let w = ckpt.root().sub("text_model");
+        // Run once per prompt: the device reads the weights from host memory (see
+        // `Weights::in_host_memory`), leaving its own memory to the denoiser.
+        let w = ckpt.root().in_host_memory().sub("text_model");
         let h = config.hidden_size;
         let emb = w.sub("embeddings");
         let token_embedding = emb.host("token_embedding.weight", &[config.vocab_size, h])?;

@@ -10,7 +10,7 @@ use serde::Deserialize;
 use std::path::Path;
 use vkdiff_formats::Error as FileError;
 use vkdiff_runtime::ops::{self, Matmul, UnaryOp};
-use vkdiff_runtime::{Context, Dtype, Tensor};
+use vkdiff_runtime::{Context, Dtype, Placement, Tensor};
 
 /// The keys of a transformers `CLIPVisionConfig` vkdiff reads, with transformers' defaults.
 #[derive(Clone, Debug, Deserialize)]
@@ -166,12 +166,15 @@ impl ClipVisionModelWithProjection {
     pub fn load(ctx: &Context, config: ClipVisionConfig, ckpt: &Checkpoint) -> Result<ClipVisionModelWithProjection> {
         config.validate()?;
         let (h, eps) = (config.hidden_size, config.layer_norm_eps);
-        let w = ckpt.root().sub("vision_model");
+        // Run once per style image: weights in host memory, as the text encoders' are.
+        let root = ckpt.root().in_host_memory();
+        let w = root.sub("vision_model");
         let emb = w.sub("embeddings");
         let (c, p) = (config.num_channels, config.patch_size);
         // [hidden, C, p, p] flattened row-major is already [hidden, C·p·p] in the patch order used below.
         let patch = emb.host("patch_embedding.weight", &[h, c, p, p])?;
-        let patch_embedding = Linear { weight: ctx.upload(&[h, c * p * p], ckpt.dtype(), &patch)?, bias: None };
+        let patch_embedding =
+            Linear { weight: ctx.upload_to(Placement::Host, &[h, c * p * p], ckpt.dtype(), &patch)?, bias: None };
         let mut positions = emb.host("position_embedding.weight", &[config.tokens(), h])?;
         let class = emb.host("class_embedding", &[h])?;
         positions[..h].iter_mut().zip(&class).for_each(|(p, c)| *p += c);
@@ -190,7 +193,7 @@ impl ClipVisionModelWithProjection {
             positions: ctx.upload(&[config.tokens(), h], ckpt.dtype(), &positions)?,
             pre_layrnorm: LayerNorm::load(&w, "pre_layrnorm", h, eps)?,
             post_layernorm: LayerNorm::load(&w, "post_layernorm", h, eps)?,
-            visual_projection: Linear::load(&ckpt.root(), "visual_projection", h, config.projection_dim, false)?,
+            visual_projection: Linear::load(&root, "visual_projection", h, config.projection_dim, false)?,
             layers,
             patch_embedding,
             ctx: ctx.clone(),

@@ -3,7 +3,7 @@
 
 use crate::controlnet::config::{cldm_names, ControlNetConfig};
 use crate::error::{Error, Result};
-use crate::layers::nn::{Conv2d, Graph};
+use crate::layers::nn::{Conv2d, Graph, Recorded};
 use crate::unet::config::UNetConfig;
 use crate::unet::down_path::{DownConditioning, DownOutput, DownPath};
 use crate::unet::unet_2d_blocks::{Conditioning, MidBlock};
@@ -12,7 +12,7 @@ use crate::weights::{component_folder, Checkpoint, Weights};
 use std::path::Path;
 use vkdiff_formats::SafeTensors;
 use vkdiff_runtime::ops::{self, UnaryOp};
-use vkdiff_runtime::{Arena, Context, Dtype, Recording, Tensor};
+use vkdiff_runtime::{Context, Dtype, Tensor};
 
 /// `ControlNetConditioningEmbedding`: 3×3 convs with SiLU, each stage after the first halving the
 /// image, down to the latent grid, then a last conv to the UNet's first width.
@@ -56,16 +56,21 @@ pub struct ControlNetInputs<'a> {
     pub scale: f32,
 }
 
-/// A recorded ControlNet evaluation writing `residuals`, which a recorded UNet pass reads.
+/// A recorded ControlNet evaluation writing `residuals`, which a recorded UNet pass reads; as
+/// with [`crate::UNetPass`], [`ControlNetPass::project_conditioning`] after each change of the
+/// prompt's encoder hidden states.
 pub struct ControlNetPass {
-    recording: Recording,
+    recorded: Recorded,
     pub residuals: ControlResiduals,
-    _arena: Arena,
 }
 
 impl ControlNetPass {
+    pub fn project_conditioning(&self) -> Result<()> {
+        self.recorded.project_conditioning()
+    }
+
     pub fn run(&self) -> Result<()> {
-        Ok(self.recording.run()?)
+        Ok(self.recorded.evaluation.run()?)
     }
 }
 
@@ -223,7 +228,7 @@ impl ControlNetModel {
             down.push(self.zero_conv(&mut g, conv, skip, inputs.scale)?);
         }
         let mid = self.zero_conv(&mut g, &self.zero_mid, &h, inputs.scale)?;
-        Ok(ControlNetPass { recording: g.rec.finish()?, residuals: ControlResiduals { down, mid }, _arena: g.arena })
+        Ok(ControlNetPass { recorded: g.finish()?, residuals: ControlResiduals { down, mid } })
     }
 
     /// scale · conv(x) into a tensor of its own, which outlives the recording's arena.

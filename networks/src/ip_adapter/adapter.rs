@@ -50,10 +50,11 @@ impl ImageProjModel {
     }
 }
 
-/// (to_k_ip, to_v_ip) of processor N = 2k + 1 for each cross-attention k of `unet`.
+/// (to_k_ip, to_v_ip) of processor N = 2k + 1 for each cross-attention k of `unet`, in host
+/// memory: they project the image tokens once per conditioning, not once per step.
 fn load_layers(ckpt: &Checkpoint, unet: &UNet) -> Result<Vec<(Tensor, Tensor)>> {
     let dim = unet.config().cross_attention_dim;
-    let w = ckpt.root().sub("ip_adapter");
+    let w = ckpt.root().in_host_memory().sub("ip_adapter");
     (unet.cross_attention_channels().iter().enumerate())
         .map(|(k, &c)| {
             let l = w.sub(&(2 * k + 1).to_string());

@@ -17,7 +17,7 @@ pub struct IpLayer {
 
 /// Extra key/value tokens on every cross-attention k:
 /// `out = softmax(QKᵀ)V + scales[k] · softmax(QK_ipᵀ)V_ip`, with K_ip, V_ip projected from
-/// `tokens` by each layer's own weights. `layers` and `scales` are in the order of
+/// `tokens` by each layer's own weights (once per conditioning, like the prompt's keys and values). `layers` and `scales` are in the order of
 /// [`crate::UNet::cross_attentions`].
 pub struct IpAdapterInput {
     /// [B, image tokens, cross_attention_dim].
@@ -57,7 +57,10 @@ impl Attention {
         cross_index: usize,
     ) -> Result<Attention> {
         let q = Linear::load(w, "to_q", channels, channels, false)?;
-        let kv = Linear { weight: w.stacked(&["to_k.weight", "to_v.weight"], channels, context)?, bias: None };
+        // Keys and values of the prompt are projected once per conditioning, so their weights
+        // live in host memory.
+        let kv = w.in_host_memory().stacked(&["to_k.weight", "to_v.weight"], channels, context)?;
+        let kv = Linear { weight: kv, bias: None };
         Self::with(w, channels, heads, Projections::Cross { q, kv }, Some(cross_index))
     }
 
@@ -97,7 +100,7 @@ impl Attention {
             (Projections::Cross { q, kv }, Some(context)) => {
                 let tokens = context.shape()[1];
                 let q = q.forward(g, x)?;
-                let kv = kv.forward(g, context)?;
+                let kv = g.project_conditioning(kv, context, 1.0)?;
                 l.kv_tokens = tokens;
                 (l.k_ld, l.v_ld) = (2 * c, 2 * c);
                 (l.k_batch, l.v_batch) = (2 * c * tokens, 2 * c * tokens);
@@ -136,9 +139,8 @@ impl Attention {
         }
         let (b, n, c) = (q.shape()[0], q.shape()[1], q.shape()[2]);
         let tokens = adapter.tokens.shape()[1];
-        let k = layer.to_k_ip.forward(g, &adapter.tokens)?;
-        let v = g.alloc(&[b, tokens, c])?;
-        layer.to_v_ip.forward_into(g, &adapter.tokens, &v, false, scale)?;
+        let k = g.project_conditioning(&layer.to_k_ip, &adapter.tokens, 1.0)?;
+        let v = g.project_conditioning(&layer.to_v_ip, &adapter.tokens, scale)?;
         let image = g.alloc(&[b, n, c])?;
         ops::attention(
             &mut g.rec,

@@ -3,7 +3,7 @@
 use crate::error::{Error, Result};
 use crate::weights::Weights;
 use vkdiff_runtime::ops::{self, ConvParams, Matmul, Padding};
-use vkdiff_runtime::{Arena, Context, Dtype, Recorder, Tensor};
+use vkdiff_runtime::{Arena, Context, Dtype, Recorder, Recording, Tensor};
 
 /// A network forward under construction: the recorder its dispatches go to and the arena its
 /// intermediate tensors come from.
@@ -11,16 +11,60 @@ pub struct Graph {
     pub rec: Recorder,
     pub arena: Arena,
     pub dtype: Dtype,
+    /// The projections of the conditioning (keys and values of the prompt's and the style
+    /// images' tokens), recorded apart: they run once per conditioning, not once per evaluation.
+    conditioning: Option<Recorder>,
 }
 
 impl Graph {
     pub fn new(ctx: &Context, dtype: Dtype) -> Result<Graph> {
-        Ok(Graph { rec: Recorder::new(ctx, false)?, arena: Arena::new(ctx), dtype })
+        Ok(Graph { rec: Recorder::new(ctx, false)?, arena: Arena::new(ctx), dtype, conditioning: None })
     }
 
     /// A scratch tensor in the run precision.
     pub fn alloc(&self, shape: &[usize]) -> Result<Tensor> {
         Ok(self.arena.tensor(shape, self.dtype)?)
+    }
+
+    /// alpha·linear(x) of a conditioning input `x`, recorded among the conditioning's
+    /// projections into a tensor of its own (not the arena's: the evaluation reads it every run).
+    pub fn project_conditioning(&mut self, linear: &Linear, x: &Tensor, alpha: f32) -> Result<Tensor> {
+        let ctx = self.rec.context().clone();
+        let out = ctx.zeros(&with_last(x.shape(), linear.outputs()), self.dtype)?;
+        let rec = match &mut self.conditioning {
+            Some(rec) => rec,
+            None => self.conditioning.insert(Recorder::new(&ctx, false)?),
+        };
+        linear.record_into(rec, x, &out, false, alpha)?;
+        Ok(out)
+    }
+
+    /// Ends recording.
+    pub fn finish(self) -> Result<Recorded> {
+        Ok(Recorded {
+            evaluation: self.rec.finish()?,
+            conditioning: self.conditioning.map(Recorder::finish).transpose()?,
+            _arena: self.arena,
+        })
+    }
+}
+
+/// A recorded evaluation, replayed for every evaluation, and the projections of its
+/// conditioning, run after each change of the conditioning inputs.
+pub struct Recorded {
+    pub evaluation: Recording,
+    conditioning: Option<Recording>,
+    /// The intermediate tensors' buffers, owned by this recording alone.
+    _arena: Arena,
+}
+
+impl Recorded {
+    /// Projects the conditioning inputs as they are now; the evaluation reads the result.
+    pub fn project_conditioning(&self) -> Result<()> {
+        if let Some(rec) = &self.conditioning {
+            rec.run()?;
+        }
+        Ok(())
     }
 }
 
@@ -58,6 +102,10 @@ impl Linear {
 
     /// out = alpha·x·Wᵀ + bias (+ out when `accumulate`: a fused residual add).
     pub fn forward_into(&self, g: &mut Graph, x: &Tensor, out: &Tensor, accumulate: bool, alpha: f32) -> Result<()> {
+        self.record_into(&mut g.rec, x, out, accumulate, alpha)
+    }
+
+    fn record_into(&self, rec: &mut Recorder, x: &Tensor, out: &Tensor, accumulate: bool, alpha: f32) -> Result<()> {
         let (n, k) = (self.weight.shape()[0], self.weight.shape()[1]);
         if x.shape().last() != Some(&k) {
             return Err(Error::Config(format!("linear layer takes {k} features, input is {:?}", x.shape())));
@@ -65,7 +113,7 @@ impl Linear {
         let mut spec = Matmul::dense(x.numel() / k, n, k, true);
         spec.accumulate = accumulate;
         spec.alpha = alpha;
-        Ok(ops::matmul(&mut g.rec, x, &self.weight, self.bias.as_ref(), out, &spec)?)
+        Ok(ops::matmul(rec, x, &self.weight, self.bias.as_ref(), out, &spec)?)
     }
 }
 

@@ -4,14 +4,14 @@
 use crate::error::{Error, Result};
 use crate::layers::attention::CrossAttention;
 use crate::layers::attention::IpAdapterInput;
-use crate::layers::nn::{Conv2d, Graph, GroupNorm};
+use crate::layers::nn::{Conv2d, Graph, GroupNorm, Recorded};
 use crate::unet::config::UNetConfig;
 use crate::unet::down_path::{DownConditioning, DownOutput, DownPath};
 use crate::unet::unet_2d_blocks::{BlockShape, Conditioning, MidBlock, UpBlock};
 use crate::weights::Checkpoint;
 use crate::weights::Parameters;
 use vkdiff_runtime::ops;
-use vkdiff_runtime::{Arena, Dtype, Recording, Tensor};
+use vkdiff_runtime::{Dtype, Tensor};
 
 /// ControlNet's outputs, added where diffusers adds `down_block_additional_residuals` (onto each
 /// skip tensor, [B, h, w, C] channels-last, in down-path order) and
@@ -35,35 +35,40 @@ pub struct UNetInputs<'a> {
     pub ip: &'a [IpAdapterInput],
 }
 
-/// A recorded evaluation: write new values into the input tensors, [`UNetPass::run`], read
-/// `output` ([B, H, W, out_channels]).
+/// A recorded evaluation: write new values into the input tensors, after a change of
+/// `encoder_hidden_states` or the image tokens [`UNetPass::project_conditioning`], then
+/// [`UNetPass::run`] and read `output` ([B, H, W, out_channels]).
 pub struct UNetPass {
-    recording: Recording,
+    recorded: Recorded,
     pub output: Tensor,
-    /// The intermediate tensors' buffers, owned by this recording alone.
-    _arena: Arena,
 }
 
 impl UNetPass {
+    /// Projects the conditioning inputs (prompt and image tokens) into every cross-attention's
+    /// keys and values, which every later [`UNetPass::run`] reads.
+    pub fn project_conditioning(&self) -> Result<()> {
+        self.recorded.project_conditioning()
+    }
+
     pub fn run(&self) -> Result<()> {
-        Ok(self.recording.run()?)
+        Ok(self.recorded.evaluation.run()?)
     }
 
     /// Runs one evaluation and returns each dispatch's device time (recorded while the context
     /// was profiling: [`vkdiff_runtime::Context::set_profiling`]).
     pub fn run_profiled(&self) -> Result<Vec<vkdiff_runtime::Timing>> {
-        Ok(self.recording.run_profiled()?)
+        Ok(self.recorded.evaluation.run_profiled()?)
     }
 
     /// The matrix-product arithmetic of one evaluation ([`vkdiff_runtime::Recording::flops`]).
     pub fn flops(&self) -> f64 {
-        self.recording.flops()
+        self.recorded.evaluation.flops()
     }
 
     /// Runs one evaluation and returns about how long each submission ran
     /// ([`vkdiff_runtime::Recording::run_submissions`]).
     pub fn run_submissions(&self) -> Result<Vec<std::time::Duration>> {
-        Ok(self.recording.run_submissions()?)
+        Ok(self.recorded.evaluation.run_submissions()?)
     }
 }
 
@@ -182,7 +187,7 @@ impl UNet {
         let s = inputs.sample.shape();
         let output = ctx.zeros(&[s[0], s[1], s[2], self.config.out_channels], self.dtype)?;
         self.conv_out.forward_into(&mut g, &h, &output, false)?;
-        Ok(UNetPass { recording: g.rec.finish()?, output, _arena: g.arena })
+        Ok(UNetPass { recorded: g.finish()?, output })
     }
 
     /// Shapes and dtypes of the inputs, each mismatch named.

@@ -12,7 +12,7 @@ use std::sync::Mutex;
 use vkdiff_formats::Error as FileError;
 use vkdiff_formats::{decode, SafeTensors, SourceDtype};
 use vkdiff_runtime::ops::oihw_to_ohwi;
-use vkdiff_runtime::{Context, Dtype, Tensor};
+use vkdiff_runtime::{Context, Dtype, Placement, Tensor};
 
 // One per checkpoint, so the size of the file variant costs nothing worth a box.
 #[allow(clippy::large_enum_variant)]
@@ -92,7 +92,7 @@ impl Checkpoint {
 
     /// The whole checkpoint as a view.
     pub fn root(&self) -> Weights<'_> {
-        Weights { ckpt: self, prefix: String::new() }
+        Weights { ckpt: self, prefix: String::new(), placement: Placement::Device }
     }
 
     /// The run precision weights are converted to.
@@ -238,18 +238,19 @@ impl Checkpoint {
         })
     }
 
-    /// `name` on the device in the run precision; bytes already in it are streamed unconverted.
-    fn tensor(&self, name: &str, shape: &[usize]) -> Result<Tensor> {
+    /// `name` in the run precision, placed as `at` says; bytes already in it are streamed
+    /// unconverted.
+    fn tensor(&self, name: &str, shape: &[usize], at: Placement) -> Result<Tensor> {
         if let Some((src, bytes, false)) = self.stored(name, shape)? {
             if matches!((src, self.dtype), (SourceDtype::F16, Dtype::F16) | (SourceDtype::F32, Dtype::F32)) {
-                return Ok(self.ctx.upload_bytes(shape, self.dtype, bytes)?);
+                return Ok(self.ctx.upload_bytes_to(at, shape, self.dtype, bytes)?);
             }
         }
-        self.upload(shape, &self.host(name, shape)?)
+        self.upload(shape, &self.host(name, shape)?, at)
     }
 
-    fn upload(&self, shape: &[usize], data: &[f32]) -> Result<Tensor> {
-        Ok(self.ctx.upload(shape, self.dtype, data)?)
+    fn upload(&self, shape: &[usize], data: &[f32], at: Placement) -> Result<Tensor> {
+        Ok(self.ctx.upload_to(at, shape, self.dtype, data)?)
     }
 }
 
@@ -258,12 +259,21 @@ impl Checkpoint {
 pub struct Weights<'a> {
     ckpt: &'a Checkpoint,
     prefix: String,
+    /// Where this module's tensors go.
+    placement: Placement,
 }
 
 impl<'a> Weights<'a> {
     /// The view of a child module (`w.sub("down_blocks.1").sub("resnets.0")`).
     pub fn sub(&self, name: &str) -> Weights<'a> {
-        Weights { ckpt: self.ckpt, prefix: self.path(name) }
+        Weights { ckpt: self.ckpt, prefix: self.path(name), placement: self.placement }
+    }
+
+    /// This view with its tensors in host memory, which the device reads over the bus: for
+    /// modules that run once per prompt or style image (encoders, the projections of the
+    /// conditioning), so that the device's memory holds what every step reads.
+    pub fn in_host_memory(&self) -> Weights<'a> {
+        Weights { placement: Placement::Host, ..self.clone() }
     }
 
     /// The dotted module path this view is rooted at.
@@ -285,7 +295,7 @@ impl<'a> Weights<'a> {
 
     /// A tensor as stored, in the run precision.
     pub fn tensor(&self, name: &str, shape: &[usize]) -> Result<Tensor> {
-        let t = self.ckpt.tensor(&self.path(name), shape)?;
+        let t = self.ckpt.tensor(&self.path(name), shape, self.placement)?;
         self.ckpt.place(self.path(name), t.clone(), shape, ParamLayout::AsStored);
         Ok(t)
     }
@@ -298,7 +308,7 @@ impl<'a> Weights<'a> {
     /// A PyTorch conv weight [out, in, kh, kw] re-laid out as the kernels read it, [out, kh, kw, in].
     pub fn conv_weight(&self, name: &str, [o, i, kh, kw]: [usize; 4]) -> Result<Tensor> {
         let oihw = self.host(name, &[o, i, kh, kw])?;
-        let t = self.ckpt.upload(&[o, kh, kw, i], &oihw_to_ohwi(&oihw, o, i, kh, kw))?;
+        let t = self.ckpt.upload(&[o, kh, kw, i], &oihw_to_ohwi(&oihw, o, i, kh, kw), self.placement)?;
         self.ckpt.place(self.path(name), t.clone(), &[o, i, kh, kw], ParamLayout::ConvOhwi);
         Ok(t)
     }
@@ -312,7 +322,7 @@ impl<'a> Weights<'a> {
         for n in names {
             data.extend(self.host(n, &[rows, cols])?);
         }
-        let t = self.ckpt.upload(&[names.len() * rows, cols], &data)?;
+        let t = self.ckpt.upload(&[names.len() * rows, cols], &data, self.placement)?;
         for (k, n) in names.iter().enumerate() {
             if let Ok(part) = t.narrow(k * rows, rows) {
                 let shape = if cols == 1 { vec![rows] } else { vec![rows, cols] };

@@ -46,6 +46,7 @@ fn check(path: &str, records_of: &str, dtype: Dtype, tol: f64) {
         scale: 1.0,
     };
     let pass = net.record(&inputs).unwrap();
+    pass.project_conditioning().unwrap();
     pass.run().unwrap();
     let r = &pass.residuals;
     let names: Vec<String> = (0..r.down.len()).map(|k| format!("down.{k}")).chain(["mid".into()]).collect();

@@ -12,12 +12,36 @@ use vkdiff_testkit::ctx;
 use vkdiff_testkit::fixture;
 
 /// The recorded inputs of one fixture, on the device.
-struct Inputs {
-    sample: Tensor,
-    timesteps: Tensor,
-    context: Tensor,
-    text_embeds: Tensor,
-    time_ids: Tensor,
+pub(crate) struct Inputs {
+    pub sample: Tensor,
+    pub timesteps: Tensor,
+    pub context: Tensor,
+    pub text_embeds: Tensor,
+    pub time_ids: Tensor,
+}
+
+impl Inputs {
+    pub fn read(ctx: &Context, io: &SafeTensors, dtype: Dtype) -> Inputs {
+        Inputs {
+            sample: upload_nhwc(ctx, io, "sample", dtype),
+            timesteps: upload(ctx, io, "timestep", Dtype::F32),
+            context: upload(ctx, io, "encoder_hidden_states", dtype),
+            text_embeds: upload(ctx, io, "text_embeds", dtype),
+            time_ids: upload(ctx, io, "time_ids", Dtype::F32),
+        }
+    }
+
+    /// The UNet's inputs: these, with `control` and `ip`.
+    pub fn unet<'a>(&'a self, control: Option<&'a ControlResiduals>, ip: &'a [IpAdapterInput]) -> UNetInputs<'a> {
+        UNetInputs {
+            sample: &self.sample,
+            timesteps: &self.timesteps,
+            encoder_hidden_states: &self.context,
+            added: Some((&self.text_embeds, &self.time_ids)),
+            control,
+            ip,
+        }
+    }
 }
 
 fn upload_nhwc(ctx: &Context, io: &SafeTensors, name: &str, dtype: Dtype) -> Tensor {
@@ -61,13 +85,7 @@ fn check_loaded(fixture_name: &str, model: &Path, dtype: Dtype, (config, ckpt): 
     let io = SafeTensors::open(&fixture("unet").join(format!("{fixture_name}/io.safetensors"))).unwrap();
     let unet = UNet::load(&config, &ckpt).unwrap();
     assert_eq!(ckpt.unused(), Vec::<String>::new(), "{}: tensors the UNet never read", model.display());
-    let inputs = Inputs {
-        sample: upload_nhwc(&ctx, &io, "sample", dtype),
-        timesteps: upload(&ctx, &io, "timestep", Dtype::F32),
-        context: upload(&ctx, &io, "encoder_hidden_states", dtype),
-        text_embeds: upload(&ctx, &io, "text_embeds", dtype),
-        time_ids: upload(&ctx, &io, "time_ids", Dtype::F32),
-    };
+    let inputs = Inputs::read(&ctx, &io, dtype);
     let (down_shapes, _) = unet.residual_shapes(0, 0, 0);
     let control = ControlResiduals {
         down: (0..down_shapes.len()).map(|i| upload_nhwc(&ctx, &io, &format!("control_down.{i}"), dtype)).collect(),
@@ -81,16 +99,8 @@ fn check_loaded(fixture_name: &str, model: &Path, dtype: Dtype, (config, ckpt): 
         ("out_ip", None, &ip[..]),
         ("out_both", Some(&control), &ip[..]),
     ] {
-        let pass = unet
-            .record(&UNetInputs {
-                sample: &inputs.sample,
-                timesteps: &inputs.timesteps,
-                encoder_hidden_states: &inputs.context,
-                added: Some((&inputs.text_embeds, &inputs.time_ids)),
-                control,
-                ip,
-            })
-            .unwrap();
+        let pass = unet.record(&inputs.unet(control, ip)).unwrap();
+        pass.project_conditioning().unwrap();
         pass.run().unwrap();
         let s = pass.output.shape().to_vec();
         let got = nhwc_to_nchw(&pass.output.download().unwrap(), [s[0], s[1], s[2], s[3]]);
@@ -110,7 +120,13 @@ fn check_loaded(fixture_name: &str, model: &Path, dtype: Dtype, (config, ckpt): 
 
 /// The fixture's IP-Adapter: random image tokens and per-layer weights keyed `ip_adapter.N`,
 /// N = 2k + 1 for the k-th cross-attention (diffusers' processor numbering).
-fn ip_adapter(ctx: &Context, unet: &UNet, io: &SafeTensors, fixture_name: &str, dtype: Dtype) -> IpAdapterInput {
+pub(crate) fn ip_adapter(
+    ctx: &Context,
+    unet: &UNet,
+    io: &SafeTensors,
+    fixture_name: &str,
+    dtype: Dtype,
+) -> IpAdapterInput {
     let file = SafeTensors::open(&fixture("unet").join(format!("{fixture_name}/ip_adapter.safetensors"))).unwrap();
     assert_eq!(
         file.entries.len(),

@@ -1,6 +1,7 @@
 //! The SDXL UNet against diffusers on tiny random models (tools/make_unet_fixtures.py), in both
 //! checkpoint layouts and both precisions, with ControlNet residuals and IP-Adapter tokens.
 
+mod conditioning;
 mod controlnet;
 mod errors;
 mod forward;

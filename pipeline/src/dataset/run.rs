@@ -54,6 +54,9 @@ pub struct StageTimes {
 pub struct Report {
     pub made: u64,
     pub times: StageTimes,
+    /// How many times the denoiser was recorded: once per batch shape, and again after each
+    /// decode that needed its memory ([`Sdxl::decode_fits_now`]).
+    pub recordings: usize,
 }
 
 /// An image to write: everything the writer thread needs, nothing it must compute on the GPU.
@@ -108,8 +111,16 @@ pub fn generate(
     let models = &*models;
     let stream = render_scenes(settings, pending.scenes, options.threads, 2 * options.batch);
     let (to_writer, writer) = start_writer(dataset.clone(), options.batch);
-    let mut run =
-        Loop { settings, models, styles, texts, tokens: HashMap::new(), times: StageTimes::default(), denoiser: None };
+    let mut run = Loop {
+        settings,
+        models,
+        styles,
+        texts,
+        tokens: HashMap::new(),
+        times: StageTimes::default(),
+        denoiser: None,
+        recordings: 0,
+    };
     let made = run.all(&stream.images, &to_writer, pending.done, total, options.batch, on_progress);
     drop(to_writer);
     drop(stream.images);
@@ -124,7 +135,7 @@ pub fn generate(
             made
         }
     };
-    Ok(Report { made, times: run.times })
+    Ok(Report { made, times: run.times, recordings: run.recordings })
 }
 
 /// A recorded denoiser with the batch size and [`Loop::shape`] it was recorded for.
@@ -137,6 +148,7 @@ struct Loop<'a> {
     texts: HashMap<usize, Conditioning>,
     tokens: HashMap<usize, Vec<f32>>,
     times: StageTimes,
+    recordings: usize,
     denoiser: Option<RecordedDenoiser<'a>>,
 }
 
@@ -238,6 +250,7 @@ impl<'a> Loop<'a> {
             self.denoiser = None; // the old recording's memory goes before the new one's comes
             let (styles, tokens) = key.1;
             let ip = self.models.ip_use(styles).filter(|_| styles > 0);
+            self.recordings += 1;
             self.denoiser = Some((
                 Denoiser::record(&self.models.sdxl, sampling, self.models.control_use(), ip, key.0, tokens)?,
                 key,
@@ -271,6 +284,11 @@ impl<'a> Loop<'a> {
         self.times.guides += out.prepare;
         self.times.denoise += out.steps.iter().sum::<Duration>();
         let shape = denoiser.latent_shape();
+        if !self.models.sdxl.decode_fits_now() {
+            // The plan counted the weights alone: the recorded passes make room, and are
+            // recorded again for the next batch.
+            self.denoiser = None;
+        }
         let mut finished = Vec::with_capacity(items.len());
         for (item, latents) in items.into_iter().zip(out.latents) {
             let start = Instant::now();

@@ -118,6 +118,11 @@ impl<'a> ControlRun<'a> {
         Ok(self.use_.net.encode_condition_into(&tensor, &self.hint)?)
     }
 
+    /// Projects the prompt's encoder hidden states as written now (see [`ControlNetPass`]).
+    pub fn project_conditioning(&self) -> Result<()> {
+        Ok(self.pass.project_conditioning()?)
+    }
+
     pub fn residuals(&self) -> &ControlResiduals {
         &self.pass.residuals
     }

@@ -224,7 +224,8 @@ impl<'m> Denoiser<'m> {
         Ok(BatchOutput { latents, prepare, steps })
     }
 
-    /// Text, image tokens and control images of every row: all negatives, then all positives.
+    /// Text, image tokens and control images of every row (all negatives, then all positives),
+    /// and the keys and values projected from them.
     fn write_conditioning(&self, items: &[ItemInputs]) -> Result<()> {
         let per_image = self.sampling.rows_per_image();
         let row = |t: &Tensor| t.numel() / t.shape()[0];
@@ -253,8 +254,9 @@ impl<'m> Denoiser<'m> {
                 })
                 .collect::<Result<Vec<_>>>()?;
             control.set_images(&images, per_image, self.sampling.width, self.sampling.height)?;
+            control.project_conditioning()?;
         }
-        Ok(())
+        Ok(self.pass.project_conditioning()?)
     }
 }
 

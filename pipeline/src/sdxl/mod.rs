@@ -30,7 +30,7 @@ use vkdiff_formats::Error as FileError;
 use vkdiff_lora::{Component, LoraFile, LoraMerger, Summary, Targets};
 use vkdiff_networks::{
     read_unet_config, unet_checkpoint, AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig,
-    VaeConfig, VaeTiling, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG,
+    VaeConfig, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG,
 };
 use vkdiff_runtime::{Context, Dtype};
 
@@ -52,8 +52,8 @@ pub struct Sdxl {
     pub(crate) force_zeros_for_empty_prompt: bool,
     /// The LoRAs merged into the weights, and the originals to restore.
     loras: LoraMerger,
-    /// The tiles the VAE decodes in (None: whole), as [`Sdxl::plan_vae`] chose.
-    vae_tiling: Option<VaeTiling>,
+    /// How the VAE decodes (whole or in tiles), as [`Sdxl::plan_vae`] chose.
+    vae_plan: Option<VaePlan>,
 }
 
 impl Sdxl {
@@ -100,7 +100,7 @@ impl Sdxl {
             scheduler,
             force_zeros_for_empty_prompt,
             loras: LoraMerger::new(),
-            vae_tiling: None,
+            vae_plan: None,
         };
         model.check_widths()?;
         Ok(model)
@@ -131,7 +131,7 @@ impl Sdxl {
             scheduler,
             force_zeros_for_empty_prompt: true,
             loras: LoraMerger::new(),
-            vae_tiling: None,
+            vae_plan: None,
         })
     }
 
@@ -223,15 +223,16 @@ impl Sdxl {
         })
     }
 
-    /// Frees the text encoders' device memory (1.6 GiB for SDXL in f16) once every prompt a
+    /// Frees the text encoders (1.6 GiB of host memory for SDXL in f16) once every prompt a
     /// run needs is encoded, and returns the bytes freed. Prompts cannot be encoded after it,
     /// nor LoRAs merged anew.
     pub fn release_text_encoders(&mut self) -> u64 {
-        let before = self.ctx.live_bytes();
+        let held = |ctx: &Context| ctx.live_bytes() + ctx.host_bytes();
+        let before = held(&self.ctx);
         self.text_encoders = None;
         self.loras.forget(Component::TextEncoder1);
         self.loras.forget(Component::TextEncoder2);
-        before.saturating_sub(self.ctx.live_bytes())
+        before.saturating_sub(held(&self.ctx))
     }
 }
 

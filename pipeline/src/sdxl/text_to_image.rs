@@ -157,7 +157,7 @@ impl Sdxl {
         let factor = self.vae.config().scaling_factor;
         let scaled: Vec<f32> = latents.iter().map(|v| v / factor).collect();
         let (latents, shape) = (nchw_to_nhwc(&scaled, [b, c, h, w]), [b, h, w, c]);
-        let (out, [_, height, width, channels]) = match self.vae_tiling {
+        let (out, [_, height, width, channels]) = match self.vae_tiling() {
             Some(tiling) => self.vae.decode_tiled(&latents, shape, tiling)?,
             None => self.vae.decode(&latents, shape)?,
         };

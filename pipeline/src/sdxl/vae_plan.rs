@@ -53,8 +53,7 @@ impl Sdxl {
     ) -> Result<VaePlan> {
         let vae = &self.vae;
         let room = self.ctx.memory_room();
-        // A twentieth of the budget stays free: allocator blocks, staging, the latents.
-        let usable = room.free.saturating_sub(room.budget / 20);
+        let usable = usable(room);
         let max_allocation = self.ctx.info().max_allocation;
         let s = vae.config().downscale();
         let (lh, lw) = (height / s, width / s);
@@ -119,12 +118,24 @@ impl Sdxl {
                 }
             }
         };
-        self.vae_tiling = chosen.tiling;
+        self.vae_plan = Some(chosen);
         Ok(chosen)
     }
 
     /// The tiles decodes take (None: whole), as [`Sdxl::plan_vae`] chose.
     pub fn vae_tiling(&self) -> Option<VaeTiling> {
-        self.vae_tiling
+        self.vae_plan.and_then(|p| p.tiling)
     }
+
+    /// Whether the planned decode fits in the memory free now, beside what was taken since the
+    /// plan (a recorded denoiser kept for the next batch).
+    pub fn decode_fits_now(&self) -> bool {
+        self.vae_plan.is_none_or(|plan| usable(self.ctx.memory_room()) >= plan.planned_bytes)
+    }
+}
+
+/// What a plan may take of `room`: a twentieth of the budget stays free (allocator blocks,
+/// staging, the latents).
+fn usable(room: MemoryRoom) -> u64 {
+    room.free.saturating_sub(room.budget / 20)
 }
