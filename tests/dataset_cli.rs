@@ -224,6 +224,13 @@ fn img2img_from_the_shaded_render_is_reproduced_by_gen() {
         assert_eq!((init.width, init.height), (control.width, control.height));
         assert!(init.pixels != control.pixels, "the init image is the shaded render, not the control image");
     }
+    // The shaded renders are those `vkdiff scene` writes for the same scene's crops.
+    let scene = scratch("dataset-init-scene").join("5");
+    run_ok(&scene_args(5, &scene), &[]);
+    for k in 0..2 {
+        let init = std::fs::read(dir.join(format!("init/{k:06}.png"))).unwrap();
+        assert!(init == std::fs::read(scene.join(format!("crops/{k}/shaded.png"))).unwrap(), "init/{k:06}.png");
+    }
     assert_gen_reproduces(&dir);
 }
 
@@ -256,32 +263,23 @@ fn assert_gen_reproduces(dir: &Path) {
     }
 }
 
+/// `vkdiff scene` for scene `seed` as `dataset_flags` cuts it.
+fn scene_args(seed: u64, out: &Path) -> Vec<String> {
+    let seed = seed.to_string();
+    let args = ["scene", "--seed", &seed, "--width", "160", "--height", "128", "--crops", "2", "--crop-size", "64"];
+    let mut args: Vec<String> = args.map(String::from).to_vec();
+    args.extend(["--out".into(), out.to_str().unwrap().into()]);
+    args
+}
+
 #[test]
 fn depth_control_and_masks_are_the_crops_vkdiff_scene_cuts() {
     let dir = reference();
     let scenes = scratch("dataset-scenes");
     for scene in 0..SCENES {
         let folder = scenes.join(scene.to_string());
-        let seed = (5 + scene).to_string();
-        run_ok(
-            &[
-                "scene",
-                "--seed",
-                &seed,
-                "--width",
-                "160",
-                "--height",
-                "128",
-                "--crops",
-                "2",
-                "--crop-size",
-                "64",
-                "--out",
-                folder.to_str().unwrap(),
-            ]
-            .map(String::from),
-            &[],
-        );
+        let seed = 5 + scene;
+        run_ok(&scene_args(seed, &folder), &[]);
         for k in 0..2 {
             let stem = format!("{:06}", scene * 2 + k);
             for (ours, theirs) in [("depth", "depth.exr"), ("control", "control.png"), ("masks", "instances.png")] {

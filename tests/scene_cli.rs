@@ -26,7 +26,9 @@ fn scene_writes_the_folder_with_its_crops() {
         "camera.json",
         "control.png",
         "preview.png",
+        "shaded.png",
         "crops/1/depth.exr",
+        "crops/1/shaded.png",
         "crops/1/camera.json",
     ] {
         assert!(out.join(file).is_file(), "{file}");

@@ -1,6 +1,6 @@
 //! What `vkdiff scene` writes: one folder per scene with depth.exr, instances.png,
-//! annotations.json, camera.json, control.png and preview.png, plus `crops/<k>/` with the same
-//! files (but the preview) for each crop. Files are produced in memory and the folder appears
+//! annotations.json, camera.json, control.png, shaded.png and preview.png, plus `crops/<k>/` with
+//! the same files (but the preview) for each crop. Files are produced in memory and the folder appears
 //! atomically; the bytes depend on the seed and the settings only.
 
 use std::path::Path;
@@ -15,7 +15,7 @@ use crate::error::{RenderError, Result};
 use crate::exr::encode_single_channel;
 use crate::frame::Frame;
 use crate::png_out::{gray16, rgb8};
-use crate::preview::preview_image;
+use crate::preview::{preview_image, shaded_image};
 use crate::scene::{Scene, SceneConfig};
 use crate::staging::StagingDir;
 use vkdiff_setting::Message;
@@ -101,8 +101,13 @@ fn provenance(seed: u64, config: &SceneConfig) -> Value {
 /// The files describing one frame (full or crop), under `prefix`.
 pub fn frame_files(frame: &Frame, info: Value, control: ControlDepth, prefix: &str) -> Vec<SceneFile> {
     let (w, h) = (frame.camera.width, frame.camera.height);
-    let ((depth, ids), (annotations, control)) = rayon::join(
-        || rayon::join(|| encode_single_channel(w, h, "Z", &frame.depth), || gray16(w, h, &frame.ids)),
+    let (((depth, ids), shaded), (annotations, control)) = rayon::join(
+        || {
+            rayon::join(
+                || rayon::join(|| encode_single_channel(w, h, "Z", &frame.depth), || gray16(w, h, &frame.ids)),
+                || rgb8(w, h, &shaded_image(frame)),
+            )
+        },
         || {
             rayon::join(
                 || coco_json(frame, &instance_masks(frame), info),
@@ -118,6 +123,8 @@ pub fn frame_files(frame: &Frame, info: Value, control: ControlDepth, prefix: &s
         ("annotations.json", annotations.into_bytes()),
         ("camera.json", camera.into_bytes()),
         ("control.png", control),
+        // The render-only image: what `dataset --init-strength` starts img2img from.
+        ("shaded.png", shaded),
     ]
     .into_iter()
     .map(|(name, bytes)| (format!("{prefix}{name}"), bytes))
