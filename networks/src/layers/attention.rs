@@ -17,7 +17,8 @@ pub struct IpLayer {
 
 /// Extra key/value tokens on every cross-attention k:
 /// `out = softmax(QKᵀ)V + scales[k] · softmax(QK_ipᵀ)V_ip`, with K_ip, V_ip projected from
-/// `tokens` by each layer's own weights (once per conditioning, like the prompt's keys and values). `layers` and `scales` are in the order of
+/// `tokens` by each layer's own weights (once per conditioning, like the prompt's keys and
+/// values). `layers` and `scales` are in the order of
 /// [`crate::UNet::cross_attentions`].
 pub struct IpAdapterInput {
     /// [B, image tokens, cross_attention_dim].
