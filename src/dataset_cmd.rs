@@ -6,7 +6,7 @@ use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use vkdiff_args::Progress;
-use vkdiff_args::{CropArgs, SceneSettings};
+use vkdiff_args::{dataset_flag, CropArgs, SceneSettings};
 use vkdiff_args::{ModelArgs, SamplingArgs};
 use vkdiff_pipeline::dataset::{
     merge, read_prompts, Crops, DatasetEvent, DatasetJob, DatasetSettings, Finish, Merged, Progress as Event, Report,
@@ -54,6 +54,12 @@ pub struct DatasetArgs {
     /// `vkdiff gen --init-image` does, instead of from noise.
     #[arg(long)]
     init_strength: Option<f64>,
+    /// The scenes' shaded renders as the images (compost brown, mushrooms white, lit from the
+    /// depth): the baseline set, with no model and no GPU. Each image is byte for byte the init/
+    /// file of a diffusion run with the same scene flags; an uncropped frame is cut to multiples
+    /// of 8, as SDXL's.
+    #[arg(long)]
+    render_only: bool,
     /// Images per UNet pass (2 × batch rows with guidance); results do not depend on it.
     #[arg(long, default_value_t = 1)]
     batch: usize,
@@ -87,7 +93,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     }
     eprintln!("{}", job.plan_line());
     if job.todo() > 0 {
-        let ctx = crate::open_device(&args.model.device)?;
+        let ctx = job.needs_device().then(|| crate::open_device(&args.model.device)).transpose()?;
         let done = job.done() as usize;
         let total = done + job.todo() as usize;
         // The bar and the clock start once the models are loaded: the closing line's per-image
@@ -95,7 +101,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         let mut bar = Progress::resuming("images", "image", done);
         let mut start = Instant::now();
         let mut made = done;
-        let report = job.run(&ctx, &mut |event| match event {
+        let report = job.run(ctx.as_ref(), &mut |event| match event {
             DatasetEvent::Note(line) => eprintln!("{line}"),
             DatasetEvent::Loaded(time) => {
                 eprintln!("loaded in {:.1} s", time.as_secs_f64());
@@ -110,7 +116,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
                 bar.show(made, total, &format!("  (step {step}/{steps})"), false)
             }
         })?;
-        eprintln!("{}", closing_line(&report, start.elapsed(), ctx.peak_bytes()));
+        eprintln!("{}", closing_line(&report, start.elapsed(), ctx.as_ref().map(|c| c.peak_bytes())));
     }
     match job.finish()? {
         Finish::Merged(merged) => print_merged(out, &merged),
@@ -146,6 +152,17 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
             .iter()
             .map(|set| set.split(',').map(str::trim).filter(|p| !p.is_empty()).map(PathBuf::from).collect()),
     );
+    let models = match (args.render_only, args.model.model_flag_given()) {
+        (true, Some(flag)) => {
+            anyhow::bail!(
+                "{} makes the shaded renders the images: drop {}",
+                dataset_flag("render_only"),
+                dataset_flag(flag)
+            )
+        }
+        (true, None) => None,
+        (false, _) => Some(args.model.settings()?),
+    };
     let crops =
         Crops { count: args.crops.crops, size: args.crops.crop_size, min_fraction: args.crops.crop_min_fraction };
     Ok(DatasetSettings::new(
@@ -154,7 +171,7 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
         args.scene.config(),
         crops,
         args.model.control_depth(),
-        args.model.settings()?,
+        models,
         prompts,
         args.sampling.negative_prompt.clone(),
         Sampling { strength: args.init_strength, ..args.sampling.sampling(0, 0) },
@@ -162,16 +179,27 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
     )?)
 }
 
-/// Per-stage seconds and peak device memory.
-fn closing_line(report: &Report, elapsed: Duration, peak: u64) -> String {
+/// Per-stage seconds and peak device memory (None: a render-only set, which used no device).
+fn closing_line(report: &Report, elapsed: Duration, peak: Option<u64>) -> String {
     let t = &report.times;
     let s = |d: Duration| format!("{:.1} s", d.as_secs_f64());
-    format!(
-        "made {} images in {} ({:.2} s/image): scene {} (on its own threads), prompts/styles/recording {} (recorded {}×), \
-            guides {}, denoise {}, VAE {}, write {} (on its own thread), waited for scenes {}; peak device memory {} MiB",
+    let made = format!(
+        "made {} images in {} ({:.2} s/image)",
         report.made,
         s(elapsed),
-        elapsed.as_secs_f64() / report.made.max(1) as f64,
+        elapsed.as_secs_f64() / report.made.max(1) as f64
+    );
+    let Some(peak) = peak else {
+        return format!(
+            "{made}: scene {} (on its own threads), write {}, waited for scenes {}",
+            s(t.scene),
+            s(t.write),
+            s(t.waiting)
+        );
+    };
+    format!(
+        "{made}: scene {} (on its own threads), prompts/styles/recording {} (recorded {}×), guides {}, denoise {}, \
+            VAE {}, write {} (on its own thread), waited for scenes {}; peak device memory {} MiB",
         s(t.scene),
         s(t.setup),
         report.recordings,

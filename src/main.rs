@@ -8,7 +8,7 @@ mod fid_cmd;
 mod gen_cmd;
 mod scene_cmd;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 #[derive(Parser)]
 #[command(
@@ -44,7 +44,7 @@ enum Command {
 fn main() {
     // SAFETY: first thing in main, before any thread or Vulkan call.
     unsafe { vkdiff_runtime::widen_lavapipe_vectors() };
-    let cli = Cli::parse();
+    let cli = parse();
     // The libraries name settings as data; errors here name them by this command's flags.
     let names = if matches!(cli.command, Command::Dataset(_)) { vkdiff_args::dataset_flag } else { vkdiff_args::flag };
     vkdiff_setting::name_settings_with(names);
@@ -61,6 +61,15 @@ fn main() {
         eprintln!("error: {}", one_line(&e));
         std::process::exit(1);
     }
+}
+
+/// The command line; `dataset --render-only` needs no `--model`, which every other generating
+/// command needs.
+fn parse() -> Cli {
+    let command = Cli::command().mut_subcommand("dataset", |c| {
+        c.mut_arg("model", |a| a.required(false).required_unless_present("render_only"))
+    });
+    Cli::from_arg_matches(&command.get_matches()).unwrap_or_else(|e| e.exit())
 }
 
 /// Opens the Vulkan device `args` choose and has it say when lavapipe compiles kernels, which on

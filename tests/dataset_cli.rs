@@ -231,7 +231,37 @@ fn img2img_from_the_shaded_render_is_reproduced_by_gen() {
         let init = std::fs::read(dir.join(format!("init/{k:06}.png"))).unwrap();
         assert!(init == std::fs::read(scene.join(format!("crops/{k}/shaded.png"))).unwrap(), "init/{k:06}.png");
     }
+    assert_render_only_is_the_init_images(&dir, &args);
     assert_gen_reproduces(&dir);
+}
+
+/// `--render-only` with the scene flags of the img2img set in `dir` (made with `args`): its
+/// images are that set's init/ files byte for byte, with the same depth, masks and COCO.
+fn assert_render_only_is_the_init_images(dir: &Path, args: &[String]) {
+    let renders = dir.parent().unwrap().join("renders");
+    let mut flags: Vec<String> =
+        ["dataset", "--render-only", "--out", renders.to_str().unwrap()].map(String::from).to_vec();
+    for flag in ["--count", "--seed", "--width", "--height", "--crops", "--crop-size"] {
+        let at = args.iter().position(|a| a == flag).unwrap();
+        flags.extend([flag.to_string(), args[at + 1].clone()]);
+    }
+    run_ok(&flags, &[]);
+    let (diffused, rendered) = (read_json(&dir.join("annotations.json")), read_json(&renders.join("annotations.json")));
+    assert_eq!(diffused["annotations"], rendered["annotations"]);
+    let images = |coco: &Value| coco["images"].as_array().unwrap().clone();
+    assert_eq!(images(&diffused).len(), images(&rendered).len());
+    for (d, r) in images(&diffused).iter().zip(&images(&rendered)) {
+        assert_eq!(r["source"], "render");
+        for key in ["id", "file_name", "width", "height", "depth_file", "mask_file", "scene_seed", "crop", "camera"] {
+            assert_eq!(d[key], r[key], "{key}");
+        }
+        let file =
+            |dir: &Path, key: &str, entry: &Value| std::fs::read(dir.join(entry[key].as_str().unwrap())).unwrap();
+        assert!(file(&renders, "file_name", r) == file(dir, "init_file", d), "{}", r["file_name"]);
+        for key in ["depth_file", "control_file", "mask_file"] {
+            assert!(file(&renders, key, r) == file(dir, key, d), "{}", r[key]);
+        }
+    }
 }
 
 /// `vkdiff gen` with each image's recorded settings writes the very same PNG.
@@ -476,6 +506,7 @@ fn bad_dataset_arguments_print_one_error_line_and_write_nothing() {
         (vec!["--prompt", "x", "--density", "-1"], "--density"),
         (vec!["--prompt", "x", "--init-strength", "0"], "--init-strength 0 must be in (0, 1]"),
         (vec!["--prompt", "(x:1.2.3)", "--prompt-syntax", "weighted"], "weight `1.2.3`"),
+        (vec!["--render-only"], "--render-only makes the shaded renders the images: drop --model"),
     ] {
         let mut args = base(&out);
         args.extend(extra.iter().map(|s| s.to_string()));

@@ -130,6 +130,18 @@ impl ModelArgs {
         self.control_depth.into()
     }
 
+    /// The first flag given that names a model (a render-only set takes none).
+    pub fn model_flag_given(&self) -> Option<&'static str> {
+        [
+            ("model", self.model.is_some()),
+            ("controlnet", self.controlnet.is_some()),
+            ("ip_adapter", self.ip_adapter.is_some()),
+            ("lora", !self.lora.is_empty()),
+        ]
+        .into_iter()
+        .find_map(|(flag, given)| given.then_some(flag))
+    }
+
     pub fn settings(&self) -> anyhow::Result<ModelSettings> {
         let controlnet = self.controlnet.as_ref().map(|model| ControlNetSettings {
             model: model.clone(),

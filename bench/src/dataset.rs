@@ -198,7 +198,7 @@ fn dataset_settings(args: &DatasetArgs, models: &ModelSettings) -> DatasetSettin
         scene: SceneConfig { width: scale(1920), height: scale(1080), ..SceneConfig::default() },
         crops: Crops { count: 3, size: args.size as u32, min_fraction: 0.1 },
         control_depth: ControlDepth::Inverse,
-        models: models.clone(),
+        models: Some(models.clone()),
         prompts: vec!["white button mushrooms on dark black soil compost mycelium".into()],
         negative_prompt: None,
         sampling,

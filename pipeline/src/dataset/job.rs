@@ -6,6 +6,7 @@
 use crate::dataset::folder::{Dataset, Pending};
 use crate::dataset::merge::{merge, Merged};
 use crate::dataset::plan::Shard;
+use crate::dataset::render_only::write_renders;
 use crate::dataset::run::{generate, Progress, Report, RunOptions};
 use crate::dataset::settings::DatasetSettings;
 use crate::error::{Error, Result};
@@ -116,16 +117,25 @@ impl DatasetJob {
         self.pending.done
     }
 
-    /// Loads the models on `ctx` and makes this shard's pending images (after which none are
-    /// pending).
-    pub fn run(&mut self, ctx: &Context, events: &mut dyn FnMut(DatasetEvent)) -> Result<Report> {
-        let start = Instant::now();
-        let mut models =
-            WorkflowModels::load(ctx, &self.settings.models, &mut |line| events(DatasetEvent::Note(line)))?;
+    /// Whether the run needs a Vulkan device: every set but a render-only one.
+    pub fn needs_device(&self) -> bool {
+        !self.settings.render_only()
+    }
+
+    /// Makes this shard's pending images (after which none are pending): loads the models on
+    /// `ctx` and denoises, or for a render-only set writes the shaded renders.
+    pub fn run(&mut self, ctx: Option<&Context>, events: &mut dyn FnMut(DatasetEvent)) -> Result<Report> {
+        let pending = std::mem::take(&mut self.pending);
         let s = &self.settings;
+        let Some(model_settings) = &s.models else {
+            return write_renders(&self.dataset, s, pending, &self.options, &mut |p| events(DatasetEvent::Progress(p)));
+        };
+        let ctx = ctx.ok_or_else(|| Error::Config("a diffusion dataset needs a Vulkan device".into()))?;
+        let start = Instant::now();
+        let mut models = WorkflowModels::load(ctx, model_settings, &mut |line| events(DatasetEvent::Note(line)))?;
         // Each image decodes alone.
         let (width, height) = (s.sampling.width, s.sampling.height);
-        if let Some(note) = models.sdxl.plan_vae(s.models.vae_tiling, 1, width, height)?.note(width, height) {
+        if let Some(note) = models.sdxl.plan_vae(model_settings.vae_tiling, 1, width, height)?.note(width, height) {
             events(DatasetEvent::Note(&note));
         }
         let prompts = s.prompts.iter().chain(&s.negative_prompt);
@@ -133,7 +143,6 @@ impl DatasetJob {
             events(DatasetEvent::Note(&warning));
         }
         events(DatasetEvent::Loaded(start.elapsed()));
-        let pending = std::mem::take(&mut self.pending);
         generate(&self.dataset, s, &mut models, &self.styles, pending, &self.options, &mut |p| {
             events(DatasetEvent::Progress(p))
         })

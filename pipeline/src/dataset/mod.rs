@@ -7,6 +7,7 @@ mod folder;
 mod job;
 mod merge;
 mod plan;
+mod render_only;
 mod run;
 mod scenes;
 mod settings;

@@ -307,33 +307,21 @@ impl<'a> Loop<'a> {
         let files = super::plan::ImageFiles::new(index, s.images());
         let ip_images: Vec<PathBuf> = item.style.map(|k| s.ip_sets[k].clone()).unwrap_or_default();
         let gen = GenSettings {
-            models: s.models.clone(),
+            models: self.models.settings.clone(),
             job: TextToImage {
                 prompt: s.prompts[item.prompt].clone(),
                 negative_prompt: s.negative_prompt.clone(),
                 seed: item.seed,
                 sampling: s.sampling.clone(),
             },
-            depth: s.models.controlnet.as_ref().map(|_| PathBuf::from(&files.depth)),
+            depth: self.models.settings.controlnet.as_ref().map(|_| PathBuf::from(&files.depth)),
             ip_images: ip_images.clone(),
             init_image: item.scene.init.as_ref().map(|_| PathBuf::from(&files.init)),
         };
-        let mut entry = json!({
-            "id": index + 1,
-            "file_name": files.image,
-            "width": image.width,
-            "height": image.height,
-            "seed": item.seed,
-            "prompt": gen.job.prompt,
-            "negative_prompt": s.negative_prompt,
-            "depth_file": files.depth,
-            "control_file": files.control,
-            "mask_file": files.mask,
-            "scene_seed": item.scene.scene_seed,
-            "crop": item.scene.window,
-            "camera": item.scene.camera,
-        });
-        entry["crop"]["index"] = json!(item.scene.crop);
+        let mut entry = item.scene.entry(&files);
+        entry["seed"] = json!(item.seed);
+        entry["prompt"] = json!(gen.job.prompt);
+        entry["negative_prompt"] = json!(s.negative_prompt);
         if let (Some(_), Some(strength)) = (&item.scene.init, s.sampling.strength) {
             entry["init_file"] = json!(files.init);
             entry["strength"] = json!(strength);
@@ -359,12 +347,8 @@ fn start_writer(dataset: Dataset, batch: usize) -> (SyncSender<Finished>, JoinHa
             let files = dataset.files(f.index);
             let png = png_bytes(&f.image, &f.text)?;
             let image_id = f.index + 1;
-            let annotations = f.scene.annotations.into_iter().map(|a| a.in_dataset(image_id)).collect();
-            let mut outputs: Vec<(&str, &[u8])> = vec![
-                (&files.depth, &f.scene.depth_exr),
-                (&files.control, &f.scene.control_png),
-                (&files.mask, &f.scene.mask_png),
-            ];
+            let annotations = f.scene.annotations.iter().cloned().map(|a| a.in_dataset(image_id)).collect();
+            let mut outputs = f.scene.scene_files(&files);
             outputs.extend(f.scene.init.as_ref().map(|(_, png)| (files.init.as_str(), png.as_slice())));
             outputs.push((&files.image, &png));
             dataset.write_image(f.index, &outputs, f.entry, annotations)?;

@@ -2,6 +2,7 @@
 //! order and cuts each into its images (depth, control image, mask, annotations, files encoded),
 //! a few scenes ahead of the denoiser and no more.
 
+use super::plan::ImageFiles;
 use super::settings::DatasetSettings;
 use crate::error::{Error, Result};
 use crate::RgbImage;
@@ -31,10 +32,37 @@ pub struct SceneImage {
     pub depth_exr: Vec<u8>,
     pub control_png: Vec<u8>,
     pub mask_png: Vec<u8>,
-    /// img2img's start (`--init-strength`): the crop's shaded render, and as a PNG.
+    /// The crop's shaded render, and as a PNG: img2img's start (`--init-strength`), or a
+    /// render-only set's image.
     pub init: Option<(RgbImage, Vec<u8>)>,
     /// COCO annotations, ids = the instance ids in the mask.
     pub annotations: Vec<Annotation>,
+}
+
+impl SceneImage {
+    /// The image's COCO entry as far as the scene makes it: files, size, where it lies in the
+    /// frame and the camera.
+    pub fn entry(&self, files: &ImageFiles) -> Value {
+        let mut entry = json!({
+            "id": self.index + 1,
+            "file_name": files.image,
+            "width": self.control.width,
+            "height": self.control.height,
+            "depth_file": files.depth,
+            "control_file": files.control,
+            "mask_file": files.mask,
+            "scene_seed": self.scene_seed,
+            "crop": self.window,
+            "camera": self.camera,
+        });
+        entry["crop"]["index"] = json!(self.crop);
+        entry
+    }
+
+    /// The files that come from the scene, as (name, bytes), in the order they are written.
+    pub fn scene_files<'a>(&'a self, files: &'a ImageFiles) -> Vec<(&'a str, &'a [u8])> {
+        vec![(&files.depth, &self.depth_exr), (&files.control, &self.control_png), (&files.mask, &self.mask_png)]
+    }
 }
 
 /// The renderer thread: images arrive in the order of `scenes`; the thread's busy time is
@@ -96,7 +124,7 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
             let (w, h) = (part.camera.width, part.camera.height);
             let pixels = control_image(&part.depth, settings.control_depth);
             let camera = part.camera.to_json();
-            let init = settings.sampling.strength.map(|_| {
+            let init = settings.wants_shaded().then(|| {
                 let shaded = shaded_image(&part);
                 let png = rgb8(w, h, &shaded);
                 (RgbImage { width: w as usize, height: h as usize, pixels: shaded }, png)

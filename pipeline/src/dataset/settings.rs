@@ -34,7 +34,8 @@ pub struct DatasetSettings {
     pub scene: SceneConfig,
     pub crops: Crops,
     pub control_depth: ControlDepth,
-    pub models: ModelSettings,
+    /// The diffusion models; None for a render-only set, whose images are the shaded renders.
+    pub models: Option<ModelSettings>,
     /// One is chosen per image from its seed.
     pub prompts: Vec<String>,
     pub negative_prompt: Option<String>,
@@ -46,7 +47,8 @@ pub struct DatasetSettings {
 
 impl DatasetSettings {
     /// Checks every setting and fixes the image size: crops of `crops.size`, or the frame cut to
-    /// sides that are multiples of the model's pixel multiple (`Sdxl::probe_pixel_multiple`).
+    /// sides that are multiples of the model's pixel multiple (`Sdxl::probe_pixel_multiple`;
+    /// SDXL's 8 for a render-only set, `models` None, which takes no prompts or styles).
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         seed: u64,
@@ -54,7 +56,7 @@ impl DatasetSettings {
         scene: SceneConfig,
         crops: Crops,
         control_depth: ControlDepth,
-        models: ModelSettings,
+        models: Option<ModelSettings>,
         prompts: Vec<String>,
         negative_prompt: Option<String>,
         mut sampling: Sampling,
@@ -73,41 +75,16 @@ impl DatasetSettings {
                     .then(format!(" {seed}")),
             ));
         }
-        if prompts.is_empty() || prompts.iter().any(|p| p.trim().is_empty()) {
-            return Err(Error::Setting(
-                Message::setting("prompt")
-                    .then(" (or ")
-                    .and("prompts")
-                    .then(" FILE) must give at least one prompt, none of them empty"),
-            ));
-        }
-        match (&models.ip_adapter, ip_sets.is_empty()) {
-            (Some(_), true) => {
-                return Err(Error::Setting(
-                    Message::setting("ip_adapter")
-                        .then(" needs style images: ")
-                        .and("ip_image")
-                        .then(" (one set) or ")
-                        .and("ip_set")
-                        .then(" A,B (repeatable)"),
-                ))
+        let multiple = match &models {
+            Some(models) => {
+                check_diffusion(models, &prompts, &negative_prompt, &sampling, &ip_sets)?;
+                Sdxl::probe_pixel_multiple(&models.model)? as u32
             }
-            (None, false) => {
-                return Err(Error::Setting(
-                    Message::setting("ip_image").then("/").and("ip_set").then(" need ").and("ip_adapter"),
-                ))
+            None => {
+                check_render_only(&prompts, &sampling, &ip_sets)?;
+                RENDER_ONLY_MULTIPLE
             }
-            _ => {}
-        }
-        if ip_sets.iter().any(|set| set.is_empty()) {
-            return Err(Error::Setting(Message::setting("ip_set").then(": a set names no image")));
-        }
-        models.check()?;
-        sampling.check()?;
-        for prompt in prompts.iter().chain(&negative_prompt) {
-            sampling.prompt_syntax.check(prompt)?;
-        }
-        let multiple = Sdxl::probe_pixel_multiple(&models.model)? as u32;
+        };
         let (width, height) = if crops.count > 0 {
             if crops.size == 0 || crops.size > scene.width.min(scene.height) {
                 return Err(Error::Setting(Message::setting("crop_size").then(format!(
@@ -145,6 +122,16 @@ impl DatasetSettings {
         })
     }
 
+    /// Whether the images are the shaded renders, with no diffusion (`--render-only`).
+    pub fn render_only(&self) -> bool {
+        self.models.is_none()
+    }
+
+    /// Whether each image needs its crop's shaded render: as img2img's start, or as the image.
+    pub fn wants_shaded(&self) -> bool {
+        self.render_only() || self.sampling.strength.is_some()
+    }
+
     /// Images per scene.
     pub fn images_per_scene(&self) -> u64 {
         self.crops.count.max(1) as u64
@@ -177,7 +164,6 @@ impl DatasetSettings {
     /// Every setting that shapes the output, under its flag's name.
     pub fn to_json(&self) -> Value {
         let s = &self.sampling;
-        let m = &self.models;
         let mut v = json!({
             "seed": self.seed,
             "count": self.count,
@@ -190,6 +176,21 @@ impl DatasetSettings {
             "crop-min-fraction": self.crops.min_fraction,
             "control-depth": control_depth_name(self.control_depth),
             "image-size": [s.width, s.height],
+        });
+        let map = v.as_object_mut().expect("an object");
+        match &self.models {
+            Some(models) => map.extend(self.diffusion_json(models)),
+            None => {
+                map.insert("render-only".into(), json!(true));
+            }
+        }
+        v
+    }
+
+    /// The settings of the images' diffusion.
+    fn diffusion_json(&self, m: &ModelSettings) -> Map<String, Value> {
+        let s = &self.sampling;
+        let mut map = object(json!({
             "model": m.model.display().to_string(),
             "precision": precision_name(m.precision),
             "prompt": self.prompts,
@@ -200,10 +201,9 @@ impl DatasetSettings {
             "scheduler": schedule_name(s),
             "rng": RNG,
             "lora": m.lora_flags(),
-        });
+        }));
         let c = &s.size_conditioning;
         let size = |s: Option<(usize, usize)>| s.map(|(w, h)| format!("{w}x{h}"));
-        let map = v.as_object_mut().expect("an object");
         if s.prompt_syntax == PromptSyntax::Weighted {
             map.insert("prompt-syntax".into(), json!("weighted"));
         }
@@ -235,7 +235,77 @@ impl DatasetSettings {
                 "ip-set": sets,
             })));
         }
-        v
+        map
+    }
+}
+
+/// A render-only set's images are cut as SDXL's are: sides multiples of its VAE's 8.
+const RENDER_ONLY_MULTIPLE: u32 = 8;
+
+/// The prompts, styles and sampling of a diffusion set, before any model loads.
+fn check_diffusion(
+    models: &ModelSettings,
+    prompts: &[String],
+    negative_prompt: &Option<String>,
+    sampling: &Sampling,
+    ip_sets: &[Vec<PathBuf>],
+) -> Result<()> {
+    if prompts.is_empty() || prompts.iter().any(|p| p.trim().is_empty()) {
+        return Err(Error::Setting(
+            Message::setting("prompt")
+                .then(" (or ")
+                .and("prompts")
+                .then(" FILE) must give at least one prompt, none of them empty"),
+        ));
+    }
+    match (&models.ip_adapter, ip_sets.is_empty()) {
+        (Some(_), true) => {
+            return Err(Error::Setting(
+                Message::setting("ip_adapter")
+                    .then(" needs style images: ")
+                    .and("ip_image")
+                    .then(" (one set) or ")
+                    .and("ip_set")
+                    .then(" A,B (repeatable)"),
+            ))
+        }
+        (None, false) => {
+            return Err(Error::Setting(
+                Message::setting("ip_image").then("/").and("ip_set").then(" need ").and("ip_adapter"),
+            ))
+        }
+        _ => {}
+    }
+    if ip_sets.iter().any(|set| set.is_empty()) {
+        return Err(Error::Setting(Message::setting("ip_set").then(": a set names no image")));
+    }
+    models.check()?;
+    sampling.check()?;
+    for prompt in prompts.iter().chain(negative_prompt) {
+        sampling.prompt_syntax.check(prompt)?;
+    }
+    Ok(())
+}
+
+/// A render-only set takes the scene flags only: a prompt, a style or a strength would be
+/// silently unused.
+fn check_render_only(prompts: &[String], sampling: &Sampling, ip_sets: &[Vec<PathBuf>]) -> Result<()> {
+    let unused = if !prompts.is_empty() {
+        Some(Message::setting("prompt").then("/").and("prompts"))
+    } else if !ip_sets.is_empty() {
+        Some(Message::setting("ip_image").then("/").and("ip_set"))
+    } else if sampling.strength.is_some() {
+        Some(Message::setting("strength"))
+    } else {
+        None
+    };
+    match unused {
+        Some(flag) => Err(Error::Setting(
+            Message::setting("render_only")
+                .then(" makes the shaded renders the images, with no model: drop ")
+                .append(flag),
+        )),
+        None => Ok(()),
     }
 }
 

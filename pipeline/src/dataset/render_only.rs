@@ -1,0 +1,49 @@
+//! `vkdiff dataset --render-only`: the set whose images are the scenes' shaded renders, the
+//! baseline every diffusion-refined set is compared with. The same scenes, crops, masks and
+//! COCO as a diffusion run with the same scene flags, and each image byte for byte that run's
+//! `init/` file; no model and no device.
+
+use super::folder::{Dataset, Pending};
+use super::run::{Progress, Report, RunOptions, StageTimes};
+use super::scenes::render_scenes;
+use super::settings::DatasetSettings;
+use crate::error::{Error, Result};
+use serde_json::json;
+use std::time::{Duration, Instant};
+
+/// Writes the `pending` images of the render-only `dataset`.
+pub fn write_renders(
+    dataset: &Dataset,
+    settings: &DatasetSettings,
+    pending: Pending,
+    options: &RunOptions,
+    on_progress: &mut dyn FnMut(Progress),
+) -> Result<Report> {
+    let (mut done, total) = (pending.done, pending.done + pending.images());
+    let stream = render_scenes(settings, pending.scenes, options.threads, 2 * options.threads.max(2));
+    let mut times = StageTimes::default();
+    let mut made = 0;
+    loop {
+        let waited = Instant::now();
+        let Ok(scene) = stream.images.recv() else { break };
+        times.waiting += waited.elapsed();
+        let scene = scene?;
+        let start = Instant::now();
+        let files = dataset.files(scene.index);
+        let (_, shaded) =
+            scene.init.as_ref().ok_or_else(|| Error::Config("a render without its shaded image".into()))?;
+        let mut outputs = scene.scene_files(&files);
+        outputs.push((&files.image, shaded));
+        let mut entry = scene.entry(&files);
+        entry["source"] = json!("render");
+        let image_id = scene.index + 1;
+        let annotations = scene.annotations.iter().cloned().map(|a| a.in_dataset(image_id)).collect();
+        dataset.write_image(scene.index, &outputs, entry, annotations)?;
+        times.write += start.elapsed();
+        made += 1;
+        done += 1;
+        on_progress(Progress::Images { done, total });
+    }
+    times.scene = stream.thread.join().unwrap_or(Duration::ZERO);
+    Ok(Report { made, times, recordings: 0 })
+}
