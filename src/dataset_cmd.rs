@@ -75,14 +75,20 @@ pub struct DatasetArgs {
 #[derive(Subcommand, Debug)]
 enum DatasetCommand {
     /// Join every image's annotations into DIR/annotations.json, once every shard is done.
-    Merge { dir: PathBuf },
+    Merge {
+        dir: PathBuf,
+    },
+    Export(crate::dataset_export_cmd::ExportArgs),
 }
 
 pub fn run(args: &DatasetArgs) -> Result<()> {
-    if let Some(DatasetCommand::Merge { dir }) = &args.command {
-        let merged = merge(dir)?;
-        print_merged(dir, &merged);
-        return Ok(());
+    match &args.command {
+        Some(DatasetCommand::Merge { dir }) => {
+            print_merged(dir, &merge(dir)?);
+            return Ok(());
+        }
+        Some(DatasetCommand::Export(export)) => return crate::dataset_export_cmd::run(export),
+        None => {}
     }
     let out = args.out.as_deref().context("--out DIR is required")?;
     let shard = ShardRequest { shard: args.shard.clone(), shards: args.shards };

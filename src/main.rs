@@ -2,6 +2,7 @@
 //! prints; the benchmarks live in `vkdiff-bench`, the shared flags in `vkdiff-args`.
 
 mod dataset_cmd;
+mod dataset_export_cmd;
 mod devices_cmd;
 mod eval_cmd;
 mod fid_cmd;

@@ -3,6 +3,7 @@
 //! annotations. Resumable image by image, sharded by scene over any number of processes sharing
 //! the folder, and merged into one `annotations.json` at the end.
 
+mod export;
 mod folder;
 mod job;
 mod merge;
@@ -12,6 +13,7 @@ mod run;
 mod scenes;
 mod settings;
 
+pub use export::{export, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions};
 pub use folder::{Dataset, ImageRecord, Pending, ANNOTATIONS, MANIFEST};
 pub use job::{DatasetEvent, DatasetJob, Finish, ShardRequest};
 pub use merge::{merge, Merged};

@@ -6,7 +6,7 @@ use crate::error::{Error, Result};
 use vkdiff_setting::Message;
 
 /// splitmix64's finaliser: a bijection of u64 that scatters nearby inputs.
-fn mix(mut x: u64) -> u64 {
+pub(crate) fn mix(mut x: u64) -> u64 {
     x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
     x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);

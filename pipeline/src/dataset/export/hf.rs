@@ -1,0 +1,57 @@
+//! A Hugging Face image folder: `{train,validation,test}/NAME.png` with a `metadata.jsonl` in
+//! each, one line per image: its COCO entry's fields (`id` as `image_id`) and its instances
+//! under `objects` as HF's object-detection sets hold them (`bbox` as COCO's [x, y, w, h],
+//! `categories` 0-based), with each instance's COCO RLE mask under `segmentation`.
+
+use super::set::FinishedSet;
+use super::splits::Split;
+use super::staging::Staging;
+use crate::error::Result;
+use serde_json::{json, Value};
+use std::io::Write;
+use vkdiff_formats::Error as FileError;
+
+/// The folder names `load_dataset("imagefolder")` takes as splits.
+fn folder(split: Split) -> &'static str {
+    match split {
+        Split::Train => "train",
+        Split::Val => "validation",
+        Split::Test => "test",
+    }
+}
+
+pub fn write(set: &FinishedSet, staging: &mut Staging, progress: &mut dyn FnMut(usize, usize)) -> Result<()> {
+    let classes: Vec<Value> =
+        set.categories.as_array().map_or(Vec::new(), |c| c.iter().map(|c| c["id"].clone()).collect());
+    let mut done = 0;
+    for split in set.splits() {
+        let (mut metadata, path) = staging.create(&format!("{}/metadata.jsonl", folder(split)))?;
+        for image in set.in_split(split) {
+            let name = image.file_name().rsplit('/').next().unwrap_or_default();
+            staging.link(&set.dir.join(image.file_name()), &format!("{}/{name}", folder(split)))?;
+            let mut row = json!({ "file_name": name, "image_id": image.entry["id"] });
+            for (key, value) in image.entry.as_object().expect("checked when read") {
+                if key != "id" && key != "file_name" && !key.ends_with("_file") {
+                    row[key] = value.clone();
+                }
+            }
+            let field = |k: &str| image.annotations.iter().map(|a| a[k].clone()).collect::<Vec<_>>();
+            let categories: Vec<Option<usize>> =
+                image.annotations.iter().map(|a| classes.iter().position(|c| *c == a["category_id"])).collect();
+            row["objects"] = json!({
+                "id": field("id"),
+                "area": field("area"),
+                "bbox": field("bbox"),
+                "categories": categories,
+                "iscrowd": field("iscrowd"),
+                "segmentation": field("segmentation"),
+            });
+            let line = serde_json::to_string(&row).expect("JSON values serialise");
+            writeln!(metadata, "{line}").map_err(|e| FileError::Io { path: path.clone(), source: e })?;
+            done += 1;
+            progress(done, set.images.len());
+        }
+        metadata.flush().map_err(|e| FileError::Io { path, source: e })?;
+    }
+    Ok(())
+}

@@ -1,0 +1,162 @@
+//! `vkdiff dataset export`: a finished dataset folder in the layout a trainer reads (COCO with
+//! splits, Ultralytics YOLO segmentation, WebDataset shards, a Hugging Face image folder), split
+//! by scene. The dataset folder is only read; the export is built in a hidden sibling of OUT and
+//! renamed into place whole, so a killed export leaves no folder that looks finished.
+
+mod coco;
+mod hf;
+mod polygons;
+mod set;
+mod splits;
+mod staging;
+mod webdataset;
+mod yolo;
+
+pub use splits::{Split, SplitFractions};
+
+use crate::error::{Error, Result};
+use set::FinishedSet;
+use staging::Staging;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use vkdiff_setting::Message;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ExportFormat {
+    /// `train.json`, `val.json`, `test.json` beside the set's files.
+    Coco,
+    /// Ultralytics' segmentation layout with `data.yaml`.
+    Yolo,
+    /// Tar shards of samples (`KEY.png`, `KEY.json`, `KEY.mask.png`, `KEY.depth.exr`).
+    WebDataset,
+    /// A folder `datasets.load_dataset("imagefolder", data_dir=OUT)` loads.
+    Hf,
+}
+
+pub struct ExportOptions {
+    pub format: ExportFormat,
+    pub splits: SplitFractions,
+    /// Copy the files; else hard-link them where the file system allows (and copy elsewhere).
+    pub copy: bool,
+    /// Replace an existing OUT.
+    pub force: bool,
+    /// WebDataset: a shard is closed once it holds this many bytes.
+    pub shard_bytes: u64,
+}
+
+/// What an export wrote.
+#[derive(Debug, Default)]
+pub struct Exported {
+    /// Images and scenes per split.
+    pub images: BTreeMap<Split, u64>,
+    pub scenes: BTreeMap<Split, u64>,
+    pub annotations: u64,
+    /// Files copied: all with `--copy`, else those a hard link could not reach.
+    pub copied: u64,
+    pub linked: u64,
+    /// YOLO: how well the polygons cover their masks.
+    pub polygons: Option<PolygonFit>,
+    /// WebDataset: tar files written.
+    pub shards: usize,
+}
+
+/// IoU of each instance's polygon with its mask, over every instance exported.
+#[derive(Debug, Clone, Copy)]
+pub struct PolygonFit {
+    pub instances: u64,
+    pub min_iou: f64,
+    pub mean_iou: f64,
+    pub points: u64,
+}
+
+/// Exports the finished set in `dir` to `out`; `progress(done, total)` after each image.
+pub fn export(
+    dir: &Path,
+    out: &Path,
+    options: &ExportOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Exported> {
+    options.splits.check()?;
+    if options.format == ExportFormat::WebDataset && options.shard_bytes == 0 {
+        return Err(Error::Setting(Message::setting("shard_size").then(" must be at least 1 MB")));
+    }
+    check_out(dir, out, options.force)?;
+    let set = FinishedSet::read(dir, &options.splits)?;
+    let mut staging = Staging::beside(out, options.copy)?;
+    let mut exported = Exported::default();
+    for split in set.splits() {
+        exported.images.insert(split, 0);
+        exported.scenes.insert(split, 0);
+    }
+    for image in &set.images {
+        *exported.images.entry(image.split).or_default() += 1;
+        exported.annotations += image.annotations.len() as u64;
+    }
+    for (split, scenes) in set.scenes_per_split() {
+        exported.scenes.insert(split, scenes);
+    }
+    let written = match options.format {
+        ExportFormat::Coco => coco::write(&set, &mut staging, progress),
+        ExportFormat::Yolo => yolo::write(&set, &mut staging, progress).map(|fit| exported.polygons = Some(fit)),
+        ExportFormat::WebDataset => {
+            webdataset::write(&set, &mut staging, options.shard_bytes, progress).map(|n| exported.shards = n)
+        }
+        ExportFormat::Hf => hf::write(&set, &mut staging, progress),
+    };
+    if let Err(e) = written {
+        staging.abandon();
+        return Err(e);
+    }
+    (exported.copied, exported.linked) = (staging.copied, staging.linked);
+    staging.publish(out, options.force)?;
+    Ok(exported)
+}
+
+/// OUT must be new (or `force`d) and lie apart from the dataset folder, which is never touched.
+fn check_out(dir: &Path, out: &Path, force: bool) -> Result<()> {
+    let absolute = |p: &Path| -> PathBuf {
+        // OUT may not exist yet: resolve the part of it that does.
+        let mut missing = Vec::new();
+        let mut at = p.to_path_buf();
+        loop {
+            if let Ok(real) = at.canonicalize() {
+                return missing.into_iter().rev().fold(real, |path: PathBuf, part| path.join(part));
+            }
+            match (at.file_name().map(|n| n.to_os_string()), at.parent()) {
+                (Some(name), Some(parent)) => {
+                    missing.push(name);
+                    at = if parent.as_os_str().is_empty() { PathBuf::from(".") } else { parent.to_path_buf() };
+                }
+                _ => return p.to_path_buf(),
+            }
+        }
+    };
+    let (d, o) = (absolute(dir), absolute(out));
+    if o.starts_with(&d) || d.starts_with(&o) {
+        return Err(Error::Setting(Message::setting("out").then(format!(
+            " {} overlaps the dataset folder {}: export to a folder outside it",
+            out.display(),
+            dir.display()
+        ))));
+    }
+    if out.is_file() {
+        return Err(Error::Setting(
+            Message::setting("out").then(format!(" {} is a file; give a folder", out.display())),
+        ));
+    }
+    if out.exists() && !force {
+        return Err(Error::Setting(
+            Message::setting("out")
+                .then(format!(" {} exists: give ", out.display()))
+                .and("force")
+                .then(" to replace it"),
+        ));
+    }
+    Ok(())
+}
+
+/// The stem of a set file name, `images/000042.png` → `000042`.
+fn stem(file_name: &str) -> &str {
+    let name = file_name.rsplit('/').next().unwrap_or(file_name);
+    name.split('.').next().unwrap_or(name)
+}

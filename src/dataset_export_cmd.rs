@@ -1,0 +1,101 @@
+//! `vkdiff dataset export DIR --format F --out OUT`: a finished set in a trainer's layout.
+
+use anyhow::Result;
+use clap::{Args, ValueEnum};
+use std::path::PathBuf;
+use vkdiff_args::Progress;
+use vkdiff_pipeline::dataset::{export, ExportFormat, ExportOptions, Exported, Split, SplitFractions};
+
+/// Write a finished dataset folder (merged: annotations.json written) in a trainer's layout,
+/// split by scene: every crop of a scene goes to the same split, and a scene's split does not
+/// change when the set grows. DIR is only read; OUT appears whole or not at all.
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    /// The dataset folder.
+    dir: PathBuf,
+    /// coco: train/val/test.json beside the set's files; yolo: Ultralytics segmentation
+    /// (images/, labels/, data.yaml); webdataset: tar shards; hf: a Hugging Face image folder.
+    #[arg(long, value_enum)]
+    format: FormatArg,
+    /// The folder to write (new, or replaced with --force).
+    #[arg(long)]
+    out: PathBuf,
+    /// Share of the scenes for validation.
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
+    val_fraction: f64,
+    /// Share of the scenes for testing.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    test_fraction: f64,
+    /// Seed of the split (the same seed gives the same split).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Copy the files rather than hard-link them (links fall back to copies across file systems).
+    #[arg(long)]
+    copy: bool,
+    /// Replace OUT if it exists.
+    #[arg(long)]
+    force: bool,
+    /// webdataset: close each shard once it holds this many MB.
+    #[arg(long, default_value_t = 1000)]
+    shard_size: u64,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum FormatArg {
+    Coco,
+    Yolo,
+    Webdataset,
+    Hf,
+}
+
+pub fn run(args: &ExportArgs) -> Result<()> {
+    let format = match args.format {
+        FormatArg::Coco => ExportFormat::Coco,
+        FormatArg::Yolo => ExportFormat::Yolo,
+        FormatArg::Webdataset => ExportFormat::WebDataset,
+        FormatArg::Hf => ExportFormat::Hf,
+    };
+    let options = ExportOptions {
+        format,
+        splits: SplitFractions { val: args.val_fraction, test: args.test_fraction, seed: args.seed },
+        copy: args.copy,
+        force: args.force,
+        shard_bytes: args.shard_size.saturating_mul(1_000_000),
+    };
+    let bar = Progress::new("export", "image");
+    let exported = export(&args.dir, &args.out, &options, &mut |done, total| bar.update(done, total))?;
+    println!("{}", summary(args, &exported));
+    Ok(())
+}
+
+fn summary(args: &ExportArgs, e: &Exported) -> String {
+    let splits: Vec<String> = Split::ALL
+        .iter()
+        .filter(|s| e.images.contains_key(s) || **s == Split::Train)
+        .map(|s| {
+            format!("{} {} images of {} scenes", s.name(), e.images.get(s).unwrap_or(&0), e.scenes.get(s).unwrap_or(&0))
+        })
+        .collect();
+    let mut line = format!(
+        "wrote {} ({}): {}; {} annotations; {} files linked, {} copied",
+        args.out.display(),
+        args.format.to_possible_value().map_or(String::new(), |v| v.get_name().to_string()),
+        splits.join(", "),
+        e.annotations,
+        e.linked,
+        e.copied
+    );
+    if let Some(fit) = e.polygons {
+        line += &format!(
+            "; polygons of {} instances ({:.1} points each) cover their masks with IoU min {:.3}, mean {:.3}",
+            fit.instances,
+            fit.points as f64 / fit.instances.max(1) as f64,
+            fit.min_iou,
+            fit.mean_iou
+        );
+    }
+    if e.shards > 0 {
+        line += &format!("; {} shards", e.shards);
+    }
+    line
+}

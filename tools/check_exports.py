@@ -1,0 +1,127 @@
+"""Loads `vkdiff dataset export` folders with the trainers' own readers.
+
+    python tools/check_exports.py DATASET_DIR EXPORTS_DIR
+
+EXPORTS_DIR holds `coco/`, `yolo/`, `webdataset/` and `hf/`, each exported from DATASET_DIR
+(`vkdiff dataset export DATASET_DIR --format F --out EXPORTS_DIR/F`). Checks, and prints:
+- coco: every split file loads in pycocotools, the splits partition the set's images and
+  annotations, and no scene is in two splits;
+- yolo: Ultralytics' `check_det_dataset` and `YOLODataset` load every split with every label, and
+  each polygon rasterised as Ultralytics trains on it (`polygon2mask`: OpenCV's `fillPoly`) covers
+  its instance's COCO mask with IoU >= 0.9, and so does pycocotools' polygon rasterisation\n  (`frPyObjects`) (min and mean reported);
+- webdataset: `webdataset.WebDataset` yields every sample with its four files, and `tarfile`
+  reads every shard;
+- hf: `datasets.load_dataset("imagefolder", data_dir=...)` loads every split with its objects.
+
+Made with: ultralytics 8.3, webdataset 1.0, datasets 4, pycocotools 2.0, opencv-python-headless 4.
+"""
+
+import glob
+import json
+import os
+import sys
+import tarfile
+
+import numpy as np
+from pycocotools import mask as mask_utils
+from pycocotools.coco import COCO
+
+
+def iou(a, b):
+    return (a & b).sum() / max((a | b).sum(), 1)
+
+
+def check_coco(dataset, out):
+    full = json.load(open(os.path.join(dataset, "annotations.json")))
+    seen_images, seen_annotations, scene_split = set(), 0, {}
+    for path in sorted(glob.glob(os.path.join(out, "*.json"))):
+        split = os.path.basename(path)[:-5]
+        coco = COCO(path)
+        for image in coco.dataset["images"]:
+            assert image["id"] not in seen_images
+            seen_images.add(image["id"])
+            assert scene_split.setdefault(image["scene_seed"], split) == split, "a scene in two splits"
+            assert os.path.isfile(os.path.join(out, image["file_name"]))
+        seen_annotations += len(coco.dataset["annotations"])
+    assert seen_images == {i["id"] for i in full["images"]}
+    assert seen_annotations == len(full["annotations"])
+    print(f"coco: {len(seen_images)} images, {seen_annotations} annotations, {len(scene_split)} scenes, splits disjoint")
+
+
+def check_yolo(dataset, out):
+    from ultralytics.data.dataset import YOLODataset
+    from ultralytics.data.utils import check_det_dataset, polygon2mask
+
+    data = check_det_dataset(os.path.join(out, "data.yaml"))
+    full = json.load(open(os.path.join(dataset, "annotations.json")))
+    by_stem = {os.path.splitext(os.path.basename(i["file_name"]))[0]: i for i in full["images"]}
+    annotations = {}
+    for a in full["annotations"]:
+        annotations.setdefault(a["image_id"], []).append(a)
+    ious, coco_ious, loaded = [], [], 0
+    for split in ("train", "val", "test"):
+        if split not in data:
+            continue
+        ds = YOLODataset(img_path=data[split], data=data, task="segment", augment=False)
+        for label in ds.labels:
+            stem = os.path.splitext(os.path.basename(label["im_file"]))[0]
+            image = by_stem[stem]
+            want = annotations.get(image["id"], [])
+            assert len(label["segments"]) == len(want), (stem, len(label["segments"]), len(want))
+            h, w = image["height"], image["width"]
+            # Lines are in annotation order.
+            for segment, a in zip(label["segments"], want):
+                mask = mask_utils.decode(a["segmentation"]).astype(bool)
+                points = (segment * [w, h]).reshape(-1)
+                drawn = polygon2mask((h, w), [points]).astype(bool)
+                ious.append(iou(drawn, mask))
+                coco_drawn = mask_utils.decode(mask_utils.frPyObjects([points.tolist()], h, w))[:, :, 0].astype(bool)
+                coco_ious.append(iou(coco_drawn, mask))
+            loaded += 1
+    ious, coco_ious = np.array(ious), np.array(coco_ious)
+    assert loaded == len(full["images"]) and min(ious.min(), coco_ious.min()) >= 0.9, (loaded, ious.min(), coco_ious.min())
+    print(
+        f"yolo: Ultralytics loaded {loaded} images; {len(ious)} polygons vs their COCO masks, IoU min/mean: "
+        f"Ultralytics' polygon2mask {ious.min():.3f}/{ious.mean():.3f}, "
+        f"pycocotools' frPyObjects {coco_ious.min():.3f}/{coco_ious.mean():.3f}"
+    )
+
+
+def check_webdataset(dataset, out):
+    import webdataset as wds
+
+    shards = sorted(glob.glob(os.path.join(out, "*.tar")))
+    for shard in shards:
+        with tarfile.open(shard) as tar:
+            tar.getmembers()
+    samples = 0
+    for sample in wds.WebDataset(shards, shardshuffle=False):
+        assert {"png", "json", "mask.png", "depth.exr"} <= set(sample), sorted(sample)
+        meta = json.loads(sample["json"])
+        assert meta["image"]["file_name"].endswith(sample["__key__"] + ".png")
+        samples += 1
+    total = len(json.load(open(os.path.join(dataset, "annotations.json")))["images"])
+    assert samples == total, (samples, total)
+    print(f"webdataset: {len(shards)} shards, {samples} samples, tarfile reads every shard")
+
+
+def check_hf(dataset, out):
+    from datasets import load_dataset
+
+    loaded = load_dataset("imagefolder", data_dir=out)
+    total = len(json.load(open(os.path.join(dataset, "annotations.json")))["images"])
+    count = sum(len(s) for s in loaded.values())
+    assert count == total, (count, total)
+    for split in loaded.values():
+        row = split[0]
+        assert row["image"].size == (row["width"], row["height"])
+        assert len(row["objects"]["bbox"]) == len(row["objects"]["segmentation"])
+    print(f"hf: imagefolder loaded {count} images in splits {sorted(loaded)}; features {sorted(loaded['train'].features)}")
+
+
+if __name__ == "__main__":
+    dataset, exports = sys.argv[1], sys.argv[2]
+    check_coco(dataset, os.path.join(exports, "coco"))
+    check_yolo(dataset, os.path.join(exports, "yolo"))
+    check_webdataset(dataset, os.path.join(exports, "webdataset"))
+    check_hf(dataset, os.path.join(exports, "hf"))
