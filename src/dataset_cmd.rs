@@ -79,6 +79,8 @@ enum DatasetCommand {
         dir: PathBuf,
     },
     Export(crate::dataset_export_cmd::ExportArgs),
+    Stats(crate::dataset_stats_cmd::StatsArgs),
+    Preview(crate::dataset_preview_cmd::PreviewArgs),
 }
 
 pub fn run(args: &DatasetArgs) -> Result<()> {
@@ -88,6 +90,8 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
             return Ok(());
         }
         Some(DatasetCommand::Export(export)) => return crate::dataset_export_cmd::run(export),
+        Some(DatasetCommand::Stats(stats)) => return crate::dataset_stats_cmd::run(stats),
+        Some(DatasetCommand::Preview(preview)) => return crate::dataset_preview_cmd::run(preview),
         None => {}
     }
     let out = args.out.as_deref().context("--out DIR is required")?;

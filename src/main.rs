@@ -3,6 +3,8 @@
 
 mod dataset_cmd;
 mod dataset_export_cmd;
+mod dataset_preview_cmd;
+mod dataset_stats_cmd;
 mod devices_cmd;
 mod eval_cmd;
 mod fid_cmd;

@@ -4,7 +4,7 @@
 
 mod cli;
 
-use cli::{scratch, vkdiff};
+use cli::{render_set_of, scratch, vkdiff};
 use serde_json::Value;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
@@ -14,17 +14,6 @@ use vkdiff_render::rle::Rle;
 /// A render-only set of `count` scenes of 320×256, two 128² crops each.
 fn render_set(dir: &Path, count: u64) {
     render_set_of(dir, count, 320, 256, 128);
-}
-
-/// A render-only set of `count` scenes of `width`×`height`, two `crop`² crops each.
-fn render_set_of(dir: &Path, count: u64, width: u32, height: u32, crop: u32) {
-    let numbers = [count, width as u64, height as u64, crop as u64].map(|n| n.to_string());
-    let mut args = vec!["dataset", "--render-only", "--out", dir.to_str().unwrap(), "--seed", "11", "--crops", "2"];
-    for (flag, value) in ["--count", "--width", "--height", "--crop-size"].iter().zip(&numbers) {
-        args.extend([*flag, value.as_str()]);
-    }
-    let out = vkdiff(&args);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
 
 /// Ten scenes, twenty images, made once.

@@ -23,3 +23,16 @@ pub fn png_text(path: &Path) -> Vec<(String, String)> {
     let latin1 = info.uncompressed_latin1_text.iter().map(|t| (t.keyword.clone(), t.text.clone()));
     latin1.chain(info.utf8_text.iter().map(|t| (t.keyword.clone(), t.get_text().unwrap()))).collect()
 }
+
+/// A render-only set (no model) of `count` scenes of `width`×`height` from seed 11, two
+/// `crop`² crops each.
+#[allow(dead_code)] // for the tests that read dataset folders
+pub fn render_set_of(dir: &Path, count: u64, width: u32, height: u32, crop: u32) {
+    let numbers = [count, width as u64, height as u64, crop as u64].map(|n| n.to_string());
+    let mut args = vec!["dataset", "--render-only", "--out", dir.to_str().unwrap(), "--seed", "11", "--crops", "2"];
+    for (flag, value) in ["--count", "--width", "--height", "--crop-size"].iter().zip(&numbers) {
+        args.extend([*flag, value.as_str()]);
+    }
+    let out = vkdiff(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+}

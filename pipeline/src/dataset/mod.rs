@@ -3,20 +3,25 @@
 //! annotations. Resumable image by image, sharded by scene over any number of processes sharing
 //! the folder, and merged into one `annotations.json` at the end.
 
+mod canvas;
 mod export;
 mod folder;
 mod job;
 mod merge;
 mod plan;
+mod preview;
 mod render_only;
 mod run;
 mod scenes;
 mod settings;
+mod stats;
 
 pub use export::{export, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions};
 pub use folder::{Dataset, ImageRecord, Pending, ANNOTATIONS, MANIFEST};
 pub use job::{DatasetEvent, DatasetJob, Finish, ShardRequest};
 pub use merge::{merge, Merged};
 pub use plan::{choose, image_seed, Choice, ImageFiles, Shard};
+pub use preview::{preview, Preview};
 pub use run::{generate, Progress, Report, RunOptions, StageTimes};
 pub use settings::{read_prompts, Crops, DatasetSettings};
+pub use stats::{stats, write_charts};

@@ -15,7 +15,7 @@ mod yolo;
 pub use splits::{Split, SplitFractions};
 
 use crate::error::{Error, Result};
-use set::FinishedSet;
+pub(crate) use set::{FinishedSet, SetImage};
 use staging::Staging;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

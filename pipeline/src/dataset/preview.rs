@@ -1,0 +1,280 @@
+//! `vkdiff dataset preview`: a self-contained HTML page of a finished set's images with their
+//! instance outlines drawn over them (one colour per instance), switchable to the depth, the
+//! control image and the init image, each captioned with its seed, prompt and instance count;
+//! and a contact sheet PNG of the same images with their outlines.
+
+use super::canvas::Canvas;
+use super::export::{FinishedSet, SetImage, SplitFractions};
+use crate::error::{Error, Result};
+use crate::images::{decode_image, read_depth_exr};
+use crate::RgbImage;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use vkdiff_formats::atomic::write_atomic;
+use vkdiff_formats::Error as FileError;
+use vkdiff_render::png_out::rgb8;
+
+/// What a preview wrote.
+pub struct Preview {
+    pub html: PathBuf,
+    pub sheet: PathBuf,
+    pub images: usize,
+}
+
+/// Thumbnails of the contact sheet fit this square.
+const THUMB: usize = 256;
+
+/// Writes the preview of `count` images of the set in `dir`, spread evenly over it, to `html`
+/// and the contact sheet beside it (`html` with `.png`); `progress(done, total)` per image.
+pub fn preview(dir: &Path, html: &Path, count: usize, progress: &mut dyn FnMut(usize, usize)) -> Result<Preview> {
+    if count == 0 {
+        return Err(Error::Setting(vkdiff_setting::Message::setting("count").then(" must be at least 1")));
+    }
+    let set = FinishedSet::read(dir, &SplitFractions { val: 0.0, test: 0.0, seed: 0 })?;
+    let n = count.min(set.images.len());
+    let chosen: Vec<&SetImage> = (0..n).map(|k| &set.images[k * set.images.len() / n]).collect();
+    let mut figures = String::new();
+    let columns = (n as f64).sqrt().ceil().max(1.0) as usize;
+    let rows = n.div_ceil(columns);
+    let mut sheet = Canvas::new(columns * (THUMB + 8) + 8, rows * (THUMB + 30) + 8, [24, 26, 27]);
+    for (k, image) in chosen.iter().enumerate() {
+        let layers = Layers::read(&set.dir, image)?;
+        figures += &figure(image, &layers);
+        let thumb = layers.outlined_thumbnail();
+        let (x, y) = (8 + (k % columns) * (THUMB + 8), 8 + (k / columns) * (THUMB + 30));
+        sheet.blit(x as i64, y as i64, thumb.width, thumb.height, &thumb.pixels);
+        let label = format!("{}  N={}", image.entry["id"], image.annotations.len());
+        sheet.text(x as i64, (y + THUMB + 8) as i64, &label, 2, [230, 230, 230]);
+        progress(k + 1, n);
+    }
+    let title = format!("{} · {} of {} images", dir.display(), n, set.images.len());
+    write_atomic(html, page(&title, &figures).as_bytes())?;
+    let sheet_path = html.with_extension("png");
+    write_atomic(&sheet_path, &sheet.png())?;
+    Ok(Preview { html: html.to_path_buf(), sheet: sheet_path, images: n })
+}
+
+/// One image's pictures: the image, its instance ids, and its guides where the set has them.
+struct Layers {
+    image: RgbImage,
+    image_png: Vec<u8>,
+    ids: Vec<u16>,
+    depth: Option<Vec<u8>>,
+    control: Option<Vec<u8>>,
+    init: Option<Vec<u8>>,
+}
+
+impl Layers {
+    fn read(dir: &Path, image: &SetImage) -> Result<Layers> {
+        let file = |key: &str| image.entry[key].as_str().map(|f| dir.join(f));
+        let bytes = |key: &str| -> Result<Option<Vec<u8>>> {
+            file(key)
+                .map(|p| std::fs::read(&p).map_err(|e| Error::from(FileError::Io { path: p, source: e })))
+                .transpose()
+        };
+        let path = dir.join(image.file_name());
+        let image_png = std::fs::read(&path).map_err(|e| FileError::Io { path: path.clone(), source: e })?;
+        let picture = decode_image(&image_png, &path)?;
+        let ids = match file("mask_file") {
+            Some(path) => read_ids(&path, picture.width, picture.height)?,
+            None => vec![0; picture.width * picture.height],
+        };
+        let depth = file("depth_file").map(|p| depth_picture(&p)).transpose()?;
+        Ok(Layers { depth, control: bytes("control_file")?, init: bytes("init_file")?, image: picture, image_png, ids })
+    }
+
+    /// Transparent but for each instance's outline, in its colour, as an RGBA PNG.
+    fn outlines_png(&self) -> Vec<u8> {
+        let (w, h) = (self.image.width, self.image.height);
+        let mut rgba = vec![0u8; w * h * 4];
+        for (p, color) in self.outline_pixels() {
+            rgba[4 * p..4 * p + 4].copy_from_slice(&[color[0], color[1], color[2], 255]);
+        }
+        rgba_png(w as u32, h as u32, &rgba)
+    }
+
+    /// Pixels of an instance that touch another id, with the instance's colour.
+    fn outline_pixels(&self) -> impl Iterator<Item = (usize, [u8; 3])> + '_ {
+        let (w, h) = (self.image.width, self.image.height);
+        (0..w * h).filter_map(move |p| {
+            let id = self.ids[p];
+            let (x, y) = (p % w, p / w);
+            let differs = |q: usize| self.ids[q] != id;
+            let edge = id != 0
+                && ((x > 0 && differs(p - 1))
+                    || (x + 1 < w && differs(p + 1))
+                    || (y > 0 && differs(p - w))
+                    || (y + 1 < h && differs(p + w)));
+            edge.then(|| (p, instance_color(id)))
+        })
+    }
+
+    /// The image with its outlines, scaled (nearest: outlines stay sharp) to fit [`THUMB`].
+    fn outlined_thumbnail(&self) -> RgbImage {
+        let mut pixels = self.image.pixels.clone();
+        for (p, color) in self.outline_pixels() {
+            pixels[3 * p..3 * p + 3].copy_from_slice(&color);
+        }
+        let (w, h) = (self.image.width, self.image.height);
+        let scale = THUMB as f64 / w.max(h) as f64;
+        let (tw, th) = (((w as f64 * scale) as usize).max(1), ((h as f64 * scale) as usize).max(1));
+        let mut thumb = Vec::with_capacity(tw * th * 3);
+        for y in 0..th {
+            for x in 0..tw {
+                let p = (y * h / th) * w + x * w / tw;
+                thumb.extend_from_slice(&pixels[3 * p..3 * p + 3]);
+            }
+        }
+        RgbImage { width: tw, height: th, pixels: thumb }
+    }
+}
+
+/// A bright colour per instance id, far from its neighbours' (golden-angle hues).
+fn instance_color(id: u16) -> [u8; 3] {
+    let hue = (id as f64 * 137.507_764) % 360.0;
+    let f = |n: f64| {
+        let k = (n + hue / 60.0) % 6.0;
+        (255.0 * (1.0 - (k.min(4.0 - k).clamp(0.0, 1.0)) * 0.85)) as u8
+    };
+    [f(5.0), f(3.0), f(1.0)]
+}
+
+/// A mask PNG's 16-bit instance ids, checked against the image's size.
+fn read_ids(path: &Path, width: usize, height: usize) -> Result<Vec<u16>> {
+    let bad = |why: String| Error::from(FileError::Format { path: path.to_path_buf(), why });
+    let bytes = std::fs::read(path).map_err(|e| FileError::Io { path: path.to_path_buf(), source: e })?;
+    let mut reader =
+        png::Decoder::new(std::io::Cursor::new(bytes)).read_info().map_err(|e| bad(format!("bad PNG: {e}")))?;
+    let info = reader.info();
+    if (info.color_type, info.bit_depth) != (png::ColorType::Grayscale, png::BitDepth::Sixteen)
+        || (info.width as usize, info.height as usize) != (width, height)
+    {
+        return Err(bad(format!("not a {width}×{height} 16-bit grey instance mask")));
+    }
+    let mut buf = vec![0; reader.output_buffer_size().ok_or_else(|| bad("too large".into()))?];
+    reader.next_frame(&mut buf).map_err(|e| bad(format!("bad PNG: {e}")))?;
+    Ok(buf.chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]])).collect())
+}
+
+/// The depth as grey, near bright, stretched over its finite range.
+fn depth_picture(path: &Path) -> Result<Vec<u8>> {
+    let (depth, width, height) = read_depth_exr(path)?;
+    let finite = depth.iter().copied().filter(|d| d.is_finite());
+    let (near, far) = finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), d| (a.min(d), b.max(d)));
+    let span = (far - near).max(1e-6);
+    let grey: Vec<u8> = depth
+        .iter()
+        .flat_map(|&d| {
+            let v = if d.is_finite() { (255.0 * (far - d) / span).round() as u8 } else { 0 };
+            [v; 3]
+        })
+        .collect();
+    Ok(rgb8(width as u32, height as u32, &grey))
+}
+
+fn rgba_png(width: u32, height: u32, rgba: &[u8]) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    let mut encoder = png::Encoder::new(&mut bytes, width, height);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header().expect("writing to memory cannot fail");
+    writer.write_image_data(rgba).expect("data matches its header");
+    writer.finish().expect("writing to memory cannot fail");
+    bytes
+}
+
+fn data_uri(png: &[u8]) -> String {
+    const DIGITS: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut text = String::with_capacity(22 + png.len().div_ceil(3) * 4);
+    text.push_str("data:image/png;base64,");
+    for chunk in png.chunks(3) {
+        let b = [chunk[0], *chunk.get(1).unwrap_or(&0), *chunk.get(2).unwrap_or(&0)];
+        let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
+        for k in 0..4 {
+            if k <= chunk.len() {
+                text.push(DIGITS[(n >> (18 - 6 * k) & 63) as usize] as char);
+            } else {
+                text.push('=');
+            }
+        }
+    }
+    text
+}
+
+fn escape(text: &str) -> String {
+    text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+fn figure(image: &SetImage, layers: &Layers) -> String {
+    let e = &image.entry;
+    let mut html = String::from("<figure><div class=\"stack\">");
+    let base = |class: &str, png: &[u8]| format!("<img class=\"{class}\" src=\"{}\" alt=\"{class}\">", data_uri(png));
+    html += &base("image", &layers.image_png);
+    for (class, png) in [("depth", &layers.depth), ("control", &layers.control), ("init", &layers.init)] {
+        if let Some(png) = png {
+            html += &base(class, png);
+        }
+    }
+    html += &base("outline", &layers.outlines_png());
+    let mut caption = format!("#{} · {} instances · scene {}", e["id"], image.annotations.len(), e["scene_seed"]);
+    if let Some(seed) = e["seed"].as_u64() {
+        let _ = write!(caption, " · seed {seed}");
+    }
+    if let Some(k) = e["crop"]["index"].as_u64() {
+        let _ = write!(caption, " · crop {k}");
+    }
+    let prompt = e["prompt"].as_str().map_or_else(|| "shaded render (no prompt)".to_string(), str::to_string);
+    let _ = writeln!(
+        html,
+        "</div><figcaption>{}<br><span class=\"prompt\">{}</span></figcaption></figure>",
+        escape(&caption),
+        escape(&prompt)
+    );
+    html
+}
+
+fn page(title: &str, figures: &str) -> String {
+    format!(
+        r#"<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{title}</title>
+<style>
+body {{ background: #181a1b; color: #ddd; font: 14px system-ui, sans-serif; margin: 16px; }}
+header {{ position: sticky; top: 0; background: #181a1b; padding: 8px 0; z-index: 2; }}
+main {{ display: grid; grid-template-columns: repeat(auto-fill, minmax(320px, 1fr)); gap: 16px; }}
+figure {{ margin: 0; }}
+.stack {{ position: relative; }}
+.stack img {{ display: none; width: 100%; image-rendering: pixelated; }}
+.stack img.outline {{ position: absolute; top: 0; left: 0; }}
+body.outlines .stack img.outline {{ display: block; }}
+body[data-layer="image"] img.image, body[data-layer="depth"] img.depth,
+body[data-layer="control"] img.control, body[data-layer="init"] img.init {{ display: block; }}
+figcaption {{ margin-top: 4px; }}
+.prompt {{ color: #999; }}
+label {{ margin-right: 12px; }}
+</style></head>
+<body class="outlines" data-layer="image">
+<header><strong>{title}</strong><br>
+<label><input type="checkbox" id="outlines" checked> instance outlines</label>
+<label><input type="radio" name="layer" value="image" checked> image</label>
+<label><input type="radio" name="layer" value="depth"> depth</label>
+<label><input type="radio" name="layer" value="control"> control</label>
+<label><input type="radio" name="layer" value="init"> init</label>
+</header>
+<main>
+{figures}</main>
+<script>
+// The layer shown: the radio buttons, or the page's #hash (preview.html#depth).
+function show(layer) {{
+  document.body.dataset.layer = layer;
+  for (const r of document.querySelectorAll('input[name=layer]')) r.checked = r.value === layer;
+}}
+for (const r of document.querySelectorAll('input[name=layer]')) r.onchange = () => show(r.value);
+document.getElementById('outlines').onchange = e => document.body.classList.toggle('outlines', e.target.checked);
+const hash = location.hash.slice(1).split(',');
+if (['image', 'depth', 'control', 'init'].includes(hash[0])) show(hash[0]);
+if (hash.includes('nooutlines')) {{ document.body.classList.remove('outlines'); document.getElementById('outlines').checked = false; }}
+</script>
+</body></html>
+"#
+    )
+}

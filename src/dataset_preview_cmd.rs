@@ -1,0 +1,30 @@
+//! `vkdiff dataset preview DIR`: a page to look at a finished set with its masks.
+
+use anyhow::Result;
+use clap::Args;
+use std::path::PathBuf;
+use vkdiff_args::Progress;
+use vkdiff_pipeline::dataset::preview;
+
+/// A self-contained HTML page of a finished set's images with each instance's outline drawn
+/// over them (one colour per instance), switchable to depth, control and init images (or by
+/// the page's #depth, #control, #init), and a contact-sheet PNG beside it.
+#[derive(Args, Debug)]
+pub struct PreviewArgs {
+    /// The dataset folder.
+    dir: PathBuf,
+    /// The page to write; the contact sheet goes beside it as .png [default: DIR/preview.html].
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Images shown, spread evenly over the set.
+    #[arg(long, default_value_t = 24)]
+    count: usize,
+}
+
+pub fn run(args: &PreviewArgs) -> Result<()> {
+    let html = args.out.clone().unwrap_or_else(|| args.dir.join("preview.html"));
+    let bar = Progress::new("preview", "image");
+    let made = preview(&args.dir, &html, args.count, &mut |done, total| bar.update(done, total))?;
+    println!("wrote {} ({} images) and its contact sheet {}", made.html.display(), made.images, made.sheet.display());
+    Ok(())
+}

@@ -1,0 +1,137 @@
+//! `vkdiff dataset stats` and `vkdiff dataset preview` on a render-only set: the figures against
+//! the COCO file, the charts, and the preview page as headless Chromium shows it.
+
+mod cli;
+
+use cli::{render_set_of, scratch, vkdiff};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+/// Six scenes, twelve images of 128², made once.
+fn set() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = scratch("look-set").join("set");
+        render_set_of(&dir, 6, 320, 256, 128);
+        dir
+    })
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = vkdiff(args);
+    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+fn png_size(path: &Path) -> (u32, u32) {
+    let reader = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap())).read_info().unwrap();
+    (reader.info().width, reader.info().height)
+}
+
+#[test]
+fn stats_count_what_the_coco_file_holds() {
+    let charts = scratch("look-stats");
+    let stats: Value = serde_json::from_str(&ok(&[
+        "dataset",
+        "stats",
+        set().to_str().unwrap(),
+        "--json",
+        "--charts",
+        charts.to_str().unwrap(),
+    ]))
+    .unwrap();
+    let coco: Value = serde_json::from_slice(&std::fs::read(set().join("annotations.json")).unwrap()).unwrap();
+    let annotations = coco["annotations"].as_array().unwrap();
+    let images = coco["images"].as_array().unwrap();
+    assert_eq!((stats["images"].as_u64(), stats["scenes"].as_u64()), (Some(12), Some(6)));
+    assert_eq!(stats["instances"].as_u64(), Some(annotations.len() as u64));
+    let per: Vec<u64> =
+        images.iter().map(|i| annotations.iter().filter(|a| a["image_id"] == i["id"]).count() as u64).collect();
+    let s = &stats["instances_per_image"];
+    assert_eq!((s["min"].as_u64(), s["max"].as_u64()), (per.iter().min().copied(), per.iter().max().copied()));
+    let binned: u64 = s["histogram"].as_array().unwrap().iter().map(|b| b["count"].as_u64().unwrap()).sum();
+    assert_eq!(binned, 12);
+    let area = &stats["mask_area_px"];
+    let classes: u64 = ["small", "medium", "large"].iter().map(|k| area[k].as_u64().unwrap()).sum();
+    assert_eq!(classes, annotations.len() as u64);
+    let small = annotations.iter().filter(|a| a["area"].as_u64().unwrap() < 32 * 32).count() as u64;
+    assert_eq!(area["small"].as_u64(), Some(small));
+    let cut = annotations
+        .iter()
+        .filter(|a| {
+            let b: Vec<u64> = a["bbox"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+            b[0] == 0 || b[1] == 0 || b[0] + b[2] == 128 || b[1] + b[3] == 128
+        })
+        .count() as u64;
+    assert!(cut > 0);
+    assert_eq!(stats["cut_by_image_edge"]["instances"].as_u64(), Some(cut));
+    assert_eq!(stats["sources"]["render"].as_u64(), Some(12));
+    for chart in ["instances_per_image.png", "mask_area.png"] {
+        let (w, h) = png_size(&charts.join(chart));
+        assert!(w >= 360 && h >= 300, "{chart}: {w}×{h}");
+    }
+    let text = ok(&["dataset", "stats", set().to_str().unwrap(), "--charts", charts.to_str().unwrap()]);
+    assert!(text.contains("12 images of 6 scenes") && text.contains("cut by the image edge"), "{text}");
+    let refused = vkdiff(&["dataset", "stats", charts.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && stderr.lines().count() == 1 && stderr.contains("not a vkdiff dataset"),
+        "{stderr}"
+    );
+}
+
+/// Debian's chromium (or `VKDIFF_CHROMIUM`); the test fails, naming the package, without it.
+fn chromium() -> String {
+    let candidates = std::env::var("VKDIFF_CHROMIUM").into_iter().chain(["chromium".into(), "chromium-browser".into()]);
+    for candidate in candidates {
+        if Command::new(&candidate).arg("--version").output().is_ok_and(|o| o.status.success()) {
+            return candidate;
+        }
+    }
+    panic!("headless Chromium is needed to look at the preview: apt-get install chromium (or set VKDIFF_CHROMIUM)");
+}
+
+/// A 1200×900 screenshot of `url`, decoded to RGB.
+fn screenshot(browser: &str, url: &str, out: &Path) -> Vec<[u8; 3]> {
+    let status = Command::new(browser)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--window-size=1200,900"])
+        .arg(format!("--screenshot={}", out.display()))
+        .arg(url)
+        .output()
+        .unwrap();
+    assert!(status.status.success() && out.is_file(), "{}", String::from_utf8_lossy(&status.stderr));
+    let image = vkdiff_pipeline::images::read_image(out).unwrap();
+    image.pixels.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect()
+}
+
+#[test]
+fn the_preview_page_shows_the_images_with_their_outlines_in_headless_chromium() {
+    let dir = scratch("look-preview");
+    let html = dir.join("page.html");
+    ok(&["dataset", "preview", set().to_str().unwrap(), "--out", html.to_str().unwrap(), "--count", "4"]);
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert_eq!(page.matches("<figure>").count(), 4);
+    // Image, depth, control and outlines each; a render-only set has no init images.
+    assert_eq!(page.matches("src=\"data:image/png;base64,").count(), 16);
+    assert!(!page.contains("src=\"images/") && !page.contains("file:"), "the page is self-contained");
+    let (w, h) = png_size(&dir.join("page.png"));
+    assert!(w >= 2 * 256 && h >= 2 * 256, "contact sheet {w}×{h}");
+
+    let browser = chromium();
+    let url = format!("file://{}", html.display());
+    let shown = screenshot(&browser, &url, &dir.join("shot.png"));
+    let plain = screenshot(&browser, &format!("{url}#image,nooutlines"), &dir.join("plain.png"));
+    let depth = screenshot(&browser, &format!("{url}#depth"), &dir.join("depth.png"));
+    // The page's own background, not a browser error page.
+    assert_eq!(shown[0], [24, 26, 27], "the screenshot is not the preview page");
+    let colours: std::collections::HashSet<[u8; 3]> = shown.iter().copied().collect();
+    assert!(colours.len() > 500, "only {} colours: the images did not render", colours.len());
+    // Outlines are drawn over the image; the depth layer replaces it.
+    let differ = |a: &[[u8; 3]], b: &[[u8; 3]]| a.iter().zip(b).filter(|(x, y)| x != y).count();
+    assert!(differ(&shown, &plain) > 1000, "the outlines do not show");
+    assert!(differ(&plain, &depth) > 10_000, "the depth toggle does not switch the layer");
+    let refused = vkdiff(&["dataset", "preview", set().to_str().unwrap(), "--count", "0"]);
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--count must be at least 1"));
+}
