@@ -9,8 +9,8 @@ use vkdiff_args::Progress;
 use vkdiff_args::{dataset_flag, CropArgs, SceneSettings};
 use vkdiff_args::{ModelArgs, SamplingArgs};
 use vkdiff_pipeline::dataset::{
-    merge, read_prompts, Crops, DatasetEvent, DatasetJob, DatasetSettings, Finish, Merged, Progress as Event, Report,
-    RunOptions, ShardRequest,
+    merge, parse_size, read_prompts, size, Crops, DatasetEvent, DatasetJob, DatasetSettings, Finish, Merged,
+    Progress as Event, Report, RunOptions, ShardRequest,
 };
 use vkdiff_pipeline::Sampling;
 
@@ -67,6 +67,10 @@ pub struct DatasetArgs {
     /// Slurm array task or a Kubernetes Indexed Job (with --shards) picks its part.
     #[arg(long)]
     shard: Option<String>,
+    /// Free space to leave on the dataset's file system: before each image, the images left
+    /// (at the size measured so far) must fit beside it, else the run stops, resumable.
+    #[arg(long, default_value = "2G", value_parser = parse_size, value_name = "SIZE")]
+    min_free: u64,
     /// Shards in a Kubernetes Indexed Job (its completions); the index is JOB_COMPLETION_INDEX.
     #[arg(long)]
     shards: Option<u64>,
@@ -96,7 +100,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     }
     let out = args.out.as_deref().context("--out DIR is required")?;
     let shard = ShardRequest { shard: args.shard.clone(), shards: args.shards };
-    let options = RunOptions { batch: args.batch, threads: args.scene.threads };
+    let options = RunOptions { batch: args.batch, threads: args.scene.threads, min_free: args.min_free };
     let mut job = DatasetJob::new(settings(args)?, out, shard, options, &|k| std::env::var(k).ok())?;
     for why in job.redo() {
         eprintln!("making again: {why}");
@@ -106,11 +110,14 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         let ctx = job.needs_device().then(|| crate::open_device(&args.model.device)).transpose()?;
         let done = job.done() as usize;
         let total = done + job.todo() as usize;
+        let total_images = job.settings().images() as f64;
         // The bar and the clock start once the models are loaded: the closing line's per-image
         // figure is the loop's.
         let mut bar = Progress::resuming("images", "image", done);
         let mut start = Instant::now();
         let mut made = done;
+        let disk = job.disk();
+        let mut estimated = done > 0;
         let report = job.run(ctx.as_ref(), &mut |event| match event {
             DatasetEvent::Note(line) => eprintln!("{line}"),
             DatasetEvent::Loaded(time) => {
@@ -120,13 +127,25 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
             }
             DatasetEvent::Progress(Event::Images { done, .. }) => {
                 made = done as usize;
+                if let Some(per) = disk.per_image().filter(|_| !estimated) {
+                    estimated = true;
+                    eprintln!(
+                        "estimated size of the whole set: {} ({} per image, from the first)",
+                        size((per * total_images) as u64),
+                        size(per as u64)
+                    );
+                }
                 bar.show(made, total, "", true);
             }
             DatasetEvent::Progress(Event::Step { step, steps }) => {
                 bar.show(made, total, &format!("  (step {step}/{steps})"), false)
             }
         })?;
-        eprintln!("{}", closing_line(&report, start.elapsed(), ctx.as_ref().map(|c| c.peak_bytes())));
+        let mut closing = closing_line(&report, start.elapsed(), ctx.as_ref().map(|c| c.peak_bytes()));
+        if let Some(bytes) = job.estimated_size() {
+            closing += &format!("; the whole set: about {} on disk", size(bytes));
+        }
+        eprintln!("{closing}");
     }
     match job.finish()? {
         Finish::Merged(merged) => print_merged(out, &merged),

@@ -507,6 +507,8 @@ fn bad_dataset_arguments_print_one_error_line_and_write_nothing() {
         (vec!["--prompt", "x", "--init-strength", "0"], "--init-strength 0 must be in (0, 1]"),
         (vec!["--prompt", "(x:1.2.3)", "--prompt-syntax", "weighted"], "weight `1.2.3`"),
         (vec!["--render-only"], "--render-only makes the shaded renders the images: drop --model"),
+        (vec!["--prompt", "x", "--min-free", "100T"], "--min-free keeps 100 TiB"),
+        (vec!["--prompt", "x", "--min-free", "lots"], "lots: expected bytes"),
     ] {
         let mut args = base(&out);
         args.extend(extra.iter().map(|s| s.to_string()));

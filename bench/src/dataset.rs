@@ -8,7 +8,7 @@ use crate::random_models::{gradient_depth, style_images, RandomGuides};
 use anyhow::Result;
 use std::time::{Duration, Instant};
 use vkdiff_lora::LoraFile;
-use vkdiff_pipeline::dataset::{generate, Crops, Dataset, DatasetSettings, RunOptions, Shard};
+use vkdiff_pipeline::dataset::{generate, Crops, Dataset, DatasetSettings, DiskGuard, RunOptions, Shard};
 use vkdiff_pipeline::images::{ClipPreprocess, ControlDepth};
 use vkdiff_pipeline::{
     ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, SamplerKind, Sampling, Sdxl,
@@ -89,11 +89,12 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     let start = Instant::now();
     let report = generate(
         &folder,
+        &DiskGuard::new(&folder, 0, 0, 0),
         &dataset,
         &mut models,
         &styles,
         pending,
-        &RunOptions { batch: args.batch, threads: 0 },
+        &RunOptions { batch: args.batch, threads: 0, min_free: 0 },
         &mut |event| {
             if let vkdiff_pipeline::dataset::Progress::Images { done, total } = event {
                 eprintln!("{done}/{total} images");

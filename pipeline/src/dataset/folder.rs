@@ -54,8 +54,9 @@ fn fnv1a(text: &str) -> String {
 pub struct Pending {
     /// Scenes with images to make, each with those images' indices.
     pub scenes: Vec<(u64, Vec<u64>)>,
-    /// Images of the shard already done.
+    /// Images of the shard already done, and the bytes their files hold.
     pub done: u64,
+    pub done_bytes: u64,
     /// Records found but not whole, each with why; their images are made again.
     pub redo: Vec<String>,
 }
@@ -173,12 +174,15 @@ impl Dataset {
     /// left (another shard's are never touched: they may be in the middle of a write).
     pub fn pending(&self, shard: Shard) -> Result<Pending> {
         self.remove_partials(&|index| shard.owns_scene(index / self.images_per_scene.max(1)))?;
-        let mut pending = Pending { scenes: Vec::new(), done: 0, redo: Vec::new() };
+        let mut pending = Pending::default();
         for scene in (0..self.scenes).filter(|&s| shard.owns_scene(s)) {
             let mut todo = Vec::new();
             for index in scene * self.images_per_scene..(scene + 1) * self.images_per_scene {
                 match self.finished(index) {
-                    Ok(_) => pending.done += 1,
+                    Ok(record) => {
+                        pending.done += 1;
+                        pending.done_bytes += record.files.values().sum::<u64>();
+                    }
                     Err(why) => {
                         pending.redo.extend(why);
                         todo.push(index);

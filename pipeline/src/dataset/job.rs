@@ -3,6 +3,7 @@
 //! finds every image done (the whole run, or the last shard to finish: shards finishing together
 //! write the same bytes, each file renamed into place whole).
 
+use crate::dataset::disk::{check_margin, size, DiskGuard};
 use crate::dataset::folder::{Dataset, Pending};
 use crate::dataset::merge::{merge, Merged};
 use crate::dataset::plan::Shard;
@@ -35,6 +36,7 @@ pub struct DatasetJob {
     /// Where the shard came from, for the log.
     shard_source: String,
     options: RunOptions,
+    disk: DiskGuard,
 }
 
 /// What a run tells as it goes.
@@ -70,9 +72,12 @@ impl DatasetJob {
             return Err(Error::Setting(Message::setting("batch").then(" must be at least 1")));
         }
         let styles = settings.ip_sets.iter().map(|set| read_images(set)).collect::<Result<Vec<_>>>()?;
+        check_margin(out, options.min_free)?;
         let dataset = Dataset::open(out, &settings)?;
         let pending = dataset.pending(shard)?;
-        Ok(DatasetJob { settings, dataset, styles, pending, shard, shard_source, options })
+        let disk = DiskGuard::new(&dataset, options.min_free, pending.done_bytes, pending.done);
+        disk.check(pending.images())?;
+        Ok(DatasetJob { settings, dataset, styles, pending, shard, shard_source, options, disk })
     }
 
     pub fn settings(&self) -> &DatasetSettings {
@@ -87,8 +92,10 @@ impl DatasetJob {
     /// One line: the set, this shard, what is left to make.
     pub fn plan_line(&self) -> String {
         let s = &self.settings;
+        let estimate =
+            self.estimated_size().map_or(String::new(), |b| format!("; about {} for the whole set", size(b)));
         format!(
-            "{}: {} images of {}×{} from {} scenes; shard {}/{} ({}): {} to make, {} already done",
+            "{}: {} images of {}×{} from {} scenes; shard {}/{} ({}): {} to make, {} already done{estimate}",
             self.dataset.dir.display(),
             s.images(),
             s.sampling.width,
@@ -100,6 +107,17 @@ impl DatasetJob {
             self.pending.images(),
             self.pending.done
         )
+    }
+
+    /// What this run writes, as it goes: the set's estimated size from it.
+    pub fn disk(&self) -> DiskGuard {
+        self.disk.clone()
+    }
+
+    /// The estimated size of the whole set on disk: images written (this run's, else earlier
+    /// runs') times the set's images.
+    pub fn estimated_size(&self) -> Option<u64> {
+        self.disk.per_image().map(|per| (per * self.settings.images() as f64) as u64)
     }
 
     /// This process's shard, `I/N`.
@@ -128,7 +146,8 @@ impl DatasetJob {
         let pending = std::mem::take(&mut self.pending);
         let s = &self.settings;
         let Some(model_settings) = &s.models else {
-            return write_renders(&self.dataset, s, pending, &self.options, &mut |p| events(DatasetEvent::Progress(p)));
+            let progress = &mut |p| events(DatasetEvent::Progress(p));
+            return write_renders(&self.dataset, &self.disk, s, pending, &self.options, progress);
         };
         let ctx = ctx.ok_or_else(|| Error::Config("a diffusion dataset needs a Vulkan device".into()))?;
         let start = Instant::now();
@@ -143,7 +162,7 @@ impl DatasetJob {
             events(DatasetEvent::Note(&warning));
         }
         events(DatasetEvent::Loaded(start.elapsed()));
-        generate(&self.dataset, s, &mut models, &self.styles, pending, &self.options, &mut |p| {
+        generate(&self.dataset, &self.disk, s, &mut models, &self.styles, pending, &self.options, &mut |p| {
             events(DatasetEvent::Progress(p))
         })
     }

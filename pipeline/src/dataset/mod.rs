@@ -4,6 +4,7 @@
 //! the folder, and merged into one `annotations.json` at the end.
 
 mod canvas;
+mod disk;
 mod export;
 mod folder;
 mod job;
@@ -16,6 +17,7 @@ mod scenes;
 mod settings;
 mod stats;
 
+pub use disk::{parse_size, size, DiskGuard, DEFAULT_MIN_FREE};
 pub use export::{export, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions};
 pub use folder::{Dataset, ImageRecord, Pending, ANNOTATIONS, MANIFEST};
 pub use job::{DatasetEvent, DatasetJob, Finish, ShardRequest};

@@ -3,6 +3,7 @@
 //! COCO as a diffusion run with the same scene flags, and each image byte for byte that run's
 //! `init/` file; no model and no device.
 
+use super::disk::DiskGuard;
 use super::folder::{Dataset, Pending};
 use super::run::{Progress, Report, RunOptions, StageTimes};
 use super::scenes::render_scenes;
@@ -11,9 +12,10 @@ use crate::error::{Error, Result};
 use serde_json::json;
 use std::time::{Duration, Instant};
 
-/// Writes the `pending` images of the render-only `dataset`.
+/// Writes the `pending` images of the render-only `dataset`, `disk` checked before each.
 pub fn write_renders(
     dataset: &Dataset,
+    disk: &DiskGuard,
     settings: &DatasetSettings,
     pending: Pending,
     options: &RunOptions,
@@ -28,6 +30,7 @@ pub fn write_renders(
         let Ok(scene) = stream.images.recv() else { break };
         times.waiting += waited.elapsed();
         let scene = scene?;
+        disk.check(total - done)?;
         let start = Instant::now();
         let files = dataset.files(scene.index);
         let (_, shaded) =
@@ -39,6 +42,7 @@ pub fn write_renders(
         let image_id = scene.index + 1;
         let annotations = scene.annotations.iter().cloned().map(|a| a.in_dataset(image_id)).collect();
         dataset.write_image(scene.index, &outputs, entry, annotations)?;
+        disk.written.add(outputs.iter().map(|(_, bytes)| bytes.len() as u64).sum());
         times.write += start.elapsed();
         made += 1;
         done += 1;

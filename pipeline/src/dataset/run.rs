@@ -2,6 +2,7 @@
 //! decoded, and handed to a writer thread that encodes and writes each image's files and then
 //! its record. Prompts and style-image sets are encoded once each and reused.
 
+use super::disk::DiskGuard;
 use super::folder::{Dataset, Pending};
 use super::plan::{choose, image_seed, Choice};
 use super::scenes::{render_scenes, SceneImage};
@@ -26,6 +27,8 @@ pub struct RunOptions {
     pub batch: usize,
     /// Scene-rendering threads (0: one per core).
     pub threads: usize,
+    /// Free space to leave on the dataset's file system (`--min-free`).
+    pub min_free: u64,
 }
 
 /// What the loop tells its caller as it goes.
@@ -80,9 +83,12 @@ struct Item {
 }
 
 /// Makes the `pending` images of `dataset` with `models` (whose text encoders it releases once
-/// the prompts are encoded); `styles` are the loaded images of each of `settings.ip_sets`.
+/// the prompts are encoded); `styles` are the loaded images of each of `settings.ip_sets`;
+/// `disk` is checked before each image and told what each wrote.
+#[allow(clippy::too_many_arguments)]
 pub fn generate(
     dataset: &Dataset,
+    disk: &DiskGuard,
     settings: &DatasetSettings,
     models: &mut WorkflowModels,
     styles: &[Vec<RgbImage>],
@@ -110,7 +116,7 @@ pub fn generate(
     models.sdxl.release_text_encoders();
     let models = &*models;
     let stream = render_scenes(settings, pending.scenes, options.threads, 2 * options.batch);
-    let (to_writer, writer) = start_writer(dataset.clone(), options.batch);
+    let (to_writer, writer) = start_writer(dataset.clone(), disk.clone(), options.batch);
     let mut run = Loop {
         settings,
         models,
@@ -121,7 +127,7 @@ pub fn generate(
         denoiser: None,
         recordings: 0,
     };
-    let made = run.all(&stream.images, &to_writer, pending.done, total, options.batch, on_progress);
+    let made = run.all(&stream.images, &to_writer, (pending.done, total), disk, options.batch, on_progress);
     drop(to_writer);
     drop(stream.images);
     let written = writer.join().map_err(|_| Error::Config("the writer thread panicked".into()))?;
@@ -157,8 +163,8 @@ impl<'a> Loop<'a> {
         &mut self,
         images: &Receiver<Result<SceneImage>>,
         to_writer: &SyncSender<Finished>,
-        mut done: u64,
-        total: u64,
+        (mut done, total): (u64, u64),
+        disk: &DiskGuard,
         batch: usize,
         on_progress: &mut dyn FnMut(Progress),
     ) -> Result<u64> {
@@ -185,6 +191,7 @@ impl<'a> Loop<'a> {
             let Some(fallback) = queue.front().map(|first| self.shape(first)) else { return Ok(made) };
             let items = self.take_batch(&mut queue, fallback, batch);
             for finished in self.batch(items, on_progress)? {
+                disk.check(total.saturating_sub(done - made + disk.images_written()))?;
                 to_writer.send(finished).map_err(|_| Error::Config("the writer stopped".into()))?;
                 made += 1;
                 done += 1;
@@ -338,7 +345,11 @@ impl<'a> Loop<'a> {
 }
 
 /// The writer thread: PNG encoding and every file write happen here, off the denoiser's path.
-fn start_writer(dataset: Dataset, batch: usize) -> (SyncSender<Finished>, JoinHandle<Result<Duration>>) {
+fn start_writer(
+    dataset: Dataset,
+    disk: DiskGuard,
+    batch: usize,
+) -> (SyncSender<Finished>, JoinHandle<Result<Duration>>) {
     let (send, receive) = sync_channel::<Finished>(2 * batch);
     let thread = std::thread::spawn(move || {
         let mut busy = Duration::ZERO;
@@ -352,6 +363,7 @@ fn start_writer(dataset: Dataset, batch: usize) -> (SyncSender<Finished>, JoinHa
             outputs.extend(f.scene.init.as_ref().map(|(_, png)| (files.init.as_str(), png.as_slice())));
             outputs.push((&files.image, &png));
             dataset.write_image(f.index, &outputs, f.entry, annotations)?;
+            disk.written.add(outputs.iter().map(|(_, bytes)| bytes.len() as u64).sum());
             busy += start.elapsed();
         }
         Ok(busy)
