@@ -6,9 +6,11 @@ use std::path::PathBuf;
 use vkdiff_args::Progress;
 use vkdiff_pipeline::dataset::{export, ExportFormat, ExportOptions, Exported, Split, SplitFractions};
 
-/// Write a finished dataset folder (merged: annotations.json written) in a trainer's layout,
-/// split by scene: every crop of a scene goes to the same split, and a scene's split does not
-/// change when the set grows. DIR is only read; OUT appears whole or not at all.
+/// Write a finished set in a trainer's layout (COCO splits, YOLO, WebDataset, Hugging Face).
+///
+/// The set must be merged (annotations.json written). Splits are by scene: every crop of a scene
+/// goes to the same split, and a scene's split does not change when the set grows. DIR is only
+/// read; OUT appears whole or not at all.
 #[derive(Args, Debug)]
 pub struct ExportArgs {
     /// The dataset folder.

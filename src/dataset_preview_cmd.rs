@@ -6,9 +6,11 @@ use std::path::PathBuf;
 use vkdiff_args::Progress;
 use vkdiff_pipeline::dataset::preview;
 
-/// A self-contained HTML page of a finished set's images with each instance's outline drawn
-/// over them (one colour per instance), switchable to depth, control and init images (or by
-/// the page's #depth, #control, #init), and a contact-sheet PNG beside it.
+/// A page to look at a finished set: images with their instance outlines, and a contact sheet.
+///
+/// A self-contained HTML page of the images with each instance's outline drawn over them (one
+/// colour per instance), switchable to depth, control and init images (or by the page's #depth,
+/// #control, #init, and #image,nooutlines), and a contact-sheet PNG beside it.
 #[derive(Args, Debug)]
 pub struct PreviewArgs {
     /// The dataset folder.

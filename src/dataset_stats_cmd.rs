@@ -6,9 +6,10 @@ use serde_json::Value;
 use std::path::PathBuf;
 use vkdiff_pipeline::dataset::{stats, write_charts};
 
-/// What a finished set holds: images, instances per image, mask areas by COCO size class,
-/// instances cut by the image edge, the seeds, prompts and style sets used; with two charts
-/// (instances per image, mask areas) as PNG.
+/// What a finished set holds, in figures and two charts.
+///
+/// Images, instances per image, mask areas by COCO size class, instances cut by the image edge,
+/// the seeds, prompts and style sets used; charts of instances per image and mask areas as PNG.
 #[derive(Args, Debug)]
 pub struct StatsArgs {
     /// The dataset folder.

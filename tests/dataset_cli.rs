@@ -264,6 +264,37 @@ fn assert_render_only_is_the_init_images(dir: &Path, args: &[String]) {
     }
 }
 
+#[test]
+fn preview_stats_and_exports_read_a_diffusion_set() {
+    let dir = reference();
+    let out = scratch("dataset-look");
+    let path = |name: &str| out.join(name).to_str().unwrap().to_string();
+    let set = dir.to_str().unwrap().to_string();
+    run_ok(&["dataset", "preview", &set, "--out", &path("page.html"), "--count", "3"].map(String::from), &[]);
+    let page = std::fs::read_to_string(out.join("page.html")).unwrap();
+    let coco = read_json(&dir.join("annotations.json"));
+    let images = coco["images"].as_array().unwrap();
+    assert_eq!(page.matches("<figure>").count(), 3);
+    assert!(images.iter().any(|i| page.contains(&format!("seed {}", i["seed"]))), "captions carry the seeds");
+    assert!(page.contains("white button mushrooms") || page.contains("brown caps"), "captions carry the prompts");
+    let stats = run_ok(&["dataset", "stats", &set, "--json", "--charts", &path("charts")].map(String::from), &[]);
+    let stats: Value = serde_json::from_str(&stats[..stats.rfind('}').unwrap() + 1]).unwrap();
+    let sum = |v: &Value| v.as_object().unwrap().values().map(|n| n.as_u64().unwrap()).sum::<u64>();
+    assert_eq!((sum(&stats["prompts"]), sum(&stats["style_sets"])), (IMAGES, IMAGES), "{stats}");
+    assert_eq!(stats["image_seeds"].as_u64(), Some(IMAGES));
+    run_ok(&["dataset", "export", &set, "--format", "hf", "--out", &path("hf")].map(String::from), &[]);
+    let rows: Vec<Value> = ["train", "validation"]
+        .iter()
+        .filter_map(|s| std::fs::read_to_string(out.join("hf").join(s).join("metadata.jsonl")).ok())
+        .flat_map(|text| text.lines().map(|l| serde_json::from_str::<Value>(l).unwrap()).collect::<Vec<_>>())
+        .collect();
+    assert_eq!(rows.len() as u64, IMAGES);
+    assert!(rows.iter().all(|r| r["prompt"].is_string() && r["seed"].is_u64() && r["ip_images"].is_array()));
+    run_ok(&["dataset", "export", &set, "--format", "yolo", "--out", &path("yolo")].map(String::from), &[]);
+    let labels = ["train", "val"].iter().filter_map(|s| std::fs::read_dir(out.join("yolo/labels").join(s)).ok());
+    assert_eq!(labels.map(|d| d.count() as u64).sum::<u64>(), IMAGES);
+}
+
 /// `vkdiff gen` with each image's recorded settings writes the very same PNG.
 fn assert_gen_reproduces(dir: &Path) {
     let coco = read_json(&dir.join("annotations.json"));

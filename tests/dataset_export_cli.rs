@@ -286,9 +286,13 @@ fn bad_export_arguments_print_one_error_line_and_write_nothing() {
         .filter(|e| e.file_name().to_string_lossy().starts_with('.'))
         .collect();
     assert!(hidden.is_empty(), "a refused export left {hidden:?}");
-    // --force replaces the folder whole; the dataset folder is never written.
+    // --force replaces the folder whole; the dataset folder is never written; what a killed
+    // export left (its process gone) is removed.
     std::fs::write(existing.join("stale.txt"), "old").unwrap();
+    let killed = dir.join(".existing.partial-4194999");
+    std::fs::create_dir_all(killed.join("train")).unwrap();
     export(set(), &existing, &["--format", "hf", "--force", "--copy"]);
     assert!(!existing.join("stale.txt").exists() && existing.join("train/metadata.jsonl").is_file());
+    assert!(!killed.exists(), "a killed export's folder was left");
     assert!(tree(set()) == before, "the export changed the dataset folder");
 }

@@ -19,12 +19,26 @@ fn io(path: &Path) -> impl FnOnce(std::io::Error) -> FileError + '_ {
     move |e| FileError::Io { path: path.to_path_buf(), source: e }
 }
 
+/// Removes the hidden folders that exports to the same OUT left when they were killed (their
+/// process is gone; a running one's is kept).
+fn remove_killed_exports(parent: &Path, name: &str) {
+    let Ok(entries) = std::fs::read_dir(parent) else { return };
+    for entry in entries.flatten() {
+        let file = entry.file_name().to_string_lossy().into_owned();
+        let pid = [PARTIAL, ".old-"].iter().find_map(|tag| file.strip_prefix(&format!(".{name}{tag}")));
+        if pid.and_then(|p| p.parse::<u32>().ok()).is_some_and(|p| !Path::new(&format!("/proc/{p}")).exists()) {
+            let _ = std::fs::remove_dir_all(entry.path());
+        }
+    }
+}
+
 impl Staging {
     /// A fresh hidden folder beside `out`; `copy`: copy files rather than hard-link them.
     pub fn beside(out: &Path, copy: bool) -> Result<Staging> {
         let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
         let name = out.file_name().map_or("export".into(), |n| n.to_string_lossy().into_owned());
         let root = parent.join(format!(".{name}{PARTIAL}{}", std::process::id()));
+        remove_killed_exports(parent, &name);
         let _ = std::fs::remove_dir_all(&root);
         std::fs::create_dir_all(&root).map_err(io(&root))?;
         Ok(Staging { root, copy, copied: 0, linked: 0 })
