@@ -75,18 +75,20 @@ fn summary(args: &ExportArgs, e: &Exported) -> String {
         .iter()
         .filter(|s| e.images.contains_key(s) || **s == Split::Train)
         .map(|s| {
-            format!("{} {} images of {} scenes", s.name(), e.images.get(s).unwrap_or(&0), e.scenes.get(s).unwrap_or(&0))
+            let (images, scenes) = (*e.images.get(s).unwrap_or(&0), *e.scenes.get(s).unwrap_or(&0));
+            format!("{} {} of {}", s.name(), count(images, "image"), count(scenes, "scene"))
         })
         .collect();
     let mut line = format!(
-        "wrote {} ({}): {}; {} annotations; {} files linked, {} copied",
+        "wrote {} ({}): {}; {}",
         args.out.display(),
         args.format.to_possible_value().map_or(String::new(), |v| v.get_name().to_string()),
         splits.join(", "),
-        e.annotations,
-        e.linked,
-        e.copied
+        count(e.annotations, "annotation"),
     );
+    if e.linked + e.copied > 0 {
+        line += &format!("; {} linked, {} copied", count(e.linked, "file"), e.copied);
+    }
     if let Some(fit) = e.polygons {
         line += &format!(
             "; polygons of {} instances ({:.1} points each) cover their masks with IoU min {:.3}, mean {:.3}",
@@ -100,4 +102,9 @@ fn summary(args: &ExportArgs, e: &Exported) -> String {
         line += &format!("; {} shards", e.shards);
     }
     line
+}
+
+/// `1 scene`, `3 scenes`.
+fn count(n: u64, thing: &str) -> String {
+    format!("{n} {thing}{}", if n == 1 { "" } else { "s" })
 }
