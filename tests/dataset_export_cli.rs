@@ -71,6 +71,11 @@ fn yolo_polygons_cover_every_instance_mask() {
         assert!(yaml.lines().any(|l| l == line), "data.yaml lacks {line}:\n{yaml}");
     }
     assert!(!yaml.contains("path:"), "the folder is the root wherever it moves");
+    // Without a val split, Ultralytics (which needs one) validates on train.
+    let no_val = dir.join("no-val");
+    export(&set, &no_val, &["--format", "yolo", "--val-fraction", "0"]);
+    let yaml = std::fs::read_to_string(no_val.join("data.yaml")).unwrap();
+    assert!(yaml.lines().any(|l| l == "val: images/train") && !yaml.contains("test:"), "{yaml}");
     let coco = read_json(&set.join("annotations.json"));
     let mut masks: HashMap<u64, Vec<&Value>> = HashMap::new();
     for a in coco["annotations"].as_array().unwrap() {

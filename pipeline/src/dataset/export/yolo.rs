@@ -76,13 +76,14 @@ fn data_yaml(set: &FinishedSet) -> String {
         set.fractions.test,
         set.fractions.seed
     );
-    for split in set.splits() {
+    for split in Split::ALL {
         let name = split.name();
         if set.in_split(split).next().is_some() {
             let _ = writeln!(yaml, "{name}: images/{name}");
         } else if split == Split::Val {
-            // Ultralytics needs a validation set; a one-scene set has none of its own.
-            let _ = writeln!(yaml, "# no scene is left for val: validating on train\nval: images/train");
+            // Ultralytics refuses a dataset without val: with --val-fraction 0 (or a one-scene
+            // set) it validates on train, and says so here.
+            let _ = writeln!(yaml, "# no scene is in val: Ultralytics validates on train\nval: images/train");
         }
     }
     yaml.push_str("names:\n");
