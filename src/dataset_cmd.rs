@@ -127,15 +127,13 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
             }
             DatasetEvent::Progress(Event::Images { done, .. }) => {
                 made = done as usize;
-                if let Some(per) = disk.per_image().filter(|_| !estimated) {
+                // Printed once measured, then refined on the bar as images are written.
+                let set_size = disk.per_image().map(|per| size((per * total_images) as u64));
+                if let Some(set_size) = set_size.as_ref().filter(|_| !estimated) {
                     estimated = true;
-                    eprintln!(
-                        "estimated size of the whole set: {} ({} per image, from the first)",
-                        size((per * total_images) as u64),
-                        size(per as u64)
-                    );
+                    eprintln!("estimated size of the whole set: {set_size} (from the first image)");
                 }
-                bar.show(made, total, "", true);
+                bar.show(made, total, &set_size.map_or(String::new(), |s| format!("  (set ≈ {s})")), true);
             }
             DatasetEvent::Progress(Event::Step { step, steps }) => {
                 bar.show(made, total, &format!("  (step {step}/{steps})"), false)

@@ -549,6 +549,14 @@ fn bad_dataset_arguments_print_one_error_line_and_write_nothing() {
         assert!(!result.status.success() && errors.len() == 1 && errors[0].contains(message), "{extra:?}: {stderr}");
         assert!(!out.exists(), "{extra:?} wrote {}", out.display());
     }
+    // A render-only set takes no diffusion flag: each is named, not ignored.
+    for (flag, value) in [("--prompt", "x"), ("--negative-prompt", "x"), ("--init-strength", "0.5")] {
+        let args = ["dataset", "--render-only", "--out", out.to_str().unwrap(), flag, value];
+        let stderr = String::from_utf8_lossy(&vk().args(args).output().unwrap().stderr).into_owned();
+        let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error")).collect();
+        assert!(errors.len() == 1 && errors[0].contains("--render-only") && errors[0].contains(flag), "{stderr}");
+        assert!(!out.exists(), "{flag} wrote {}", out.display());
+    }
     let mut args = base(&foreign);
     args.extend(["--prompt", "x"].map(String::from));
     let result = vk().args(&args).output().unwrap();

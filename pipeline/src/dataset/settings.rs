@@ -81,7 +81,7 @@ impl DatasetSettings {
                 Sdxl::probe_pixel_multiple(&models.model)? as u32
             }
             None => {
-                check_render_only(&prompts, &sampling, &ip_sets)?;
+                check_render_only(&prompts, &negative_prompt, &sampling, &ip_sets)?;
                 RENDER_ONLY_MULTIPLE
             }
         };
@@ -289,9 +289,16 @@ fn check_diffusion(
 
 /// A render-only set takes the scene flags only: a prompt, a style or a strength would be
 /// silently unused.
-fn check_render_only(prompts: &[String], sampling: &Sampling, ip_sets: &[Vec<PathBuf>]) -> Result<()> {
+fn check_render_only(
+    prompts: &[String],
+    negative_prompt: &Option<String>,
+    sampling: &Sampling,
+    ip_sets: &[Vec<PathBuf>],
+) -> Result<()> {
     let unused = if !prompts.is_empty() {
         Some(Message::setting("prompt").then("/").and("prompts"))
+    } else if negative_prompt.is_some() {
+        Some(Message::setting("negative_prompt"))
     } else if !ip_sets.is_empty() {
         Some(Message::setting("ip_image").then("/").and("ip_set"))
     } else if sampling.strength.is_some() {
