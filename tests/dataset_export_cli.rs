@@ -213,9 +213,14 @@ fn hf_metadata_lists_every_image_with_its_objects() {
         for line in text.lines() {
             let row: Value = serde_json::from_str(line).unwrap();
             assert!(out.join(split).join(row["file_name"].as_str().unwrap()).is_file());
+            let mask = out.join(split).join(row["mask_file_name"].as_str().unwrap());
+            assert!(
+                std::fs::read(mask).unwrap()
+                    == std::fs::read(set().join(format!("masks/{}", row["file_name"].as_str().unwrap()))).unwrap()
+            );
             let objects = &row["objects"];
             let n = objects["bbox"].as_array().unwrap().len();
-            for key in ["id", "area", "categories", "segmentation", "iscrowd"] {
+            for key in ["id", "area", "categories", "segmentation", "iscrowd", "mask_id"] {
                 assert_eq!(objects[key].as_array().unwrap().len(), n, "{key}");
             }
             assert!(objects["categories"].as_array().unwrap().iter().all(|c| c == 0));

@@ -114,8 +114,10 @@ def check_hf(dataset, out):
     assert count == total, (count, total)
     for split in loaded.values():
         row = split[0]
-        assert row["image"].size == (row["width"], row["height"])
+        assert row["image"].size == (row["width"], row["height"]) == row["mask"].size
         assert len(row["objects"]["bbox"]) == len(row["objects"]["segmentation"])
+        ids = set(np.unique(np.array(row["mask"])).tolist()) - {0}
+        assert ids == set(row["objects"]["mask_id"]), "the mask column holds the objects' mask ids"
     print(f"hf: imagefolder loaded {count} images in splits {sorted(loaded)}; features {sorted(loaded['train'].features)}")
 
 

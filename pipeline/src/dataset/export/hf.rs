@@ -1,7 +1,9 @@
 //! A Hugging Face image folder: `{train,validation,test}/NAME.png` with a `metadata.jsonl` in
 //! each, one line per image: its COCO entry's fields (`id` as `image_id`) and its instances
 //! under `objects` as HF's object-detection sets hold them (`bbox` as COCO's [x, y, w, h],
-//! `categories` 0-based), with each instance's COCO RLE mask under `segmentation`.
+//! `categories` 0-based), with each instance's COCO RLE mask under `segmentation` and its id in
+//! the instance mask under `mask_id`. The instance mask is a second image column, `mask`
+//! (`mask_file_name`, `masks/NAME.png`: 16-bit ids, as `datasets` 3 and later load them).
 
 use super::set::FinishedSet;
 use super::splits::Split;
@@ -30,6 +32,11 @@ pub fn write(set: &FinishedSet, staging: &mut Staging, progress: &mut dyn FnMut(
             let name = image.file_name().rsplit('/').next().unwrap_or_default();
             staging.link(&set.dir.join(image.file_name()), &format!("{}/{name}", folder(split)))?;
             let mut row = json!({ "file_name": name, "image_id": image.entry["id"] });
+            if let Some(mask) = image.entry["mask_file"].as_str() {
+                let mask_name = format!("masks/{}", mask.rsplit('/').next().unwrap_or_default());
+                staging.link(&set.dir.join(mask), &format!("{}/{mask_name}", folder(split)))?;
+                row["mask_file_name"] = json!(mask_name);
+            }
             for (key, value) in image.entry.as_object().expect("checked when read") {
                 if key != "id" && key != "file_name" && !key.ends_with("_file") {
                     row[key] = value.clone();
@@ -44,6 +51,7 @@ pub fn write(set: &FinishedSet, staging: &mut Staging, progress: &mut dyn FnMut(
                 "bbox": field("bbox"),
                 "categories": categories,
                 "iscrowd": field("iscrowd"),
+                "mask_id": field("mask_id"),
                 "segmentation": field("segmentation"),
             });
             let line = serde_json::to_string(&row).expect("JSON values serialise");
