@@ -306,3 +306,21 @@ fn bad_export_arguments_print_one_error_line_and_write_nothing() {
     assert!(!killed.exists(), "a killed export's folder was left");
     assert!(tree(set()) == before, "the export changed the dataset folder");
 }
+
+/// One scene cannot fill a val split: each format still gives its trainer what it needs.
+#[test]
+fn a_one_scene_set_exports_in_every_format() {
+    let dir = scratch("export-one");
+    let one = dir.join("set");
+    render_set_of(&one, 1, 320, 256, 128);
+    for format in ["coco", "yolo", "webdataset", "hf"] {
+        export(&one, &dir.join(format), &["--format", format, "--val-fraction", "0.2"]);
+    }
+    let val = read_json(&dir.join("coco/val.json"));
+    assert!(val["images"].as_array().unwrap().is_empty(), "an empty val.json is still COCO");
+    let yaml = std::fs::read_to_string(dir.join("yolo/data.yaml")).unwrap();
+    assert!(yaml.lines().any(|l| l == "val: images/train"), "{yaml}");
+    assert_eq!(tree(&dir.join("webdataset")).keys().cloned().collect::<Vec<_>>(), ["train-000000.tar"]);
+    assert!(!dir.join("hf/validation").exists(), "datasets refuses a split folder without images");
+    assert!(dir.join("hf/train/metadata.jsonl").is_file());
+}

@@ -26,7 +26,8 @@ pub fn write(set: &FinishedSet, staging: &mut Staging, progress: &mut dyn FnMut(
     let classes: Vec<Value> =
         set.categories.as_array().map_or(Vec::new(), |c| c.iter().map(|c| c["id"].clone()).collect());
     let mut done = 0;
-    for split in set.splits() {
+    // `datasets` refuses a split folder without images: a split no scene fell in is left out.
+    for split in set.splits().into_iter().filter(|&s| set.in_split(s).next().is_some()) {
         let (mut metadata, path) = staging.create(&format!("{}/metadata.jsonl", folder(split)))?;
         for image in set.in_split(split) {
             let name = image.file_name().rsplit('/').next().unwrap_or_default();

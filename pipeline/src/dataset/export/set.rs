@@ -73,10 +73,14 @@ impl FinishedSet {
         }
         let mut read = Vec::with_capacity(images.len());
         for entry in images {
-            let (Some(id), Some(scene_seed), Some(_)) =
-                (entry["id"].as_u64(), entry["scene_seed"].as_u64(), entry["file_name"].as_str())
-            else {
-                return Err(bad(format!("image {} lacks an id, file_name or scene_seed", entry["id"])));
+            let (Some(id), Some(scene_seed), Some(_), Some(1..), Some(1..)) = (
+                entry["id"].as_u64(),
+                entry["scene_seed"].as_u64(),
+                entry["file_name"].as_str(),
+                entry["width"].as_u64(),
+                entry["height"].as_u64(),
+            ) else {
+                return Err(bad(format!("image {} lacks an id, file_name, width, height or scene_seed", entry["id"])));
             };
             let image = SetImage {
                 annotations: by_image.remove(&id).unwrap_or_default(),
