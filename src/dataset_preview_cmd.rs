@@ -21,12 +21,16 @@ pub struct PreviewArgs {
     /// Images shown, spread evenly over the set.
     #[arg(long, default_value_t = 24)]
     count: usize,
+    /// Pictures on the page at most this many pixels on a side (0: full size), so that a page
+    /// of 1024² images stays light; the contact sheet is made from the full images.
+    #[arg(long, default_value_t = 512)]
+    max_side: usize,
 }
 
 pub fn run(args: &PreviewArgs) -> Result<()> {
     let html = args.out.clone().unwrap_or_else(|| args.dir.join("preview.html"));
     let bar = Progress::new("preview", "image");
-    let made = preview(&args.dir, &html, args.count, &mut |done, total| bar.update(done, total))?;
+    let made = preview(&args.dir, &html, args.count, args.max_side, &mut |done, total| bar.update(done, total))?;
     println!("wrote {} ({} images) and its contact sheet {}", made.html.display(), made.images, made.sheet.display());
     Ok(())
 }

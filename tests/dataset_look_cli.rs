@@ -110,7 +110,11 @@ fn screenshot(browser: &str, url: &str, out: &Path) -> Vec<[u8; 3]> {
 fn the_preview_page_shows_the_images_with_their_outlines_in_headless_chromium() {
     let dir = scratch("look-preview");
     let html = dir.join("page.html");
-    ok(&["dataset", "preview", set().to_str().unwrap(), "--out", html.to_str().unwrap(), "--count", "4"]);
+    let preview = |out: &Path, max_side: &str| {
+        let (set, out) = (set().to_str().unwrap(), out.to_str().unwrap());
+        ok(&["dataset", "preview", set, "--out", out, "--count", "4", "--max-side", max_side]);
+    };
+    preview(&html, "0");
     let page = std::fs::read_to_string(&html).unwrap();
     assert_eq!(page.matches("<figure>").count(), 4);
     // Image, depth, control and outlines each; a render-only set has no init images.
@@ -118,6 +122,12 @@ fn the_preview_page_shows_the_images_with_their_outlines_in_headless_chromium() 
     assert!(!page.contains("src=\"images/") && !page.contains("file:"), "the page is self-contained");
     let (w, h) = png_size(&dir.join("page.png"));
     assert!(w >= 2 * 256 && h >= 2 * 256, "contact sheet {w}×{h}");
+    // --max-side shrinks the page's pictures (the 128² images to 64²), not what they show.
+    let small = dir.join("small.html");
+    preview(&small, "64");
+    let small_page = std::fs::read_to_string(&small).unwrap();
+    assert_eq!(small_page.matches("<figure>").count(), 4);
+    assert!(small_page.len() * 2 < page.len(), "{} bytes shrunk, {} bytes whole", small_page.len(), page.len());
 
     let browser = chromium();
     let url = format!("file://{}", html.display());

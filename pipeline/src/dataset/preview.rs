@@ -6,7 +6,7 @@
 use super::canvas::Canvas;
 use super::export::{FinishedSet, SetImage, SplitFractions};
 use crate::error::{Error, Result};
-use crate::images::{decode_image, read_depth_exr};
+use crate::images::{read_depth_exr, read_image};
 use crate::RgbImage;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -25,8 +25,15 @@ pub struct Preview {
 const THUMB: usize = 256;
 
 /// Writes the preview of `count` images of the set in `dir`, spread evenly over it, to `html`
-/// and the contact sheet beside it (`html` with `.png`); `progress(done, total)` per image.
-pub fn preview(dir: &Path, html: &Path, count: usize, progress: &mut dyn FnMut(usize, usize)) -> Result<Preview> {
+/// (pictures at most `max_side` pixels on a side, 0: full size) and the contact sheet beside it
+/// (`html` with `.png`); `progress(done, total)` per image.
+pub fn preview(
+    dir: &Path,
+    html: &Path,
+    count: usize,
+    max_side: usize,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Preview> {
     if count == 0 {
         return Err(Error::Setting(vkdiff_setting::Message::setting("count").then(" must be at least 1")));
     }
@@ -39,7 +46,7 @@ pub fn preview(dir: &Path, html: &Path, count: usize, progress: &mut dyn FnMut(u
     let mut sheet = Canvas::new(columns * (THUMB + 8) + 8, rows * (THUMB + 30) + 8, [24, 26, 27]);
     for (k, image) in chosen.iter().enumerate() {
         let layers = Layers::read(&set.dir, image)?;
-        figures += &figure(image, &layers);
+        figures += &figure(image, &layers.shrunk(max_side));
         let thumb = layers.outlined_thumbnail();
         let (x, y) = (8 + (k % columns) * (THUMB + 8), 8 + (k / columns) * (THUMB + 30));
         sheet.blit(x as i64, y as i64, thumb.width, thumb.height, &thumb.pixels);
@@ -57,30 +64,40 @@ pub fn preview(dir: &Path, html: &Path, count: usize, progress: &mut dyn FnMut(u
 /// One image's pictures: the image, its instance ids, and its guides where the set has them.
 struct Layers {
     image: RgbImage,
-    image_png: Vec<u8>,
     ids: Vec<u16>,
-    depth: Option<Vec<u8>>,
-    control: Option<Vec<u8>>,
-    init: Option<Vec<u8>>,
+    depth: Option<RgbImage>,
+    control: Option<RgbImage>,
+    init: Option<RgbImage>,
 }
 
 impl Layers {
     fn read(dir: &Path, image: &SetImage) -> Result<Layers> {
         let file = |key: &str| image.entry[key].as_str().map(|f| dir.join(f));
-        let bytes = |key: &str| -> Result<Option<Vec<u8>>> {
-            file(key)
-                .map(|p| std::fs::read(&p).map_err(|e| Error::from(FileError::Io { path: p, source: e })))
-                .transpose()
-        };
-        let path = dir.join(image.file_name());
-        let image_png = std::fs::read(&path).map_err(|e| FileError::Io { path: path.clone(), source: e })?;
-        let picture = decode_image(&image_png, &path)?;
+        let picture = |key: &str| file(key).map(|p| read_image(&p)).transpose();
+        let image_rgb = read_image(&dir.join(image.file_name()))?;
         let ids = match file("mask_file") {
-            Some(path) => read_ids(&path, picture.width, picture.height)?,
-            None => vec![0; picture.width * picture.height],
+            Some(path) => read_ids(&path, image_rgb.width, image_rgb.height)?,
+            None => vec![0; image_rgb.width * image_rgb.height],
         };
         let depth = file("depth_file").map(|p| depth_picture(&p)).transpose()?;
-        Ok(Layers { depth, control: bytes("control_file")?, init: bytes("init_file")?, image: picture, image_png, ids })
+        Ok(Layers { depth, control: picture("control_file")?, init: picture("init_file")?, image: image_rgb, ids })
+    }
+
+    /// The layers at most `max_side` pixels on a side (0: as they are): pictures box-averaged
+    /// and ids sampled, by the same whole factor, so that a page of large images stays light.
+    fn shrunk(&self, max_side: usize) -> Layers {
+        let (w, h) = (self.image.width, self.image.height);
+        let f = if max_side == 0 { 1 } else { w.max(h).div_ceil(max_side).max(1) };
+        let (sw, sh) = (w.div_ceil(f), h.div_ceil(f));
+        let ids =
+            (0..sw * sh).map(|p| self.ids[((p / sw) * f + f / 2).min(h - 1) * w + ((p % sw) * f + f / 2).min(w - 1)]);
+        Layers {
+            image: box_down(&self.image, f),
+            ids: ids.collect(),
+            depth: self.depth.as_ref().map(|d| box_down(d, f)),
+            control: self.control.as_ref().map(|c| box_down(c, f)),
+            init: self.init.as_ref().map(|i| box_down(i, f)),
+        }
     }
 
     /// Transparent but for each instance's outline, in its colour, as an RGBA PNG.
@@ -129,6 +146,31 @@ impl Layers {
     }
 }
 
+/// `image` averaged over `f`×`f` blocks (those at the right and bottom edges cut short).
+fn box_down(image: &RgbImage, f: usize) -> RgbImage {
+    if f == 1 {
+        return image.clone();
+    }
+    let (w, h) = (image.width, image.height);
+    let (sw, sh) = (w.div_ceil(f), h.div_ceil(f));
+    let mut pixels = Vec::with_capacity(sw * sh * 3);
+    for by in 0..sh {
+        for bx in 0..sw {
+            let (ys, xs) = (by * f..((by + 1) * f).min(h), bx * f..((bx + 1) * f).min(w));
+            let n = (ys.len() * xs.len()) as u32;
+            for c in 0..3 {
+                let sum: u32 = ys
+                    .clone()
+                    .flat_map(|y| xs.clone().map(move |x| (y, x)))
+                    .map(|(y, x)| image.pixels[3 * (y * w + x) + c] as u32)
+                    .sum();
+                pixels.push(((sum + n / 2) / n) as u8);
+            }
+        }
+    }
+    RgbImage { width: sw, height: sh, pixels }
+}
+
 /// A bright colour per instance id, far from its neighbours' (golden-angle hues).
 fn instance_color(id: u16) -> [u8; 3] {
     let hue = (id as f64 * 137.507_764) % 360.0;
@@ -157,7 +199,7 @@ fn read_ids(path: &Path, width: usize, height: usize) -> Result<Vec<u16>> {
 }
 
 /// The depth as grey, near bright, stretched over its finite range.
-fn depth_picture(path: &Path) -> Result<Vec<u8>> {
+fn depth_picture(path: &Path) -> Result<RgbImage> {
     let (depth, width, height) = read_depth_exr(path)?;
     let finite = depth.iter().copied().filter(|d| d.is_finite());
     let (near, far) = finite.fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), d| (a.min(d), b.max(d)));
@@ -169,7 +211,7 @@ fn depth_picture(path: &Path) -> Result<Vec<u8>> {
             [v; 3]
         })
         .collect();
-    Ok(rgb8(width as u32, height as u32, &grey))
+    Ok(RgbImage { width, height, pixels: grey })
 }
 
 fn rgba_png(width: u32, height: u32, rgba: &[u8]) -> Vec<u8> {
@@ -209,10 +251,11 @@ fn figure(image: &SetImage, layers: &Layers) -> String {
     let e = &image.entry;
     let mut html = String::from("<figure><div class=\"stack\">");
     let base = |class: &str, png: &[u8]| format!("<img class=\"{class}\" src=\"{}\" alt=\"{class}\">", data_uri(png));
-    html += &base("image", &layers.image_png);
-    for (class, png) in [("depth", &layers.depth), ("control", &layers.control), ("init", &layers.init)] {
-        if let Some(png) = png {
-            html += &base(class, png);
+    let png = |i: &RgbImage| rgb8(i.width as u32, i.height as u32, &i.pixels);
+    html += &base("image", &png(&layers.image));
+    for (class, picture) in [("depth", &layers.depth), ("control", &layers.control), ("init", &layers.init)] {
+        if let Some(picture) = picture {
+            html += &base(class, &png(picture));
         }
     }
     html += &base("outline", &layers.outlines_png());
