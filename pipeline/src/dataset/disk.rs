@@ -59,11 +59,12 @@ impl DiskGuard {
     /// do not fit in the free space (before any image is measured, the margin alone).
     pub fn check(&self, remaining: u64) -> Result<()> {
         let free = free_bytes(&self.dir)?;
-        let need = self.per_image().map_or(0.0, |b| b * remaining as f64) as u64;
+        let per_image = self.per_image();
+        let need = per_image.map_or(0.0, |b| b * remaining as f64) as u64;
         if free >= need.saturating_add(self.min_free) {
             return Ok(());
         }
-        let what = match self.per_image() {
+        let what = match per_image {
             Some(per) => format!("the {remaining} images left need about {} ({} each)", size(need), size(per as u64)),
             None => "no image is measured yet".into(),
         };

@@ -54,7 +54,7 @@ fn fnv1a(text: &str) -> String {
 pub struct Pending {
     /// Scenes with images to make, each with those images' indices.
     pub scenes: Vec<(u64, Vec<u64>)>,
-    /// Images of the shard already done, and the bytes their files hold.
+    /// Images of the shard already done, and the bytes their files and records hold.
     pub done: u64,
     pub done_bytes: u64,
     /// Records found but not whole, each with why; their images are made again.
@@ -180,8 +180,9 @@ impl Dataset {
             for index in scene * self.images_per_scene..(scene + 1) * self.images_per_scene {
                 match self.finished(index) {
                     Ok(record) => {
+                        let record_file = std::fs::metadata(self.dir.join(self.files(index).record));
                         pending.done += 1;
-                        pending.done_bytes += record.files.values().sum::<u64>();
+                        pending.done_bytes += record.files.values().sum::<u64>() + record_file.map_or(0, |m| m.len());
                     }
                     Err(why) => {
                         pending.redo.extend(why);
@@ -211,23 +212,26 @@ impl Dataset {
         Ok(())
     }
 
-    /// Writes an image's files, then its record: the image counts as done only once all are whole.
+    /// Writes an image's files, then its record: the image counts as done only once all are
+    /// whole. Returns the bytes written.
     pub fn write_image(
         &self,
         index: u64,
         outputs: &[(&str, &[u8])],
         image: Value,
         annotations: Vec<Annotation>,
-    ) -> Result<()> {
+    ) -> Result<u64> {
         let mut files = BTreeMap::new();
         for (name, bytes) in outputs {
             write_atomic(&self.dir.join(name), bytes)?;
             files.insert(name.to_string(), bytes.len() as u64);
         }
+        let written = files.values().sum::<u64>();
         let record = ImageRecord { fingerprint: self.fingerprint.clone(), files, image, annotations };
         let mut text = serde_json::to_string(&record).expect("records serialise");
         text.push('\n');
-        Ok(write_atomic(&self.dir.join(self.files(index).record), text.as_bytes())?)
+        write_atomic(&self.dir.join(self.files(index).record), text.as_bytes())?;
+        Ok(written + text.len() as u64)
     }
 }
 

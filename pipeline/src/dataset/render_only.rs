@@ -39,10 +39,7 @@ pub fn write_renders(
         outputs.push((&files.image, shaded));
         let mut entry = scene.entry(&files);
         entry["source"] = json!("render");
-        let image_id = scene.index + 1;
-        let annotations = scene.annotations.iter().cloned().map(|a| a.in_dataset(image_id)).collect();
-        dataset.write_image(scene.index, &outputs, entry, annotations)?;
-        disk.written.add(outputs.iter().map(|(_, bytes)| bytes.len() as u64).sum());
+        disk.written.add(dataset.write_image(scene.index, &outputs, entry, scene.dataset_annotations())?);
         times.write += start.elapsed();
         made += 1;
         done += 1;

@@ -357,13 +357,11 @@ fn start_writer(
             let start = Instant::now();
             let files = dataset.files(f.index);
             let png = png_bytes(&f.image, &f.text)?;
-            let image_id = f.index + 1;
-            let annotations = f.scene.annotations.iter().cloned().map(|a| a.in_dataset(image_id)).collect();
+            let annotations = f.scene.dataset_annotations();
             let mut outputs = f.scene.scene_files(&files);
             outputs.extend(f.scene.init.as_ref().map(|(_, png)| (files.init.as_str(), png.as_slice())));
             outputs.push((&files.image, &png));
-            dataset.write_image(f.index, &outputs, f.entry, annotations)?;
-            disk.written.add(outputs.iter().map(|(_, bytes)| bytes.len() as u64).sum());
+            disk.written.add(dataset.write_image(f.index, &outputs, f.entry, annotations)?);
             busy += start.elapsed();
         }
         Ok(busy)

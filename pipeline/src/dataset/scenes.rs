@@ -59,6 +59,12 @@ impl SceneImage {
         entry
     }
 
+    /// The annotations as the dataset records them: image id `index + 1`, set-wide ids left to
+    /// the merge.
+    pub fn dataset_annotations(&self) -> Vec<Annotation> {
+        self.annotations.iter().cloned().map(|a| a.in_dataset(self.index + 1)).collect()
+    }
+
     /// The files that come from the scene, as (name, bytes), in the order they are written.
     pub fn scene_files<'a>(&'a self, files: &'a ImageFiles) -> Vec<(&'a str, &'a [u8])> {
         vec![(&files.depth, &self.depth_exr), (&files.control, &self.control_png), (&files.mask, &self.mask_png)]
