@@ -25,7 +25,7 @@ pub const KERNELS: &[KernelSpec] = &[
     // one variant set per lavapipe width (LP_NATIVE_VECTOR_WIDTH 128, 256, 512 → 4, 8, 16 lanes).
     KernelSpec {
         name: "gemm_sg",
-        files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "gemm_sg.wgsl"],
+        files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "gemm_store4.wgsl", "gemm_sg.wgsl"],
         params: &[
             &[("SG", 4), ("TM", 8), ("BT", 0), ("LU", 1)],
             &[("SG", 4), ("TM", 8), ("BT", 1), ("LU", 1)],
@@ -53,7 +53,7 @@ pub const KERNELS: &[KernelSpec] = &[
     },
     KernelSpec {
         name: "conv_sg",
-        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "gemm_sg.wgsl"],
+        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "gemm_store4.wgsl", "gemm_sg.wgsl"],
         params: &[
             &[("SG", 4), ("TM", 8), ("BT", 1), ("LU", 1)],
             &[("SG", 4), ("TM", 16), ("BT", 1), ("LU", 4)],
@@ -140,7 +140,8 @@ pub const KERNELS: &[KernelSpec] = &[
         params: &[&[("OP", 0)], &[("OP", 1)], &[("OP", 2)], &[("OP", 3)], &[("OP", 4)]],
     },
     KernelSpec { name: "binary", files: &["grid.wgsl", "binary.wgsl"], params: &[&[("OP", 0)], &[("OP", 1)]] },
-    KernelSpec { name: "geglu", files: &["grid.wgsl", "activations.wgsl", "geglu.wgsl"], params: NONE },
+    KernelSpec { name: "geglu", files: &["grid.wgsl", "activations.wgsl", "geglu_common.wgsl", "geglu.wgsl"], params: NONE },
+    KernelSpec { name: "geglu_v4", files: &["grid.wgsl", "activations.wgsl", "geglu_common.wgsl", "geglu_v4.wgsl"], params: NONE },
     KernelSpec { name: "upsample_nearest2x", files: &["grid.wgsl", "upsample.wgsl"], params: NONE },
     KernelSpec { name: "concat_channels", files: &["grid.wgsl", "concat.wgsl"], params: NONE },
     KernelSpec { name: "copy_heads", files: &["grid.wgsl", "copy_heads.wgsl"], params: NONE },
@@ -153,7 +154,7 @@ pub const KERNELS: &[KernelSpec] = &[
 
 /// Kernels on the device's matrix units (`VK_KHR_cooperative_matrix`), compiled in f16 only:
 /// their operands are f16, so f32 products keep the scalar kernels' precision by not using
-/// them. CM = fragment size (8: lavapipe's 8×8×8; 16: the 16×16×16 NVIDIA and AMD list), SG =
+/// them. The GEMM and convolution read vec4-aligned operands (others take the tiled kernels). CM = fragment size (8: lavapipe's 8×8×8; 16: the 16×16×16 NVIDIA and AMD list), SG =
 /// the subgroup width the workgroup's four subgroups are pinned to, WT = fragments per side of
 /// a subgroup's tile (4 for products large enough to fill a GPU with the larger tiles). Intel's
 /// 8×16×16 has no naga type (naga 30 spells only square 8×8 and 16×16 fragments), so Intel
@@ -161,7 +162,7 @@ pub const KERNELS: &[KernelSpec] = &[
 pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
     KernelSpec {
         name: "gemm_coop",
-        files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix.wgsl", "gemm_store.wgsl", "gemm_coop.wgsl"],
+        files: &["gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "gemm_store4.wgsl", "gemm_coop.wgsl"],
         params: &[
             &[("CM", 8), ("SG", 4), ("WT", 2), ("BT", 0)],
             &[("CM", 8), ("SG", 4), ("WT", 2), ("BT", 1)],
@@ -187,7 +188,7 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
     },
     KernelSpec {
         name: "conv_coop",
-        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv.wgsl", "gemm_store.wgsl", "gemm_coop.wgsl"],
+        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "gemm_store4.wgsl", "gemm_coop.wgsl"],
         params: &[
             &[("CM", 8), ("SG", 4), ("WT", 2), ("BT", 1)],
             &[("CM", 8), ("SG", 4), ("WT", 4), ("BT", 1)],
@@ -202,16 +203,16 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
         ],
     },
     // Attention with both products on the matrix units, heads of up to DH = 64 (SDXL's, CLIP's);
-    // wider heads take attention_rows.
+    // wider heads take attention_rows. KF = key fragments per chunk. Subgroups of at least CM
+    // lanes (a row's softmax takes SG/CM of them): lavapipe at 4 lanes takes its subgroup kernel.
     KernelSpec {
         name: "attention_coop",
         files: &["attention_common.wgsl", "attention_coop.wgsl"],
         params: &[
-            &[("CM", 8), ("SG", 4), ("DH", 64)],
-            &[("CM", 8), ("SG", 8), ("DH", 64)],
-            &[("CM", 8), ("SG", 16), ("DH", 64)],
-            &[("CM", 16), ("SG", 32), ("DH", 64)],
-            &[("CM", 16), ("SG", 64), ("DH", 64)],
+            &[("CM", 8), ("SG", 8), ("DH", 64), ("KF", 4)],
+            &[("CM", 8), ("SG", 16), ("DH", 64), ("KF", 4)],
+            &[("CM", 16), ("SG", 32), ("DH", 64), ("KF", 4)],
+            &[("CM", 16), ("SG", 64), ("DH", 64), ("KF", 4)],
         ],
     },
 ];

@@ -1,36 +1,84 @@
 // GEMM core on the device's matrix units (VK_KHR_cooperative_matrix): f16 operands, f32
 // accumulation. A workgroup is 4 subgroups of SG lanes in a 2×2 grid, each computing WT×WT
 // fragments of CM×CM (the prelude's FA, FB, FC types), so a workgroup's tile is BM×BM with
-// BM = 2·WT·CM. A and B are staged through workgroup memory as f16, read k-fastest where their
-// rows run along K (tails and convolution padding read zero, so any M, N, K and strides work).
-// Each fragment leaves through a small per-subgroup scratch, so the epilogue and the edge masks
-// are those of the scalar kernels (gemm_store.wgsl). Row strides are multiples of 8 halves (16
-// bytes, what cooperative loads need), padded off a power of two against bank conflicts.
-@group(0) @binding(1) var<storage, read> b: array<S>;
+// BM = 2·WT·CM, over K-steps of BK = 4·CM. Operands are vec4-aligned (the runtime sends other
+// shapes to the tiled kernel): each invocation stages units of four f16 along K (A, and B
+// stored N×K) or along N (B stored K×N), one load each, zero past M, N and K. The next step's
+// units are loaded into registers while the matrix units work on this one, so the loads'
+// latency hides behind the products. Each fragment leaves through a small per-subgroup
+// scratch, four columns at a time, so the epilogue and the edge masks are those of the vec4
+// subgroup kernel (gemm_store4.wgsl).
+// Row strides are multiples of 8 halves (16 bytes, what cooperative loads need), padded off a
+// power of two against bank conflicts.
+@group(0) @binding(1) var<storage, read> b: array<vec4<S>>;
 
 const BM: u32 = 2u * WT * CM;
-const BK: u32 = 2u * CM;
+const BK: u32 = 4u * CM;
 const WG: u32 = 4u * SG;
 const LDA: u32 = BK + 8u; // A tile [BM][LDA]; B tile [BM][LDA] (BT = 1) or [BK][LDB] (BT = 0)
 const LDB: u32 = BM + 8u;
 const LDS: u32 = CM + 4u; // a subgroup's f32 scratch [CM][LDS]
-// Staged elements per invocation (WT·CM²/SG, the unroll count below), and the tile rows between
-// them (WG is a multiple of BK in every variant).
-const PER: u32 = BM * BK / WG;
-const STEP: u32 = WG / BK;
+// Units along a tile row of K, units per invocation (WT·CM²/SG/2, the unroll count below), and
+// the tile rows between an invocation's units (WG is a multiple of UK in every variant).
+const UK: u32 = BK / 4u;
+const PER: u32 = BM * BK / (4u * WG);
+const STEP: u32 = WG / UK;
+// B stored K×N: units along a tile row of N.
+const UN: u32 = BM / 4u;
 
 var<workgroup> a_tile: array<f16, BM * LDA>;
-var<workgroup> b_tile: array<f16, max(BM * LDA, BK * LDB)>;
+var<workgroup> b_tile: array<f16, BM * LDA>; // ≥ BK·LDB, as BM ≥ 4·CM
 var<workgroup> scratch: array<f32, 4u * CM * LDS>;
 
-fn load_b16(boff: u32, k: u32, n: u32) -> f16 {
+fn b_unit(boff: u32, k: u32, n: u32) -> vec4<f16> {
     if k >= p.g.k || n >= p.g.n {
-        return 0.0h;
+        return vec4<f16>();
     }
     if BT == 0u {
-        return f16(b[boff + k * p.g.ldb + n]);
+        return vec4<f16>(b[(boff + k * p.g.ldb + n) / 4u]);
     }
-    return f16(b[boff + n * p.g.ldb + k]);
+    return vec4<f16>(b[(boff + n * p.g.ldb + k) / 4u]);
+}
+
+// (Workgroup pointers cannot be passed to functions, hence one writer per tile.)
+fn put_a(at: u32, x: vec4<f16>) {
+    a_tile[at] = x.x;
+    a_tile[at + 1u] = x.y;
+    a_tile[at + 2u] = x.z;
+    a_tile[at + 3u] = x.w;
+}
+
+fn put_b(at: u32, x: vec4<f16>) {
+    b_tile[at] = x.x;
+    b_tile[at + 1u] = x.y;
+    b_tile[at + 2u] = x.z;
+    b_tile[at + 3u] = x.w;
+}
+
+// This invocation's units of the K-step at k0: A rows tr + STEP·i at k0 + 4·tu, and B's rows
+// alike (BT = 1) or its units t + WG·i of the [BK][BM] step (BT = 0).
+fn fetch(
+    rows: ptr<function, array<RowCtx, PER>>,
+    ra: ptr<function, array<vec4<f16>, PER>>,
+    rb: ptr<function, array<vec4<f16>, PER>>,
+    k0: u32,
+    t: u32,
+    col0: u32,
+    boff: u32,
+) {
+    let tu = t % UK;
+    let tr = t / UK;
+    let ka = k0 + 4u * tu;
+    let kc = k_ctx(ka);
+    // #unroll I WT*CM*CM/SG/2
+    (*ra)[I] = select(vec4<f16>(), vec4<f16>(load_a((*rows)[I], kc)), ka < p.g.k);
+    if BT == 1u {
+        (*rb)[I] = b_unit(boff, ka, col0 + tr + STEP * I);
+    } else {
+        let at = t + WG * I;
+        (*rb)[I] = b_unit(boff, k0 + at / UN, col0 + 4u * (at % UN));
+    }
+    // #end
 }
 
 @compute @workgroup_size(WG)
@@ -47,41 +95,43 @@ fn main(
     // This subgroup's fragments start at row sm, column sn of the tile.
     let sm = (sid / 2u) * WT * CM;
     let sn = (sid % 2u) * WT * CM;
-    // This invocation stages k = k0 + tk of tile rows tr + STEP·i (A, and B when BT = 1).
-    let tk = t % BK;
-    let tr = t / BK;
+    let tu = t % UK;
+    let tr = t / UK;
     var rows: array<RowCtx, PER>;
-    // #unroll I WT*CM*CM/SG
+    // #unroll I WT*CM*CM/SG/2
     rows[I] = row_ctx(batch, row0 + tr + STEP * I);
     // #end
+    var ra: array<vec4<f16>, PER>;
+    var rb: array<vec4<f16>, PER>;
+    fetch(&rows, &ra, &rb, 0u, t, col0, boff);
     var acc: array<FC, WT * WT>;
     for (var k0 = 0u; k0 < p.g.k; k0 += BK) {
-        let ka = k0 + tk;
-        let kc = k_ctx(ka);
-        // #unroll I WT*CM*CM/SG
-        a_tile[(tr + STEP * I) * LDA + tk] = f16(select(0.0, load_a1(rows[I], kc), ka < p.g.k));
+        // #unroll I WT*CM*CM/SG/2
+        put_a((tr + STEP * I) * LDA + 4u * tu, ra[I]);
         if BT == 1u {
-            b_tile[(tr + STEP * I) * LDA + tk] = load_b16(boff, ka, col0 + tr + STEP * I);
+            put_b((tr + STEP * I) * LDA + 4u * tu, rb[I]);
         } else {
             let at = t + WG * I;
-            b_tile[(at / BM) * LDB + at % BM] = load_b16(boff, k0 + at / BM, col0 + at % BM);
+            put_b((at / UN) * LDB + 4u * (at % UN), rb[I]);
         }
         // #end
         workgroupBarrier();
-        // #unroll KK 2
-        {
+        if k0 + BK < p.g.k {
+            fetch(&rows, &ra, &rb, k0 + BK, t, col0, boff);
+        }
+        for (var kk = 0u; kk < BK; kk += CM) {
             var fa: array<FA, WT>;
             var fb: array<FB, WT>;
             // #unroll I WT
             {
                 // Offsets bound to a `let`: naga 30's SPIR-V output panics on inline ones here.
-                let at = (sm + I * CM) * LDA + KK * CM;
+                let at = (sm + I * CM) * LDA + kk;
                 fa[I] = coopLoadT<FA>(&a_tile[at], LDA);
                 if BT == 1u {
-                    let bt = (sn + I * CM) * LDA + KK * CM;
+                    let bt = (sn + I * CM) * LDA + kk;
                     fb[I] = coopLoad<FB>(&b_tile[bt], LDA);
                 } else {
-                    let bt = KK * CM * LDB + sn + I * CM;
+                    let bt = kk * LDB + sn + I * CM;
                     fb[I] = coopLoadT<FB>(&b_tile[bt], LDB);
                 }
             }
@@ -92,7 +142,6 @@ fn main(
             // #end
             // #end
         }
-        // #end
         workgroupBarrier();
     }
     // One fragment at a time through this subgroup's scratch; every subgroup takes the same
@@ -103,10 +152,11 @@ fn main(
     {
         coopStoreT(acc[WT * I + J], &scratch[own], LDS);
         workgroupBarrier();
-        for (var e = lane; e < CM * CM; e += SG) {
-            let r = e / CM;
-            let col = e % CM;
-            store(batch, row0 + sm + I * CM + r, col0 + sn + J * CM + col, scratch[own + r * LDS + col]);
+        for (var e = lane; e < CM * CM / 4u; e += SG) {
+            let r = e / (CM / 4u);
+            let at = own + r * LDS + 4u * (e % (CM / 4u));
+            let sum = vec4<f32>(scratch[at], scratch[at + 1u], scratch[at + 2u], scratch[at + 3u]);
+            store4(batch, row0 + sm + I * CM + r, col0 + sn + J * CM + 4u * (e % (CM / 4u)), sum);
         }
         workgroupBarrier();
     }

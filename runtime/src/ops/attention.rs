@@ -152,21 +152,23 @@ const SMALL_CHANNELS: usize = 256;
 const ROWS_PER_WORKGROUP: u32 = 64;
 
 /// The matrix-unit attention for f16 heads of up to 64 values, where the context runs its GEMMs
-/// on the matrix units (the same fragment size and subgroup width).
+/// on the matrix units (the same fragment size and subgroup width) and the device's workgroup
+/// memory holds the variant's.
 fn cooperative_variant(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<&'static vkdiff_kernels::Variant> {
     let (cm, sg) = ctx.info().cooperative_variant()?;
-    let fits = cooperative_workgroup_bytes(cm) <= ctx.info().max_shared_memory;
-    if ctx.gemm_family() != GemmFamily::Cooperative || dtype != Dtype::F16 || head_dim > 64 || !fits {
+    if ctx.gemm_family() != GemmFamily::Cooperative || dtype != Dtype::F16 || head_dim > 64 {
         return None;
     }
     vkdiff_kernels::find("attention_coop", dtype, &[("CM", cm), ("SG", sg), ("DH", 64)])
+        .filter(|v| cooperative_workgroup_bytes(cm, v.param("KF").unwrap()) <= ctx.info().max_shared_memory)
 }
 
-/// Workgroup memory of attention_coop.wgsl at fragment size `cm` (heads of 64): K and V rows
-/// (f16), scores (f32), probabilities (f16), output rows (f32), and each row's maximum and sum.
-fn cooperative_workgroup_bytes(cm: u32) -> u32 {
-    let (keys, rows) = (2 * cm, 4 * cm);
-    2 * keys * (64 + 8) * 2 + rows * (keys + 4) * 4 + rows * (keys + 8) * 2 + rows * (64 + 4) * 4 + 2 * rows * 4
+/// Workgroup memory of attention_coop.wgsl at fragment size `cm` with `kf` key fragments per
+/// chunk (heads of 64): K and V rows (f16), the subgroups' scratch rows (f32), probabilities
+/// (f16), each row's reference, sum and scale, and the subgroups' flags.
+fn cooperative_workgroup_bytes(cm: u32, kf: u32) -> u32 {
+    let (keys, rows) = (kf * cm, 4 * cm);
+    2 * keys * (64 + 8) * 2 + rows * (keys.max(64) + 4) * 4 + rows * (keys + 8) * 2 + 3 * rows * 4 + 4 * 4
 }
 
 /// The GPU attention variant with the fewest slots that hold a head of `slots` vec4s.

@@ -127,7 +127,9 @@ pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
     ensure(two_f.is_multiple_of(2) && two_f > 0 && out.numel() * 2 == x.numel(), || {
         format!("geglu: {:?} into {:?}", x.shape(), out.shape())
     })?;
-    let k = kernel(rec.context(), "geglu", dtype, &[], 2)?;
+    // Four values per invocation where F allows (every SDXL and CLIP width).
+    let lanes = if two_f.is_multiple_of(8) { 4 } else { 1 };
+    let k = kernel(rec.context(), if lanes == 4 { "geglu_v4" } else { "geglu" }, dtype, &[], 2)?;
     let rows = x.numel() / two_f;
     let per = if fit(rec.context(), &[x, out]) {
         rows
@@ -136,7 +138,8 @@ pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
     };
     for band in bands(rows, per) {
         let (xs, ys) = (row_view(x, two_f, band.clone())?, row_view(out, two_f / 2, band)?);
-        dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(ys.numel()), u(two_f / 2)], element_groups(ys.numel()))?;
+        let n = ys.numel() / lanes;
+        dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(n), u(two_f / 2 / lanes)], element_groups(n))?;
     }
     Ok(())
 }

@@ -169,7 +169,7 @@ fn matmul_whole(
     ];
     // Without a bias the kernel never reads binding 2; C stands in for it.
     let bias = bias.unwrap_or(c);
-    let shape = GemmShape { m: s.m, n: s.n, k: s.k, batch: s.batch, fits_subgroup: s.fits_vec4() };
+    let shape = GemmShape { m: s.m, n: s.n, k: s.k, batch: s.batch, vec4: s.fits_vec4() };
     let kernels = (GemmKernels::MATMUL, dtype, &[("BT", s.b_transposed as u32)][..]);
     dispatch_gemm_family(rec, kernels, &shape, &[a, b, bias], c, &common)
 }
@@ -180,8 +180,9 @@ pub(super) struct GemmShape {
     pub n: usize,
     pub k: usize,
     pub batch: usize,
-    /// Whether the subgroup kernel can take the operands (vec4-aligned sizes and strides).
-    pub fits_subgroup: bool,
+    /// Whether the operands are vec4-aligned (sizes and strides), which the subgroup and
+    /// cooperative kernels need.
+    pub vec4: bool,
 }
 
 /// The kernels of one GEMM-shaped op, one per family.
@@ -195,8 +196,8 @@ impl GemmKernels {
     const MATMUL: GemmKernels = GemmKernels { subgroup: "gemm_sg", tiled: "gemm_tiled", cooperative: "gemm_coop" };
 }
 
-/// Records a GEMM-shaped kernel: the cooperative variant where the context uses the matrix units
-/// and the storage is f16; the subgroup variant where the device prefers it and the shape
+/// Records a GEMM-shaped kernel: the cooperative variant where the context uses the matrix units,
+/// the storage is f16 and the shape fits vec4 loads; the subgroup variant where the device prefers it and the shape
 /// fits, with more rows per workgroup for taller products; else the tiled one. `params` are
 /// the variant parameters all share; bindings are `reads` then `out`.
 pub(super) fn dispatch_gemm_family(
@@ -211,7 +212,7 @@ pub(super) fn dispatch_gemm_family(
     rec.count_flops(2.0 * (s.batch * s.m) as f64 * (s.n * s.k) as f64);
     let family = ctx.gemm_family();
     let cooperative =
-        ctx.info().cooperative_variant().filter(|_| family == GemmFamily::Cooperative && dtype == Dtype::F16);
+        ctx.info().cooperative_variant().filter(|_| family == GemmFamily::Cooperative && dtype == Dtype::F16 && s.vec4);
     if let Some((cm, sg)) = cooperative {
         let wt = cooperative_fragments_per_side(s, cm as usize);
         let want: Vec<(&str, u32)> =
@@ -220,7 +221,7 @@ pub(super) fn dispatch_gemm_family(
         let tile = (2 * wt * cm) as usize;
         return rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(tile)), u(s.m.div_ceil(tile)), u(s.batch)]);
     }
-    let width = ctx.info().gemm_subgroup_width().filter(|_| family == GemmFamily::Subgroup && s.fits_subgroup);
+    let width = ctx.info().gemm_subgroup_width().filter(|_| family == GemmFamily::Subgroup && s.vec4);
     if let Some(sg) = width {
         let tm = subgroup_rows(s, sg, ctx.quick_compile());
         let want: Vec<(&str, u32)> = [("SG", sg), ("TM", tm)].into_iter().chain(params.iter().copied()).collect();

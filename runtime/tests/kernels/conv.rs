@@ -138,14 +138,14 @@ fn conv3x3_stride2_vae_padding() {
 
 #[test]
 fn conv_large_products_take_the_large_cooperative_tiles() {
-    // 66·66 = 4356 output pixels × 130 channels: over 128 tiles of 64 (lavapipe's 8×8 fragments).
+    // 66·66 = 4356 output pixels × 132 channels: over 128 tiles of 64 (lavapipe's 8×8 fragments).
     all(
         Case {
             b: 1,
             h: 66,
             w: 66,
             cin: 4,
-            cout: 130,
+            cout: 132,
             k: [3, 3],
             stride: 1,
             pad: Padding::same(1),

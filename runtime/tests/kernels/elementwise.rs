@@ -80,7 +80,13 @@ fn unary_in_place() {
 
 #[test]
 fn geglu_value_first_gate_second() {
-    let (rows, f) = (7, 40);
+    // F = 40 takes the vec4 kernel, F = 10 the one-value one.
+    for (rows, f) in [(7, 40), (5, 10)] {
+        geglu_case(rows, f);
+    }
+}
+
+fn geglu_case(rows: usize, f: usize) {
     let x: Vec<f32> = random(rows * 2 * f, 63).iter().map(|v| 4.0 * v).collect();
     let want = |xs: &[f32]| {
         (0..rows * f)
