@@ -140,8 +140,16 @@ pub const KERNELS: &[KernelSpec] = &[
         params: &[&[("OP", 0)], &[("OP", 1)], &[("OP", 2)], &[("OP", 3)], &[("OP", 4)]],
     },
     KernelSpec { name: "binary", files: &["grid.wgsl", "binary.wgsl"], params: &[&[("OP", 0)], &[("OP", 1)]] },
-    KernelSpec { name: "geglu", files: &["grid.wgsl", "activations.wgsl", "geglu_common.wgsl", "geglu.wgsl"], params: NONE },
-    KernelSpec { name: "geglu_v4", files: &["grid.wgsl", "activations.wgsl", "geglu_common.wgsl", "geglu_v4.wgsl"], params: NONE },
+    KernelSpec {
+        name: "geglu",
+        files: &["grid.wgsl", "activations.wgsl", "geglu_common.wgsl", "geglu.wgsl"],
+        params: NONE,
+    },
+    KernelSpec {
+        name: "geglu_v4",
+        files: &["grid.wgsl", "activations.wgsl", "geglu_common.wgsl", "geglu_v4.wgsl"],
+        params: NONE,
+    },
     KernelSpec { name: "upsample_nearest2x", files: &["grid.wgsl", "upsample.wgsl"], params: NONE },
     KernelSpec { name: "concat_channels", files: &["grid.wgsl", "concat.wgsl"], params: NONE },
     KernelSpec { name: "copy_heads", files: &["grid.wgsl", "copy_heads.wgsl"], params: NONE },
@@ -154,9 +162,10 @@ pub const KERNELS: &[KernelSpec] = &[
 
 /// Kernels on the device's matrix units (`VK_KHR_cooperative_matrix`), compiled in f16 only:
 /// their operands are f16, so f32 products keep the scalar kernels' precision by not using
-/// them. The GEMM and convolution read vec4-aligned operands (others take the tiled kernels). CM = fragment size (8: lavapipe's 8×8×8; 16: the 16×16×16 NVIDIA and AMD list), SG =
-/// the subgroup width the workgroup's four subgroups are pinned to, WT = fragments per side of
-/// a subgroup's tile (4 for products large enough to fill a GPU with the larger tiles). Intel's
+/// them. The GEMM and convolution read vec4-aligned operands (others take the tiled kernels).
+/// CM = fragment size (8: lavapipe's 8×8×8; 16: the 16×16×16 NVIDIA and AMD list), SG = the
+/// subgroup width the workgroup's four subgroups are pinned to, WT = fragments per side of a
+/// subgroup's tile (4 for products large enough to fill a GPU with the larger tiles). Intel's
 /// 8×16×16 has no naga type (naga 30 spells only square 8×8 and 16×16 fragments), so Intel
 /// takes the tiled kernels.
 pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
