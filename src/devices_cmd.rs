@@ -1,7 +1,7 @@
 //! `vkdiff devices`: every Vulkan device, what it supports and which one vkdiff picks.
 
 use anyhow::Result;
-use vkdiff_runtime::{choose, gpu_paths_requested, list_devices, DeviceInfo, GemmFamily};
+use vkdiff_runtime::{built_cooperative_variants, choose, gpu_paths_requested, list_devices, DeviceInfo, GemmFamily};
 
 #[derive(clap::Args)]
 pub struct DevicesArgs {
@@ -99,9 +99,10 @@ fn matrix_units(d: &DeviceInfo) -> String {
     let verdict = match d.cooperative_variant() {
         Some((size, lanes)) => format!("vkdiff's {size}×{size} variant at {lanes} lanes fits"),
         None if !d.cooperative_features => "not usable: no cooperativeMatrix or vulkanMemoryModel feature".into(),
-        None => "no vkdiff variant fits them (f16·f16+f32 square 8 or 16 at subgroup scope, a width built \
-            for): f16 products take the tiled kernels"
-            .into(),
+        None => format!(
+            "no vkdiff variant fits them (f16·f16+f32 at subgroup scope, {}): f16 products take the tiled kernels",
+            built_cooperative_variants()
+        ),
     };
     format!("{}; {verdict}", shapes.join(", "))
 }

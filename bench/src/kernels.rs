@@ -93,6 +93,34 @@ fn gemm_case(ctx: &Context, dtype: Dtype, m: usize, n: usize, k: usize, linear: 
     })
 }
 
+/// SDXL's feed-forward projection at 64×64 (640 → 2×2560, bias) followed by GEGLU: fused into
+/// the product's epilogue, or the projection stored and read back by the GEGLU kernel.
+fn linear_geglu_case(ctx: &Context, dtype: Dtype, fused: bool) -> vkdiff_runtime::Result<Case> {
+    let (m, n, k) = (64 * 64, 5120, 640);
+    Ok(Case {
+        name: if fused { "linear + GEGLU, fused" } else { "linear, then GEGLU" },
+        shape: format!("M={m} N={n} K={k} -> {}", n / 2),
+        work: Work::Flops(2.0 * (m * n * k) as f64),
+        gemm: None,
+        on_gemm_family: true,
+        tensors: vec![
+            rand_tensor(ctx, &[m, k], dtype, 21)?,
+            rand_tensor(ctx, &[n, k], dtype, 22)?,
+            rand_tensor(ctx, &[n], dtype, 23)?,
+            ctx.zeros(&[m, n / 2], dtype)?,
+            ctx.zeros(&[m, n], dtype)?,
+        ],
+        record: if fused {
+            |rec, t| ops::linear_geglu(rec, &t[0], &t[1], Some(&t[2]), &t[3])
+        } else {
+            |rec, t| {
+                ops::linear(rec, &t[0], &t[1], Some(&t[2]), &t[4])?;
+                ops::geglu(rec, &t[4], &t[3])
+            }
+        },
+    })
+}
+
 fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
     let bytes = |n: usize| (n * vkdiff_runtime::dtype_size(dtype)) as f64;
     let (hw, c) = (64 * 64, 640);
@@ -191,6 +219,8 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             tensors: vec![rand_tensor(ctx, &[hw, 5120], dtype, 20)?, ctx.zeros(&[hw, 2560], dtype)?],
             record: |rec, t| ops::geglu(rec, &t[0], &t[1]),
         },
+        linear_geglu_case(ctx, dtype, true)?,
+        linear_geglu_case(ctx, dtype, false)?,
     ])
 }
 

@@ -3,21 +3,25 @@
 // subgroup, with the rows' Q fragments and output accumulators held in the matrix registers.
 // Per chunk of KC = KF·CM keys, staged with their values in workgroup memory as f16, each
 // subgroup computes its scores S = (scale·Q)·Kᵀ into its own scratch (f32 accumulation; the
-// scale is folded into Q before its rounding to f16, exact for SDXL's 1/8). SG/CM lanes share
-// a row (SG ≥ CM in every variant) and run its online softmax in base 2 over the scores held in
-// registers, joined by shuffles, writing P as f16; the matrix units then add P·V to the
-// accumulators. The powers are taken against a per-row reference that moves only when a
-// chunk's maximum passes it by more than LAZY, so P stays under 2^LAZY (well inside f16) and
+// scale is folded into Q before its rounding to f16, exact for SDXL's 1/8). LPR lanes share a
+// row and run its online softmax in base 2 over the scores held in registers, joined by
+// shuffles, writing P as f16, SG/LPR rows at a time (on GPUs LPR = SG/CM: every lane in one
+// pass; lavapipe's variant takes two passes of LPR = 2, so CI runs the joined softmax that GPUs
+// do); the matrix units then add P·V to the accumulators. The powers are taken against a
+// per-row reference that moves only when a chunk's maximum passes it by more than LAZY, so P
+// stays under 2^LAZY (well inside f16) and
 // the accumulators are rescaled (a pass through workgroup memory) only on the rare chunk that
 // moves one; the first chunk holds key 0, which no mask hides, so every reference is finite
-// from then on. Operands: attention_common.wgsl.
+// from then on. Workgroup memory is held as vec4s (four f16 or f32 per access; cooperative
+// loads and stores then count strides in vec4s), and a lane's keys in the softmax are
+// contiguous, so each of its shared accesses moves four values. Operands: attention_common.wgsl.
 const KC: u32 = KF * CM; // keys per chunk
 const ROWS: u32 = 4u * CM; // query rows per workgroup (≤ 2·KC: Q is staged where K and V go)
 const WG: u32 = 4u * SG;
 const SLOTS: u32 = DH / 4u;
 const NB: u32 = DH / CM; // fragments along a head
-const LPR: u32 = SG / CM; // lanes per row in the softmax
-const PK: u32 = KC / LPR; // a lane's keys per chunk (the `#unroll I KF*CM*CM/SG` loops)
+const RPP: u32 = SG / LPR; // rows per pass of the softmax (LPR lanes a row; RPP divides CM)
+const PK: u32 = KC / LPR; // a lane's keys per chunk, PK/4 vec4s (the `#unroll I KF*CM/LPR/4`)
 const LAZY: f32 = 11.0;
 const LOG2E: f32 = 1.4426950408889634;
 // Row strides: f16 ones multiples of 8 (16 bytes, what cooperative loads need), f32 ones of 4,
@@ -26,19 +30,17 @@ const LD: u32 = DH + 8u; // Q, K and V rows (f16)
 const LS: u32 = max(KC, DH) + 4u; // a subgroup's scratch rows (f32): scores, or output rows
 const LP: u32 = KC + 8u; // probabilities (f16)
 
-var<workgroup> kv: array<f16, 2u * KC * LD>; // a chunk's K rows, then its V rows
-var<workgroup> scratch: array<f32, ROWS * LS>;
-var<workgroup> probs: array<f16, ROWS * LP>;
+var<workgroup> kv: array<vec4<f16>, 2u * KC * LD / 4u>; // a chunk's K rows, then its V rows
+var<workgroup> scratch: array<vec4<f32>, ROWS * LS / 4u>;
+var<workgroup> probs: array<vec4<f16>, ROWS * LP / 4u>;
 var<workgroup> row_ref: array<f32, ROWS>;
 var<workgroup> row_sum: array<f32, ROWS>;
 var<workgroup> row_scale: array<f32, ROWS>;
 var<workgroup> moved: array<u32, 4>; // per subgroup: a reference moved in this chunk
 
-fn put(at: u32, x: vec4<f32>) {
-    kv[at] = f16(x.x);
-    kv[at + 1u] = f16(x.y);
-    kv[at + 2u] = f16(x.z);
-    kv[at + 3u] = f16(x.w);
+// Values slot..slot+3 of row `row` of `kv`.
+fn put(row: u32, slot: u32, x: vec4<f32>) {
+    kv[row * (LD / 4u) + slot] = vec4<f16>(x);
 }
 
 fn joined_max(x: f32) -> f32 {
@@ -57,10 +59,15 @@ fn joined_sum(x: f32) -> f32 {
     return m;
 }
 
-// Key j of row `row` (of the workgroup) in this chunk: its score, or NEG where masked.
-fn score(row: u32, query: u32, j0: u32, j: u32) -> f32 {
-    let key = j0 + j;
-    return select(NEG, scratch[row * LS + j], key < p.nk && (p.causal == 0u || key <= query));
+// Keys j..j+3 of row `row` (of the workgroup) in this chunk: their scores, or NEG where masked.
+fn scores(row: u32, query: u32, j0: u32, j: u32) -> vec4<f32> {
+    let key = vec4<u32>(j0 + j) + vec4<u32>(0u, 1u, 2u, 3u);
+    let live = key < vec4<u32>(p.nk) & (vec4<bool>(p.causal == 0u) | key <= vec4<u32>(query));
+    return select(vec4<f32>(NEG), scratch[(row * LS + j) / 4u], live);
+}
+
+fn max4(x: vec4<f32>) -> f32 {
+    return max(max(x.x, x.y), max(x.z, x.w));
 }
 
 @compute @workgroup_size(WG)
@@ -83,7 +90,7 @@ fn main(
         let s = i % SLOTS;
         let token = min(row0 + r, p.nq - 1u);
         let at = (p.q_off + batch * p.q_batch + token * p.q_ld + head * p.d) / 4u + min(s, slots - 1u);
-        put(r * LD + 4u * s, select(vec4<f32>(0.0), p.scale * vec4<f32>(q[at]), s < slots));
+        put(r, s, select(vec4<f32>(0.0), p.scale * vec4<f32>(q[at]), s < slots));
     }
     if t < ROWS {
         row_ref[t] = NEG;
@@ -93,8 +100,8 @@ fn main(
     var qf: array<FA, NB>;
     // #unroll B DH/CM
     {
-        let at = mine * LD + B * CM;
-        qf[B] = coopLoadT<FA>(&kv[at], LD);
+        let at = (mine * LD + B * CM) / 4u;
+        qf[B] = coopLoadT<FA>(&kv[at], LD / 4u);
     }
     // #end
     var acc: array<FC, NB>;
@@ -107,8 +114,8 @@ fn main(
             let sl = min(s, slots - 1u);
             let ka = (p.k_off + batch * p.k_batch + key * p.k_ld + head * p.d) / 4u + sl;
             let va = (p.v_off + batch * p.v_batch + key * p.v_ld + head * p.d) / 4u + sl;
-            put(r * LD + 4u * s, select(vec4<f32>(0.0), vec4<f32>(k[ka]), s < slots));
-            put((KC + r) * LD + 4u * s, select(vec4<f32>(0.0), vec4<f32>(v[va]), s < slots));
+            put(r, s, select(vec4<f32>(0.0), vec4<f32>(k[ka]), s < slots));
+            put(KC + r, s, select(vec4<f32>(0.0), vec4<f32>(v[va]), s < slots));
         }
         workgroupBarrier();
         // S = Q·Kᵀ: K rows [key][d] read column-major are Kᵀ.
@@ -117,45 +124,21 @@ fn main(
             var sf: FC;
             // #unroll B DH/CM
             {
-                let at = J * CM * LD + B * CM;
-                sf = coopMultiplyAdd(qf[B], coopLoad<FB>(&kv[at], LD), sf);
+                let at = (J * CM * LD + B * CM) / 4u;
+                sf = coopMultiplyAdd(qf[B], coopLoad<FB>(&kv[at], LD / 4u), sf);
             }
             // #end
-            let st = mine * LS + J * CM;
-            coopStoreT(sf, &scratch[st], LS);
+            let st = (mine * LS + J * CM) / 4u;
+            coopStoreT(sf, &scratch[st], LS / 4u);
         }
         // #end
         workgroupBarrier();
-        // The softmax of this lane's row, over keys part, part + LPR, … of the chunk.
-        let row = mine + lane / LPR;
-        let query = row0 + row;
-        var sv: array<f32, PK>;
-        var top = NEG;
-        // #unroll I KF*CM*CM/SG
-        sv[I] = LOG2E * score(row, query, j0, part + LPR * I);
-        top = max(top, sv[I]);
-        // #end
-        top = joined_max(top);
-        let old = row_ref[row];
-        let now = select(old, top, top > old + LAZY);
-        var sum = 0.0;
-        // #unroll I KF*CM*CM/SG
-        {
-            // The weights P·V uses: rounded to f16, summed as rounded.
-            let w = f16(exp2(sv[I] - now));
-            probs[row * LP + part + LPR * I] = w;
-            sum += f32(w);
+        // The softmax of this subgroup's rows, RPP rows at a time.
+        var any_moved = false;
+        for (var r0 = 0u; r0 < CM; r0 += RPP) {
+            let moved_here = chunk_softmax(mine + r0 + lane / LPR, row0, j0, part);
+            any_moved = any_moved || moved_here;
         }
-        // #end
-        sum = joined_sum(sum);
-        // exp2(NEG - now) = 0 on the first chunk, whose accumulators are still zero.
-        let scale = exp2(old - now);
-        if part == 0u {
-            row_sum[row] = row_sum[row] * scale + sum;
-            row_ref[row] = now;
-            row_scale[row] = scale;
-        }
-        let any_moved = now != old && old != NEG;
         let sub_moved = subgroupAny(any_moved);
         if lane == 0u {
             moved[sid] = u32(sub_moved);
@@ -169,15 +152,15 @@ fn main(
         var pf: array<FA, KF>;
         // #unroll J KF
         {
-            let pt = mine * LP + J * CM;
-            pf[J] = coopLoadT<FA>(&probs[pt], LP);
+            let pt = (mine * LP + J * CM) / 4u;
+            pf[J] = coopLoadT<FA>(&probs[pt], LP / 4u);
         }
         // #end
         // #unroll B DH/CM
         // #unroll J KF
         {
-            let vt = (KC + J * CM) * LD + B * CM;
-            acc[B] = coopMultiplyAdd(pf[J], coopLoadT<FB>(&kv[vt], LD), acc[B]);
+            let vt = ((KC + J * CM) * LD + B * CM) / 4u;
+            acc[B] = coopMultiplyAdd(pf[J], coopLoadT<FB>(&kv[vt], LD / 4u), acc[B]);
         }
         // #end
         // #end
@@ -187,8 +170,8 @@ fn main(
     // The output rows through this subgroup's scratch, divided by their sums.
     // #unroll B DH/CM
     {
-        let ot = mine * LS + B * CM;
-        coopStoreT(acc[B], &scratch[ot], LS);
+        let ot = (mine * LS + B * CM) / 4u;
+        coopStoreT(acc[B], &scratch[ot], LS / 4u);
     }
     // #end
     workgroupBarrier();
@@ -197,31 +180,65 @@ fn main(
         let s = i % SLOTS;
         let query = row0 + r;
         if query < p.nq && s < slots {
-            let at = r * LS + 4u * s;
-            let x = vec4<f32>(scratch[at], scratch[at + 1u], scratch[at + 2u], scratch[at + 3u]) / row_sum[r];
+            let x = scratch[r * (LS / 4u) + s] / row_sum[r];
             o[(batch * p.o_batch + query * p.o_ld + head * p.d) / 4u + s] = vec4<S>(x);
         }
     }
+}
+
+// The online softmax of row `row` over this chunk, this lane taking keys part·PK .. part·PK + PK
+// (joined with the row's other lanes by shuffles): writes the row's P, sum, reference and
+// rescale factor; returns whether its reference moved (and the accumulators need rescaling).
+fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32) -> bool {
+    let query = row0 + row;
+    let first = part * PK;
+    var sv: array<vec4<f32>, PK / 4u>;
+    var top = NEG;
+    // #unroll I KF*CM/LPR/4
+    sv[I] = LOG2E * scores(row, query, j0, first + 4u * I);
+    top = max(top, max4(sv[I]));
+    // #end
+    top = joined_max(top);
+    let old = row_ref[row];
+    let now = select(old, top, top > old + LAZY);
+    var sum = 0.0;
+    // #unroll I KF*CM/LPR/4
+    {
+        // The weights P·V uses: rounded to f16, summed as rounded.
+        let w = vec4<f16>(exp2(sv[I] - now));
+        probs[(row * LP + first) / 4u + I] = w;
+        sum += dot(vec4<f32>(w), vec4<f32>(1.0));
+    }
+    // #end
+    sum = joined_sum(sum);
+    // exp2(NEG - now) = 0 on the first chunk, whose accumulators are still zero.
+    let scale = exp2(old - now);
+    if part == 0u {
+        row_sum[row] = row_sum[row] * scale + sum;
+        row_ref[row] = now;
+        row_scale[row] = scale;
+    }
+    return now != old && old != NEG;
 }
 
 // Multiplies each of this subgroup's output rows by its row_scale, through its scratch rows.
 fn rescale(acc: ptr<function, array<FC, NB>>, mine: u32, lane: u32) {
     // #unroll B DH/CM
     {
-        let ot = mine * LS + B * CM;
-        coopStoreT((*acc)[B], &scratch[ot], LS);
+        let ot = (mine * LS + B * CM) / 4u;
+        coopStoreT((*acc)[B], &scratch[ot], LS / 4u);
     }
     // #end
     workgroupBarrier();
-    for (var i = lane; i < CM * DH; i += SG) {
-        let r = mine + i / DH;
-        scratch[r * LS + i % DH] *= row_scale[r];
+    for (var i = lane; i < CM * SLOTS; i += SG) {
+        let r = mine + i / SLOTS;
+        scratch[r * (LS / 4u) + i % SLOTS] *= row_scale[r];
     }
     workgroupBarrier();
     // #unroll B DH/CM
     {
-        let ot = mine * LS + B * CM;
-        (*acc)[B] = coopLoadT<FC>(&scratch[ot], LS);
+        let ot = (mine * LS + B * CM) / 4u;
+        (*acc)[B] = coopLoadT<FC>(&scratch[ot], LS / 4u);
     }
     // #end
 }

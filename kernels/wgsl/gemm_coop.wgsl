@@ -8,11 +8,14 @@
 // latency hides behind the products. Each fragment leaves through a small per-subgroup
 // scratch, four columns at a time, so the epilogue and the edge masks are those of the vec4
 // subgroup kernel (gemm_store4.wgsl).
-// Row strides are multiples of 8 halves (16 bytes, what cooperative loads need), padded off a
-// power of two against bank conflicts.
+// The tiles are arrays of vec4s, so a unit is one 8-byte shared store (SPV_KHR_cooperative_matrix
+// lets a cooperative load's pointee be a vector, its stride then counted in vectors). Row strides
+// are multiples of 8 halves (16 bytes, what cooperative loads need), padded off a power of two
+// against bank conflicts.
 @group(0) @binding(1) var<storage, read> b: array<vec4<S>>;
 
 const BM: u32 = 2u * WT * CM;
+const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): 4 values, then their 4 gates
 const BK: u32 = 4u * CM;
 const WG: u32 = 4u * SG;
 const LDA: u32 = BK + 8u; // A tile [BM][LDA]; B tile [BM][LDA] (BT = 1) or [BK][LDB] (BT = 0)
@@ -26,9 +29,9 @@ const STEP: u32 = WG / UK;
 // B stored K×N: units along a tile row of N.
 const UN: u32 = BM / 4u;
 
-var<workgroup> a_tile: array<f16, BM * LDA>;
-var<workgroup> b_tile: array<f16, BM * LDA>; // ≥ BK·LDB, as BM ≥ 4·CM
-var<workgroup> scratch: array<f32, 4u * CM * LDS>;
+var<workgroup> a_tile: array<vec4<f16>, BM * LDA / 4u>;
+var<workgroup> b_tile: array<vec4<f16>, BM * LDA / 4u>; // ≥ BK·LDB, as BM ≥ 4·CM
+var<workgroup> scratch: array<vec4<f32>, CM * LDS>; // 4 subgroups × [CM][LDS] f32
 
 fn b_unit(boff: u32, k: u32, n: u32) -> vec4<f16> {
     if k >= p.g.k || n >= p.g.n {
@@ -37,22 +40,7 @@ fn b_unit(boff: u32, k: u32, n: u32) -> vec4<f16> {
     if BT == 0u {
         return vec4<f16>(b[(boff + k * p.g.ldb + n) / 4u]);
     }
-    return vec4<f16>(b[(boff + n * p.g.ldb + k) / 4u]);
-}
-
-// (Workgroup pointers cannot be passed to functions, hence one writer per tile.)
-fn put_a(at: u32, x: vec4<f16>) {
-    a_tile[at] = x.x;
-    a_tile[at + 1u] = x.y;
-    a_tile[at + 2u] = x.z;
-    a_tile[at + 3u] = x.w;
-}
-
-fn put_b(at: u32, x: vec4<f16>) {
-    b_tile[at] = x.x;
-    b_tile[at + 1u] = x.y;
-    b_tile[at + 2u] = x.z;
-    b_tile[at + 3u] = x.w;
+    return vec4<f16>(b[(boff + b_row(n) * p.g.ldb + k) / 4u]);
 }
 
 // This invocation's units of the K-step at k0: A rows tr + STEP·i at k0 + 4·tu, and B's rows
@@ -107,12 +95,12 @@ fn main(
     var acc: array<FC, WT * WT>;
     for (var k0 = 0u; k0 < p.g.k; k0 += BK) {
         // #unroll I WT*CM*CM/SG/2
-        put_a((tr + STEP * I) * LDA + 4u * tu, ra[I]);
+        a_tile[(tr + STEP * I) * (LDA / 4u) + tu] = ra[I];
         if BT == 1u {
-            put_b((tr + STEP * I) * LDA + 4u * tu, rb[I]);
+            b_tile[(tr + STEP * I) * (LDA / 4u) + tu] = rb[I];
         } else {
             let at = t + WG * I;
-            put_b((at / UN) * LDB + 4u * (at % UN), rb[I]);
+            b_tile[(at / UN) * (LDB / 4u) + at % UN] = rb[I];
         }
         // #end
         workgroupBarrier();
@@ -125,14 +113,14 @@ fn main(
             // #unroll I WT
             {
                 // Offsets bound to a `let`: naga 30's SPIR-V output panics on inline ones here.
-                let at = (sm + I * CM) * LDA + kk;
-                fa[I] = coopLoadT<FA>(&a_tile[at], LDA);
+                let at = ((sm + I * CM) * LDA + kk) / 4u;
+                fa[I] = coopLoadT<FA>(&a_tile[at], LDA / 4u);
                 if BT == 1u {
-                    let bt = (sn + I * CM) * LDA + kk;
-                    fb[I] = coopLoad<FB>(&b_tile[bt], LDA);
+                    let bt = ((sn + I * CM) * LDA + kk) / 4u;
+                    fb[I] = coopLoad<FB>(&b_tile[bt], LDA / 4u);
                 } else {
-                    let bt = kk * LDB + sn + I * CM;
-                    fb[I] = coopLoadT<FB>(&b_tile[bt], LDB);
+                    let bt = (kk * LDB + sn + I * CM) / 4u;
+                    fb[I] = coopLoadT<FB>(&b_tile[bt], LDB / 4u);
                 }
             }
             // #end
@@ -146,17 +134,25 @@ fn main(
     }
     // One fragment at a time through this subgroup's scratch; every subgroup takes the same
     // number of steps, so the workgroup barriers between them are uniform.
-    let own = sid * CM * LDS;
+    let own = sid * CM * LDS / 4u;
     // #unroll I WT
     // #unroll J WT
     {
-        coopStoreT(acc[WT * I + J], &scratch[own], LDS);
+        coopStoreT(acc[WT * I + J], &scratch[own], LDS / 4u);
         workgroupBarrier();
-        for (var e = lane; e < CM * CM / 4u; e += SG) {
-            let r = e / (CM / 4u);
-            let at = own + r * LDS + 4u * (e % (CM / 4u));
-            let sum = vec4<f32>(scratch[at], scratch[at + 1u], scratch[at + 2u], scratch[at + 3u]);
-            store4(batch, row0 + sm + I * CM + r, col0 + sn + J * CM + 4u * (e % (CM / 4u)), sum);
+        if GE == 1u {
+            for (var e = lane; e < CM * CM / 8u; e += SG) {
+                let r = e / (CM / 8u);
+                let at = own + r * (LDS / 4u) + 2u * (e % (CM / 8u));
+                let col = col0 + sn + J * CM + 8u * (e % (CM / 8u));
+                store_geglu4(batch, row0 + sm + I * CM + r, col, scratch[at], scratch[at + 1u]);
+            }
+        } else {
+            for (var e = lane; e < CM * CM / 4u; e += SG) {
+                let r = e / (CM / 4u);
+                let sum = scratch[own + r * (LDS / 4u) + e % (CM / 4u)];
+                store4(batch, row0 + sm + I * CM + r, col0 + sn + J * CM + 4u * (e % (CM / 4u)), sum);
+            }
         }
         workgroupBarrier();
     }

@@ -8,6 +8,8 @@
 // Needs N, K and every stride to be multiples of 4. B is K×N (BT = 0) or N×K (BT = 1).
 @group(0) @binding(1) var<storage, read> b: array<vec4<S>>;
 
+const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): a lane's 8 columns are 4 values, 4 gates
+
 // Rows k..k+3 of B at columns n..n+7, as [2·row + half]. Rows past K are clamped to real
 // ones: the A values they meet are zero.
 fn load_b(boff: u32, k_in: u32, n: u32) -> array<vec4<f32>, 8> {
@@ -23,7 +25,7 @@ fn load_b(boff: u32, k_in: u32, n: u32) -> array<vec4<f32>, 8> {
     } else {
         var col: array<vec4<f32>, 8>;
         // #unroll J 8
-        col[J] = vec4<f32>(b[(boff + min(n + J, p.g.n - 1u) * p.g.ldb + k) / 4u]);
+        col[J] = vec4<f32>(b[(boff + b_row(min(n + J, p.g.n - 1u)) * p.g.ldb + k) / 4u]);
         // #end
         // #unroll I 4
         r[2u * I] = vec4<f32>(col[0][I], col[1][I], col[2][I], col[3][I]);
@@ -79,9 +81,15 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             // #end
         }
     }
-    // #unroll R TM
-    // #unroll H 2
-    store4(batch, row0 + R, n + 4u * H, acc[2u * R + H]);
-    // #end
-    // #end
+    if GE == 1u {
+        // #unroll R TM
+        store_geglu4(batch, row0 + R, n, acc[2u * R], acc[2u * R + 1u]);
+        // #end
+    } else {
+        // #unroll R TM
+        // #unroll H 2
+        store4(batch, row0 + R, n + 4u * H, acc[2u * R + H]);
+        // #end
+        // #end
+    }
 }

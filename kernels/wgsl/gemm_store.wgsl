@@ -20,3 +20,17 @@ fn store(batch: u32, row: u32, col: u32, sum: f32) {
     }
     c[at] = S(v);
 }
+
+// GE = 1: one value of C from the sums of value column `col` and of its gate.
+fn store_geglu(batch: u32, row: u32, col: u32, value: f32, gate: f32) {
+    if row >= p.g.m || col >= p.g.n {
+        return;
+    }
+    var v = p.g.alpha * value;
+    var g = p.g.alpha * gate;
+    if (p.g.flags & FLAG_BIAS) != 0u {
+        v += f32(bias[b_row(col)]);
+        g += f32(bias[b_row(col + GB)]);
+    }
+    c[batch * p.g.c_batch + row * p.g.ldc + out_col(col)] = S(v * gelu_erf(g));
+}

@@ -21,3 +21,18 @@ fn store4(batch: u32, row: u32, col: u32, sum: vec4<f32>) {
     }
     c[at] = vec4<S>(v);
 }
+
+// GE = 1: four values of C from the sums of value columns col..col+3 and of their gates.
+fn store_geglu4(batch: u32, row: u32, col: u32, value: vec4<f32>, gate: vec4<f32>) {
+    if row >= p.g.m || col >= p.g.n {
+        return;
+    }
+    var v = p.g.alpha * value;
+    var g = p.g.alpha * gate;
+    if (p.g.flags & FLAG_BIAS) != 0u {
+        v += vec4<f32>(bias[b_row(col) / 4u]);
+        g += vec4<f32>(bias[b_row(col + GB) / 4u]);
+    }
+    let at = (batch * p.g.c_batch + row * p.g.ldc + out_col(col)) / 4u;
+    c[at] = vec4<S>(v * vec4<f32>(gelu_erf(g.x), gelu_erf(g.y), gelu_erf(g.z), gelu_erf(g.w)));
+}

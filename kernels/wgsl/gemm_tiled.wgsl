@@ -11,6 +11,8 @@
 const TILE: u32 = 64u;
 const BK: u32 = 16u;
 const LD: u32 = 65u; // row length of the [BK][LD] tiles
+// GEGLU blocks (gemm_common.wgsl): columns lid.x + 16·j pair j = 0 with 1 and 2 with 3.
+const GB: u32 = 16u;
 
 var<workgroup> a_tile: array<f32, 1040>;
 var<workgroup> b_tile: array<f32, 1040>;
@@ -22,7 +24,7 @@ fn load_b1(boff: u32, k: u32, n: u32) -> f32 {
     if BT == 0u {
         return f32(b[boff + k * p.g.ldb + n]);
     }
-    return f32(b[boff + n * p.g.ldb + k]);
+    return f32(b[boff + b_row(n) * p.g.ldb + k]);
 }
 
 @compute @workgroup_size(16, 16)
@@ -70,9 +72,20 @@ fn main(
         }
         workgroupBarrier();
     }
-    // #unroll I 4
-    // #unroll J 4
-    store(batch, row0 + lid.y + 16u * I, col0 + lid.x + 16u * J, acc[4u * I + J]);
-    // #end
-    // #end
+    if GE == 1u {
+        // #unroll I 4
+        // #unroll H 2
+        {
+            let at = 4u * I + 2u * H;
+            store_geglu(batch, row0 + lid.y + 16u * I, col0 + lid.x + 32u * H, acc[at], acc[at + 1u]);
+        }
+        // #end
+        // #end
+    } else {
+        // #unroll I 4
+        // #unroll J 4
+        store(batch, row0 + lid.y + 16u * I, col0 + lid.x + 16u * J, acc[4u * I + J]);
+        // #end
+        // #end
+    }
 }

@@ -24,7 +24,7 @@ pub use cpu_vectors::{lavapipe_vectors_widened, widen_lavapipe_vectors};
 pub use device::{api_limit, list_devices, DeviceInfo, DeviceKind};
 pub use device_choice::{choose, loader_icds, DeviceChoice, DeviceSpec, PciAddress};
 pub use error::{Error, Result};
-pub use matrix_units::MatrixShape;
+pub use matrix_units::{built_cooperative_variants, MatrixShape};
 pub use memory::Placement;
 pub use memory_budget::MemoryRoom;
 pub use pipeline::Kernel;

@@ -44,9 +44,8 @@ impl BasicTransformerBlock {
         let n = self.norm2.forward(g, h)?;
         self.attn2.forward_residual(g, &n, Some(context), ip, h)?;
         let n = self.norm3.forward(g, h)?;
-        let projected = self.ff_in.forward(g, &n)?;
-        let gated = g.alloc(&with_last(projected.shape(), projected.shape()[2] / 2))?;
-        ops::geglu(&mut g.rec, &projected, &gated)?;
+        let gated = g.alloc(&with_last(n.shape(), self.ff_in.outputs() / 2))?;
+        ops::linear_geglu(&mut g.rec, &n, &self.ff_in.weight, self.ff_in.bias.as_ref(), &gated)?;
         self.ff_out.forward_into(g, &gated, h, true, 1.0)
     }
 }

@@ -10,7 +10,10 @@ use crate::tensor::{Dtype, Tensor};
 
 /// C[i] = alpha · A[i]·B[i] (+ bias) (+ C[i] if `accumulate`) for i < batch, row-major with the
 /// given leading dimensions and batch strides (0 shares an operand across the batch). With
-/// `b_transposed`, B is stored N×K (a PyTorch weight) and ldb is its row stride.
+/// `b_transposed`, B is stored N×K (a PyTorch weight) and ldb is its row stride. With `geglu`
+/// (B stored N×K, N a multiple of [`GEGLU_COLUMNS`], no accumulation), C has N/2 columns:
+/// GEGLU of the product, value·GELU_erf(gate) of its columns j and N/2 + j, as diffusers'
+/// `GEGLU` after its projection.
 #[derive(Clone, Debug)]
 pub struct Matmul {
     pub batch: usize,
@@ -26,7 +29,12 @@ pub struct Matmul {
     pub b_transposed: bool,
     pub alpha: f32,
     pub accumulate: bool,
+    pub geglu: bool,
 }
+
+/// What N of a product with GEGLU fused must be a multiple of: the value/gate blocks of every
+/// kernel family (16 columns each in the tiled kernel) pair up whole.
+pub const GEGLU_COLUMNS: usize = 32;
 
 impl Matmul {
     /// A dense (M×K)·(K×N) product, or (M×K)·(N×K)ᵀ when `b_transposed`.
@@ -45,6 +53,16 @@ impl Matmul {
             b_transposed,
             alpha: 1.0,
             accumulate: false,
+            geglu: false,
+        }
+    }
+
+    /// Columns of C: N, or N/2 with GEGLU fused.
+    fn c_cols(&self) -> usize {
+        if self.geglu {
+            self.n / 2
+        } else {
+            self.n
         }
     }
 
@@ -120,7 +138,7 @@ fn matmul_per_batch(
         let (av, bv, cv) = (
             view(a, spec.a_batch, spec.m, spec.lda, spec.k)?,
             view(b, spec.b_batch, b_rows, spec.ldb, b_cols)?,
-            view(c, spec.c_batch, spec.m, spec.ldc, spec.n)?,
+            view(c, spec.c_batch, spec.m, spec.ldc, spec.c_cols())?,
         );
         matmul(rec, &av, &bv, bias, &cv, &one)?;
     }
@@ -137,6 +155,9 @@ fn matmul_whole(
 ) -> Result<()> {
     let s = spec;
     ensure(s.batch > 0 && s.m > 0 && s.n > 0 && s.k > 0, || format!("matmul: empty shape {s:?}"))?;
+    ensure(!s.geglu || (s.b_transposed && !s.accumulate && s.n.is_multiple_of(GEGLU_COLUMNS)), || {
+        format!("matmul: GEGLU needs B stored N×K, N a multiple of {GEGLU_COLUMNS} and no accumulation: {s:?}")
+    })?;
     let dtype = same_dtype(rec.context(), "matmul", &[a, b, c])?;
     let (b_rows, b_cols) = if s.b_transposed { (s.n, s.k) } else { (s.k, s.n) };
     ensure(a.numel() >= Matmul::extent(s.batch, s.a_batch, s.m, s.lda, s.k), || {
@@ -145,7 +166,7 @@ fn matmul_whole(
     ensure(b.numel() >= Matmul::extent(s.batch, s.b_batch, b_rows, s.ldb, b_cols), || {
         format!("matmul: B {:?} too small for {s:?}", b.shape())
     })?;
-    ensure(c.numel() >= Matmul::extent(s.batch, s.c_batch, s.m, s.ldc, s.n), || {
+    ensure(c.numel() >= Matmul::extent(s.batch, s.c_batch, s.m, s.ldc, s.c_cols()), || {
         format!("matmul: C {:?} too small for {s:?}", c.shape())
     })?;
     if let Some(bias) = bias {
@@ -170,7 +191,7 @@ fn matmul_whole(
     // Without a bias the kernel never reads binding 2; C stands in for it.
     let bias = bias.unwrap_or(c);
     let shape = GemmShape { m: s.m, n: s.n, k: s.k, batch: s.batch, vec4: s.fits_vec4() };
-    let kernels = (GemmKernels::MATMUL, dtype, &[("BT", s.b_transposed as u32)][..]);
+    let kernels = (GemmKernels::MATMUL, dtype, &[("BT", s.b_transposed as u32), ("GE", s.geglu as u32)][..]);
     dispatch_gemm_family(rec, kernels, &shape, &[a, b, bias], c, &common)
 }
 
@@ -273,6 +294,33 @@ impl DeviceInfo {
         let native = self.subgroup_size;
         ([4, 8, 16].contains(&native) && self.can_use_subgroup(native)).then_some(native)
     }
+}
+
+/// A PyTorch `Linear` followed by GEGLU (diffusers' `GEGLU`: value first, gate second):
+/// out[.., N/2] = value · GELU_erf(gate) of x[.., K] · wᵀ (+ bias), w stored [N, K]. Fused into
+/// the product's epilogue where N is a multiple of [`GEGLU_COLUMNS`] (every SDXL width), so the
+/// N-wide projection is never stored; else through a temporary and the GEGLU kernel.
+pub fn linear_geglu(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor) -> Result<()> {
+    ensure(w.shape().len() == 2, || format!("linear_geglu: weight must be [out, in], got {:?}", w.shape()))?;
+    let (n, k) = (w.shape()[0], w.shape()[1]);
+    ensure(x.shape().last() == Some(&k), || format!("linear_geglu: input {:?} does not end in {k}", x.shape()))?;
+    let m = x.numel() / k;
+    ensure(n.is_multiple_of(2) && out.numel() * 2 == m * n, || {
+        format!("linear_geglu: output {:?} is not {m}×{}", out.shape(), n / 2)
+    })?;
+    if !n.is_multiple_of(GEGLU_COLUMNS) {
+        let projected = rec.context().zeros(&[m, n], x.dtype())?;
+        matmul(rec, x, w, bias, &projected, &Matmul::dense(m, n, k, true))?;
+        return super::geglu(rec, &projected, out);
+    }
+    matmul(
+        rec,
+        x,
+        w,
+        bias,
+        out,
+        &Matmul { geglu: true, ldc: n / 2, c_batch: m * n / 2, ..Matmul::dense(m, n, k, true) },
+    )
 }
 
 /// A PyTorch `Linear`: out[.., N] = x[.., K] · wᵀ (+ bias), w stored [N, K].

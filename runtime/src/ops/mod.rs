@@ -15,7 +15,7 @@ pub use elementwise::{
     add, binary, concat_channels, copy_into_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x,
     BinaryOp, TimestepEmbedding, UnaryOp,
 };
-pub use gemm::{linear, matmul, Matmul};
+pub use gemm::{linear, linear_geglu, matmul, Matmul, GEGLU_COLUMNS};
 pub use norm::{group_norm, layer_norm, softmax};
 pub use pool::{pool2d, resize_tf1, upload_image_bytes, Pool, PoolOp};
 

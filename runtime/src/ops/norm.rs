@@ -112,10 +112,12 @@ pub fn layer_norm(rec: &mut Recorder, x: &Tensor, gamma: &Tensor, beta: &Tensor,
     ensure(gamma.numel() == c && beta.numel() == c && out.shape() == x.shape(), || {
         "layer_norm: affine or output shape mismatch".into()
     })?;
-    let k = kernel(rec.context(), "layer_norm", dtype, &[], 4)?;
+    // Four values a load where C allows (every SDXL and CLIP width).
+    let lanes = if c.is_multiple_of(4) { 4 } else { 1 };
+    let k = kernel(rec.context(), if lanes == 4 { "layer_norm_v4" } else { "layer_norm" }, dtype, &[], 4)?;
     for band in row_bands(rec, "layer_norm", x, out, rows, c)? {
         let (xs, ys) = (row_view(x, c, band.clone())?, row_view(out, c, band.clone())?);
-        dispatch_flat(rec, &k, &[&xs, gamma, beta], &[&ys], &[u(c), f(eps)], band.len())?;
+        dispatch_flat(rec, &k, &[&xs, gamma, beta], &[&ys], &[u(c / lanes), f(eps)], band.len())?;
     }
     Ok(())
 }

@@ -1,6 +1,6 @@
 //! GEMM / linear against an f64 reference, for both kernel families and both storage dtypes.
 
-use vkdiff_runtime::ops::{linear, matmul, Matmul};
+use vkdiff_runtime::ops::{linear, linear_geglu, matmul, Matmul, GEGLU_COLUMNS};
 use vkdiff_runtime::{Context, Dtype, GemmFamily};
 use vkdiff_testkit::*;
 
@@ -162,6 +162,69 @@ fn linear_layer_shapes() {
             1e-6 + accumulation_tol() * mag[i] + rtol * want[i].abs()
         });
     }
+}
+
+/// linear_geglu on one family against the f64 projection followed by GEGLU (value first).
+fn check_linear_geglu(ctx: &Context, dtype: Dtype, (rows, k, n): (usize, usize, usize), seed: u64) {
+    let f = n / 2;
+    let x = stored(&random(rows * k, seed), dtype);
+    let w = stored(&random(n * k, seed + 1), dtype);
+    let bias = stored(&random(n, seed + 2), dtype);
+    let tx = ctx.upload(&[rows, k], dtype, &x).unwrap();
+    let tw = ctx.upload(&[n, k], dtype, &w).unwrap();
+    let tb = ctx.upload(&[n], dtype, &bias).unwrap();
+    let out = ctx.zeros(&[rows, f], dtype).unwrap();
+    ctx.run(|rec| linear_geglu(rec, &tx, &tw, Some(&tb), &out)).unwrap();
+    let (y, mag) = reference(&x, &w, Some(&bias), &vec![0.0; rows * n], &Matmul::dense(rows, n, k, true));
+    let gelu = |g: f64| 0.5 * g * (1.0 + libm::erf(g / 2f64.sqrt()));
+    let at = |i: usize| (i / f * n + i % f, i / f * n + f + i % f);
+    let want: Vec<f64> = (0..rows * f).map(|i| y[at(i).0] * gelu(y[at(i).1])).collect();
+    let rtol = storage_rtol(dtype);
+    // Each input's error (its sum's, and its f16 rounding where the projection is stored),
+    // through the product (|GELU'| < 1.13), plus the output's rounding.
+    assert_within(
+        &format!("linear_geglu {:?} {dtype:?} {rows}×{k}→{n}", ctx.gemm_family()),
+        &out.download().unwrap(),
+        &want,
+        |i| {
+            let ((v, g), (mv, mg)) = ((y[at(i).0], y[at(i).1]), (mag[at(i).0], mag[at(i).1]));
+            let (ev, eg) = (accumulation_tol() * mv + rtol * v.abs(), accumulation_tol() * mg + rtol * g.abs());
+            1e-6 + ev * gelu(g).abs() + 1.13 * v.abs() * eg + rtol * want[i].abs()
+        },
+    );
+}
+
+#[test]
+fn linear_geglu_fused_into_the_product() {
+    // N a multiple of GEGLU_COLUMNS (32) fuses (M and N off the tiles' multiples; K = 27 takes the
+    // tiled kernel, and 130×2752 the cooperative kernels' large tiles); N = 40 goes through the
+    // GEGLU kernel. Rows stay under 256, so the subgroup kernels compile at 16 rows only.
+    let c = GEGLU_COLUMNS;
+    for family in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative] {
+        let ctx = ctx_with(family);
+        for dtype in DTYPES {
+            for (i, shape) in [(37, 40, 2 * c), (2 * 77, 64, 3 * c), (9, 27, 2 * c), (130, 24, 86 * c), (5, 12, c + 8)]
+                .into_iter()
+                .enumerate()
+            {
+                check_linear_geglu(&ctx, dtype, shape, 20 + 3 * i as u64);
+            }
+        }
+    }
+}
+
+#[test]
+fn geglu_refuses_what_it_cannot_pair() {
+    let ctx = ctx();
+    let (x, w) = (ctx.zeros(&[4, 8], Dtype::F32).unwrap(), ctx.zeros(&[64, 8], Dtype::F32).unwrap());
+    let out = ctx.zeros(&[4, 32], Dtype::F32).unwrap();
+    let mut s = Matmul { geglu: true, ..Matmul::dense(4, 64, 8, true) };
+    s.accumulate = true;
+    let err = ctx.run(|rec| matmul(rec, &x, &w, None, &out, &s)).unwrap_err().to_string();
+    assert!(err.contains("GEGLU needs"), "{err}");
+    let odd = ctx.zeros(&[4, 31], Dtype::F32).unwrap();
+    let err = ctx.run(|rec| linear_geglu(rec, &x, &w, None, &odd)).unwrap_err().to_string();
+    assert!(err.contains("is not 4×32"), "{err}");
 }
 
 #[test]

@@ -60,18 +60,16 @@ fn group_norm_in_bands_of_pixels_on_gpus() {
     check_group_norm(2, 1010, 64, 32, true, 33);
 }
 
-#[test]
-fn layer_norm_rows() {
+fn check_layer_norm(rows: usize, c: usize, offset: f32, seed: u64) {
     let ctx = ctx();
     for dtype in DTYPES {
-        let (rows, c) = (2 * 77, 320);
-        let x = stored(&random(rows * c, 33).iter().map(|v| 2.0 * v - 0.3).collect::<Vec<_>>(), dtype);
-        let g = stored(&random(c, 34), dtype);
-        let be = stored(&random(c, 35), dtype);
-        let tx = ctx.upload(&[2, 77, c], dtype, &x).unwrap();
+        let x = stored(&random(rows * c, seed).iter().map(|v| 2.0 * v + offset).collect::<Vec<_>>(), dtype);
+        let g = stored(&random(c, seed + 1), dtype);
+        let be = stored(&random(c, seed + 2), dtype);
+        let tx = ctx.upload(&[rows, c], dtype, &x).unwrap();
         let tg = ctx.upload(&[c], dtype, &g).unwrap();
         let tbe = ctx.upload(&[c], dtype, &be).unwrap();
-        let out = ctx.zeros(&[2, 77, c], dtype).unwrap();
+        let out = ctx.zeros(&[rows, c], dtype).unwrap();
         ctx.run(|rec| layer_norm(rec, &tx, &tg, &tbe, &out, 1e-5)).unwrap();
         let mut want = vec![0.0; x.len()];
         for r in 0..rows {
@@ -82,8 +80,23 @@ fn layer_norm_rows() {
                 want[r * c + i] = (row[i] as f64 - mean) / (var + 1e-5).sqrt() * g[i] as f64 + be[i] as f64;
             }
         }
-        assert_close(&format!("layer_norm {dtype:?}"), &out.download().unwrap(), &want, ATOL, storage_rtol(dtype));
+        let what = format!("layer_norm {dtype:?} C={c} offset={offset}");
+        assert_close(&what, &out.download().unwrap(), &want, ATOL, storage_rtol(dtype));
     }
+}
+
+#[test]
+fn layer_norm_rows() {
+    // C a multiple of 4 (the vec4 kernel, every SDXL and CLIP width) and not.
+    check_layer_norm(2 * 77, 320, -0.3, 33);
+    check_layer_norm(37, 321, 0.5, 36);
+}
+
+#[test]
+fn layer_norm_rows_far_from_zero() {
+    // Means of 100 over a spread of about 1: a naive E[x²] − E[x]² in f32 would lose the variance.
+    check_layer_norm(40, 1280, 100.0, 39);
+    check_layer_norm(5, 77, -100.0, 42);
 }
 
 #[test]
