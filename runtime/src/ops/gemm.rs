@@ -299,7 +299,9 @@ impl DeviceInfo {
 /// A PyTorch `Linear` followed by GEGLU (diffusers' `GEGLU`: value first, gate second):
 /// out[.., N/2] = value · GELU_erf(gate) of x[.., K] · wᵀ (+ bias), w stored [N, K]. Fused into
 /// the product's epilogue where N is a multiple of [`GEGLU_COLUMNS`] (every SDXL width), so the
-/// N-wide projection is never stored; else through a temporary and the GEGLU kernel.
+/// N-wide projection is never stored; else through a temporary and the GEGLU kernel, as also
+/// where the context prefers quick compiles (the fused variant is one more JIT: on Mesa 25
+/// lavapipe it made the README's demo 12 s slower from a cold cache).
 pub fn linear_geglu(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor) -> Result<()> {
     ensure(w.shape().len() == 2, || format!("linear_geglu: weight must be [out, in], got {:?}", w.shape()))?;
     let (n, k) = (w.shape()[0], w.shape()[1]);
@@ -308,7 +310,7 @@ pub fn linear_geglu(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Te
     ensure(n.is_multiple_of(2) && out.numel() * 2 == m * n, || {
         format!("linear_geglu: output {:?} is not {m}×{}", out.shape(), n / 2)
     })?;
-    if !n.is_multiple_of(GEGLU_COLUMNS) {
+    if !n.is_multiple_of(GEGLU_COLUMNS) || rec.context().quick_compile() {
         let projected = rec.context().zeros(&[m, n], x.dtype())?;
         matmul(rec, x, w, bias, &projected, &Matmul::dense(m, n, k, true))?;
         return super::geglu(rec, &projected, out);

@@ -183,7 +183,7 @@ fn check_linear_geglu(ctx: &Context, dtype: Dtype, (rows, k, n): (usize, usize, 
     // Each input's error (its sum's, and its f16 rounding where the projection is stored),
     // through the product (|GELU'| < 1.13), plus the output's rounding.
     assert_within(
-        &format!("linear_geglu {:?} {dtype:?} {rows}×{k}→{n}", ctx.gemm_family()),
+        &format!("linear_geglu {:?} quick={} {dtype:?} {rows}×{k}→{n}", ctx.gemm_family(), ctx.quick_compile()),
         &out.download().unwrap(),
         &want,
         |i| {
@@ -198,10 +198,15 @@ fn check_linear_geglu(ctx: &Context, dtype: Dtype, (rows, k, n): (usize, usize, 
 fn linear_geglu_fused_into_the_product() {
     // N a multiple of GEGLU_COLUMNS (32) fuses (M and N off the tiles' multiples; K = 27 takes the
     // tiled kernel, and 130×2752 the cooperative kernels' large tiles); N = 40 goes through the
-    // GEGLU kernel. Rows stay under 256, so the subgroup kernels compile at 16 rows only.
+    // GEGLU kernel, as does every width where the context prefers quick compiles. Rows stay
+    // under 256, so the subgroup kernels compile at 16 rows only.
     let c = GEGLU_COLUMNS;
-    for family in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative] {
+    for (family, quick) in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative]
+        .into_iter()
+        .flat_map(|f| [(f, false), (f, true)])
+    {
         let ctx = ctx_with(family);
+        ctx.set_quick_compile(quick);
         for dtype in DTYPES {
             for (i, shape) in [(37, 40, 2 * c), (2 * 77, 64, 3 * c), (9, 27, 2 * c), (130, 24, 86 * c), (5, 12, c + 8)]
                 .into_iter()
