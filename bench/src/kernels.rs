@@ -114,8 +114,7 @@ fn linear_geglu_case(ctx: &Context, dtype: Dtype, fused: bool) -> vkdiff_runtime
             // The fused kernel itself, which `linear_geglu` leaves on quick-compile drivers.
             |rec, t| {
                 let (m, k, n) = (t[0].shape()[0], t[0].shape()[1], t[1].shape()[0]);
-                let fused = Matmul { geglu: true, ldc: n / 2, c_batch: m * n / 2, ..Matmul::dense(m, n, k, true) };
-                ops::matmul(rec, &t[0], &t[1], Some(&t[2]), &t[3], &fused)
+                ops::matmul(rec, &t[0], &t[1], Some(&t[2]), &t[3], &Matmul::linear_geglu(m, n, k))
             }
         } else {
             |rec, t| {

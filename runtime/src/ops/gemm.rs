@@ -57,6 +57,11 @@ impl Matmul {
         }
     }
 
+    /// A PyTorch `Linear` (N×K weight) with GEGLU fused: C is M×N/2, dense.
+    pub fn linear_geglu(m: usize, n: usize, k: usize) -> Matmul {
+        Matmul { geglu: true, ldc: n / 2, c_batch: m * n / 2, ..Matmul::dense(m, n, k, true) }
+    }
+
     /// Columns of C: N, or N/2 with GEGLU fused.
     fn c_cols(&self) -> usize {
         if self.geglu {
@@ -301,7 +306,7 @@ impl DeviceInfo {
 /// the product's epilogue where N is a multiple of [`GEGLU_COLUMNS`] (every SDXL width), so the
 /// N-wide projection is never stored; else through a temporary and the GEGLU kernel, as also
 /// where the context prefers quick compiles (the fused variant is one more JIT: on Mesa 25
-/// lavapipe it made the README's demo 12 s slower from a cold cache).
+/// lavapipe it made the README's demo about 10 s slower from a cold cache).
 pub fn linear_geglu(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor) -> Result<()> {
     ensure(w.shape().len() == 2, || format!("linear_geglu: weight must be [out, in], got {:?}", w.shape()))?;
     let (n, k) = (w.shape()[0], w.shape()[1]);
@@ -315,14 +320,7 @@ pub fn linear_geglu(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Te
         matmul(rec, x, w, bias, &projected, &Matmul::dense(m, n, k, true))?;
         return super::geglu(rec, &projected, out);
     }
-    matmul(
-        rec,
-        x,
-        w,
-        bias,
-        out,
-        &Matmul { geglu: true, ldc: n / 2, c_batch: m * n / 2, ..Matmul::dense(m, n, k, true) },
-    )
+    matmul(rec, x, w, bias, out, &Matmul::linear_geglu(m, n, k))
 }
 
 /// A PyTorch `Linear`: out[.., N] = x[.., K] · wᵀ (+ bias), w stored [N, K].

@@ -223,7 +223,7 @@ fn geglu_refuses_what_it_cannot_pair() {
     let ctx = ctx();
     let (x, w) = (ctx.zeros(&[4, 8], Dtype::F32).unwrap(), ctx.zeros(&[64, 8], Dtype::F32).unwrap());
     let out = ctx.zeros(&[4, 32], Dtype::F32).unwrap();
-    let mut s = Matmul { geglu: true, ..Matmul::dense(4, 64, 8, true) };
+    let mut s = Matmul::linear_geglu(4, 64, 8);
     s.accumulate = true;
     let err = ctx.run(|rec| matmul(rec, &x, &w, None, &out, &s)).unwrap_err().to_string();
     assert!(err.contains("GEGLU needs"), "{err}");
