@@ -89,6 +89,8 @@ pub(crate) struct Shared {
     /// Bytes of tensors in host memory ([`crate::Placement::Host`]).
     pub(crate) host_bytes: AtomicU64,
     pub(crate) pipelines: PipelineCache,
+    /// Where kernels' statistics are printed as they are compiled (`VKDIFF_PIPELINE_STATS=1`).
+    pub(crate) statistics: Option<ash::khr::pipeline_executable_properties::Device>,
     pub(crate) gemm_family: Mutex<GemmFamily>,
     pub(crate) binding_limit: AtomicU64,
     /// The largest buffer one allocation may hold (`maxMemoryAllocationSize`).
@@ -112,6 +114,11 @@ pub(crate) struct Shared {
     pub(crate) memory_budget: Option<u64>,
     /// Whether `VK_EXT_memory_budget` is enabled.
     pub(crate) memory_budget_extension: bool,
+}
+
+/// Whether kernels' statistics are asked for and the device can report them.
+fn capture_statistics(info: &DeviceInfo) -> bool {
+    info.pipeline_statistics && crate::pipeline_stats::requested()
 }
 
 /// Called before a submission whose kernels the driver compiles then, with their number.
@@ -225,6 +232,12 @@ impl Context {
         if info.memory_budget {
             extensions.push(ash::ext::memory_budget::NAME.as_ptr());
         }
+        let mut executables =
+            vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default().pipeline_executable_info(true);
+        if capture_statistics(&info) {
+            extensions.push(ash::khr::pipeline_executable_properties::NAME.as_ptr());
+            create = create.push_next(&mut executables);
+        }
         let create = create.enabled_extension_names(&extensions);
         // SAFETY: pd belongs to the instance; the create info outlives the call.
         let device = unsafe { instance.create_device(pd, &create, None) }.vk("vkCreateDevice")?;
@@ -255,6 +268,14 @@ impl Context {
         let env = |name: &str| std::env::var(name).ok();
         let submit_budget = SubmitBudget::for_device(&info, &env)?;
         let memory_budget = crate::memory_budget::budget_override(&env)?;
+        let statistics = capture_statistics(&info)
+            .then(|| ash::khr::pipeline_executable_properties::Device::new(&instance, &device));
+        if crate::pipeline_stats::requested() && statistics.is_none() {
+            eprintln!(
+                "VKDIFF_PIPELINE_STATS=1: {} reports no kernel statistics (no VK_KHR_pipeline_executable_properties)",
+                info.name
+            );
+        }
         let shared = Shared {
             _entry: entry,
             instance,
@@ -270,6 +291,7 @@ impl Context {
             peak_bytes: AtomicU64::new(0),
             host_bytes: AtomicU64::new(0),
             pipelines: PipelineCache::default(),
+            statistics,
             gemm_family: Mutex::new(gemm_family),
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
             allocation_limit: AtomicU64::new(info.max_allocation),
@@ -292,7 +314,8 @@ impl Context {
     /// The pipeline for `variant`, created on first use and kept for the context's lifetime.
     pub fn kernel(&self, variant: &'static Variant, bindings: u32) -> Result<Arc<Kernel>> {
         let pinned_subgroups = self.shared.info.subgroup_size_range.is_some();
-        self.shared.pipelines.kernel(&self.shared.device, pinned_subgroups, variant, bindings)
+        let statistics = self.shared.statistics.as_ref();
+        self.shared.pipelines.kernel(&self.shared.device, (pinned_subgroups, statistics), variant, bindings)
     }
 
     /// Bytes of device memory held by live tensors now.

@@ -92,6 +92,9 @@ pub struct DeviceInfo {
     pub pci: Option<PciAddress>,
     /// `VK_EXT_memory_budget`: how much of its heaps this process may use now.
     pub memory_budget: bool,
+    /// `VK_KHR_pipeline_executable_properties`: compiled kernels' statistics
+    /// (`VKDIFF_PIPELINE_STATS=1`).
+    pub pipeline_statistics: bool,
 }
 
 impl DeviceInfo {
@@ -225,6 +228,7 @@ pub(crate) fn describe(
     let cooperative_extension = extension(ash::khr::cooperative_matrix::NAME);
     let pci_extension = extension(ash::ext::pci_bus_info::NAME);
     let memory_budget = extension(ash::ext::memory_budget::NAME);
+    let pipeline_statistics = extension(ash::khr::pipeline_executable_properties::NAME);
 
     let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
     let mut size_control = vk::PhysicalDeviceSubgroupSizeControlProperties::default();
@@ -335,6 +339,7 @@ pub(crate) fn describe(
             function: pci.pci_function,
         }),
         memory_budget,
+        pipeline_statistics,
     }
 }
 
@@ -412,6 +417,7 @@ pub(crate) mod tests {
             uuid: [index as u8; 16],
             pci: None,
             memory_budget: false,
+            pipeline_statistics: false,
         }
     }
 

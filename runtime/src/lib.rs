@@ -12,6 +12,7 @@ mod memory;
 mod memory_budget;
 pub mod ops;
 mod pipeline;
+mod pipeline_stats;
 mod recorder;
 mod submit;
 mod submit_budget;

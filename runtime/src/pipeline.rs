@@ -39,11 +39,12 @@ impl PipelineCache {
 
 impl PipelineCache {
     /// The pipeline for `variant` on `device`, created on first use; `pinned_subgroups`: the
-    /// device can require a subgroup size (`VK_EXT_subgroup_size_control`).
+    /// device can require a subgroup size (`VK_EXT_subgroup_size_control`); `statistics`: print
+    /// the compiled kernel's statistics (`VKDIFF_PIPELINE_STATS=1`).
     pub(crate) fn kernel(
         &self,
         device: &ash::Device,
-        pinned_subgroups: bool,
+        options: (bool, Option<&Statistics>),
         variant: &'static Variant,
         bindings: u32,
     ) -> Result<Arc<Kernel>> {
@@ -52,15 +53,17 @@ impl PipelineCache {
         if let Some(k) = cache.get(&key) {
             return Ok(k.clone());
         }
-        let kernel = Arc::new(create_kernel(device, pinned_subgroups, variant, bindings)?);
+        let kernel = Arc::new(create_kernel(device, options, variant, bindings)?);
         cache.insert(key, kernel.clone());
         Ok(kernel)
     }
 }
 
+type Statistics = ash::khr::pipeline_executable_properties::Device;
+
 fn create_kernel(
     device: &ash::Device,
-    pinned_subgroups: bool,
+    (pinned_subgroups, statistics): (bool, Option<&Statistics>),
     variant: &'static Variant,
     bindings: u32,
 ) -> Result<Kernel> {
@@ -105,13 +108,19 @@ fn create_kernel(
             stage = stage.flags(vk::PipelineShaderStageCreateFlags::REQUIRE_FULL_SUBGROUPS).push_next(&mut required);
         }
         // DISPATCH_BASE: grids past the workgroup-count limit run as based dispatches.
-        let info = [vk::ComputePipelineCreateInfo::default()
-            .flags(vk::PipelineCreateFlags::DISPATCH_BASE)
-            .stage(stage)
-            .layout(layout)];
+        let mut flags = vk::PipelineCreateFlags::DISPATCH_BASE;
+        if statistics.is_some() {
+            flags |= vk::PipelineCreateFlags::CAPTURE_STATISTICS_KHR;
+        }
+        let info = [vk::ComputePipelineCreateInfo::default().flags(flags).stage(stage).layout(layout)];
         let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
         device.destroy_shader_module(module, None);
         let pipeline = created.map_err(|(_, e)| e).vk("vkCreateComputePipelines")?[0];
+        if let Some(loader) = statistics {
+            for line in crate::pipeline_stats::describe(loader, pipeline, variant) {
+                eprintln!("pipeline statistics: {line}");
+            }
+        }
         Ok(Kernel { name: variant.kernel, pipeline, layout, set_layout, bindings, dispatched: AtomicBool::new(false) })
     }
 }
