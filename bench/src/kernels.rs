@@ -132,6 +132,11 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
         gemm_case(ctx, dtype, 1024, 1024, 1024, false)?,
         gemm_case(ctx, dtype, 4096, 640, 640, false)?,
         gemm_case(ctx, dtype, 4096, 640, 640, true)?,
+        // The UNet's own products at 1024² with guidance (two latents): the 32×32 level's
+        // attention projections and feed-forward output, and the 64×64 level's projections.
+        gemm_case(ctx, dtype, 2 * 1024, 1280, 1280, true)?,
+        gemm_case(ctx, dtype, 2 * 1024, 1280, 5120, true)?,
+        gemm_case(ctx, dtype, 2 * 4096, 640, 640, true)?,
         Case {
             name: "conv2d 3x3",
             shape: "64x64, 640->640, stride 1".into(),

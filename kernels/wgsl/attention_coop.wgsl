@@ -1,7 +1,8 @@
 // Fused multi-head attention on the device's matrix units (VK_KHR_cooperative_matrix), heads of
 // up to DH values: a workgroup of 4 subgroups takes 4·CM query rows of one head, CM rows per
 // subgroup, with the rows' Q fragments and output accumulators held in the matrix registers.
-// Per chunk of KC = KF·CM keys, staged with their values in workgroup memory as f16, each
+// Per chunk of KC = KF·CM keys, staged with their values in workgroup memory as f16 (loaded
+// into registers while the chunk before is computed, so the loads' latency hides), each
 // subgroup computes its scores S = (scale·Q)·Kᵀ into its own scratch (f32 accumulation; the
 // scale is folded into Q before its rounding to f16, exact for SDXL's 1/8). LPR lanes share a
 // row and run its online softmax in base 2 over the scores held in registers, joined by
@@ -22,6 +23,7 @@ const SLOTS: u32 = DH / 4u;
 const NB: u32 = DH / CM; // fragments along a head
 const RPP: u32 = SG / LPR; // rows per pass of the softmax (LPR lanes a row; RPP divides CM)
 const PK: u32 = KC / LPR; // a lane's keys per chunk, PK/4 vec4s (the `#unroll I KF*CM/LPR/4`)
+const PU: u32 = KC * SLOTS / WG; // a chunk's K (and V) units per invocation
 const LAZY: f32 = 11.0;
 const LOG2E: f32 = 1.4426950408889634;
 // Row strides: f16 ones multiples of 8 (16 bytes, what cooperative loads need), f32 ones of 4,
@@ -41,6 +43,31 @@ var<workgroup> moved: array<u32, 4>; // per subgroup: a reference moved in this 
 // Values slot..slot+3 of row `row` of `kv`.
 fn put(row: u32, slot: u32, x: vec4<f32>) {
     kv[row * (LD / 4u) + slot] = vec4<f16>(x);
+}
+
+// Units t + WG·u of the chunk at key j0 (K and V rows [KC][SLOTS]) into registers: keys past
+// the end clamped (their scores are masked), slots past the head zero.
+fn fetch_kv(
+    rk: ptr<function, array<vec4<f16>, PU>>,
+    rv: ptr<function, array<vec4<f16>, PU>>,
+    j0: u32,
+    t: u32,
+    head: u32,
+    batch: u32,
+) {
+    let slots = p.d / 4u;
+    // #unroll U KF*CM*DH/SG/16
+    {
+        let i = t + WG * U;
+        let s = i % SLOTS;
+        let key = min(j0 + i / SLOTS, p.nk - 1u);
+        let sl = min(s, slots - 1u);
+        let ka = (p.k_off + batch * p.k_batch + key * p.k_ld + head * p.d) / 4u + sl;
+        let va = (p.v_off + batch * p.v_batch + key * p.v_ld + head * p.d) / 4u + sl;
+        (*rk)[U] = select(vec4<f16>(), vec4<f16>(k[ka]), s < slots);
+        (*rv)[U] = select(vec4<f16>(), vec4<f16>(v[va]), s < slots);
+    }
+    // #end
 }
 
 fn joined_max(x: f32) -> f32 {
@@ -84,6 +111,10 @@ fn main(
     // This subgroup's rows start at `mine` in the workgroup's tile (and in `scratch`).
     let mine = sid * CM;
     let part = lane % LPR;
+    // The first chunk's keys and values are loaded while Q is staged.
+    var rk: array<vec4<f16>, PU>;
+    var rv: array<vec4<f16>, PU>;
+    fetch_kv(&rk, &rv, 0u, t, head, batch);
     // Scaled Q rows through `kv` (rows past the end clamped, slots past the head zero).
     for (var i = t; i < ROWS * SLOTS; i += WG) {
         let r = i / SLOTS;
@@ -107,17 +138,17 @@ fn main(
     var acc: array<FC, NB>;
     workgroupBarrier();
     for (var j0 = 0u; j0 < p.nk; j0 += KC) {
-        for (var i = t; i < KC * SLOTS; i += WG) {
-            let r = i / SLOTS;
-            let s = i % SLOTS;
-            let key = min(j0 + r, p.nk - 1u);
-            let sl = min(s, slots - 1u);
-            let ka = (p.k_off + batch * p.k_batch + key * p.k_ld + head * p.d) / 4u + sl;
-            let va = (p.v_off + batch * p.v_batch + key * p.v_ld + head * p.d) / 4u + sl;
-            put(r, s, select(vec4<f32>(0.0), vec4<f32>(k[ka]), s < slots));
-            put(KC + r, s, select(vec4<f32>(0.0), vec4<f32>(v[va]), s < slots));
+        // #unroll U KF*CM*DH/SG/16
+        {
+            let i = t + WG * U;
+            kv[(i / SLOTS) * (LD / 4u) + i % SLOTS] = rk[U];
+            kv[(KC + i / SLOTS) * (LD / 4u) + i % SLOTS] = rv[U];
         }
+        // #end
         workgroupBarrier();
+        if j0 + KC < p.nk {
+            fetch_kv(&rk, &rv, j0 + KC, t, head, batch);
+        }
         // S = Q·Kᵀ: K rows [key][d] read column-major are Kᵀ.
         // #unroll J KF
         {

@@ -1,7 +1,7 @@
 // GEMM core on the device's matrix units (VK_KHR_cooperative_matrix): f16 operands, f32
 // accumulation. A workgroup is 4 subgroups of SG lanes in a 2×2 grid, each computing WT×WT
 // fragments of CM×CM (the prelude's FA, FB, FC types), so a workgroup's tile is BM×BM with
-// BM = 2·WT·CM, over K-steps of BK = 4·CM. Operands are vec4-aligned (the runtime sends other
+// BM = 2·WT·CM, over K-steps of BK = KS·CM. Operands are vec4-aligned (the runtime sends other
 // shapes to the tiled kernel): each invocation stages units of four f16 along K (A, and B
 // stored N×K) or along N (B stored K×N), one load each, zero past M, N and K. The next step's
 // units are loaded into registers while the matrix units work on this one, so the loads'
@@ -16,12 +16,12 @@
 
 const BM: u32 = 2u * WT * CM;
 const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): 4 values, then their 4 gates
-const BK: u32 = 4u * CM;
+const BK: u32 = KS * CM;
 const WG: u32 = 4u * SG;
 const LDA: u32 = BK + 8u; // A tile [BM][LDA]; B tile [BM][LDA] (BT = 1) or [BK][LDB] (BT = 0)
 const LDB: u32 = BM + 8u;
 const LDS: u32 = CM + 4u; // a subgroup's f32 scratch [CM][LDS]
-// Units along a tile row of K, units per invocation (WT·CM²/SG/2, the unroll count below), and
+// Units along a tile row of K, units per invocation (WT·CM²·KS/SG/8, the unroll count below), and
 // the tile rows between an invocation's units (WG is a multiple of UK in every variant).
 const UK: u32 = BK / 4u;
 const PER: u32 = BM * BK / (4u * WG);
@@ -30,7 +30,7 @@ const STEP: u32 = WG / UK;
 const UN: u32 = BM / 4u;
 
 var<workgroup> a_tile: array<vec4<f16>, BM * LDA / 4u>;
-var<workgroup> b_tile: array<vec4<f16>, BM * LDA / 4u>; // ≥ BK·LDB, as BM ≥ 4·CM
+var<workgroup> b_tile: array<vec4<f16>, BM * LDA / 4u>; // ≥ BK·LDB, as BM ≥ KS·CM
 var<workgroup> scratch: array<vec4<f32>, CM * LDS>; // 4 subgroups × [CM][LDS] f32
 
 fn b_unit(boff: u32, k: u32, n: u32) -> vec4<f16> {
@@ -58,7 +58,7 @@ fn fetch(
     let tr = t / UK;
     let ka = k0 + 4u * tu;
     let kc = k_ctx(ka);
-    // #unroll I WT*CM*CM/SG/2
+    // #unroll I WT*CM*CM*KS/SG/8
     (*ra)[I] = select(vec4<f16>(), vec4<f16>(load_a((*rows)[I], kc)), ka < p.g.k);
     if BT == 1u {
         (*rb)[I] = b_unit(boff, ka, col0 + tr + STEP * I);
@@ -86,7 +86,7 @@ fn main(
     let tu = t % UK;
     let tr = t / UK;
     var rows: array<RowCtx, PER>;
-    // #unroll I WT*CM*CM/SG/2
+    // #unroll I WT*CM*CM*KS/SG/8
     rows[I] = row_ctx(batch, row0 + tr + STEP * I);
     // #end
     var ra: array<vec4<f16>, PER>;
@@ -94,7 +94,7 @@ fn main(
     fetch(&rows, &ra, &rb, 0u, t, col0, boff);
     var acc: array<FC, WT * WT>;
     for (var k0 = 0u; k0 < p.g.k; k0 += BK) {
-        // #unroll I WT*CM*CM/SG/2
+        // #unroll I WT*CM*CM*KS/SG/8
         a_tile[(tr + STEP * I) * (LDA / 4u) + tu] = ra[I];
         if BT == 1u {
             b_tile[(tr + STEP * I) * (LDA / 4u) + tu] = rb[I];

@@ -45,7 +45,7 @@ impl BasicTransformerBlock {
         self.attn2.forward_residual(g, &n, Some(context), ip, h)?;
         let n = self.norm3.forward(g, h)?;
         let gated = g.alloc(&with_last(n.shape(), self.ff_in.outputs() / 2))?;
-        ops::linear_geglu(&mut g.rec, &n, &self.ff_in.weight, self.ff_in.bias.as_ref(), &gated)?;
+        ops::linear_geglu(&mut g.rec, (&n, &self.ff_in.weight, self.ff_in.bias.as_ref()), &gated, &g.arena)?;
         self.ff_out.forward_into(g, &gated, h, true, 1.0)
     }
 }

@@ -2,8 +2,9 @@
 
 use super::bands::{bands, elem, fit, row_view, rows_per_band, span_view};
 use super::{f, kernel, same_dtype, u};
-use crate::context::GemmFamily;
-use crate::device::DeviceInfo;
+use crate::arena::Arena;
+use crate::context::{Context, GemmFamily};
+use crate::device::{DeviceInfo, DeviceKind};
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
@@ -240,7 +241,7 @@ pub(super) fn dispatch_gemm_family(
     let cooperative =
         ctx.info().cooperative_variant().filter(|_| family == GemmFamily::Cooperative && dtype == Dtype::F16 && s.vec4);
     if let Some((cm, sg)) = cooperative {
-        let wt = cooperative_fragments_per_side(s, cm as usize);
+        let wt = cooperative_fragments_per_side(&ctx, s, (cm, sg));
         let want: Vec<(&str, u32)> =
             [("CM", cm), ("SG", sg), ("WT", wt)].into_iter().chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.cooperative, dtype, &want, 4)?;
@@ -260,10 +261,16 @@ pub(super) fn dispatch_gemm_family(
 }
 
 /// Fragments per side of a subgroup's tile in the cooperative kernels: 4 (tiles of 8·CM) where
-/// the product still makes 128 such tiles, enough to keep a GPU's 100+ compute units busy, else 2.
-fn cooperative_fragments_per_side(s: &GemmShape, cm: usize) -> u32 {
-    let big = 8 * cm;
-    if s.m.div_ceil(big) * s.n.div_ceil(big) * s.batch >= 128 {
+/// the product still makes 128 such tiles, enough to keep a GPU's 100+ compute units busy, and
+/// the accumulators fit a GPU lane's registers (at most 64 f32 each: 16×16 fragments on 64-lane
+/// subgroups); else 2. At 32 lanes 4×4 fragments take 128 registers a lane for the sums alone,
+/// and NVIDIA's compiler then spilled (H200: 255 registers, the products 1.5× slower than 2×2).
+/// CPU devices (lavapipe's 8×8 kernels) have no register file to fill and take both sizes.
+fn cooperative_fragments_per_side(ctx: &Context, s: &GemmShape, (cm, sg): (u32, u32)) -> u32 {
+    let big = 8 * cm as usize;
+    let fills = s.m.div_ceil(big) * s.n.div_ceil(big) * s.batch >= 128;
+    let fits = 16 * cm * cm / sg <= 64 || ctx.info().kind == DeviceKind::Cpu;
+    if fills && fits {
         4
     } else {
         2
@@ -303,11 +310,18 @@ impl DeviceInfo {
 
 /// A PyTorch `Linear` followed by GEGLU (diffusers' `GEGLU`: value first, gate second):
 /// out[.., N/2] = value · GELU_erf(gate) of x[.., K] · wᵀ (+ bias), w stored [N, K]. Fused into
-/// the product's epilogue where N is a multiple of [`GEGLU_COLUMNS`] (every SDXL width), so the
-/// N-wide projection is never stored; else through a temporary and the GEGLU kernel, as also
-/// where the context prefers quick compiles (the fused variant is one more JIT: on Mesa 25
-/// lavapipe it made the README's demo about 10 s slower from a cold cache).
-pub fn linear_geglu(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>, out: &Tensor) -> Result<()> {
+/// the product's epilogue, so the N-wide projection is never stored, where that measured faster:
+/// the subgroup kernels (lavapipe: 1.07× in f32, 1.14× in f16) with N a multiple of
+/// [`GEGLU_COLUMNS`] (every SDXL width) and full compiles (the fused variant is one more JIT: on
+/// Mesa 25 it made the README's demo about 10 s slower from a cold cache). Elsewhere through a
+/// temporary from `scratch` and the GEGLU kernel: on an H200 the fused product ran 1.3× slower than product and
+/// kernel on the matrix units (the UNet 222 against 208 ms) and 1.04× slower on the tiled ones.
+pub fn linear_geglu(
+    rec: &mut Recorder,
+    (x, w, bias): (&Tensor, &Tensor, Option<&Tensor>),
+    out: &Tensor,
+    scratch: &Arena,
+) -> Result<()> {
     ensure(w.shape().len() == 2, || format!("linear_geglu: weight must be [out, in], got {:?}", w.shape()))?;
     let (n, k) = (w.shape()[0], w.shape()[1]);
     ensure(x.shape().last() == Some(&k), || format!("linear_geglu: input {:?} does not end in {k}", x.shape()))?;
@@ -315,8 +329,10 @@ pub fn linear_geglu(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Te
     ensure(n.is_multiple_of(2) && out.numel() * 2 == m * n, || {
         format!("linear_geglu: output {:?} is not {m}×{}", out.shape(), n / 2)
     })?;
-    if !n.is_multiple_of(GEGLU_COLUMNS) || rec.context().quick_compile() {
-        let projected = rec.context().zeros(&[m, n], x.dtype())?;
+    let ctx = rec.context();
+    let fuse = ctx.gemm_family() == GemmFamily::Subgroup && n.is_multiple_of(GEGLU_COLUMNS) && !ctx.quick_compile();
+    if !fuse {
+        let projected = scratch.tensor(&[m, n], x.dtype())?;
         matmul(rec, x, w, bias, &projected, &Matmul::dense(m, n, k, true))?;
         return super::geglu(rec, &projected, out);
     }

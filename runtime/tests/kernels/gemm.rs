@@ -1,7 +1,7 @@
 //! GEMM / linear against an f64 reference, for both kernel families and both storage dtypes.
 
 use vkdiff_runtime::ops::{linear, linear_geglu, matmul, Matmul, GEGLU_COLUMNS};
-use vkdiff_runtime::{Context, Dtype, GemmFamily};
+use vkdiff_runtime::{Arena, Context, Dtype, GemmFamily};
 use vkdiff_testkit::*;
 
 /// Reference C and Σ|a·b| per element (the scale that bounds rounding error of a dot product).
@@ -112,7 +112,8 @@ fn quick_compiles_take_the_eight_row_tiles() {
 #[test]
 fn large_products_take_the_large_cooperative_tiles() {
     // At least 128 tiles of 8·CM (64 on lavapipe, 128 on NVIDIA/AMD) select 4×4 fragments per
-    // subgroup; M, N and K off every tile's multiple.
+    // subgroup where the sums fit (CPU devices, 64-lane GPUs; 32-lane GPUs keep 2×2); M, N and
+    // K off every tile's multiple.
     both(Matmul::dense(1030, 2052, 24, true), true, 10);
     both(Matmul::dense(520, 1000, 40, false), false, 11);
 }
@@ -165,7 +166,8 @@ fn linear_layer_shapes() {
 }
 
 /// linear_geglu on one family against the f64 projection followed by GEGLU (value first).
-fn check_linear_geglu(ctx: &Context, dtype: Dtype, (rows, k, n): (usize, usize, usize), seed: u64) {
+/// `linear_geglu` (`fused`: the fused product itself, whichever way the op would go).
+fn check_linear_geglu(ctx: &Context, dtype: Dtype, (rows, k, n): (usize, usize, usize), fused: bool, seed: u64) {
     let f = n / 2;
     let x = stored(&random(rows * k, seed), dtype);
     let w = stored(&random(n * k, seed + 1), dtype);
@@ -174,7 +176,12 @@ fn check_linear_geglu(ctx: &Context, dtype: Dtype, (rows, k, n): (usize, usize, 
     let tw = ctx.upload(&[n, k], dtype, &w).unwrap();
     let tb = ctx.upload(&[n], dtype, &bias).unwrap();
     let out = ctx.zeros(&[rows, f], dtype).unwrap();
-    ctx.run(|rec| linear_geglu(rec, &tx, &tw, Some(&tb), &out)).unwrap();
+    if fused {
+        ctx.run(|rec| matmul(rec, &tx, &tw, Some(&tb), &out, &Matmul::linear_geglu(rows, n, k))).unwrap();
+    } else {
+        let scratch = Arena::new(ctx);
+        ctx.run(|rec| linear_geglu(rec, (&tx, &tw, Some(&tb)), &out, &scratch)).unwrap();
+    }
     let (y, mag) = reference(&x, &w, Some(&bias), &vec![0.0; rows * n], &Matmul::dense(rows, n, k, true));
     let gelu = |g: f64| 0.5 * g * (1.0 + libm::erf(g / 2f64.sqrt()));
     let at = |i: usize| (i / f * n + i % f, i / f * n + f + i % f);
@@ -183,7 +190,11 @@ fn check_linear_geglu(ctx: &Context, dtype: Dtype, (rows, k, n): (usize, usize, 
     // Each input's error (its sum's, and its f16 rounding where the projection is stored),
     // through the product (|GELU'| < 1.13), plus the output's rounding.
     assert_within(
-        &format!("linear_geglu {:?} quick={} {dtype:?} {rows}×{k}→{n}", ctx.gemm_family(), ctx.quick_compile()),
+        &format!(
+            "linear_geglu {:?} quick={} fused={fused} {dtype:?} {rows}×{k}→{n}",
+            ctx.gemm_family(),
+            ctx.quick_compile()
+        ),
         &out.download().unwrap(),
         &want,
         |i| {
@@ -196,10 +207,11 @@ fn check_linear_geglu(ctx: &Context, dtype: Dtype, (rows, k, n): (usize, usize, 
 
 #[test]
 fn linear_geglu_fused_into_the_product() {
-    // N a multiple of GEGLU_COLUMNS (32) fuses (M and N off the tiles' multiples; K = 27 takes the
-    // tiled kernel, and 130×2752 the cooperative kernels' large tiles); N = 40 goes through the
-    // GEGLU kernel, as does every width where the context prefers quick compiles. Rows stay
-    // under 256, so the subgroup kernels compile at 16 rows only.
+    // Every family's fused product where N is a multiple of GEGLU_COLUMNS (32), and the op, which
+    // fuses on the subgroup kernels only (M and N off the tiles' multiples; K = 27 takes the tiled
+    // kernel, and 130×2752 the cooperative kernels' large tiles); N = 40 goes through the GEGLU
+    // kernel, as does every width where the context prefers quick compiles. Rows stay under 256,
+    // so the subgroup kernels compile at 16 rows only.
     let c = GEGLU_COLUMNS;
     for (family, quick) in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative]
         .into_iter()
@@ -212,7 +224,10 @@ fn linear_geglu_fused_into_the_product() {
                 .into_iter()
                 .enumerate()
             {
-                check_linear_geglu(&ctx, dtype, shape, 20 + 3 * i as u64);
+                check_linear_geglu(&ctx, dtype, shape, false, 20 + 3 * i as u64);
+                if shape.2 % c == 0 {
+                    check_linear_geglu(&ctx, dtype, shape, true, 20 + 3 * i as u64);
+                }
             }
         }
     }
@@ -228,7 +243,7 @@ fn geglu_refuses_what_it_cannot_pair() {
     let err = ctx.run(|rec| matmul(rec, &x, &w, None, &out, &s)).unwrap_err().to_string();
     assert!(err.contains("GEGLU needs"), "{err}");
     let odd = ctx.zeros(&[4, 31], Dtype::F32).unwrap();
-    let err = ctx.run(|rec| linear_geglu(rec, &x, &w, None, &odd)).unwrap_err().to_string();
+    let err = ctx.run(|rec| linear_geglu(rec, (&x, &w, None), &odd, &Arena::new(&ctx))).unwrap_err().to_string();
     assert!(err.contains("is not 4×32"), "{err}");
 }
 
