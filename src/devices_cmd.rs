@@ -40,8 +40,8 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
     } else {
         "query rows per invocation (GPU)"
     };
-    let widened = if d.lavapipe_mesa.is_some() && vkdiff_runtime::lavapipe_vectors_widened() {
-        " (vkdiff set LP_NATIVE_VECTOR_WIDTH=512 for this AVX-512 CPU; set it yourself to choose)"
+    let wider = if d.lavapipe_mesa.is_some() && vkdiff_runtime::wider_lavapipe_vectors_available() {
+        " (this CPU has AVX-512: LP_NATIVE_VECTOR_WIDTH=512 runs 16-lane kernels, which compile slower and ran no faster)"
     } else {
         ""
     };
@@ -52,7 +52,7 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
     };
     let paths = if gpu_paths { " (VKDIFF_GPU_PATHS=1: device memory through staging, GPU kernels)" } else { "" };
     [
-        format!("[{}] {}{widened} — {}", d.index, d.name, verdict),
+        format!("[{}] {}{wider} — {}", d.index, d.name, verdict),
         format!(
             "    kind: {}, Vulkan {}.{}.{}, driver: {}",
             d.kind.label(),

@@ -45,8 +45,6 @@ enum Command {
 }
 
 fn main() {
-    // SAFETY: first thing in main, before any thread or Vulkan call.
-    unsafe { vkdiff_runtime::widen_lavapipe_vectors() };
     let cli = parse();
     // The libraries name settings as data; errors here name them by this command's flags.
     let names = if matches!(cli.command, Command::Dataset(_)) { vkdiff_args::dataset_flag } else { vkdiff_args::flag };

@@ -100,7 +100,7 @@ pub fn run(args: &UnetArgs) -> Result<()> {
         }
         args.common.print(&row, |row| {
             format!(
-                "{} | SDXL UNet {size}² batch {} {} on {}: {:.0} ms/eval, {:.2} TFLOP at {:.1} TFLOP/s ({} of the \
+                "{} | SDXL UNet {size}² batch {} {} on {}: {:.0} ms/eval, {:.2} TFLOP at {} ({} of the \
                     matrix peak) in {} submissions, the longest {:.0} ms (load {:.1} s, record {:.2} s), weights {:.0} \
                     MiB, peak {:.0} MiB | diffusers: {} | speed-up {}",
                 row.device,
@@ -109,7 +109,7 @@ pub fn run(args: &UnetArgs) -> Result<()> {
                 row.gemm_kernels,
                 row.ms,
                 row.tflop,
-                row.tflops,
+                rate(row.tflops),
                 row.matrix_peak_share,
                 row.submissions,
                 row.longest_submission_ms,
@@ -259,4 +259,22 @@ fn reference(latent: usize, args: &UnetArgs) -> std::result::Result<Reference, S
         v["diffusers"].as_str().unwrap_or("?"),
     );
     Ok(Reference { ms, peak_mib: v["peak_mib"].as_f64().unwrap_or(0.0), what })
+}
+
+/// "71.5 TFLOP/s", or "38 GFLOP/s" below one TFLOP/s (CPU devices would read "0.0 TFLOP/s").
+fn rate(tflops: f64) -> String {
+    if tflops >= 1.0 {
+        format!("{tflops:.1} TFLOP/s")
+    } else {
+        format!("{:.0} GFLOP/s", tflops * 1e3)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn rates_below_a_teraflop_read_in_gigaflops() {
+        assert_eq!(super::rate(71.46), "71.5 TFLOP/s");
+        assert_eq!(super::rate(0.0383), "38 GFLOP/s");
+    }
 }

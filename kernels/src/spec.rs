@@ -19,6 +19,9 @@ pub struct KernelSpec {
 }
 
 const NONE: &[&[(&str, u32)]] = &[&[]];
+/// kernels/wgsl/unary.wgsl's and binary.wgsl's operations.
+const UNARY: &[&[(&str, u32)]] = &[&[("OP", 0)], &[("OP", 1)], &[("OP", 2)], &[("OP", 3)], &[("OP", 4)]];
+const BINARY: &[&[(&str, u32)]] = &[&[("OP", 0)], &[("OP", 1)]];
 
 pub const KERNELS: &[KernelSpec] = &[
     // Register-blocked GEMM for CPU-like devices: workgroup = one subgroup, A shared by shuffles;
@@ -148,24 +151,25 @@ pub const KERNELS: &[KernelSpec] = &[
             &[("W", 64), ("DV", 4), ("TM", 2)],
         ],
     },
+    // Element-wise kernels, each as one value per invocation and as a vec4 (`_v4`, unit_4.wgsl).
+    KernelSpec { name: "unary", files: &["grid.wgsl", "activations.wgsl", "unit_1.wgsl", "unary.wgsl"], params: UNARY },
     KernelSpec {
-        name: "unary",
-        files: &["grid.wgsl", "activations.wgsl", "unary.wgsl"],
-        params: &[&[("OP", 0)], &[("OP", 1)], &[("OP", 2)], &[("OP", 3)], &[("OP", 4)]],
+        name: "unary_v4",
+        files: &["grid.wgsl", "activations.wgsl", "unit_4.wgsl", "unary.wgsl"],
+        params: UNARY,
     },
-    KernelSpec { name: "binary", files: &["grid.wgsl", "binary.wgsl"], params: &[&[("OP", 0)], &[("OP", 1)]] },
-    KernelSpec {
-        name: "geglu",
-        files: &["grid.wgsl", "activations.wgsl", "geglu_common.wgsl", "geglu.wgsl"],
-        params: NONE,
-    },
+    KernelSpec { name: "binary", files: &["grid.wgsl", "unit_1.wgsl", "binary.wgsl"], params: BINARY },
+    KernelSpec { name: "binary_v4", files: &["grid.wgsl", "unit_4.wgsl", "binary.wgsl"], params: BINARY },
+    KernelSpec { name: "geglu", files: &["grid.wgsl", "activations.wgsl", "unit_1.wgsl", "geglu.wgsl"], params: NONE },
     KernelSpec {
         name: "geglu_v4",
-        files: &["grid.wgsl", "activations.wgsl", "geglu_common.wgsl", "geglu_v4.wgsl"],
+        files: &["grid.wgsl", "activations.wgsl", "unit_4.wgsl", "geglu.wgsl"],
         params: NONE,
     },
-    KernelSpec { name: "upsample_nearest2x", files: &["grid.wgsl", "upsample.wgsl"], params: NONE },
-    KernelSpec { name: "concat_channels", files: &["grid.wgsl", "concat.wgsl"], params: NONE },
+    KernelSpec { name: "upsample_nearest2x", files: &["grid.wgsl", "unit_1.wgsl", "upsample.wgsl"], params: NONE },
+    KernelSpec { name: "upsample_nearest2x_v4", files: &["grid.wgsl", "unit_4.wgsl", "upsample.wgsl"], params: NONE },
+    KernelSpec { name: "concat_channels", files: &["grid.wgsl", "unit_1.wgsl", "concat.wgsl"], params: NONE },
+    KernelSpec { name: "concat_channels_v4", files: &["grid.wgsl", "unit_4.wgsl", "concat.wgsl"], params: NONE },
     KernelSpec { name: "copy_heads", files: &["grid.wgsl", "copy_heads.wgsl"], params: NONE },
     KernelSpec { name: "copy_channels", files: &["grid.wgsl", "copy_channels.wgsl"], params: NONE },
     // Inception's pooling (0 max, 1 average of the taps inside) and its TensorFlow-style resize.

@@ -2,10 +2,11 @@
 // which covers same-shape (b_inner = b_outer = n), a per-channel vector (b_inner = C, b_outer ≥ n)
 // and a per-(batch, channel) vector over pixels (b_inner = C, b_outer = H·W·C). OP: 0 add, 1 mul.
 // Past the binding limit the runtime binds runs of a and out starting at element `base` of the
-// whole tensors, and b's elements from `b_shift` on.
-@group(0) @binding(0) var<storage, read> a: array<S>;
-@group(0) @binding(1) var<storage, read> b: array<S>;
-@group(0) @binding(2) var<storage, read_write> out: array<S>;
+// whole tensors, and b's elements from `b_shift` on. Every count is in units (unit_1.wgsl /
+// unit_4.wgsl): with b_inner and b_outer multiples of 4, a unit of a meets a unit of b.
+@group(0) @binding(0) var<storage, read> a: array<U>;
+@group(0) @binding(1) var<storage, read> b: array<U>;
+@group(0) @binding(2) var<storage, read_write> out: array<U>;
 
 struct Params {
     n: u32,
@@ -24,12 +25,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     if i >= p.n {
         return;
     }
-    let x = f32(a[i]);
+    let x = widen(a[i]);
     let g = p.base + i;
-    let y = f32(b[(g / p.b_outer) * p.b_inner + g % p.b_inner - p.b_shift]);
+    let y = widen(b[(g / p.b_outer) * p.b_inner + g % p.b_inner - p.b_shift]);
     if OP == 0u {
-        out[i] = S(x + y);
+        out[i] = narrow(x + y);
     } else {
-        out[i] = S(x * y);
+        out[i] = narrow(x * y);
     }
 }

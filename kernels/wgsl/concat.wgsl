@@ -1,7 +1,8 @@
-// Channel concatenation of NHWC tensors: out[pix] = [a[pix] (C1 channels), b[pix] (C2 channels)].
-@group(0) @binding(0) var<storage, read> a: array<S>;
-@group(0) @binding(1) var<storage, read> b: array<S>;
-@group(0) @binding(2) var<storage, read_write> out: array<S>;
+// Channel concatenation of NHWC tensors: out[pix] = [a[pix] (C1 channels), b[pix] (C2 channels)];
+// n, c1 and c2 count units (unit_1.wgsl / unit_4.wgsl).
+@group(0) @binding(0) var<storage, read> a: array<U>;
+@group(0) @binding(1) var<storage, read> b: array<U>;
+@group(0) @binding(2) var<storage, read_write> out: array<U>;
 
 struct Params {
     n: u32,

@@ -1,6 +1,7 @@
-// Nearest-neighbour 2× upsampling of NHWC: out[b, y, x, c] = in[b, y/2, x/2, c].
-@group(0) @binding(0) var<storage, read> x: array<S>;
-@group(0) @binding(1) var<storage, read_write> out: array<S>;
+// Nearest-neighbour 2× upsampling of NHWC: out[b, y, x, c] = in[b, y/2, x/2, c]; n and c count
+// units (unit_1.wgsl / unit_4.wgsl).
+@group(0) @binding(0) var<storage, read> x: array<U>;
+@group(0) @binding(1) var<storage, read_write> out: array<U>;
 
 struct Params {
     n: u32,

@@ -21,7 +21,7 @@ mod validation;
 
 pub use arena::Arena;
 pub use context::{gpu_paths_requested, CompileNotice, Context, GemmFamily};
-pub use cpu_vectors::{lavapipe_vectors_widened, widen_lavapipe_vectors};
+pub use cpu_vectors::wider_lavapipe_vectors_available;
 pub use device::{api_limit, list_devices, DeviceInfo, DeviceKind};
 pub use device_choice::{choose, loader_icds, DeviceChoice, DeviceSpec, PciAddress};
 pub use error::{Error, Result};

@@ -2,10 +2,31 @@
 
 use super::bands::{bands, elem, fit, image_rows, row_view, rows_per_band};
 use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u};
+use crate::context::Context;
 use crate::error::{ensure, Result};
+use crate::pipeline::Kernel;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 use std::ops::Range;
+use std::sync::Arc;
+
+/// The element-wise kernel `names.0`, or its vec4 variant `names.1` (four values per invocation)
+/// where every count it indexes by is a multiple of 4; and the values per invocation (1 or 4),
+/// by which the caller divides those counts.
+fn unit_kernel(
+    ctx: &Context,
+    names: (&'static str, &'static str),
+    dtype: Dtype,
+    want: &[(&str, u32)],
+    bindings: u32,
+    counts: &[usize],
+) -> Result<(Arc<Kernel>, usize)> {
+    if counts.iter().all(|c| c.is_multiple_of(4)) {
+        Ok((kernel(ctx, names.1, dtype, want, bindings)?, 4))
+    } else {
+        Ok((kernel(ctx, names.0, dtype, want, bindings)?, 1))
+    }
+}
 
 /// Unary functions, numbered as in `kernels/wgsl/unary.wgsl`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -32,12 +53,13 @@ pub enum BinaryOp {
 pub fn unary(rec: &mut Recorder, op: UnaryOp, x: &Tensor, out: &Tensor, alpha: f32) -> Result<()> {
     let dtype = same_dtype(rec.context(), "unary", &[x, out])?;
     ensure(x.numel() == out.numel(), || format!("{op:?}: {:?} into {:?}", x.shape(), out.shape()))?;
-    let k = kernel(rec.context(), "unary", dtype, &[("OP", op as u32)], 2)?;
     let n = x.numel();
     let per = if fit(rec.context(), &[x, out]) { n } else { rows_per_band(rec.context(), "unary", &[elem(x)], 0, 64)? };
+    let (k, unit) = unit_kernel(rec.context(), ("unary", "unary_v4"), dtype, &[("OP", op as u32)], 2, &[n, per])?;
     for run in bands(n, per) {
         let (xs, ys) = (row_view(x, 1, run.clone())?, row_view(out, 1, run.clone())?);
-        dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(run.len()), f(alpha)], element_groups(run.len()))?;
+        let units = run.len() / unit;
+        dispatch_flat(rec, &k, &[&xs], &[&ys], &[u(units), f(alpha)], element_groups(units))?;
     }
     Ok(())
 }
@@ -61,21 +83,26 @@ pub fn binary(
     ensure((n - 1) / b_outer * b_inner + b_inner.min(n) <= b.numel(), || {
         format!("{op:?}: {:?} cannot broadcast over {:?}", b.shape(), a.shape())
     })?;
-    let k = kernel(rec.context(), "binary", dtype, &[("OP", op as u32)], 3)?;
-    if fit(rec.context(), &[a, b, out]) {
-        return dispatch_flat(rec, &k, &[a, b], &[out], &[u(n), u(b_inner), u(b_outer), 0, 0], element_groups(n));
+    let ctx = rec.context().clone();
+    let (names, want) = (("binary", "binary_v4"), [("OP", op as u32)]);
+    if fit(&ctx, &[a, b, out]) {
+        let (k, unit) = unit_kernel(&ctx, names, dtype, &want, 3, &[n, b_inner, b_outer])?;
+        let push = [n, b_inner, b_outer].map(|c| u(c / unit));
+        return dispatch_flat(rec, &k, &[a, b], &[out], &[push[0], push[1], push[2], 0, 0], element_groups(n / unit));
     }
     // b's view starts at an aligned element at or before the run's first index, so it may take
-    // up to `slack` elements more than the run.
-    let slack = (rec.context().info().binding_alignment() as usize).div_ceil(elem(b));
-    let per = rows_per_band(rec.context(), "binary", &[elem(a)], slack, 64)?;
+    // up to `slack` elements more than the run. With vec4 units every run starts on a multiple
+    // of 4, and so does b's view: slack is a power of two, and what b reads starts on a unit.
+    let slack = (ctx.info().binding_alignment() as usize).div_ceil(elem(b));
+    let per = rows_per_band(&ctx, "binary", &[elem(a)], slack, 64)?;
+    let (k, unit) = unit_kernel(&ctx, names, dtype, &want, 3, &[n, b_inner, b_outer, per])?;
     for run in bands(n, per) {
         let reads = broadcast_span(run.clone(), b_inner, b_outer);
         let first = reads.start - reads.start % slack;
         let (xs, ys, bs) =
             (row_view(a, 1, run.clone())?, row_view(out, 1, run.clone())?, row_view(b, 1, first..reads.end)?);
-        let push = [u(run.len()), u(b_inner), u(b_outer), u(run.start), u(first)];
-        dispatch_flat(rec, &k, &[&xs, &bs], &[&ys], &push, element_groups(run.len()))?;
+        let push = [run.len(), b_inner, b_outer, run.start, first].map(|c| u(c / unit));
+        dispatch_flat(rec, &k, &[&xs, &bs], &[&ys], &push, element_groups(run.len() / unit))?;
     }
     Ok(())
 }
@@ -128,8 +155,7 @@ pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
         format!("geglu: {:?} into {:?}", x.shape(), out.shape())
     })?;
     // Four values per invocation where F allows (every SDXL and CLIP width).
-    let lanes = if two_f.is_multiple_of(8) { 4 } else { 1 };
-    let k = kernel(rec.context(), if lanes == 4 { "geglu_v4" } else { "geglu" }, dtype, &[], 2)?;
+    let (k, lanes) = unit_kernel(rec.context(), ("geglu", "geglu_v4"), dtype, &[], 2, &[two_f / 2])?;
     let rows = x.numel() / two_f;
     let per = if fit(rec.context(), &[x, out]) {
         rows
@@ -152,16 +178,11 @@ pub fn upsample_nearest2x(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Resul
     ensure(s.len() == 4 && out.shape() == [s[0], 2 * s[1], 2 * s[2], s[3]], || {
         format!("upsample: {:?} into {:?}", s, out.shape())
     })?;
-    let k = kernel(rec.context(), "upsample_nearest2x", dtype, &[], 2)?;
+    let names = ("upsample_nearest2x", "upsample_nearest2x_v4");
+    let (k, unit) = unit_kernel(rec.context(), names, dtype, &[], 2, &[s[3]])?;
     if fit(rec.context(), &[x, out]) {
-        return dispatch_flat(
-            rec,
-            &k,
-            &[x],
-            &[out],
-            &[u(out.numel()), u(s[1]), u(s[2]), u(s[3])],
-            element_groups(out.numel()),
-        );
+        let n = out.numel() / unit;
+        return dispatch_flat(rec, &k, &[x], &[out], &[u(n), u(s[1]), u(s[2]), u(s[3] / unit)], element_groups(n));
     }
     let per = rows_per_band(
         rec.context(),
@@ -173,14 +194,9 @@ pub fn upsample_nearest2x(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Resul
     for image in 0..s[0] {
         for rows in bands(s[1], per) {
             let (xs, ys) = (image_rows(x, image, rows.clone())?, image_rows(out, image, 2 * rows.start..2 * rows.end)?);
-            dispatch_flat(
-                rec,
-                &k,
-                &[&xs],
-                &[&ys],
-                &[u(ys.numel()), u(rows.len()), u(s[2]), u(s[3])],
-                element_groups(ys.numel()),
-            )?;
+            let n = ys.numel() / unit;
+            let push = [u(n), u(rows.len()), u(s[2]), u(s[3] / unit)];
+            dispatch_flat(rec, &k, &[&xs], &[&ys], &push, element_groups(n))?;
         }
     }
     Ok(())
@@ -195,7 +211,8 @@ pub fn concat_channels(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor)
         c1 > 0 && c2 > 0 && lead(a) == lead(b) && lead(out) == lead(a) && out.shape().last() == Some(&(c1 + c2)),
         || format!("concat: {:?} + {:?} into {:?}", a.shape(), b.shape(), out.shape()),
     )?;
-    let k = kernel(rec.context(), "concat_channels", dtype, &[], 3)?;
+    let names = ("concat_channels", "concat_channels_v4");
+    let (k, unit) = unit_kernel(rec.context(), names, dtype, &[], 3, &[c1, c2])?;
     let rows = a.numel() / c1;
     let per = if fit(rec.context(), &[a, b, out]) {
         rows
@@ -205,7 +222,8 @@ pub fn concat_channels(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor)
     for band in bands(rows, per) {
         let (av, bv, ov) =
             (row_view(a, c1, band.clone())?, row_view(b, c2, band.clone())?, row_view(out, c1 + c2, band)?);
-        dispatch_flat(rec, &k, &[&av, &bv], &[&ov], &[u(ov.numel()), u(c1), u(c2)], element_groups(ov.numel()))?;
+        let n = ov.numel() / unit;
+        dispatch_flat(rec, &k, &[&av, &bv], &[&ov], &[u(n), u(c1 / unit), u(c2 / unit)], element_groups(n))?;
     }
     Ok(())
 }

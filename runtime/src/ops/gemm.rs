@@ -278,13 +278,18 @@ fn cooperative_fragments_per_side(ctx: &Context, s: &GemmShape, (cm, sg): (u32, 
 }
 
 /// Rows per workgroup of the subgroup kernels: more rows load each B value fewer times (64 ran
-/// fastest on Mesa 22.3's lavapipe; 16 lanes stop at 32, for code size), but later Mesa's JIT
-/// time grows about with the square of the rows (Mesa 25, 8 lanes, measured: 8 rows 5 s, 16 14 s,
-/// 32 57 s, 64 minutes). With `quick` compiles, no product takes 64, and products with fewer
-/// weights than [`SMALL_WEIGHTS`] (tiny models: milliseconds each) or at most 8 rows take 8.
+/// fastest on Mesa 22.3's lavapipe; 16 lanes stop at 32, for code size), but the JIT time grows
+/// about with the square of the rows (measured, 8 lanes: Mesa 25 8 rows 5 s, 16 14 s, 32 57 s, 64
+/// minutes; Mesa 22.3 16 rows 2.5 s, 32 6 s, 64 14–18 s). So [`small`] products (tiny models,
+/// whose products take milliseconds) take 16 rows, or 8 where compiles are `quick`; with `quick`
+/// compiles no product takes 64.
 fn subgroup_rows(s: &GemmShape, sg: u32, quick: bool) -> u32 {
-    if quick && (s.n * s.k < SMALL_WEIGHTS || s.m <= 8) {
-        8
+    if small(s.m, s.n, s.k) {
+        if quick {
+            8
+        } else {
+            16
+        }
     } else if s.m >= 1024 && sg < 16 && !quick {
         64
     } else if s.m >= 256 {
@@ -292,6 +297,12 @@ fn subgroup_rows(s: &GemmShape, sg: u32, quick: bool) -> u32 {
     } else {
         16
     }
+}
+
+/// Whether an m×n×k product is small enough to take the variants that compile quickly: fewer
+/// weights than [`SMALL_WEIGHTS`] or at most 8 rows.
+fn small(m: usize, n: usize, k: usize) -> bool {
+    n * k < SMALL_WEIGHTS || m <= 8
 }
 
 /// Products with fewer weights than this (2¹⁷: none of SDXL's, CLIP's or the VAE's layers but
@@ -312,8 +323,9 @@ impl DeviceInfo {
 /// out[.., N/2] = value · GELU_erf(gate) of x[.., K] · wᵀ (+ bias), w stored [N, K]. Fused into
 /// the product's epilogue, so the N-wide projection is never stored, where that measured faster:
 /// the subgroup kernels (lavapipe: 1.07× in f32, 1.14× in f16) with N a multiple of
-/// [`GEGLU_COLUMNS`] (every SDXL width) and full compiles (the fused variant is one more JIT: on
-/// Mesa 25 it made the README's demo about 10 s slower from a cold cache). Elsewhere through a
+/// [`GEGLU_COLUMNS`] (every SDXL width), full compiles and products that are not [`small`] (the
+/// fused variant is one more JIT: on Mesa 25 it made the README's demo about 10 s slower from a
+/// cold cache). Elsewhere through a
 /// temporary from `scratch` and the GEGLU kernel: on an H200 the fused product ran 1.3× slower than product and
 /// kernel on the matrix units (the UNet 222 against 208 ms) and 1.04× slower on the tiled ones.
 pub fn linear_geglu(
@@ -330,7 +342,10 @@ pub fn linear_geglu(
         format!("linear_geglu: output {:?} is not {m}×{}", out.shape(), n / 2)
     })?;
     let ctx = rec.context();
-    let fuse = ctx.gemm_family() == GemmFamily::Subgroup && n.is_multiple_of(GEGLU_COLUMNS) && !ctx.quick_compile();
+    let fuse = ctx.gemm_family() == GemmFamily::Subgroup
+        && n.is_multiple_of(GEGLU_COLUMNS)
+        && !ctx.quick_compile()
+        && !small(m, n, k);
     if !fuse {
         let projected = scratch.tensor(&[m, n], x.dtype())?;
         matmul(rec, x, w, bias, &projected, &Matmul::dense(m, n, k, true))?;

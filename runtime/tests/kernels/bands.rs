@@ -112,26 +112,34 @@ fn upsample_linear_and_geglu_bands_match() {
 
 #[test]
 fn broadcast_add_and_mul_bands_bind_what_they_read() {
-    // Same shape, a per-channel vector, and a per-(batch, channel) vector over pixels.
-    for dtype in DTYPES {
-        for b in [&[2, 13, 8, 16][..], &[16], &[2, 1, 1, 16]] {
-            let (whole, banded) =
-                whole_and_banded(dtype, &[&[2, 13, 8, 16], b], &[2, 13, 8, 16], |rec, t, o| add(rec, &t[0], &t[1], o));
+    // Same shape, a per-channel vector, and a per-(batch, channel) vector over pixels; 16
+    // channels take the vec4 kernel, 15 the one-value one.
+    for (dtype, c) in DTYPES.into_iter().flat_map(|d| [(d, 16), (d, 15)]) {
+        let a = [2, 13, 8, c];
+        for b in [&a[..], &[c], &[2, 1, 1, c]] {
+            let (whole, banded) = whole_and_banded(dtype, &[&a, b], &a, |rec, t, o| add(rec, &t[0], &t[1], o));
             assert_same(&format!("add {b:?} {dtype:?}"), &whole, &banded);
-            let (whole, banded) =
-                whole_and_banded(dtype, &[&[2, 13, 8, 16], b], &[2, 13, 8, 16], |rec, t, o| mul(rec, &t[0], &t[1], o));
+            let (whole, banded) = whole_and_banded(dtype, &[&a, b], &a, |rec, t, o| mul(rec, &t[0], &t[1], o));
             assert_same(&format!("mul {b:?} {dtype:?}"), &whole, &banded);
         }
+        let silu = |rec: &mut Recorder, t: &[Tensor], o: &Tensor| unary(rec, UnaryOp::Silu, &t[0], o, 1.0);
+        let n = 201 * c;
+        let (whole, banded) = whole_and_banded(dtype, &[&[n]], &[n], silu);
+        assert_same(&format!("silu of {n} {dtype:?}"), &whole, &banded);
     }
 }
 
 #[test]
 fn concat_layer_norm_and_softmax_bands_match() {
     for dtype in DTYPES {
-        let (whole, banded) = whole_and_banded(dtype, &[&[2, 9, 8, 12], &[2, 9, 8, 4]], &[2, 9, 8, 16], |rec, t, o| {
-            concat_channels(rec, &t[0], &t[1], o)
-        });
-        assert_same(&format!("concat {dtype:?}"), &whole, &banded);
+        // 12 + 4 channels take the vec4 kernel, 5 + 7 the one-value one.
+        for (c1, c2) in [(12, 4), (5, 7)] {
+            let shapes: [&[usize]; 2] = [&[2, 9, 16, c1], &[2, 9, 16, c2]];
+            let (whole, banded) = whole_and_banded(dtype, &shapes, &[2, 9, 16, c1 + c2], |rec, t, o| {
+                concat_channels(rec, &t[0], &t[1], o)
+            });
+            assert_same(&format!("concat {c1}+{c2} {dtype:?}"), &whole, &banded);
+        }
         let (whole, banded) = whole_and_banded(dtype, &[&[100, 24], &[24], &[24]], &[100, 24], |rec, t, o| {
             layer_norm(rec, &t[0], &t[1], &t[2], o, 1e-5)
         });

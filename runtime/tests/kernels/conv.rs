@@ -158,14 +158,15 @@ fn conv_large_products_take_the_large_cooperative_tiles() {
 
 #[test]
 fn conv_large_images_take_the_large_row_tiles() {
-    // 34×34 = 1156 and 2·13·13 = 338 output pixels select the 64- and 32-row variants.
+    // 34×34 = 1156 and 2·13·13 = 338 output pixels select the 64- and 32-row variants where
+    // the weights number at least 2¹⁷ (3·3·128·116; smaller convolutions take 16 rows).
     all(
         Case {
             b: 1,
             h: 34,
             w: 34,
-            cin: 8,
-            cout: 12,
+            cin: 128,
+            cout: 116,
             k: [3, 3],
             stride: 1,
             pad: Padding::same(1),
@@ -179,8 +180,8 @@ fn conv_large_images_take_the_large_row_tiles() {
             b: 2,
             h: 13,
             w: 13,
-            cin: 4,
-            cout: 8,
+            cin: 128,
+            cout: 116,
             k: [3, 3],
             stride: 1,
             pad: Padding::same(1),

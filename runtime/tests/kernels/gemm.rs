@@ -87,9 +87,10 @@ fn square_and_rectangular() {
 
 #[test]
 fn tall_shapes_take_the_large_row_tiles() {
-    // M ≥ 256 and ≥ 1024 select the 32- and 64-row subgroup variants; M off their multiples.
-    both(Matmul::dense(300, 68, 36, true), true, 8);
-    both(Matmul::dense(1030, 40, 44, false), false, 9);
+    // M ≥ 256 and ≥ 1024 select the 32- and 64-row subgroup variants for products of at least
+    // 2¹⁷ weights (smaller ones take 16 rows); M off their multiples.
+    both(Matmul::dense(300, 516, 256, true), true, 8);
+    both(Matmul::dense(1030, 520, 256, false), false, 9);
 }
 
 #[test]
@@ -210,8 +211,9 @@ fn linear_geglu_fused_into_the_product() {
     // Every family's fused product where N is a multiple of GEGLU_COLUMNS (32), and the op, which
     // fuses on the subgroup kernels only (M and N off the tiles' multiples; K = 27 takes the tiled
     // kernel, and 130×2752 the cooperative kernels' large tiles); N = 40 goes through the GEGLU
-    // kernel, as does every width where the context prefers quick compiles. Rows stay under 256,
-    // so the subgroup kernels compile at 16 rows only.
+    // kernel, as do products of fewer than 2¹⁷ weights (all but 64→2048) and every width where
+    // the context prefers quick compiles. Rows stay under 256, so the subgroup kernels compile
+    // at 16 rows only.
     let c = GEGLU_COLUMNS;
     for (family, quick) in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative]
         .into_iter()
@@ -220,9 +222,16 @@ fn linear_geglu_fused_into_the_product() {
         let ctx = ctx_with(family);
         ctx.set_quick_compile(quick);
         for dtype in DTYPES {
-            for (i, shape) in [(37, 40, 2 * c), (2 * 77, 64, 3 * c), (9, 27, 2 * c), (130, 24, 86 * c), (5, 12, c + 8)]
-                .into_iter()
-                .enumerate()
+            for (i, shape) in [
+                (37, 40, 2 * c),
+                (37, 64, 64 * c),
+                (2 * 77, 64, 3 * c),
+                (9, 27, 2 * c),
+                (130, 24, 86 * c),
+                (5, 12, c + 8),
+            ]
+            .into_iter()
+            .enumerate()
             {
                 check_linear_geglu(&ctx, dtype, shape, false, 20 + 3 * i as u64);
                 if shape.2 % c == 0 {

@@ -54,7 +54,7 @@ fn profiling_times_every_dispatch() {
     let recording = rec.finish().unwrap();
     let timings = recording.run_profiled().unwrap();
     assert_eq!(timings.len(), 300, "one timing per dispatch, across query pools");
-    assert!(timings.iter().all(|t| t.kernel == "unary" && t.nanos > 0.0), "{:?}", &timings[..3]);
+    assert!(timings.iter().all(|t| t.kernel == "unary_v4" && t.nanos > 0.0), "{:?}", &timings[..3]);
 }
 
 #[test]
