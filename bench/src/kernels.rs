@@ -197,6 +197,20 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             record: |rec, t| ops::group_norm(rec, &t[0], &t[1], &t[2], &t[3], 32, 1e-5, true),
         },
         Case {
+            name: "group_norm + SiLU",
+            shape: "128x128x320, 32 groups".into(),
+            work: Work::Bytes(4.0 * bytes(4 * hw * c / 2)),
+            gemm: None,
+            on_gemm_family: false,
+            tensors: vec![
+                rand_tensor(ctx, &[1, 4 * hw, c / 2], dtype, 24)?,
+                rand_tensor(ctx, &[c / 2], dtype, 25)?,
+                rand_tensor(ctx, &[c / 2], dtype, 26)?,
+                ctx.zeros(&[1, 4 * hw, c / 2], dtype)?,
+            ],
+            record: |rec, t| ops::group_norm(rec, &t[0], &t[1], &t[2], &t[3], 32, 1e-5, true),
+        },
+        Case {
             name: "layer_norm",
             shape: "4096 x 640".into(),
             work: Work::Bytes(4.0 * bytes(hw * c)),
@@ -218,6 +232,19 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             on_gemm_family: false,
             tensors: vec![rand_tensor(ctx, &[hw * c], dtype, 19)?, ctx.zeros(&[hw * c], dtype)?],
             record: |rec, t| ops::unary(rec, UnaryOp::Silu, &t[0], &t[1], 1.0),
+        },
+        Case {
+            name: "add (residual)",
+            shape: "64x64x640".into(),
+            work: Work::Bytes(3.0 * bytes(hw * c)),
+            gemm: None,
+            on_gemm_family: false,
+            tensors: vec![
+                rand_tensor(ctx, &[1, hw, c], dtype, 27)?,
+                rand_tensor(ctx, &[1, hw, c], dtype, 28)?,
+                ctx.zeros(&[1, hw, c], dtype)?,
+            ],
+            record: |rec, t| ops::add(rec, &t[0], &t[1], &t[2]),
         },
         Case {
             name: "geglu",

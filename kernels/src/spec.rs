@@ -23,6 +23,13 @@ const NONE: &[&[(&str, u32)]] = &[&[]];
 const UNARY: &[&[(&str, u32)]] = &[&[("OP", 0)], &[("OP", 1)], &[("OP", 2)], &[("OP", 3)], &[("OP", 4)]];
 const BINARY: &[&[(&str, u32)]] = &[&[("OP", 0)], &[("OP", 1)]];
 
+/// A GroupNorm kernel: the workgroup reductions, then `files`.
+macro_rules! group_norm_spec {
+    ($name:literal, $($file:literal),+) => {
+        KernelSpec { name: $name, files: &["reduce.wgsl", $($file),+], params: NONE }
+    };
+}
+
 pub const KERNELS: &[KernelSpec] = &[
     // Register-blocked GEMM for CPU-like devices: workgroup = one subgroup, A shared by shuffles;
     // one variant set per lavapipe width (LP_NATIVE_VECTOR_WIDTH 128, 256, 512 → 4, 8, 16 lanes).
@@ -95,22 +102,18 @@ pub const KERNELS: &[KernelSpec] = &[
         files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv.wgsl", "gemm_store.wgsl", "gemm_tiled.wgsl"],
         params: &[&[("BT", 1), ("GE", 0)]],
     },
-    KernelSpec {
-        name: "group_norm",
-        files: &["reduce.wgsl", "group_moments.wgsl", "group_apply.wgsl", "group_norm.wgsl"],
-        params: NONE,
-    },
-    // GroupNorm in bands, for tensors past the binding limit.
-    KernelSpec {
-        name: "group_norm_stats",
-        files: &["reduce.wgsl", "group_moments.wgsl", "group_norm_stats.wgsl"],
-        params: NONE,
-    },
-    KernelSpec {
-        name: "group_norm_apply",
-        files: &["reduce.wgsl", "group_apply.wgsl", "group_norm_apply.wgsl"],
-        params: NONE,
-    },
+    // GroupNorm, one, two (`_v2`) or four (`_v4`) channels a step (unit_*.wgsl): in one
+    // workgroup per group, or in bands (statistics, then the normalisation) on GPUs and past the
+    // binding limit.
+    group_norm_spec!("group_norm", "unit_1.wgsl", "group_moments.wgsl", "group_apply.wgsl", "group_norm.wgsl"),
+    group_norm_spec!("group_norm_v2", "unit_2.wgsl", "group_moments.wgsl", "group_apply.wgsl", "group_norm.wgsl"),
+    group_norm_spec!("group_norm_v4", "unit_4.wgsl", "group_moments.wgsl", "group_apply.wgsl", "group_norm.wgsl"),
+    group_norm_spec!("group_norm_stats", "unit_1.wgsl", "group_moments.wgsl", "group_norm_stats.wgsl"),
+    group_norm_spec!("group_norm_stats_v2", "unit_2.wgsl", "group_moments.wgsl", "group_norm_stats.wgsl"),
+    group_norm_spec!("group_norm_stats_v4", "unit_4.wgsl", "group_moments.wgsl", "group_norm_stats.wgsl"),
+    group_norm_spec!("group_norm_apply", "unit_1.wgsl", "group_apply.wgsl", "group_norm_apply.wgsl"),
+    group_norm_spec!("group_norm_apply_v2", "unit_2.wgsl", "group_apply.wgsl", "group_norm_apply.wgsl"),
+    group_norm_spec!("group_norm_apply_v4", "unit_4.wgsl", "group_apply.wgsl", "group_norm_apply.wgsl"),
     KernelSpec { name: "layer_norm", files: &["reduce.wgsl", "layer_norm.wgsl"], params: NONE },
     KernelSpec { name: "layer_norm_v4", files: &["layer_norm_v4.wgsl"], params: NONE },
     KernelSpec { name: "softmax", files: &["reduce.wgsl", "softmax.wgsl"], params: NONE },

@@ -1,9 +1,10 @@
 // GroupNorm over NHWC: one workgroup per (group, batch); mean and variance in two passes (f32),
 // then the affine map, optionally followed by SiLU (the ResNet block's norm + activation).
-@group(0) @binding(0) var<storage, read> x: array<S>;
-@group(0) @binding(1) var<storage, read> gamma: array<S>;
-@group(0) @binding(2) var<storage, read> beta: array<S>;
-@group(0) @binding(3) var<storage, read_write> y: array<S>;
+// Channels count units (unit_1/2/4.wgsl), hw pixels.
+@group(0) @binding(0) var<storage, read> x: array<U>;
+@group(0) @binding(1) var<storage, read> gamma: array<U>;
+@group(0) @binding(2) var<storage, read> beta: array<U>;
+@group(0) @binding(3) var<storage, read_write> y: array<U>;
 
 struct Params {
     hw: u32,
@@ -22,5 +23,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let c0 = wg.x * cg;
     let base = wg.y * p.hw * p.c + c0;
     let m = group_moments(base, count, cg, p.c, lid);
-    group_apply(base, count, cg, p.c, c0, m.x, inverseSqrt(m.y / f32(count) + p.eps), p.silu != 0u, lid);
+    group_apply(base, count, cg, p.c, c0, m.x, inverseSqrt(m.y / f32(count * UNIT) + p.eps), p.silu != 0u, lid);
 }

@@ -2,11 +2,11 @@
 // from the partial statistics of all bands of the image (slots first + image·parts ..
 // + parts, merged with Chan's parallel-variance formula), then the affine map and optional
 // SiLU, as group_norm does in one workgroup per group.
-@group(0) @binding(0) var<storage, read> x: array<S>;
-@group(0) @binding(1) var<storage, read> gamma: array<S>;
-@group(0) @binding(2) var<storage, read> beta: array<S>;
+@group(0) @binding(0) var<storage, read> x: array<U>;
+@group(0) @binding(1) var<storage, read> gamma: array<U>;
+@group(0) @binding(2) var<storage, read> beta: array<U>;
 @group(0) @binding(3) var<storage, read> stats: array<f32>;
-@group(0) @binding(4) var<storage, read_write> y: array<S>;
+@group(0) @binding(4) var<storage, read_write> y: array<U>;
 
 struct Params {
     hw: u32,

@@ -3,7 +3,7 @@
 // slot (slot + image·parts + part)·groups + group; group_norm_apply merges the slots of an image.
 // GPUs split every image so that enough workgroups run; a tensor too large for one binding is
 // normalised one band per dispatch.
-@group(0) @binding(0) var<storage, read> x: array<S>;
+@group(0) @binding(0) var<storage, read> x: array<U>;
 @group(0) @binding(1) var<storage, read_write> stats: array<f32>;
 
 struct Params {
@@ -25,7 +25,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let m = group_moments((wg.z * p.hw + first) * p.c + wg.x * cg, count, cg, p.c, lid);
     if lid == 0u {
         let at = ((p.slot + wg.z * p.parts + wg.y) * p.groups + wg.x) * 3u;
-        stats[at] = f32(count);
+        stats[at] = f32(count * UNIT);
         stats[at + 1u] = m.x;
         stats[at + 2u] = m.y;
     }

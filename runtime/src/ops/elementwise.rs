@@ -1,32 +1,11 @@
 //! Element-wise and data-movement operations.
 
 use super::bands::{bands, elem, fit, image_rows, row_view, rows_per_band};
-use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u};
-use crate::context::Context;
+use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u, unit_kernel};
 use crate::error::{ensure, Result};
-use crate::pipeline::Kernel;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 use std::ops::Range;
-use std::sync::Arc;
-
-/// The element-wise kernel `names.0`, or its vec4 variant `names.1` (four values per invocation)
-/// where every count it indexes by is a multiple of 4; and the values per invocation (1 or 4),
-/// by which the caller divides those counts.
-fn unit_kernel(
-    ctx: &Context,
-    names: (&'static str, &'static str),
-    dtype: Dtype,
-    want: &[(&str, u32)],
-    bindings: u32,
-    counts: &[usize],
-) -> Result<(Arc<Kernel>, usize)> {
-    if counts.iter().all(|c| c.is_multiple_of(4)) {
-        Ok((kernel(ctx, names.1, dtype, want, bindings)?, 4))
-    } else {
-        Ok((kernel(ctx, names.0, dtype, want, bindings)?, 1))
-    }
-}
 
 /// Unary functions, numbered as in `kernels/wgsl/unary.wgsl`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -55,7 +34,8 @@ pub fn unary(rec: &mut Recorder, op: UnaryOp, x: &Tensor, out: &Tensor, alpha: f
     ensure(x.numel() == out.numel(), || format!("{op:?}: {:?} into {:?}", x.shape(), out.shape()))?;
     let n = x.numel();
     let per = if fit(rec.context(), &[x, out]) { n } else { rows_per_band(rec.context(), "unary", &[elem(x)], 0, 64)? };
-    let (k, unit) = unit_kernel(rec.context(), ("unary", "unary_v4"), dtype, &[("OP", op as u32)], 2, &[n, per])?;
+    let (k, unit) =
+        unit_kernel(rec.context(), &[("unary_v4", 4), ("unary", 1)], dtype, &[("OP", op as u32)], 2, &[n, per])?;
     for run in bands(n, per) {
         let (xs, ys) = (row_view(x, 1, run.clone())?, row_view(out, 1, run.clone())?);
         let units = run.len() / unit;
@@ -84,7 +64,7 @@ pub fn binary(
         format!("{op:?}: {:?} cannot broadcast over {:?}", b.shape(), a.shape())
     })?;
     let ctx = rec.context().clone();
-    let (names, want) = (("binary", "binary_v4"), [("OP", op as u32)]);
+    let (names, want) = (&[("binary_v4", 4), ("binary", 1)], [("OP", op as u32)]);
     if fit(&ctx, &[a, b, out]) {
         let (k, unit) = unit_kernel(&ctx, names, dtype, &want, 3, &[n, b_inner, b_outer])?;
         let push = [n, b_inner, b_outer].map(|c| u(c / unit));
@@ -155,7 +135,7 @@ pub fn geglu(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Result<()> {
         format!("geglu: {:?} into {:?}", x.shape(), out.shape())
     })?;
     // Four values per invocation where F allows (every SDXL and CLIP width).
-    let (k, lanes) = unit_kernel(rec.context(), ("geglu", "geglu_v4"), dtype, &[], 2, &[two_f / 2])?;
+    let (k, lanes) = unit_kernel(rec.context(), &[("geglu_v4", 4), ("geglu", 1)], dtype, &[], 2, &[two_f / 2])?;
     let rows = x.numel() / two_f;
     let per = if fit(rec.context(), &[x, out]) {
         rows
@@ -178,7 +158,7 @@ pub fn upsample_nearest2x(rec: &mut Recorder, x: &Tensor, out: &Tensor) -> Resul
     ensure(s.len() == 4 && out.shape() == [s[0], 2 * s[1], 2 * s[2], s[3]], || {
         format!("upsample: {:?} into {:?}", s, out.shape())
     })?;
-    let names = ("upsample_nearest2x", "upsample_nearest2x_v4");
+    let names = &[("upsample_nearest2x_v4", 4), ("upsample_nearest2x", 1)];
     let (k, unit) = unit_kernel(rec.context(), names, dtype, &[], 2, &[s[3]])?;
     if fit(rec.context(), &[x, out]) {
         let n = out.numel() / unit;
@@ -211,7 +191,7 @@ pub fn concat_channels(rec: &mut Recorder, a: &Tensor, b: &Tensor, out: &Tensor)
         c1 > 0 && c2 > 0 && lead(a) == lead(b) && lead(out) == lead(a) && out.shape().last() == Some(&(c1 + c2)),
         || format!("concat: {:?} + {:?} into {:?}", a.shape(), b.shape(), out.shape()),
     )?;
-    let names = ("concat_channels", "concat_channels_v4");
+    let names = &[("concat_channels_v4", 4), ("concat_channels", 1)];
     let (k, unit) = unit_kernel(rec.context(), names, dtype, &[], 3, &[c1, c2])?;
     let rows = a.numel() / c1;
     let per = if fit(rec.context(), &[a, b, out]) {

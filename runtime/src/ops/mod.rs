@@ -33,6 +33,22 @@ fn kernel(ctx: &Context, name: &'static str, dtype: Dtype, want: &[(&str, u32)],
     ctx.kernel(variant, bindings)
 }
 
+/// The first of `variants` (kernel name and values per invocation step, widest first, the last
+/// one value) whose width divides every count the kernel indexes by, and that width, by which
+/// the caller divides those counts (kernels/wgsl/unit_1.wgsl, unit_2.wgsl, unit_4.wgsl).
+fn unit_kernel(
+    ctx: &Context,
+    variants: &[(&'static str, usize)],
+    dtype: Dtype,
+    want: &[(&str, u32)],
+    bindings: u32,
+    counts: &[usize],
+) -> Result<(Arc<Kernel>, usize)> {
+    let fits = |&&(_, width): &&(&str, usize)| counts.iter().all(|c| c.is_multiple_of(width));
+    let (name, width) = *variants.iter().find(fits).unwrap_or(&variants[variants.len() - 1]);
+    Ok((kernel(ctx, name, dtype, want, bindings)?, width))
+}
+
 /// All tensors share one storage dtype, which the device supports.
 fn same_dtype(ctx: &Context, op: &str, tensors: &[&Tensor]) -> Result<Dtype> {
     let dtype = tensors[0].dtype();

@@ -1,7 +1,7 @@
 //! Normalisations and softmax over NHWC / row-major tensors, accumulated in f32.
 
 use super::bands::{bands, elem, fit, row_view, rows_per_band};
-use super::{dispatch_flat, f, kernel, rows_of, same_dtype, u};
+use super::{dispatch_flat, f, kernel, rows_of, same_dtype, u, unit_kernel};
 use crate::context::Context;
 use crate::device::DeviceKind;
 use crate::error::{ensure, Result};
@@ -34,9 +34,18 @@ pub fn group_norm(
     if let Some(band) = gpu_band(rec.context(), groups, hw) {
         return group_norm_split(rec, [x, gamma, beta, out], (b, hw, c), groups, (eps, silu), band);
     }
-    let k = kernel(rec.context(), "group_norm", dtype, &[], 4)?;
-    rec.dispatch(&k, &[x, gamma, beta], &[out], &[u(hw), u(c), u(groups), f(eps), silu as u32], [u(groups), u(b), 1])
+    let (k, unit) = unit_kernel(rec.context(), &GROUP_NORM, dtype, &[], 4, &[c / groups])?;
+    let push = [u(hw), u(c / unit), u(groups), f(eps), silu as u32];
+    rec.dispatch(&k, &[x, gamma, beta], &[out], &push, [u(groups), u(b), 1])
 }
+
+/// GroupNorm's kernels, each as two or four channels a step where a group's channels allow
+/// (SDXL: 10, 20 and 40 a group) and as one (kernels/wgsl/unit_1.wgsl).
+const GROUP_NORM: [(&str, usize); 3] = [("group_norm_v4", 4), ("group_norm_v2", 2), ("group_norm", 1)];
+const GROUP_NORM_STATS: [(&str, usize); 3] =
+    [("group_norm_stats_v4", 4), ("group_norm_stats_v2", 2), ("group_norm_stats", 1)];
+const GROUP_NORM_APPLY: [(&str, usize); 3] =
+    [("group_norm_apply_v4", 4), ("group_norm_apply_v2", 2), ("group_norm_apply", 1)];
 
 /// Pixels per band on a GPU, where an image splits into more than one: enough bands for about
 /// 1024 workgroups of (group, band) per image, each band at least 64 pixels. One workgroup per
@@ -63,10 +72,10 @@ fn group_norm_split(
     let parts = hw.div_ceil(band);
     let stats = ctx.zeros(&[b * parts * groups * 3], Dtype::F32)?;
     let grid = [u(groups), u(parts), u(b)];
-    let k = kernel(&ctx, "group_norm_stats", x.dtype(), &[], 2)?;
-    rec.dispatch(&k, &[x], &[&stats], &[u(hw), u(c), u(groups), 0, u(band), u(parts)], grid)?;
-    let k = kernel(&ctx, "group_norm_apply", x.dtype(), &[], 5)?;
-    let push = [u(hw), u(c), u(groups), f(eps), silu as u32, 0, u(parts), u(band)];
+    let (k, unit) = unit_kernel(&ctx, &GROUP_NORM_STATS, x.dtype(), &[], 2, &[c / groups])?;
+    rec.dispatch(&k, &[x], &[&stats], &[u(hw), u(c / unit), u(groups), 0, u(band), u(parts)], grid)?;
+    let (k, unit) = unit_kernel(&ctx, &GROUP_NORM_APPLY, x.dtype(), &[], 5, &[c / groups])?;
+    let push = [u(hw), u(c / unit), u(groups), f(eps), silu as u32, 0, u(parts), u(band)];
     rec.dispatch(&k, &[x, gamma, beta, &stats], &[out], &push, grid)
 }
 
@@ -87,17 +96,18 @@ fn group_norm_banded(
     let parts = hw.div_ceil(per);
     let stats = ctx.zeros(&[b * parts * groups * 3], Dtype::F32)?;
     let pixels = |image: usize, band: &std::ops::Range<usize>| image * hw + band.start..image * hw + band.end;
-    let k = kernel(&ctx, "group_norm_stats", x.dtype(), &[], 2)?;
+    let (k, unit) = unit_kernel(&ctx, &GROUP_NORM_STATS, x.dtype(), &[], 2, &[c / groups])?;
     for image in 0..b {
         for (i, band) in bands(hw, per).enumerate() {
-            let push = [u(band.len()), u(c), u(groups), u(image * parts + i), u(band.len()), 1];
+            let push = [u(band.len()), u(c / unit), u(groups), u(image * parts + i), u(band.len()), 1];
             rec.dispatch(&k, &[&row_view(x, c, pixels(image, &band))?], &[&stats], &push, [u(groups), 1, 1])?;
         }
     }
-    let k = kernel(&ctx, "group_norm_apply", x.dtype(), &[], 5)?;
+    let (k, unit) = unit_kernel(&ctx, &GROUP_NORM_APPLY, x.dtype(), &[], 5, &[c / groups])?;
     for image in 0..b {
         for band in bands(hw, per) {
-            let push = [u(band.len()), u(c), u(groups), f(eps), silu as u32, u(image * parts), u(parts), u(band.len())];
+            let (n, c_units) = (u(band.len()), u(c / unit));
+            let push = [n, c_units, u(groups), f(eps), silu as u32, u(image * parts), u(parts), n];
             let (xs, ys) = (row_view(x, c, pixels(image, &band))?, row_view(out, c, pixels(image, &band))?);
             rec.dispatch(&k, &[&xs, gamma, beta, &stats], &[&ys], &push, [u(groups), 1, 1])?;
         }

@@ -76,14 +76,15 @@ fn conv_bands_match_the_whole_convolution() {
 
 #[test]
 fn group_norm_bands_merge_statistics_exactly_enough() {
-    for dtype in DTYPES {
-        let shapes: [&[usize]; 3] = [&[2, 13, 8, 16], &[16], &[16]];
-        let (whole, banded) = whole_and_banded(dtype, &shapes, &[2, 13, 8, 16], |rec, t, o| {
-            group_norm(rec, &t[0], &t[1], &t[2], o, 4, 1e-6, true)
-        });
+    // Groups of 4, 2 and 3 channels: four, two and one a step.
+    for (dtype, c) in DTYPES.into_iter().flat_map(|d| [(d, 16), (d, 8), (d, 12)]) {
+        let x = [2, 13, 16, c];
+        let shapes: [&[usize]; 3] = [&x, &[c], &[c]];
+        let (whole, banded) =
+            whole_and_banded(dtype, &shapes, &x, |rec, t, o| group_norm(rec, &t[0], &t[1], &t[2], o, 4, 1e-6, true));
         let want: Vec<f64> = whole.iter().map(|&v| v as f64).collect();
         // Chan's merge of band statistics rounds differently from one two-pass sum.
-        assert_close(&format!("group_norm {dtype:?}"), &banded, &want, 1e-5, storage_rtol(dtype));
+        assert_close(&format!("group_norm {c} channels {dtype:?}"), &banded, &want, 1e-5, storage_rtol(dtype));
     }
 }
 

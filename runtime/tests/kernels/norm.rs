@@ -50,14 +50,19 @@ fn check_group_norm(b: usize, hw: usize, c: usize, groups: usize, silu: bool, se
 
 #[test]
 fn group_norm_plain_and_silu() {
+    // Groups of 2, 10, 3 and 16 channels: two a step, one a step, four a step.
     check_group_norm(2, 64, 64, 32, false, 31);
     check_group_norm(1, 37, 320, 32, true, 32);
+    check_group_norm(2, 29, 96, 32, true, 34);
+    check_group_norm(1, 40, 128, 8, false, 35);
 }
 
 #[test]
 fn group_norm_in_bands_of_pixels_on_gpus() {
     // 15 bands per image on the GPU context, 14 of 68 pixels and one of 58, merged per image and group.
     check_group_norm(2, 1010, 64, 32, true, 33);
+    check_group_norm(1, 1010, 96, 32, false, 36);
+    check_group_norm(1, 1010, 128, 32, true, 37);
 }
 
 fn check_layer_norm(rows: usize, c: usize, offset: f32, seed: u64) {
