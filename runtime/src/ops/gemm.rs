@@ -325,9 +325,9 @@ impl DeviceInfo {
 /// the subgroup kernels (lavapipe: 1.07× in f32, 1.14× in f16) with N a multiple of
 /// [`GEGLU_COLUMNS`] (every SDXL width), full compiles and products that are not [`small`] (the
 /// fused variant is one more JIT: on Mesa 25 it made the README's demo about 10 s slower from a
-/// cold cache). Elsewhere through a
-/// temporary from `scratch` and the GEGLU kernel: on an H200 the fused product ran 1.3× slower than product and
-/// kernel on the matrix units (the UNet 222 against 208 ms) and 1.04× slower on the tiled ones.
+/// cold cache). Elsewhere through a temporary from `scratch` and the GEGLU kernel: on an H200
+/// the fused product ran 1.3× slower than product and kernel on the matrix units (the UNet 222
+/// against 208 ms) and 1.04× slower on the tiled ones.
 pub fn linear_geglu(
     rec: &mut Recorder,
     (x, w, bias): (&Tensor, &Tensor, Option<&Tensor>),
