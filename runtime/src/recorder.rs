@@ -5,13 +5,13 @@ use crate::context::Context;
 use crate::error::{ensure, Result, VkContext};
 use crate::memory::Buffer;
 use crate::pipeline::{Kernel, PUSH_BYTES};
-use crate::submit::{memory_barrier, submit_chunks_and_wait};
+use crate::submit::{memory_barrier, submit_groups_and_wait};
 use crate::submit_budget::SubmitBudget;
 use crate::tensor::Tensor;
 use ash::vk;
 use std::collections::HashSet;
 use std::sync::atomic::Ordering;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 const SETS_PER_POOL: u32 = 256;
 const MAX_BINDINGS: u32 = 8;
@@ -363,7 +363,7 @@ impl Recorder {
         }
         let mut res = self.res;
         res.chunks.push(self.cmd);
-        Ok(Recording { ctx: self.ctx, res, flops: self.flops })
+        Ok(Recording { ctx: self.ctx, res, flops: self.flops, merged: Mutex::new(None) })
     }
 
     /// Counts the arithmetic of a matrix product just recorded (ops call it; see
@@ -379,10 +379,13 @@ pub struct Recording {
     ctx: Context,
     res: Resources,
     flops: f64,
+    /// Chunks per submission, from the run that timed each chunk alone; none until then.
+    merged: Mutex<Option<Vec<usize>>>,
 }
 
 impl Recording {
-    /// Runs the recording to completion, one submission per chunk.
+    /// Runs the recording to completion: the first time one submission per chunk, then as
+    /// many chunks a submission as [`SubmitBudget::merge`] allows.
     pub fn run(&self) -> Result<()> {
         self.run_submissions().map(drop)
     }
@@ -391,11 +394,32 @@ impl Recording {
     /// one before (the first: from its submission) to its own end, as the host saw them.
     pub fn run_submissions(&self) -> Result<Vec<std::time::Duration>> {
         self.tell_compiles();
-        submit_chunks_and_wait(&self.ctx, &self.res.chunks)
+        let budget = self.ctx.submit_budget();
+        let mut merged = self.merged.lock().unwrap();
+        let sizes = merged.clone().unwrap_or_else(|| vec![1; self.res.chunks.len()]);
+        let mut rest = &self.res.chunks[..];
+        let groups: Vec<&[vk::CommandBuffer]> = sizes
+            .iter()
+            .map(|&n| {
+                let (group, after) = rest.split_at(n);
+                rest = after;
+                group
+            })
+            .collect();
+        let times = submit_groups_and_wait(&self.ctx, &groups)?;
+        *merged = match merged.take() {
+            None => Some(budget.merged(&times)),
+            // A merged submission twice as slow as its chunks were timed (clocks, a GPU shared
+            // with other work): time them alone again.
+            Some(_) if times.iter().zip(&sizes).any(|(&t, &n)| n > 1 && t > 2 * budget.merge) => None,
+            kept => kept,
+        };
+        Ok(times)
     }
 
-    /// The submissions one run makes (see [`SubmitBudget`]).
-    pub fn submissions(&self) -> usize {
+    /// The chunks a recording is split into (see [`SubmitBudget`]), each its own submission the
+    /// first time it runs.
+    pub fn chunks(&self) -> usize {
         self.res.chunks.len()
     }
 

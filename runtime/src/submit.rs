@@ -60,27 +60,26 @@ pub(crate) fn submit_once(ctx: &Context, f: impl FnOnce(&ash::Device, vk::Comman
 
 /// Submits one recorded command buffer and blocks until the device has finished it.
 pub(crate) fn submit_and_wait(ctx: &Context, cmd: vk::CommandBuffer) -> Result<()> {
-    submit_chunks_and_wait(ctx, &[cmd]).map(drop)
+    submit_groups_and_wait(ctx, &[&[cmd]]).map(drop)
 }
 
-/// Submits `chunks` in order, one `vkQueueSubmit` each (a GPU watchdog times each alone), then
-/// waits for each in turn, at most the context's submission timeout apiece. Returns the time
-/// between one chunk's end and the next's (the first's from the submission): queued back to
-/// back, about each chunk's run time.
-pub(crate) fn submit_chunks_and_wait(ctx: &Context, chunks: &[vk::CommandBuffer]) -> Result<Vec<Duration>> {
+/// Submits `groups` of chunks in order, one `vkQueueSubmit` each (a GPU watchdog times each
+/// alone), then waits for each in turn, at most the context's submission timeout apiece.
+/// Returns the time between one submission's end and the next's (the first's from its
+/// submission): queued back to back, about each submission's run time.
+pub(crate) fn submit_groups_and_wait(ctx: &Context, groups: &[&[vk::CommandBuffer]]) -> Result<Vec<Duration>> {
     let device = &ctx.shared.device;
     let timeout = ctx.submit_budget().timeout;
-    let mut fences = Vec::with_capacity(chunks.len());
-    let mut times = Vec::with_capacity(chunks.len());
+    let mut fences = Vec::with_capacity(groups.len());
+    let mut times = Vec::with_capacity(groups.len());
     // SAFETY: each chunk is fully recorded; the queue is externally synchronised by its mutex;
     // the fences are destroyed only once signalled (or never, on a hung device).
     unsafe {
         let result = (|| {
-            for &cmd in chunks {
+            for group in groups {
                 let fence = device.create_fence(&vk::FenceCreateInfo::default(), None).vk("vkCreateFence")?;
                 fences.push(fence);
-                let cmds = [cmd];
-                let submit = [vk::SubmitInfo::default().command_buffers(&cmds)];
+                let submit = [vk::SubmitInfo::default().command_buffers(group)];
                 let queue = ctx.shared.queue.lock().unwrap();
                 device.queue_submit(*queue, &submit, fence).vk("vkQueueSubmit")?;
             }

@@ -158,9 +158,16 @@ fn a_buffer_past_the_allocation_limit_is_refused_by_name() {
     assert!(ctx.zeros(&[1 << 18], Dtype::F32).is_ok(), "1 MiB fits");
 }
 
-/// Runs `chain` (a GEMM, then 40 dependent element-wise updates) under `budget` on a fresh context
-/// and returns the result and the number of submissions one run made.
-fn chain_under(budget: Option<SubmitBudget>) -> (Vec<f32>, usize) {
+/// What `chain` (a GEMM, then 40 dependent element-wise updates, in place) gave after each of
+/// two runs, the chunks its recording was split into, and the submissions of the second run.
+struct Chain {
+    results: [Vec<f32>; 2],
+    chunks: usize,
+    second_submissions: usize,
+}
+
+/// Runs `chain` twice under `budget` on a fresh context.
+fn chain_under(budget: Option<SubmitBudget>) -> Chain {
     let ctx = Context::new(&Default::default()).unwrap();
     if let Some(budget) = budget {
         ctx.set_submit_budget(budget);
@@ -177,22 +184,39 @@ fn chain_under(budget: Option<SubmitBudget>) -> (Vec<f32>, usize) {
         ops::add(&mut rec, &t, &y, &y).unwrap();
     }
     let recording = rec.finish().unwrap();
-    recording.run().unwrap();
-    (y.download().unwrap(), recording.submissions())
+    let first = recording.run_submissions().unwrap();
+    assert_eq!(first.len(), recording.chunks(), "a first run submits each chunk alone");
+    let after_first = y.download().unwrap();
+    let second_submissions = recording.run_submissions().unwrap().len();
+    Chain { results: [after_first, y.download().unwrap()], chunks: recording.chunks(), second_submissions }
+}
+
+fn same_bits(a: &Chain, b: &Chain) -> bool {
+    a.results.iter().zip(&b.results).all(|(x, y)| x.iter().zip(y).all(|(p, q)| p.to_bits() == q.to_bits()))
 }
 
 #[test]
 fn recordings_split_into_submissions_give_the_same_bits() {
-    let (whole, submissions) = chain_under(None);
-    assert_eq!(submissions, 1, "41 small dispatches fit one default submission");
-    let every = SubmitBudget { flops: 1e12, dispatches: 1, timeout: std::time::Duration::from_secs(600) };
-    let (split, submissions) = chain_under(Some(every));
-    assert_eq!(submissions, 41);
-    assert!(whole.iter().zip(&split).all(|(a, b)| a.to_bits() == b.to_bits()), "one dispatch per submission");
+    let whole = chain_under(None);
+    assert_eq!((whole.chunks, whole.second_submissions), (1, 1), "41 small dispatches fit one default chunk");
+    let alone = SubmitBudget {
+        flops: 1e12,
+        dispatches: 1,
+        timeout: std::time::Duration::from_secs(600),
+        merge: std::time::Duration::ZERO,
+    };
+    let split = chain_under(Some(alone));
+    assert_eq!((split.chunks, split.second_submissions), (41, 41), "one dispatch per chunk, none merged");
+    assert!(same_bits(&whole, &split), "one dispatch per submission");
     // A FLOP budget below the GEMM's ends the chunk after it, whatever the dispatch count.
-    let (split, submissions) = chain_under(Some(SubmitBudget { flops: 1e3, dispatches: 1000, ..every }));
-    assert_eq!(submissions, 2);
-    assert!(whole.iter().zip(&split).all(|(a, b)| a.to_bits() == b.to_bits()), "split after the GEMM");
+    let split = chain_under(Some(SubmitBudget { flops: 1e3, dispatches: 1000, ..alone }));
+    assert_eq!(split.chunks, 2);
+    assert!(same_bits(&whole, &split), "split after the GEMM");
+    // Timed alone in the first run, the 41 chunks (each far below a minute) go in fewer
+    // submissions in the second, with the same bits.
+    let merged = chain_under(Some(SubmitBudget { merge: std::time::Duration::from_secs(60), ..alone }));
+    assert_eq!((merged.chunks, merged.second_submissions), (41, 1));
+    assert!(same_bits(&whole, &merged), "41 chunks merged into one submission");
 }
 
 #[test]
