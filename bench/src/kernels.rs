@@ -4,8 +4,8 @@ use crate::cpu_reference::{self, CpuGemm};
 use crate::peaks;
 use anyhow::Result;
 use std::time::{Duration, Instant};
-use vkdiff_runtime::ops::{self, AttentionLayout, ConvParams, Matmul, UnaryOp};
-use vkdiff_runtime::{Context, Dtype, GemmFamily, Recorder, Tensor};
+use vkdiff_runtime::ops::{self, AttentionLayout, ConvParams, Matmul, MatrixCeiling, UnaryOp};
+use vkdiff_runtime::{Context, DeviceKind, Dtype, GemmFamily, Recorder, Tensor};
 
 #[derive(clap::Args)]
 pub struct KernelsArgs {
@@ -123,6 +123,51 @@ fn linear_geglu_case(ctx: &Context, dtype: Dtype, fused: bool) -> vkdiff_runtime
             }
         },
     })
+}
+
+/// The matrix units' ceiling on this device (kernels/wgsl/coop_ceiling.wgsl): sized to keep a
+/// GPU busy for milliseconds, and a CPU device (lavapipe, emulating them) for far less.
+fn ceiling_run(ctx: &Context, from_shared: bool) -> Option<MatrixCeiling> {
+    let (cm, _) = ctx.info().cooperative_variant()?;
+    let (groups, reps) = if ctx.info().kind == DeviceKind::Cpu { (16, 64) } else { (2048, 4096) };
+    Some(MatrixCeiling { fragment: cm as usize, groups, reps, step: 1, from_shared })
+}
+
+/// The ceiling's two rows, where the products run on the matrix units.
+fn ceiling_cases(ctx: &Context) -> vkdiff_runtime::Result<Vec<Case>> {
+    let mut cases = Vec::new();
+    for from_shared in [false, true] {
+        let Some(run) = ceiling_run(ctx, from_shared).filter(|_| ctx.gemm_family() == GemmFamily::Cooperative) else {
+            break;
+        };
+        let cm = run.fragment;
+        cases.push(Case {
+            name: "matrix-unit ceiling",
+            shape: format!(
+                "{cm}x{cm}, {}",
+                if from_shared { "from workgroup memory" } else { "operands in registers" }
+            ),
+            work: Work::Flops(run.flops()),
+            gemm: None,
+            on_gemm_family: false,
+            tensors: vec![
+                rand_tensor(ctx, &[run.operand_len()], Dtype::F16, 30)?,
+                ctx.zeros(&[run.sums_len()], Dtype::F32)?,
+            ],
+            record: if from_shared {
+                |rec, t| {
+                    let run = ceiling_run(rec.context(), true).expect("a ceiling case exists");
+                    ops::matrix_ceiling(rec, &t[0], &t[1], &run)
+                }
+            } else {
+                |rec, t| {
+                    let run = ceiling_run(rec.context(), false).expect("a ceiling case exists");
+                    ops::matrix_ceiling(rec, &t[0], &t[1], &run)
+                }
+            },
+        });
+    }
+    Ok(cases)
 }
 
 fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
@@ -257,7 +302,10 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
         },
         linear_geglu_case(ctx, dtype, true)?,
         linear_geglu_case(ctx, dtype, false)?,
-    ])
+    ]
+    .into_iter()
+    .chain(if dtype == Dtype::F16 { ceiling_cases(ctx)? } else { Vec::new() })
+    .collect())
 }
 
 /// Best time of one case per repetition: a warm-up (the driver JITs on first dispatch), then

@@ -225,6 +225,20 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
             &[("CM", 16), ("SG", 64), ("WT", 4), ("BT", 1), ("GE", 0), ("KS", 2)],
         ],
     },
+    // The matrix units' rate with no device memory in the loop, for `bench kernels`: SRC = 0
+    // operands in registers, 1 loaded from workgroup memory before each multiply-add.
+    KernelSpec {
+        name: "coop_ceiling",
+        files: &["coop_ceiling.wgsl"],
+        params: &[
+            &[("CM", 8), ("SG", 8), ("SRC", 0)],
+            &[("CM", 8), ("SG", 8), ("SRC", 1)],
+            &[("CM", 16), ("SG", 32), ("SRC", 0)],
+            &[("CM", 16), ("SG", 32), ("SRC", 1)],
+            &[("CM", 16), ("SG", 64), ("SRC", 0)],
+            &[("CM", 16), ("SG", 64), ("SRC", 1)],
+        ],
+    },
     // Attention with both products on the matrix units, heads of up to DH = 64 (SDXL's, CLIP's);
     // wider heads take attention_rows. KF = key fragments per chunk, LPR = lanes per row in the
     // softmax (SG/CM on GPUs; 2 on lavapipe, so that its two passes test the joined softmax).

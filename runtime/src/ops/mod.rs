@@ -3,6 +3,7 @@
 
 mod attention;
 mod bands;
+mod ceiling;
 mod conv;
 mod elementwise;
 mod gemm;
@@ -10,6 +11,7 @@ mod norm;
 mod pool;
 
 pub use attention::{attention, copy_heads, AttentionLayout, HeadSpan};
+pub use ceiling::{matrix_ceiling, MatrixCeiling};
 pub use conv::{conv2d, oihw_to_ohwi, ConvParams, Padding};
 pub use elementwise::{
     add, binary, concat_channels, copy_into_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x,

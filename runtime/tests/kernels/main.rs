@@ -3,6 +3,7 @@
 
 mod attention;
 mod bands;
+mod ceiling;
 mod conv;
 mod elementwise;
 mod gemm;
