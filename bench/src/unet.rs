@@ -65,8 +65,9 @@ struct Row {
     ms: f64,
     /// Matrix-product arithmetic of one evaluation, counted from the recorded dispatches.
     tflop: f64,
-    /// Submissions per evaluation (VKDIFF_SUBMIT_GFLOP), and the longest one's time in the
-    /// fastest run (what a GPU watchdog, 2 s on Windows, holds against).
+    /// Submissions in the fastest run (chunks of VKDIFF_SUBMIT_GFLOP, merged up to
+    /// VKDIFF_SUBMIT_MERGE after the first run), and the longest one's time in it (what a GPU
+    /// watchdog, 2 s on Windows, holds against).
     submissions: usize,
     longest_submission_ms: f64,
     tflops: f64,
