@@ -36,8 +36,9 @@ impl Source {
 }
 
 /// The prelude of a variant: the storage type `S` and the parameters as constants; for
-/// cooperative kernels also the fragment types FA, FB (f16 operands) and FC (f32 accumulator)
-/// of the variant's CM×CM shape.
+/// cooperative kernels also the fragment types FA (f16, FM×FK), FB (f16, FK×FN) and FC (f32
+/// accumulator, FM×FN). naga 30 spells only square 8×8 and 16×16 fragments, so they are declared
+/// 8×8 here and given the variant's shape in the SPIR-V ([`shape_fragments`]).
 fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
     let mut text = String::from(match (f16, cooperative) {
         (_, true) => "enable f16; enable wgpu_cooperative_matrix; alias S = f16;",
@@ -47,12 +48,70 @@ fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
     for (name, value) in params {
         text.push_str(&format!(" const {name}: u32 = {value}u;"));
     }
-    if let Some((_, cm)) = params.iter().find(|(name, _)| *name == "CM") {
+    if cooperative {
         for (alias, scalar, role) in [("FA", "f16", "A"), ("FB", "f16", "B"), ("FC", "f32", "C")] {
-            text.push_str(&format!(" alias {alias} = coop_mat{cm}x{cm}<{scalar}, {role}>;"));
+            text.push_str(&format!(" alias {alias} = coop_mat8x8<{scalar}, {role}>;"));
         }
     }
     text
+}
+
+/// The fragment shape of a cooperative variant's parameters: (FM, FN, FK).
+fn fragment_shape(params: &[(&str, u32)]) -> Option<(u32, u32, u32)> {
+    let get = |name: &str| params.iter().find(|(n, _)| *n == name).map(|(_, v)| *v);
+    Some((get("FM")?, get("FN")?, get("FK")?))
+}
+
+/// Gives every `OpTypeCooperativeMatrixKHR` in `words` the shape its use takes in an
+/// M×N×K product: A (MatrixA) M×K, B (MatrixB) K×N, the accumulator M×N. The row and column
+/// counts are 32-bit unsigned constants; those missing are declared just before the type.
+fn shape_fragments(words: &[u32], (m, n, k): (u32, u32, u32)) -> Result<Vec<u32>, String> {
+    const OP_TYPE_INT: u32 = 21;
+    const OP_CONSTANT: u32 = 43;
+    const OP_TYPE_COOPERATIVE_MATRIX: u32 = 4456;
+    let mut out = words.get(..5).ok_or("SPIR-V shorter than its header")?.to_vec();
+    let mut bound = out[3];
+    let mut uint = None;
+    let mut constants: Vec<(u32, u32)> = Vec::new(); // (value, id) of 32-bit unsigned constants
+    let mut at = 5;
+    while at < words.len() {
+        let count = (words[at] >> 16) as usize;
+        let op = words[at] & 0xffff;
+        let inst = words.get(at..at + count).filter(|_| count > 0).ok_or("truncated SPIR-V instruction")?;
+        match op {
+            OP_TYPE_INT if inst[2..] == [32, 0] => uint = Some(inst[1]),
+            OP_CONSTANT if Some(inst[1]) == uint && count == 4 => constants.push((inst[3], inst[2])),
+            OP_TYPE_COOPERATIVE_MATRIX if count == 7 => {
+                let value = |id: u32| constants.iter().find(|(_, c)| *c == id).map(|(v, _)| *v);
+                let (rows, cols) = match value(inst[6]) {
+                    Some(0) => (m, k),
+                    Some(1) => (k, n),
+                    Some(2) => (m, n),
+                    other => return Err(format!("cooperative matrix use {other:?}: not A, B or an accumulator")),
+                };
+                let uint = uint.ok_or("no 32-bit unsigned type before a cooperative matrix")?;
+                let mut id_of = |v: u32| {
+                    if let Some(&(_, id)) = constants.iter().find(|(x, _)| *x == v) {
+                        return id;
+                    }
+                    let id = bound;
+                    bound += 1;
+                    out.extend([(4 << 16) | OP_CONSTANT, uint, id, v]);
+                    constants.push((v, id));
+                    id
+                };
+                let (r, c) = (id_of(rows), id_of(cols));
+                out.extend([inst[0], inst[1], inst[2], inst[3], r, c, inst[6]]);
+                at += count;
+                continue;
+            }
+            _ => {}
+        }
+        out.extend_from_slice(inst);
+        at += count;
+    }
+    out[3] = bound;
+    Ok(out)
 }
 
 /// Expands `// #unroll NAME COUNT` … `// #end` blocks: the body repeated COUNT times (a number
@@ -165,5 +224,11 @@ fn compile(mut src: Source, params: &[(&str, u32)], cooperative: bool, what: &st
         ..Default::default()
     };
     let pipeline = spv::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".into() };
-    spv::write_vec(&module, &info, &options, Some(&pipeline)).map_err(|e| format!("{what}: SPIR-V output: {e}"))
+    let words =
+        spv::write_vec(&module, &info, &options, Some(&pipeline)).map_err(|e| format!("{what}: SPIR-V output: {e}"))?;
+    match fragment_shape(params).filter(|_| cooperative) {
+        Some(shape) => shape_fragments(&words, shape).map_err(|e| format!("{what}: fragment shapes: {e}")),
+        None if cooperative => Err(format!("{what}: a cooperative kernel needs the parameters FM, FN and FK")),
+        None => Ok(words),
+    }
 }

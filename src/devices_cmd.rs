@@ -28,8 +28,12 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
     let gpu_paths = gpu_paths_requested();
     let gemm = match (d.gemm_family(gpu_paths), d.gemm_subgroup_width(), d.cooperative_variant()) {
         (GemmFamily::Subgroup, Some(lanes), _) => format!("subgroup-register, {lanes} lanes (CPU)"),
-        (GemmFamily::Cooperative, _, Some((size, lanes))) => {
-            format!("matrix units, {size}×{size}×{size} f16→f32 fragments, {lanes} lanes (f32 products: shared-memory tiles)")
+        (GemmFamily::Cooperative, _, Some(f)) => {
+            format!(
+                "matrix units, {} f16→f32 fragments, {} lanes (f32 products: shared-memory tiles)",
+                f.shape(),
+                f.lanes
+            )
         }
         _ => "shared-memory tiles (GPU)".into(),
     };
@@ -97,15 +101,24 @@ fn matrix_units(d: &DeviceInfo) -> String {
         return "no (VK_KHR_cooperative_matrix not offered)".into();
     }
     let shapes: Vec<String> = d.matrix_shapes.iter().map(|s| s.label()).collect();
+    let flexible: Vec<String> = d.flexible_shapes.iter().map(|s| s.label()).collect();
+    let flexible = if flexible.is_empty() {
+        String::new()
+    } else {
+        format!("; flexible dimensions (VK_NV_cooperative_matrix2) in multiples of {}", flexible.join(", "))
+    };
     let verdict = match d.cooperative_variant() {
-        Some((size, lanes)) => format!("vkdiff's {size}×{size} variant at {lanes} lanes fits"),
+        Some(f) if f.flexible => {
+            format!("vkdiff's {} variant at {} lanes runs through flexible dimensions", f.shape(), f.lanes)
+        }
+        Some(f) => format!("vkdiff's {} variant at {} lanes fits", f.shape(), f.lanes),
         None if !d.cooperative_features => "not usable: no cooperativeMatrix or vulkanMemoryModel feature".into(),
         None => format!(
             "no vkdiff variant fits them (f16·f16+f32 at subgroup scope, {}): f16 products take the tiled kernels",
             built_cooperative_variants()
         ),
     };
-    format!("{}; {verdict}", shapes.join(", "))
+    format!("{}{flexible}; {verdict}", shapes.join(", "))
 }
 
 pub fn run(args: &DevicesArgs) -> Result<()> {
@@ -122,7 +135,8 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
                     "f16": d.supports_f16(), "subgroup_size": d.subgroup_size,
                     "subgroup_size_range": d.subgroup_size_range,
                     "cooperative_matrix_shapes": d.matrix_shapes.iter().map(|s| s.label()).collect::<Vec<_>>(),
-                    "cooperative_variant": d.cooperative_variant(), "device_memory_bytes": d.device_local_bytes,
+                    "cooperative_variant": d.cooperative_variant().map(|f| serde_json::json!({
+                        "m": f.m, "n": f.n, "k": f.k, "lanes": f.lanes, "flexible_dimensions": f.flexible })), "device_memory_bytes": d.device_local_bytes,
                     "max_storage_buffer_range": d.max_storage_buffer_range, "usable": d.unsupported_reason().is_none(),
                     "unusable_reason": d.unsupported_reason(), "selected": chosen == Some(d.index), "quick_compile": d.quick_compile(gpu_paths),
                     "uuid": d.uuid_text(), "pci": d.pci.map(|p| p.to_string()),

@@ -128,9 +128,9 @@ fn linear_geglu_case(ctx: &Context, dtype: Dtype, fused: bool) -> vkdiff_runtime
 /// The matrix units' ceiling on this device (kernels/wgsl/coop_ceiling.wgsl): sized to keep a
 /// GPU busy for milliseconds, and a CPU device (lavapipe, emulating them) for far less.
 fn ceiling_run(ctx: &Context, from_shared: bool) -> Option<MatrixCeiling> {
-    let (cm, _) = ctx.info().cooperative_variant()?;
+    let fragment = ctx.info().cooperative_variant()?;
     let (groups, reps) = if ctx.info().kind == DeviceKind::Cpu { (16, 64) } else { (2048, 4096) };
-    Some(MatrixCeiling { fragment: cm as usize, groups, reps, step: 1, from_shared })
+    Some(MatrixCeiling { fragment, groups, reps, step: 1, from_shared })
 }
 
 /// The ceiling's two rows, where the products run on the matrix units.
@@ -140,11 +140,11 @@ fn ceiling_cases(ctx: &Context) -> vkdiff_runtime::Result<Vec<Case>> {
         let Some(run) = ceiling_run(ctx, from_shared).filter(|_| ctx.gemm_family() == GemmFamily::Cooperative) else {
             break;
         };
-        let cm = run.fragment;
         cases.push(Case {
             name: "matrix-unit ceiling",
             shape: format!(
-                "{cm}x{cm}, {}",
+                "{}, {}",
+                run.fragment.shape(),
                 if from_shared { "from workgroup memory" } else { "operands in registers" }
             ),
             work: Work::Flops(run.flops()),

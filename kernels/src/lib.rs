@@ -90,6 +90,43 @@ mod compile_tests {
         assert_eq!(unroll_count("CM/0", &params), None);
     }
 
+    /// (rows, columns, use) of each cooperative matrix type in `words`.
+    fn fragment_types(words: &[u32]) -> Vec<(u32, u32, u32)> {
+        let (mut constants, mut types, mut at) = (Vec::new(), Vec::new(), 5);
+        while at < words.len() {
+            let count = (words[at] >> 16) as usize;
+            let inst = &words[at..at + count];
+            let value = |id: u32| constants.iter().find(|(c, _)| *c == id).map(|(_, v)| *v).unwrap();
+            match words[at] & 0xffff {
+                43 => constants.push((inst[2], inst[3])),
+                4456 => types.push((value(inst[4]), value(inst[5]), value(inst[6]))),
+                _ => {}
+            }
+            at += count;
+        }
+        types
+    }
+
+    #[test]
+    fn fragments_take_the_variants_shape_by_use() {
+        let body = "var<workgroup> w: array<vec4<f16>, 64>;\n@compute @workgroup_size(SG)\nfn main() {\n    \
+            let a = coopLoadT<FA>(&w[0], 4u);\n    let b = coopLoad<FB>(&w[0], 4u);\n    var c: FC;\n    \
+            c = coopMultiplyAdd(a, b, c);\n}\n";
+        let params = [("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16)];
+        let src = Source::new(&prelude(true, &params, true), &[("k.wgsl".into(), body.into())]);
+        let words = compile(src, &params, true, "kernel `t`").unwrap();
+        let mut types = fragment_types(&words);
+        types.sort_by_key(|t| t.2);
+        assert_eq!(types, [(8, 16, 0), (16, 16, 1), (8, 16, 2)], "A 8×16, B 16×16, C 8×16");
+        let square = [("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8)];
+        let src = Source::new(&prelude(true, &square, true), &[("k.wgsl".into(), body.into())]);
+        let words = compile(src, &square, true, "kernel `t`").unwrap();
+        assert!(fragment_types(&words).iter().all(|&(r, c, _)| (r, c) == (8, 8)));
+        let src = Source::new(&prelude(true, &[("SG", 8)], true), &[("k.wgsl".into(), body.into())]);
+        let err = compile(src, &[("SG", 8)], true, "kernel `t`").unwrap_err();
+        assert!(err.contains("needs the parameters FM, FN and FK"), "{err}");
+    }
+
     #[test]
     fn a_valid_kernel_compiles_to_spirv() {
         let words = compile(one_file("@compute @workgroup_size(N)\nfn main() {}\n"), &[], false, "kernel `t`").unwrap();

@@ -184,45 +184,61 @@ pub const KERNELS: &[KernelSpec] = &[
 /// Kernels on the device's matrix units (`VK_KHR_cooperative_matrix`), compiled in f16 only:
 /// their operands are f16, so f32 products keep the scalar kernels' precision by not using
 /// them. The GEMM and convolution read vec4-aligned operands (others take the tiled kernels).
-/// CM = fragment size (8: lavapipe's 8×8×8; 16: the 16×16×16 NVIDIA and AMD list), SG = the
+/// FM×FN×FK = the fragment shape, A (FM×FK) · B (FK×FN) + C (FM×FN): 16×16×16, what NVIDIA and
+/// AMD list; Intel's 8×16×16 (Xe2, 16 lanes) and 8×8×16 (Xe-HPG, 8 lanes); lavapipe's 8×8×8.
+/// naga 30 spells only square fragments, so the build gives each its shape in the SPIR-V
+/// (compile.rs). 8×16×16 is also built at 8 lanes: lavapipe runs it there through
+/// `VK_NV_cooperative_matrix2`'s flexible dimensions, so CI proves the source Intel's 16-lane
+/// variant is built from, as its 8×8×8 proves the 16×16×16 one. SG = the
 /// subgroup width the workgroup's four subgroups are pinned to, WT = fragments per side of a
 /// subgroup's tile (4 for products large enough to fill a GPU with the larger tiles, where the
-/// sums fit a lane's registers), KS = fragments per K-step: 4 for products, 2 for convolutions
+/// sums fit a lane's registers; built for the square fragments only), KS = fragments per
+/// K-step: 4 for products, 2 for convolutions
 /// (H200, measured: the convolution's tap arithmetic makes its K-step of four a third more
-/// registers, 176 against 130, and it ran 1.12× slower in the UNet; products 1.3× faster). Intel's
-/// 8×16×16 has no naga type (naga 30 spells only square 8×8 and 16×16 fragments), so Intel
-/// takes the tiled kernels.
+/// registers, 176 against 130, and it ran 1.12× slower in the UNet; products 1.3× faster).
 pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
     KernelSpec {
         name: "gemm_coop",
         files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "gemm_store4.wgsl", "gemm_coop.wgsl"],
         params: &[
-            &[("CM", 8), ("SG", 8), ("WT", 2), ("BT", 0), ("GE", 0), ("KS", 4)],
-            &[("CM", 8), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 4)],
-            &[("CM", 8), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 1), ("KS", 4)],
-            &[("CM", 8), ("SG", 8), ("WT", 4), ("BT", 0), ("GE", 0), ("KS", 4)],
-            &[("CM", 8), ("SG", 8), ("WT", 4), ("BT", 1), ("GE", 0), ("KS", 4)],
-            &[("CM", 8), ("SG", 8), ("WT", 4), ("BT", 1), ("GE", 1), ("KS", 4)],
-            &[("CM", 16), ("SG", 32), ("WT", 2), ("BT", 0), ("GE", 0), ("KS", 4)],
-            &[("CM", 16), ("SG", 32), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 4)],
-            &[("CM", 16), ("SG", 32), ("WT", 2), ("BT", 1), ("GE", 1), ("KS", 4)],
-            &[("CM", 16), ("SG", 64), ("WT", 2), ("BT", 0), ("GE", 0), ("KS", 4)],
-            &[("CM", 16), ("SG", 64), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 4)],
-            &[("CM", 16), ("SG", 64), ("WT", 2), ("BT", 1), ("GE", 1), ("KS", 4)],
-            &[("CM", 16), ("SG", 64), ("WT", 4), ("BT", 0), ("GE", 0), ("KS", 4)],
-            &[("CM", 16), ("SG", 64), ("WT", 4), ("BT", 1), ("GE", 0), ("KS", 4)],
-            &[("CM", 16), ("SG", 64), ("WT", 4), ("BT", 1), ("GE", 1), ("KS", 4)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 2), ("BT", 0), ("GE", 0), ("KS", 4)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 4)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 1), ("KS", 4)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 4), ("BT", 0), ("GE", 0), ("KS", 4)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 4), ("BT", 1), ("GE", 0), ("KS", 4)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 4), ("BT", 1), ("GE", 1), ("KS", 4)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 32), ("WT", 2), ("BT", 0), ("GE", 0), ("KS", 4)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 32), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 4)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 32), ("WT", 2), ("BT", 1), ("GE", 1), ("KS", 4)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("WT", 2), ("BT", 0), ("GE", 0), ("KS", 4)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 4)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("WT", 2), ("BT", 1), ("GE", 1), ("KS", 4)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("WT", 4), ("BT", 0), ("GE", 0), ("KS", 4)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("WT", 4), ("BT", 1), ("GE", 0), ("KS", 4)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("WT", 4), ("BT", 1), ("GE", 1), ("KS", 4)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16), ("WT", 2), ("BT", 0), ("GE", 0), ("KS", 4)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 4)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16), ("WT", 2), ("BT", 1), ("GE", 1), ("KS", 4)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 8), ("WT", 2), ("BT", 0), ("GE", 0), ("KS", 4)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 4)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 1), ("KS", 4)],
+            &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("WT", 2), ("BT", 0), ("GE", 0), ("KS", 4)],
+            &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 4)],
+            &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 1), ("KS", 4)],
         ],
     },
     KernelSpec {
         name: "conv_coop",
         files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "gemm_store4.wgsl", "gemm_coop.wgsl"],
         params: &[
-            &[("CM", 8), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 2)],
-            &[("CM", 8), ("SG", 8), ("WT", 4), ("BT", 1), ("GE", 0), ("KS", 2)],
-            &[("CM", 16), ("SG", 32), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 2)],
-            &[("CM", 16), ("SG", 64), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 2)],
-            &[("CM", 16), ("SG", 64), ("WT", 4), ("BT", 1), ("GE", 0), ("KS", 2)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 2)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 4), ("BT", 1), ("GE", 0), ("KS", 2)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 32), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 2)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 2)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("WT", 4), ("BT", 1), ("GE", 0), ("KS", 2)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 2)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 2)],
+            &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 2)],
         ],
     },
     // The matrix units' rate with no device memory in the loop, for `bench kernels`: SRC = 0
@@ -231,24 +247,34 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
         name: "coop_ceiling",
         files: &["coop_ceiling.wgsl"],
         params: &[
-            &[("CM", 8), ("SG", 8), ("SRC", 0)],
-            &[("CM", 8), ("SG", 8), ("SRC", 1)],
-            &[("CM", 16), ("SG", 32), ("SRC", 0)],
-            &[("CM", 16), ("SG", 32), ("SRC", 1)],
-            &[("CM", 16), ("SG", 64), ("SRC", 0)],
-            &[("CM", 16), ("SG", 64), ("SRC", 1)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("SRC", 0)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("SRC", 1)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 32), ("SRC", 0)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 32), ("SRC", 1)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("SRC", 0)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("SRC", 1)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16), ("SRC", 0)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16), ("SRC", 1)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 8), ("SRC", 0)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 8), ("SRC", 1)],
+            &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("SRC", 0)],
+            &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("SRC", 1)],
         ],
     },
     // Attention with both products on the matrix units, heads of up to DH = 64 (SDXL's, CLIP's);
-    // wider heads take attention_rows. KF = key fragments per chunk, LPR = lanes per row in the
-    // softmax (SG/CM on GPUs; 2 on lavapipe, so that its two passes test the joined softmax).
+    // wider heads take attention_rows. KF = FN-wide key fragments per chunk, LPR = lanes per row
+    // in the softmax (SG/FM on GPUs; 2 at 8 lanes, so that lavapipe's two passes test the
+    // joined softmax).
     KernelSpec {
         name: "attention_coop",
         files: &["attention_common.wgsl", "attention_coop.wgsl"],
         params: &[
-            &[("CM", 8), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2)],
-            &[("CM", 16), ("SG", 32), ("DH", 64), ("KF", 4), ("LPR", 2)],
-            &[("CM", 16), ("SG", 64), ("DH", 64), ("KF", 4), ("LPR", 4)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 32), ("DH", 64), ("KF", 4), ("LPR", 2)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("DH", 64), ("KF", 4), ("LPR", 4)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16), ("DH", 64), ("KF", 4), ("LPR", 2)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2)],
+            &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2)],
         ],
     },
 ];

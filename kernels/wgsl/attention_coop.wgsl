@@ -1,13 +1,15 @@
 // Fused multi-head attention on the device's matrix units (VK_KHR_cooperative_matrix), heads of
-// up to DH values: a workgroup of 4 subgroups takes 4·CM query rows of one head, CM rows per
+// up to DH values: a workgroup of 4 subgroups takes 4·FM query rows of one head, FM rows per
 // subgroup, with the rows' Q fragments and output accumulators held in the matrix registers.
-// Per chunk of KC = KF·CM keys, staged with their values in workgroup memory as f16 (loaded
+// Fragments are the prelude's: Q·Kᵀ takes Q as FM×FK A fragments along the head and Kᵀ as
+// FK×FN B fragments along the keys; P·V takes P as FM×FK A fragments along the keys and V as
+// FK×FN B fragments along the head. Per chunk of KC = KF·FN keys, staged with their values in workgroup memory as f16 (loaded
 // into registers while the chunk before is computed, so the loads' latency hides), each
 // subgroup computes its scores S = (scale·Q)·Kᵀ into its own scratch (f32 accumulation; the
 // scale is folded into Q before its rounding to f16, exact for SDXL's 1/8). LPR lanes share a
 // row and run its online softmax in base 2 over the scores held in registers, joined by
-// shuffles, writing P as f16, SG/LPR rows at a time (on GPUs LPR = SG/CM: every lane in one
-// pass; lavapipe's variant takes two passes of LPR = 2, so CI runs the joined softmax that GPUs
+// shuffles, writing P as f16, SG/LPR rows at a time (on GPUs LPR = SG/FM: every lane in one
+// pass; lavapipe's variants take two passes of LPR = 2, so CI runs the joined softmax that GPUs
 // do); the matrix units then add P·V to the accumulators. The powers are taken against a
 // per-row reference that moves only when a chunk's maximum passes it by more than LAZY, so P
 // stays under 2^LAZY (well inside f16) and
@@ -16,13 +18,13 @@
 // from then on. Workgroup memory is held as vec4s (four f16 or f32 per access; cooperative
 // loads and stores then count strides in vec4s), and a lane's keys in the softmax are
 // contiguous, so each of its shared accesses moves four values. Operands: attention_common.wgsl.
-const KC: u32 = KF * CM; // keys per chunk
-const ROWS: u32 = 4u * CM; // query rows per workgroup (≤ 2·KC: Q is staged where K and V go)
+const KC: u32 = KF * FN; // keys per chunk (a multiple of FK)
+const ROWS: u32 = 4u * FM; // query rows per workgroup (≤ 2·KC: Q is staged where K and V go)
 const WG: u32 = 4u * SG;
 const SLOTS: u32 = DH / 4u;
-const NB: u32 = DH / CM; // fragments along a head
-const RPP: u32 = SG / LPR; // rows per pass of the softmax (LPR lanes a row; RPP divides CM)
-const PK: u32 = KC / LPR; // a lane's keys per chunk, PK/4 vec4s (the `#unroll I KF*CM/LPR/4`)
+const NB: u32 = DH / FN; // output fragments along a head
+const RPP: u32 = SG / LPR; // rows per pass of the softmax (LPR lanes a row; RPP divides FM)
+const PK: u32 = KC / LPR; // a lane's keys per chunk, PK/4 vec4s (the `#unroll I KF*FN/LPR/4`)
 const PU: u32 = KC * SLOTS / WG; // a chunk's K (and V) units per invocation
 const LAZY: f32 = 11.0;
 const LOG2E: f32 = 1.4426950408889634;
@@ -56,7 +58,7 @@ fn fetch_kv(
     batch: u32,
 ) {
     let slots = p.d / 4u;
-    // #unroll U KF*CM*DH/SG/16
+    // #unroll U KF*FN*DH/SG/16
     {
         let i = t + WG * U;
         let s = i % SLOTS;
@@ -109,7 +111,7 @@ fn main(
     let row0 = wg.x * ROWS;
     let slots = p.d / 4u;
     // This subgroup's rows start at `mine` in the workgroup's tile (and in `scratch`).
-    let mine = sid * CM;
+    let mine = sid * FM;
     let part = lane % LPR;
     // The first chunk's keys and values are loaded while Q is staged.
     var rk: array<vec4<f16>, PU>;
@@ -128,17 +130,17 @@ fn main(
         row_sum[t] = 0.0;
     }
     workgroupBarrier();
-    var qf: array<FA, NB>;
-    // #unroll B DH/CM
+    var qf: array<FA, DH / FK>;
+    // #unroll B DH/FK
     {
-        let at = (mine * LD + B * CM) / 4u;
+        let at = (mine * LD + B * FK) / 4u;
         qf[B] = coopLoadT<FA>(&kv[at], LD / 4u);
     }
     // #end
     var acc: array<FC, NB>;
     workgroupBarrier();
     for (var j0 = 0u; j0 < p.nk; j0 += KC) {
-        // #unroll U KF*CM*DH/SG/16
+        // #unroll U KF*FN*DH/SG/16
         {
             let i = t + WG * U;
             kv[(i / SLOTS) * (LD / 4u) + i % SLOTS] = rk[U];
@@ -153,20 +155,20 @@ fn main(
         // #unroll J KF
         {
             var sf: FC;
-            // #unroll B DH/CM
+            // #unroll B DH/FK
             {
-                let at = (J * CM * LD + B * CM) / 4u;
+                let at = (J * FN * LD + B * FK) / 4u;
                 sf = coopMultiplyAdd(qf[B], coopLoad<FB>(&kv[at], LD / 4u), sf);
             }
             // #end
-            let st = (mine * LS + J * CM) / 4u;
+            let st = (mine * LS + J * FN) / 4u;
             coopStoreT(sf, &scratch[st], LS / 4u);
         }
         // #end
         workgroupBarrier();
         // The softmax of this subgroup's rows, RPP rows at a time.
         var any_moved = false;
-        for (var r0 = 0u; r0 < CM; r0 += RPP) {
+        for (var r0 = 0u; r0 < FM; r0 += RPP) {
             let moved_here = chunk_softmax(mine + r0 + lane / LPR, row0, j0, part);
             any_moved = any_moved || moved_here;
         }
@@ -180,17 +182,17 @@ fn main(
             rescale(&acc, mine, lane);
         }
         // O += P·V, one fragment of the head at a time.
-        var pf: array<FA, KF>;
-        // #unroll J KF
+        var pf: array<FA, KC / FK>;
+        // #unroll J KF*FN/FK
         {
-            let pt = (mine * LP + J * CM) / 4u;
+            let pt = (mine * LP + J * FK) / 4u;
             pf[J] = coopLoadT<FA>(&probs[pt], LP / 4u);
         }
         // #end
-        // #unroll B DH/CM
-        // #unroll J KF
+        // #unroll B DH/FN
+        // #unroll J KF*FN/FK
         {
-            let vt = ((KC + J * CM) * LD + B * CM) / 4u;
+            let vt = ((KC + J * FK) * LD + B * FN) / 4u;
             acc[B] = coopMultiplyAdd(pf[J], coopLoadT<FB>(&kv[vt], LD / 4u), acc[B]);
         }
         // #end
@@ -199,14 +201,14 @@ fn main(
         workgroupBarrier();
     }
     // The output rows through this subgroup's scratch, divided by their sums.
-    // #unroll B DH/CM
+    // #unroll B DH/FN
     {
-        let ot = (mine * LS + B * CM) / 4u;
+        let ot = (mine * LS + B * FN) / 4u;
         coopStoreT(acc[B], &scratch[ot], LS / 4u);
     }
     // #end
     workgroupBarrier();
-    for (var i = lane; i < CM * SLOTS; i += SG) {
+    for (var i = lane; i < FM * SLOTS; i += SG) {
         let r = mine + i / SLOTS;
         let s = i % SLOTS;
         let query = row0 + r;
@@ -225,7 +227,7 @@ fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32) -> bool {
     let first = part * PK;
     var sv: array<vec4<f32>, PK / 4u>;
     var top = NEG;
-    // #unroll I KF*CM/LPR/4
+    // #unroll I KF*FN/LPR/4
     sv[I] = LOG2E * scores(row, query, j0, first + 4u * I);
     top = max(top, max4(sv[I]));
     // #end
@@ -233,7 +235,7 @@ fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32) -> bool {
     let old = row_ref[row];
     let now = select(old, top, top > old + LAZY);
     var sum = 0.0;
-    // #unroll I KF*CM/LPR/4
+    // #unroll I KF*FN/LPR/4
     {
         // The weights P·V uses: rounded to f16, summed as rounded.
         let w = vec4<f16>(exp2(sv[I] - now));
@@ -254,21 +256,21 @@ fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32) -> bool {
 
 // Multiplies each of this subgroup's output rows by its row_scale, through its scratch rows.
 fn rescale(acc: ptr<function, array<FC, NB>>, mine: u32, lane: u32) {
-    // #unroll B DH/CM
+    // #unroll B DH/FN
     {
-        let ot = (mine * LS + B * CM) / 4u;
+        let ot = (mine * LS + B * FN) / 4u;
         coopStoreT((*acc)[B], &scratch[ot], LS / 4u);
     }
     // #end
     workgroupBarrier();
-    for (var i = lane; i < CM * SLOTS; i += SG) {
+    for (var i = lane; i < FM * SLOTS; i += SG) {
         let r = mine + i / SLOTS;
         scratch[r * (LS / 4u) + i % SLOTS] *= row_scale[r];
     }
     workgroupBarrier();
-    // #unroll B DH/CM
+    // #unroll B DH/FN
     {
-        let ot = (mine * LS + B * CM) / 4u;
+        let ot = (mine * LS + B * FN) / 4u;
         (*acc)[B] = coopLoadT<FC>(&scratch[ot], LS / 4u);
     }
     // #end

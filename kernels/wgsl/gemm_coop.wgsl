@@ -1,7 +1,8 @@
 // GEMM core on the device's matrix units (VK_KHR_cooperative_matrix): f16 operands, f32
 // accumulation. A workgroup is 4 subgroups of SG lanes in a 2×2 grid, each computing WT×WT
-// fragments of CM×CM (the prelude's FA, FB, FC types), so a workgroup's tile is BM×BM with
-// BM = 2·WT·CM, over K-steps of BK = KS·CM. Operands are vec4-aligned (the runtime sends other
+// fragments of FM×FN (A fragments FM×FK, B fragments FK×FN: the prelude's FA, FB, FC types), so
+// a workgroup's tile is BM×BN with BM = 2·WT·FM and BN = 2·WT·FN, over K-steps of BK = KS·FK.
+// Operands are vec4-aligned (the runtime sends other
 // shapes to the tiled kernel): each invocation stages units of four f16 along K (A, and B
 // stored N×K) or along N (B stored K×N), one load each, zero past M, N and K. The next step's
 // units are loaded into registers while the matrix units work on this one, so the loads'
@@ -14,24 +15,26 @@
 // against bank conflicts.
 @group(0) @binding(1) var<storage, read> b: array<vec4<S>>;
 
-const BM: u32 = 2u * WT * CM;
+const BM: u32 = 2u * WT * FM;
+const BN: u32 = 2u * WT * FN;
 const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): 4 values, then their 4 gates
-const BK: u32 = KS * CM;
+const BK: u32 = KS * FK;
 const WG: u32 = 4u * SG;
-const LDA: u32 = BK + 8u; // A tile [BM][LDA]; B tile [BM][LDA] (BT = 1) or [BK][LDB] (BT = 0)
-const LDB: u32 = BM + 8u;
-const LDS: u32 = CM + 4u; // a subgroup's f32 scratch [CM][LDS]
-// Units along a tile row of K, units per invocation (WT·CM²·KS/SG/8, the unroll count below), and
+const LDA: u32 = BK + 8u; // A tile [BM][LDA]; B tile [BN][LDA] (BT = 1) or [BK][LDB] (BT = 0)
+const LDB: u32 = BN + 8u;
+const LDS: u32 = FN + 4u; // a subgroup's f32 scratch [FM][LDS]
+// Units along a tile row of K, A's and B's units per invocation (the unroll counts below), and
 // the tile rows between an invocation's units (WG is a multiple of UK in every variant).
 const UK: u32 = BK / 4u;
-const PER: u32 = BM * BK / (4u * WG);
+const PA: u32 = BM * BK / (4u * WG); // WT·FM·FK·KS/SG/8
+const PB: u32 = BN * BK / (4u * WG); // WT·FN·FK·KS/SG/8
 const STEP: u32 = WG / UK;
 // B stored K×N: units along a tile row of N.
-const UN: u32 = BM / 4u;
+const UN: u32 = BN / 4u;
 
 var<workgroup> a_tile: array<vec4<f16>, BM * LDA / 4u>;
-var<workgroup> b_tile: array<vec4<f16>, BM * LDA / 4u>; // ≥ BK·LDB, as BM ≥ KS·CM
-var<workgroup> scratch: array<vec4<f32>, CM * LDS>; // 4 subgroups × [CM][LDS] f32
+var<workgroup> b_tile: array<vec4<f16>, max(BN * LDA, BK * LDB) / 4u>;
+var<workgroup> scratch: array<vec4<f32>, FM * LDS>; // 4 subgroups × [FM][LDS] f32
 
 fn b_unit(boff: u32, k: u32, n: u32) -> vec4<f16> {
     if k >= p.g.k || n >= p.g.n {
@@ -44,11 +47,11 @@ fn b_unit(boff: u32, k: u32, n: u32) -> vec4<f16> {
 }
 
 // This invocation's units of the K-step at k0: A rows tr + STEP·i at k0 + 4·tu, and B's rows
-// alike (BT = 1) or its units t + WG·i of the [BK][BM] step (BT = 0).
+// alike (BT = 1) or its units t + WG·i of the [BK][BN] step (BT = 0).
 fn fetch(
-    rows: ptr<function, array<RowCtx, PER>>,
-    ra: ptr<function, array<vec4<f16>, PER>>,
-    rb: ptr<function, array<vec4<f16>, PER>>,
+    rows: ptr<function, array<RowCtx, PA>>,
+    ra: ptr<function, array<vec4<f16>, PA>>,
+    rb: ptr<function, array<vec4<f16>, PB>>,
     k0: u32,
     t: u32,
     col0: u32,
@@ -58,8 +61,10 @@ fn fetch(
     let tr = t / UK;
     let ka = k0 + 4u * tu;
     let kc = k_ctx(ka);
-    // #unroll I WT*CM*CM*KS/SG/8
+    // #unroll I WT*FM*FK*KS/SG/8
     (*ra)[I] = select(vec4<f16>(), vec4<f16>(load_a((*rows)[I], kc)), ka < p.g.k);
+    // #end
+    // #unroll I WT*FN*FK*KS/SG/8
     if BT == 1u {
         (*rb)[I] = b_unit(boff, ka, col0 + tr + STEP * I);
     } else {
@@ -77,25 +82,27 @@ fn main(
     @builtin(subgroup_invocation_id) lane: u32,
 ) {
     let row0 = wg.y * BM;
-    let col0 = wg.x * BM;
+    let col0 = wg.x * BN;
     let batch = wg.z;
     let boff = batch * p.g.b_batch;
     // This subgroup's fragments start at row sm, column sn of the tile.
-    let sm = (sid / 2u) * WT * CM;
-    let sn = (sid % 2u) * WT * CM;
+    let sm = (sid / 2u) * WT * FM;
+    let sn = (sid % 2u) * WT * FN;
     let tu = t % UK;
     let tr = t / UK;
-    var rows: array<RowCtx, PER>;
-    // #unroll I WT*CM*CM*KS/SG/8
+    var rows: array<RowCtx, PA>;
+    // #unroll I WT*FM*FK*KS/SG/8
     rows[I] = row_ctx(batch, row0 + tr + STEP * I);
     // #end
-    var ra: array<vec4<f16>, PER>;
-    var rb: array<vec4<f16>, PER>;
+    var ra: array<vec4<f16>, PA>;
+    var rb: array<vec4<f16>, PB>;
     fetch(&rows, &ra, &rb, 0u, t, col0, boff);
     var acc: array<FC, WT * WT>;
     for (var k0 = 0u; k0 < p.g.k; k0 += BK) {
-        // #unroll I WT*CM*CM*KS/SG/8
+        // #unroll I WT*FM*FK*KS/SG/8
         a_tile[(tr + STEP * I) * (LDA / 4u) + tu] = ra[I];
+        // #end
+        // #unroll I WT*FN*FK*KS/SG/8
         if BT == 1u {
             b_tile[(tr + STEP * I) * (LDA / 4u) + tu] = rb[I];
         } else {
@@ -107,19 +114,19 @@ fn main(
         if k0 + BK < p.g.k {
             fetch(&rows, &ra, &rb, k0 + BK, t, col0, boff);
         }
-        for (var kk = 0u; kk < BK; kk += CM) {
+        for (var kk = 0u; kk < BK; kk += FK) {
             var fa: array<FA, WT>;
             var fb: array<FB, WT>;
             // #unroll I WT
             {
                 // Offsets bound to a `let`: naga 30's SPIR-V output panics on inline ones here.
-                let at = ((sm + I * CM) * LDA + kk) / 4u;
+                let at = ((sm + I * FM) * LDA + kk) / 4u;
                 fa[I] = coopLoadT<FA>(&a_tile[at], LDA / 4u);
                 if BT == 1u {
-                    let bt = ((sn + I * CM) * LDA + kk) / 4u;
+                    let bt = ((sn + I * FN) * LDA + kk) / 4u;
                     fb[I] = coopLoad<FB>(&b_tile[bt], LDA / 4u);
                 } else {
-                    let bt = (kk * LDB + sn + I * CM) / 4u;
+                    let bt = (kk * LDB + sn + I * FN) / 4u;
                     fb[I] = coopLoadT<FB>(&b_tile[bt], LDB / 4u);
                 }
             }
@@ -134,24 +141,24 @@ fn main(
     }
     // One fragment at a time through this subgroup's scratch; every subgroup takes the same
     // number of steps, so the workgroup barriers between them are uniform.
-    let own = sid * CM * LDS / 4u;
+    let own = sid * FM * LDS / 4u;
     // #unroll I WT
     // #unroll J WT
     {
         coopStoreT(acc[WT * I + J], &scratch[own], LDS / 4u);
         workgroupBarrier();
         if GE == 1u {
-            for (var e = lane; e < CM * CM / 8u; e += SG) {
-                let r = e / (CM / 8u);
-                let at = own + r * (LDS / 4u) + 2u * (e % (CM / 8u));
-                let col = col0 + sn + J * CM + 8u * (e % (CM / 8u));
-                store_geglu4(batch, row0 + sm + I * CM + r, col, scratch[at], scratch[at + 1u]);
+            for (var e = lane; e < FM * FN / 8u; e += SG) {
+                let r = e / (FN / 8u);
+                let at = own + r * (LDS / 4u) + 2u * (e % (FN / 8u));
+                let col = col0 + sn + J * FN + 8u * (e % (FN / 8u));
+                store_geglu4(batch, row0 + sm + I * FM + r, col, scratch[at], scratch[at + 1u]);
             }
         } else {
-            for (var e = lane; e < CM * CM / 4u; e += SG) {
-                let r = e / (CM / 4u);
-                let sum = scratch[own + r * (LDS / 4u) + e % (CM / 4u)];
-                store4(batch, row0 + sm + I * CM + r, col0 + sn + J * CM + 4u * (e % (CM / 4u)), sum);
+            for (var e = lane; e < FM * FN / 4u; e += SG) {
+                let r = e / (FN / 4u);
+                let sum = scratch[own + r * (LDS / 4u) + e % (FN / 4u)];
+                store4(batch, row0 + sm + I * FM + r, col0 + sn + J * FN + 4u * (e % (FN / 4u)), sum);
             }
         }
         workgroupBarrier();

@@ -3,6 +3,7 @@
 use crate::device::{self, DeviceInfo, DeviceKind};
 use crate::device_choice::{choose, DeviceChoice};
 use crate::error::{Error, Result, VkContext};
+use crate::matrix_units::{self, CooperativeMatrix2Features};
 use crate::pipeline::{Kernel, PipelineCache};
 use crate::submit_budget::SubmitBudget;
 use crate::validation::Validation;
@@ -116,6 +117,23 @@ pub(crate) struct Shared {
     pub(crate) memory_budget_extension: bool,
 }
 
+/// `VKDIFF_FRAGMENT`, where set: a shape vkdiff builds that this device's matrix units take.
+fn check_requested_fragment(info: &DeviceInfo) -> Result<()> {
+    let Some((m, n, k)) = matrix_units::requested_fragment()? else { return Ok(()) };
+    if info.cooperative_variant().is_some() {
+        return Ok(());
+    }
+    let listed: Vec<String> = info.matrix_shapes.iter().map(|s| s.label()).collect();
+    let flexible: Vec<String> = info.flexible_shapes.iter().map(|s| s.label()).collect();
+    Err(Error::BadSetting(format!(
+        "VKDIFF_FRAGMENT={m}x{n}x{k}: `{}` does not take it at a subgroup width vkdiff builds it for (it lists: {}; \
+         flexible dimensions: {})",
+        info.name,
+        if listed.is_empty() { "none".into() } else { listed.join(", ") },
+        if flexible.is_empty() { "none".into() } else { flexible.join(", ") }
+    )))
+}
+
 /// Whether kernels' statistics are asked for and the device can report them.
 fn capture_statistics(info: &DeviceInfo) -> bool {
     info.pipeline_statistics && crate::pipeline_stats::requested()
@@ -187,6 +205,7 @@ impl Context {
         let info = infos[index].clone();
         let pd = pds[index];
         let family = info.compute_queue_family.expect("checked by choose");
+        check_requested_fragment(&info)?;
         // Every feature the kernels' SPIR-V declares, where the device has it.
         let mut f11 = vk::PhysicalDeviceVulkan11Features::default()
             .storage_buffer16_bit_access(info.storage_16bit)
@@ -195,6 +214,7 @@ impl Context {
             .shader_float16(info.shader_f16)
             .vulkan_memory_model(info.cooperative_features);
         let mut cooperative = vk::PhysicalDeviceCooperativeMatrixFeaturesKHR::default().cooperative_matrix(true);
+        let mut flexible = CooperativeMatrix2Features::new(true);
         let size_control = info.subgroup_size_range.is_some();
         let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
             .subgroup_size_control(size_control)
@@ -228,6 +248,10 @@ impl Context {
         if info.cooperative_features {
             extensions.push(ash::khr::cooperative_matrix::NAME.as_ptr());
             create = create.push_next(&mut cooperative);
+        }
+        if info.cooperative_variant().is_some_and(|f| f.flexible) {
+            extensions.push(CooperativeMatrix2Features::EXTENSION.as_ptr());
+            create = create.push_next(&mut flexible);
         }
         if info.memory_budget {
             extensions.push(ash::ext::memory_budget::NAME.as_ptr());

@@ -2,7 +2,7 @@
 
 use crate::device_choice::PciAddress;
 use crate::error::{Error, Result, VkContext};
-use crate::matrix_units::{self, MatrixShape};
+use crate::matrix_units::{self, CooperativeMatrix2Features, Fragment, MatrixShape};
 use crate::validation::Validation;
 use ash::vk;
 use std::ffi::CStr;
@@ -69,6 +69,9 @@ pub struct DeviceInfo {
     pub subgroup_arithmetic: bool,
     /// The product shapes `VK_KHR_cooperative_matrix` lists (empty without it).
     pub matrix_shapes: Vec<MatrixShape>,
+    /// With `VK_NV_cooperative_matrix2`'s `cooperativeMatrixFlexibleDimensions`: the granularities
+    /// (as m, n, k) of the other shapes the units take (empty without it).
+    pub flexible_shapes: Vec<MatrixShape>,
     /// Whether the cooperative kernels can run: the extension with its `cooperativeMatrix`
     /// feature, and `vulkanMemoryModel` (naga's cooperative SPIR-V declares the Vulkan model).
     pub cooperative_features: bool,
@@ -143,14 +146,15 @@ impl DeviceInfo {
         self.shader_f16 && self.storage_16bit
     }
 
-    /// The cooperative GEMM/convolution variant this device runs, as (fragment size, subgroup
-    /// width); None where its matrix units fit no variant or it cannot run them (f16 storage
-    /// and arithmetic, the features above).
-    pub fn cooperative_variant(&self) -> Option<(u32, u32)> {
+    /// The cooperative variant this device runs (`VKDIFF_FRAGMENT`'s shape where one is asked
+    /// for); None where its matrix units fit no variant or it cannot run them (f16 storage and
+    /// arithmetic, the features above).
+    pub fn cooperative_variant(&self) -> Option<Fragment> {
         if !self.cooperative_features || !self.supports_f16() {
             return None;
         }
-        matrix_units::pick(&self.matrix_shapes, |width| self.can_use_subgroup(width))
+        let request = matrix_units::requested_fragment().ok().flatten();
+        matrix_units::pick(&self.matrix_shapes, &self.flexible_shapes, |width| self.can_use_subgroup(width), request)
     }
 
     /// Whether a kernel written for a subgroup of exactly `size` lanes can be pinned to it.
@@ -226,6 +230,7 @@ pub(crate) fn describe(
     let size_control_extension = !core13 && extension(ash::ext::subgroup_size_control::NAME);
     let zero_init_extension = !core13 && extension(ash::khr::zero_initialize_workgroup_memory::NAME);
     let cooperative_extension = extension(ash::khr::cooperative_matrix::NAME);
+    let cooperative2_extension = cooperative_extension && extension(CooperativeMatrix2Features::EXTENSION);
     let pci_extension = extension(ash::ext::pci_bus_info::NAME);
     let memory_budget = extension(ash::ext::memory_budget::NAME);
     let pipeline_statistics = extension(ash::khr::pipeline_executable_properties::NAME);
@@ -253,6 +258,7 @@ pub(crate) fn describe(
     let mut size_control_features = vk::PhysicalDeviceSubgroupSizeControlFeatures::default();
     let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default();
     let mut cooperative = vk::PhysicalDeviceCooperativeMatrixFeaturesKHR::default();
+    let mut cooperative2 = CooperativeMatrix2Features::new(false);
     let mut feats2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f11).push_next(&mut f12);
     if core13 {
         feats2 = feats2.push_next(&mut f13);
@@ -265,6 +271,9 @@ pub(crate) fn describe(
     }
     if cooperative_extension {
         feats2 = feats2.push_next(&mut cooperative);
+    }
+    if cooperative2_extension {
+        feats2 = feats2.push_next(&mut cooperative2);
     }
     // SAFETY: pd comes from this instance; the chained structs live until the calls return.
     let (mem, families) = unsafe {
@@ -319,6 +328,11 @@ pub(crate) fn describe(
         subgroup_arithmetic: subgroup.supported_stages.contains(compute)
             && ops.contains(vk::SubgroupFeatureFlags::ARITHMETIC),
         matrix_shapes: if cooperative_extension { matrix_units::query(entry, instance, pd) } else { Vec::new() },
+        flexible_shapes: if cooperative2.flexible_dimensions == vk::TRUE {
+            matrix_units::query_flexible(entry, instance, pd)
+        } else {
+            Vec::new()
+        },
         cooperative_features: cooperative.cooperative_matrix == vk::TRUE && f12.vulkan_memory_model == vk::TRUE,
         max_storage_buffer_range: p.limits.max_storage_buffer_range as u64,
         max_shared_memory: p.limits.max_compute_shared_memory_size,
@@ -402,6 +416,7 @@ pub(crate) mod tests {
             subgroup_shuffle: usable,
             subgroup_arithmetic: true,
             matrix_shapes: Vec::new(),
+            flexible_shapes: Vec::new(),
             cooperative_features: false,
             max_storage_buffer_range: 1 << 27,
             max_shared_memory: 32768,

@@ -1,6 +1,7 @@
 //! The device's matrix units as `VK_KHR_cooperative_matrix` lists them, and which cooperative
 //! kernel variant (kernels/src/spec.rs) fits them.
 
+use crate::error::{Error, Result};
 use ash::vk;
 
 /// One product shape the device's matrix units take: A (M×K) · B (K×N) + C (M×N).
@@ -22,11 +23,20 @@ impl MatrixShape {
         format!("{}×{}×{} {a}·{b}+{c}→{r}{scope}", self.m, self.n, self.k)
     }
 
-    /// f16 operands with f32 accumulation, square, at subgroup scope: what the kernels compute.
-    fn is_square_f16_f32(&self, size: u32) -> bool {
-        (self.m, self.n, self.k) == (size, size, size)
-            && self.types == ["f16", "f16", "f32", "f32"]
-            && self.subgroup_scope
+    /// M×N×K with f16 operands and f32 accumulation at subgroup scope: what the kernels compute.
+    fn is_f16_f32(&self, m: u32, n: u32, k: u32) -> bool {
+        (self.m, self.n, self.k) == (m, n, k) && self.computes_f16_f32()
+    }
+
+    /// As flexible-dimension granularities: whether M×N×K f16·f16+f32 at subgroup scope is a
+    /// multiple of them.
+    fn divides(&self, m: u32, n: u32, k: u32) -> bool {
+        let multiple = |x: u32, g: u32| g > 0 && x.is_multiple_of(g);
+        multiple(m, self.m) && multiple(n, self.n) && multiple(k, self.k) && self.computes_f16_f32()
+    }
+
+    fn computes_f16_f32(&self) -> bool {
+        self.types == ["f16", "f16", "f32", "f32"] && self.subgroup_scope
     }
 }
 
@@ -69,28 +79,186 @@ pub(crate) fn query(entry: &ash::Entry, instance: &ash::Instance, pd: vk::Physic
         .collect()
 }
 
-/// The cooperative variants built (kernels/src/spec.rs): fragment size and the subgroup widths
-/// each is built for, in order of preference. 8×8 only at 8 lanes, the one width it is proven
-/// at: lavapipe (the only driver known to list 8×8) offers no cooperativeMatrix feature at 4
-/// lanes, and Mesa 26.1 crashes inside the driver running these kernels at 16.
-const VARIANTS: [(u32, &[u32]); 2] = [(16, &[32, 64]), (8, &[8])];
+/// `VkPhysicalDeviceCooperativeMatrix2FeaturesNV` (`VK_NV_cooperative_matrix2`, newer than
+/// ash's headers); vkdiff reads and enables only `cooperativeMatrixFlexibleDimensions`.
+#[repr(C)]
+pub(crate) struct CooperativeMatrix2Features {
+    s_type: vk::StructureType,
+    p_next: *mut std::ffi::c_void,
+    workgroup_scope: vk::Bool32,
+    pub(crate) flexible_dimensions: vk::Bool32,
+    others: [vk::Bool32; 5],
+}
 
-/// The variants built, for messages: "16×16 at 32 or 64 lanes, 8×8 at 8 lanes".
+// SAFETY: the struct is laid out as the Vulkan one, which extends both chains.
+unsafe impl vk::ExtendsPhysicalDeviceFeatures2 for CooperativeMatrix2Features {}
+unsafe impl vk::ExtendsDeviceCreateInfo for CooperativeMatrix2Features {}
+
+impl CooperativeMatrix2Features {
+    pub(crate) const EXTENSION: &'static std::ffi::CStr = c"VK_NV_cooperative_matrix2";
+
+    /// Every feature off, or (`flexible_dimensions`) that one on.
+    pub(crate) fn new(flexible_dimensions: bool) -> Self {
+        CooperativeMatrix2Features {
+            s_type: vk::StructureType::from_raw(1_000_593_000),
+            p_next: std::ptr::null_mut(),
+            workgroup_scope: vk::FALSE,
+            flexible_dimensions: flexible_dimensions.into(),
+            others: [vk::FALSE; 5],
+        }
+    }
+}
+
+/// `VkCooperativeMatrixFlexibleDimensionsPropertiesNV`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct FlexibleDimensions {
+    s_type: vk::StructureType,
+    p_next: *mut std::ffi::c_void,
+    m_granularity: u32,
+    n_granularity: u32,
+    k_granularity: u32,
+    types: [vk::ComponentTypeKHR; 4],
+    saturating_accumulation: vk::Bool32,
+    scope: vk::ScopeKHR,
+    workgroup_invocations: u32,
+}
+
+/// The granularities `vkGetPhysicalDeviceCooperativeMatrixFlexibleDimensionsPropertiesNV` lists
+/// for `pd`, as shapes (m, n, k: the granularities); empty where the query is missing or fails.
+pub(crate) fn query_flexible(entry: &ash::Entry, instance: &ash::Instance, pd: vk::PhysicalDevice) -> Vec<MatrixShape> {
+    type Query = unsafe extern "system" fn(vk::PhysicalDevice, *mut u32, *mut FlexibleDimensions) -> vk::Result;
+    let name = c"vkGetPhysicalDeviceCooperativeMatrixFlexibleDimensionsPropertiesNV";
+    // SAFETY: a valid instance; the name is NUL-terminated.
+    let Some(address) = (unsafe { (entry.static_fn().get_instance_proc_addr)(instance.handle(), name.as_ptr()) })
+    else {
+        return Vec::new();
+    };
+    // SAFETY: the loader returns this command's entry point, whose signature is `Query`.
+    let query: Query = unsafe { std::mem::transmute::<unsafe extern "system" fn(), Query>(address) };
+    let blank = FlexibleDimensions {
+        s_type: vk::StructureType::from_raw(1_000_593_001),
+        p_next: std::ptr::null_mut(),
+        m_granularity: 0,
+        n_granularity: 0,
+        k_granularity: 0,
+        types: [vk::ComponentTypeKHR::FLOAT16; 4],
+        saturating_accumulation: vk::FALSE,
+        scope: vk::ScopeKHR::DEVICE,
+        workgroup_invocations: 0,
+    };
+    let mut count = 0;
+    // SAFETY: the two-call idiom; `list` holds `count` initialised structs with their sType.
+    let mut list = unsafe {
+        if query(pd, &mut count, std::ptr::null_mut()) != vk::Result::SUCCESS {
+            return Vec::new();
+        }
+        let mut list = vec![blank; count as usize];
+        if query(pd, &mut count, list.as_mut_ptr()) != vk::Result::SUCCESS {
+            return Vec::new();
+        }
+        list
+    };
+    list.truncate(count as usize);
+    list.iter()
+        .map(|f| MatrixShape {
+            m: f.m_granularity,
+            n: f.n_granularity,
+            k: f.k_granularity,
+            types: f.types.map(component),
+            subgroup_scope: f.scope == vk::ScopeKHR::SUBGROUP,
+        })
+        .collect()
+}
+
+/// A cooperative kernel variant: fragments A (m×k) · B (k×n) + C (m×n), f16 operands and f32
+/// sums, on subgroups pinned to `lanes`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fragment {
+    pub m: u32,
+    pub n: u32,
+    pub k: u32,
+    pub lanes: u32,
+    /// Whether the device runs this shape only through `VK_NV_cooperative_matrix2`'s flexible
+    /// dimensions (it lists no such shape itself), which the device is then created with.
+    pub flexible: bool,
+}
+
+impl Fragment {
+    /// The kernels' parameters for it: FM, FN, FK and SG.
+    pub fn params(&self) -> [(&'static str, u32); 4] {
+        [("FM", self.m), ("FN", self.n), ("FK", self.k), ("SG", self.lanes)]
+    }
+
+    /// "8×16×16".
+    pub fn shape(&self) -> String {
+        format!("{}×{}×{}", self.m, self.n, self.k)
+    }
+}
+
+/// (M, N, K) of a fragment.
+type Shape = (u32, u32, u32);
+
+/// The cooperative variants built (kernels/src/spec.rs): fragment shape (M, N, K) and the
+/// subgroup widths each is built for, in order of preference. 16×16×16 is NVIDIA's and AMD's,
+/// 8×16×16 Intel Xe2's (16 lanes), 8×8×16 Intel Xe-HPG's (8 lanes), 8×8×8 lavapipe's. 8×16×16 at
+/// 8 lanes is the instantiation lavapipe proves (through flexible dimensions) for Xe2's. 8-wide
+/// fragments only at 8 and 16 lanes: lavapipe offers no cooperativeMatrix feature at 4 lanes,
+/// and Mesa 26.1 crashes inside the driver running these kernels at 16.
+const VARIANTS: [(Shape, &[u32]); 4] =
+    [((16, 16, 16), &[32, 64]), ((8, 16, 16), &[16, 8]), ((8, 8, 16), &[8]), ((8, 8, 8), &[8])];
+
+/// The variants built, for messages: "16×16×16 at 32 or 64 lanes, 8×16×16 at 16 or 8 lanes, …".
 pub fn built_cooperative_variants() -> String {
-    let each = VARIANTS.map(|(size, widths)| {
+    let each = VARIANTS.map(|((m, n, k), widths)| {
         let widths: Vec<String> = widths.iter().map(u32::to_string).collect();
-        format!("{size}×{size} at {} lanes", widths.join(" or "))
+        format!("{m}×{n}×{k} at {} lanes", widths.join(" or "))
     });
     each.join(", ")
 }
 
-/// The cooperative variant for a device with `shapes`, whose subgroups `pinnable` can be made
-/// a given width: (fragment size CM, subgroup width SG), or None where no variant fits.
-pub(crate) fn pick(shapes: &[MatrixShape], pinnable: impl Fn(u32) -> bool) -> Option<(u32, u32)> {
-    VARIANTS.iter().find_map(|&(size, widths)| {
-        let listed = shapes.iter().any(|s| s.is_square_f16_f32(size));
-        widths.iter().copied().find(|&sg| listed && pinnable(sg)).map(|sg| (size, sg))
-    })
+/// `VKDIFF_FRAGMENT=MxNxK` (such as `8x16x16`): the fragment shape asked for instead of the
+/// device's best; None where unset. One of the shapes built, or an error naming them.
+pub fn requested_fragment() -> Result<Option<Shape>> {
+    match std::env::var("VKDIFF_FRAGMENT") {
+        Ok(text) if !text.is_empty() => parse_fragment(&text).map(Some),
+        _ => Ok(None),
+    }
+}
+
+fn parse_fragment(text: &str) -> Result<Shape> {
+    let numbers: Vec<Option<u32>> = text.split(['x', '×']).map(|w| w.trim().parse().ok()).collect();
+    match numbers[..] {
+        [Some(m), Some(n), Some(k)] if VARIANTS.iter().any(|(shape, _)| *shape == (m, n, k)) => Ok((m, n, k)),
+        _ => Err(Error::BadSetting(format!(
+            "VKDIFF_FRAGMENT={text}: expected one of the shapes vkdiff builds, as MxNxK ({})",
+            built_cooperative_variants()
+        ))),
+    }
+}
+
+/// The cooperative variant for a device with `shapes`, whose subgroups `pinnable` can be made a
+/// given width: the first built variant the device lists at a width it pins. Where a shape is
+/// asked for (`request`), only that one, listed or else taken through flexible dimensions
+/// (`flexible`: their granularities). Flexible dimensions serve requests only: Mesa 26.1
+/// lavapipe offers them at 16 lanes too, where it crashed running these kernels. None where
+/// no variant fits.
+pub(crate) fn pick(
+    shapes: &[MatrixShape],
+    flexible: &[MatrixShape],
+    pinnable: impl Fn(u32) -> bool,
+    request: Option<Shape>,
+) -> Option<Fragment> {
+    let wanted = VARIANTS.iter().filter(|(shape, _)| request.is_none_or(|r| r == *shape));
+    let fitting = |flexible_ok: bool| {
+        wanted.clone().find_map(|&((m, n, k), widths)| {
+            let listed = shapes.iter().any(|s| s.is_f16_f32(m, n, k));
+            let flex = flexible_ok && !listed && flexible.iter().any(|g| g.divides(m, n, k));
+            let lanes = widths.iter().copied().find(|&sg| (listed || flex) && pinnable(sg))?;
+            Some(Fragment { m, n, k, lanes, flexible: flex })
+        })
+    };
+    fitting(false).or_else(|| fitting(request.is_some()))
 }
 
 #[cfg(test)]
@@ -101,19 +269,56 @@ mod tests {
         MatrixShape { m, n, k, types: ["f16", "f16", c, c], subgroup_scope: true }
     }
 
+    fn fits(m: u32, n: u32, k: u32, lanes: u32, flexible: bool) -> Option<Fragment> {
+        Some(Fragment { m, n, k, lanes, flexible })
+    }
+
     #[test]
     fn picks_the_largest_listed_fragment_at_a_width_the_device_pins() {
+        let pick = |shapes: &[MatrixShape], width: u32| pick(shapes, &[], |w| w == width, None);
         let nvidia = [shape(16, 16, 16, "f16"), shape(16, 16, 16, "f32"), shape(16, 8, 16, "f32")];
-        assert_eq!(pick(&nvidia, |w| w == 32), Some((16, 32)));
+        assert_eq!(pick(&nvidia, 32), fits(16, 16, 16, 32, false));
         let amd_wave64_only = [shape(16, 16, 16, "f32")];
-        assert_eq!(pick(&amd_wave64_only, |w| w == 64), Some((16, 64)));
+        assert_eq!(pick(&amd_wave64_only, 64), fits(16, 16, 16, 64, false));
         let lavapipe = [shape(8, 8, 8, "f32"), shape(8, 8, 8, "f16")];
-        assert_eq!(pick(&lavapipe, |w| w == 8), Some((8, 8)));
-        assert_eq!(pick(&lavapipe, |w| w == 16), None);
-        // f16 accumulation only, a width no variant is built for, Intel's 8×16×16: none.
-        assert_eq!(pick(&[shape(16, 16, 16, "f16")], |w| w == 32), None);
-        assert_eq!(pick(&nvidia, |w| w == 128), None);
-        assert_eq!(pick(&[shape(8, 16, 16, "f32")], |w| w == 16), None);
-        assert_eq!(built_cooperative_variants(), "16×16 at 32 or 64 lanes, 8×8 at 8 lanes");
+        assert_eq!(pick(&lavapipe, 8), fits(8, 8, 8, 8, false));
+        assert_eq!(pick(&lavapipe, 16), None);
+        // Intel: Xe2 lists 8×16×16 at 16 lanes, Xe-HPG 8×8×16 at 8.
+        assert_eq!(pick(&[shape(8, 16, 16, "f32")], 16), fits(8, 16, 16, 16, false));
+        assert_eq!(pick(&[shape(8, 8, 16, "f32")], 8), fits(8, 8, 16, 8, false));
+        // f16 accumulation only, a width no variant is built for, a shape none is built for: none.
+        assert_eq!(pick(&[shape(16, 16, 16, "f16")], 32), None);
+        assert_eq!(pick(&nvidia, 128), None);
+        assert_eq!(pick(&[shape(16, 8, 16, "f32")], 32), None);
+        assert_eq!(
+            built_cooperative_variants(),
+            "16×16×16 at 32 or 64 lanes, 8×16×16 at 16 or 8 lanes, 8×8×16 at 8 lanes, 8×8×8 at 8 lanes"
+        );
+    }
+
+    #[test]
+    fn flexible_dimensions_serve_a_shape_asked_for() {
+        // Mesa 26.1 lavapipe: 8×8×8 listed, any multiple of 8 through flexible dimensions.
+        let lavapipe = [shape(8, 8, 8, "f32")];
+        let granular = [shape(8, 8, 8, "f32")];
+        let eight = |w: u32| w == 8;
+        assert_eq!(pick(&lavapipe, &granular, eight, None), fits(8, 8, 8, 8, false), "listed shapes first");
+        assert_eq!(pick(&[], &granular, eight, None), None, "only where asked for");
+        assert_eq!(pick(&lavapipe, &granular, eight, Some((8, 16, 16))), fits(8, 16, 16, 8, true));
+        assert_eq!(pick(&lavapipe, &granular, eight, Some((8, 8, 16))), fits(8, 8, 16, 8, true));
+        assert_eq!(pick(&lavapipe, &[], eight, Some((8, 16, 16))), None, "no flexible dimensions");
+        assert_eq!(pick(&lavapipe, &[shape(16, 16, 16, "f32")], eight, Some((8, 16, 16))), None, "granularity 16");
+        assert_eq!(pick(&lavapipe, &granular, |w| w == 4, Some((8, 8, 8))), None, "no width it pins");
+    }
+
+    #[test]
+    fn a_requested_fragment_is_a_shape_vkdiff_builds() {
+        assert_eq!(parse_fragment("8x16x16").unwrap(), (8, 16, 16));
+        assert_eq!(parse_fragment("8×8×16").unwrap(), (8, 8, 16));
+        for bad in ["16x8x16", "8x8", "eight", "8x8x8x8"] {
+            let err = parse_fragment(bad).unwrap_err().to_string();
+            assert!(err.starts_with(&format!("VKDIFF_FRAGMENT={bad}: expected one of")), "{err}");
+            assert!(err.contains("8×16×16 at 16 or 8 lanes"), "{err}");
+        }
     }
 }

@@ -119,8 +119,8 @@ pub fn attention(
             .min_by_key(|v| v.param("DV"))
             .ok_or_else(|| Error::Shape(format!("attention: head size {} is past the widest variant", l.head_dim)))?,
     };
-    // Query rows per workgroup: TM, 4·CM on the matrix units, or attention_rows' one per invocation.
-    let tm = variant.param("TM").or(variant.param("CM").map(|cm| 4 * cm)).unwrap_or(ROWS_PER_WORKGROUP) as usize;
+    // Query rows per workgroup: TM, 4·FM on the matrix units, or attention_rows' one per invocation.
+    let tm = variant.param("TM").or(variant.param("FM").map(|fm| 4 * fm)).unwrap_or(ROWS_PER_WORKGROUP) as usize;
     let kern = ctx.kernel(variant, 4)?;
     let push = [
         u(l.q_tokens),
@@ -152,22 +152,24 @@ const SMALL_CHANNELS: usize = 256;
 const ROWS_PER_WORKGROUP: u32 = 64;
 
 /// The matrix-unit attention for f16 heads of up to 64 values, where the context runs its GEMMs
-/// on the matrix units (the same fragment size and subgroup width) and the device's workgroup
+/// on the matrix units (the same fragment shape and subgroup width) and the device's workgroup
 /// memory holds the variant's.
 fn cooperative_variant(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<&'static vkdiff_kernels::Variant> {
-    let (cm, sg) = ctx.info().cooperative_variant()?;
+    let fragment = ctx.info().cooperative_variant()?;
     if ctx.gemm_family() != GemmFamily::Cooperative || dtype != Dtype::F16 || head_dim > 64 {
         return None;
     }
-    vkdiff_kernels::find("attention_coop", dtype, &[("CM", cm), ("SG", sg), ("DH", 64)])
-        .filter(|v| cooperative_workgroup_bytes(cm, v.param("KF").unwrap()) <= ctx.info().max_shared_memory)
+    let want: Vec<(&str, u32)> = fragment.params().into_iter().chain([("DH", 64)]).collect();
+    vkdiff_kernels::find("attention_coop", dtype, &want).filter(|v| {
+        cooperative_workgroup_bytes(fragment.m, fragment.n, v.param("KF").unwrap()) <= ctx.info().max_shared_memory
+    })
 }
 
-/// Workgroup memory of attention_coop.wgsl at fragment size `cm` with `kf` key fragments per
-/// chunk (heads of 64): K and V rows (f16), the subgroups' scratch rows (f32), probabilities
-/// (f16), each row's reference, sum and scale, and the subgroups' flags.
-fn cooperative_workgroup_bytes(cm: u32, kf: u32) -> u32 {
-    let (keys, rows) = (kf * cm, 4 * cm);
+/// Workgroup memory of attention_coop.wgsl at fragments of `fm` rows and `fn_` columns with `kf`
+/// key fragments per chunk (heads of 64): K and V rows (f16), the subgroups' scratch rows
+/// (f32), probabilities (f16), each row's reference, sum and scale, and the subgroups' flags.
+fn cooperative_workgroup_bytes(fm: u32, fn_: u32, kf: u32) -> u32 {
+    let (keys, rows) = (kf * fn_, 4 * fm);
     2 * keys * (64 + 8) * 2 + rows * (keys.max(64) + 4) * 4 + rows * (keys + 8) * 2 + 3 * rows * 4 + 4 * 4
 }
 

@@ -6,6 +6,7 @@ use crate::arena::Arena;
 use crate::context::{Context, GemmFamily};
 use crate::device::{DeviceInfo, DeviceKind};
 use crate::error::{ensure, Result};
+use crate::matrix_units::Fragment;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -240,13 +241,13 @@ pub(super) fn dispatch_gemm_family(
     let family = ctx.gemm_family();
     let cooperative =
         ctx.info().cooperative_variant().filter(|_| family == GemmFamily::Cooperative && dtype == Dtype::F16 && s.vec4);
-    if let Some((cm, sg)) = cooperative {
-        let wt = cooperative_fragments_per_side(&ctx, s, (cm, sg));
+    if let Some(fragment) = cooperative {
+        let wt = cooperative_fragments_per_side(&ctx, s, &fragment, names.cooperative, params);
         let want: Vec<(&str, u32)> =
-            [("CM", cm), ("SG", sg), ("WT", wt)].into_iter().chain(params.iter().copied()).collect();
+            fragment.params().into_iter().chain([("WT", wt)]).chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.cooperative, dtype, &want, 4)?;
-        let tile = (2 * wt * cm) as usize;
-        return rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(tile)), u(s.m.div_ceil(tile)), u(s.batch)]);
+        let (rows, columns) = ((2 * wt * fragment.m) as usize, (2 * wt * fragment.n) as usize);
+        return rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(columns)), u(s.m.div_ceil(rows)), u(s.batch)]);
     }
     let width = ctx.info().gemm_subgroup_width().filter(|_| family == GemmFamily::Subgroup && s.vec4);
     if let Some(sg) = width {
@@ -260,17 +261,24 @@ pub(super) fn dispatch_gemm_family(
     rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(64)), u(s.m.div_ceil(64)), u(s.batch)])
 }
 
-/// Fragments per side of a subgroup's tile in the cooperative kernels: 4 (tiles of 8·CM) where
-/// the product still makes 128 such tiles, enough to keep a GPU's 100+ compute units busy, and
-/// the accumulators fit a GPU lane's registers (at most 64 f32 each: 16×16 fragments on 64-lane
-/// subgroups); else 2. At 32 lanes 4×4 fragments take 128 registers a lane for the sums alone,
-/// and NVIDIA's compiler then spilled (H200: 255 registers, the products 1.5× slower than 2×2).
-/// CPU devices (lavapipe's 8×8 kernels) have no register file to fill and take both sizes.
-fn cooperative_fragments_per_side(ctx: &Context, s: &GemmShape, (cm, sg): (u32, u32)) -> u32 {
-    let big = 8 * cm as usize;
-    let fills = s.m.div_ceil(big) * s.n.div_ceil(big) * s.batch >= 128;
-    let fits = 16 * cm * cm / sg <= 64 || ctx.info().kind == DeviceKind::Cpu;
-    if fills && fits {
+/// Fragments per side of a subgroup's tile in the cooperative kernels: 4 (tiles of 8·FM × 8·FN)
+/// where such a variant is built, the product still makes 128 such tiles, enough to keep a
+/// GPU's 100+ compute units busy, and the accumulators fit a GPU lane's registers (at most 64 f32
+/// each: 16×16 fragments on 64-lane subgroups); else 2. At 32 lanes 4×4 fragments take 128
+/// registers a lane for the sums alone, and NVIDIA's compiler then spilled (H200: 255 registers,
+/// the products 1.5× slower than 2×2). CPU devices (lavapipe's 8×8×8 kernels) have no register
+/// file to fill and take both sizes.
+fn cooperative_fragments_per_side(
+    ctx: &Context,
+    s: &GemmShape,
+    f: &Fragment,
+    kernel: &str,
+    params: &[(&str, u32)],
+) -> u32 {
+    let fills = s.m.div_ceil(8 * f.m as usize) * s.n.div_ceil(8 * f.n as usize) * s.batch >= 128;
+    let fits = 16 * f.m * f.n / f.lanes <= 64 || ctx.info().kind == DeviceKind::Cpu;
+    let want: Vec<(&str, u32)> = f.params().into_iter().chain([("WT", 4)]).chain(params.iter().copied()).collect();
+    if fills && fits && vkdiff_kernels::find(kernel, Dtype::F16, &want).is_some() {
         4
     } else {
         2
