@@ -1,7 +1,9 @@
 //! `vkdiff devices`: every Vulkan device, what it supports and which one vkdiff picks.
 
 use anyhow::Result;
-use vkdiff_runtime::{built_cooperative_variants, choose, gpu_paths_requested, list_devices, DeviceInfo, GemmFamily};
+use vkdiff_runtime::{
+    built_cooperative_variants, choose, gpu_paths_requested, list_devices, requested_fragment, DeviceInfo, GemmFamily,
+};
 
 #[derive(clap::Args)]
 pub struct DevicesArgs {
@@ -122,6 +124,8 @@ fn matrix_units(d: &DeviceInfo) -> String {
 }
 
 pub fn run(args: &DevicesArgs) -> Result<()> {
+    // A malformed request would otherwise show as the device's default choice.
+    requested_fragment()?;
     let devices = list_devices()?;
     let chosen = choose(&devices, &Default::default()).ok();
     if args.json {

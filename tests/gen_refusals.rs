@@ -4,7 +4,7 @@
 
 mod cli;
 
-use cli::{scratch, vkdiff};
+use cli::{scratch, vkdiff, vkdiff_with};
 use std::path::{Path, PathBuf};
 
 fn fixture(path: &str) -> PathBuf {
@@ -13,7 +13,12 @@ fn fixture(path: &str) -> PathBuf {
 
 /// The one `error:` line of a failed run.
 fn error_line(args: &[&str]) -> String {
-    let result = vkdiff(args);
+    error_line_with(args, &[])
+}
+
+/// The one `error:` line of a failed run with these environment variables.
+fn error_line_with(args: &[&str], env: &[(&str, &str)]) -> String {
+    let result = vkdiff_with(args, env);
     let stderr = String::from_utf8_lossy(&result.stderr).into_owned();
     let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
     assert!(!result.status.success() && errors.len() == 1, "{args:?}: {stderr}");
@@ -240,4 +245,20 @@ fn a_cpu_device_is_refused_when_a_gpu_is_required() {
     assert!(!out.exists());
     let line = error_line(&[&args[..], &["--device", "0000:99:00.0"]].concat());
     assert!(line.contains("--device names device PCI 0000:99:00.0") && line.contains("vkdiff devices"), "{line}");
+}
+
+#[test]
+fn a_fragment_shape_the_device_cannot_take_is_refused() {
+    // VKDIFF_FRAGMENT names a shape vkdiff builds, which the device must take at a width it is
+    // built for: lavapipe pins no 32- or 64-lane subgroups, so 16×16×16 is refused there.
+    let dir = scratch("fragment");
+    let out = dir.join("x.png");
+    let model = tiny();
+    let args = ["gen", "--model", &model, "--prompt", "x", "--steps", "1", "--out", out.to_str().unwrap()];
+    let run = |fragment: &str| error_line_with(&args, &[("VKDIFF_FRAGMENT", fragment)]);
+    let line = run("16x8x16");
+    assert!(line.contains("VKDIFF_FRAGMENT=16x8x16: expected one of the shapes vkdiff builds"), "{line}");
+    let line = run("16x16x16");
+    assert!(line.contains("VKDIFF_FRAGMENT=16x16x16: `") && line.contains("does not take it"), "{line}");
+    assert!(!out.exists());
 }

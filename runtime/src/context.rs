@@ -3,7 +3,8 @@
 use crate::device::{self, DeviceInfo, DeviceKind};
 use crate::device_choice::{choose, DeviceChoice};
 use crate::error::{Error, Result, VkContext};
-use crate::matrix_units::{self, CooperativeMatrix2Features};
+use crate::flexible_dimensions::CooperativeMatrix2Features;
+use crate::matrix_units;
 use crate::pipeline::{Kernel, PipelineCache};
 use crate::submit_budget::SubmitBudget;
 use crate::validation::Validation;

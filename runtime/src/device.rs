@@ -2,7 +2,8 @@
 
 use crate::device_choice::PciAddress;
 use crate::error::{Error, Result, VkContext};
-use crate::matrix_units::{self, CooperativeMatrix2Features, Fragment, MatrixShape};
+use crate::flexible_dimensions::{self, CooperativeMatrix2Features};
+use crate::matrix_units::{self, Fragment, MatrixShape};
 use crate::validation::Validation;
 use ash::vk;
 use std::ffi::CStr;
@@ -329,7 +330,7 @@ pub(crate) fn describe(
             && ops.contains(vk::SubgroupFeatureFlags::ARITHMETIC),
         matrix_shapes: if cooperative_extension { matrix_units::query(entry, instance, pd) } else { Vec::new() },
         flexible_shapes: if cooperative2.flexible_dimensions == vk::TRUE {
-            matrix_units::query_flexible(entry, instance, pd)
+            flexible_dimensions::query(entry, instance, pd)
         } else {
             Vec::new()
         },

@@ -7,6 +7,7 @@ mod cpu_vectors;
 mod device;
 mod device_choice;
 mod error;
+mod flexible_dimensions;
 mod matrix_units;
 mod memory;
 mod memory_budget;

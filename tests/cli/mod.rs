@@ -4,7 +4,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 pub fn vkdiff(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_vkdiff")).args(args).env("RUST_BACKTRACE", "0").output().unwrap()
+    vkdiff_with(args, &[])
+}
+
+/// `vkdiff` with these environment variables set as well.
+pub fn vkdiff_with(args: &[&str], env: &[(&str, &str)]) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_vkdiff"));
+    command.args(args).env("RUST_BACKTRACE", "0").envs(env.iter().copied()).output().unwrap()
 }
 
 /// An empty folder under the target's temporary directory, unique to this test process.

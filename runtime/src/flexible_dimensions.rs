@@ -1,0 +1,98 @@
+//! `VK_NV_cooperative_matrix2`'s flexible dimensions, newer than ash's headers: the feature
+//! struct and the query of the granularities, which let a device take fragment shapes it does
+//! not list (`VKDIFF_FRAGMENT`; Mesa 26.1 lavapipe runs Intel's shapes this way in CI).
+
+use crate::matrix_units::{component, MatrixShape};
+use ash::vk;
+
+/// `VkPhysicalDeviceCooperativeMatrix2FeaturesNV` (`VK_NV_cooperative_matrix2`, newer than
+/// ash's headers); vkdiff reads and enables only `cooperativeMatrixFlexibleDimensions`.
+#[repr(C)]
+pub(crate) struct CooperativeMatrix2Features {
+    s_type: vk::StructureType,
+    p_next: *mut std::ffi::c_void,
+    workgroup_scope: vk::Bool32,
+    pub(crate) flexible_dimensions: vk::Bool32,
+    others: [vk::Bool32; 5],
+}
+
+// SAFETY: the struct is laid out as the Vulkan one, which extends both chains.
+unsafe impl vk::ExtendsPhysicalDeviceFeatures2 for CooperativeMatrix2Features {}
+unsafe impl vk::ExtendsDeviceCreateInfo for CooperativeMatrix2Features {}
+
+impl CooperativeMatrix2Features {
+    pub(crate) const EXTENSION: &'static std::ffi::CStr = c"VK_NV_cooperative_matrix2";
+
+    /// Every feature off, or (`flexible_dimensions`) that one on.
+    pub(crate) fn new(flexible_dimensions: bool) -> Self {
+        CooperativeMatrix2Features {
+            s_type: vk::StructureType::from_raw(1_000_593_000),
+            p_next: std::ptr::null_mut(),
+            workgroup_scope: vk::FALSE,
+            flexible_dimensions: flexible_dimensions.into(),
+            others: [vk::FALSE; 5],
+        }
+    }
+}
+
+/// `VkCooperativeMatrixFlexibleDimensionsPropertiesNV`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct FlexibleDimensions {
+    s_type: vk::StructureType,
+    p_next: *mut std::ffi::c_void,
+    m_granularity: u32,
+    n_granularity: u32,
+    k_granularity: u32,
+    types: [vk::ComponentTypeKHR; 4],
+    saturating_accumulation: vk::Bool32,
+    scope: vk::ScopeKHR,
+    workgroup_invocations: u32,
+}
+
+/// The granularities `vkGetPhysicalDeviceCooperativeMatrixFlexibleDimensionsPropertiesNV` lists
+/// for `pd`, as shapes (m, n, k: the granularities); empty where the query is missing or fails.
+pub(crate) fn query(entry: &ash::Entry, instance: &ash::Instance, pd: vk::PhysicalDevice) -> Vec<MatrixShape> {
+    type Query = unsafe extern "system" fn(vk::PhysicalDevice, *mut u32, *mut FlexibleDimensions) -> vk::Result;
+    let name = c"vkGetPhysicalDeviceCooperativeMatrixFlexibleDimensionsPropertiesNV";
+    // SAFETY: a valid instance; the name is NUL-terminated.
+    let Some(address) = (unsafe { (entry.static_fn().get_instance_proc_addr)(instance.handle(), name.as_ptr()) })
+    else {
+        return Vec::new();
+    };
+    // SAFETY: the loader returns this command's entry point, whose signature is `Query`.
+    let query: Query = unsafe { std::mem::transmute::<unsafe extern "system" fn(), Query>(address) };
+    let blank = FlexibleDimensions {
+        s_type: vk::StructureType::from_raw(1_000_593_001),
+        p_next: std::ptr::null_mut(),
+        m_granularity: 0,
+        n_granularity: 0,
+        k_granularity: 0,
+        types: [vk::ComponentTypeKHR::FLOAT16; 4],
+        saturating_accumulation: vk::FALSE,
+        scope: vk::ScopeKHR::DEVICE,
+        workgroup_invocations: 0,
+    };
+    let mut count = 0;
+    // SAFETY: the two-call idiom; `list` holds `count` initialised structs with their sType.
+    let mut list = unsafe {
+        if query(pd, &mut count, std::ptr::null_mut()) != vk::Result::SUCCESS {
+            return Vec::new();
+        }
+        let mut list = vec![blank; count as usize];
+        if query(pd, &mut count, list.as_mut_ptr()) != vk::Result::SUCCESS {
+            return Vec::new();
+        }
+        list
+    };
+    list.truncate(count as usize);
+    list.iter()
+        .map(|f| MatrixShape {
+            m: f.m_granularity,
+            n: f.n_granularity,
+            k: f.k_granularity,
+            types: f.types.map(component),
+            subgroup_scope: f.scope == vk::ScopeKHR::SUBGROUP,
+        })
+        .collect()
+}
