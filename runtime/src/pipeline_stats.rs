@@ -13,7 +13,7 @@ pub(crate) fn requested() -> bool {
     std::env::var("VKDIFF_PIPELINE_STATS").is_ok_and(|v| v == "1")
 }
 
-/// "gemm_coop f16 CM=16 SG=32 WT=4: Register Count 168, …" for each executable of `pipeline`
+/// "gemm_coop f16 FM=16 FN=16 FK=16 SG=32 WT=4: Register Count 168, …" for each executable of `pipeline`
 /// (created with `CAPTURE_STATISTICS`); a failed query is reported on its line, not raised.
 pub(crate) fn describe(
     loader: &ash::khr::pipeline_executable_properties::Device,
