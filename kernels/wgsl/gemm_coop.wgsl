@@ -2,13 +2,12 @@
 // accumulation. A workgroup is 4 subgroups of SG lanes in a 2×2 grid, each computing WT×WT
 // fragments of FM×FN (A fragments FM×FK, B fragments FK×FN: the prelude's FA, FB, FC types), so
 // a workgroup's tile is BM×BN with BM = 2·WT·FM and BN = 2·WT·FN, over K-steps of BK = KS·FK.
-// Operands are vec4-aligned (the runtime sends other
-// shapes to the tiled kernel): each invocation stages units of four f16 along K (A, and B
-// stored N×K) or along N (B stored K×N), one load each, zero past M, N and K. The next step's
-// units are loaded into registers while the matrix units work on this one, so the loads'
-// latency hides behind the products. Each fragment leaves through a small per-subgroup
-// scratch, four columns at a time, so the epilogue and the edge masks are those of the vec4
-// subgroup kernel (gemm_store4.wgsl).
+// Operands are vec4-aligned (the runtime sends other shapes to the tiled kernel): each
+// invocation stages units of four f16 along K (A, and B stored N×K) or along N (B stored K×N),
+// one load each, zero past M, N and K. The next step's units are loaded into registers while
+// the matrix units work on this one, so the loads' latency hides behind the products. Each
+// fragment leaves through a small per-subgroup scratch, four columns at a time, so the epilogue
+// and the edge masks are those of the vec4 subgroup kernel (gemm_store4.wgsl).
 // The tiles are arrays of vec4s, so a unit is one 8-byte shared store (SPV_KHR_cooperative_matrix
 // lets a cooperative load's pointee be a vector, its stride then counted in vectors). Row strides
 // are multiples of 8 halves (16 bytes, what cooperative loads need), padded off a power of two
