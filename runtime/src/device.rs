@@ -73,6 +73,9 @@ pub struct DeviceInfo {
     /// With `VK_NV_cooperative_matrix2`'s `cooperativeMatrixFlexibleDimensions`: the granularities
     /// (as m, n, k) of the other shapes the units take (empty without it).
     pub flexible_shapes: Vec<MatrixShape>,
+    /// The fragment shape `VKDIFF_FRAGMENT` asks for (None where unset or malformed: a context
+    /// refuses the latter), read once here rather than at every product recorded.
+    pub fragment_request: Option<(u32, u32, u32)>,
     /// Whether the cooperative kernels can run: the extension with its `cooperativeMatrix`
     /// feature, and `vulkanMemoryModel` (naga's cooperative SPIR-V declares the Vulkan model).
     pub cooperative_features: bool,
@@ -154,8 +157,8 @@ impl DeviceInfo {
         if !self.cooperative_features || !self.supports_f16() {
             return None;
         }
-        let request = matrix_units::requested_fragment().ok().flatten();
-        matrix_units::pick(&self.matrix_shapes, &self.flexible_shapes, |width| self.can_use_subgroup(width), request)
+        let pinnable = |width| self.can_use_subgroup(width);
+        matrix_units::pick(&self.matrix_shapes, &self.flexible_shapes, pinnable, self.fragment_request)
     }
 
     /// Whether a kernel written for a subgroup of exactly `size` lanes can be pinned to it.
@@ -329,6 +332,7 @@ pub(crate) fn describe(
         subgroup_arithmetic: subgroup.supported_stages.contains(compute)
             && ops.contains(vk::SubgroupFeatureFlags::ARITHMETIC),
         matrix_shapes: if cooperative_extension { matrix_units::query(entry, instance, pd) } else { Vec::new() },
+        fragment_request: matrix_units::requested_fragment().ok().flatten(),
         flexible_shapes: if cooperative2.flexible_dimensions == vk::TRUE {
             flexible_dimensions::query(entry, instance, pd)
         } else {
@@ -418,6 +422,7 @@ pub(crate) mod tests {
             subgroup_arithmetic: true,
             matrix_shapes: Vec::new(),
             flexible_shapes: Vec::new(),
+            fragment_request: None,
             cooperative_features: false,
             max_storage_buffer_range: 1 << 27,
             max_shared_memory: 32768,
