@@ -2,7 +2,8 @@
 
 use anyhow::Result;
 use vkdiff_runtime::{
-    built_cooperative_variants, choose, gpu_paths_requested, list_devices, requested_fragment, DeviceInfo, GemmFamily,
+    built_cooperative_variants, choose, gpu_paths_requested, list_devices, requested_fragment, CooperativeSetting,
+    DeviceInfo, GemmFamily,
 };
 
 #[derive(clap::Args)]
@@ -31,8 +32,15 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
     let gemm = match (d.gemm_family(gpu_paths), d.gemm_subgroup_width(), d.cooperative_variant()) {
         (GemmFamily::Subgroup, Some(lanes), _) => format!("subgroup-register, {lanes} lanes (CPU)"),
         (GemmFamily::Cooperative, _, Some(f)) => {
+            let tried = match CooperativeSetting::from_env() {
+                Ok(CooperativeSetting::Trial) => {
+                    ", kept where a product timed on them as vkdiff starts agrees with the tiled kernels and is not \
+                     1.25× slower"
+                }
+                _ => "",
+            };
             format!(
-                "matrix units, {} f16→f32 fragments, {} lanes (f32 products: shared-memory tiles)",
+                "matrix units, {} f16→f32 fragments, {} lanes{tried} (f32 products: shared-memory tiles)",
                 f.shape(),
                 f.lanes
             )
@@ -126,6 +134,7 @@ fn matrix_units(d: &DeviceInfo) -> String {
 pub fn run(args: &DevicesArgs) -> Result<()> {
     // A malformed request would otherwise show as the device's default choice.
     requested_fragment()?;
+    CooperativeSetting::from_env()?;
     let devices = list_devices()?;
     let chosen = choose(&devices, &Default::default()).ok();
     if args.json {

@@ -4,7 +4,7 @@
 
 mod cli;
 
-use cli::{scratch, vkdiff, vkdiff_with};
+use cli::{error_line_with, scratch, vkdiff};
 use std::path::{Path, PathBuf};
 
 fn fixture(path: &str) -> PathBuf {
@@ -14,15 +14,6 @@ fn fixture(path: &str) -> PathBuf {
 /// The one `error:` line of a failed run.
 fn error_line(args: &[&str]) -> String {
     error_line_with(args, &[])
-}
-
-/// The one `error:` line of a failed run with these environment variables.
-fn error_line_with(args: &[&str], env: &[(&str, &str)]) -> String {
-    let result = vkdiff_with(args, env);
-    let stderr = String::from_utf8_lossy(&result.stderr).into_owned();
-    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
-    assert!(!result.status.success() && errors.len() == 1, "{args:?}: {stderr}");
-    errors[0].to_string()
 }
 
 fn tiny() -> String {

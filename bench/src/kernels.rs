@@ -137,7 +137,7 @@ fn ceiling_run(ctx: &Context, from_shared: bool) -> Option<MatrixCeiling> {
 fn ceiling_cases(ctx: &Context) -> vkdiff_runtime::Result<Vec<Case>> {
     let mut cases = Vec::new();
     for from_shared in [false, true] {
-        let Some(run) = ceiling_run(ctx, from_shared).filter(|_| ctx.gemm_family() == GemmFamily::Cooperative) else {
+        let Some(run) = ceiling_run(ctx, from_shared).filter(|_| peaks::has_matrix_units(ctx)) else {
             break;
         };
         cases.push(Case {
@@ -381,6 +381,9 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             info.driver,
             ctx.gemm_family()
         );
+        if let Some(trial) = peaks::trial_label(&ctx) {
+            println!("matrix-unit trial: {trial}");
+        }
         println!(
             "{:<26} {:<5} {:<20} {:<32} {:>10} {:>9} {:>8} {:>10}",
             "kernel", "dtype", "GEMM kernels", "shape", "ms", "GFLOP/s", "GB/s", "of matrix peak"
@@ -395,7 +398,9 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             // Products run on each family the device has, so one run compares them.
             let families = match (case.on_gemm_family, default_family) {
                 (false, _) => vec![None],
-                (true, GemmFamily::Cooperative) if dtype == Dtype::F16 => {
+                (true, GemmFamily::Cooperative | GemmFamily::Tiled)
+                    if dtype == Dtype::F16 && peaks::has_matrix_units(&ctx) =>
+                {
                     vec![Some(GemmFamily::Cooperative), Some(GemmFamily::Tiled)]
                 }
                 (true, family) => vec![Some(family)],
@@ -432,6 +437,10 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
         let out = serde_json::json!({
             "device": info.name, "driver": info.driver, "kind": info.kind.label(),
             "gemm_family": format!("{:?}", ctx.gemm_family()),
+            "matrix_unit_trial": ctx.matrix_unit_trial().map(|t| serde_json::json!({
+                "cooperative_ms": t.cooperative_ms, "tiled_ms": t.tiled_ms, "difference": t.difference,
+                "kept": t.keeps_matrix_units(),
+            })),
             "kernels": rows.iter().map(|(r, _)| r).collect::<Vec<_>>(),
             "cpu_reference": cpu
                 .as_ref()

@@ -44,3 +44,14 @@ pub(crate) fn family_label(ctx: &Context, dtype: Dtype) -> String {
         _ => "tiled".into(),
     }
 }
+
+/// What the matrix units' trial at the context's start found and chose, where one ran.
+pub(crate) fn trial_label(ctx: &Context) -> Option<String> {
+    ctx.matrix_unit_trial().map(|t| t.summary(&ctx.info().name))
+}
+
+/// Whether the device has matrix units vkdiff's kernels fit and `VKDIFF_COOPERATIVE=0` leaves
+/// them on, whether or not the trial kept them: benchmarks time them either way.
+pub(crate) fn has_matrix_units(ctx: &Context) -> bool {
+    ctx.info().gemm_family(ctx.gpu_paths()) == GemmFamily::Cooperative
+}

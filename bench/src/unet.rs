@@ -60,6 +60,8 @@ struct Row {
     precision: &'static str,
     /// The kernels the products ran on (`matrix units 16×16`, `tiled`, …).
     gemm_kernels: String,
+    /// What the matrix units' trial at start found, where one ran.
+    matrix_unit_trial: Option<String>,
     load_s: f64,
     record_s: f64,
     ms: f64,
@@ -124,7 +126,8 @@ pub fn run(args: &UnetArgs) -> Result<()> {
                     row.reference
                 )),
                 row.ratio_to_reference.map_or("-".into(), |r| format!("{r:.2}×")),
-            ) + &profile_lines(&row.profile)
+            ) + &row.matrix_unit_trial.as_ref().map_or(String::new(), |t| format!("\n  matrix-unit trial: {t}"))
+                + &profile_lines(&row.profile)
         })?;
     }
     Ok(())
@@ -180,6 +183,7 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
         batch: b,
         precision: dtype_name(dtype),
         gemm_kernels: peaks::family_label(&ctx, dtype),
+        matrix_unit_trial: peaks::trial_label(&ctx),
         load_s,
         record_s,
         ms: best * 1e3,

@@ -4,6 +4,7 @@ use crate::device::{self, DeviceInfo, DeviceKind};
 use crate::device_choice::{choose, DeviceChoice};
 use crate::error::{Error, Result, VkContext};
 use crate::flexible_dimensions::CooperativeMatrix2Features;
+use crate::matrix_unit_trial::{run_trial, CooperativeSetting, MatrixUnitTrial};
 use crate::matrix_units;
 use crate::pipeline::{Kernel, PipelineCache};
 use crate::submit_budget::SubmitBudget;
@@ -32,22 +33,18 @@ pub fn gpu_paths_requested() -> bool {
     std::env::var("VKDIFF_GPU_PATHS").is_ok_and(|v| v == "1")
 }
 
-/// `VKDIFF_COOPERATIVE=0` keeps the GPU on its tiled kernels (a driver's matrix units
-/// misbehaving, or a comparison of the two).
-fn cooperative_allowed() -> bool {
-    std::env::var("VKDIFF_COOPERATIVE").map_or(true, |v| v != "0")
-}
-
 impl DeviceInfo {
     /// The GEMM/convolution family a context on this device starts with: the subgroup-register
     /// kernels on CPU devices with a width they are built for; on GPUs (and on the GPU paths)
     /// the matrix units where a cooperative variant fits them and `VKDIFF_COOPERATIVE=0` does
-    /// not turn them off, else the tiled kernels.
+    /// not turn them off, else the tiled kernels. A context then tries the units before it keeps
+    /// them ([`crate::MatrixUnitTrial`]).
     pub fn gemm_family(&self, gpu_paths: bool) -> GemmFamily {
         let cpu = !gpu_paths && self.kind == DeviceKind::Cpu;
+        let allowed = CooperativeSetting::from_env().map_or(true, |s| s != CooperativeSetting::Never);
         if cpu && self.gemm_subgroup_width().is_some() {
             GemmFamily::Subgroup
-        } else if !cpu && self.cooperative_variant().is_some() && cooperative_allowed() {
+        } else if !cpu && self.cooperative_variant().is_some() && allowed {
             GemmFamily::Cooperative
         } else {
             GemmFamily::Tiled
@@ -116,6 +113,8 @@ pub(crate) struct Shared {
     pub(crate) memory_budget: Option<u64>,
     /// Whether `VK_EXT_memory_budget` is enabled.
     pub(crate) memory_budget_extension: bool,
+    /// What the matrix units' trial found, where one ran (see [`Context::matrix_unit_trial`]).
+    pub(crate) trial: Mutex<Option<MatrixUnitTrial>>,
 }
 
 /// `VKDIFF_FRAGMENT`, where set: a shape vkdiff builds that this device's matrix units take.
@@ -177,7 +176,9 @@ impl Context {
         let (instance, validation) = device::create_instance(&entry, api)?;
         match Self::open(&entry, &instance, choice, api) {
             Ok((device, pd, info, queue_family)) => {
-                Self::finish(entry, (instance, validation), device, pd, info, queue_family)
+                let ctx = Self::finish(entry, (instance, validation), device, pd, info, queue_family)?;
+                ctx.try_matrix_units();
+                Ok(ctx)
             }
             Err(e) => {
                 // SAFETY: nothing created from the instance is alive but the messenger, which goes first.
@@ -207,6 +208,7 @@ impl Context {
         let pd = pds[index];
         let family = info.compute_queue_family.expect("checked by choose");
         check_requested_fragment(&info)?;
+        CooperativeSetting::from_env()?;
         // Every feature the kernels' SPIR-V declares, where the device has it.
         let mut f11 = vk::PhysicalDeviceVulkan11Features::default()
             .storage_buffer16_bit_access(info.storage_16bit)
@@ -327,9 +329,44 @@ impl Context {
             compile_notice: Mutex::new(None),
             submit_budget: Mutex::new(submit_budget),
             hung: AtomicBool::new(false),
+            trial: Mutex::new(None),
             info,
         };
         Ok(Context { shared: Arc::new(shared) })
+    }
+
+    /// Where this context would run products on the matrix units and `VKDIFF_COOPERATIVE` is
+    /// unset, times one on them and on the tiled kernels and keeps the units only where they
+    /// agree and are not clearly slower ([`MatrixUnitTrial::keeps_matrix_units`]); says so
+    /// where it drops them. A trial that fails drops them too: the tiled kernels then run alone.
+    fn try_matrix_units(&self) {
+        if self.gemm_family() != GemmFamily::Cooperative
+            || !matches!(CooperativeSetting::from_env(), Ok(CooperativeSetting::Trial))
+        {
+            return;
+        }
+        let name = &self.info().name;
+        match run_trial(self) {
+            Ok(trial) => {
+                if !trial.keeps_matrix_units() {
+                    eprintln!("vkdiff: {}", trial.summary(name));
+                    self.set_gemm_family(GemmFamily::Tiled);
+                }
+                *self.shared.trial.lock().unwrap() = Some(trial);
+            }
+            Err(e) => {
+                eprintln!("vkdiff: `{name}`: the matrix units' trial failed ({e}): using the tiled kernels");
+                self.set_gemm_family(GemmFamily::Tiled);
+            }
+        }
+        // The trial's tensors are gone; the peak is the caller's work alone.
+        self.reset_peak();
+    }
+
+    /// What the matrix units' trial at this context's start found; `None` where none ran (no
+    /// variant fits, a CPU device, or `VKDIFF_COOPERATIVE` set).
+    pub fn matrix_unit_trial(&self) -> Option<MatrixUnitTrial> {
+        *self.shared.trial.lock().unwrap()
     }
 
     pub fn info(&self) -> &DeviceInfo {

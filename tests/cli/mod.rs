@@ -9,8 +9,30 @@ pub fn vkdiff(args: &[&str]) -> Output {
 
 /// `vkdiff` with these environment variables set as well.
 pub fn vkdiff_with(args: &[&str], env: &[(&str, &str)]) -> Output {
-    let mut command = Command::new(env!("CARGO_BIN_EXE_vkdiff"));
-    command.args(args).env("RUST_BACKTRACE", "0").envs(env.iter().copied()).output().unwrap()
+    command().args(args).env("RUST_BACKTRACE", "0").envs(env.iter().copied()).output().unwrap()
+}
+
+/// The binary, started as cargo starts the test binaries: through the target's runner where one
+/// is set (CI's Mesa 26.1 root runs both with its own libraries).
+pub fn command() -> Command {
+    match std::env::var_os("CARGO_TARGET_X86_64_UNKNOWN_LINUX_GNU_RUNNER") {
+        Some(runner) => {
+            let mut command = Command::new(runner);
+            command.arg(env!("CARGO_BIN_EXE_vkdiff"));
+            command
+        }
+        None => Command::new(env!("CARGO_BIN_EXE_vkdiff")),
+    }
+}
+
+/// The one `error:` line of a failed run with these environment variables.
+#[allow(dead_code)] // for the tests of refusals
+pub fn error_line_with(args: &[&str], env: &[(&str, &str)]) -> String {
+    let result = vkdiff_with(args, env);
+    let stderr = String::from_utf8_lossy(&result.stderr).into_owned();
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+    assert!(!result.status.success() && errors.len() == 1, "{args:?}: {stderr}");
+    errors[0].to_string()
 }
 
 /// An empty folder under the target's temporary directory, unique to this test process.

@@ -1,0 +1,20 @@
+//! The trial that decides, as a context starts, whether the matrix units run its products.
+
+use vkdiff_runtime::{run_trial, GemmFamily};
+use vkdiff_testkit::*;
+
+#[test]
+fn the_matrix_unit_trial_runs_both_families_and_they_agree() {
+    let ctx = ctx_with(GemmFamily::Cooperative);
+    if ctx.info().cooperative_variant().is_none() {
+        let err = run_trial(&ctx).unwrap_err().to_string();
+        assert!(err.contains("has no variant to try"), "{err}");
+        return;
+    }
+    let trial = run_trial(&ctx).unwrap();
+    assert_eq!((trial.cooperative_kernel, trial.tiled_kernel), ("gemm_coop", "gemm_tiled"), "{trial:?}");
+    assert!(trial.cooperative_ms > 0.0 && trial.tiled_ms > 0.0, "{trial:?}");
+    // Both sum in f32 and round to f16: a garbled fragment would miss by the results' size.
+    assert!(trial.difference < 2e-3, "{trial:?}");
+    assert_eq!(ctx.gemm_family(), GemmFamily::Cooperative, "the trial leaves the family as it found it");
+}

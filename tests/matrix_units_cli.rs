@@ -1,0 +1,47 @@
+//! Where the matrix units run: `VKDIFF_COOPERATIVE` and the trial each run makes as it starts.
+//! On a driver without matrix units (Mesa 22.3 lavapipe) no trial runs; CI's Mesa 26.1 pass
+//! runs these tests where one does.
+
+mod cli;
+
+use cli::{command, error_line_with, scratch};
+
+#[test]
+fn a_cooperative_setting_other_than_0_or_1_is_refused() {
+    let out = scratch("cooperative-setting").join("x.png");
+    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pipeline/tiny-sdxl");
+    let gen =
+        ["gen", "--model", model.to_str().unwrap(), "--prompt", "x", "--steps", "1", "--out", out.to_str().unwrap()];
+    for args in [&["devices"][..], &gen] {
+        let line = error_line_with(args, &[("VKDIFF_COOPERATIVE", "yes")]);
+        assert!(line.contains("VKDIFF_COOPERATIVE=yes: use 1"), "{args:?}: {line}");
+    }
+    assert!(!out.exists());
+}
+
+/// stdout of `vkdiff` on the GPU paths with `VKDIFF_COOPERATIVE` unset, so the trial decides.
+fn on_gpu_paths(args: &[&str]) -> String {
+    let run = command().args(args).env("VKDIFF_GPU_PATHS", "1").env_remove("VKDIFF_COOPERATIVE").output().unwrap();
+    assert!(run.status.success(), "{args:?}: {}", String::from_utf8_lossy(&run.stderr));
+    String::from_utf8(run.stdout).unwrap()
+}
+
+#[test]
+fn the_matrix_units_are_tried_as_vkdiff_starts_where_a_variant_fits() {
+    let devices: serde_json::Value = serde_json::from_str(&on_gpu_paths(&["devices", "--json"])).unwrap();
+    let selected = devices.as_array().unwrap().iter().find(|d| d["selected"] == true).unwrap();
+    let fits = !selected["cooperative_variant"].is_null();
+    let header = on_gpu_paths(&["bench", "kernels", "--filter", "no such kernel", "--no-cpu-reference"]);
+    let trial = header.lines().find_map(|l| l.strip_prefix("matrix-unit trial: "));
+    let Some(trial) = trial else {
+        assert!(!fits, "a variant fits, but no trial ran:\n{header}");
+        assert!(!header.contains("GEMM kernels: Cooperative"), "{header}");
+        return;
+    };
+    assert!(fits, "a trial ran on a device no variant fits:\n{header}");
+    // The family the run took is the trial's verdict, whichever way the timing went.
+    assert!(trial.contains("results agree"), "{trial}");
+    let kept = trial.ends_with("using the matrix units");
+    let family = if kept { "GEMM kernels: Cooperative" } else { "GEMM kernels: Tiled" };
+    assert!(header.contains(family), "{header}");
+}
