@@ -54,14 +54,15 @@ impl CooperativeSetting {
 /// What the trial found.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MatrixUnitTrial {
-    /// Device time of one trial product on the matrix units and on the tiled kernels.
+    /// Time of one trial product on the matrix units and on the tiled kernels: device time from
+    /// timestamps, or the host's clock around the run where the queue writes none.
     pub cooperative_ms: f64,
     pub tiled_ms: f64,
     /// Largest difference of the two results over the largest result.
     pub difference: f32,
-    /// The kernels that ran the product in each family.
-    pub cooperative_kernel: &'static str,
-    pub tiled_kernel: &'static str,
+    /// The kernels that ran the product in each family, where timestamps name them.
+    pub cooperative_kernel: Option<&'static str>,
+    pub tiled_kernel: Option<&'static str>,
 }
 
 impl MatrixUnitTrial {
@@ -98,13 +99,28 @@ impl MatrixUnitTrial {
     }
 }
 
-/// Runs the trial on `ctx`'s matrix units, whose variant must fit; leaves its family as found.
+/// How the trial times its products.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TrialClock {
+    /// The device's timestamps around each product.
+    Timestamps,
+    /// The host's clock around the run: where the queue writes no timestamps.
+    Host,
+}
+
+/// Runs the trial on `ctx`'s matrix units, whose variant must fit, timed by the device where it
+/// writes timestamps; leaves the context's family as found.
 pub fn run_trial(ctx: &Context) -> Result<MatrixUnitTrial> {
+    run_trial_timed_by(ctx, if ctx.info().timestamps() { TrialClock::Timestamps } else { TrialClock::Host })
+}
+
+/// [`run_trial`] timed by `clock`.
+pub fn run_trial_timed_by(ctx: &Context, clock: TrialClock) -> Result<MatrixUnitTrial> {
     if ctx.info().cooperative_variant().is_none() {
         return Err(Error::Shape(format!("matrix-unit trial: `{}` has no variant to try", ctx.info().name)));
     }
     let before = ctx.gemm_family();
-    let outcome = timed_products(ctx);
+    let outcome = timed_products(ctx, clock);
     ctx.set_gemm_family(before);
     let (cooperative, tiled) = outcome?;
     Ok(MatrixUnitTrial {
@@ -120,28 +136,34 @@ pub fn run_trial(ctx: &Context) -> Result<MatrixUnitTrial> {
 /// kernel that ran it and its result.
 struct Timed {
     ms: f64,
-    kernel: &'static str,
+    kernel: Option<&'static str>,
     result: Vec<f32>,
 }
 
-fn timed_products(ctx: &Context) -> Result<(Timed, Timed)> {
+fn timed_products(ctx: &Context, clock: TrialClock) -> Result<(Timed, Timed)> {
     let x = ctx.upload(&[M, K], Dtype::F16, &pattern(M * K, 1))?;
     let w = ctx.upload(&[N, K], Dtype::F16, &pattern(N * K, 2))?;
     let run = |family: GemmFamily| -> Result<Timed> {
         ctx.set_gemm_family(family);
         let out = ctx.zeros(&[M, N], Dtype::F16)?;
-        let recording = products(ctx, &x, &w, &out)?;
+        let stamps = clock == TrialClock::Timestamps;
+        let recording = products(ctx, &x, &w, &out, stamps)?;
         recording.run()?;
-        let timings = recording.run_profiled()?;
-        let nanos: f64 = timings.iter().map(|t| t.nanos).sum();
-        let kernel = timings.first().map_or("none", |t| t.kernel);
+        let (nanos, kernel) = if stamps {
+            let timings = recording.run_profiled()?;
+            (timings.iter().map(|t| t.nanos).sum(), timings.first().map(|t| t.kernel))
+        } else {
+            let start = std::time::Instant::now();
+            recording.run()?;
+            (start.elapsed().as_nanos() as f64, None)
+        };
         Ok(Timed { ms: nanos / REPEATS as f64 / 1e6, kernel, result: out.download()? })
     };
     Ok((run(GemmFamily::Cooperative)?, run(GemmFamily::Tiled)?))
 }
 
-fn products(ctx: &Context, x: &Tensor, w: &Tensor, out: &Tensor) -> Result<crate::recorder::Recording> {
-    let mut rec = Recorder::new(ctx, true)?;
+fn products(ctx: &Context, x: &Tensor, w: &Tensor, out: &Tensor, timed: bool) -> Result<crate::recorder::Recording> {
+    let mut rec = Recorder::new(ctx, timed)?;
     for _ in 0..REPEATS {
         linear(&mut rec, x, w, None, out)?;
     }
@@ -175,7 +197,7 @@ mod tests {
     use super::*;
 
     fn trial(cooperative_ms: f64, tiled_ms: f64, difference: f32) -> MatrixUnitTrial {
-        MatrixUnitTrial { cooperative_ms, tiled_ms, difference, cooperative_kernel: "c", tiled_kernel: "t" }
+        MatrixUnitTrial { cooperative_ms, tiled_ms, difference, cooperative_kernel: None, tiled_kernel: None }
     }
 
     #[test]
