@@ -29,7 +29,7 @@ pub const MARGIN: f64 = 1.25;
 /// What `VKDIFF_COOPERATIVE` asks for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CooperativeSetting {
-    /// Unset: the matrix units where a variant fits and the trial keeps them.
+    /// Unset or `auto`: the matrix units where a variant fits and the trial keeps them.
     Trial,
     /// `1`: the matrix units wherever a variant fits, untried.
     Always,
@@ -39,13 +39,21 @@ pub enum CooperativeSetting {
 
 impl CooperativeSetting {
     pub fn from_env() -> Result<CooperativeSetting> {
-        match std::env::var("VKDIFF_COOPERATIVE").as_deref() {
+        match std::env::var("VKDIFF_COOPERATIVE") {
             Err(_) => Ok(CooperativeSetting::Trial),
-            Ok("1") => Ok(CooperativeSetting::Always),
-            Ok("0") => Ok(CooperativeSetting::Never),
-            Ok(other) => Err(Error::BadSetting(format!(
-                "VKDIFF_COOPERATIVE={other}: use 1 (the matrix units, untried), 0 (never) or leave it unset (tried \
-                 against the tiled kernels at start)"
+            Ok(value) => CooperativeSetting::parse(&value),
+        }
+    }
+
+    /// `1`, `0` or `auto`, and the usual spellings of a switch (`true`/`false`, `yes`/`no`, `on`/`off`).
+    pub fn parse(value: &str) -> Result<CooperativeSetting> {
+        match value.trim().to_ascii_lowercase().as_str() {
+            "auto" | "" => Ok(CooperativeSetting::Trial),
+            "1" | "true" | "yes" | "on" => Ok(CooperativeSetting::Always),
+            "0" | "false" | "no" | "off" => Ok(CooperativeSetting::Never),
+            _ => Err(Error::BadSetting(format!(
+                "VKDIFF_COOPERATIVE={value}: use 1 (the matrix units, untried), 0 (never) or auto (the default: \
+                 tried against the tiled kernels as vkdiff starts)"
             ))),
         }
     }
@@ -222,6 +230,23 @@ mod tests {
         assert!(trial(1.0, 4.0, 1e-3).summary("gpu").ends_with("using the matrix units"));
         assert!(trial(1.0, 4.0, 0.5).summary("gpu").contains("differs from the tiled kernels' by 5.00e-1"));
         assert!(trial(4.0, 1.0, 1e-3).summary("gpu").contains("using the tiled kernels"));
+    }
+
+    #[test]
+    fn the_setting_takes_the_spellings_of_a_switch() {
+        for (value, setting) in [
+            ("auto", CooperativeSetting::Trial),
+            ("1", CooperativeSetting::Always),
+            ("True", CooperativeSetting::Always),
+            ("on", CooperativeSetting::Always),
+            ("0", CooperativeSetting::Never),
+            ("no", CooperativeSetting::Never),
+            ("OFF", CooperativeSetting::Never),
+        ] {
+            assert_eq!(CooperativeSetting::parse(value).unwrap(), setting, "{value}");
+        }
+        let err = CooperativeSetting::parse("2").unwrap_err().to_string();
+        assert!(err.contains("VKDIFF_COOPERATIVE=2: use 1"), "{err}");
     }
 
     #[test]
