@@ -34,8 +34,8 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
         (GemmFamily::Cooperative, _, Some(f)) => {
             let tried = match CooperativeSetting::from_env() {
                 Ok(CooperativeSetting::Trial) => {
-                    ", kept where a product timed on them as vkdiff starts agrees with the tiled kernels and is not \
-                     1.25× slower"
+                    ", unless a product timed on them as vkdiff starts differs from the tiled kernels' or takes over \
+                     1.25× their time"
                 }
                 _ => "",
             };

@@ -336,7 +336,7 @@ impl Context {
     }
 
     /// Where this context would run products on the matrix units and `VKDIFF_COOPERATIVE` is
-    /// unset, times one on them and on the tiled kernels and keeps the units only where they
+    /// unset or `auto`, times one on them and on the tiled kernels and keeps the units only where they
     /// agree and are not clearly slower ([`MatrixUnitTrial::keeps_matrix_units`]); says so
     /// where it drops them. A trial that fails drops them too: the tiled kernels then run alone.
     fn try_matrix_units(&self) {
@@ -364,7 +364,7 @@ impl Context {
     }
 
     /// What the matrix units' trial at this context's start found; `None` where none ran (no
-    /// variant fits, a CPU device, or `VKDIFF_COOPERATIVE` set).
+    /// variant fits, a CPU device, or `VKDIFF_COOPERATIVE` set to on or off).
     pub fn matrix_unit_trial(&self) -> Option<MatrixUnitTrial> {
         *self.shared.trial.lock().unwrap()
     }
