@@ -3,7 +3,7 @@
 use anyhow::Result;
 use vkdiff_runtime::{
     built_cooperative_variants, choose, gpu_paths_requested, list_devices, requested_fragment, CooperativeSetting,
-    DeviceInfo, GemmFamily,
+    DeviceInfo, GemmFamily, COOPERATIVE_MATRIX2_FEATURES,
 };
 
 #[derive(clap::Args)]
@@ -128,7 +128,19 @@ fn matrix_units(d: &DeviceInfo) -> String {
             built_cooperative_variants()
         ),
     };
-    format!("{}{flexible}; {verdict}", shapes.join(", "))
+    format!("{}{flexible}{}; {verdict}", shapes.join(", "), matrix2_features(d))
+}
+
+/// "; VK_NV_cooperative_matrix2 features: …" where the device reports any: what a kernel on
+/// that extension's workgroup-scope matrices or tensor loads could count on.
+fn matrix2_features(d: &DeviceInfo) -> String {
+    if d.cooperative_matrix2.is_empty() {
+        return String::new();
+    }
+    let missing: Vec<&str> =
+        COOPERATIVE_MATRIX2_FEATURES.iter().copied().filter(|f| !d.cooperative_matrix2.contains(f)).collect();
+    let missing = if missing.is_empty() { String::new() } else { format!(" (not {})", missing.join(", ")) };
+    format!("; VK_NV_cooperative_matrix2 features: {}{missing}", d.cooperative_matrix2.join(", "))
 }
 
 pub fn run(args: &DevicesArgs) -> Result<()> {
@@ -148,6 +160,7 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
                     "f16": d.supports_f16(), "subgroup_size": d.subgroup_size,
                     "subgroup_size_range": d.subgroup_size_range,
                     "cooperative_matrix_shapes": d.matrix_shapes.iter().map(|s| s.label()).collect::<Vec<_>>(),
+                    "cooperative_matrix2_features": d.cooperative_matrix2,
                     "cooperative_variant": d.cooperative_variant().map(|f| serde_json::json!({
                         "m": f.m, "n": f.n, "k": f.k, "lanes": f.lanes, "flexible_dimensions": f.flexible })), "device_memory_bytes": d.device_local_bytes,
                     "max_storage_buffer_range": d.max_storage_buffer_range, "usable": d.unsupported_reason().is_none(),

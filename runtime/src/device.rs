@@ -73,6 +73,9 @@ pub struct DeviceInfo {
     /// With `VK_NV_cooperative_matrix2`'s `cooperativeMatrixFlexibleDimensions`: the granularities
     /// (as m, n, k) of the other shapes the units take (empty without it).
     pub flexible_shapes: Vec<MatrixShape>,
+    /// The `VK_NV_cooperative_matrix2` features the device reports (by
+    /// [`crate::COOPERATIVE_MATRIX2_FEATURES`]' names); empty without the extension.
+    pub cooperative_matrix2: Vec<&'static str>,
     /// The fragment shape `VKDIFF_FRAGMENT` asks for (None where unset or malformed: a context
     /// refuses the latter), read once here rather than at every product recorded.
     pub fragment_request: Option<(u32, u32, u32)>,
@@ -333,7 +336,8 @@ pub(crate) fn describe(
             && ops.contains(vk::SubgroupFeatureFlags::ARITHMETIC),
         matrix_shapes: if cooperative_extension { matrix_units::query(entry, instance, pd) } else { Vec::new() },
         fragment_request: matrix_units::requested_fragment().ok().flatten(),
-        flexible_shapes: if cooperative2.flexible_dimensions == vk::TRUE {
+        cooperative_matrix2: if cooperative2_extension { cooperative2.reported() } else { Vec::new() },
+        flexible_shapes: if cooperative2.flexible_dimensions() {
             flexible_dimensions::query(entry, instance, pd)
         } else {
             Vec::new()
@@ -422,6 +426,7 @@ pub(crate) mod tests {
             subgroup_arithmetic: true,
             matrix_shapes: Vec::new(),
             flexible_shapes: Vec::new(),
+            cooperative_matrix2: Vec::new(),
             fragment_request: None,
             cooperative_features: false,
             max_storage_buffer_range: 1 << 27,

@@ -6,15 +6,26 @@ use crate::matrix_units::{component, MatrixShape};
 use ash::vk;
 
 /// `VkPhysicalDeviceCooperativeMatrix2FeaturesNV` (`VK_NV_cooperative_matrix2`, newer than
-/// ash's headers); vkdiff reads and enables only `cooperativeMatrixFlexibleDimensions`.
+/// ash's headers): its seven features in the header's order ([`FEATURE_NAMES`]); vkdiff enables
+/// only `cooperativeMatrixFlexibleDimensions`.
 #[repr(C)]
 pub(crate) struct CooperativeMatrix2Features {
     s_type: vk::StructureType,
     p_next: *mut std::ffi::c_void,
-    workgroup_scope: vk::Bool32,
-    pub(crate) flexible_dimensions: vk::Bool32,
-    others: [vk::Bool32; 5],
+    features: [vk::Bool32; 7],
 }
+
+/// The features of `VK_NV_cooperative_matrix2`, as `vkdiff devices` names them.
+pub const FEATURE_NAMES: [&str; 7] = [
+    "workgroup scope",
+    "flexible dimensions",
+    "reductions",
+    "conversions",
+    "per-element operations",
+    "tensor addressing",
+    "block loads",
+];
+const FLEXIBLE_DIMENSIONS: usize = 1;
 
 // SAFETY: the struct is laid out as the Vulkan one, which extends both chains.
 unsafe impl vk::ExtendsPhysicalDeviceFeatures2 for CooperativeMatrix2Features {}
@@ -25,13 +36,22 @@ impl CooperativeMatrix2Features {
 
     /// Every feature off, or (`flexible_dimensions`) that one on.
     pub(crate) fn new(flexible_dimensions: bool) -> Self {
+        let mut features = [vk::FALSE; 7];
+        features[FLEXIBLE_DIMENSIONS] = flexible_dimensions.into();
         CooperativeMatrix2Features {
             s_type: vk::StructureType::from_raw(1_000_593_000),
             p_next: std::ptr::null_mut(),
-            workgroup_scope: vk::FALSE,
-            flexible_dimensions: flexible_dimensions.into(),
-            others: [vk::FALSE; 5],
+            features,
         }
+    }
+
+    pub(crate) fn flexible_dimensions(&self) -> bool {
+        self.features[FLEXIBLE_DIMENSIONS] == vk::TRUE
+    }
+
+    /// The names of the features the device reports ([`FEATURE_NAMES`]).
+    pub(crate) fn reported(&self) -> Vec<&'static str> {
+        FEATURE_NAMES.iter().zip(self.features).filter(|(_, on)| *on == vk::TRUE).map(|(name, _)| *name).collect()
     }
 }
 
@@ -95,4 +115,20 @@ pub(crate) fn query(entry: &ash::Entry, instance: &ash::Instance, pd: vk::Physic
             subgroup_scope: f.scope == vk::ScopeKHR::SUBGROUP,
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reported_features_are_named_in_the_headers_order() {
+        let mut f = CooperativeMatrix2Features::new(true);
+        assert!(f.flexible_dimensions());
+        assert_eq!(f.reported(), ["flexible dimensions"]);
+        f.features = [vk::TRUE, vk::FALSE, vk::FALSE, vk::FALSE, vk::FALSE, vk::TRUE, vk::TRUE];
+        assert!(!f.flexible_dimensions());
+        assert_eq!(f.reported(), ["workgroup scope", "tensor addressing", "block loads"]);
+        assert!(CooperativeMatrix2Features::new(false).reported().is_empty());
+    }
 }

@@ -27,6 +27,7 @@ pub use cpu_vectors::wider_lavapipe_vectors_available;
 pub use device::{api_limit, list_devices, DeviceInfo, DeviceKind};
 pub use device_choice::{choose, loader_icds, DeviceChoice, DeviceSpec, PciAddress};
 pub use error::{Error, Result};
+pub use flexible_dimensions::FEATURE_NAMES as COOPERATIVE_MATRIX2_FEATURES;
 pub use matrix_unit_trial::{run_trial, run_trial_timed_by, CooperativeSetting, MatrixUnitTrial, TrialClock};
 pub use matrix_units::{built_cooperative_variants, requested_fragment, Fragment, MatrixShape};
 pub use memory::Placement;
