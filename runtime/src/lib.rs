@@ -35,4 +35,4 @@ pub use memory_budget::MemoryRoom;
 pub use pipeline::Kernel;
 pub use recorder::{Recorder, Recording, Timing};
 pub use submit_budget::{SubmitBudget, DEFAULT_SUBMIT_GFLOP, DISPATCHES_PER_SUBMIT};
-pub use tensor::{dtype_size, Dtype, Tensor};
+pub use tensor::{dtype_size, uniform_values, Dtype, Tensor};

@@ -10,6 +10,21 @@ use half::f16;
 use std::sync::Arc;
 pub use vkdiff_kernels::Dtype;
 
+/// Deterministic values uniform in [-1, 1) (xorshift64*, one stream per `seed`): the data of the
+/// tests and of the matrix units' trial, which no fragment layout could reproduce by accident.
+pub fn uniform_values(n: usize, seed: u64) -> Vec<f32> {
+    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+    (0..n)
+        .map(|_| {
+            s ^= s >> 12;
+            s ^= s << 25;
+            s ^= s >> 27;
+            let x = s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40;
+            (x as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
+        })
+        .collect()
+}
+
 /// Bytes per element of a storage dtype.
 pub fn dtype_size(dtype: Dtype) -> usize {
     match dtype {
@@ -189,5 +204,19 @@ impl Context {
         let t = Tensor::owned(buf, shape, dtype);
         t.write_bytes(bytes)?;
         Ok(t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::uniform_values;
+
+    #[test]
+    fn uniform_values_span_the_unit_interval_and_differ_by_seed() {
+        let a = uniform_values(4096, 1);
+        assert!(a.iter().all(|v| (-1.0..1.0).contains(v)));
+        assert!(a.iter().any(|&v| v < -0.9) && a.iter().any(|&v| v > 0.9));
+        assert_eq!(a[..8], uniform_values(8, 1)[..]);
+        assert_ne!(a[..8], uniform_values(8, 2)[..]);
     }
 }

@@ -1,19 +1,10 @@
 //! Deterministic data and comparisons against f64 references that name the worst element.
 
-use vkdiff_runtime::Dtype;
+use vkdiff_runtime::{uniform_values, Dtype};
 
-/// Deterministic values uniform in [-1, 1) (xorshift64*).
+/// Deterministic values uniform in [-1, 1) (the runtime's [`uniform_values`]).
 pub fn random(n: usize, seed: u64) -> Vec<f32> {
-    let mut s = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-    (0..n)
-        .map(|_| {
-            s ^= s >> 12;
-            s ^= s << 25;
-            s ^= s >> 27;
-            let x = s.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40;
-            (x as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
-        })
-        .collect()
+    uniform_values(n, seed)
 }
 
 /// The values a tensor of `dtype` actually holds after upload.
