@@ -12,7 +12,7 @@ use crate::ops::linear;
 use crate::recorder::Recorder;
 use crate::tensor::{uniform_values, Dtype, Tensor};
 
-/// The trial product: the shape of SDXL's attention projections at a 32×32 latent, in f16.
+/// The trial product: SDXL's 640-channel attention projections for one 512² image (1024 tokens), in f16.
 const M: usize = 1024;
 const N: usize = 640;
 const K: usize = 640;
