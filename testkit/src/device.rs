@@ -44,7 +44,7 @@ pub fn private_ctx() -> Context {
 /// whose units fit no cooperative variant fails the test instead of testing the tiled kernels twice.
 pub fn ctx_with(family: GemmFamily) -> Context {
     let c = open();
-    if family == GemmFamily::Cooperative && std::env::var("VKDIFF_EXPECT_COOPERATIVE").is_ok_and(|v| v == "1") {
+    if family == GemmFamily::Cooperative && expect_cooperative() {
         let info = c.info();
         assert!(
             info.cooperative_variant().is_some(),
@@ -57,11 +57,24 @@ pub fn ctx_with(family: GemmFamily) -> Context {
     c
 }
 
+fn expect_cooperative() -> bool {
+    std::env::var("VKDIFF_EXPECT_COOPERATIVE").is_ok_and(|v| v == "1")
+}
+
+/// A new context; under `VKDIFF_EXPECT_COOPERATIVE=1` a matrix-unit trial that dropped the units
+/// fails the test, which would otherwise test the tiled kernels where the units were meant.
 fn open() -> Context {
-    Context::new(&Default::default()).unwrap_or_else(|e| {
+    let c = Context::new(&Default::default()).unwrap_or_else(|e| {
         panic!(
             "vkdiff's tests need a Vulkan device and found none usable: {e}\n(on Debian: apt-get install -y \
             mesa-vulkan-drivers libvulkan1)"
         )
-    })
+    });
+    if let Some(trial) = c.matrix_unit_trial().filter(|t| expect_cooperative() && !t.keeps_matrix_units()) {
+        panic!(
+            "VKDIFF_EXPECT_COOPERATIVE=1, but the matrix units' trial dropped them: {}",
+            trial.summary(&c.info().name)
+        );
+    }
+    c
 }
