@@ -208,12 +208,16 @@ fn compile(mut src: Source, params: &[(&str, u32)], cooperative: bool, what: &st
             format!("{}: {what}: {}\n{}", at.unwrap_or_default(), e.as_inner(), e.emit_to_string(&src.text))
         })?;
     // Measured with naga 30 on lavapipe: SPIR-V 1.3 for subgroups, native workgroup zero-init (the polyfill costs
-    // seconds of JIT on lavapipe), no StorageInputOutput16 (lavapipe lacks it), Restrict bounds.
+    // seconds of JIT on lavapipe), no StorageInputOutput16 (lavapipe lacks it), Restrict bounds. No loop bounding:
+    // naga's default puts a 64-bit iteration counter in every loop, a browser's guard against infinite loops (which
+    // every loop here is not: each counts to a bound), and the counter's second exit hides loops' trip counts from
+    // drivers' unrollers (wgpu issue 7698: a compute pass 100× slower with it).
     let restrict = naga::proc::BoundsCheckPolicy::Restrict;
     let options = spv::Options {
         lang_version: (1, 3),
         flags: spv::WriterFlags::empty(),
         zero_initialize_workgroup_memory: spv::ZeroInitializeWorkgroupMemoryMode::Native,
+        force_loop_bounding: false,
         use_storage_input_output_16: false,
         bounds_check_policies: naga::proc::BoundsCheckPolicies {
             index: restrict,

@@ -90,19 +90,27 @@ mod compile_tests {
         assert_eq!(unroll_count("CM/0", &params), None);
     }
 
-    /// (rows, columns, use) of each cooperative matrix type in `words`.
-    fn fragment_types(words: &[u32]) -> Vec<(u32, u32, u32)> {
-        let (mut constants, mut types, mut at) = (Vec::new(), Vec::new(), 5);
+    /// The instructions of a SPIR-V module, after its header.
+    fn instructions(words: &[u32]) -> Vec<&[u32]> {
+        let (mut out, mut at) = (Vec::new(), 5);
         while at < words.len() {
             let count = (words[at] >> 16) as usize;
-            let inst = &words[at..at + count];
+            out.push(&words[at..at + count]);
+            at += count;
+        }
+        out
+    }
+
+    /// (rows, columns, use) of each cooperative matrix type in `words`.
+    fn fragment_types(words: &[u32]) -> Vec<(u32, u32, u32)> {
+        let (mut constants, mut types) = (Vec::new(), Vec::new());
+        for inst in instructions(words) {
             let value = |id: u32| constants.iter().find(|(c, _)| *c == id).map(|(_, v)| *v).unwrap();
-            match words[at] & 0xffff {
+            match inst[0] & 0xffff {
                 43 => constants.push((inst[2], inst[3])),
                 4456 => types.push((value(inst[4]), value(inst[5]), value(inst[6]))),
                 _ => {}
             }
-            at += count;
         }
         types
     }
@@ -125,6 +133,35 @@ mod compile_tests {
         let src = Source::new(&prelude(true, &[("SG", 8)], true), &[("k.wgsl".into(), body.into())]);
         let err = compile(src, &[("SG", 8)], true, "kernel `t`").unwrap_err();
         assert!(err.contains("needs the parameters FM, FN and FK"), "{err}");
+    }
+
+    /// Whether `words` hold a composite of 32-bit all-ones constants: naga's loop-bounding
+    /// counter starts at vec2(u32::MAX), and nothing in a kernel builds one.
+    fn has_loop_counter(words: &[u32]) -> bool {
+        let mut all_ones = Vec::new();
+        instructions(words).into_iter().any(|inst| match inst[0] & 0xffff {
+            43 if inst.len() == 4 && inst[3] == u32::MAX => {
+                all_ones.push(inst[2]);
+                false
+            }
+            44 => inst[3..].iter().all(|c| all_ones.contains(c)),
+            _ => false,
+        })
+    }
+
+    #[test]
+    fn loops_carry_no_iteration_counter() {
+        let body = "var<workgroup> w: array<u32, 8>;\n@compute @workgroup_size(1)\nfn main() {\n    \
+            for (var i = 0u; i < 8u; i++) {\n        w[i] = i;\n    }\n}\n";
+        let words = compile(one_file(body), &[], false, "kernel `t`").unwrap();
+        assert!(instructions(&words).iter().any(|i| i[0] & 0xffff == 246), "the loop is there (OpLoopMerge)");
+        assert!(!has_loop_counter(&words), "a loop compiled with naga's iteration counter");
+        let bounded: Vec<String> = crate::VARIANTS
+            .iter()
+            .filter(|v| has_loop_counter(&v.words()))
+            .map(|v| format!("{} {:?} {:?}", v.kernel, v.dtype, v.params))
+            .collect();
+        assert!(bounded.is_empty(), "variants with naga's loop counter: {bounded:?}");
     }
 
     #[test]
