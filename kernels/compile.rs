@@ -188,9 +188,27 @@ fn replace_word(text: &str, word: &str, with: &str) -> String {
     out
 }
 
+/// Whether a variant's loops keep naga's 64-bit iteration counter. naga adds one to every loop by
+/// default, a browser's guard against infinite loops (none here: each loop counts to a bound).
+/// Its second exit hides the loop's trip count from the driver's unroller. GPU kernels drop it, so
+/// that their compilers unroll as they see fit (wgpu issue 7698: a compute pass 100× slower
+/// with the counter). The kernels lavapipe runs keep it: their hot loops are unrolled in the
+/// source as far as JIT time allows, and without the counter Mesa 26.1 unrolled the rest, so the
+/// kernel tests took 430 s at 16 lanes instead of 24.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Loops {
+    Counted,
+    Plain,
+}
+
 /// SPIR-V words for `src`; on failure one message starting with `file:line: what: `, followed
 /// by naga's rendering of the error.
-fn compile(mut src: Source, params: &[(&str, u32)], cooperative: bool, what: &str) -> Result<Vec<u32>, String> {
+fn compile(
+    mut src: Source,
+    params: &[(&str, u32)],
+    (cooperative, loops): (bool, Loops),
+    what: &str,
+) -> Result<Vec<u32>, String> {
     use naga::{back::spv, valid};
     src.text = unroll(&src.text, params).map_err(|e| format!("{what}: {e}"))?;
     let module = naga::front::wgsl::parse_str(&src.text).map_err(|e| {
@@ -208,16 +226,14 @@ fn compile(mut src: Source, params: &[(&str, u32)], cooperative: bool, what: &st
             format!("{}: {what}: {}\n{}", at.unwrap_or_default(), e.as_inner(), e.emit_to_string(&src.text))
         })?;
     // Measured with naga 30 on lavapipe: SPIR-V 1.3 for subgroups, native workgroup zero-init (the polyfill costs
-    // seconds of JIT on lavapipe), no StorageInputOutput16 (lavapipe lacks it), Restrict bounds. No loop bounding:
-    // naga's default puts a 64-bit iteration counter in every loop, a browser's guard against infinite loops (which
-    // every loop here is not: each counts to a bound), and the counter's second exit hides loops' trip counts from
-    // drivers' unrollers (wgpu issue 7698: a compute pass 100× slower with it).
+    // seconds of JIT on lavapipe), no StorageInputOutput16 (lavapipe lacks it), Restrict bounds; loop counters as
+    // `loops` says.
     let restrict = naga::proc::BoundsCheckPolicy::Restrict;
     let options = spv::Options {
         lang_version: (1, 3),
         flags: spv::WriterFlags::empty(),
         zero_initialize_workgroup_memory: spv::ZeroInitializeWorkgroupMemoryMode::Native,
-        force_loop_bounding: false,
+        force_loop_bounding: loops == Loops::Counted,
         use_storage_input_output_16: false,
         bounds_check_policies: naga::proc::BoundsCheckPolicies {
             index: restrict,

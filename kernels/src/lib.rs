@@ -51,16 +51,20 @@ mod compile_tests {
 
     #[test]
     fn parse_errors_name_the_file_and_line() {
-        let err =
-            compile(one_file("@compute @workgroup_size(1)\nfn main() {\n    let x = ;\n}\n"), &[], false, "kernel `t`")
-                .unwrap_err();
+        let err = compile(
+            one_file("@compute @workgroup_size(1)\nfn main() {\n    let x = ;\n}\n"),
+            &[],
+            (false, Loops::Plain),
+            "kernel `t`",
+        )
+        .unwrap_err();
         assert!(err.starts_with("kernels/wgsl/broken.wgsl:3: kernel `t`"), "{err}");
     }
 
     #[test]
     fn validation_errors_name_the_file_and_line() {
         let body = "@compute @workgroup_size(1)\nfn main() {\n    var x: u32 = 1u;\n    x = 1.5 + x;\n}\n";
-        let err = compile(one_file(body), &[], false, "kernel `t`").unwrap_err();
+        let err = compile(one_file(body), &[], (false, Loops::Plain), "kernel `t`").unwrap_err();
         assert!(err.starts_with("kernels/wgsl/broken.wgsl:4:"), "{err}");
     }
 
@@ -68,7 +72,7 @@ mod compile_tests {
     fn unrolled_blocks_keep_line_numbers() {
         let body = "var<workgroup> w: array<u32, 4>;\n@compute @workgroup_size(1)\nfn main() \
             {\n    // #unroll I N\n    w[I] = I; // a comment\n    // #end\n    let y = ;\n}\n";
-        let err = compile(one_file(body), &[("N", 2)], false, "kernel `t`").unwrap_err();
+        let err = compile(one_file(body), &[("N", 2)], (false, Loops::Plain), "kernel `t`").unwrap_err();
         assert!(err.starts_with("kernels/wgsl/broken.wgsl:7:"), "{err}");
     }
 
@@ -122,16 +126,16 @@ mod compile_tests {
             c = coopMultiplyAdd(a, b, c);\n}\n";
         let params = [("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16)];
         let src = Source::new(&prelude(true, &params, true), &[("k.wgsl".into(), body.into())]);
-        let words = compile(src, &params, true, "kernel `t`").unwrap();
+        let words = compile(src, &params, (true, Loops::Plain), "kernel `t`").unwrap();
         let mut types = fragment_types(&words);
         types.sort_by_key(|t| t.2);
         assert_eq!(types, [(8, 16, 0), (16, 16, 1), (8, 16, 2)], "A 8×16, B 16×16, C 8×16");
         let square = [("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8)];
         let src = Source::new(&prelude(true, &square, true), &[("k.wgsl".into(), body.into())]);
-        let words = compile(src, &square, true, "kernel `t`").unwrap();
+        let words = compile(src, &square, (true, Loops::Plain), "kernel `t`").unwrap();
         assert!(fragment_types(&words).iter().all(|&(r, c, _)| (r, c) == (8, 8)));
         let src = Source::new(&prelude(true, &[("SG", 8)], true), &[("k.wgsl".into(), body.into())]);
-        let err = compile(src, &[("SG", 8)], true, "kernel `t`").unwrap_err();
+        let err = compile(src, &[("SG", 8)], (true, Loops::Plain), "kernel `t`").unwrap_err();
         assert!(err.contains("needs the parameters FM, FN and FK"), "{err}");
     }
 
@@ -150,23 +154,35 @@ mod compile_tests {
     }
 
     #[test]
-    fn loops_carry_no_iteration_counter() {
+    fn loops_keep_naga_s_counter_only_where_asked() {
         let body = "var<workgroup> w: array<u32, 8>;\n@compute @workgroup_size(1)\nfn main() {\n    \
             for (var i = 0u; i < 8u; i++) {\n        w[i] = i;\n    }\n}\n";
-        let words = compile(one_file(body), &[], false, "kernel `t`").unwrap();
-        assert!(instructions(&words).iter().any(|i| i[0] & 0xffff == 246), "the loop is there (OpLoopMerge)");
-        assert!(!has_loop_counter(&words), "a loop compiled with naga's iteration counter");
-        let bounded: Vec<String> = crate::VARIANTS
+        for loops in [Loops::Plain, Loops::Counted] {
+            let words = compile(one_file(body), &[], (false, loops), "kernel `t`").unwrap();
+            assert!(instructions(&words).iter().any(|i| i[0] & 0xffff == 246), "the loop is there (OpLoopMerge)");
+            assert_eq!(has_loop_counter(&words), loops == Loops::Counted, "{loops:?}");
+        }
+    }
+
+    #[test]
+    fn gpu_kernels_carry_no_loop_counter_and_lavapipe_s_keep_it() {
+        let gpu = |name: &str| {
+            crate::GPU_KERNELS.contains(&name) || crate::COOPERATIVE_KERNELS.iter().any(|k| k.name == name)
+        };
+        let wrong: Vec<String> = crate::VARIANTS
             .iter()
-            .filter(|v| has_loop_counter(&v.words()))
+            .filter(|v| has_loop_counter(&v.words()) == gpu(v.kernel) && (gpu(v.kernel) || v.kernel == "gemm_sg"))
             .map(|v| format!("{} {:?} {:?}", v.kernel, v.dtype, v.params))
             .collect();
-        assert!(bounded.is_empty(), "variants with naga's loop counter: {bounded:?}");
+        assert!(wrong.is_empty(), "GPU kernels with naga's loop counter, or subgroup GEMMs without: {wrong:?}");
+        assert!(crate::GPU_KERNELS.iter().all(|name| crate::KERNELS.iter().any(|k| k.name == *name)));
     }
 
     #[test]
     fn a_valid_kernel_compiles_to_spirv() {
-        let words = compile(one_file("@compute @workgroup_size(N)\nfn main() {}\n"), &[], false, "kernel `t`").unwrap();
+        let words =
+            compile(one_file("@compute @workgroup_size(N)\nfn main() {}\n"), &[], (false, Loops::Plain), "kernel `t`")
+                .unwrap();
         assert_eq!(words[0], 0x0723_0203, "SPIR-V magic number");
     }
 }

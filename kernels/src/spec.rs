@@ -181,6 +181,11 @@ pub const KERNELS: &[KernelSpec] = &[
     KernelSpec { name: "timestep_embedding", files: &["timestep.wgsl"], params: NONE },
 ];
 
+/// The kernels above written for GPUs only (lavapipe runs them where tests ask for the GPU paths,
+/// and the tiled GEMM for shapes off the vec4 grid). They and [`COOPERATIVE_KERNELS`] are
+/// compiled without naga's loop counters (`Loops` in compile.rs).
+pub const GPU_KERNELS: &[&str] = &["gemm_tiled", "conv_tiled", "attention_rows", "attention_wg"];
+
 /// Kernels on the device's matrix units (`VK_KHR_cooperative_matrix`), compiled in f16 only:
 /// their operands are f16, so f32 products keep the scalar kernels' precision by not using
 /// them. The GEMM and convolution read vec4-aligned operands (others take the tiled kernels).
