@@ -102,6 +102,39 @@ pub const KERNELS: &[KernelSpec] = &[
         files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv.wgsl", "gemm_store.wgsl", "gemm_tiled.wgsl"],
         params: &[&[("BT", 1), ("GE", 0)]],
     },
+    // The same for vec4-aligned operands, RH·32 outputs an invocation in tiles of 64·RH × 128.
+    // GEGLU follows the product on GPUs (gemm.rs, `linear_geglu`), so no GE = 1 variant is built.
+    KernelSpec {
+        name: "gemm_tiled_v4",
+        files: &[
+            "activations.wgsl",
+            "gemm_common.wgsl",
+            "a_matrix_rows.wgsl",
+            "a_matrix_v4.wgsl",
+            "b_matrix_v4.wgsl",
+            "gemm_store4.wgsl",
+            "gemm_tiled_v4.wgsl",
+        ],
+        params: &[
+            &[("BT", 0), ("GE", 0), ("RH", 1)],
+            &[("BT", 0), ("GE", 0), ("RH", 2)],
+            &[("BT", 1), ("GE", 0), ("RH", 1)],
+            &[("BT", 1), ("GE", 0), ("RH", 2)],
+        ],
+    },
+    KernelSpec {
+        name: "conv_tiled_v4",
+        files: &[
+            "activations.wgsl",
+            "gemm_common.wgsl",
+            "conv_taps.wgsl",
+            "a_conv_v4.wgsl",
+            "b_matrix_v4.wgsl",
+            "gemm_store4.wgsl",
+            "gemm_tiled_v4.wgsl",
+        ],
+        params: &[&[("BT", 1), ("GE", 0), ("RH", 1)], &[("BT", 1), ("GE", 0), ("RH", 2)]],
+    },
     // GroupNorm, one, two (`_v2`) or four (`_v4`) channels a step (unit_*.wgsl): in one
     // workgroup per group, or in bands (statistics, then the normalisation) on GPUs and past the
     // binding limit.
@@ -184,7 +217,8 @@ pub const KERNELS: &[KernelSpec] = &[
 /// The kernels above written for GPUs only (lavapipe runs them where tests ask for the GPU paths,
 /// and the tiled GEMM for shapes off the vec4 grid). They and [`COOPERATIVE_KERNELS`] are
 /// compiled without naga's loop counters (`Loops` in compile.rs).
-pub const GPU_KERNELS: &[&str] = &["gemm_tiled", "conv_tiled", "attention_rows", "attention_wg"];
+pub const GPU_KERNELS: &[&str] =
+    &["gemm_tiled", "conv_tiled", "gemm_tiled_v4", "conv_tiled_v4", "attention_rows", "attention_wg"];
 
 /// Kernels on the device's matrix units (`VK_KHR_cooperative_matrix`), compiled in f16 only:
 /// their operands are f16, so f32 products keep the scalar kernels' precision by not using
@@ -204,7 +238,7 @@ pub const GPU_KERNELS: &[&str] = &["gemm_tiled", "conv_tiled", "attention_rows",
 pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
     KernelSpec {
         name: "gemm_coop",
-        files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "gemm_store4.wgsl", "gemm_coop.wgsl"],
+        files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "b_matrix_v4.wgsl", "gemm_store4.wgsl", "gemm_coop.wgsl"],
         params: &[
             &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 2), ("BT", 0), ("GE", 0), ("KS", 4)],
             &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 4)],
@@ -234,7 +268,7 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
     },
     KernelSpec {
         name: "conv_coop",
-        files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "gemm_store4.wgsl", "gemm_coop.wgsl"],
+        files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "b_matrix_v4.wgsl", "gemm_store4.wgsl", "gemm_coop.wgsl"],
         params: &[
             &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 2), ("BT", 1), ("GE", 0), ("KS", 2)],
             &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("WT", 4), ("BT", 1), ("GE", 0), ("KS", 2)],

@@ -12,8 +12,6 @@
 // lets a cooperative load's pointee be a vector, its stride then counted in vectors). Row strides
 // are multiples of 8 halves (16 bytes, what cooperative loads need), padded off a power of two
 // against bank conflicts.
-@group(0) @binding(1) var<storage, read> b: array<vec4<S>>;
-
 const BM: u32 = 2u * WT * FM;
 const BN: u32 = 2u * WT * FN;
 const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): 4 values, then their 4 gates
@@ -34,16 +32,6 @@ const UN: u32 = BN / 4u;
 var<workgroup> a_tile: array<vec4<f16>, BM * LDA / 4u>;
 var<workgroup> b_tile: array<vec4<f16>, max(BN * LDA, BK * LDB) / 4u>;
 var<workgroup> scratch: array<vec4<f32>, FM * LDS>; // 4 subgroups × [FM][LDS] f32
-
-fn b_unit(boff: u32, k: u32, n: u32) -> vec4<f16> {
-    if k >= p.g.k || n >= p.g.n {
-        return vec4<f16>();
-    }
-    if BT == 0u {
-        return vec4<f16>(b[(boff + k * p.g.ldb + n) / 4u]);
-    }
-    return vec4<f16>(b[(boff + b_row(n) * p.g.ldb + k) / 4u]);
-}
 
 // This invocation's units of the K-step at k0: A rows tr + STEP·i at k0 + 4·tu, and B's rows
 // alike (BT = 1) or its units t + WG·i of the [BK][BN] step (BT = 0).

@@ -216,18 +216,21 @@ pub(super) struct GemmShape {
 /// The kernels of one GEMM-shaped op, one per family.
 pub(super) struct GemmKernels {
     pub subgroup: &'static str,
-    pub tiled: &'static str,
+    /// The tiled kernel for vec4-aligned shapes, and the one for any shape.
+    pub tiled: (&'static str, &'static str),
     pub cooperative: &'static str,
 }
 
 impl GemmKernels {
-    const MATMUL: GemmKernels = GemmKernels { subgroup: "gemm_sg", tiled: "gemm_tiled", cooperative: "gemm_coop" };
+    const MATMUL: GemmKernels =
+        GemmKernels { subgroup: "gemm_sg", tiled: ("gemm_tiled_v4", "gemm_tiled"), cooperative: "gemm_coop" };
 }
 
 /// Records a GEMM-shaped kernel: the cooperative variant where the context uses the matrix units,
 /// the storage is f16 and the shape fits vec4 loads; the subgroup variant where the device prefers it and the shape
-/// fits, with more rows per workgroup for taller products; else the tiled one. `params` are
-/// the variant parameters all share; bindings are `reads` then `out`.
+/// fits, with more rows per workgroup for taller products; else the tiled one, in vec4 units
+/// where the shape fits them and GEGLU is not fused. `params` are the variant parameters all
+/// share; bindings are `reads` then `out`.
 pub(super) fn dispatch_gemm_family(
     rec: &mut Recorder,
     (names, dtype, params): (GemmKernels, Dtype, &[(&str, u32)]),
@@ -257,8 +260,40 @@ pub(super) fn dispatch_gemm_family(
         let columns = u(s.n.div_ceil(8 * sg as usize));
         return rec.dispatch(&k, reads, &[out], push, [columns, u(s.m.div_ceil(tm as usize)), u(s.batch)]);
     }
-    let k = kernel(&ctx, names.tiled, dtype, params, 4)?;
+    let (vec4_kernel, any_shape) = names.tiled;
+    let rh = tiled_row_halves(ctx.info(), s);
+    let want: Vec<(&str, u32)> = params.iter().copied().chain([("RH", rh)]).collect();
+    if let Some(variant) = vkdiff_kernels::find(vec4_kernel, dtype, &want).filter(|_| s.vec4) {
+        let k = ctx.kernel(variant, 4)?;
+        return rec.dispatch(
+            &k,
+            reads,
+            &[out],
+            push,
+            [u(s.n.div_ceil(128)), u(s.m.div_ceil(64 * rh as usize)), u(s.batch)],
+        );
+    }
+    let k = kernel(&ctx, any_shape, dtype, params, 4)?;
     rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(64)), u(s.m.div_ceil(64)), u(s.batch)])
+}
+
+/// Row halves of the vec4 tiled kernel's 64·RH × 128 tiles: 2 (8×8 outputs an invocation, each
+/// staged value used 8 times) where the product still makes 128 such tiles, as the cooperative
+/// kernels choose their larger tiles, and the device has the workgroup memory; else 1, so that
+/// smaller products spread over more workgroups.
+fn tiled_row_halves(device: &DeviceInfo, s: &GemmShape) -> u32 {
+    let fills = s.m.div_ceil(128) * s.n.div_ceil(128) * s.batch >= 128;
+    if fills && tiled_v4_workgroup_bytes(2) <= device.max_shared_memory {
+        2
+    } else {
+        1
+    }
+}
+
+/// Workgroup memory of gemm_tiled_v4.wgsl: K-steps of 16 rows of A (16·RH + 1 vec4s of f32) and
+/// B (33). At RH = 2 that is 16.5 KiB, past the 16 KiB Vulkan guarantees.
+fn tiled_v4_workgroup_bytes(rh: u32) -> u32 {
+    16 * (16 * rh + 1 + 33) * 16
 }
 
 /// Fragments per side of a subgroup's tile in the cooperative kernels: 4 (tiles of 8·FM × 8·FN)
@@ -370,4 +405,20 @@ pub fn linear(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>,
     let m = x.numel() / k;
     ensure(out.numel() == m * n, || format!("linear: output {:?} is not {m}×{n}", out.shape()))?;
     matmul(rec, x, w, bias, out, &Matmul::dense(m, n, k, true))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::device::tests::device;
+
+    #[test]
+    fn the_tiled_kernel_takes_its_tall_tiles_where_they_fill_and_fit() {
+        let shape = |m, n| GemmShape { m, n, k: 640, batch: 1, vec4: true };
+        let mut gpu = device(0, DeviceKind::Discrete, true);
+        assert_eq!(tiled_row_halves(&gpu, &shape(2048, 1024)), 2, "128 tiles of 128×128");
+        assert_eq!(tiled_row_halves(&gpu, &shape(2048, 896)), 1, "112 tiles");
+        gpu.max_shared_memory = 16384;
+        assert_eq!(tiled_row_halves(&gpu, &shape(8192, 1280)), 1, "16 KiB of workgroup memory");
+    }
 }

@@ -111,10 +111,12 @@ fn quick_compiles_take_the_eight_row_tiles() {
 }
 
 #[test]
-fn large_products_take_the_large_cooperative_tiles() {
+fn large_products_take_the_large_tiles() {
     // At least 128 tiles of 8·FM × 8·FN (64 on lavapipe, 128 on NVIDIA/AMD) select 4×4 fragments
     // per subgroup where such a variant is built and the sums fit (CPU devices, 64-lane GPUs;
-    // 32-lane GPUs and Intel's shapes keep 2×2); M, N and K off every tile's multiple.
+    // 32-lane GPUs and Intel's shapes keep 2×2); at least 128 of 128×128, the tiled kernel's
+    // 128-row tiles (the first product; the second takes 64 rows); M, N and K off every tile's
+    // multiple.
     both(Matmul::dense(1030, 2052, 24, true), true, 10);
     both(Matmul::dense(520, 1000, 40, false), false, 11);
 }

@@ -13,7 +13,7 @@ fn the_matrix_unit_trial_runs_both_families_and_they_agree() {
     }
     // lavapipe writes timestamps; the host's clock serves queues that write none.
     for (clock, named) in
-        [(TrialClock::Timestamps, (Some("gemm_coop"), Some("gemm_tiled"))), (TrialClock::Host, (None, None))]
+        [(TrialClock::Timestamps, (Some("gemm_coop"), Some("gemm_tiled_v4"))), (TrialClock::Host, (None, None))]
     {
         let trial = run_trial_timed_by(&ctx, clock).unwrap();
         assert_eq!((trial.cooperative_kernel, trial.tiled_kernel), named, "{clock:?}: {trial:?}");
