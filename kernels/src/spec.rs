@@ -177,6 +177,9 @@ pub const KERNELS: &[KernelSpec] = &[
         files: &["attention_common.wgsl", "attention_rows.wgsl"],
         params: &[&[("DS", 16), ("KC", 64)], &[("DS", 32), ("KC", 32)]],
     },
+    // GPU attention for heads of up to 64 values, 4×4 scores and outputs an invocation: TM = 64
+    // query rows per workgroup of 16×16.
+    KernelSpec { name: "attention_tiled", files: &["attention_common.wgsl", "attention_tiled.wgsl"], params: &[&[("TM", 64)]] },
     // Workgroup-memory attention: W invocations, no subgroup operations.
     KernelSpec {
         name: "attention_wg",
@@ -218,7 +221,7 @@ pub const KERNELS: &[KernelSpec] = &[
 /// and the tiled GEMM for shapes off the vec4 grid). They and [`COOPERATIVE_KERNELS`] are
 /// compiled without naga's loop counters (`Loops` in compile.rs).
 pub const GPU_KERNELS: &[&str] =
-    &["gemm_tiled", "conv_tiled", "gemm_tiled_v4", "conv_tiled_v4", "attention_rows", "attention_wg"];
+    &["gemm_tiled", "conv_tiled", "gemm_tiled_v4", "conv_tiled_v4", "attention_tiled", "attention_rows", "attention_wg"];
 
 /// Kernels on the device's matrix units (`VK_KHR_cooperative_matrix`), compiled in f16 only:
 /// their operands are f16, so f32 products keep the scalar kernels' precision by not using

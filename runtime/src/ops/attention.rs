@@ -111,6 +111,7 @@ pub fn attention(
     let quick = ctx.quick_compile() && l.heads * l.head_dim < SMALL_CHANNELS;
     let found = cooperative_variant(&ctx, dtype, l.head_dim)
         .or_else(|| subgroup_variant(&ctx, dtype, slots).filter(|_| !quick))
+        .or_else(|| tiled_variant(&ctx, dtype, l.head_dim).filter(|_| !quick))
         .or_else(|| rows_variant(dtype, slots).filter(|_| !quick));
     let variant = match found {
         Some(v) => v,
@@ -171,6 +172,20 @@ fn cooperative_variant(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<&
 fn cooperative_workgroup_bytes(fm: u32, fn_: u32, kf: u32) -> u32 {
     let (keys, rows) = (kf * fn_, 4 * fm);
     2 * keys * (64 + 8) * 2 + rows * (keys.max(64) + 4) * 4 + rows * (keys + 8) * 2 + 3 * rows * 4 + 4 * 4
+}
+
+/// The register-blocked GPU attention, for heads of up to 64 values where the device has its
+/// 32 KiB of workgroup memory (two tiles of 64×64 f32).
+fn tiled_variant(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<&'static vkdiff_kernels::Variant> {
+    let fits = head_dim <= 64 && ctx.info().holds_tiled_attention();
+    vkdiff_kernels::find("attention_tiled", dtype, &[]).filter(|_| fits)
+}
+
+impl crate::DeviceInfo {
+    /// Whether the device's workgroup memory holds attention_tiled.wgsl's two 64×64 f32 tiles.
+    pub fn holds_tiled_attention(&self) -> bool {
+        2 * 64 * 64 * 4 <= self.max_shared_memory
+    }
 }
 
 /// The GPU attention variant with the fewest slots that hold a head of `slots` vec4s.
@@ -395,4 +410,19 @@ pub fn copy_heads(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::device::tests::device;
+    use crate::device::DeviceKind;
+
+    #[test]
+    fn tiled_attention_needs_32_kib_of_workgroup_memory() {
+        let mut gpu = device(0, DeviceKind::Discrete, true);
+        gpu.max_shared_memory = 32768;
+        assert!(gpu.holds_tiled_attention());
+        gpu.max_shared_memory = 16384;
+        assert!(!gpu.holds_tiled_attention());
+    }
 }
