@@ -217,13 +217,14 @@ pub(super) struct GemmShape {
 pub(super) struct GemmKernels {
     pub subgroup: &'static str,
     /// The tiled kernel for vec4-aligned shapes, and the one for any shape.
-    pub tiled: (&'static str, &'static str),
+    pub tiled_v4: &'static str,
+    pub tiled: &'static str,
     pub cooperative: &'static str,
 }
 
 impl GemmKernels {
     const MATMUL: GemmKernels =
-        GemmKernels { subgroup: "gemm_sg", tiled: ("gemm_tiled_v4", "gemm_tiled"), cooperative: "gemm_coop" };
+        GemmKernels { subgroup: "gemm_sg", tiled_v4: "gemm_tiled_v4", tiled: "gemm_tiled", cooperative: "gemm_coop" };
 }
 
 /// Records a GEMM-shaped kernel: the cooperative variant where the context uses the matrix units,
@@ -260,20 +261,16 @@ pub(super) fn dispatch_gemm_family(
         let columns = u(s.n.div_ceil(8 * sg as usize));
         return rec.dispatch(&k, reads, &[out], push, [columns, u(s.m.div_ceil(tm as usize)), u(s.batch)]);
     }
-    let (vec4_kernel, any_shape) = names.tiled;
-    let rh = tiled_row_halves(ctx.info(), s);
-    let want: Vec<(&str, u32)> = params.iter().copied().chain([("RH", rh)]).collect();
-    if let Some(variant) = vkdiff_kernels::find(vec4_kernel, dtype, &want).filter(|_| s.vec4) {
-        let k = ctx.kernel(variant, 4)?;
-        return rec.dispatch(
-            &k,
-            reads,
-            &[out],
-            push,
-            [u(s.n.div_ceil(128)), u(s.m.div_ceil(64 * rh as usize)), u(s.batch)],
-        );
+    if s.vec4 {
+        let rh = tiled_row_halves(ctx.info(), s);
+        let want: Vec<(&str, u32)> = params.iter().copied().chain([("RH", rh)]).collect();
+        if let Some(variant) = vkdiff_kernels::find(names.tiled_v4, dtype, &want) {
+            let k = ctx.kernel(variant, 4)?;
+            let grid = [u(s.n.div_ceil(128)), u(s.m.div_ceil(64 * rh as usize)), u(s.batch)];
+            return rec.dispatch(&k, reads, &[out], push, grid);
+        }
     }
-    let k = kernel(&ctx, any_shape, dtype, params, 4)?;
+    let k = kernel(&ctx, names.tiled, dtype, params, 4)?;
     rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(64)), u(s.m.div_ceil(64)), u(s.batch)])
 }
 
