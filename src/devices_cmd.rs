@@ -48,13 +48,14 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
         _ => "shared-memory tiles (GPU)".into(),
     };
     let tiles = if d.holds_tiled_attention() { "register-blocked tiles for heads up to 64, else " } else { "" };
-    let attention = if d.subgroup_attention(gpu_paths) {
+    let flash = if d.subgroup_attention(gpu_paths) {
         "subgroup-register (CPU)".to_string()
     } else if d.gemm_family(gpu_paths) == GemmFamily::Cooperative {
         format!("matrix units for f16 heads up to 64, else {tiles}query rows per invocation (GPU)")
     } else {
         format!("{tiles}query rows per invocation (GPU)")
     };
+    let attention = format!("{flash}; f32 heads over 128 (the VAE's): products around a row softmax");
     let wider = if d.lavapipe_mesa.is_some() && vkdiff_runtime::wider_lavapipe_vectors_available() {
         " (this CPU has AVX-512: LP_NATIVE_VECTOR_WIDTH=512 runs 16-lane kernels, which compile 2–3× slower and ran \
             the UNet 1.04× faster on an AMD EPYC, 4.9× slower on an Intel Xeon)"

@@ -170,6 +170,25 @@ fn ceiling_cases(ctx: &Context) -> vkdiff_runtime::Result<Vec<Case>> {
     Ok(cases)
 }
 
+/// Self-attention over the 4096 tokens of a 64×64 level in `heads` heads of `d` values.
+fn self_attention_case(ctx: &Context, dtype: Dtype, heads: usize, d: usize, seed: u32) -> vkdiff_runtime::Result<Case> {
+    Ok(Case {
+        name: "attention",
+        shape: format!("4096 tokens, {heads} head{} x {d}", if heads > 1 { "s" } else { "" }),
+        work: Work::Flops(4.0 * 4096.0 * 4096.0 * (heads * d) as f64),
+        gemm: None,
+        on_gemm_family: false,
+        tensors: (0..4)
+            .map(|i| rand_tensor(ctx, &[1, 4096, heads, d], dtype, seed + i))
+            .collect::<vkdiff_runtime::Result<_>>()?,
+        record: |rec, t| {
+            let [n, heads, d] = [t[0].shape()[1], t[0].shape()[2], t[0].shape()[3]];
+            let l = AttentionLayout::dense(1, heads, d, n, n);
+            ops::attention(rec, &t[0], &t[1], &t[2], &t[3], &l, (d as f32).sqrt().recip())
+        },
+    })
+}
+
 fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
     let bytes = |n: usize| (n * vkdiff_runtime::dtype_size(dtype)) as f64;
     let (hw, c) = (64 * 64, 640);
@@ -196,20 +215,9 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
             ],
             record: |rec, t| ops::conv2d(rec, &t[0], &t[1], Some(&t[2]), &t[3], &ConvParams::new(1, 1)),
         },
-        Case {
-            name: "attention",
-            shape: "4096 tokens, 10 heads x 64".into(),
-            work: Work::Flops(4.0 * 4096.0 * 4096.0 * 64.0 * 10.0),
-            gemm: None,
-            on_gemm_family: false,
-            tensors: (0..4)
-                .map(|i| rand_tensor(ctx, &[1, 4096, 640], dtype, 6 + i))
-                .collect::<vkdiff_runtime::Result<_>>()?,
-            record: |rec, t| {
-                let l = AttentionLayout::dense(1, 10, 64, 4096, 4096);
-                ops::attention(rec, &t[0], &t[1], &t[2], &t[3], &l, 0.125)
-            },
-        },
+        self_attention_case(ctx, dtype, 10, 64, 6)?,
+        // The VAE decoder's mid-block at 512² (a 64×64 latent): one head of all 512 channels.
+        self_attention_case(ctx, dtype, 1, 512, 14)?,
         Case {
             name: "cross-attention",
             shape: "4096 x 77 tokens, 10 heads x 64".into(),

@@ -1,5 +1,6 @@
 //! Fused multi-head attention (flash-style: no Nq×Nk scores in memory).
 
+use super::attention_products::{attention_by_products, rows_per_chunk};
 use super::bands::{bands, elem, fit, rows_per_band, span_view};
 use super::{dispatch_flat, element_groups, f, kernel, same_dtype, u};
 use crate::context::{Context, GemmFamily};
@@ -93,6 +94,9 @@ pub fn attention(
     ensure(out.numel() >= need(l.o_ld, l.o_batch, l.q_tokens), || {
         format!("attention: output {:?} too small", out.shape())
     })?;
+    if let Some(rows) = rows_per_chunk(rec, dtype, l) {
+        return attention_by_products(rec, [q, k, v], out, l, scale, rows);
+    }
     if !fit(rec.context(), &[q, k, v, out]) {
         return attention_banded(rec, [q, k, v], out, l, scale);
     }

@@ -2,6 +2,7 @@
 //! and records one dispatch. Networks are compositions of these.
 
 mod attention;
+mod attention_products;
 mod bands;
 mod ceiling;
 mod conv;

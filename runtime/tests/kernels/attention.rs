@@ -1,7 +1,7 @@
 //! Fused attention against an f64 softmax(QKᵀ)V, for self- and cross-attention and many head sizes.
 
 use vkdiff_runtime::ops::{attention, AttentionLayout};
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_runtime::{Context, Dtype, Recorder};
 use vkdiff_testkit::*;
 
 fn reference(q: &[f32], k: &[f32], v: &[f32], l: &AttentionLayout, scale: f64) -> Vec<f64> {
@@ -43,12 +43,19 @@ fn check(dtype: Dtype, l: &AttentionLayout, seed: u64) {
     }
 }
 
-fn check_on(ctx: &Context, dtype: Dtype, l: &AttentionLayout, seed: u64) {
-    check_with_key_gain(ctx, dtype, l, seed, |_| 1.0);
+fn check_on(ctx: &Context, dtype: Dtype, l: &AttentionLayout, seed: u64) -> Vec<&'static str> {
+    check_with_key_gain(ctx, dtype, l, seed, |_| 1.0)
 }
 
-/// As [`check_on`], with key token t's K values multiplied by `gain(t)`.
-fn check_with_key_gain(ctx: &Context, dtype: Dtype, l: &AttentionLayout, seed: u64, gain: impl Fn(usize) -> f32) {
+/// As [`check_on`], with key token t's K values multiplied by `gain(t)`; returns the kernels
+/// the attention dispatched.
+fn check_with_key_gain(
+    ctx: &Context,
+    dtype: Dtype,
+    l: &AttentionLayout,
+    seed: u64,
+    gain: impl Fn(usize) -> f32,
+) -> Vec<&'static str> {
     let extent =
         |off: usize, ld: usize, bs: usize, n: usize| off + (l.batch - 1) * bs + (n - 1) * ld + l.heads * l.head_dim;
     let q = stored(&random(extent(l.q_offset, l.q_ld, l.q_batch, l.q_tokens), seed), dtype);
@@ -68,7 +75,9 @@ fn check_with_key_gain(ctx: &Context, dtype: Dtype, l: &AttentionLayout, seed: u
     dense.o_batch = l.q_tokens * width;
     // Scores of O(4): the softmax is peaked enough that a wrong max or sum shows.
     let scale = 4.0 / (l.head_dim as f32).sqrt();
-    ctx.run(|rec| attention(rec, &tq, &tk, &tv, &out, &dense, scale)).unwrap();
+    let mut rec = Recorder::new(ctx, true).unwrap();
+    attention(&mut rec, &tq, &tk, &tv, &out, &dense, scale).unwrap();
+    let kernels = rec.finish().unwrap().run_profiled().unwrap().iter().map(|t| t.kernel).collect();
     let want = reference(&q, &k, &v, l, scale as f64);
     // Outputs are convex combinations of V (|v| ≤ 1): f32 error stays under 1e-5 absolute.
     let atol = match dtype {
@@ -85,6 +94,7 @@ fn check_with_key_gain(ctx: &Context, dtype: Dtype, l: &AttentionLayout, seed: u
         l.kv_tokens
     );
     assert_close(&what, &out.download().unwrap(), &want, atol, storage_rtol(dtype));
+    kernels
 }
 
 #[test]
@@ -193,5 +203,62 @@ fn head_sizes_and_strides_off_the_vec4_grid() {
     l.causal = true;
     for dtype in DTYPES {
         check(dtype, &l, 80);
+    }
+}
+
+/// A fresh context on the device's paths or the GPU paths, with bindings of at most `limit`
+/// bytes, so that wide heads run in several chunks of query rows.
+fn limited_ctx(gpu_paths: bool, limit: u64) -> Context {
+    let c = ctx_with(ctx().gemm_family());
+    c.set_gpu_paths(gpu_paths);
+    c.set_binding_limit(limit);
+    c
+}
+
+/// Whether `kernels` are attention as products: matrix products around a row softmax, no
+/// flash kernel.
+fn as_products(kernels: &[&str]) -> bool {
+    kernels.contains(&"softmax") && !kernels.iter().any(|k| k.starts_with("attention"))
+}
+
+#[test]
+fn wide_f32_heads_run_as_products_in_chunks() {
+    // The VAE's mid-block: one head of 512 over a fused [B, N, 3·512] projection, two images;
+    // 512 KiB bindings make chunks of 64 query rows (the last one 20). Then two dense heads of
+    // 256, cross-attention, in chunks of 128 rows and a last one of 72.
+    let (n, d) = (84, 512);
+    let mut fused = AttentionLayout::dense(2, 1, d, n, n);
+    (fused.q_ld, fused.k_ld, fused.v_ld) = (3 * d, 3 * d, 3 * d);
+    (fused.q_batch, fused.k_batch, fused.v_batch) = (n * 3 * d, n * 3 * d, n * 3 * d);
+    (fused.k_offset, fused.v_offset) = (d, 2 * d);
+    // Chunks: per image and head.
+    let cases = [(fused, 512 << 10, 2), (AttentionLayout::dense(2, 2, 256, 200, 96), 256 << 10, 2)];
+    for (seed, (l, limit, chunks)) in cases.into_iter().enumerate() {
+        for gpu_paths in [false, true] {
+            let kernels = check_on(&limited_ctx(gpu_paths, limit), Dtype::F32, &l, 100 + seed as u64);
+            let softmaxes = kernels.iter().filter(|&&k| k == "softmax").count();
+            assert!(as_products(&kernels), "d{}: {kernels:?}", l.head_dim);
+            assert_eq!(softmaxes, l.batch * l.heads * chunks, "d{}: {kernels:?}", l.head_dim);
+        }
+    }
+}
+
+#[test]
+fn heads_the_products_do_not_take_stay_flash() {
+    // f16 (its scores would round to f16), heads of 128, key counts off the vec4 grid, causal
+    // masks: the flash kernels, on both paths.
+    let mut causal = AttentionLayout::dense(1, 1, 256, 40, 40);
+    causal.causal = true;
+    let cases = [
+        (Dtype::F16, AttentionLayout::dense(1, 1, 512, 40, 32)),
+        (Dtype::F32, AttentionLayout::dense(1, 2, 128, 40, 32)),
+        (Dtype::F32, AttentionLayout::dense(1, 1, 512, 40, 30)),
+        (Dtype::F32, causal),
+    ];
+    for (i, (dtype, l)) in cases.into_iter().enumerate() {
+        for ctx in [ctx(), gpu_ctx()] {
+            let kernels = check_on(&ctx, dtype, &l, 110 + i as u64);
+            assert!(kernels.len() == 1 && kernels[0].starts_with("attention"), "case {i}: {kernels:?}");
+        }
     }
 }
