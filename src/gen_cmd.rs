@@ -84,7 +84,11 @@ pub fn run(args: &GenArgs) -> Result<()> {
             progress = Some(Progress::new("denoising", "step"));
         }
         GenEvent::Step { done, total } => {
-            progress.get_or_insert_with(|| Progress::new("denoising", "step")).update(done, total)
+            progress.get_or_insert_with(|| Progress::new("denoising", "step")).update(done, total);
+            // The decode that follows can take minutes on a CPU device, with no bar of its own.
+            if done == total {
+                eprintln!("VAE: decoding the latents");
+            }
         }
     })?;
     let steps: f64 = t.steps.iter().map(|d| d.as_secs_f64()).sum();

@@ -62,7 +62,8 @@ fn gen_writes_the_image_and_latents_diffusers_wrote() {
     .concat();
     let result = vkdiff(&args);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
-    assert!(String::from_utf8_lossy(&result.stderr).contains("5/5"), "no progress shown");
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    assert!(stderr.contains("5/5") && stderr.contains("VAE: decoding"), "no progress shown: {stderr}");
 
     let records = vkdiff_formats::SafeTensors::open(Path::new(&fixture("records.safetensors"))).unwrap();
     let written = vkdiff_formats::SafeTensors::open(&lat).unwrap();
