@@ -21,7 +21,7 @@ const SCORE_BYTES: usize = 128 << 20;
 
 /// Query rows a chunk takes, or None where this path does not apply: f16 (whose scores would
 /// round to f16), heads of up to [`WIDEST_FLASH_HEAD`], causal masks, key counts or row strides
-/// off the vec4 grid, operands whose heads do not start on the binding alignment, or K and V past one binding.
+/// off the vec4 grid, heads that do not start on the binding alignment, K or V past one binding.
 pub(super) fn rows_per_chunk(rec: &Recorder, dtype: Dtype, l: &AttentionLayout) -> Option<usize> {
     let ctx = rec.context();
     if dtype != Dtype::F32 || l.head_dim <= WIDEST_FLASH_HEAD || l.causal || !l.kv_tokens.is_multiple_of(4) {
