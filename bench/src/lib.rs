@@ -10,6 +10,7 @@ mod gen;
 mod kernels;
 mod lora;
 mod peaks;
+mod profile;
 mod random_models;
 mod scene;
 mod unet;

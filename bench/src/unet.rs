@@ -4,6 +4,7 @@
 
 use crate::kernels::{dtype_name, rand_tensor};
 use crate::peaks;
+use crate::profile::{self, by_kernel, KernelTime};
 use anyhow::{Context as _, Result};
 use std::time::Instant;
 use vkdiff_args::Precision;
@@ -42,14 +43,6 @@ pub struct UnetArgs {
     /// Where the diffusers reference runs.
     #[arg(long, value_enum, default_value_t = ReferenceDevice::Cpu)]
     reference_device: ReferenceDevice,
-}
-
-/// One kernel's share of a profiled evaluation.
-#[derive(serde::Serialize)]
-struct KernelTime {
-    kernel: &'static str,
-    dispatches: usize,
-    ms: f64,
 }
 
 #[derive(serde::Serialize)]
@@ -127,7 +120,7 @@ pub fn run(args: &UnetArgs) -> Result<()> {
                 )),
                 row.ratio_to_reference.map_or("-".into(), |r| format!("{r:.2}×")),
             ) + &row.matrix_unit_trial.as_ref().map_or(String::new(), |t| format!("\n  matrix-unit trial: {t}"))
-                + &profile_lines(&row.profile)
+                + &profile::lines(&row.profile)
         })?;
     }
     Ok(())
@@ -202,23 +195,6 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
     })
 }
 
-/// The profile as indented lines under the summary, empty without `--profile`.
-fn profile_lines(profile: &[KernelTime]) -> String {
-    let total: f64 = profile.iter().map(|k| k.ms).sum();
-    profile
-        .iter()
-        .map(|k| {
-            format!(
-                "\n  {:<22} {:>5} dispatches {:>9.2} ms {:>5.1} %",
-                k.kernel,
-                k.dispatches,
-                k.ms,
-                100.0 * k.ms / total
-            )
-        })
-        .collect()
-}
-
 /// Device time per kernel over one evaluation recorded with timestamps, largest first.
 fn profile(ctx: &Context, unet: &UNet, inputs: &UNetInputs) -> Result<Vec<KernelTime>> {
     ctx.set_profiling(true);
@@ -226,15 +202,7 @@ fn profile(ctx: &Context, unet: &UNet, inputs: &UNetInputs) -> Result<Vec<Kernel
     ctx.set_profiling(false);
     let pass = pass?;
     pass.project_conditioning()?;
-    let mut by_kernel: Vec<KernelTime> = Vec::new();
-    for t in pass.run_profiled()? {
-        match by_kernel.iter_mut().find(|k| k.kernel == t.kernel) {
-            Some(k) => (k.dispatches, k.ms) = (k.dispatches + 1, k.ms + t.nanos / 1e6),
-            None => by_kernel.push(KernelTime { kernel: t.kernel, dispatches: 1, ms: t.nanos / 1e6 }),
-        }
-    }
-    by_kernel.sort_by(|a, b| b.ms.total_cmp(&a.ms));
-    Ok(by_kernel)
+    Ok(by_kernel(pass.run_profiled()?))
 }
 
 /// diffusers: best milliseconds per evaluation, its peak memory, and what ran it.

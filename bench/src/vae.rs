@@ -3,6 +3,7 @@
 //! memory (the context's peak less the weights) beside the estimate the memory plan uses; the
 //! whole decode is the tiled one's reference, in the same run.
 
+use crate::profile::{self, by_kernel, KernelTime};
 use anyhow::Result;
 use std::time::Instant;
 use vkdiff_networks::{AutoencoderKl, Checkpoint, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
@@ -21,6 +22,9 @@ pub struct VaeArgs {
     /// Decodes of each kind; the fastest is reported (the first compiles the kernels).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     samples: u32,
+    /// Also time every dispatch of one more whole decode and list the kernels by device time.
+    #[arg(long)]
+    profile: bool,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -43,6 +47,8 @@ struct Row {
     tiled: Decode,
     /// Tiled activations over whole ones.
     memory_ratio: f64,
+    /// With `--profile`: device time per kernel of a whole decode, largest first.
+    profile: Vec<KernelTime>,
 }
 
 pub fn run(args: &VaeArgs) -> Result<()> {
@@ -76,6 +82,13 @@ pub fn run(args: &VaeArgs) -> Result<()> {
     };
     let whole = decode(None)?;
     let tiled = decode(Some(tiling))?;
+    let profile = if args.profile {
+        let (decoded, timings) = ctx.profiled(|| vae.decode(&latents, [1, h, h, 4]));
+        decoded?;
+        by_kernel(timings)
+    } else {
+        Vec::new()
+    };
     let row = Row {
         device: ctx.info().name.clone(),
         size: args.size,
@@ -83,6 +96,7 @@ pub fn run(args: &VaeArgs) -> Result<()> {
         memory_ratio: tiled.activations_mib / whole.activations_mib,
         whole,
         tiled,
+        profile,
     };
     if args.json {
         println!("{}", serde_json::to_string(&row)?);
@@ -94,14 +108,15 @@ pub fn run(args: &VaeArgs) -> Result<()> {
             )
         };
         println!(
-            "{} | SDXL VAE decode {}² f32, weights {:.0} MiB | whole: {} | {}-px tiles: {} | tiled/whole memory {:.2}",
+            "{} | SDXL VAE decode {}² f32, weights {:.0} MiB | whole: {} | {}-px tiles: {} | tiled/whole memory {:.2}{}",
             row.device,
             row.size,
             row.weights_mib,
             line(&row.whole),
             args.tile,
             line(&row.tiled),
-            row.memory_ratio
+            row.memory_ratio,
+            profile::lines(&row.profile)
         );
     }
     Ok(())

@@ -7,6 +7,7 @@ use crate::flexible_dimensions::CooperativeMatrix2Features;
 use crate::matrix_unit_trial::{run_trial, CooperativeSetting, MatrixUnitTrial};
 use crate::matrix_units;
 use crate::pipeline::{Kernel, PipelineCache};
+use crate::recorder::Timing;
 use crate::submit_budget::SubmitBudget;
 use crate::validation::Validation;
 use ash::vk;
@@ -100,6 +101,8 @@ pub(crate) struct Shared {
     pub(crate) gpu_paths: AtomicBool,
     /// Whether every recording times its dispatches (see [`Context::set_profiling`]).
     pub(crate) profiling: AtomicBool,
+    /// The dispatch times of every timed recording run inside [`Context::profiled`].
+    pub(crate) collected: Mutex<Option<Vec<Timing>>>,
     /// See [`Context::quick_compile`].
     pub(crate) quick_compile: AtomicBool,
     /// Told how many kernels a submission compiles (see [`Context::on_compile`]).
@@ -325,6 +328,7 @@ impl Context {
             workgroup_limit: Mutex::new(info.max_workgroup_count),
             gpu_paths: AtomicBool::new(gpu_paths),
             profiling: AtomicBool::new(false),
+            collected: Mutex::new(None),
             quick_compile: AtomicBool::new(info.quick_compile(gpu_paths)),
             compile_notice: Mutex::new(None),
             submit_budget: Mutex::new(submit_budget),
@@ -454,6 +458,17 @@ impl Context {
 
     pub(crate) fn profiling(&self) -> bool {
         self.shared.profiling.load(Ordering::SeqCst)
+    }
+
+    /// Runs `f` with every recording it makes timing its dispatches, and returns what `f` returns
+    /// with the device time of each dispatch its runs made, in order: a whole network call
+    /// (a VAE decode, tiles and all) profiled without a handle on its recordings.
+    pub fn profiled<T>(&self, f: impl FnOnce() -> T) -> (T, Vec<Timing>) {
+        *self.shared.collected.lock().unwrap() = Some(Vec::new());
+        self.set_profiling(true);
+        let out = f();
+        self.set_profiling(false);
+        (out, self.shared.collected.lock().unwrap().take().unwrap_or_default())
     }
 
     /// Whether small products take the kernel variants that compile quickly rather than those

@@ -387,7 +387,14 @@ impl Recording {
     /// Runs the recording to completion: the first time one submission per chunk, then as
     /// many chunks a submission as [`SubmitBudget::merge`] allows.
     pub fn run(&self) -> Result<()> {
-        self.run_submissions().map(drop)
+        self.run_submissions()?;
+        // Inside Context::profiled, a timed recording hands its dispatch times over.
+        let collecting = !self.res.labels.is_empty() && self.ctx.shared.collected.lock().unwrap().is_some();
+        if collecting {
+            let timings = self.timings()?;
+            self.ctx.shared.collected.lock().unwrap().get_or_insert_with(Vec::new).extend(timings);
+        }
+        Ok(())
     }
 
     /// Runs the recording and returns about how long each submission ran: from the end of the
@@ -438,7 +445,12 @@ impl Recording {
 
     /// Runs the recording and returns each dispatch's device time (recorded with `profile`).
     pub fn run_profiled(&self) -> Result<Vec<Timing>> {
-        self.run()?;
+        self.run_submissions()?;
+        self.timings()
+    }
+
+    /// Each dispatch's device time in the last run (recorded with `profile`).
+    fn timings(&self) -> Result<Vec<Timing>> {
         let n = self.res.labels.len();
         let mut stamps = vec![0u64; 2 * n];
         for (i, chunk) in stamps.chunks_mut(QUERIES_PER_POOL as usize).enumerate() {

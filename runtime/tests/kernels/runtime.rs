@@ -58,6 +58,23 @@ fn profiling_times_every_dispatch() {
 }
 
 #[test]
+fn profiled_collects_the_runs_of_every_recording_made_inside() {
+    // A private context: profiling is a context-wide switch.
+    let ctx = ctx_with(ctx().gemm_family());
+    let x = ctx.upload(&[4096], Dtype::F32, &random(4096, 75)).unwrap();
+    let silu = |rec: &mut Recorder| ops::unary(rec, UnaryOp::Silu, &x, &x, 0.0);
+    let twice = |rec: &mut Recorder| silu(rec).and_then(|()| ops::add(rec, &x, &x, &x));
+    let (ran, timings) = ctx.profiled(|| ctx.run(silu).and_then(|()| ctx.run(twice)));
+    ran.unwrap();
+    let kernels: Vec<&str> = timings.iter().map(|t| t.kernel).collect();
+    assert_eq!(kernels, ["unary_v4", "unary_v4", "binary_v4"], "two recordings' dispatches, in order");
+    // Afterwards recordings are untimed again.
+    let mut rec = Recorder::new(&ctx, false).unwrap();
+    silu(&mut rec).unwrap();
+    assert_eq!(rec.finish().unwrap().dispatches(), 0, "profiling left on");
+}
+
+#[test]
 fn memory_accounting_tracks_live_and_peak() {
     // A private context: other tests allocate concurrently on the shared one.
     let ctx = Context::new(&Default::default()).unwrap();
