@@ -97,11 +97,6 @@ pub const KERNELS: &[KernelSpec] = &[
         files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix.wgsl", "gemm_store.wgsl", "gemm_tiled.wgsl"],
         params: &[&[("BT", 0), ("GE", 0)], &[("BT", 1), ("GE", 0)], &[("BT", 1), ("GE", 1)]],
     },
-    KernelSpec {
-        name: "conv_tiled",
-        files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv.wgsl", "gemm_store.wgsl", "gemm_tiled.wgsl"],
-        params: &[&[("BT", 1), ("GE", 0)]],
-    },
     // The same for vec4-aligned operands, RH·32 outputs an invocation in tiles of 64·RH × 128.
     // GEGLU follows the product on GPUs (gemm.rs, `linear_geglu`), so no GE = 1 variant is built.
     KernelSpec {
@@ -221,7 +216,7 @@ pub const KERNELS: &[KernelSpec] = &[
 /// and the tiled GEMM for shapes off the vec4 grid). They and [`COOPERATIVE_KERNELS`] are
 /// compiled without naga's loop counters (`Loops` in compile.rs).
 pub const GPU_KERNELS: &[&str] =
-    &["gemm_tiled", "conv_tiled", "gemm_tiled_v4", "conv_tiled_v4", "attention_tiled", "attention_rows", "attention_wg"];
+    &["gemm_tiled", "gemm_tiled_v4", "conv_tiled_v4", "attention_tiled", "attention_rows", "attention_wg"];
 
 /// Kernels on the device's matrix units (`VK_KHR_cooperative_matrix`), compiled in f16 only:
 /// their operands are f16, so f32 products keep the scalar kernels' precision by not using

@@ -1,6 +1,7 @@
 //! 2-D convolution on NHWC tensors as an implicit GEMM (no im2col buffer).
 
 use super::bands::{bands, elem, fit, image_rows, rows_per_band};
+use super::conv_padded::conv2d_padded;
 use super::gemm::{dispatch_gemm_family, GemmKernels, GemmShape};
 use super::{f, same_dtype, u};
 use crate::error::{ensure, Result};
@@ -59,7 +60,8 @@ pub fn oihw_to_ohwi(w: &[f32], cout: usize, cin: usize, kh: usize, kw: usize) ->
 
 /// out[B, Ho, Wo, Cout] = conv(x[B, H, W, Cin], w[Cout, KH, KW, Cin]) (+ bias) (+ out) (ReLU), with the
 /// output size implied by stride and padding. Input or output past the binding limit is
-/// convolved in bands of output rows, each reading its input rows plus the kernel's halo.
+/// convolved in bands of output rows, each reading its input rows plus the kernel's halo;
+/// channels off the vec4 grid are padded onto it (conv_padded.rs).
 pub fn conv2d(
     rec: &mut Recorder,
     x: &Tensor,
@@ -68,7 +70,11 @@ pub fn conv2d(
     out: &Tensor,
     p: &ConvParams,
 ) -> Result<()> {
-    if fit(rec.context(), &[x, out]) || x.shape().len() != 4 || out.shape().len() != 4 || w.shape().len() != 4 {
+    let four_d = [x, w, out].iter().all(|t| t.shape().len() == 4);
+    if four_d && !(x.shape()[3].is_multiple_of(4) && w.shape()[0].is_multiple_of(4)) {
+        return conv2d_padded(rec, x, w, bias, out, p);
+    }
+    if fit(rec.context(), &[x, out]) || !four_d {
         return conv2d_whole(rec, x, w, bias, out, p);
     }
     let [b, h, wd, cin] = [x.shape()[0], x.shape()[1], x.shape()[2], x.shape()[3]];
@@ -156,7 +162,6 @@ fn conv2d_whole(
     // Without a bias the kernel never reads binding 2; the output stands in for it.
     let bias = bias.unwrap_or(out);
     let shape = GemmShape { m, n, k, batch: 1, vec4: cin % 4 == 0 && cout % 4 == 0 };
-    let kernels =
-        GemmKernels { subgroup: "conv_sg", tiled_v4: "conv_tiled_v4", tiled: "conv_tiled", cooperative: "conv_coop" };
+    let kernels = GemmKernels { subgroup: "conv_sg", tiled_v4: "conv_tiled_v4", tiled: None, cooperative: "conv_coop" };
     dispatch_gemm_family(rec, (kernels, dtype, &[]), &shape, &[x, w, bias], out, &push)
 }

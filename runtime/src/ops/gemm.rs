@@ -5,7 +5,7 @@ use super::{f, kernel, same_dtype, u};
 use crate::arena::Arena;
 use crate::context::{Context, GemmFamily};
 use crate::device::{DeviceInfo, DeviceKind};
-use crate::error::{ensure, Result};
+use crate::error::{ensure, Error, Result};
 use crate::matrix_units::Fragment;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
@@ -216,15 +216,20 @@ pub(super) struct GemmShape {
 /// The kernels of one GEMM-shaped op, one per family.
 pub(super) struct GemmKernels {
     pub subgroup: &'static str,
-    /// The tiled kernel for vec4-aligned shapes, and the one for any shape.
+    /// The tiled kernel for vec4-aligned shapes, and the one for any shape (none for
+    /// convolutions, which pad their channels onto the vec4 grid).
     pub tiled_v4: &'static str,
-    pub tiled: &'static str,
+    pub tiled: Option<&'static str>,
     pub cooperative: &'static str,
 }
 
 impl GemmKernels {
-    const MATMUL: GemmKernels =
-        GemmKernels { subgroup: "gemm_sg", tiled_v4: "gemm_tiled_v4", tiled: "gemm_tiled", cooperative: "gemm_coop" };
+    const MATMUL: GemmKernels = GemmKernels {
+        subgroup: "gemm_sg",
+        tiled_v4: "gemm_tiled_v4",
+        tiled: Some("gemm_tiled"),
+        cooperative: "gemm_coop",
+    };
 }
 
 /// Records a GEMM-shaped kernel: the cooperative variant where the context uses the matrix units,
@@ -270,7 +275,10 @@ pub(super) fn dispatch_gemm_family(
             return rec.dispatch(&k, reads, &[out], push, grid);
         }
     }
-    let k = kernel(&ctx, names.tiled, dtype, params, 4)?;
+    let tiled = names.tiled.ok_or_else(|| {
+        Error::Shape(format!("{}: M={} N={} K={} is off the vec4 grid its kernels read", names.tiled_v4, s.m, s.n, s.k))
+    })?;
+    let k = kernel(&ctx, tiled, dtype, params, 4)?;
     rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(64)), u(s.m.div_ceil(64)), u(s.batch)])
 }
 

@@ -6,6 +6,7 @@ mod attention_products;
 mod bands;
 mod ceiling;
 mod conv;
+mod conv_padded;
 mod elementwise;
 mod gemm;
 mod norm;

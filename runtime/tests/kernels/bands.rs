@@ -61,12 +61,14 @@ fn conv_bands_match_the_whole_convolution() {
         ConvParams { stride: 2, pad: Padding { top: 0, left: 0, bottom: 1, right: 1 }, accumulate: true, relu: false };
     let shortcut = ConvParams { accumulate: true, ..ConvParams::new(1, 0) };
     for dtype in DTYPES {
-        for (name, p, k, out) in [
-            ("3x3", square, 3, [2, 21, 16, 8]),
-            ("stride 2, pad bottom-right", down, 3, [2, 10, 8, 8]),
-            ("1x1", shortcut, 1, [2, 21, 16, 8]),
+        for (name, p, k, cin, out) in [
+            ("3x3", square, 3, 8, [2, 21, 16, 8]),
+            ("stride 2, pad bottom-right", down, 3, 8, [2, 10, 8, 8]),
+            ("1x1", shortcut, 1, 8, [2, 21, 16, 8]),
+            ("3 into 5 channels, padded to 4 and 8", shortcut, 3, 3, [2, 19, 14, 5]),
         ] {
-            let shapes: [&[usize]; 3] = [&[2, 21, 16, 8], &[8, k, k, 8], &[8]];
+            let cout = out[3];
+            let shapes: [&[usize]; 3] = [&[2, 21, 16, cin], &[cout, k, k, cin], &[cout]];
             let (whole, banded) =
                 whole_and_banded(dtype, &shapes, &out, |rec, t, o| conv2d(rec, &t[0], &t[1], Some(&t[2]), o, &p));
             assert_same(&format!("conv {name} {dtype:?}"), &whole, &banded);

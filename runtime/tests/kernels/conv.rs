@@ -236,23 +236,26 @@ fn conv1x1() {
 }
 
 #[test]
-fn conv_rgb_input_any_channel_count() {
-    // Cin = 3 (the VAE encoder's conv_in) and Cout = 5 take the scalar path on every device.
-    all(
-        Case {
-            b: 1,
-            h: 7,
-            w: 6,
-            cin: 3,
-            cout: 5,
-            k: [3, 3],
-            stride: 1,
-            pad: Padding::same(1),
-            accumulate: true,
-            relu: false,
-        },
-        25,
-    );
+fn conv_channels_off_the_vec4_grid_are_padded() {
+    // Cin = 3 into 5 channels, accumulating; 8 into 3 with ReLU (the VAE's conv_out, 128 → 3);
+    // 3 into 8 at stride 2 (an encoder's conv_in, ControlNet's hint): zero channels padded on.
+    let case = |cin, cout, stride, accumulate, relu| Case {
+        b: 2,
+        h: 7,
+        w: 6,
+        cin,
+        cout,
+        k: [3, 3],
+        stride,
+        pad: Padding::same(1),
+        accumulate,
+        relu,
+    };
+    for (seed, c) in
+        [case(3, 5, 1, true, false), case(8, 3, 1, false, true), case(3, 8, 2, false, false)].into_iter().enumerate()
+    {
+        all(c, 25 + seed as u64);
+    }
 }
 
 #[test]
