@@ -1,10 +1,13 @@
 //! `vkdiff bench vae`: SDXL's VAE decoder (real architecture, random weights, f32 as its
 //! `force_upcast` asks) decoding whole and in diffusers' tiles, with each decode's activation
 //! memory (the context's peak less the weights) beside the estimate the memory plan uses; the
-//! whole decode is the tiled one's reference, in the same run.
+//! whole decode is the tiled one's reference, in the same run. With `--reference-device`,
+//! diffusers decodes the same size there after vkdiff's device is released
+//! (`tools/vae_reference.py`).
 
 use crate::profile::{self, by_kernel, KernelTime};
-use anyhow::Result;
+use crate::unet::ReferenceDevice;
+use anyhow::{Context as _, Result};
 use std::time::Instant;
 use vkdiff_networks::{AutoencoderKl, Checkpoint, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
 use vkdiff_runtime::{Context, Dtype};
@@ -25,6 +28,10 @@ pub struct VaeArgs {
     /// Also time every dispatch of one more whole decode and list the kernels by device time.
     #[arg(long)]
     profile: bool,
+    /// Also time diffusers' whole decode there (float32; on CUDA also with TF32 convolutions,
+    /// torch's default).
+    #[arg(long, value_enum)]
+    reference_device: Option<ReferenceDevice>,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -49,9 +56,90 @@ struct Row {
     memory_ratio: f64,
     /// With `--profile`: device time per kernel of a whole decode, largest first.
     profile: Vec<KernelTime>,
+    /// With `--reference-device`: diffusers' whole decode, or why it could not run.
+    reference: Option<std::result::Result<Reference, String>>,
+}
+
+/// diffusers' fastest whole decode, float32 throughout, and (on CUDA) with torch's default of
+/// TF32 convolutions.
+#[derive(serde::Serialize)]
+struct Reference {
+    seconds: f64,
+    seconds_tf32: Option<f64>,
+    peak_mib: f64,
+    what: String,
+}
+
+impl Reference {
+    /// diffusers' time over ours for each of its modes, as the UNet bench's speed-up.
+    fn describe(&self, ours: f64) -> String {
+        let tf32 = self.seconds_tf32.map_or(String::new(), |s| {
+            format!(", {s:.2} s with TF32 convolutions (torch's default; speed-up {:.2}×)", s / ours)
+        });
+        format!(
+            "{:.2} s float32 (speed-up {:.2}×){tf32}, peak {:.0} MiB ({})",
+            self.seconds,
+            self.seconds / ours,
+            self.peak_mib,
+            self.what
+        )
+    }
+}
+
+const REFERENCE: &str = include_str!("../../tools/vae_reference.py");
+
+fn reference(size: usize, samples: u32, device: ReferenceDevice) -> std::result::Result<Reference, String> {
+    let device = match device {
+        ReferenceDevice::Cpu => "cpu",
+        ReferenceDevice::Cuda => "cuda",
+    };
+    let args = [SDXL_VAE_CONFIG.to_string(), size.to_string(), samples.to_string(), device.to_string()];
+    let v = crate::cpu_reference::run_python_reference(REFERENCE, args, None)?;
+    let field = |name: &str| v[name].as_f64();
+    let seconds = field("seconds_f32").context("no seconds_f32").map_err(|e| e.to_string())?;
+    let what = format!(
+        "{}, torch {} / diffusers {}",
+        v["where"].as_str().unwrap_or("?"),
+        v["torch"].as_str().unwrap_or("?"),
+        v["diffusers"].as_str().unwrap_or("?"),
+    );
+    Ok(Reference { seconds, seconds_tf32: field("seconds_tf32"), peak_mib: field("peak_mib").unwrap_or(0.0), what })
 }
 
 pub fn run(args: &VaeArgs) -> Result<()> {
+    let mut row = measure(args)?;
+    row.reference = args.reference_device.map(|device| reference(args.size, args.samples, device));
+    if args.json {
+        println!("{}", serde_json::to_string(&row)?);
+    } else {
+        let line = |d: &Decode| {
+            format!(
+                "{:.2} s, activations {:.0} MiB (plan's estimate {:.0} MiB)",
+                d.seconds, d.activations_mib, d.estimate_mib
+            )
+        };
+        let reference = match &row.reference {
+            None => String::new(),
+            Some(Ok(r)) => format!(" | diffusers whole: {}", r.describe(row.whole.seconds)),
+            Some(Err(why)) => format!(" | diffusers: unavailable: {why}"),
+        };
+        println!(
+            "{} | SDXL VAE decode {}² f32, weights {:.0} MiB | whole: {} | {}-px tiles: {} | tiled/whole memory {:.2}{reference}{}",
+            row.device,
+            row.size,
+            row.weights_mib,
+            line(&row.whole),
+            args.tile,
+            line(&row.tiled),
+            row.memory_ratio,
+            profile::lines(&row.profile)
+        );
+    }
+    Ok(())
+}
+
+/// vkdiff's decodes; the device and every buffer are released before a reference runs.
+fn measure(args: &VaeArgs) -> Result<Row> {
     let ctx = Context::new(&args.device.choice())?;
     let config: VaeConfig = serde_json::from_str(SDXL_VAE_CONFIG)?;
     let vae = AutoencoderKl::load(&ctx, config, &Checkpoint::random(&ctx, Dtype::F32, 0))?;
@@ -89,7 +177,7 @@ pub fn run(args: &VaeArgs) -> Result<()> {
     } else {
         Vec::new()
     };
-    let row = Row {
+    Ok(Row {
         device: ctx.info().name.clone(),
         size: args.size,
         weights_mib: mib(weights),
@@ -97,27 +185,6 @@ pub fn run(args: &VaeArgs) -> Result<()> {
         whole,
         tiled,
         profile,
-    };
-    if args.json {
-        println!("{}", serde_json::to_string(&row)?);
-    } else {
-        let line = |d: &Decode| {
-            format!(
-                "{:.2} s, activations {:.0} MiB (plan's estimate {:.0} MiB)",
-                d.seconds, d.activations_mib, d.estimate_mib
-            )
-        };
-        println!(
-            "{} | SDXL VAE decode {}² f32, weights {:.0} MiB | whole: {} | {}-px tiles: {} | tiled/whole memory {:.2}{}",
-            row.device,
-            row.size,
-            row.weights_mib,
-            line(&row.whole),
-            args.tile,
-            line(&row.tiled),
-            row.memory_ratio,
-            profile::lines(&row.profile)
-        );
-    }
-    Ok(())
+        reference: None,
+    })
 }

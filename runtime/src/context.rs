@@ -4,12 +4,12 @@ use crate::device::{self, DeviceInfo, DeviceKind};
 use crate::device_choice::{choose, DeviceChoice};
 use crate::error::{Error, Result, VkContext};
 use crate::flexible_dimensions::CooperativeMatrix2Features;
+use crate::instance::Instance;
 use crate::matrix_unit_trial::{run_trial, CooperativeSetting, MatrixUnitTrial};
 use crate::matrix_units;
 use crate::pipeline::{Kernel, PipelineCache};
 use crate::recorder::Timing;
 use crate::submit_budget::SubmitBudget;
-use crate::validation::Validation;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use std::mem::ManuallyDrop;
@@ -75,10 +75,9 @@ impl DeviceInfo {
 }
 
 pub(crate) struct Shared {
-    _entry: ash::Entry,
-    pub(crate) instance: ash::Instance,
+    /// The process's instance (see [`crate::instance`]), which outlives every context.
+    pub(crate) vulkan: Arc<Instance>,
     pub(crate) physical_device: vk::PhysicalDevice,
-    validation: Option<Validation>,
     pub(crate) device: ash::Device,
     pub(crate) queue: Mutex<vk::Queue>,
     pub(crate) queue_family: u32,
@@ -156,10 +155,6 @@ impl Drop for Shared {
             self.pipelines.destroy(&self.device);
             ManuallyDrop::drop(&mut self.allocator);
             self.device.destroy_device(None);
-            if let Some(v) = &self.validation {
-                v.destroy();
-            }
-            self.instance.destroy_instance(None);
         }
     }
 }
@@ -174,34 +169,15 @@ impl Context {
     /// Opens the device `choice` names (or `VKDIFF_DEVICE`, the scheduler's, or the best one;
     /// see [`crate::choose`]).
     pub fn new(choice: &DeviceChoice) -> Result<Context> {
-        let entry = device::load_entry()?;
-        let api = device::api_limit()?;
-        let (instance, validation) = device::create_instance(&entry, api)?;
-        match Self::open(&entry, &instance, choice, api) {
-            Ok((device, pd, info, queue_family)) => {
-                let ctx = Self::finish(entry, (instance, validation), device, pd, info, queue_family)?;
-                ctx.try_matrix_units();
-                Ok(ctx)
-            }
-            Err(e) => {
-                // SAFETY: nothing created from the instance is alive but the messenger, which goes first.
-                unsafe {
-                    if let Some(v) = &validation {
-                        v.destroy();
-                    }
-                    instance.destroy_instance(None)
-                };
-                Err(e)
-            }
-        }
+        let vulkan = crate::instance::shared()?;
+        let (device, pd, info, queue_family) = Self::open(&vulkan, choice)?;
+        let ctx = Self::finish(vulkan, device, pd, info, queue_family)?;
+        ctx.try_matrix_units();
+        Ok(ctx)
     }
 
-    fn open(
-        entry: &ash::Entry,
-        instance: &ash::Instance,
-        choice: &DeviceChoice,
-        api: (u32, u32),
-    ) -> Result<(ash::Device, vk::PhysicalDevice, DeviceInfo, u32)> {
+    fn open(vulkan: &Instance, choice: &DeviceChoice) -> Result<(ash::Device, vk::PhysicalDevice, DeviceInfo, u32)> {
+        let (entry, instance, api) = (&vulkan.entry, &vulkan.raw, vulkan.api);
         // SAFETY: valid instance.
         let pds = unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
         let infos: Vec<DeviceInfo> =
@@ -275,8 +251,7 @@ impl Context {
     }
 
     fn finish(
-        entry: ash::Entry,
-        (instance, validation): (ash::Instance, Option<Validation>),
+        vulkan: Arc<Instance>,
         device: ash::Device,
         pd: vk::PhysicalDevice,
         info: DeviceInfo,
@@ -285,7 +260,7 @@ impl Context {
         // SAFETY: index 0 of a family we created one queue in.
         let queue = unsafe { device.get_device_queue(family, 0) };
         let allocator = Allocator::new(&AllocatorCreateDesc {
-            instance: instance.clone(),
+            instance: vulkan.raw.clone(),
             device: device.clone(),
             physical_device: pd,
             debug_settings: Default::default(),
@@ -299,7 +274,7 @@ impl Context {
         let submit_budget = SubmitBudget::for_device(&info, &env)?;
         let memory_budget = crate::memory_budget::budget_override(&env)?;
         let statistics = capture_statistics(&info)
-            .then(|| ash::khr::pipeline_executable_properties::Device::new(&instance, &device));
+            .then(|| ash::khr::pipeline_executable_properties::Device::new(&vulkan.raw, &device));
         if crate::pipeline_stats::requested() && statistics.is_none() {
             eprintln!(
                 "VKDIFF_PIPELINE_STATS=1: {} reports no kernel statistics (no VK_KHR_pipeline_executable_properties)",
@@ -307,12 +282,10 @@ impl Context {
             );
         }
         let shared = Shared {
-            _entry: entry,
-            instance,
+            vulkan,
             physical_device: pd,
             memory_budget,
             memory_budget_extension: info.memory_budget,
-            validation,
             device,
             queue: Mutex::new(queue),
             queue_family: family,

@@ -4,7 +4,6 @@ use crate::device_choice::PciAddress;
 use crate::error::{Error, Result, VkContext};
 use crate::flexible_dimensions::{self, CooperativeMatrix2Features};
 use crate::matrix_units::{self, Fragment, MatrixShape};
-use crate::validation::Validation;
 use ash::vk;
 use std::ffi::CStr;
 
@@ -173,11 +172,6 @@ impl DeviceInfo {
     }
 }
 
-pub(crate) fn load_entry() -> Result<ash::Entry> {
-    // SAFETY: loading the system Vulkan loader; its symbols follow the Vulkan ABI.
-    unsafe { ash::Entry::load() }.map_err(|e| Error::NoLoader(e.to_string()))
-}
-
 /// The newest Vulkan version vkdiff asks for: 1.3, or 1.2 under `VKDIFF_VULKAN_API=1.2`, which
 /// runs the 1.2 paths (extensions where 1.3 has core features) on a 1.3 driver.
 pub fn api_limit() -> Result<(u32, u32)> {
@@ -191,7 +185,7 @@ pub fn api_limit() -> Result<(u32, u32)> {
 /// vkdiff's instance for Vulkan up to `api` (major, minor), validated under `VKDIFF_VALIDATE=1`.
 /// Where the loader offers `VK_KHR_portability_enumeration`, portability devices (MoltenVK) are
 /// listed too.
-pub(crate) fn create_instance(entry: &ash::Entry, api: (u32, u32)) -> Result<(ash::Instance, Option<Validation>)> {
+pub(crate) fn create_instance(entry: &ash::Entry, api: (u32, u32)) -> Result<ash::Instance> {
     let app = vk::ApplicationInfo::default()
         .application_name(c"vkdiff")
         .engine_name(c"vkdiff")
@@ -376,21 +370,10 @@ fn compute_family(families: &[vk::QueueFamilyProperties]) -> Option<u32> {
 
 /// Every Vulkan device on this machine, described.
 pub fn list_devices() -> Result<Vec<DeviceInfo>> {
-    let entry = load_entry()?;
-    let api = api_limit()?;
-    let (instance, validation) = create_instance(&entry, api)?;
-    // SAFETY: the instance is valid until destroyed below.
-    let infos = unsafe { instance.enumerate_physical_devices() }
-        .vk("vkEnumeratePhysicalDevices")
-        .map(|pds| pds.iter().enumerate().map(|(i, &pd)| describe(&entry, &instance, pd, (i, api))).collect());
-    // SAFETY: nothing created from the instance outlives it; the messenger goes first.
-    unsafe {
-        if let Some(v) = &validation {
-            v.destroy();
-        }
-        instance.destroy_instance(None)
-    };
-    infos
+    let vulkan = crate::instance::shared()?;
+    // SAFETY: the instance lives as long as the process.
+    let pds = unsafe { vulkan.raw.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
+    Ok(pds.iter().enumerate().map(|(i, &pd)| describe(&vulkan.entry, &vulkan.raw, pd, (i, vulkan.api))).collect())
 }
 
 /// Mesa's (major, minor) from lavapipe's driver info ("Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"):

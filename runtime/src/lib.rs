@@ -8,6 +8,7 @@ mod device;
 mod device_choice;
 mod error;
 mod flexible_dimensions;
+mod instance;
 mod matrix_unit_trial;
 mod matrix_units;
 mod memory;

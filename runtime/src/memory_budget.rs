@@ -50,7 +50,7 @@ impl Context {
             let mut budget = vk::PhysicalDeviceMemoryBudgetPropertiesEXT::default();
             let mut props = vk::PhysicalDeviceMemoryProperties2::default().push_next(&mut budget);
             // SAFETY: the physical device belongs to the live instance; the struct outlives the call.
-            unsafe { shared.instance.get_physical_device_memory_properties2(shared.physical_device, &mut props) };
+            unsafe { shared.vulkan.raw.get_physical_device_memory_properties2(shared.physical_device, &mut props) };
             let heaps = props.memory_properties.memory_heaps;
             let count = props.memory_properties.memory_heap_count as usize;
             let heap = (0..count)

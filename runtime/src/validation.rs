@@ -13,31 +13,17 @@ pub(crate) fn requested() -> bool {
     std::env::var("VKDIFF_VALIDATE").is_ok_and(|v| v == "1")
 }
 
-/// The debug messenger of a validated instance; destroyed before the instance.
-pub(crate) struct Validation {
-    loader: ash::ext::debug_utils::Instance,
-    messenger: vk::DebugUtilsMessengerEXT,
-}
-
-impl Validation {
-    /// # Safety
-    /// Called once, before the instance is destroyed.
-    pub(crate) unsafe fn destroy(&self) {
-        // SAFETY: the messenger belongs to the loader's instance, which is still alive.
-        unsafe { self.loader.destroy_debug_utils_messenger(self.messenger, None) };
-    }
-}
-
-/// Creates the instance `info` describes with `extensions`, validated when asked for.
+/// Creates the instance `info` describes with `extensions`, validated when asked for (its
+/// debug messenger then lives as long as the instance: the process, see [`crate::instance`]).
 pub(crate) fn create_instance(
     entry: &ash::Entry,
     info: vk::InstanceCreateInfo,
     mut extensions: Vec<*const c_char>,
-) -> Result<(ash::Instance, Option<Validation>)> {
+) -> Result<ash::Instance> {
     if !requested() {
         let info = info.enabled_extension_names(&extensions);
         // SAFETY: the create info and everything it points to outlive the call.
-        return Ok((unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance")?, None));
+        return unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance");
     }
     // SAFETY: a plain query of the loader.
     let layers = unsafe { entry.enumerate_instance_layer_properties() }.vk("vkEnumerateInstanceLayerProperties")?;
@@ -58,7 +44,7 @@ pub(crate) fn create_instance(
         .pfn_user_callback(Some(on_message));
     // SAFETY: the instance was created with the debug-utils extension.
     match unsafe { loader.create_debug_utils_messenger(&create, None) } {
-        Ok(messenger) => Ok((instance, Some(Validation { loader, messenger }))),
+        Ok(_messenger) => Ok(instance),
         Err(e) => {
             // SAFETY: nothing else was created from the instance.
             unsafe { instance.destroy_instance(None) };
