@@ -55,7 +55,9 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
     } else {
         format!("{tiles}query rows per invocation (GPU)")
     };
-    let attention = format!("{flash}; f32 heads over 128 (the VAE's): products around a row softmax");
+    let attention = format!(
+        "{flash}; heads over 128 (the VAE's): products around a row softmax, f16 heads widened to f32 for them"
+    );
     let wider = if d.lavapipe_mesa.is_some() && vkdiff_runtime::wider_lavapipe_vectors_available() {
         " (this CPU has AVX-512: LP_NATIVE_VECTOR_WIDTH=512 runs 16-lane kernels, which compile 2–3× slower and ran \
             the UNet 1.04× faster on an AMD EPYC, 4.9× slower on an Intel Xeon)"

@@ -204,7 +204,14 @@ pub const KERNELS: &[KernelSpec] = &[
     KernelSpec { name: "upsample_nearest2x_v4", files: &["grid.wgsl", "unit_4.wgsl", "upsample.wgsl"], params: NONE },
     KernelSpec { name: "concat_channels", files: &["grid.wgsl", "unit_1.wgsl", "concat.wgsl"], params: NONE },
     KernelSpec { name: "concat_channels_v4", files: &["grid.wgsl", "unit_4.wgsl", "concat.wgsl"], params: NONE },
-    KernelSpec { name: "copy_heads", files: &["grid.wgsl", "copy_heads.wgsl"], params: NONE },
+    KernelSpec { name: "copy_heads", files: &["grid.wgsl", "heads_as_stored.wgsl", "copy_heads.wgsl"], params: NONE },
+    // f16 heads widened for f32 arithmetic and the results narrowed back (wide attention heads).
+    KernelSpec { name: "copy_heads_to_f32", files: &["grid.wgsl", "heads_to_f32.wgsl", "copy_heads.wgsl"], params: NONE },
+    KernelSpec {
+        name: "copy_heads_from_f32",
+        files: &["grid.wgsl", "heads_from_f32.wgsl", "copy_heads.wgsl"],
+        params: NONE,
+    },
     KernelSpec { name: "copy_channels", files: &["grid.wgsl", "copy_channels.wgsl"], params: NONE },
     // Inception's pooling (0 max, 1 average of the taps inside) and its TensorFlow-style resize.
     KernelSpec { name: "pool2d", files: &["grid.wgsl", "pool2d.wgsl"], params: &[&[("OP", 0)], &[("OP", 1)]] },

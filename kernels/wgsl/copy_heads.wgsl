@@ -2,9 +2,11 @@
 // dst[dst_off + batch·dst_batch + token·dst_ld + head·dst_d + d] =
 //     src[src_off + batch·src_batch + token·src_ld + head·src_d + d] where d < src_d, else 0.
 // Attention pads head sizes that are not a multiple of 4 into its vec4 layout with this, and
-// takes the padding off again.
-@group(0) @binding(0) var<storage, read> src: array<S>;
-@group(0) @binding(1) var<storage, read_write> dst: array<S>;
+// takes the padding off again; convolutions pad channels the same way. SRC and DST are the
+// storage types (heads_as_stored.wgsl, or heads_to_f32.wgsl / heads_from_f32.wgsl, which widen
+// f16 heads for f32 arithmetic and narrow the results back).
+@group(0) @binding(0) var<storage, read> src: array<SRC>;
+@group(0) @binding(1) var<storage, read_write> dst: array<DST>;
 
 struct Params {
     n: u32,
@@ -36,8 +38,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let batch = row / (p.heads * p.tokens);
     let at = p.dst_off + batch * p.dst_batch + token * p.dst_ld + head * p.dst_d + d;
     if d < p.src_d {
-        dst[at] = src[p.src_off + batch * p.src_batch + token * p.src_ld + head * p.src_d + d];
+        dst[at] = DST(src[p.src_off + batch * p.src_batch + token * p.src_ld + head * p.src_d + d]);
     } else {
-        dst[at] = S(0.0);
+        dst[at] = DST(0.0);
     }
 }

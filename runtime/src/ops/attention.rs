@@ -340,7 +340,8 @@ pub struct HeadSpan {
 }
 
 /// Copies every head of `src` into `dst`'s layout: the first min(head sizes) values of each
-/// head, and zeros where `dst`'s heads are wider.
+/// head, and zeros where `dst`'s heads are wider. f16 heads into an f32 tensor are widened,
+/// f32 ones into an f16 tensor rounded.
 #[allow(clippy::too_many_arguments)]
 pub fn copy_heads(
     rec: &mut Recorder,
@@ -352,7 +353,13 @@ pub fn copy_heads(
     tokens: usize,
     heads: usize,
 ) -> Result<()> {
-    let dtype = same_dtype(rec.context(), "copy_heads", &[src, dst])?;
+    let (name, dtype) = match (src.dtype(), dst.dtype()) {
+        (Dtype::F16, Dtype::F32) => ("copy_heads_to_f32", Dtype::F16),
+        (Dtype::F32, Dtype::F16) => ("copy_heads_from_f32", Dtype::F16),
+        _ => ("copy_heads", src.dtype()),
+    };
+    same_dtype(rec.context(), "copy_heads", &[src])?;
+    same_dtype(rec.context(), "copy_heads", &[dst])?;
     let extent = |s: HeadSpan| s.offset + (batch - 1) * s.batch + (tokens - 1) * s.ld + heads * s.head_dim;
     ensure(batch > 0 && tokens > 0 && heads > 0 && from.head_dim > 0 && to.head_dim > 0, || {
         "copy_heads: empty layout".into()
@@ -364,7 +371,7 @@ pub fn copy_heads(
             dst.shape()
         )
     })?;
-    let k = kernel(rec.context(), "copy_heads", dtype, &[], 2)?;
+    let k = kernel(rec.context(), name, dtype, &[], 2)?;
     let record =
         |rec: &mut Recorder, src: &Tensor, dst: &Tensor, from: HeadSpan, to: HeadSpan, batch: usize, tokens: usize| {
             let n = batch * tokens * heads * to.head_dim;

@@ -222,37 +222,57 @@ fn as_products(kernels: &[&str]) -> bool {
 }
 
 #[test]
-fn wide_f32_heads_run_as_products_in_chunks() {
-    // The VAE's mid-block: one head of 512 over a fused [B, N, 3·512] projection, two images;
-    // 512 KiB bindings make chunks of 64 query rows (the last one 20). Then two dense heads of
-    // 256, cross-attention, in chunks of 128 rows and a last one of 72.
+fn wide_heads_run_as_products_in_chunks() {
+    // The VAE's mid-block: one head of 512 over a fused [B, N, 3·512] projection, two images.
+    // f32 products read it in place: 512 KiB bindings make chunks of 64 query rows (the last
+    // one 20). f16 heads (an fp16-fix VAE) are widened into dense f32 rows, so the same bindings
+    // hold all 84. Then two dense heads of 256, cross-attention: in f32, chunks of 128 rows and
+    // a last one of 72 at 256 KiB; in f16, the same at 128 KiB.
     let (n, d) = (84, 512);
     let mut fused = AttentionLayout::dense(2, 1, d, n, n);
     (fused.q_ld, fused.k_ld, fused.v_ld) = (3 * d, 3 * d, 3 * d);
     (fused.q_batch, fused.k_batch, fused.v_batch) = (n * 3 * d, n * 3 * d, n * 3 * d);
     (fused.k_offset, fused.v_offset) = (d, 2 * d);
-    // Chunks: per image and head.
-    let cases = [(fused, 512 << 10, 2), (AttentionLayout::dense(2, 2, 256, 200, 96), 256 << 10, 2)];
-    for (seed, (l, limit, chunks)) in cases.into_iter().enumerate() {
+    let cross = AttentionLayout::dense(2, 2, 256, 200, 96);
+    // (layout, dtype, binding limit, chunks per image and head)
+    let cases = [
+        (&fused, Dtype::F32, 512 << 10, 2),
+        (&fused, Dtype::F16, 512 << 10, 1),
+        (&cross, Dtype::F32, 256 << 10, 2),
+        (&cross, Dtype::F16, 128 << 10, 2),
+    ];
+    for (seed, &(l, dtype, limit, chunks)) in cases.iter().enumerate() {
         for gpu_paths in [false, true] {
-            let kernels = check_on(&limited_ctx(gpu_paths, limit), Dtype::F32, &l, 100 + seed as u64);
-            let softmaxes = kernels.iter().filter(|&&k| k == "softmax").count();
-            assert!(as_products(&kernels), "d{}: {kernels:?}", l.head_dim);
-            assert_eq!(softmaxes, l.batch * l.heads * chunks, "d{}: {kernels:?}", l.head_dim);
+            let kernels = check_on(&limited_ctx(gpu_paths, limit), dtype, l, 100 + seed as u64);
+            let count = |name: &str| kernels.iter().filter(|&&k| k == name).count();
+            let what = format!("{dtype:?} d{}: {kernels:?}", l.head_dim);
+            assert!(as_products(&kernels), "{what}");
+            assert_eq!(count("softmax"), l.batch * l.heads * chunks, "{what}");
+            // f16: keys and values widened once per image and head, queries once per chunk (each
+            // copy in one or more bands), and each chunk's outputs narrowed back.
+            let (widened, narrowed) = (count("copy_heads_to_f32"), count("copy_heads_from_f32"));
+            match dtype {
+                Dtype::F16 => assert!(
+                    widened >= l.batch * l.heads * (2 + chunks) && narrowed >= l.batch * l.heads * chunks,
+                    "{what}"
+                ),
+                Dtype::F32 => assert_eq!((widened, narrowed), (0, 0), "{what}"),
+            }
         }
     }
 }
 
 #[test]
 fn heads_the_products_do_not_take_stay_flash() {
-    // f16 (its scores would round to f16), heads of 128, key counts off the vec4 grid, causal
-    // masks: the flash kernels, on both paths.
+    // Heads of 128, key counts or heads off the vec4 grid, causal masks: the flash kernels, on
+    // both paths.
     let mut causal = AttentionLayout::dense(1, 1, 256, 40, 40);
     causal.causal = true;
     let cases = [
-        (Dtype::F16, AttentionLayout::dense(1, 1, 512, 40, 32)),
         (Dtype::F32, AttentionLayout::dense(1, 2, 128, 40, 32)),
+        (Dtype::F16, AttentionLayout::dense(1, 2, 128, 40, 32)),
         (Dtype::F32, AttentionLayout::dense(1, 1, 512, 40, 30)),
+        (Dtype::F16, AttentionLayout::dense(1, 1, 512, 40, 30)),
         (Dtype::F32, causal),
     ];
     for (i, (dtype, l)) in cases.into_iter().enumerate() {

@@ -1,0 +1,3 @@
+// copy_heads.wgsl from the kernel's storage type (f16) into f32.
+alias SRC = S;
+alias DST = f32;
