@@ -1,16 +1,19 @@
-//! `vkdiff bench vae`: SDXL's VAE decoder (real architecture, random weights, f32 as its
-//! `force_upcast` asks) decoding whole and in diffusers' tiles, with each decode's activation
+//! `vkdiff bench vae`: SDXL's VAE decoder (real architecture, random weights; f32 as its
+//! `force_upcast` asks, or f16 as the fp16-fix VAE's config allows) decoding whole and in
+//! diffusers' tiles, with each decode's activation
 //! memory (the context's peak less the weights) beside the estimate the memory plan uses; the
 //! whole decode is the tiled one's reference, in the same run. With `--reference-device`,
 //! diffusers decodes the same size there after vkdiff's device is released
 //! (`tools/vae_reference.py`).
 
+use crate::kernels::dtype_name;
 use crate::profile::{self, by_kernel, KernelTime};
 use crate::unet::ReferenceDevice;
 use anyhow::{Context as _, Result};
 use std::time::Instant;
+use vkdiff_args::Precision;
 use vkdiff_networks::{AutoencoderKl, Checkpoint, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_runtime::Context;
 
 #[derive(clap::Args)]
 pub struct VaeArgs {
@@ -19,6 +22,9 @@ pub struct VaeArgs {
     /// Image side in pixels (square).
     #[arg(long, default_value_t = 512)]
     size: usize,
+    /// f32 (SDXL's VAE, which asks for it), or f16 (the fp16-fix VAE's config: `force_upcast` false).
+    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    precision: Precision,
     /// Tile side in pixels for the tiled decode (a multiple of 32).
     #[arg(long, default_value_t = 256)]
     tile: usize,
@@ -28,8 +34,8 @@ pub struct VaeArgs {
     /// Also time every dispatch of one more whole decode and list the kernels by device time.
     #[arg(long)]
     profile: bool,
-    /// Also time diffusers' whole decode there (float32; on CUDA also with TF32 convolutions,
-    /// torch's default).
+    /// Also time diffusers' whole decode there, at `--precision` (f32: on CUDA also with TF32
+    /// convolutions, torch's default).
     #[arg(long, value_enum)]
     reference_device: Option<ReferenceDevice>,
     /// Print JSON instead of a table.
@@ -49,6 +55,7 @@ struct Decode {
 struct Row {
     device: String,
     size: usize,
+    precision: &'static str,
     weights_mib: f64,
     whole: Decode,
     tiled: Decode,
@@ -60,8 +67,8 @@ struct Row {
     reference: Option<std::result::Result<Reference, String>>,
 }
 
-/// diffusers' fastest whole decode, float32 throughout, and (on CUDA) with torch's default of
-/// TF32 convolutions.
+/// diffusers' fastest whole decode, in the precision's own arithmetic, and (f32 on CUDA) with
+/// torch's default of TF32 convolutions.
 #[derive(serde::Serialize)]
 struct Reference {
     seconds: f64,
@@ -77,7 +84,7 @@ impl Reference {
             format!(", {s:.2} s with TF32 convolutions (torch's default; speed-up {:.2}×)", s / ours)
         });
         format!(
-            "{:.2} s float32 (speed-up {:.2}×){tf32}, peak {:.0} MiB ({})",
+            "{:.2} s (speed-up {:.2}×){tf32}, peak {:.0} MiB ({})",
             self.seconds,
             self.seconds / ours,
             self.peak_mib,
@@ -88,15 +95,16 @@ impl Reference {
 
 const REFERENCE: &str = include_str!("../../tools/vae_reference.py");
 
-fn reference(size: usize, samples: u32, device: ReferenceDevice) -> std::result::Result<Reference, String> {
+fn reference(config: &str, args: &VaeArgs, device: ReferenceDevice) -> std::result::Result<Reference, String> {
     let device = match device {
         ReferenceDevice::Cpu => "cpu",
         ReferenceDevice::Cuda => "cuda",
     };
-    let args = [SDXL_VAE_CONFIG.to_string(), size.to_string(), samples.to_string(), device.to_string()];
+    let dtype = dtype_name(args.precision.dtype());
+    let args = [config, &args.size.to_string(), &args.samples.to_string(), device, dtype].map(str::to_string);
     let v = crate::cpu_reference::run_python_reference(REFERENCE, args, None)?;
     let field = |name: &str| v[name].as_f64();
-    let seconds = field("seconds_f32").context("no seconds_f32").map_err(|e| e.to_string())?;
+    let seconds = field("seconds").context("no seconds").map_err(|e| e.to_string())?;
     let what = format!(
         "{}, torch {} / diffusers {}",
         v["where"].as_str().unwrap_or("?"),
@@ -107,8 +115,12 @@ fn reference(size: usize, samples: u32, device: ReferenceDevice) -> std::result:
 }
 
 pub fn run(args: &VaeArgs) -> Result<()> {
-    let mut row = measure(args)?;
-    row.reference = args.reference_device.map(|device| reference(args.size, args.samples, device));
+    let mut config: serde_json::Value = serde_json::from_str(SDXL_VAE_CONFIG)?;
+    // f16 is the fp16-fix VAE: SDXL's architecture, with a config that does not ask for f32.
+    config["force_upcast"] = matches!(args.precision, Precision::F32).into();
+    let config = config.to_string();
+    let mut row = measure(args, &config)?;
+    row.reference = args.reference_device.map(|device| reference(&config, args, device));
     if args.json {
         println!("{}", serde_json::to_string(&row)?);
     } else {
@@ -124,9 +136,10 @@ pub fn run(args: &VaeArgs) -> Result<()> {
             Some(Err(why)) => format!(" | diffusers: unavailable: {why}"),
         };
         println!(
-            "{} | SDXL VAE decode {}² f32, weights {:.0} MiB | whole: {} | {}-px tiles: {} | tiled/whole memory {:.2}{reference}{}",
+            "{} | SDXL VAE decode {}² {}, weights {:.0} MiB | whole: {} | {}-px tiles: {} | tiled/whole memory {:.2}{reference}{}",
             row.device,
             row.size,
+            row.precision,
             row.weights_mib,
             line(&row.whole),
             args.tile,
@@ -139,10 +152,11 @@ pub fn run(args: &VaeArgs) -> Result<()> {
 }
 
 /// vkdiff's decodes; the device and every buffer are released before a reference runs.
-fn measure(args: &VaeArgs) -> Result<Row> {
+fn measure(args: &VaeArgs, config: &str) -> Result<Row> {
     let ctx = Context::new(&args.device.choice())?;
-    let config: VaeConfig = serde_json::from_str(SDXL_VAE_CONFIG)?;
-    let vae = AutoencoderKl::load(&ctx, config, &Checkpoint::random(&ctx, Dtype::F32, 0))?;
+    let config: VaeConfig = serde_json::from_str(config)?;
+    let dtype = args.precision.dtype();
+    let vae = AutoencoderKl::load(&ctx, config, &Checkpoint::random(&ctx, dtype, 0))?;
     let tiling = VaeTiling { tile: args.tile };
     vae.check_tiling(tiling)?;
     let weights = ctx.live_bytes();
@@ -180,6 +194,7 @@ fn measure(args: &VaeArgs) -> Result<Row> {
     Ok(Row {
         device: ctx.info().name.clone(),
         size: args.size,
+        precision: dtype_name(dtype),
         weights_mib: mib(weights),
         memory_ratio: tiled.activations_mib / whole.activations_mib,
         whole,

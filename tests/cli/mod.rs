@@ -36,6 +36,7 @@ pub fn error_line_with(args: &[&str], env: &[(&str, &str)]) -> String {
 }
 
 /// An empty folder under the target's temporary directory, unique to this test process.
+#[allow(dead_code)] // not every test binary writes files
 pub fn scratch(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cli-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);

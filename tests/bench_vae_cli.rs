@@ -1,0 +1,28 @@
+//! `vkdiff bench vae` as a user runs it: SDXL's real VAE (random weights) at a tiny size.
+
+mod cli;
+
+use cli::vkdiff;
+
+#[test]
+fn bench_vae_decodes_whole_and_in_tiles_in_f16() {
+    // f16 is the fp16-fix VAE's config; at 64² its mid-block attends over 64 tokens with one
+    // head of 512, which runs as products on f32 copies.
+    let result = vkdiff(&["bench", "vae", "--size", "64", "--tile", "32", "--precision", "f16", "--json"]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let stdout = String::from_utf8_lossy(&result.stdout);
+    let row: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap_or("")).expect("one JSON line");
+    assert_eq!(row["precision"], "f16", "{row}");
+    assert_eq!(row["size"], 64, "{row}");
+    assert_eq!(row["tiled"]["tile"], 32, "{row}");
+    assert!(row["reference"].is_null(), "no --reference-device, no reference: {row}");
+    let activations = |decode: &str| row[decode]["activations_mib"].as_f64().unwrap();
+    for decode in ["whole", "tiled"] {
+        assert!(row[decode]["seconds"].as_f64().unwrap() > 0.0, "{row}");
+        assert!(activations(decode) > 0.0 && activations(decode) <= row[decode]["estimate_mib"].as_f64().unwrap());
+    }
+    // Four 32-px tiles each hold a quarter of the activations of the whole 64² decode.
+    assert!(activations("tiled") < activations("whole"), "{row}");
+    // f16 weights: half of the f32 VAE's 319 MiB.
+    assert!((row["weights_mib"].as_f64().unwrap() - 159.6).abs() < 1.0, "{row}");
+}
