@@ -101,8 +101,8 @@ fn reference(config: &str, args: &VaeArgs, device: ReferenceDevice) -> std::resu
         ReferenceDevice::Cuda => "cuda",
     };
     let dtype = dtype_name(args.precision.dtype());
-    let args = [config, &args.size.to_string(), &args.samples.to_string(), device, dtype].map(str::to_string);
-    let v = crate::cpu_reference::run_python_reference(REFERENCE, args, None)?;
+    let script_args = [config, &args.size.to_string(), &args.samples.to_string(), device, dtype].map(str::to_string);
+    let v = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
     let field = |name: &str| v[name].as_f64();
     let seconds = field("seconds").context("no seconds").map_err(|e| e.to_string())?;
     let what = format!(
