@@ -13,7 +13,7 @@ use anyhow::{Context as _, Result};
 use std::time::Instant;
 use vkdiff_args::Precision;
 use vkdiff_networks::{AutoencoderKl, Checkpoint, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
-use vkdiff_runtime::Context;
+use vkdiff_runtime::{AllocationStats, Context};
 
 #[derive(clap::Args)]
 pub struct VaeArgs {
@@ -49,6 +49,28 @@ struct Decode {
     seconds: f64,
     activations_mib: f64,
     estimate_mib: f64,
+    /// Where the last decode's buffers came from: fresh from the driver, or idle ones reused.
+    buffers: Buffers,
+}
+
+#[derive(serde::Serialize)]
+struct Buffers {
+    fresh: u64,
+    fresh_mib: f64,
+    reused: u64,
+    /// The host's time in the driver's allocation calls.
+    driver_ms: f64,
+}
+
+impl Buffers {
+    fn of(stats: AllocationStats) -> Buffers {
+        Buffers {
+            fresh: stats.fresh,
+            fresh_mib: stats.fresh_bytes as f64 / (1 << 20) as f64,
+            reused: stats.reused,
+            driver_ms: stats.driver_seconds * 1e3,
+        }
+    }
 }
 
 #[derive(serde::Serialize)]
@@ -126,8 +148,15 @@ pub fn run(args: &VaeArgs) -> Result<()> {
     } else {
         let line = |d: &Decode| {
             format!(
-                "{:.2} s, activations {:.0} MiB (plan's estimate {:.0} MiB)",
-                d.seconds, d.activations_mib, d.estimate_mib
+                "{:.2} s, activations {:.0} MiB (plan's estimate {:.0} MiB), last decode's buffers: {} fresh \
+                 ({:.0} MiB), {} reused, {:.1} ms in the driver's allocation calls",
+                d.seconds,
+                d.activations_mib,
+                d.estimate_mib,
+                d.buffers.fresh,
+                d.buffers.fresh_mib,
+                d.buffers.reused,
+                d.buffers.driver_ms
             )
         };
         let reference = match &row.reference {
@@ -166,13 +195,15 @@ fn measure(args: &VaeArgs, config: &str) -> Result<Row> {
     let decode = |tile: Option<VaeTiling>| -> Result<Decode> {
         ctx.reset_peak();
         let mut seconds = f64::INFINITY;
+        let mut buffers = AllocationStats::default();
         for _ in 0..args.samples {
-            let start = Instant::now();
+            let (start, before) = (Instant::now(), ctx.allocation_stats());
             match tile {
                 Some(t) => vae.decode_tiled(&latents, [1, h, h, 4], t)?,
                 None => vae.decode(&latents, [1, h, h, 4])?,
             };
             seconds = seconds.min(start.elapsed().as_secs_f64());
+            buffers = ctx.allocation_stats().since(&before);
         }
         let side = tile.map_or(args.size, |t| t.tile.min(args.size));
         Ok(Decode {
@@ -180,6 +211,7 @@ fn measure(args: &VaeArgs, config: &str) -> Result<Row> {
             seconds,
             activations_mib: mib(ctx.peak_bytes() - weights),
             estimate_mib: mib(vae.decode_bytes(1, side, side)),
+            buffers: Buffers::of(buffers),
         })
     };
     let whole = decode(None)?;

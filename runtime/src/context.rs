@@ -4,6 +4,7 @@ use crate::device::{self, DeviceInfo, DeviceKind};
 use crate::device_choice::{choose, DeviceChoice};
 use crate::error::{Error, Result, VkContext};
 use crate::flexible_dimensions::CooperativeMatrix2Features;
+use crate::idle_buffers::{AllocationStats, IdleBuffers};
 use crate::instance::Instance;
 use crate::matrix_unit_trial::{run_trial, CooperativeSetting, MatrixUnitTrial};
 use crate::matrix_units;
@@ -117,6 +118,9 @@ pub(crate) struct Shared {
     pub(crate) memory_budget_extension: bool,
     /// What the matrix units' trial found, where one ran (see [`Context::matrix_unit_trial`]).
     pub(crate) trial: Mutex<Option<MatrixUnitTrial>>,
+    /// Device buffers no tensor holds, kept for reuse (see [`crate::idle_buffers`]).
+    pub(crate) idle: Mutex<IdleBuffers>,
+    pub(crate) allocations: Mutex<AllocationStats>,
 }
 
 /// `VKDIFF_FRAGMENT`, where set: a shape vkdiff builds that this device's matrix units take.
@@ -152,6 +156,7 @@ impl Drop for Shared {
         // SAFETY: every buffer and recording holds an Arc<Shared>, so none is alive any more.
         unsafe {
             let _ = self.device.device_wait_idle();
+            crate::memory::release_idle(self);
             self.pipelines.destroy(&self.device);
             ManuallyDrop::drop(&mut self.allocator);
             self.device.destroy_device(None);
@@ -273,6 +278,10 @@ impl Context {
         let env = |name: &str| std::env::var(name).ok();
         let submit_budget = SubmitBudget::for_device(&info, &env)?;
         let memory_budget = crate::memory_budget::budget_override(&env)?;
+        let idle = IdleBuffers::from_setting(
+            env("VKDIFF_BUFFER_CACHE").as_deref(),
+            memory_budget.unwrap_or(info.device_local_bytes),
+        )?;
         let statistics = capture_statistics(&info)
             .then(|| ash::khr::pipeline_executable_properties::Device::new(&vulkan.raw, &device));
         if crate::pipeline_stats::requested() && statistics.is_none() {
@@ -307,6 +316,8 @@ impl Context {
             submit_budget: Mutex::new(submit_budget),
             hung: AtomicBool::new(false),
             trial: Mutex::new(None),
+            idle: Mutex::new(idle),
+            allocations: Mutex::new(AllocationStats::default()),
             info,
         };
         Ok(Context { shared: Arc::new(shared) })
@@ -360,6 +371,16 @@ impl Context {
     /// Bytes of device memory held by live tensors now.
     pub fn live_bytes(&self) -> u64 {
         self.shared.live_bytes.load(Ordering::SeqCst)
+    }
+
+    /// Bytes of device memory in buffers no tensor holds, kept for reuse.
+    pub fn idle_bytes(&self) -> u64 {
+        self.shared.idle.lock().unwrap().bytes()
+    }
+
+    /// Buffers allocated fresh and reused so far, and the host's time in the driver's calls.
+    pub fn allocation_stats(&self) -> AllocationStats {
+        *self.shared.allocations.lock().unwrap()
     }
 
     /// The most device memory held at once since the context opened or [`Context::reset_peak`].

@@ -1,12 +1,15 @@
-//! Device buffers from gpu-allocator, with live and peak byte counts per context.
+//! Device buffers from gpu-allocator, with live and peak byte counts per context; buffers whose
+//! tensors are gone wait idle for reuse (see [`crate::idle_buffers`]).
 
 use crate::context::Shared;
 use crate::error::{Error, Result, VkContext};
+use crate::idle_buffers::Idle;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
 /// Where a tensor's memory lives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -63,10 +66,6 @@ impl Buffer {
                 limit >> 20
             )));
         }
-        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
-            | vk::BufferUsageFlags::TRANSFER_SRC
-            | vk::BufferUsageFlags::TRANSFER_DST;
-        let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
         let placement = match use_ {
             BufferUse::Tensor(p) => Some(p),
             BufferUse::UploadStaging | BufferUse::DownloadStaging => None,
@@ -83,29 +82,34 @@ impl Buffer {
                 )));
             }
         }
-        let device = &shared.device;
-        // SAFETY: valid device and create info.
-        let raw = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
-        // SAFETY: raw was just created on this device.
-        let requirements = unsafe { device.get_buffer_memory_requirements(raw) };
-        let allocation = shared
-            .allocator
-            .lock()
-            .unwrap()
-            .allocate(&AllocationCreateDesc {
-                name,
-                requirements,
-                location: use_.location(),
-                linear: true,
-                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-            })
-            .map_err(|e| {
-                // SAFETY: the buffer has no memory bound and is not in use.
-                unsafe { device.destroy_buffer(raw, None) };
-                Error::Memory(format!("{e} (asking for {} MiB for `{name}`)", size >> 20))
-            })?;
-        // SAFETY: the allocation satisfies the buffer's requirements and is unused.
-        unsafe { device.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) }.vk("vkBindBufferMemory")?;
+        let reused = if counted { shared.idle.lock().unwrap().take(size) } else { None };
+        let (raw, allocation, size) = match reused {
+            Some(idle) => {
+                let mut stats = shared.allocations.lock().unwrap();
+                stats.reused += 1;
+                stats.reused_bytes += idle.size;
+                (idle.raw, idle.allocation, idle.size)
+            }
+            None => {
+                if counted && shared.idle.lock().unwrap().bytes() > 0 && !fits_beside_idle(shared, size) {
+                    release_idle(shared);
+                }
+                let start = Instant::now();
+                let fresh = match allocate(shared, size, use_, name) {
+                    Err(_) if shared.idle.lock().unwrap().bytes() > 0 => {
+                        release_idle(shared);
+                        allocate(shared, size, use_, name)
+                    }
+                    other => other,
+                };
+                let mut stats = shared.allocations.lock().unwrap();
+                stats.driver_seconds += start.elapsed().as_secs_f64();
+                let (raw, allocation) = fresh?;
+                stats.fresh += 1;
+                stats.fresh_bytes += size;
+                (raw, allocation, size)
+            }
+        };
         match placement {
             Some(Placement::Device) => {
                 let live = shared.live_bytes.fetch_add(size, Ordering::SeqCst) + size;
@@ -135,15 +139,103 @@ impl Drop for Buffer {
         if self.shared.hung.load(Ordering::SeqCst) {
             return; // a timed-out submission may still use it; the process ends anyway
         }
-        if let Some(allocation) = self.allocation.lock().unwrap().take() {
-            let _ = self.shared.allocator.lock().unwrap().free(allocation);
-        }
         match self.placement {
             Some(Placement::Device) => self.shared.live_bytes.fetch_sub(self.size, Ordering::SeqCst),
             Some(Placement::Host) => self.shared.host_bytes.fetch_sub(self.size, Ordering::SeqCst),
             None => 0,
         };
-        // SAFETY: recordings keep their buffers alive, so no pending work uses this one.
-        unsafe { self.shared.device.destroy_buffer(self.raw, None) };
+        let Some(allocation) = self.allocation.lock().unwrap().take() else { return };
+        let idle = Idle { raw: self.raw, allocation, size: self.size };
+        // Recordings keep their buffers alive, so no pending work uses this one.
+        if self.placement == Some(Placement::Device) {
+            let evicted = self.shared.idle.lock().unwrap().put(idle);
+            free(&self.shared, evicted);
+        } else {
+            free(&self.shared, vec![idle]);
+        }
+    }
+}
+
+/// A new buffer of `size` bytes and its memory, from the driver.
+fn allocate(shared: &Shared, size: u64, use_: BufferUse, name: &str) -> Result<(vk::Buffer, Allocation)> {
+    let usage =
+        vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
+    let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
+    let device = &shared.device;
+    // SAFETY: valid device and create info.
+    let raw = unsafe { device.create_buffer(&info, None) }.vk("vkCreateBuffer")?;
+    // SAFETY: raw was just created on this device.
+    let requirements = unsafe { device.get_buffer_memory_requirements(raw) };
+    let allocation = shared
+        .allocator
+        .lock()
+        .unwrap()
+        .allocate(&AllocationCreateDesc {
+            name,
+            requirements,
+            location: use_.location(),
+            linear: true,
+            allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+        })
+        .map_err(|e| {
+            // SAFETY: the buffer has no memory bound and is not in use.
+            unsafe { device.destroy_buffer(raw, None) };
+            Error::Memory(format!("{e} (asking for {} MiB for `{name}`)", size >> 20))
+        })?;
+    // SAFETY: the allocation satisfies the buffer's requirements and is unused.
+    unsafe { device.bind_buffer_memory(raw, allocation.memory(), allocation.offset()) }.vk("vkBindBufferMemory")?;
+    Ok((raw, allocation))
+}
+
+/// Whether `size` more bytes fit the device's memory with the idle buffers kept.
+fn fits_beside_idle(shared: &Shared, size: u64) -> bool {
+    let live = shared.live_bytes.load(Ordering::SeqCst);
+    let idle = shared.idle.lock().unwrap().bytes();
+    let heap = || crate::memory_budget::device_heap(shared);
+    fits(size, (live, idle), shared.memory_budget, heap)
+}
+
+/// Whether `size` more bytes fit beside (live, idle) bytes: under `VKDIFF_MEMORY_BUDGET` where
+/// set, else under `VK_EXT_memory_budget`'s (budget, usage) of the heap, whose usage counts
+/// every buffer (where the device reports none, the allocation itself finds out).
+fn fits(size: u64, (live, idle): (u64, u64), budget: Option<u64>, heap: impl Fn() -> Option<(u64, u64)>) -> bool {
+    match budget {
+        Some(budget) => live + idle + size <= budget,
+        None => heap().is_none_or(|(budget, used)| used + size <= budget),
+    }
+}
+
+/// Gives every idle buffer back to the driver.
+pub(crate) fn release_idle(shared: &Shared) {
+    let idle = shared.idle.lock().unwrap().drain();
+    free(shared, idle);
+}
+
+fn free(shared: &Shared, buffers: Vec<Idle>) {
+    if buffers.is_empty() {
+        return;
+    }
+    let start = Instant::now();
+    for idle in buffers {
+        let _ = shared.allocator.lock().unwrap().free(idle.allocation);
+        // SAFETY: no tensor or recording holds the buffer any more.
+        unsafe { shared.device.destroy_buffer(idle.raw, None) };
+    }
+    shared.allocations.lock().unwrap().driver_seconds += start.elapsed().as_secs_f64();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fits;
+
+    #[test]
+    fn idle_buffers_count_against_the_budget() {
+        let no_heap = || None;
+        assert!(fits(100, (500, 400), Some(1000), no_heap));
+        assert!(!fits(101, (500, 400), Some(1000), no_heap), "live + idle + new past the budget");
+        assert!(fits(101, (500, 0), Some(1000), no_heap));
+        assert!(fits(1 << 40, (500, 400), None, no_heap), "no figure: the driver says");
+        assert!(fits(100, (0, 0), None, || Some((1000, 900))));
+        assert!(!fits(101, (0, 0), None, || Some((1000, 900))), "the heap's usage holds the idle buffers");
     }
 }

@@ -2,7 +2,7 @@
 //! then enforced: an allocation past it fails), else `VK_EXT_memory_budget`'s heap budget less
 //! the heap's use, else the device-local heap less vkdiff's own live buffers.
 
-use crate::context::Context;
+use crate::context::{Context, Shared};
 use crate::error::{Error, Result};
 use ash::vk;
 use std::sync::atomic::Ordering;
@@ -39,31 +39,40 @@ pub(crate) fn budget_override(env: &dyn Fn(&str) -> Option<String>) -> Result<Op
 }
 
 impl Context {
-    /// The device memory this process may still allocate (see the module's comment).
+    /// The device memory this process may still allocate (see the module's comment). Idle
+    /// buffers count as free: they are given back before an allocation would not fit.
     pub fn memory_room(&self) -> MemoryRoom {
         let shared = &self.shared;
         let live = shared.live_bytes.load(Ordering::SeqCst);
         if let Some(budget) = shared.memory_budget {
             return MemoryRoom { free: budget.saturating_sub(live), budget, source: "VKDIFF_MEMORY_BUDGET" };
         }
-        if shared.memory_budget_extension {
-            let mut budget = vk::PhysicalDeviceMemoryBudgetPropertiesEXT::default();
-            let mut props = vk::PhysicalDeviceMemoryProperties2::default().push_next(&mut budget);
-            // SAFETY: the physical device belongs to the live instance; the struct outlives the call.
-            unsafe { shared.vulkan.raw.get_physical_device_memory_properties2(shared.physical_device, &mut props) };
-            let heaps = props.memory_properties.memory_heaps;
-            let count = props.memory_properties.memory_heap_count as usize;
-            let heap = (0..count)
-                .filter(|&i| heaps[i].flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL))
-                .max_by_key(|&i| heaps[i].size);
-            if let Some(i) = heap {
-                let (total, used) = (budget.heap_budget[i], budget.heap_usage[i]);
-                return MemoryRoom { free: total.saturating_sub(used), budget: total, source: "VK_EXT_memory_budget" };
-            }
+        if let Some((total, used)) = device_heap(shared) {
+            let idle = shared.idle.lock().unwrap().bytes();
+            let free = total.saturating_sub(used.saturating_sub(idle));
+            return MemoryRoom { free, budget: total, source: "VK_EXT_memory_budget" };
         }
         let heap = shared.info.device_local_bytes;
         MemoryRoom { free: heap.saturating_sub(live), budget: heap, source: "the device-local heap" }
     }
+}
+
+/// `VK_EXT_memory_budget`'s (budget, usage) of the largest device-local heap, where the device
+/// reports them.
+pub(crate) fn device_heap(shared: &Shared) -> Option<(u64, u64)> {
+    if !shared.memory_budget_extension {
+        return None;
+    }
+    let mut budget = vk::PhysicalDeviceMemoryBudgetPropertiesEXT::default();
+    let mut props = vk::PhysicalDeviceMemoryProperties2::default().push_next(&mut budget);
+    // SAFETY: the physical device belongs to the live instance; the struct outlives the call.
+    unsafe { shared.vulkan.raw.get_physical_device_memory_properties2(shared.physical_device, &mut props) };
+    let heaps = props.memory_properties.memory_heaps;
+    let count = props.memory_properties.memory_heap_count as usize;
+    let heap = (0..count)
+        .filter(|&i| heaps[i].flags.contains(vk::MemoryHeapFlags::DEVICE_LOCAL))
+        .max_by_key(|&i| heaps[i].size)?;
+    Some((budget.heap_budget[heap], budget.heap_usage[heap]))
 }
 
 #[cfg(test)]

@@ -166,6 +166,35 @@ fn arena_reuses_a_dropped_buffer_within_one_recording() {
 }
 
 #[test]
+fn a_later_recording_reuses_the_buffers_of_a_dropped_one() {
+    // The same forward recorded twice, as an image's VAE decode is: the second takes the
+    // first's buffers, which still hold its values, and computes as if they were new.
+    let ctx = Context::new(&Default::default()).unwrap();
+    let x: Vec<f32> = (0..3000).map(|i| i as f32).collect();
+    let tx = ctx.upload(&[3000], Dtype::F32, &x).unwrap();
+    let forward = |scale: f32| {
+        let arena = Arena::new(&ctx);
+        let mut rec = Recorder::new(&ctx, false).unwrap();
+        let a = arena.tensor(&[3000], Dtype::F32).unwrap();
+        let b = arena.tensor(&[1000], Dtype::F32).unwrap();
+        let out = ctx.zeros(&[1000], Dtype::F32).unwrap();
+        ops::unary(&mut rec, UnaryOp::Scale, &tx, &a, scale).unwrap();
+        ops::add(&mut rec, &a.narrow(0, 1000).unwrap(), &out, &b).unwrap();
+        ops::add(&mut rec, &b, &b, &out).unwrap();
+        rec.finish().unwrap().run().unwrap();
+        out.download().unwrap()
+    };
+    let live = ctx.live_bytes();
+    assert_eq!(forward(2.0), x[..1000].iter().map(|v| 4.0 * v).collect::<Vec<_>>());
+    assert_eq!(ctx.live_bytes(), live, "the forward's tensors are gone");
+    assert!(ctx.idle_bytes() >= 5000 * 4, "and their buffers wait idle");
+    let before = ctx.allocation_stats();
+    assert_eq!(forward(-1.0), x[..1000].iter().map(|v| -2.0 * v).collect::<Vec<_>>());
+    let second = ctx.allocation_stats().since(&before);
+    assert_eq!((second.fresh, second.reused), (0, 3), "{second:?}");
+}
+
+#[test]
 fn a_buffer_past_the_allocation_limit_is_refused_by_name() {
     let ctx = Context::new(&Default::default()).unwrap();
     ctx.set_allocation_limit(1 << 20);
