@@ -88,8 +88,7 @@ fn builtin_matches_transformers() {
 
 /// A scratch folder holding `files` copied from the CLIP-L fixture folder.
 fn scratch(test: &str, files: &[&str]) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vkdiff-tokenizer-{test}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = vkdiff_testkit::scratch(test);
     for file in files {
         std::fs::copy(folder("tokenizer").join(file), dir.join(file)).unwrap();
     }

@@ -1,6 +1,6 @@
 //! What the command-line tests share: running the binary and a scratch folder per test.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 pub fn vkdiff(args: &[&str]) -> Output {
@@ -35,14 +35,8 @@ pub fn error_line_with(args: &[&str], env: &[(&str, &str)]) -> String {
     errors[0].to_string()
 }
 
-/// An empty folder under the target's temporary directory, unique to this test process.
-#[allow(dead_code)] // not every test binary writes files
-pub fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+#[allow(unused_imports)] // not every test binary writes files
+pub use vkdiff_testkit::scratch;
 
 /// A PNG's text chunks, `tEXt` and `iTXt` alike, in file order.
 #[allow(dead_code)] // not every test binary reads PNG text

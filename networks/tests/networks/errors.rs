@@ -1,19 +1,11 @@
 //! Broken checkpoints and inputs: one error naming what is wrong.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use vkdiff_networks::{single_file_unet_checkpoint, unet_checkpoint};
 use vkdiff_networks::{UNet, UNetConfig, UNetInputs};
 use vkdiff_runtime::{Dtype, Tensor};
 use vkdiff_testkit::ctx;
-use vkdiff_testkit::fixture;
-
-/// A fresh scratch folder for one test.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vkdiff-unet-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use vkdiff_testkit::{fixture, scratch};
 
 fn load_error(path: &Path) -> String {
     match unet_checkpoint(&ctx(), path, Dtype::F32).and_then(|(config, ckpt)| UNet::load(&config, &ckpt)) {
@@ -32,14 +24,14 @@ pub fn assert_one_line(message: &str, wants: &[&str]) {
 #[test]
 fn truncated_single_file_names_the_tensor() {
     let bytes = std::fs::read(fixture("unet").join("sdxl3/sd_xl_single_file.safetensors")).unwrap();
-    let path = scratch("truncated").join("model.safetensors");
+    let path = scratch("unet-truncated").join("model.safetensors");
     std::fs::write(&path, &bytes[..bytes.len() * 2 / 3]).unwrap();
     assert_one_line(&load_error(&path), &["model.safetensors", "model.diffusion_model.", "truncated"]);
 }
 
 #[test]
 fn not_a_safetensors_file() {
-    let path = scratch("garbage").join("model.safetensors");
+    let path = scratch("unet-garbage").join("model.safetensors");
     std::fs::write(&path, b"\xff\xff\xff\xff\xff\xff\x00\x00 certainly not a header").unwrap();
     assert_one_line(&load_error(&path), &["model.safetensors", "header"]);
 }
@@ -69,7 +61,7 @@ fn missing_tensor_names_both_layouts() {
 
 #[test]
 fn shape_mismatch_names_tensor_and_shapes() {
-    let dir = scratch("shape");
+    let dir = scratch("unet-shape");
     let source = fixture("unet").join("heads/unet");
     for entry in std::fs::read_dir(&source).unwrap() {
         let entry = entry.unwrap();
@@ -84,7 +76,7 @@ fn shape_mismatch_names_tensor_and_shapes() {
 
 #[test]
 fn folder_without_config() {
-    let dir = scratch("noconfig");
+    let dir = scratch("unet-noconfig");
     assert_one_line(&load_error(&dir), &["config.json"]);
 }
 
@@ -144,7 +136,7 @@ fn a_unet_only_file_has_no_text_encoders_or_vae() {
 #[test]
 fn a_text_encoder_of_the_wrong_width_names_the_tensor() {
     // text_encoder_2's weights under text_encoder's config: the first shape check names both.
-    let dir = scratch("te-width");
+    let dir = scratch("unet-te-width");
     let src = fixture("pipeline/tiny-sdxl");
     std::fs::create_dir_all(dir.join("text_encoder")).unwrap();
     std::fs::copy(src.join("text_encoder/config.json"), dir.join("text_encoder/config.json")).unwrap();

@@ -5,13 +5,13 @@ use crate::errors::assert_one_line;
 use crate::forward::errors;
 use serde_json::Value;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use vkdiff_formats::{write_safetensors_f32, SafeTensors};
 use vkdiff_networks::unet_checkpoint;
 use vkdiff_networks::{ClipVisionModelWithProjection, ImageFeature, IpAdapter, IpAdapterKind, UNet};
 use vkdiff_runtime::Dtype;
-use vkdiff_testkit::fixture;
 use vkdiff_testkit::{ctx, random};
+use vkdiff_testkit::{fixture, scratch};
 
 /// records.safetensors and records.json of the workflow fixture.
 fn records() -> (SafeTensors, Value) {
@@ -42,14 +42,6 @@ fn check(what: &str, dtype: Dtype, got: &[f32], want: &[f32]) {
 fn tiny_unet(dtype: Dtype) -> UNet {
     let (config, ckpt) = unet_checkpoint(&ctx(), &fixture("pipeline").join("tiny-sdxl/unet"), dtype).unwrap();
     UNet::load(&config, &ckpt).unwrap()
-}
-
-/// A fresh scratch folder for one test.
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vkdiff-ip-adapter-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 /// A plain adapter of random weights for `unet`, keyed as h94's files are; `edit` may change
@@ -103,7 +95,7 @@ fn plain_reference(w: &[f32], b: &[f32], gamma: &[f32], beta: &[f32], e: &[f32],
 #[test]
 fn ip_adapter_synthetic_plain_projection_and_unet_input() {
     let unet = tiny_unet(Dtype::F32);
-    let path = scratch("plain").join("ip-adapter.safetensors");
+    let path = scratch("ip-adapter-plain").join("ip-adapter.safetensors");
     synthetic_plain(&unet, &path, |_| {});
     let adapter = IpAdapter::load(&ctx(), &path, &unet, Dtype::F32).unwrap();
     assert_eq!(adapter.kind(), IpAdapterKind::Plain);
@@ -140,7 +132,7 @@ fn ip_adapter_synthetic_plain_projection_and_unet_input() {
 #[test]
 fn ip_adapter_bin_files_ask_for_safetensors() {
     let unet = tiny_unet(Dtype::F32);
-    let path = scratch("bin").join("ip-adapter_sdxl.bin");
+    let path = scratch("ip-adapter-bin").join("ip-adapter_sdxl.bin");
     std::fs::write(&path, b"PK\x03\x04 not really a zip").unwrap();
     assert_one_line(&load_error(&path, &unet), &["ip-adapter_sdxl.bin", "safetensors"]);
 }
@@ -149,7 +141,7 @@ fn ip_adapter_bin_files_ask_for_safetensors() {
 fn ip_adapter_for_another_unet_is_named() {
     let unet = tiny_unet(Dtype::F32);
     let n = unet.cross_attention_channels().len();
-    let dir = scratch("mismatch");
+    let dir = scratch("ip-adapter-mismatch");
     // One cross-attention too few.
     let path = dir.join("missing.safetensors");
     synthetic_plain(&unet, &path, |t| {

@@ -110,8 +110,7 @@ fn vae_decode_in_bands_equals_the_whole_decode() {
 fn a_text_encoder_saved_without_its_text_model_level_loads_the_same() {
     // transformers 5 saves CLIPTextModel as `embeddings.…`, `encoder.layers.…` (no `text_model.`).
     let source = fixture("pipeline").join("tiny-sdxl");
-    let dir = std::env::temp_dir().join(format!("vkdiff-no-level-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
+    let dir = vkdiff_testkit::scratch("no-text-model-level");
     std::fs::create_dir_all(dir.join("text_encoder")).unwrap();
     std::fs::copy(source.join("text_encoder/config.json"), dir.join("text_encoder/config.json")).unwrap();
     let mut parts = crate::malformed::read_parts(&source.join("text_encoder/model.safetensors"));
@@ -131,5 +130,4 @@ fn a_text_encoder_saved_without_its_text_model_level_loads_the_same() {
             .penultimate
     };
     assert_eq!(encode(&dir), encode(&source));
-    std::fs::remove_dir_all(dir).unwrap();
 }
