@@ -8,7 +8,8 @@ use cli::vkdiff;
 fn bench_vae_decodes_whole_and_in_tiles_in_f16() {
     // f16 is the fp16-fix VAE's config; at 64² its mid-block attends over 64 tokens with one
     // head of 512, which runs as products on f32 copies.
-    let result = vkdiff(&["bench", "vae", "--size", "64", "--tile", "32", "--precision", "f16", "--json"]);
+    let result =
+        vkdiff(&["bench", "vae", "--size", "64", "--tile", "32", "--precision", "f16", "--samples", "2", "--json"]);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     let stdout = String::from_utf8_lossy(&result.stdout);
     let row: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap_or("")).expect("one JSON line");
@@ -20,6 +21,12 @@ fn bench_vae_decodes_whole_and_in_tiles_in_f16() {
     for decode in ["whole", "tiled"] {
         assert!(row[decode]["seconds"].as_f64().unwrap() > 0.0, "{row}");
         assert!(activations(decode) > 0.0 && activations(decode) <= row[decode]["estimate_mib"].as_f64().unwrap());
+    }
+    // The second decode of each kind recorded anew, on the first one's buffers.
+    for decode in ["whole", "tiled"] {
+        let host = &row[decode]["host"];
+        assert_eq!(host["fresh_buffers"], 0, "{row}");
+        assert!(host["reused_buffers"].as_u64().unwrap() > 0 && host["recording_ms"].as_f64().unwrap() > 0.0, "{row}");
     }
     // Four 32-px tiles each hold a quarter of the activations of the whole 64² decode.
     assert!(activations("tiled") < activations("whole"), "{row}");

@@ -13,7 +13,7 @@ use anyhow::{Context as _, Result};
 use std::time::Instant;
 use vkdiff_args::Precision;
 use vkdiff_networks::{AutoencoderKl, Checkpoint, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
-use vkdiff_runtime::{AllocationStats, Context};
+use vkdiff_runtime::{Context, HostStats};
 
 #[derive(clap::Args)]
 pub struct VaeArgs {
@@ -49,26 +49,29 @@ struct Decode {
     seconds: f64,
     activations_mib: f64,
     estimate_mib: f64,
-    /// Where the last decode's buffers came from: fresh from the driver, or idle ones reused.
-    buffers: Buffers,
+    /// The last decode's host work besides waiting for the device.
+    host: Host,
 }
 
+/// Buffers fresh from the driver or reused idle ones, the host's time in the driver's
+/// allocation calls, and its time recording (allocations made meanwhile included).
 #[derive(serde::Serialize)]
-struct Buffers {
-    fresh: u64,
+struct Host {
+    fresh_buffers: u64,
     fresh_mib: f64,
-    reused: u64,
-    /// The host's time in the driver's allocation calls.
-    driver_ms: f64,
+    reused_buffers: u64,
+    allocation_ms: f64,
+    recording_ms: f64,
 }
 
-impl Buffers {
-    fn of(stats: AllocationStats) -> Buffers {
-        Buffers {
-            fresh: stats.fresh,
+impl Host {
+    fn of(stats: HostStats) -> Host {
+        Host {
+            fresh_buffers: stats.fresh,
             fresh_mib: stats.fresh_bytes as f64 / (1 << 20) as f64,
-            reused: stats.reused,
-            driver_ms: stats.driver_seconds * 1e3,
+            reused_buffers: stats.reused,
+            allocation_ms: stats.allocation_seconds * 1e3,
+            recording_ms: stats.recording_seconds * 1e3,
         }
     }
 }
@@ -148,15 +151,16 @@ pub fn run(args: &VaeArgs) -> Result<()> {
     } else {
         let line = |d: &Decode| {
             format!(
-                "{:.2} s, activations {:.0} MiB (plan's estimate {:.0} MiB), last decode's buffers: {} fresh \
-                 ({:.0} MiB), {} reused, {:.1} ms in the driver's allocation calls",
+                "{:.2} s, activations {:.0} MiB (plan's estimate {:.0} MiB); the last decode recorded for {:.1} \
+                 ms, took {} buffers fresh ({:.0} MiB, {:.1} ms in the driver's allocation calls) and reused {}",
                 d.seconds,
                 d.activations_mib,
                 d.estimate_mib,
-                d.buffers.fresh,
-                d.buffers.fresh_mib,
-                d.buffers.reused,
-                d.buffers.driver_ms
+                d.host.recording_ms,
+                d.host.fresh_buffers,
+                d.host.fresh_mib,
+                d.host.allocation_ms,
+                d.host.reused_buffers
             )
         };
         let reference = match &row.reference {
@@ -195,15 +199,15 @@ fn measure(args: &VaeArgs, config: &str) -> Result<Row> {
     let decode = |tile: Option<VaeTiling>| -> Result<Decode> {
         ctx.reset_peak();
         let mut seconds = f64::INFINITY;
-        let mut buffers = AllocationStats::default();
+        let mut host = HostStats::default();
         for _ in 0..args.samples {
-            let (start, before) = (Instant::now(), ctx.allocation_stats());
+            let (start, before) = (Instant::now(), ctx.host_stats());
             match tile {
                 Some(t) => vae.decode_tiled(&latents, [1, h, h, 4], t)?,
                 None => vae.decode(&latents, [1, h, h, 4])?,
             };
             seconds = seconds.min(start.elapsed().as_secs_f64());
-            buffers = ctx.allocation_stats().since(&before);
+            host = ctx.host_stats().since(&before);
         }
         let side = tile.map_or(args.size, |t| t.tile.min(args.size));
         Ok(Decode {
@@ -211,7 +215,7 @@ fn measure(args: &VaeArgs, config: &str) -> Result<Row> {
             seconds,
             activations_mib: mib(ctx.peak_bytes() - weights),
             estimate_mib: mib(vae.decode_bytes(1, side, side)),
-            buffers: Buffers::of(buffers),
+            host: Host::of(host),
         })
     };
     let whole = decode(None)?;

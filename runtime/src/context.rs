@@ -4,7 +4,8 @@ use crate::device::{self, DeviceInfo, DeviceKind};
 use crate::device_choice::{choose, DeviceChoice};
 use crate::error::{Error, Result, VkContext};
 use crate::flexible_dimensions::CooperativeMatrix2Features;
-use crate::idle_buffers::{AllocationStats, IdleBuffers};
+use crate::host_stats::HostStats;
+use crate::idle_buffers::{cache_setting, IdleBuffers};
 use crate::instance::Instance;
 use crate::matrix_unit_trial::{run_trial, CooperativeSetting, MatrixUnitTrial};
 use crate::matrix_units;
@@ -118,9 +119,13 @@ pub(crate) struct Shared {
     pub(crate) memory_budget_extension: bool,
     /// What the matrix units' trial found, where one ran (see [`Context::matrix_unit_trial`]).
     pub(crate) trial: Mutex<Option<MatrixUnitTrial>>,
-    /// Device buffers no tensor holds, kept for reuse (see [`crate::idle_buffers`]).
+    /// Device buffers no tensor holds, kept for reuse (see [`crate::idle_buffers`]) unless
+    /// `VKDIFF_BUFFER_CACHE=0`.
     pub(crate) idle: Mutex<IdleBuffers>,
-    pub(crate) allocations: Mutex<AllocationStats>,
+    pub(crate) keep_idle: bool,
+    /// The most device memory live tensors have held at once (never reset).
+    pub(crate) most_live: AtomicU64,
+    pub(crate) host_stats: Mutex<HostStats>,
 }
 
 /// `VKDIFF_FRAGMENT`, where set: a shape vkdiff builds that this device's matrix units take.
@@ -278,10 +283,7 @@ impl Context {
         let env = |name: &str| std::env::var(name).ok();
         let submit_budget = SubmitBudget::for_device(&info, &env)?;
         let memory_budget = crate::memory_budget::budget_override(&env)?;
-        let idle = IdleBuffers::from_setting(
-            env("VKDIFF_BUFFER_CACHE").as_deref(),
-            memory_budget.unwrap_or(info.device_local_bytes),
-        )?;
+        let keep_idle = cache_setting(env("VKDIFF_BUFFER_CACHE").as_deref())?;
         let statistics = capture_statistics(&info)
             .then(|| ash::khr::pipeline_executable_properties::Device::new(&vulkan.raw, &device));
         if crate::pipeline_stats::requested() && statistics.is_none() {
@@ -316,8 +318,10 @@ impl Context {
             submit_budget: Mutex::new(submit_budget),
             hung: AtomicBool::new(false),
             trial: Mutex::new(None),
-            idle: Mutex::new(idle),
-            allocations: Mutex::new(AllocationStats::default()),
+            idle: Mutex::new(IdleBuffers::default()),
+            keep_idle,
+            most_live: AtomicU64::new(0),
+            host_stats: Mutex::new(HostStats::default()),
             info,
         };
         Ok(Context { shared: Arc::new(shared) })
@@ -378,9 +382,9 @@ impl Context {
         self.shared.idle.lock().unwrap().bytes()
     }
 
-    /// Buffers allocated fresh and reused so far, and the host's time in the driver's calls.
-    pub fn allocation_stats(&self) -> AllocationStats {
-        *self.shared.allocations.lock().unwrap()
+    /// Buffers allocated fresh and reused so far, and the host's time allocating and recording.
+    pub fn host_stats(&self) -> HostStats {
+        *self.shared.host_stats.lock().unwrap()
     }
 
     /// The most device memory held at once since the context opened or [`Context::reset_peak`].

@@ -85,14 +85,14 @@ impl Buffer {
         let reused = if counted { shared.idle.lock().unwrap().take(size) } else { None };
         let (raw, allocation, size) = match reused {
             Some(idle) => {
-                let mut stats = shared.allocations.lock().unwrap();
+                let mut stats = shared.host_stats.lock().unwrap();
                 stats.reused += 1;
                 stats.reused_bytes += idle.size;
                 (idle.raw, idle.allocation, idle.size)
             }
             None => {
-                if counted && shared.idle.lock().unwrap().bytes() > 0 && !fits_beside_idle(shared, size) {
-                    release_idle(shared);
+                if counted {
+                    make_room(shared, size);
                 }
                 let start = Instant::now();
                 let fresh = match allocate(shared, size, use_, name) {
@@ -102,8 +102,8 @@ impl Buffer {
                     }
                     other => other,
                 };
-                let mut stats = shared.allocations.lock().unwrap();
-                stats.driver_seconds += start.elapsed().as_secs_f64();
+                let mut stats = shared.host_stats.lock().unwrap();
+                stats.allocation_seconds += start.elapsed().as_secs_f64();
                 let (raw, allocation) = fresh?;
                 stats.fresh += 1;
                 stats.fresh_bytes += size;
@@ -114,6 +114,7 @@ impl Buffer {
             Some(Placement::Device) => {
                 let live = shared.live_bytes.fetch_add(size, Ordering::SeqCst) + size;
                 shared.peak_bytes.fetch_max(live, Ordering::SeqCst);
+                shared.most_live.fetch_max(live, Ordering::SeqCst);
             }
             Some(Placement::Host) => {
                 shared.host_bytes.fetch_add(size, Ordering::SeqCst);
@@ -147,9 +148,8 @@ impl Drop for Buffer {
         let Some(allocation) = self.allocation.lock().unwrap().take() else { return };
         let idle = Idle { raw: self.raw, allocation, size: self.size };
         // Recordings keep their buffers alive, so no pending work uses this one.
-        if self.placement == Some(Placement::Device) {
-            let evicted = self.shared.idle.lock().unwrap().put(idle);
-            free(&self.shared, evicted);
+        if self.placement == Some(Placement::Device) && self.shared.keep_idle {
+            self.shared.idle.lock().unwrap().put(idle);
         } else {
             free(&self.shared, vec![idle]);
         }
@@ -187,27 +187,24 @@ fn allocate(shared: &Shared, size: u64, use_: BufferUse, name: &str) -> Result<(
     Ok((raw, allocation))
 }
 
-/// Whether `size` more bytes fit the device's memory with the idle buffers kept.
-fn fits_beside_idle(shared: &Shared, size: u64) -> bool {
+/// Gives back the oldest idle buffers that would take the process, with `size` bytes more,
+/// past the most its tensors have held at once.
+fn make_room(shared: &Shared, size: u64) {
     let live = shared.live_bytes.load(Ordering::SeqCst);
-    let idle = shared.idle.lock().unwrap().bytes();
-    let heap = || crate::memory_budget::device_heap(shared);
-    fits(size, (live, idle), shared.memory_budget, heap)
+    let keep = idle_to_keep(live, size, shared.most_live.load(Ordering::SeqCst));
+    let evicted = shared.idle.lock().unwrap().evict_to(keep);
+    free(shared, evicted);
 }
 
-/// Whether `size` more bytes fit beside (live, idle) bytes: under `VKDIFF_MEMORY_BUDGET` where
-/// set, else under `VK_EXT_memory_budget`'s (budget, usage) of the heap, whose usage counts
-/// every buffer (where the device reports none, the allocation itself finds out).
-fn fits(size: u64, (live, idle): (u64, u64), budget: Option<u64>, heap: impl Fn() -> Option<(u64, u64)>) -> bool {
-    match budget {
-        Some(budget) => live + idle + size <= budget,
-        None => heap().is_none_or(|(budget, used)| used + size <= budget),
-    }
+/// The idle bytes that fit beside `live` bytes and `size` more under the most ever live (or the
+/// new total, where it passes that).
+fn idle_to_keep(live: u64, size: u64, most_live: u64) -> u64 {
+    most_live.saturating_sub(live + size)
 }
 
 /// Gives every idle buffer back to the driver.
 pub(crate) fn release_idle(shared: &Shared) {
-    let idle = shared.idle.lock().unwrap().drain();
+    let idle = shared.idle.lock().unwrap().evict_to(0);
     free(shared, idle);
 }
 
@@ -221,21 +218,18 @@ fn free(shared: &Shared, buffers: Vec<Idle>) {
         // SAFETY: no tensor or recording holds the buffer any more.
         unsafe { shared.device.destroy_buffer(idle.raw, None) };
     }
-    shared.allocations.lock().unwrap().driver_seconds += start.elapsed().as_secs_f64();
+    shared.host_stats.lock().unwrap().allocation_seconds += start.elapsed().as_secs_f64();
 }
 
 #[cfg(test)]
 mod tests {
-    use super::fits;
+    use super::idle_to_keep;
 
     #[test]
-    fn idle_buffers_count_against_the_budget() {
-        let no_heap = || None;
-        assert!(fits(100, (500, 400), Some(1000), no_heap));
-        assert!(!fits(101, (500, 400), Some(1000), no_heap), "live + idle + new past the budget");
-        assert!(fits(101, (500, 0), Some(1000), no_heap));
-        assert!(fits(1 << 40, (500, 400), None, no_heap), "no figure: the driver says");
-        assert!(fits(100, (0, 0), None, || Some((1000, 900))));
-        assert!(!fits(101, (0, 0), None, || Some((1000, 900))), "the heap's usage holds the idle buffers");
+    fn idle_buffers_never_take_the_process_past_its_peak() {
+        assert_eq!(idle_to_keep(500, 100, 1000), 400);
+        assert_eq!(idle_to_keep(500, 500, 1000), 0);
+        assert_eq!(idle_to_keep(500, 700, 1000), 0, "a new peak keeps none");
+        assert_eq!(idle_to_keep(0, 0, 1000), 1000);
     }
 }

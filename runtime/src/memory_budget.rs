@@ -59,7 +59,7 @@ impl Context {
 
 /// `VK_EXT_memory_budget`'s (budget, usage) of the largest device-local heap, where the device
 /// reports them.
-pub(crate) fn device_heap(shared: &Shared) -> Option<(u64, u64)> {
+fn device_heap(shared: &Shared) -> Option<(u64, u64)> {
     if !shared.memory_budget_extension {
         return None;
     }

@@ -12,6 +12,7 @@ use ash::vk;
 use std::collections::HashSet;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
 const SETS_PER_POOL: u32 = 256;
 const MAX_BINDINGS: u32 = 8;
@@ -40,6 +41,8 @@ pub struct Recorder {
     /// FLOPs and dispatches recorded into `cmd` so far.
     chunk_flops: f64,
     chunk_dispatches: u32,
+    /// When recording began (see [`crate::HostStats::recording_seconds`]).
+    started: Instant,
 }
 
 /// Vulkan objects owned by a recording, destroyed with it.
@@ -115,6 +118,7 @@ impl Recorder {
                 budget: ctx.submit_budget(),
                 chunk_flops: 0.0,
                 chunk_dispatches: 0,
+                started: Instant::now(),
             };
             rec.begin_chunk()?;
             Ok(rec)
@@ -361,6 +365,7 @@ impl Recorder {
             );
             self.ctx.shared.device.end_command_buffer(self.cmd).vk("vkEndCommandBuffer")?;
         }
+        self.ctx.shared.host_stats.lock().unwrap().recording_seconds += self.started.elapsed().as_secs_f64();
         let mut res = self.res;
         res.chunks.push(self.cmd);
         Ok(Recording { ctx: self.ctx, res, flops: self.flops, merged: Mutex::new(None) })
