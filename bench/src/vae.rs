@@ -53,8 +53,9 @@ struct Decode {
     host: Host,
 }
 
-/// Buffers fresh from the driver or reused idle ones, the host's time in the driver's
-/// allocation calls, and its time recording (allocations made meanwhile included).
+/// Device tensors' buffers fresh from the driver or reused idle ones, the host's time in the
+/// driver's allocation calls (staging buffers' too), and its time recording (allocations made
+/// meanwhile included).
 #[derive(serde::Serialize)]
 struct Host {
     fresh_buffers: u64,

@@ -1,10 +1,11 @@
 //! Where a context's host time goes besides waiting for the device, for benchmarks to set
 //! beside the device's own time.
 
-/// Buffers fresh from the driver and reused idle ones ([`crate::idle_buffers`]), the host's time
-/// in the driver's allocation calls (creating, binding and freeing buffers and their memory),
-/// and its time recording command buffers (from `Recorder::new` to `finish`, allocations of
-/// the tensors made meanwhile included).
+/// Device tensors' buffers fresh from the driver and reused idle ones ([`crate::idle_buffers`]),
+/// the host's time in the driver's allocation calls for every buffer (creating, binding and
+/// freeing buffers and their memory; staging buffers included), and its time recording command
+/// buffers (from `Recorder::new` to `finish`, allocations of the tensors made meanwhile
+/// included).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct HostStats {
     pub fresh: u64,

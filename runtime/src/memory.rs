@@ -105,8 +105,10 @@ impl Buffer {
                 let mut stats = shared.host_stats.lock().unwrap();
                 stats.allocation_seconds += start.elapsed().as_secs_f64();
                 let (raw, allocation) = fresh?;
-                stats.fresh += 1;
-                stats.fresh_bytes += size;
+                if counted {
+                    stats.fresh += 1;
+                    stats.fresh_bytes += size;
+                }
                 (raw, allocation, size)
             }
         };
