@@ -45,9 +45,9 @@ impl IdleBuffers {
     }
 
     /// The smallest idle buffer of `size` bytes up to a quarter more (the arena's size classes
-    /// are a quarter apart, so the class of `size` and no larger one).
-    pub fn take(&mut self, size: u64) -> Option<Idle> {
-        let fits = |b: &Idle| b.size >= size && b.size <= size + size / 4;
+    /// are a quarter apart, so the class of `size` and no larger one), and at most `most`.
+    pub fn take(&mut self, size: u64, most: u64) -> Option<Idle> {
+        let fits = |b: &Idle| b.size >= size && b.size <= (size + size / 4).min(most);
         let (i, _) = self.entries.iter().enumerate().filter(|(_, b)| fits(b)).min_by_key(|(_, b)| b.size)?;
         let idle = self.entries.remove(i)?;
         self.bytes -= idle.size;
@@ -90,11 +90,13 @@ mod tests {
             cache.put(idle(size));
         }
         assert_eq!(cache.bytes(), 7500);
-        assert_eq!(cache.take(1000).map(|b| b.size), Some(1000));
-        assert_eq!(cache.take(1000).map(|b| b.size), Some(1200), "1300 is more than a quarter past 1000");
-        assert!(cache.take(1000).is_none());
-        assert!(cache.take(5000).is_none(), "never a smaller buffer");
-        assert_eq!(cache.take(3300).map(|b| b.size), Some(4000));
+        let take = |cache: &mut IdleBuffers, size, most| cache.take(size, most).map(|b| b.size);
+        assert_eq!(take(&mut cache, 1000, u64::MAX), Some(1000));
+        assert_eq!(take(&mut cache, 1000, 1199), None, "1200 is past the most asked for");
+        assert_eq!(take(&mut cache, 1000, u64::MAX), Some(1200), "1300 is more than a quarter past 1000");
+        assert_eq!(take(&mut cache, 1000, u64::MAX), None);
+        assert_eq!(take(&mut cache, 5000, u64::MAX), None, "never a smaller buffer");
+        assert_eq!(take(&mut cache, 3300, u64::MAX), Some(4000));
         assert_eq!(cache.bytes(), 1300);
     }
 

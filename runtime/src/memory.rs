@@ -82,7 +82,10 @@ impl Buffer {
                 )));
             }
         }
-        let reused = if counted { shared.idle.lock().unwrap().take(size) } else { None };
+        // A reused buffer may be larger than asked for, but not past the budget.
+        let most =
+            shared.memory_budget.map_or(u64::MAX, |b| b.saturating_sub(shared.live_bytes.load(Ordering::SeqCst)));
+        let reused = if counted { shared.idle.lock().unwrap().take(size, most) } else { None };
         let (raw, allocation, size) = match reused {
             Some(idle) => {
                 let mut stats = shared.host_stats.lock().unwrap();
