@@ -11,6 +11,18 @@ pub struct DevicesArgs {
     /// Print JSON instead of text.
     #[arg(long)]
     json: bool,
+    /// Compile every kernel variant the chosen device can run, and print what its driver
+    /// reports of each (registers, spills, instruction counts, where it reports them).
+    #[arg(long)]
+    compile: bool,
+    /// With --compile: only these kernels (comma-separated names, as --compile prints them).
+    #[arg(long, value_delimiter = ',', requires = "compile")]
+    kernel: Vec<String>,
+    /// With --compile: fail where a kernel variant spills registers to memory.
+    #[arg(long, requires = "compile")]
+    no_spills: bool,
+    #[command(flatten)]
+    device: vkdiff_args::DeviceArgs,
 }
 
 fn mib(bytes: u64) -> String {
@@ -151,6 +163,15 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
     // A malformed request would otherwise show as the device's default choice.
     requested_fragment()?;
     CooperativeSetting::from_env()?;
+    if args.compile {
+        let request = crate::devices_compile::CompileRequest {
+            choice: args.device.choice(),
+            kernels: &args.kernel,
+            no_spills: args.no_spills,
+            json: args.json,
+        };
+        return crate::devices_compile::run(&request);
+    }
     let devices = list_devices()?;
     let chosen = choose(&devices, &Default::default()).ok();
     if args.json {

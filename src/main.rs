@@ -6,6 +6,7 @@ mod dataset_export_cmd;
 mod dataset_preview_cmd;
 mod dataset_stats_cmd;
 mod devices_cmd;
+mod devices_compile;
 mod eval_cmd;
 mod fid_cmd;
 mod gen_cmd;

@@ -145,9 +145,10 @@ fn check_requested_fragment(info: &DeviceInfo) -> Result<()> {
     )))
 }
 
-/// Whether kernels' statistics are asked for and the device can report them.
-fn capture_statistics(info: &DeviceInfo) -> bool {
-    info.pipeline_statistics && crate::pipeline_stats::requested()
+/// Whether kernels' statistics are asked for (`census`: by [`Context::for_census`]) and the
+/// device can report them.
+fn capture_statistics(info: &DeviceInfo, census: bool) -> bool {
+    info.pipeline_statistics && (census || crate::pipeline_stats::requested())
 }
 
 /// Called before a submission whose kernels the driver compiles then, with their number.
@@ -180,13 +181,25 @@ impl Context {
     /// see [`crate::choose`]).
     pub fn new(choice: &DeviceChoice) -> Result<Context> {
         let vulkan = crate::instance::shared()?;
-        let (device, pd, info, queue_family) = Self::open(&vulkan, choice)?;
-        let ctx = Self::finish(vulkan, device, pd, info, queue_family)?;
+        let (device, pd, info, queue_family) = Self::open(&vulkan, choice, false)?;
+        let ctx = Self::finish(vulkan, device, pd, info, queue_family, false)?;
         ctx.try_matrix_units();
         Ok(ctx)
     }
 
-    fn open(vulkan: &Instance, choice: &DeviceChoice) -> Result<(ash::Device, vk::PhysicalDevice, DeviceInfo, u32)> {
+    /// A context for [`Context::compile_for_census`]: kernels' statistics captured wherever the
+    /// device reports them, and no matrix-unit trial (it runs nothing).
+    pub fn for_census(choice: &DeviceChoice) -> Result<Context> {
+        let vulkan = crate::instance::shared()?;
+        let (device, pd, info, queue_family) = Self::open(&vulkan, choice, true)?;
+        Self::finish(vulkan, device, pd, info, queue_family, true)
+    }
+
+    fn open(
+        vulkan: &Instance,
+        choice: &DeviceChoice,
+        census: bool,
+    ) -> Result<(ash::Device, vk::PhysicalDevice, DeviceInfo, u32)> {
         let (entry, instance, api) = (&vulkan.entry, &vulkan.raw, vulkan.api);
         // SAFETY: valid instance.
         let pds = unsafe { instance.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
@@ -250,7 +263,7 @@ impl Context {
         }
         let mut executables =
             vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default().pipeline_executable_info(true);
-        if capture_statistics(&info) {
+        if capture_statistics(&info, census) {
             extensions.push(ash::khr::pipeline_executable_properties::NAME.as_ptr());
             create = create.push_next(&mut executables);
         }
@@ -266,6 +279,7 @@ impl Context {
         pd: vk::PhysicalDevice,
         info: DeviceInfo,
         family: u32,
+        census: bool,
     ) -> Result<Context> {
         // SAFETY: index 0 of a family we created one queue in.
         let queue = unsafe { device.get_device_queue(family, 0) };
@@ -284,7 +298,7 @@ impl Context {
         let submit_budget = SubmitBudget::for_device(&info, &env)?;
         let memory_budget = crate::memory_budget::budget_override(&env)?;
         let keep_idle = cache_setting(env("VKDIFF_BUFFER_CACHE").as_deref())?;
-        let statistics = capture_statistics(&info)
+        let statistics = capture_statistics(&info, census)
             .then(|| ash::khr::pipeline_executable_properties::Device::new(&vulkan.raw, &device));
         if crate::pipeline_stats::requested() && statistics.is_none() {
             eprintln!(

@@ -1,6 +1,7 @@
 //! Compute pipelines, created once per kernel variant and cached for the context's lifetime.
 
 use crate::error::{Result, VkContext};
+use crate::pipeline_stats::{self, Statistics};
 use ash::vk;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -30,9 +31,7 @@ impl PipelineCache {
     /// SAFETY: the device must be idle and no kernel used again.
     pub(crate) unsafe fn destroy(&self, device: &ash::Device) {
         for (_, k) in self.kernels.lock().unwrap().drain() {
-            device.destroy_pipeline(k.pipeline, None);
-            device.destroy_pipeline_layout(k.layout, None);
-            device.destroy_descriptor_set_layout(k.set_layout, None);
+            k.destroy(device);
         }
     }
 }
@@ -44,7 +43,7 @@ impl PipelineCache {
     pub(crate) fn kernel(
         &self,
         device: &ash::Device,
-        options: (bool, Option<&Statistics>),
+        options: (bool, Option<&StatisticsLoader>),
         variant: &'static Variant,
         bindings: u32,
     ) -> Result<Arc<Kernel>> {
@@ -53,20 +52,37 @@ impl PipelineCache {
         if let Some(k) = cache.get(&key) {
             return Ok(k.clone());
         }
-        let kernel = Arc::new(create_kernel(device, options, variant, bindings)?);
+        let (kernel, statistics) = create_kernel(device, options, variant, bindings)?;
+        let label = pipeline_stats::variant_label(variant);
+        match statistics {
+            None => {}
+            Some(Ok(executables)) => {
+                for each in executables {
+                    eprintln!("pipeline statistics: {label}: {}", pipeline_stats::describe(&each));
+                }
+            }
+            Some(Err(e)) => eprintln!("pipeline statistics: {label}: {e}"),
+        }
+        let kernel = Arc::new(kernel);
         cache.insert(key, kernel.clone());
         Ok(kernel)
     }
 }
 
-type Statistics = ash::khr::pipeline_executable_properties::Device;
+type StatisticsLoader = ash::khr::pipeline_executable_properties::Device;
 
-fn create_kernel(
+/// What a driver reported of each executable of a pipeline created with statistics captured, or
+/// why it reported nothing.
+pub(crate) type Reported = std::result::Result<Vec<Statistics>, String>;
+
+/// The kernel and, where `statistics` is given, what the driver reports of each of its
+/// executables (or why it reports nothing).
+pub(crate) fn create_kernel(
     device: &ash::Device,
-    (pinned_subgroups, statistics): (bool, Option<&Statistics>),
+    (pinned_subgroups, statistics): (bool, Option<&StatisticsLoader>),
     variant: &'static Variant,
     bindings: u32,
-) -> Result<Kernel> {
+) -> Result<(Kernel, Option<Reported>)> {
     let layout_bindings: Vec<_> = (0..bindings)
         .map(|b| {
             vk::DescriptorSetLayoutBinding::default()
@@ -115,12 +131,26 @@ fn create_kernel(
         let info = [vk::ComputePipelineCreateInfo::default().flags(flags).stage(stage).layout(layout)];
         let created = device.create_compute_pipelines(vk::PipelineCache::null(), &info, None);
         device.destroy_shader_module(module, None);
-        let pipeline = created.map_err(|(_, e)| e).vk("vkCreateComputePipelines")?[0];
-        if let Some(loader) = statistics {
-            for line in crate::pipeline_stats::describe(loader, pipeline, variant) {
-                eprintln!("pipeline statistics: {line}");
+        let pipeline = match created {
+            Ok(p) => p[0],
+            Err((_, e)) => {
+                device.destroy_pipeline_layout(layout, None);
+                device.destroy_descriptor_set_layout(set_layout, None);
+                return Err(e).vk("vkCreateComputePipelines");
             }
-        }
-        Ok(Kernel { name: variant.kernel, pipeline, layout, set_layout, bindings, dispatched: AtomicBool::new(false) })
+        };
+        let reported = statistics.map(|loader| pipeline_stats::query(loader, pipeline));
+        let kernel =
+            Kernel { name: variant.kernel, pipeline, layout, set_layout, bindings, dispatched: AtomicBool::new(false) };
+        Ok((kernel, reported))
+    }
+}
+
+impl Kernel {
+    /// SAFETY: the device must be done with it, and it is not used again.
+    pub(crate) unsafe fn destroy(&self, device: &ash::Device) {
+        device.destroy_pipeline(self.pipeline, None);
+        device.destroy_pipeline_layout(self.layout, None);
+        device.destroy_descriptor_set_layout(self.set_layout, None);
     }
 }
