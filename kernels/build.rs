@@ -34,12 +34,12 @@ fn main() {
     let scalar = KERNELS.iter().flat_map(|spec| [(spec, Dtype::F32, false), (spec, Dtype::F16, false)]);
     let cooperative = COOPERATIVE_KERNELS.iter().map(|spec| (spec, Dtype::F16, true));
     for (spec, dtype, cooperative) in scalar.chain(cooperative) {
-        let loops = if cooperative || GPU_KERNELS.contains(&spec.name) { Loops::Plain } else { Loops::Counted };
+        let target = if cooperative || GPU_KERNELS.contains(&spec.name) { Target::Gpu } else { Target::Any };
         let files = read_files(spec);
         for (i, params) in spec.params.iter().enumerate() {
             let src = Source::new(&prelude(dtype == Dtype::F16, params, cooperative), &files);
             let what = format!("kernel `{}` ({dtype:?}, {params:?})", spec.name);
-            let words = compile(src, params, (cooperative, loops), &what).unwrap_or_else(|e| fail(&e));
+            let words = compile(src, params, (cooperative, target), &what).unwrap_or_else(|e| fail(&e));
             let file = format!("{}.{dtype:?}.{i}.spv", spec.name);
             let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
             fs::write(Path::new(&out).join(&file), bytes).unwrap();

@@ -54,7 +54,7 @@ mod compile_tests {
         let err = compile(
             one_file("@compute @workgroup_size(1)\nfn main() {\n    let x = ;\n}\n"),
             &[],
-            (false, Loops::Plain),
+            (false, Target::Gpu),
             "kernel `t`",
         )
         .unwrap_err();
@@ -64,7 +64,7 @@ mod compile_tests {
     #[test]
     fn validation_errors_name_the_file_and_line() {
         let body = "@compute @workgroup_size(1)\nfn main() {\n    var x: u32 = 1u;\n    x = 1.5 + x;\n}\n";
-        let err = compile(one_file(body), &[], (false, Loops::Plain), "kernel `t`").unwrap_err();
+        let err = compile(one_file(body), &[], (false, Target::Gpu), "kernel `t`").unwrap_err();
         assert!(err.starts_with("kernels/wgsl/broken.wgsl:4:"), "{err}");
     }
 
@@ -72,7 +72,7 @@ mod compile_tests {
     fn unrolled_blocks_keep_line_numbers() {
         let body = "var<workgroup> w: array<u32, 4>;\n@compute @workgroup_size(1)\nfn main() \
             {\n    // #unroll I N\n    w[I] = I; // a comment\n    // #end\n    let y = ;\n}\n";
-        let err = compile(one_file(body), &[("N", 2)], (false, Loops::Plain), "kernel `t`").unwrap_err();
+        let err = compile(one_file(body), &[("N", 2)], (false, Target::Gpu), "kernel `t`").unwrap_err();
         assert!(err.starts_with("kernels/wgsl/broken.wgsl:7:"), "{err}");
     }
 
@@ -126,16 +126,16 @@ mod compile_tests {
             c = coopMultiplyAdd(a, b, c);\n}\n";
         let params = [("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16)];
         let src = Source::new(&prelude(true, &params, true), &[("k.wgsl".into(), body.into())]);
-        let words = compile(src, &params, (true, Loops::Plain), "kernel `t`").unwrap();
+        let words = compile(src, &params, (true, Target::Gpu), "kernel `t`").unwrap();
         let mut types = fragment_types(&words);
         types.sort_by_key(|t| t.2);
         assert_eq!(types, [(8, 16, 0), (16, 16, 1), (8, 16, 2)], "A 8×16, B 16×16, C 8×16");
         let square = [("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8)];
         let src = Source::new(&prelude(true, &square, true), &[("k.wgsl".into(), body.into())]);
-        let words = compile(src, &square, (true, Loops::Plain), "kernel `t`").unwrap();
+        let words = compile(src, &square, (true, Target::Gpu), "kernel `t`").unwrap();
         assert!(fragment_types(&words).iter().all(|&(r, c, _)| (r, c) == (8, 8)));
         let src = Source::new(&prelude(true, &[("SG", 8)], true), &[("k.wgsl".into(), body.into())]);
-        let err = compile(src, &[("SG", 8)], (true, Loops::Plain), "kernel `t`").unwrap_err();
+        let err = compile(src, &[("SG", 8)], (true, Target::Gpu), "kernel `t`").unwrap_err();
         assert!(err.contains("needs the parameters FM, FN and FK"), "{err}");
     }
 
@@ -153,14 +153,20 @@ mod compile_tests {
         })
     }
 
+    /// Whether `words` clamp an index with GLSL.std.450's UMin (naga's `Restrict` policy).
+    fn clamps_an_index(words: &[u32]) -> bool {
+        instructions(words).iter().any(|i| i[0] & 0xffff == 12 && i[4] == 38)
+    }
+
     #[test]
-    fn loops_keep_naga_s_counter_only_where_asked() {
+    fn only_kernels_for_any_device_keep_naga_s_loop_counter_and_index_clamps() {
         let body = "var<workgroup> w: array<u32, 8>;\n@compute @workgroup_size(1)\nfn main() {\n    \
             for (var i = 0u; i < 8u; i++) {\n        w[i] = i;\n    }\n}\n";
-        for loops in [Loops::Plain, Loops::Counted] {
-            let words = compile(one_file(body), &[], (false, loops), "kernel `t`").unwrap();
+        for target in [Target::Gpu, Target::Any] {
+            let words = compile(one_file(body), &[], (false, target), "kernel `t`").unwrap();
             assert!(instructions(&words).iter().any(|i| i[0] & 0xffff == 246), "the loop is there (OpLoopMerge)");
-            assert_eq!(has_loop_counter(&words), loops == Loops::Counted, "{loops:?}");
+            assert_eq!(has_loop_counter(&words), target == Target::Any, "{target:?}");
+            assert_eq!(clamps_an_index(&words), target == Target::Any, "{target:?}");
         }
     }
 
@@ -181,7 +187,7 @@ mod compile_tests {
     #[test]
     fn a_valid_kernel_compiles_to_spirv() {
         let words =
-            compile(one_file("@compute @workgroup_size(N)\nfn main() {}\n"), &[], (false, Loops::Plain), "kernel `t`")
+            compile(one_file("@compute @workgroup_size(N)\nfn main() {}\n"), &[], (false, Target::Gpu), "kernel `t`")
                 .unwrap();
         assert_eq!(words[0], 0x0723_0203, "SPIR-V magic number");
     }

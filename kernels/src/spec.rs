@@ -221,7 +221,7 @@ pub const KERNELS: &[KernelSpec] = &[
 
 /// The kernels above written for GPUs only (lavapipe runs them where tests ask for the GPU paths,
 /// and the tiled GEMM for shapes off the vec4 grid). They and [`COOPERATIVE_KERNELS`] are
-/// compiled without naga's loop counters (`Loops` in compile.rs).
+/// compiled without naga's loop counters and index clamps (`Target` in compile.rs).
 pub const GPU_KERNELS: &[&str] =
     &["gemm_tiled", "gemm_tiled_v4", "conv_tiled_v4", "attention_tiled", "attention_rows", "attention_wg"];
 
