@@ -4,7 +4,12 @@
 
 const A_VEC: u32 = 4u;
 
-fn load_a(r: RowCtx, k: KCtx) -> vec4<f32> {
+// As stored (see a_matrix_v4.wgsl).
+fn load_a_stored(r: RowCtx, k: KCtx) -> vec4<S> {
     let t = tap(r, k);
-    return select(vec4<f32>(0.0), vec4<f32>(a[t.at / 4u]), t.inside);
+    return select(vec4<S>(), a[t.at / 4u], t.inside);
+}
+
+fn load_a(r: RowCtx, k: KCtx) -> vec4<f32> {
+    return vec4<f32>(load_a_stored(r, k));
 }

@@ -4,6 +4,12 @@
 
 const A_VEC: u32 = 4u;
 
+// As stored: the matrix-unit kernels stage it so, with no round trip through f32 (which not
+// every compiler folds: NVK's did not).
+fn load_a_stored(r: RowCtx, k: KCtx) -> vec4<S> {
+    return a[(r + k) / 4u];
+}
+
 fn load_a(r: RowCtx, k: KCtx) -> vec4<f32> {
-    return vec4<f32>(a[(r + k) / 4u]);
+    return vec4<f32>(load_a_stored(r, k));
 }

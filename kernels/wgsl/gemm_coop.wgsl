@@ -49,7 +49,7 @@ fn fetch(
     let ka = k0 + 4u * tu;
     let kc = k_ctx(ka);
     // #unroll I WT*FM*FK*KS/SG/8
-    (*ra)[I] = select(vec4<f16>(), vec4<f16>(load_a((*rows)[I], kc)), ka < p.g.k);
+    (*ra)[I] = select(vec4<f16>(), load_a_stored((*rows)[I], kc), ka < p.g.k);
     // #end
     // #unroll I WT*FN*FK*KS/SG/8
     if BT == 1u {
