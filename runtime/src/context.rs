@@ -365,7 +365,10 @@ impl Context {
                 self.set_gemm_family(GemmFamily::Tiled);
             }
         }
-        // The trial's tensors are gone; the peak is the caller's work alone.
+        // The trial's tensors are gone: their buffers go back to the driver, and the peak and the
+        // most ever held (which bounds the idle buffers kept) are the caller's work alone.
+        crate::memory::release_idle(&self.shared);
+        self.shared.most_live.store(self.live_bytes(), Ordering::SeqCst);
         self.reset_peak();
     }
 
