@@ -191,4 +191,21 @@ mod compile_tests {
                 .unwrap();
         assert_eq!(words[0], 0x0723_0203, "SPIR-V magic number");
     }
+
+    /// naga 30 compiles `&&` and `||` with short-circuit control flow: a branch (and, on NVIDIA,
+    /// its branch-sync instructions) around every load that such a condition masked, which NAK
+    /// showed around each of the matrix-unit GEMM's loads. The kernels combine comparisons with
+    /// `&` and `|`, whose operands here are always safe to evaluate.
+    #[test]
+    fn kernels_combine_comparisons_without_short_circuits() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("wgsl");
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            let text = std::fs::read_to_string(&path).unwrap();
+            for (n, line) in text.lines().enumerate() {
+                let code = line.split("//").next().unwrap();
+                assert!(!code.contains("&&") && !code.contains("||"), "{}:{}: {line}", path.display(), n + 1);
+            }
+        }
+    }
 }

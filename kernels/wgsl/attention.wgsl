@@ -46,7 +46,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         {
             // Past the end, or (causal) past the query row. Key 0 is never masked, so every
             // row's running maximum is real after the first chunk and masked keys weigh 0.
-            let sc = select(NEG, score[R], key < p.nk && (p.causal == 0u || key <= row0 + R));
+            let sc = select(NEG, score[R], (key < p.nk) & ((p.causal == 0u) | (key <= row0 + R)));
             let m_new = max(m[R], subgroupMax(sc));
             let correction = exp(m[R] - m_new);
             let pr = exp(sc - m_new);
@@ -79,7 +79,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     {
         let row = row0 + R;
         let slot = V * SG + lane;
-        if row < p.nq && slot < slots {
+        if (row < p.nq) & (slot < slots) {
             o[(batch * p.o_batch + row * p.o_ld + head * p.d) / 4u + slot] = vec4<S>(acc[R * DV + V] / l[R]);
         }
     }

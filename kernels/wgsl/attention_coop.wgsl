@@ -170,7 +170,7 @@ fn main(
         var any_moved = false;
         for (var r0 = 0u; r0 < FM; r0 += RPP) {
             let moved_here = chunk_softmax(mine + r0 + lane / LPR, row0, j0, part);
-            any_moved = any_moved || moved_here;
+            any_moved = any_moved | moved_here;
         }
         let sub_moved = subgroupAny(any_moved);
         if lane == 0u {
@@ -212,7 +212,7 @@ fn main(
         let r = mine + i / SLOTS;
         let s = i % SLOTS;
         let query = row0 + r;
-        if query < p.nq && s < slots {
+        if (query < p.nq) & (s < slots) {
             let x = scratch[r * (LS / 4u) + s] / row_sum[r];
             o[(batch * p.o_batch + query * p.o_ld + head * p.d) / 4u + s] = vec4<S>(x);
         }
@@ -251,7 +251,7 @@ fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32) -> bool {
         row_ref[row] = now;
         row_scale[row] = scale;
     }
-    return now != old && old != NEG;
+    return (now != old) & (old != NEG);
 }
 
 // Multiplies each of this subgroup's output rows by its row_scale, through its scratch rows.

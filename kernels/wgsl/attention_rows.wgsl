@@ -50,7 +50,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
                 s += dot(qv[SL], ks[(j + J) * DS + SL]);
                 // #end
                 let key = j0 + j + J;
-                score[J] = select(NEG, s, key < p.nk && (p.causal == 0u || key <= row));
+                score[J] = select(NEG, s, (key < p.nk) & ((p.causal == 0u) | (key <= row)));
                 top = max(top, score[J]);
             }
             // #end
@@ -75,7 +75,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
     }
     let obase = (batch * p.o_batch + row * p.o_ld + head * p.d) / 4u;
     // #unroll SL DS
-    if row < p.nq && SL < slots {
+    if (row < p.nq) & (SL < slots) {
         o[obase + SL] = vec4<S>(acc[SL] / l);
     }
     // #end

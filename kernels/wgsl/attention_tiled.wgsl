@@ -130,7 +130,7 @@ fn main(
     // #unroll I 4
     {
         let row = row0 + 4u * lid.y + I;
-        if row < p.nq && lid.x < slots {
+        if (row < p.nq) & (lid.x < slots) {
             o[(batch * p.o_batch + row * p.o_ld + head * p.d) / 4u + lid.x] = vec4<S>(acc[I] / sum[I]);
         }
     }

@@ -41,7 +41,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
         }
         // Masked past the end, or (causal) past the query row; key 0 never is.
         // #unroll R TM
-        scores[R * W + t] = select(NEG, score[R], key < p.nk && (p.causal == 0u || key <= row0 + R));
+        scores[R * W + t] = select(NEG, score[R], (key < p.nk) & ((p.causal == 0u) | (key <= row0 + R)));
         // #end
         workgroupBarrier();
         // #unroll R TM
@@ -82,7 +82,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
     {
         let row = row0 + R;
         let slot = V * W + t;
-        if row < p.nq && slot < slots {
+        if (row < p.nq) & (slot < slots) {
             o[(batch * p.o_batch + row * p.o_ld + head * p.d) / 4u + slot] = vec4<S>(acc[R * DV + V] / l[R]);
         }
     }

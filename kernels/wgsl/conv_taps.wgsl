@@ -50,7 +50,7 @@ struct Tap {
 fn tap(r: RowCtx, k: KCtx) -> Tap {
     let y = r.y + k.dy;
     let x = r.x + k.dx;
-    let inside = y >= 0 && y < i32(p.a.h) && x >= 0 && x < i32(p.a.w);
+    let inside = (y >= 0) & (y < i32(p.a.h)) & (x >= 0) & (x < i32(p.a.w));
     let yc = u32(clamp(y, 0, i32(p.a.h) - 1));
     let xc = u32(clamp(x, 0, i32(p.a.w) - 1));
     return Tap(r.base + (yc * p.a.w + xc) * p.a.cin + k.ci, inside);

@@ -4,7 +4,7 @@
 @group(0) @binding(3) var<storage, read_write> c: array<S>;
 
 fn store(batch: u32, row: u32, col: u32, sum: f32) {
-    if row >= p.g.m || col >= p.g.n {
+    if (row >= p.g.m) | (col >= p.g.n) {
         return;
     }
     let at = batch * p.g.c_batch + row * p.g.ldc + col;
@@ -23,7 +23,7 @@ fn store(batch: u32, row: u32, col: u32, sum: f32) {
 
 // GE = 1: one value of C from the sums of value column `col` and of its gate.
 fn store_geglu(batch: u32, row: u32, col: u32, value: f32, gate: f32) {
-    if row >= p.g.m || col >= p.g.n {
+    if (row >= p.g.m) | (col >= p.g.n) {
         return;
     }
     var v = p.g.alpha * value;

@@ -5,7 +5,7 @@
 @group(0) @binding(3) var<storage, read_write> c: array<vec4<S>>;
 
 fn store4(batch: u32, row: u32, col: u32, sum: vec4<f32>) {
-    if row >= p.g.m || col >= p.g.n {
+    if (row >= p.g.m) | (col >= p.g.n) {
         return;
     }
     let at = (batch * p.g.c_batch + row * p.g.ldc + col) / 4u;
@@ -24,7 +24,7 @@ fn store4(batch: u32, row: u32, col: u32, sum: vec4<f32>) {
 
 // GE = 1: four values of C from the sums of value columns col..col+3 and of their gates.
 fn store_geglu4(batch: u32, row: u32, col: u32, value: vec4<f32>, gate: vec4<f32>) {
-    if row >= p.g.m || col >= p.g.n {
+    if (row >= p.g.m) | (col >= p.g.n) {
         return;
     }
     var v = p.g.alpha * value;

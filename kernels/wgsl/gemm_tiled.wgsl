@@ -17,14 +17,17 @@ const GB: u32 = 16u;
 var<workgroup> a_tile: array<f32, 1040>;
 var<workgroup> b_tile: array<f32, 1040>;
 
+// B at (k, n), zero past K and N: read clamped and masked, with no branch around the load.
 fn load_b1(boff: u32, k: u32, n: u32) -> f32 {
-    if k >= p.g.k || n >= p.g.n {
-        return 0.0;
-    }
+    let kc = min(k, p.g.k - 1u);
+    let nc = min(n, p.g.n - 1u);
+    var value: S;
     if BT == 0u {
-        return f32(b[boff + k * p.g.ldb + n]);
+        value = b[boff + kc * p.g.ldb + nc];
+    } else {
+        value = b[boff + b_row(nc) * p.g.ldb + kc];
     }
-    return f32(b[boff + b_row(n) * p.g.ldb + k]);
+    return select(0.0, f32(value), (k < p.g.k) & (n < p.g.n));
 }
 
 @compute @workgroup_size(16, 16)
