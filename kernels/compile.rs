@@ -35,22 +35,30 @@ impl Source {
     }
 }
 
-/// The prelude of a variant: the storage type `S` and the parameters as constants; for
-/// cooperative kernels also the fragment types FA (f16, FM×FK), FB (f16, FK×FN) and FC (f32
-/// accumulator, FM×FN). naga 30 spells only square 8×8 and 16×16 fragments, so they are declared
-/// 8×8 here and given the variant's shape in the SPIR-V ([`shape_fragments`]).
+/// The prelude of a variant: the storage type `S`, `U4` (a unit of four values as kernels move
+/// it) and the parameters as constants; for cooperative kernels also the fragment types FA (f16,
+/// FM×FK), FB (f16, FK×FN) and FC (f32 accumulator, FM×FN).
+///
+/// Cooperative kernels move f16 data as its bits, U4 = `vec2<u32>`, and hold it in workgroup
+/// memory as `vec2<f32>` words: as `vec4<f16>`, NIR splits a unit into halves that the compilers
+/// then shuffle (AMD's ACO 4 moves a unit, NVIDIA's NAK 6 byte permutes). naga 30 types a
+/// cooperative load by the pointer it reads through and knows f16 and f32 fragments only, so FA
+/// and FB are declared f32 here, and the SPIR-V makes them f16 (SPV_KHR_cooperative_matrix lets a
+/// load's pointee differ from the fragment's component type). naga also spells only square 8×8
+/// and 16×16 fragments, so all three are declared 8×8 and given the variant's shape in the
+/// SPIR-V ([`shape_fragments`]).
 fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
     let mut text = String::from(match (f16, cooperative) {
-        (_, true) => "enable f16; enable wgpu_cooperative_matrix; alias S = f16;",
-        (true, false) => "enable f16; alias S = f16;",
-        (false, false) => "alias S = f32;",
+        (_, true) => "enable f16; enable wgpu_cooperative_matrix; alias S = f16; alias U4 = vec2<u32>;",
+        (true, false) => "enable f16; alias S = f16; alias U4 = vec4<S>;",
+        (false, false) => "alias S = f32; alias U4 = vec4<S>;",
     });
     for (name, value) in params {
         text.push_str(&format!(" const {name}: u32 = {value}u;"));
     }
     if cooperative {
-        for (alias, scalar, role) in [("FA", "f16", "A"), ("FB", "f16", "B"), ("FC", "f32", "C")] {
-            text.push_str(&format!(" alias {alias} = coop_mat8x8<{scalar}, {role}>;"));
+        for (alias, role) in [("FA", "A"), ("FB", "B"), ("FC", "C")] {
+            text.push_str(&format!(" alias {alias} = coop_mat8x8<f32, {role}>;"));
         }
     }
     text
@@ -63,15 +71,18 @@ fn fragment_shape(params: &[(&str, u32)]) -> Option<(u32, u32, u32)> {
 }
 
 /// Gives every `OpTypeCooperativeMatrixKHR` in `words` the shape its use takes in an
-/// M×N×K product: A (MatrixA) M×K, B (MatrixB) K×N, the accumulator M×N. The row and column
-/// counts are 32-bit unsigned constants; those missing are declared just before the type.
+/// M×N×K product: A (MatrixA) M×K, B (MatrixB) K×N, the accumulator M×N; and A and B f16
+/// components ([`prelude`]). The row and column counts are 32-bit unsigned constants; those
+/// missing are declared just before the type.
 fn shape_fragments(words: &[u32], (m, n, k): (u32, u32, u32)) -> Result<Vec<u32>, String> {
     const OP_TYPE_INT: u32 = 21;
+    const OP_TYPE_FLOAT: u32 = 22;
     const OP_CONSTANT: u32 = 43;
     const OP_TYPE_COOPERATIVE_MATRIX: u32 = 4456;
     let mut out = words.get(..5).ok_or("SPIR-V shorter than its header")?.to_vec();
     let mut bound = out[3];
     let mut uint = None;
+    let mut f16 = None;
     let mut constants: Vec<(u32, u32)> = Vec::new(); // (value, id) of 32-bit unsigned constants
     let mut at = 5;
     while at < words.len() {
@@ -80,13 +91,15 @@ fn shape_fragments(words: &[u32], (m, n, k): (u32, u32, u32)) -> Result<Vec<u32>
         let inst = words.get(at..at + count).filter(|_| count > 0).ok_or("truncated SPIR-V instruction")?;
         match op {
             OP_TYPE_INT if inst[2..] == [32, 0] => uint = Some(inst[1]),
+            OP_TYPE_FLOAT if inst[2] == 16 => f16 = Some(inst[1]),
             OP_CONSTANT if Some(inst[1]) == uint && count == 4 => constants.push((inst[3], inst[2])),
             OP_TYPE_COOPERATIVE_MATRIX if count == 7 => {
                 let value = |id: u32| constants.iter().find(|(_, c)| *c == id).map(|(v, _)| *v);
-                let (rows, cols) = match value(inst[6]) {
-                    Some(0) => (m, k),
-                    Some(1) => (k, n),
-                    Some(2) => (m, n),
+                let f16 = f16.ok_or("no f16 type before a cooperative matrix");
+                let (rows, cols, component) = match value(inst[6]) {
+                    Some(0) => (m, k, f16?),
+                    Some(1) => (k, n, f16?),
+                    Some(2) => (m, n, inst[2]),
                     other => return Err(format!("cooperative matrix use {other:?}: not A, B or an accumulator")),
                 };
                 let uint = uint.ok_or("no 32-bit unsigned type before a cooperative matrix")?;
@@ -101,7 +114,7 @@ fn shape_fragments(words: &[u32], (m, n, k): (u32, u32, u32)) -> Result<Vec<u32>
                     id
                 };
                 let (r, c) = (id_of(rows), id_of(cols));
-                out.extend([inst[0], inst[1], inst[2], inst[3], r, c, inst[6]]);
+                out.extend([inst[0], inst[1], component, inst[3], r, c, inst[6]]);
                 at += count;
                 continue;
             }
@@ -225,7 +238,10 @@ fn compile(
         let at = e.location(&src.text).map(|l| src.locate(l.line_number as usize));
         format!("{}: {what}: {}\n{}", at.unwrap_or_default(), e.message(), e.emit_to_string(&src.text))
     })?;
-    let mut caps = valid::Capabilities::IMMEDIATES | valid::Capabilities::SHADER_FLOAT16 | valid::Capabilities::SUBGROUP;
+    let mut caps = valid::Capabilities::IMMEDIATES
+        | valid::Capabilities::SHADER_FLOAT16
+        | valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32
+        | valid::Capabilities::SUBGROUP;
     caps.set(valid::Capabilities::COOPERATIVE_MATRIX, cooperative);
     let info = valid::Validator::new(valid::ValidationFlags::all(), caps)
         .subgroup_stages(valid::ShaderStages::COMPUTE)

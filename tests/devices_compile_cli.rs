@@ -57,3 +57,83 @@ fn kernel_names_need_the_census() {
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("--compile"));
 }
+
+fn is_load(op: &str) -> bool {
+    op.starts_with("buffer_load") || op.starts_with("global_load")
+}
+
+fn is_multiply_add(op: &str) -> bool {
+    ["v_fma", "v_dual_fmac", "v_dual_fma", "v_pk_fma", "v_wmma"].iter().any(|w| op.starts_with(w))
+}
+
+/// The largest loop of one ACO disassembly that loads from device memory (a backward branch's
+/// range, labels dropped).
+fn aco_loading_loop(disassembly: &str) -> Option<Vec<&str>> {
+    let lines: Vec<&str> =
+        disassembly.lines().map(|l| l.split(';').next().unwrap().trim()).filter(|l| !l.is_empty()).collect();
+    let label_at = |name: &str| lines.iter().position(|l| l.strip_suffix(':') == Some(name));
+    let mut loops = Vec::new();
+    for (end, line) in lines.iter().enumerate() {
+        let target =
+            line.strip_prefix("s_cbranch_").or(line.strip_prefix("s_branch")).and_then(|l| l.split_whitespace().last());
+        if let Some(start) = target.and_then(label_at).filter(|&start| start < end) {
+            loops.push(lines[start..=end].iter().copied().filter(|l| !l.ends_with(':')).collect::<Vec<_>>());
+        }
+    }
+    loops.into_iter().filter(|b| b.iter().any(|op| is_load(op))).max_by_key(|b| b.len())
+}
+
+/// Multiply-adds issued between the load at `at` of a loop body and the first `s_waitcnt
+/// vmcnt(c)` it must pass going round (loads complete in order: one with `later` loads issued
+/// after it is done once c <= later). tools/load_cover.py prints the same for every kernel.
+fn load_cover(body: &[&str], at: usize) -> usize {
+    let (mut later, mut work) = (0, 0);
+    for step in 1..=body.len() {
+        let op = body[(at + step) % body.len()];
+        let wait =
+            op.strip_prefix("s_waitcnt").and_then(|w| w.split("vmcnt(").nth(1)).and_then(|c| c.split(')').next());
+        if wait.and_then(|c| c.parse::<usize>().ok()).is_some_and(|c| c <= later) {
+            return work;
+        }
+        later += usize::from(is_load(op));
+        work += usize::from(is_multiply_add(op));
+    }
+    work
+}
+
+/// AMD's compiler (RADV's ACO, which prints its code with RADV_DEBUG=shaders) must let the
+/// products' K-loops run at least half a step's multiply-adds before each prefetched load is
+/// waited for. Masked as they arrived, or fetched under a branch, the loads were waited for
+/// before any: the prefetch hid nothing. Other drivers print no ACO code, so this holds on RADV
+/// only (CI's drm-shim passes for RDNA3 and RDNA2).
+#[test]
+fn amd_s_compiler_hides_the_products_loads_behind_their_multiply_adds() {
+    let run = command().args(["devices", "--json"]).env("VKDIFF_GPU_PATHS", "1").output().unwrap();
+    let devices: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let device = devices.as_array().unwrap().iter().find(|d| d["selected"] == true).unwrap();
+    if !device["name"].as_str().unwrap().contains("RADV") {
+        return;
+    }
+    let mut kernels = "gemm_tiled_v4,conv_tiled_v4".to_string();
+    if !device["cooperative_variant"].is_null() {
+        kernels.push_str(",gemm_coop,conv_coop");
+    }
+    let run = command()
+        .args(["devices", "--compile", "--json", "--kernel", &kernels])
+        .envs([("VKDIFF_GPU_PATHS", "1"), ("RADV_DEBUG", "shaders"), ("MESA_SHADER_CACHE_DISABLE", "true")])
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let out: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    let shaders: Vec<&str> = stderr.split("\ndisasm:\n").skip(1).map(|s| s.split("\n\n").next().unwrap()).collect();
+    let compiled = out["compiled"].as_array().unwrap();
+    assert_eq!(shaders.len(), compiled.len(), "one disassembly a variant of {kernels}");
+    for (shader, variant) in shaders.iter().zip(compiled) {
+        let body = aco_loading_loop(shader).expect("a K-loop that loads");
+        let work = body.iter().filter(|op| is_multiply_add(op)).count();
+        let least = (0..body.len()).filter(|&i| is_load(body[i])).map(|i| load_cover(&body, i)).min().unwrap();
+        let what = format!("{} {}", variant["kernel"], variant["params"]);
+        assert!(2 * least >= work, "{what}: a load is waited for after {least} of the step's {work} multiply-adds");
+    }
+}

@@ -105,14 +105,16 @@ mod compile_tests {
         out
     }
 
-    /// (rows, columns, use) of each cooperative matrix type in `words`.
-    fn fragment_types(words: &[u32]) -> Vec<(u32, u32, u32)> {
-        let (mut constants, mut types) = (Vec::new(), Vec::new());
+    /// (rows, columns, use, component bits) of each cooperative matrix type in `words`.
+    fn fragment_types(words: &[u32]) -> Vec<(u32, u32, u32, u32)> {
+        let (mut constants, mut floats, mut types) = (Vec::new(), Vec::new(), Vec::new());
         for inst in instructions(words) {
             let value = |id: u32| constants.iter().find(|(c, _)| *c == id).map(|(_, v)| *v).unwrap();
+            let bits = |id: u32| floats.iter().find(|(f, _)| *f == id).map(|(_, b)| *b).unwrap();
             match inst[0] & 0xffff {
+                22 => floats.push((inst[1], inst[2])),
                 43 => constants.push((inst[2], inst[3])),
-                4456 => types.push((value(inst[4]), value(inst[5]), value(inst[6]))),
+                4456 => types.push((value(inst[4]), value(inst[5]), value(inst[6]), bits(inst[2]))),
                 _ => {}
             }
         }
@@ -120,8 +122,8 @@ mod compile_tests {
     }
 
     #[test]
-    fn fragments_take_the_variants_shape_by_use() {
-        let body = "var<workgroup> w: array<vec4<f16>, 64>;\n@compute @workgroup_size(SG)\nfn main() {\n    \
+    fn fragments_take_the_variants_shape_by_use_and_f16_operands() {
+        let body = "var<workgroup> w: array<vec2<f32>, 64>;\n@compute @workgroup_size(SG)\nfn main() {\n    \
             let a = coopLoadT<FA>(&w[0], 4u);\n    let b = coopLoad<FB>(&w[0], 4u);\n    var c: FC;\n    \
             c = coopMultiplyAdd(a, b, c);\n}\n";
         let params = [("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16)];
@@ -129,11 +131,11 @@ mod compile_tests {
         let words = compile(src, &params, (true, Target::Gpu), "kernel `t`").unwrap();
         let mut types = fragment_types(&words);
         types.sort_by_key(|t| t.2);
-        assert_eq!(types, [(8, 16, 0), (16, 16, 1), (8, 16, 2)], "A 8×16, B 16×16, C 8×16");
+        assert_eq!(types, [(8, 16, 0, 16), (16, 16, 1, 16), (8, 16, 2, 32)], "A 8×16, B 16×16 f16, C 8×16 f32");
         let square = [("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8)];
         let src = Source::new(&prelude(true, &square, true), &[("k.wgsl".into(), body.into())]);
         let words = compile(src, &square, (true, Target::Gpu), "kernel `t`").unwrap();
-        assert!(fragment_types(&words).iter().all(|&(r, c, _)| (r, c) == (8, 8)));
+        assert!(fragment_types(&words).iter().all(|&(r, c, _, _)| (r, c) == (8, 8)));
         let src = Source::new(&prelude(true, &[("SG", 8)], true), &[("k.wgsl".into(), body.into())]);
         let err = compile(src, &[("SG", 8)], (true, Target::Gpu), "kernel `t`").unwrap_err();
         assert!(err.contains("needs the parameters FM, FN and FK"), "{err}");

@@ -37,7 +37,7 @@ pub const KERNELS: &[KernelSpec] = &[
     // epilogue (matrix products with B stored N×K only), 0 is the plain product.
     KernelSpec {
         name: "gemm_sg",
-        files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "gemm_store4.wgsl", "gemm_sg.wgsl"],
+        files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "gemm_sg.wgsl"],
         params: &[
             &[("SG", 4), ("TM", 8), ("BT", 0), ("LU", 1), ("GE", 0)],
             &[("SG", 4), ("TM", 8), ("BT", 1), ("LU", 1), ("GE", 0)],
@@ -76,7 +76,7 @@ pub const KERNELS: &[KernelSpec] = &[
     },
     KernelSpec {
         name: "conv_sg",
-        files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "gemm_store4.wgsl", "gemm_sg.wgsl"],
+        files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "gemm_sg.wgsl"],
         params: &[
             &[("SG", 4), ("TM", 8), ("BT", 1), ("LU", 1), ("GE", 0)],
             &[("SG", 4), ("TM", 16), ("BT", 1), ("LU", 4), ("GE", 0)],

@@ -34,24 +34,34 @@ const LD: u32 = DH + 8u; // Q, K and V rows (f16)
 const LS: u32 = max(KC, DH) + 4u; // a subgroup's scratch rows (f32): scores, or output rows
 const LP: u32 = KC + 8u; // probabilities (f16)
 
-var<workgroup> kv: array<vec4<f16>, 2u * KC * LD / 4u>; // a chunk's K rows, then its V rows
+var<workgroup> kv: array<vec2<f32>, 2u * KC * LD / 4u>; // a chunk's K rows, then its V rows
 var<workgroup> scratch: array<vec4<f32>, ROWS * LS / 4u>;
-var<workgroup> probs: array<vec4<f16>, ROWS * LP / 4u>;
+var<workgroup> probs: array<vec2<f32>, ROWS * LP / 4u>;
 var<workgroup> row_ref: array<f32, ROWS>;
 var<workgroup> row_sum: array<f32, ROWS>;
 var<workgroup> row_scale: array<f32, ROWS>;
 var<workgroup> moved: array<u32, 4>; // per subgroup: a reference moved in this chunk
 
-// Values slot..slot+3 of row `row` of `kv`.
-fn put(row: u32, slot: u32, x: vec4<f32>) {
-    kv[row * (LD / 4u) + slot] = vec4<f16>(x);
+// A unit of the operands widened to f32, and four values rounded to f16 as a unit.
+fn widen(u: U4) -> vec4<f32> {
+    return vec4<f32>(unpack2x16float(u.x), unpack2x16float(u.y));
+}
+
+fn narrow(x: vec4<f32>) -> U4 {
+    return U4(pack2x16float(x.xy), pack2x16float(x.zw));
+}
+
+// A unit as the tiles hold it (gemm_coop.wgsl): its bits.
+fn tiled(u: U4) -> vec2<f32> {
+    return bitcast<vec2<f32>>(u);
 }
 
 // Units t + WG·u of the chunk at key j0 (K and V rows [KC][SLOTS]) into registers: keys past
-// the end clamped (their scores are masked), slots past the head zero.
+// the end clamped (their scores are masked), slots past the head clamped too (zeroed when staged,
+// so that nothing waits for the loads before then).
 fn fetch_kv(
-    rk: ptr<function, array<vec4<f16>, PU>>,
-    rv: ptr<function, array<vec4<f16>, PU>>,
+    rk: ptr<function, array<U4, PU>>,
+    rv: ptr<function, array<U4, PU>>,
     j0: u32,
     t: u32,
     head: u32,
@@ -66,8 +76,8 @@ fn fetch_kv(
         let sl = min(s, slots - 1u);
         let ka = (p.k_off + batch * p.k_batch + key * p.k_ld + head * p.d) / 4u + sl;
         let va = (p.v_off + batch * p.v_batch + key * p.v_ld + head * p.d) / 4u + sl;
-        (*rk)[U] = select(vec4<f16>(), vec4<f16>(k[ka]), s < slots);
-        (*rv)[U] = select(vec4<f16>(), vec4<f16>(v[va]), s < slots);
+        (*rk)[U] = k[ka];
+        (*rv)[U] = v[va];
     }
     // #end
 }
@@ -114,8 +124,8 @@ fn main(
     let mine = sid * FM;
     let part = lane % LPR;
     // The first chunk's keys and values are loaded while Q is staged.
-    var rk: array<vec4<f16>, PU>;
-    var rv: array<vec4<f16>, PU>;
+    var rk: array<U4, PU>;
+    var rv: array<U4, PU>;
     fetch_kv(&rk, &rv, 0u, t, head, batch);
     // Scaled Q rows through `kv` (rows past the end clamped, slots past the head zero).
     for (var i = t; i < ROWS * SLOTS; i += WG) {
@@ -123,7 +133,7 @@ fn main(
         let s = i % SLOTS;
         let token = min(row0 + r, p.nq - 1u);
         let at = (p.q_off + batch * p.q_batch + token * p.q_ld + head * p.d) / 4u + min(s, slots - 1u);
-        put(r, s, select(vec4<f32>(0.0), p.scale * vec4<f32>(q[at]), s < slots));
+        kv[r * (LD / 4u) + s] = tiled(select(U4(), narrow(p.scale * widen(q[at])), s < slots));
     }
     if t < ROWS {
         row_ref[t] = NEG;
@@ -143,14 +153,15 @@ fn main(
         // #unroll U KF*FN*DH/SG/16
         {
             let i = t + WG * U;
-            kv[(i / SLOTS) * (LD / 4u) + i % SLOTS] = rk[U];
-            kv[(KC + i / SLOTS) * (LD / 4u) + i % SLOTS] = rv[U];
+            let inside = i % SLOTS < slots;
+            kv[(i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(select(U4(), rk[U], inside));
+            kv[(KC + i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(select(U4(), rv[U], inside));
         }
         // #end
         workgroupBarrier();
-        if j0 + KC < p.nk {
-            fetch_kv(&rk, &rv, j0 + KC, t, head, batch);
-        }
+        // Unconditional (the last chunk's fetch reads clamped keys, never used): a branch
+        // around it made AMD's compiler wait for the loads at its end.
+        fetch_kv(&rk, &rv, j0 + KC, t, head, batch);
         // S = Q·Kᵀ: K rows [key][d] read column-major are Kᵀ.
         // #unroll J KF
         {
@@ -214,7 +225,7 @@ fn main(
         let query = row0 + r;
         if (query < p.nq) & (s < slots) {
             let x = scratch[r * (LS / 4u) + s] / row_sum[r];
-            o[(batch * p.o_batch + query * p.o_ld + head * p.d) / 4u + s] = vec4<S>(x);
+            o[(batch * p.o_batch + query * p.o_ld + head * p.d) / 4u + s] = narrow(x);
         }
     }
 }
@@ -238,9 +249,9 @@ fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32) -> bool {
     // #unroll I KF*FN/LPR/4
     {
         // The weights P·V uses: rounded to f16, summed as rounded.
-        let w = vec4<f16>(exp2(sv[I] - now));
-        probs[(row * LP + first) / 4u + I] = w;
-        sum += dot(vec4<f32>(w), vec4<f32>(1.0));
+        let w = narrow(exp2(sv[I] - now));
+        probs[(row * LP + first) / 4u + I] = tiled(w);
+        sum += dot(widen(w), vec4<f32>(1.0));
     }
     // #end
     sum = joined_sum(sum);

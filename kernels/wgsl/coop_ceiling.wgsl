@@ -12,8 +12,9 @@ struct Params {
 }
 
 var<immediate> p: Params;
-// A (2·FM rows of KS·FK) then B (2·FN rows of KS·FK, N×K), row-major f16.
-@group(0) @binding(0) var<storage, read> operands: array<vec4<f16>>;
+// A (2·FM rows of KS·FK) then B (2·FN rows of KS·FK, N×K), row-major f16, copied as their bits
+// into tiles of vec2<f32> (as gemm_coop.wgsl's).
+@group(0) @binding(0) var<storage, read> operands: array<vec2<f32>>;
 // Per workgroup, per subgroup, its 2×2 sums, each FM×FN row-major.
 @group(0) @binding(1) var<storage, read_write> sums: array<vec4<f32>>;
 
@@ -23,7 +24,7 @@ const LDA: u32 = KS * FK + 8u; // a tile row in f16, a multiple of 8 padded off 
 const ROW: u32 = KS * FK / 4u; // an operand row in vec4s
 const TILE: u32 = 2u * FM * LDA / 4u; // A's tile in vec4s; B's follows it
 
-var<workgroup> tiles: array<vec4<f16>, 2u * (FM + FN) * LDA / 4u>; // A, then B
+var<workgroup> tiles: array<vec2<f32>, 2u * (FM + FN) * LDA / 4u>; // A, then B
 
 @compute @workgroup_size(WG)
 fn main(

@@ -5,13 +5,15 @@
 // Operands are vec4-aligned (the runtime sends other shapes to the tiled kernel): each
 // invocation stages units of four f16 along K (A, and B stored N×K) or along N (B stored K×N),
 // one load each, zero past M, N and K. The next step's units are loaded into registers while
-// the matrix units work on this one, so the loads' latency hides behind the products. Each
-// fragment leaves through a small per-subgroup scratch, four columns at a time, so the epilogue
-// and the edge masks are those of the vec4 subgroup kernel (gemm_store4.wgsl).
-// The tiles are arrays of vec4s, so a unit is one 8-byte shared store (SPV_KHR_cooperative_matrix
-// lets a cooperative load's pointee be a vector, its stride then counted in vectors). Row strides
-// are multiples of 8 halves (16 bytes, what cooperative loads need), padded off a power of two
-// against bank conflicts.
+// the matrix units work on this one, so the loads' latency hides behind the products. For that
+// nothing may use a unit before the next step stores it: the loads read in bounds (clamped,
+// unconditionally) and the masks wait for the stores. Masked as they arrived, or fetched under
+// a branch, they made AMD's compiler wait for every load before the step's first product
+// (tools/load_cover.py). Units move as their bits, U4 = vec2<u32>, and the tiles hold them as
+// vec2<f32> words (the prelude, compile.rs, says why). Row strides are multiples of 8 halves
+// (16 bytes, what cooperative loads need), padded off a power of two against bank conflicts.
+// Each fragment leaves through a small per-subgroup scratch, four columns at a time, so the
+// epilogue and the edge masks are those of the vec4 subgroup kernel (gemm_store4.wgsl).
 const BM: u32 = 2u * WT * FM;
 const BN: u32 = 2u * WT * FN;
 const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): 4 values, then their 4 gates
@@ -29,16 +31,19 @@ const STEP: u32 = WG / UK;
 // B stored K×N: units along a tile row of N.
 const UN: u32 = BN / 4u;
 
-var<workgroup> a_tile: array<vec4<f16>, BM * LDA / 4u>;
-var<workgroup> b_tile: array<vec4<f16>, max(BN * LDA, BK * LDB) / 4u>;
+var<workgroup> a_tile: array<vec2<f32>, BM * LDA / 4u>;
+var<workgroup> b_tile: array<vec2<f32>, max(BN * LDA, BK * LDB) / 4u>;
 var<workgroup> scratch: array<vec4<f32>, FM * LDS>; // 4 subgroups × [FM][LDS] f32
 
-// This invocation's units of the K-step at k0: A rows tr + STEP·i at k0 + 4·tu, and B's rows
-// alike (BT = 1) or its units t + WG·i of the [BK][BN] step (BT = 0).
+// This invocation's units of the K-step at k0, and whether each is inside the product: A rows
+// tr + STEP·i at k0 + 4·tu, and B's rows alike (BT = 1) or its units t + WG·i of the [BK][BN]
+// step (BT = 0).
 fn fetch(
     rows: ptr<function, array<RowCtx, PA>>,
-    ra: ptr<function, array<vec4<f16>, PA>>,
-    rb: ptr<function, array<vec4<f16>, PB>>,
+    ra: ptr<function, array<U4, PA>>,
+    rb: ptr<function, array<U4, PB>>,
+    ia: ptr<function, array<bool, PA>>,
+    ib: ptr<function, array<bool, PB>>,
     k0: u32,
     t: u32,
     col0: u32,
@@ -49,16 +54,27 @@ fn fetch(
     let ka = k0 + 4u * tu;
     let kc = k_ctx(ka);
     // #unroll I WT*FM*FK*KS/SG/8
-    (*ra)[I] = select(vec4<f16>(), load_a_stored((*rows)[I], kc), ka < p.g.k);
+    (*ra)[I] = a_unit((*rows)[I], kc);
+    (*ia)[I] = (ka < p.g.k) & a_unit_inside((*rows)[I], kc);
     // #end
     // #unroll I WT*FN*FK*KS/SG/8
-    if BT == 1u {
-        (*rb)[I] = b_unit(boff, ka, col0 + tr + STEP * I);
-    } else {
-        let at = t + WG * I;
-        (*rb)[I] = b_unit(boff, k0 + at / UN, col0 + 4u * (at % UN));
+    {
+        var k = ka;
+        var n = col0 + tr + STEP * I;
+        if BT == 0u {
+            let at = t + WG * I;
+            k = k0 + at / UN;
+            n = col0 + 4u * (at % UN);
+        }
+        (*rb)[I] = b_unit(boff, k, n);
+        (*ib)[I] = b_unit_inside(k, n);
     }
     // #end
+}
+
+// A unit as a tile holds it: its bits, zero outside the product.
+fn staged(unit: U4, inside: bool) -> vec2<f32> {
+    return bitcast<vec2<f32>>(select(U4(), unit, inside));
 }
 
 @compute @workgroup_size(WG)
@@ -81,26 +97,26 @@ fn main(
     // #unroll I WT*FM*FK*KS/SG/8
     rows[I] = row_ctx(batch, row0 + tr + STEP * I);
     // #end
-    var ra: array<vec4<f16>, PA>;
-    var rb: array<vec4<f16>, PB>;
-    fetch(&rows, &ra, &rb, 0u, t, col0, boff);
+    var ra: array<U4, PA>;
+    var rb: array<U4, PB>;
+    var ia: array<bool, PA>;
+    var ib: array<bool, PB>;
+    fetch(&rows, &ra, &rb, &ia, &ib, 0u, t, col0, boff);
     var acc: array<FC, WT * WT>;
     for (var k0 = 0u; k0 < p.g.k; k0 += BK) {
         // #unroll I WT*FM*FK*KS/SG/8
-        a_tile[(tr + STEP * I) * (LDA / 4u) + tu] = ra[I];
+        a_tile[(tr + STEP * I) * (LDA / 4u) + tu] = staged(ra[I], ia[I]);
         // #end
         // #unroll I WT*FN*FK*KS/SG/8
         if BT == 1u {
-            b_tile[(tr + STEP * I) * (LDA / 4u) + tu] = rb[I];
+            b_tile[(tr + STEP * I) * (LDA / 4u) + tu] = staged(rb[I], ib[I]);
         } else {
             let at = t + WG * I;
-            b_tile[(at / UN) * (LDB / 4u) + at % UN] = rb[I];
+            b_tile[(at / UN) * (LDB / 4u) + at % UN] = staged(rb[I], ib[I]);
         }
         // #end
         workgroupBarrier();
-        if k0 + BK < p.g.k {
-            fetch(&rows, &ra, &rb, k0 + BK, t, col0, boff);
-        }
+        fetch(&rows, &ra, &rb, &ia, &ib, k0 + BK, t, col0, boff);
         for (var kk = 0u; kk < BK; kk += FK) {
             var fa: array<FA, WT>;
             var fb: array<FB, WT>;

@@ -20,12 +20,17 @@ const LB: u32 = BN / 4u + 1u;
 var<workgroup> a_tile: array<vec4<f32>, BK * LA>;
 var<workgroup> b_tile: array<vec4<f32>, BK * LB>;
 
-// This invocation's units of the K-step at k0: A rows t/4 + 64·i and B rows (BT = 1) t/4 + 64·i
-// at K offset 4·(t % 4); B stored K×N: rows t/32 + 8·i at columns 4·(t % 32).
+// This invocation's units of the K-step at k0, as stored, and whether each is inside the
+// product: A rows t/4 + 64·i and B rows (BT = 1) t/4 + 64·i at K offset 4·(t % 4); B stored K×N:
+// rows t/32 + 8·i at columns 4·(t % 32). The reads are in bounds (clamped); the masks and the
+// widening to f32 wait for the stores at the next step, so that nothing waits for a load before
+// this step's multiply-adds (gemm_coop.wgsl).
 fn fetch(
     rows: ptr<function, array<RowCtx, RH>>,
-    ra: ptr<function, array<vec4<f32>, RH>>,
-    rb: ptr<function, array<vec4<S>, 2>>,
+    ra: ptr<function, array<U4, RH>>,
+    rb: ptr<function, array<U4, 2>>,
+    ia: ptr<function, array<bool, RH>>,
+    ib: ptr<function, array<bool, 2>>,
     k0: u32,
     t: u32,
     col0: u32,
@@ -34,15 +39,26 @@ fn fetch(
     let ka = k0 + 4u * (t % 4u);
     let kc = k_ctx(ka);
     // #unroll I RH
-    (*ra)[I] = select(vec4<f32>(0.0), load_a((*rows)[I], kc), ka < p.g.k);
+    (*ra)[I] = a_unit((*rows)[I], kc);
+    (*ia)[I] = (ka < p.g.k) & a_unit_inside((*rows)[I], kc);
     // #end
     // #unroll I 2
-    if BT == 1u {
-        (*rb)[I] = b_unit(boff, ka, col0 + t / 4u + 64u * I);
-    } else {
-        (*rb)[I] = b_unit(boff, k0 + t / 32u + 8u * I, col0 + 4u * (t % 32u));
+    {
+        var k = ka;
+        var n = col0 + t / 4u + 64u * I;
+        if BT == 0u {
+            k = k0 + t / 32u + 8u * I;
+            n = col0 + 4u * (t % 32u);
+        }
+        (*rb)[I] = b_unit(boff, k, n);
+        (*ib)[I] = b_unit_inside(k, n);
     }
     // #end
+}
+
+// A unit as the tiles hold it: widened to f32, zero outside the product.
+fn staged(unit: U4, inside: bool) -> vec4<f32> {
+    return select(vec4<f32>(0.0), vec4<f32>(unit), inside);
 }
 
 @compute @workgroup_size(16, 16)
@@ -64,29 +80,35 @@ fn main(
     // #unroll I RH
     rows[I] = row_ctx(batch, row0 + t / 4u + 64u * I);
     // #end
-    var ra: array<vec4<f32>, RH>;
-    var rb: array<vec4<S>, 2>;
-    fetch(&rows, &ra, &rb, 0u, t, col0, boff);
+    var ra: array<U4, RH>;
+    var rb: array<U4, 2>;
+    var ia: array<bool, RH>;
+    var ib: array<bool, 2>;
+    fetch(&rows, &ra, &rb, &ia, &ib, 0u, t, col0, boff);
     var acc: array<vec4<f32>, 8u * RH>;
     for (var k0 = 0u; k0 < p.g.k; k0 += BK) {
         // #unroll I RH
-        // #unroll C 4
-        a_tile[(kq + C) * LA + slot + 16u * I][lane] = ra[I][C];
-        // #end
+        {
+            let unit = staged(ra[I], ia[I]);
+            // #unroll C 4
+            a_tile[(kq + C) * LA + slot + 16u * I][lane] = unit[C];
+            // #end
+        }
         // #end
         // #unroll I 2
-        if BT == 1u {
-            // #unroll C 4
-            b_tile[(kq + C) * LB + slot + 16u * I][lane] = f32(rb[I][C]);
-            // #end
-        } else {
-            b_tile[(t / 32u + 8u * I) * LB + t % 32u] = vec4<f32>(rb[I]);
+        {
+            let unit = staged(rb[I], ib[I]);
+            if BT == 1u {
+                // #unroll C 4
+                b_tile[(kq + C) * LB + slot + 16u * I][lane] = unit[C];
+                // #end
+            } else {
+                b_tile[(t / 32u + 8u * I) * LB + t % 32u] = unit;
+            }
         }
         // #end
         workgroupBarrier();
-        if k0 + BK < p.g.k {
-            fetch(&rows, &ra, &rb, k0 + BK, t, col0, boff);
-        }
+        fetch(&rows, &ra, &rb, &ia, &ib, k0 + BK, t, col0, boff);
         for (var kk = 0u; kk < BK; kk++) {
             let b0 = b_tile[kk * LB + lid.x];
             let b1 = b_tile[kk * LB + 16u + lid.x];
