@@ -35,28 +35,36 @@ impl Source {
     }
 }
 
-/// The prelude of a variant: the storage type `S`, `U4` (a unit of four values as kernels move
-/// it) and the parameters as constants; for cooperative kernels also the fragment types FA (f16,
-/// FM×FK), FB (f16, FK×FN) and FC (f32 accumulator, FM×FN).
+/// The prelude of a variant: the storage type `S`, the parameters as constants, `UW` (the
+/// values in a unit, what the vec4 loaders read at once: a parameter of the matrix-unit GEMM and
+/// convolution, 4 elsewhere) and `Unit`, such a unit as kernels move it; for cooperative
+/// kernels also the fragment types FA (f16, FM×FK), FB (f16, FK×FN) and FC (f32 accumulator,
+/// FM×FN).
 ///
-/// Cooperative kernels move f16 data as its bits, U4 = `vec2<u32>`, and hold it in workgroup
-/// memory as `vec2<f32>` words: as `vec4<f16>`, NIR splits a unit into halves that the compilers
-/// then shuffle (AMD's ACO 4 moves a unit, NVIDIA's NAK 6 byte permutes). naga 30 types a
-/// cooperative load by the pointer it reads through and knows f16 and f32 fragments only, so FA
-/// and FB are declared f32 here, and the SPIR-V makes them f16 (SPV_KHR_cooperative_matrix lets a
-/// load's pointee differ from the fragment's component type). naga also spells only square 8×8
-/// and 16×16 fragments, so all three are declared 8×8 and given the variant's shape in the
-/// SPIR-V ([`shape_fragments`]).
+/// Cooperative kernels move f16 data as its bits, `Unit` = `vec2<u32>` or `vec4<u32>` (UW = 8,
+/// 16-byte loads), and hold it in workgroup memory as `Words`, `vec2<f32>` or `vec4<f32>`: as
+/// `vec4<f16>`, NIR splits a unit into halves that the compilers then shuffle (AMD's ACO 4 moves
+/// a unit, NVIDIA's NAK 6 byte permutes). naga 30 types a cooperative load by the pointer it
+/// reads through and knows f16 and f32 fragments only, so FA and FB are declared f32 here, and
+/// the SPIR-V makes them f16 (SPV_KHR_cooperative_matrix lets a load's pointee differ from the
+/// fragment's component type). naga also spells only square 8×8 and 16×16 fragments, so all three
+/// are declared 8×8 and given the variant's shape in the SPIR-V ([`shape_fragments`]).
 fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
     let mut text = String::from(match (f16, cooperative) {
-        (_, true) => "enable f16; enable wgpu_cooperative_matrix; alias S = f16; alias U4 = vec2<u32>;",
-        (true, false) => "enable f16; alias S = f16; alias U4 = vec4<S>;",
-        (false, false) => "alias S = f32; alias U4 = vec4<S>;",
+        (_, true) => "enable f16; enable wgpu_cooperative_matrix; alias S = f16;",
+        (true, false) => "enable f16; alias S = f16; alias Unit = vec4<S>;",
+        (false, false) => "alias S = f32; alias Unit = vec4<S>;",
     });
     for (name, value) in params {
         text.push_str(&format!(" const {name}: u32 = {value}u;"));
     }
+    let uw = params.iter().find(|(name, _)| *name == "UW").map(|(_, value)| *value);
+    if uw.is_none() {
+        text.push_str(" const UW: u32 = 4u;");
+    }
     if cooperative {
+        let words = uw.unwrap_or(4) / 2;
+        text.push_str(&format!(" alias Unit = vec{words}<u32>; alias Words = vec{words}<f32>;"));
         for (alias, role) in [("FA", "A"), ("FB", "B"), ("FC", "C")] {
             text.push_str(&format!(" alias {alias} = coop_mat8x8<f32, {role}>;"));
         }

@@ -1,10 +1,10 @@
 // Attention's operands and parameters, shared by the subgroup (attention.wgsl) and workgroup
 // (attention_wg.wgsl) kernels. Element (b, token, head, d) of an operand lies at
 // off + b·batch + token·ld + head·D + d; D and every stride and offset % 4 = 0 (vec4 reads).
-@group(0) @binding(0) var<storage, read> q: array<U4>;
-@group(0) @binding(1) var<storage, read> k: array<U4>;
-@group(0) @binding(2) var<storage, read> v: array<U4>;
-@group(0) @binding(3) var<storage, read_write> o: array<U4>;
+@group(0) @binding(0) var<storage, read> q: array<Unit>;
+@group(0) @binding(1) var<storage, read> k: array<Unit>;
+@group(0) @binding(2) var<storage, read> v: array<Unit>;
+@group(0) @binding(3) var<storage, read_write> o: array<Unit>;
 
 struct Params {
     nq: u32,

@@ -34,34 +34,34 @@ const LD: u32 = DH + 8u; // Q, K and V rows (f16)
 const LS: u32 = max(KC, DH) + 4u; // a subgroup's scratch rows (f32): scores, or output rows
 const LP: u32 = KC + 8u; // probabilities (f16)
 
-var<workgroup> kv: array<vec2<f32>, 2u * KC * LD / 4u>; // a chunk's K rows, then its V rows
+var<workgroup> kv: array<Words, 2u * KC * LD / 4u>; // a chunk's K rows, then its V rows
 var<workgroup> scratch: array<vec4<f32>, ROWS * LS / 4u>;
-var<workgroup> probs: array<vec2<f32>, ROWS * LP / 4u>;
+var<workgroup> probs: array<Words, ROWS * LP / 4u>;
 var<workgroup> row_ref: array<f32, ROWS>;
 var<workgroup> row_sum: array<f32, ROWS>;
 var<workgroup> row_scale: array<f32, ROWS>;
 var<workgroup> moved: array<u32, 4>; // per subgroup: a reference moved in this chunk
 
 // A unit of the operands widened to f32, and four values rounded to f16 as a unit.
-fn widen(u: U4) -> vec4<f32> {
+fn widen(u: Unit) -> vec4<f32> {
     return vec4<f32>(unpack2x16float(u.x), unpack2x16float(u.y));
 }
 
-fn narrow(x: vec4<f32>) -> U4 {
-    return U4(pack2x16float(x.xy), pack2x16float(x.zw));
+fn narrow(x: vec4<f32>) -> Unit {
+    return Unit(pack2x16float(x.xy), pack2x16float(x.zw));
 }
 
 // A unit as the tiles hold it (gemm_coop.wgsl): its bits.
-fn tiled(u: U4) -> vec2<f32> {
-    return bitcast<vec2<f32>>(u);
+fn tiled(u: Unit) -> Words {
+    return bitcast<Words>(u);
 }
 
 // Units t + WG·u of the chunk at key j0 (K and V rows [KC][SLOTS]) into registers: keys past
 // the end clamped (their scores are masked), slots past the head clamped too (zeroed when staged,
 // so that nothing waits for the loads before then).
 fn fetch_kv(
-    rk: ptr<function, array<U4, PU>>,
-    rv: ptr<function, array<U4, PU>>,
+    rk: ptr<function, array<Unit, PU>>,
+    rv: ptr<function, array<Unit, PU>>,
     j0: u32,
     t: u32,
     head: u32,
@@ -124,8 +124,8 @@ fn main(
     let mine = sid * FM;
     let part = lane % LPR;
     // The first chunk's keys and values are loaded while Q is staged.
-    var rk: array<U4, PU>;
-    var rv: array<U4, PU>;
+    var rk: array<Unit, PU>;
+    var rv: array<Unit, PU>;
     fetch_kv(&rk, &rv, 0u, t, head, batch);
     // Scaled Q rows through `kv` (rows past the end clamped, slots past the head zero).
     for (var i = t; i < ROWS * SLOTS; i += WG) {
@@ -133,7 +133,7 @@ fn main(
         let s = i % SLOTS;
         let token = min(row0 + r, p.nq - 1u);
         let at = (p.q_off + batch * p.q_batch + token * p.q_ld + head * p.d) / 4u + min(s, slots - 1u);
-        kv[r * (LD / 4u) + s] = tiled(select(U4(), narrow(p.scale * widen(q[at])), s < slots));
+        kv[r * (LD / 4u) + s] = tiled(select(Unit(), narrow(p.scale * widen(q[at])), s < slots));
     }
     if t < ROWS {
         row_ref[t] = NEG;
@@ -154,8 +154,8 @@ fn main(
         {
             let i = t + WG * U;
             let inside = i % SLOTS < slots;
-            kv[(i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(select(U4(), rk[U], inside));
-            kv[(KC + i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(select(U4(), rv[U], inside));
+            kv[(i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(select(Unit(), rk[U], inside));
+            kv[(KC + i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(select(Unit(), rv[U], inside));
         }
         // #end
         workgroupBarrier();

@@ -2,15 +2,16 @@
 // accumulation. A workgroup is 4 subgroups of SG lanes in a 2×2 grid, each computing WT×WT
 // fragments of FM×FN (A fragments FM×FK, B fragments FK×FN: the prelude's FA, FB, FC types), so
 // a workgroup's tile is BM×BN with BM = 2·WT·FM and BN = 2·WT·FN, over K-steps of BK = KS·FK.
-// Operands are vec4-aligned (the runtime sends other shapes to the tiled kernel): each
-// invocation stages units of four f16 along K (A, and B stored N×K) or along N (B stored K×N),
-// one load each, zero past M, N and K. The next step's units are loaded into registers while
+// Operands are aligned to units of UW = 4 or 8 values (the runtime takes 8 where sizes and
+// strides allow, and sends shapes off the vec4 grid to the tiled kernel): each invocation
+// stages units of UW f16 along K (A, and B stored N×K) or along N (B stored K×N), one 8- or
+// 16-byte load each, zero past M, N and K. The next step's units are loaded into registers while
 // the matrix units work on this one, so the loads' latency hides behind the products. For that
 // nothing may use a unit before the next step stores it: the loads read in bounds (clamped,
 // unconditionally) and the masks wait for the stores. Masked as they arrived, or fetched under
 // a branch, they made AMD's compiler wait for every load before the step's first product
-// (tools/load_cover.py). Units move as their bits, U4 = vec2<u32>, and the tiles hold them as
-// vec2<f32> words (the prelude, compile.rs, says why). Row strides are multiples of 8 halves
+// (tools/load_cover.py). Units move as their bits (the prelude's Unit), and the tiles hold them
+// as 32-bit float words (its Words; compile.rs says why). Row strides are multiples of 8 halves
 // (16 bytes, what cooperative loads need), padded off a power of two against bank conflicts.
 // Each fragment leaves through a small per-subgroup scratch, four columns at a time, so the
 // epilogue and the edge masks are those of the vec4 subgroup kernel (gemm_store4.wgsl).
@@ -24,15 +25,15 @@ const LDB: u32 = BN + 8u;
 const LDS: u32 = FN + 4u; // a subgroup's f32 scratch [FM][LDS]
 // Units along a tile row of K, A's and B's units per invocation (the unroll counts below), and
 // the tile rows between an invocation's units (WG is a multiple of UK in every variant).
-const UK: u32 = BK / 4u;
-const PA: u32 = BM * BK / (4u * WG); // WT·FM·FK·KS/SG/8
-const PB: u32 = BN * BK / (4u * WG); // WT·FN·FK·KS/SG/8
+const UK: u32 = BK / UW;
+const PA: u32 = BM * BK / (UW * WG); // WT·FM·FK·KS/SG/2/UW
+const PB: u32 = BN * BK / (UW * WG); // WT·FN·FK·KS/SG/2/UW
 const STEP: u32 = WG / UK;
 // B stored K×N: units along a tile row of N.
-const UN: u32 = BN / 4u;
+const UN: u32 = BN / UW;
 
-var<workgroup> a_tile: array<vec2<f32>, BM * LDA / 4u>;
-var<workgroup> b_tile: array<vec2<f32>, max(BN * LDA, BK * LDB) / 4u>;
+var<workgroup> a_tile: array<Words, BM * LDA / UW>;
+var<workgroup> b_tile: array<Words, max(BN * LDA, BK * LDB) / UW>;
 var<workgroup> scratch: array<vec4<f32>, FM * LDS>; // 4 subgroups × [FM][LDS] f32
 
 // This invocation's units of the K-step at k0, and whether each is inside the product: A rows
@@ -40,8 +41,8 @@ var<workgroup> scratch: array<vec4<f32>, FM * LDS>; // 4 subgroups × [FM][LDS] 
 // step (BT = 0).
 fn fetch(
     rows: ptr<function, array<RowCtx, PA>>,
-    ra: ptr<function, array<U4, PA>>,
-    rb: ptr<function, array<U4, PB>>,
+    ra: ptr<function, array<Unit, PA>>,
+    rb: ptr<function, array<Unit, PB>>,
     ia: ptr<function, array<bool, PA>>,
     ib: ptr<function, array<bool, PB>>,
     k0: u32,
@@ -51,20 +52,20 @@ fn fetch(
 ) {
     let tu = t % UK;
     let tr = t / UK;
-    let ka = k0 + 4u * tu;
+    let ka = k0 + UW * tu;
     let kc = k_ctx(ka);
-    // #unroll I WT*FM*FK*KS/SG/8
+    // #unroll I WT*FM*FK*KS/SG/2/UW
     (*ra)[I] = a_unit((*rows)[I], kc);
     (*ia)[I] = (ka < p.g.k) & a_unit_inside((*rows)[I], kc);
     // #end
-    // #unroll I WT*FN*FK*KS/SG/8
+    // #unroll I WT*FN*FK*KS/SG/2/UW
     {
         var k = ka;
         var n = col0 + tr + STEP * I;
         if BT == 0u {
             let at = t + WG * I;
             k = k0 + at / UN;
-            n = col0 + 4u * (at % UN);
+            n = col0 + UW * (at % UN);
         }
         (*rb)[I] = b_unit(boff, k, n);
         (*ib)[I] = b_unit_inside(k, n);
@@ -73,8 +74,8 @@ fn fetch(
 }
 
 // A unit as a tile holds it: its bits, zero outside the product.
-fn staged(unit: U4, inside: bool) -> vec2<f32> {
-    return bitcast<vec2<f32>>(select(U4(), unit, inside));
+fn staged(unit: Unit, inside: bool) -> Words {
+    return bitcast<Words>(select(Unit(), unit, inside));
 }
 
 @compute @workgroup_size(WG)
@@ -94,25 +95,25 @@ fn main(
     let tu = t % UK;
     let tr = t / UK;
     var rows: array<RowCtx, PA>;
-    // #unroll I WT*FM*FK*KS/SG/8
+    // #unroll I WT*FM*FK*KS/SG/2/UW
     rows[I] = row_ctx(batch, row0 + tr + STEP * I);
     // #end
-    var ra: array<U4, PA>;
-    var rb: array<U4, PB>;
+    var ra: array<Unit, PA>;
+    var rb: array<Unit, PB>;
     var ia: array<bool, PA>;
     var ib: array<bool, PB>;
     fetch(&rows, &ra, &rb, &ia, &ib, 0u, t, col0, boff);
     var acc: array<FC, WT * WT>;
     for (var k0 = 0u; k0 < p.g.k; k0 += BK) {
-        // #unroll I WT*FM*FK*KS/SG/8
-        a_tile[(tr + STEP * I) * (LDA / 4u) + tu] = staged(ra[I], ia[I]);
+        // #unroll I WT*FM*FK*KS/SG/2/UW
+        a_tile[(tr + STEP * I) * (LDA / UW) + tu] = staged(ra[I], ia[I]);
         // #end
-        // #unroll I WT*FN*FK*KS/SG/8
+        // #unroll I WT*FN*FK*KS/SG/2/UW
         if BT == 1u {
-            b_tile[(tr + STEP * I) * (LDA / 4u) + tu] = staged(rb[I], ib[I]);
+            b_tile[(tr + STEP * I) * (LDA / UW) + tu] = staged(rb[I], ib[I]);
         } else {
             let at = t + WG * I;
-            b_tile[(at / UN) * (LDB / 4u) + at % UN] = staged(rb[I], ib[I]);
+            b_tile[(at / UN) * (LDB / UW) + at % UN] = staged(rb[I], ib[I]);
         }
         // #end
         workgroupBarrier();
@@ -123,14 +124,14 @@ fn main(
             // #unroll I WT
             {
                 // Offsets bound to a `let`: naga 30's SPIR-V output panics on inline ones here.
-                let at = ((sm + I * FM) * LDA + kk) / 4u;
-                fa[I] = coopLoadT<FA>(&a_tile[at], LDA / 4u);
+                let at = ((sm + I * FM) * LDA + kk) / UW;
+                fa[I] = coopLoadT<FA>(&a_tile[at], LDA / UW);
                 if BT == 1u {
-                    let bt = ((sn + I * FN) * LDA + kk) / 4u;
-                    fb[I] = coopLoad<FB>(&b_tile[bt], LDA / 4u);
+                    let bt = ((sn + I * FN) * LDA + kk) / UW;
+                    fb[I] = coopLoad<FB>(&b_tile[bt], LDA / UW);
                 } else {
-                    let bt = (kk * LDB + sn + I * FN) / 4u;
-                    fb[I] = coopLoadT<FB>(&b_tile[bt], LDB / 4u);
+                    let bt = (kk * LDB + sn + I * FN) / UW;
+                    fb[I] = coopLoadT<FB>(&b_tile[bt], LDB / UW);
                 }
             }
             // #end

@@ -27,8 +27,8 @@ var<workgroup> b_tile: array<vec4<f32>, BK * LB>;
 // this step's multiply-adds (gemm_coop.wgsl).
 fn fetch(
     rows: ptr<function, array<RowCtx, RH>>,
-    ra: ptr<function, array<U4, RH>>,
-    rb: ptr<function, array<U4, 2>>,
+    ra: ptr<function, array<Unit, RH>>,
+    rb: ptr<function, array<Unit, 2>>,
     ia: ptr<function, array<bool, RH>>,
     ib: ptr<function, array<bool, 2>>,
     k0: u32,
@@ -57,7 +57,7 @@ fn fetch(
 }
 
 // A unit as the tiles hold it: widened to f32, zero outside the product.
-fn staged(unit: U4, inside: bool) -> vec4<f32> {
+fn staged(unit: Unit, inside: bool) -> vec4<f32> {
     return select(vec4<f32>(0.0), vec4<f32>(unit), inside);
 }
 
@@ -80,8 +80,8 @@ fn main(
     // #unroll I RH
     rows[I] = row_ctx(batch, row0 + t / 4u + 64u * I);
     // #end
-    var ra: array<U4, RH>;
-    var rb: array<U4, 2>;
+    var ra: array<Unit, RH>;
+    var rb: array<Unit, 2>;
     var ia: array<bool, RH>;
     var ib: array<bool, 2>;
     fetch(&rows, &ra, &rb, &ia, &ib, 0u, t, col0, boff);

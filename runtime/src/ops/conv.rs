@@ -161,7 +161,8 @@ fn conv2d_whole(
     ];
     // Without a bias the kernel never reads binding 2; the output stands in for it.
     let bias = bias.unwrap_or(out);
-    let shape = GemmShape { m, n, k, batch: 1, vec4: cin % 4 == 0 && cout % 4 == 0 };
+    let shape =
+        GemmShape { m, n, k, batch: 1, vec4: cin % 4 == 0 && cout % 4 == 0, vec8: cin % 8 == 0 && cout % 4 == 0 };
     let kernels = GemmKernels { subgroup: "conv_sg", tiled_v4: "conv_tiled_v4", tiled: None, cooperative: "conv_coop" };
     dispatch_gemm_family(rec, (kernels, dtype, &[]), &shape, &[x, w, bias], out, &push)
 }

@@ -79,6 +79,12 @@ impl Matmul {
             .all(|x| x % 4 == 0)
     }
 
+    /// Whether the matrix-unit kernels can read A and B in units of 8 (C is stored in fours).
+    fn fits_vec8(&self) -> bool {
+        let along_n = if self.b_transposed { 0 } else { self.n };
+        self.fits_vec4() && [self.k, self.lda, self.ldb, self.a_batch, self.b_batch, along_n].iter().all(|x| x % 8 == 0)
+    }
+
     /// Highest element index + 1 an operand is read or written at.
     fn extent(batch: usize, batch_stride: usize, rows: usize, ld: usize, cols: usize) -> usize {
         (batch - 1) * batch_stride + (rows - 1) * ld + cols
@@ -197,7 +203,7 @@ fn matmul_whole(
     ];
     // Without a bias the kernel never reads binding 2; C stands in for it.
     let bias = bias.unwrap_or(c);
-    let shape = GemmShape { m: s.m, n: s.n, k: s.k, batch: s.batch, vec4: s.fits_vec4() };
+    let shape = GemmShape { m: s.m, n: s.n, k: s.k, batch: s.batch, vec4: s.fits_vec4(), vec8: s.fits_vec8() };
     let kernels = (GemmKernels::MATMUL, dtype, &[("BT", s.b_transposed as u32), ("GE", s.geglu as u32)][..]);
     dispatch_gemm_family(rec, kernels, &shape, &[a, b, bias], c, &common)
 }
@@ -211,6 +217,8 @@ pub(super) struct GemmShape {
     /// Whether the operands are vec4-aligned (sizes and strides), which the subgroup and
     /// cooperative kernels need.
     pub vec4: bool,
+    /// Whether the cooperative kernels can read A and B in units of 8 (16-byte loads).
+    pub vec8: bool,
 }
 
 /// The kernels of one GEMM-shaped op, one per family.
@@ -233,7 +241,7 @@ impl GemmKernels {
 }
 
 /// Records a GEMM-shaped kernel: the cooperative variant where the context uses the matrix units,
-/// the storage is f16 and the shape fits vec4 loads; the subgroup variant where the device prefers it and the shape
+/// the storage is f16 and the shape fits vec4 loads (in units of 8 where it fits those); the subgroup variant where the device prefers it and the shape
 /// fits, with more rows per workgroup for taller products; else the tiled one, in vec4 units
 /// where the shape fits them and GEGLU is not fused. `params` are the variant parameters all
 /// share; bindings are `reads` then `out`.
@@ -252,8 +260,9 @@ pub(super) fn dispatch_gemm_family(
         ctx.info().cooperative_variant().filter(|_| family == GemmFamily::Cooperative && dtype == Dtype::F16 && s.vec4);
     if let Some(fragment) = cooperative {
         let wt = cooperative_fragments_per_side(&ctx, s, &fragment, names.cooperative, params);
+        let unit = if s.vec8 { 8 } else { 4 };
         let want: Vec<(&str, u32)> =
-            fragment.params().into_iter().chain([("WT", wt)]).chain(params.iter().copied()).collect();
+            fragment.params().into_iter().chain([("WT", wt), ("UW", unit)]).chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.cooperative, dtype, &want, 4)?;
         let (rows, columns) = ((2 * wt * fragment.m) as usize, (2 * wt * fragment.n) as usize);
         return rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(columns)), u(s.m.div_ceil(rows)), u(s.batch)]);
@@ -419,11 +428,23 @@ mod tests {
 
     #[test]
     fn the_tiled_kernel_takes_its_tall_tiles_where_they_fill_and_fit() {
-        let shape = |m, n| GemmShape { m, n, k: 640, batch: 1, vec4: true };
+        let shape = |m, n| GemmShape { m, n, k: 640, batch: 1, vec4: true, vec8: true };
         let mut gpu = device(0, DeviceKind::Discrete, true);
         assert_eq!(tiled_row_halves(&gpu, &shape(2048, 1024)), 2, "128 tiles of 128×128");
         assert_eq!(tiled_row_halves(&gpu, &shape(2048, 896)), 1, "112 tiles");
         gpu.max_shared_memory = 16384;
         assert_eq!(tiled_row_halves(&gpu, &shape(8192, 1280)), 1, "16 KiB of workgroup memory");
+    }
+
+    #[test]
+    fn the_matrix_units_read_units_of_eight_where_a_and_b_allow() {
+        assert!(Matmul::dense(64, 64, 64, false).fits_vec8());
+        assert!(Matmul::dense(64, 36, 64, true).fits_vec8(), "B N×K: N only needs the vec4 grid");
+        assert!(!Matmul::dense(64, 36, 64, false).fits_vec8(), "B K×N is read along N");
+        assert!(!Matmul::dense(64, 64, 36, true).fits_vec8(), "K");
+        let strided = Matmul { lda: 68, a_batch: 64 * 68, ..Matmul::dense(64, 64, 64, true) };
+        assert!(strided.fits_vec4() && !strided.fits_vec8(), "A's row stride");
+        let c_in_fours = Matmul { ldc: 68, c_batch: 64 * 68, ..Matmul::dense(64, 64, 64, true) };
+        assert!(c_in_fours.fits_vec8(), "C is stored in units of 4");
     }
 }

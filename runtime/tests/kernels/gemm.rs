@@ -116,9 +116,10 @@ fn large_products_take_the_large_tiles() {
     // per subgroup where such a variant is built and the sums fit (CPU devices, 64-lane GPUs;
     // 32-lane GPUs and Intel's shapes keep 2×2); at least 128 of 128×128, the tiled kernel's
     // 128-row tiles (the first product; the second takes 64 rows); M, N and K off every tile's
-    // multiple.
+    // multiple. The matrix units read K = 36 in units of 4, the others in units of 8.
     both(Matmul::dense(1030, 2052, 24, true), true, 10);
     both(Matmul::dense(520, 1000, 40, false), false, 11);
+    both(Matmul::dense(1030, 2052, 36, true), false, 16);
 }
 
 #[test]
