@@ -37,7 +37,7 @@ var<workgroup> b_tile: array<Words, max(BN * LDA, BK * LDB) / UW>;
 var<workgroup> scratch: array<vec4<f32>, FM * LDS>; // 4 subgroups × [FM][LDS] f32
 
 // This invocation's units of the K-step at k0, and whether each is inside the product: A rows
-// tr + STEP·i at k0 + 4·tu, and B's rows alike (BT = 1) or its units t + WG·i of the [BK][BN]
+// tr + STEP·i at k0 + UW·tu, and B's rows alike (BT = 1) or its units t + WG·i of the [BK][BN]
 // step (BT = 0).
 fn fetch(
     rows: ptr<function, array<RowCtx, PA>>,
