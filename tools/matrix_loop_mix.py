@@ -41,23 +41,66 @@ def aco_class(op):
     return "other"
 
 
+def passes(blocks, succs, loops):
+    """For each loop (head, tail), its instructions and those of its shortest pass."""
+    out = []
+    for head, tail in loops:
+        # The loop's blocks: on a path from its head to its tail (not an exit placed inside).
+        ahead, behind = {head}, {tail}
+        for b in sorted(blocks):
+            if b in ahead:
+                ahead.update(s for s in succs.get(b, []) if b < s <= tail)
+        for b in sorted(blocks, reverse=True):
+            if any(s in behind for s in succs.get(b, []) if b < s <= tail):
+                behind.add(b)
+        body = [op for b in sorted(ahead & behind) for op in blocks[b]]
+        if not any(o.startswith(("v_wmma", "hmma")) for o in body):
+            continue
+        best = {head: [blocks[head]]}
+        for b in sorted(blocks):
+            if b < head or b > tail or b not in best:
+                continue
+            for s in succs.get(b, []):
+                if b < s <= tail:
+                    path = best[b] + [blocks[s]]
+                    if s not in best or sum(map(len, path)) < sum(map(len, best[s])):
+                        best[s] = path
+        one = [op for blk in best.get(tail, [body]) for op in blk]
+        out.append((body, one))
+    return out
+
+
 def aco_shaders(text):
-    """(instructions, loops) of each ACO disassembly that holds v_wmma."""
+    """(instructions, loops) of each ACO disassembly that holds v_wmma: each loop as its whole
+    body and its shortest pass."""
     for part in text.split("\ndisasm:\n")[1:]:
         lines = [l.split(";")[0].strip() for l in part.split("\n\n")[0].splitlines()]
         lines = [l for l in lines if l]
         if not any(l.startswith("v_wmma") for l in lines):
             continue
-        labels = {l[:-1]: i for i, l in enumerate(lines) if re.fullmatch(r"BB\d+:", l)}
-        loops = []
-        for i, l in enumerate(lines):
-            m = re.search(r"s_c?branch\w* (BB\d+)", l)
-            if m and m.group(1) in labels and labels[m.group(1)] < i:
-                body = [x.split()[0] for x in lines[labels[m.group(1)] : i + 1] if not x.endswith(":")]
-                if any(op.startswith("v_wmma") for op in body):
-                    loops.append(body)
-        ops = [l.split()[0] for l in lines if not l.endswith(":")]
-        yield ops, loops, aco_class
+        # Basic blocks in layout order: a label starts one, a branch ends one.
+        blocks, names = {0: []}, {}
+        for l in lines:
+            if re.fullmatch(r"BB\d+:", l):
+                if blocks[len(blocks) - 1]:
+                    blocks[len(blocks)] = []
+                names[l[:-1]] = len(blocks) - 1
+                continue
+            blocks[len(blocks) - 1].append(l)
+            if l.startswith(("s_branch", "s_cbranch", "s_endpgm")):
+                blocks[len(blocks)] = []
+        succs, loops = {}, []
+        for b, body in blocks.items():
+            last = body[-1] if body else ""
+            target = re.search(r"s_c?branch\w* (BB\d+)", last)
+            succs[b] = [] if last.startswith(("s_endpgm", "s_branch")) else [b + 1]
+            if target and target.group(1) in names:
+                succs[b].append(names[target.group(1)])
+                if names[target.group(1)] <= b:
+                    loops.append((names[target.group(1)], b))
+        blocks = {b: [l.split()[0] for l in body] for b, body in blocks.items()}
+        ops = [op for b in sorted(blocks) for op in blocks[b]]
+        yield ops, passes(blocks, succs, loops), aco_class
 
 
 def nak_class(op):
@@ -80,7 +123,8 @@ def nak_class(op):
 
 
 def nak_shaders(text):
-    """(instructions, loops) of each final NAK shader (after calc_instr_deps) that holds hmma."""
+    """(instructions, loops) of each final NAK shader (after calc_instr_deps) that holds hmma:
+    each loop as its whole body and its shortest pass."""
     for part in text.split("NAK IR after calc_instr_deps:")[1:]:
         blocks, preds, cur = {}, {}, None
         for l in part.split("\nStage:")[0].splitlines():
@@ -100,18 +144,12 @@ def nak_shaders(text):
         ops = [op for b in sorted(blocks) for op in blocks[b]]
         if not any(op.startswith("hmma") for op in ops):
             continue
-        loops = []
-        for head, ps in preds.items():
-            for tail in (p for p in ps if p >= head):
-                # Blocks before the first matrix block that end in `exit` are the epilogue,
-                # which NAK may place inside the loop's range.
-                span = [b for b in range(head, tail + 1) if b in blocks]
-                first = next(b for b in span if any(o.startswith("hmma") for o in blocks[b]))
-                start = max([b + 1 for b in span if b < first and "exit" in blocks[b]], default=head)
-                body = [o for b in span if b >= start for o in blocks[b]]
-                if any(o.startswith("hmma") for o in body):
-                    loops.append(body)
-        yield ops, loops, nak_class
+        succs = {}
+        for b, ps in preds.items():
+            for p in ps:
+                succs.setdefault(p, []).append(b)
+        loops = [(head, tail) for head, ps in preds.items() for tail in ps if tail >= head]
+        yield ops, passes(blocks, succs, loops), nak_class
 
 
 def main():
@@ -126,10 +164,10 @@ def main():
     for n, (ops, loops, classify) in enumerate(shaders):
         label = labels[n] if len(labels) == len(shaders) else f"shader {n}"
         print(f"{label}: {len(ops)} instructions")
-        for body in sorted(loops, key=len):
-            mix = collections.Counter(classify(op) for op in body)
+        for body, one in sorted(loops, key=lambda loop: len(loop[0])):
+            mix = collections.Counter(classify(op) for op in one)
             each = ", ".join(f"{k} {v}" for k, v in mix.most_common())
-            print(f"  loop of {len(body)}: {each}")
+            print(f"  loop of {len(body)}, one pass {len(one)}: {each}")
 
 
 if __name__ == "__main__":

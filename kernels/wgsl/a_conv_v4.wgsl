@@ -2,8 +2,6 @@
 // along Cin (Cin % UW = 0).
 @group(0) @binding(0) var<storage, read> a: array<Unit>;
 
-const A_VEC: u32 = UW;
-
 // The unit a tap reads, as stored (see a_matrix_v4.wgsl): in bounds, whether or not the tap
 // falls in the padding, which a_unit_inside says.
 fn a_unit(r: RowCtx, k: KCtx) -> Unit {

@@ -16,3 +16,23 @@ fn row_ctx(batch: u32, row: u32) -> RowCtx {
 fn k_ctx(k: u32) -> KCtx {
     return min(k, p.g.k - A_VEC);
 }
+
+// Walking K a step at a time (gemm_coop.wgsl): the column itself, clamped where it is read.
+alias KWalk = u32;
+alias KStep = u32;
+
+fn k_walk(k: u32) -> KWalk {
+    return k;
+}
+
+fn k_step(s: u32) -> KStep {
+    return s;
+}
+
+fn k_next(k: KWalk, s: KStep) -> KWalk {
+    return k + s;
+}
+
+fn k_at(k: KWalk) -> KCtx {
+    return k_ctx(k);
+}

@@ -56,9 +56,10 @@ fn tiled(u: Unit) -> Words {
     return bitcast<Words>(u);
 }
 
-// Units t + WG·u of the chunk at key j0 (K and V rows [KC][SLOTS]) into registers: keys past
-// the end clamped (their scores are masked), slots past the head clamped too (zeroed when staged,
-// so that nothing waits for the loads before then).
+// Units t + WG·u of the chunk at key j0 (K and V rows [KC][SLOTS]) into registers, staged as
+// loaded: keys past the end clamped (their scores are masked, so their weights are zero), slots
+// past the head clamped too (in K they meet Q's zeros; in V they make output columns that are
+// never stored).
 fn fetch_kv(
     rk: ptr<function, array<Unit, PU>>,
     rv: ptr<function, array<Unit, PU>>,
@@ -98,11 +99,12 @@ fn joined_sum(x: f32) -> f32 {
     return m;
 }
 
-// Keys j..j+3 of row `row` (of the workgroup) in this chunk: their scores, or NEG where masked.
-fn scores(row: u32, query: u32, j0: u32, j: u32) -> vec4<f32> {
+// Keys j..j+3 of row `row` (of the workgroup) in this chunk: their scores, or NEG where masked
+// (past the keys' end, or after the query under a causal mask) if the chunk is `masked`.
+fn scores(row: u32, query: u32, j0: u32, j: u32, masked: bool) -> vec4<f32> {
     let key = vec4<u32>(j0 + j) + vec4<u32>(0u, 1u, 2u, 3u);
     let live = key < vec4<u32>(p.nk) & (vec4<bool>(p.causal == 0u) | key <= vec4<u32>(query));
-    return select(vec4<f32>(NEG), scratch[(row * LS + j) / 4u], live);
+    return select(vec4<f32>(NEG), scratch[(row * LS + j) / 4u], !vec4<bool>(masked) | live);
 }
 
 fn max4(x: vec4<f32>) -> f32 {
@@ -153,9 +155,8 @@ fn main(
         // #unroll U KF*FN*DH/SG/16
         {
             let i = t + WG * U;
-            let inside = i % SLOTS < slots;
-            kv[(i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(select(Unit(), rk[U], inside));
-            kv[(KC + i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(select(Unit(), rv[U], inside));
+            kv[(i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(rk[U]);
+            kv[(KC + i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(rv[U]);
         }
         // #end
         workgroupBarrier();
@@ -177,10 +178,18 @@ fn main(
         }
         // #end
         workgroupBarrier();
-        // The softmax of this subgroup's rows, RPP rows at a time.
+        // The softmax of this subgroup's rows, RPP rows at a time. Only a chunk past the keys'
+        // end or under a causal mask masks scores: each select is one more instruction a step.
+        let masked = (j0 + KC > p.nk) | (p.causal != 0u);
         var any_moved = false;
         for (var r0 = 0u; r0 < FM; r0 += RPP) {
-            let moved_here = chunk_softmax(mine + r0 + lane / LPR, row0, j0, part);
+            let row = mine + r0 + lane / LPR;
+            var moved_here: bool;
+            if masked {
+                moved_here = chunk_softmax(row, row0, j0, part, true);
+            } else {
+                moved_here = chunk_softmax(row, row0, j0, part, false);
+            }
             any_moved = any_moved | moved_here;
         }
         let sub_moved = subgroupAny(any_moved);
@@ -233,13 +242,13 @@ fn main(
 // The online softmax of row `row` over this chunk, this lane taking keys part·PK .. part·PK + PK
 // (joined with the row's other lanes by shuffles): writes the row's P, sum, reference and
 // rescale factor; returns whether its reference moved (and the accumulators need rescaling).
-fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32) -> bool {
+fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32, masked: bool) -> bool {
     let query = row0 + row;
     let first = part * PK;
     var sv: array<vec4<f32>, PK / 4u>;
     var top = NEG;
     // #unroll I KF*FN/LPR/4
-    sv[I] = LOG2E * scores(row, query, j0, first + 4u * I);
+    sv[I] = LOG2E * scores(row, query, j0, first + 4u * I, masked);
     top = max(top, max4(sv[I]));
     // #end
     top = joined_max(top);

@@ -10,11 +10,15 @@
 // nothing may use a unit before the next step stores it: the loads read in bounds (clamped,
 // unconditionally) and the masks wait for the stores. Masked as they arrived, or fetched under
 // a branch, they made AMD's compiler wait for every load before the step's first product
-// (tools/load_cover.py). Units move as their bits (the prelude's Unit), and the tiles hold them
-// as 32-bit float words (its Words; compile.rs says why). Row strides are multiples of 8 halves
-// (16 bytes, what cooperative loads need), padded off a power of two against bank conflicts.
-// Each fragment leaves through a small per-subgroup scratch, four columns at a time, so the
-// epilogue and the edge masks are those of the vec4 subgroup kernel (gemm_store4.wgsl).
+// (tools/load_cover.py). The loop is short of instruction slots on GPUs whose matrix units are
+// fast (an H200 ran the GEMM 2–2.6× faster with the loads and their arithmetic left out), so a
+// step does little besides: the columns walk K by additions (a convolution's taps with no
+// division, conv_taps.wgsl) and only a last, partial K-step masks the columns past K. Units
+// move as their bits (the prelude's Unit), and the tiles hold them as 32-bit float words (its
+// Words; compile.rs says why). Row strides are multiples of 8 halves (16 bytes, what cooperative
+// loads need), padded off a power of two against bank conflicts. Each fragment leaves through a
+// small per-subgroup scratch, four columns at a time, so the epilogue and the edge masks are
+// those of the vec4 subgroup kernel (gemm_store4.wgsl).
 const BM: u32 = 2u * WT * FM;
 const BN: u32 = 2u * WT * FN;
 const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): 4 values, then their 4 gates
@@ -36,39 +40,38 @@ var<workgroup> a_tile: array<Words, BM * LDA / UW>;
 var<workgroup> b_tile: array<Words, max(BN * LDA, BK * LDB) / UW>;
 var<workgroup> scratch: array<vec4<f32>, FM * LDS>; // 4 subgroups × [FM][LDS] f32
 
-// This invocation's units of the K-step at k0, and whether each is inside the product: A rows
-// tr + STEP·i at k0 + UW·tu, and B's rows alike (BT = 1) or its units t + WG·i of the [BK][BN]
-// step (BT = 0).
+// Where this invocation's B unit i of the K-step at k0 lies in the product, (k, n): B's rows
+// alike A's (BT = 1), or units t + WG·i of the [BK][BN] step (BT = 0).
+fn b_at(i: u32, k0: u32, t: u32, col0: u32) -> vec2<u32> {
+    if BT == 0u {
+        let at = t + WG * i;
+        return vec2<u32>(k0 + at / UN, col0 + UW * (at % UN));
+    }
+    return vec2<u32>(k0 + UW * (t % UK), col0 + t / UK + STEP * i);
+}
+
+// This invocation's units of the K-step whose columns kc walks (A rows tr + STEP·i at column
+// k0 + UW·tu, B's as b_at says), and whether each A unit is inside the operand (a convolution's
+// padding is not). Columns past K are masked where the units are staged.
 fn fetch(
     rows: ptr<function, array<RowCtx, PA>>,
     ra: ptr<function, array<Unit, PA>>,
     rb: ptr<function, array<Unit, PB>>,
     ia: ptr<function, array<bool, PA>>,
-    ib: ptr<function, array<bool, PB>>,
+    kc: KCtx,
     k0: u32,
     t: u32,
     col0: u32,
     boff: u32,
 ) {
-    let tu = t % UK;
-    let tr = t / UK;
-    let ka = k0 + UW * tu;
-    let kc = k_ctx(ka);
     // #unroll I WT*FM*FK*KS/SG/2/UW
     (*ra)[I] = a_unit((*rows)[I], kc);
-    (*ia)[I] = (ka < p.g.k) & a_unit_inside((*rows)[I], kc);
+    (*ia)[I] = a_unit_inside((*rows)[I], kc);
     // #end
     // #unroll I WT*FN*FK*KS/SG/2/UW
     {
-        var k = ka;
-        var n = col0 + tr + STEP * I;
-        if BT == 0u {
-            let at = t + WG * I;
-            k = k0 + at / UN;
-            n = col0 + UW * (at % UN);
-        }
-        (*rb)[I] = b_unit(boff, k, n);
-        (*ib)[I] = b_unit_inside(k, n);
+        let kn = b_at(I, k0, t, col0);
+        (*rb)[I] = b_unit(boff, kn.x, kn.y);
     }
     // #end
 }
@@ -76,6 +79,39 @@ fn fetch(
 // A unit as a tile holds it: its bits, zero outside the product.
 fn staged(unit: Unit, inside: bool) -> Words {
     return bitcast<Words>(select(Unit(), unit, inside));
+}
+
+// Stores this invocation's units of the K-step at k0 into the tiles. Only the last step of a K
+// that is no multiple of BK (`tail`) masks the columns past K; the others store B as loaded and
+// A with its own mask only (a convolution's padding; a matrix has none), since each select is
+// one more instruction per word of every unit in every step.
+fn stage(
+    ra: ptr<function, array<Unit, PA>>,
+    rb: ptr<function, array<Unit, PB>>,
+    ia: ptr<function, array<bool, PA>>,
+    k0: u32,
+    t: u32,
+    col0: u32,
+    tail: bool,
+) {
+    let tu = t % UK;
+    let tr = t / UK;
+    let in_k = !tail | (k0 + UW * tu < p.g.k);
+    // #unroll I WT*FM*FK*KS/SG/2/UW
+    a_tile[(tr + STEP * I) * (LDA / UW) + tu] = staged((*ra)[I], (*ia)[I] & in_k);
+    // #end
+    // #unroll I WT*FN*FK*KS/SG/2/UW
+    {
+        let kn = b_at(I, k0, t, col0);
+        let unit = staged((*rb)[I], !tail | b_unit_inside(kn.x, kn.y));
+        if BT == 1u {
+            b_tile[(tr + STEP * I) * (LDA / UW) + tu] = unit;
+        } else {
+            let at = t + WG * I;
+            b_tile[(at / UN) * (LDB / UW) + at % UN] = unit;
+        }
+    }
+    // #end
 }
 
 @compute @workgroup_size(WG)
@@ -101,23 +137,19 @@ fn main(
     var ra: array<Unit, PA>;
     var rb: array<Unit, PB>;
     var ia: array<bool, PA>;
-    var ib: array<bool, PB>;
-    fetch(&rows, &ra, &rb, &ia, &ib, 0u, t, col0, boff);
+    let step = k_step(BK);
+    var walk = k_walk(UW * tu);
+    fetch(&rows, &ra, &rb, &ia, k_at(walk), 0u, t, col0, boff);
     var acc: array<FC, WT * WT>;
     for (var k0 = 0u; k0 < p.g.k; k0 += BK) {
-        // #unroll I WT*FM*FK*KS/SG/2/UW
-        a_tile[(tr + STEP * I) * (LDA / UW) + tu] = staged(ra[I], ia[I]);
-        // #end
-        // #unroll I WT*FN*FK*KS/SG/2/UW
-        if BT == 1u {
-            b_tile[(tr + STEP * I) * (LDA / UW) + tu] = staged(rb[I], ib[I]);
+        if k0 + BK <= p.g.k {
+            stage(&ra, &rb, &ia, k0, t, col0, false);
         } else {
-            let at = t + WG * I;
-            b_tile[(at / UN) * (LDB / UW) + at % UN] = staged(rb[I], ib[I]);
+            stage(&ra, &rb, &ia, k0, t, col0, true);
         }
-        // #end
         workgroupBarrier();
-        fetch(&rows, &ra, &rb, &ia, &ib, k0 + BK, t, col0, boff);
+        walk = k_next(walk, step);
+        fetch(&rows, &ra, &rb, &ia, k_at(walk), k0 + BK, t, col0, boff);
         for (var kk = 0u; kk < BK; kk += FK) {
             var fa: array<FA, WT>;
             var fb: array<FB, WT>;
