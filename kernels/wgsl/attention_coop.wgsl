@@ -104,7 +104,7 @@ fn joined_sum(x: f32) -> f32 {
 fn scores(row: u32, query: u32, j0: u32, j: u32, masked: bool) -> vec4<f32> {
     let key = vec4<u32>(j0 + j) + vec4<u32>(0u, 1u, 2u, 3u);
     let live = key < vec4<u32>(p.nk) & (vec4<bool>(p.causal == 0u) | key <= vec4<u32>(query));
-    return select(vec4<f32>(NEG), scratch[(row * LS + j) / 4u], !vec4<bool>(masked) | live);
+    return select(vec4<f32>(NEG), scratch[row * (LS / 4u) + j / 4u], !vec4<bool>(masked) | live);
 }
 
 fn max4(x: vec4<f32>) -> f32 {
@@ -145,7 +145,7 @@ fn main(
     var qf: array<FA, DH / FK>;
     // #unroll B DH/FK
     {
-        let at = (mine * LD + B * FK) / 4u;
+        let at = mine * (LD / 4u) + B * FK / 4u;
         qf[B] = coopLoadT<FA>(&kv[at], LD / 4u);
     }
     // #end
@@ -173,7 +173,7 @@ fn main(
                 sf = coopMultiplyAdd(qf[B], coopLoad<FB>(&kv[at], LD / 4u), sf);
             }
             // #end
-            let st = (mine * LS + J * FN) / 4u;
+            let st = mine * (LS / 4u) + J * FN / 4u;
             coopStoreT(sf, &scratch[st], LS / 4u);
         }
         // #end
@@ -205,7 +205,7 @@ fn main(
         var pf: array<FA, KC / FK>;
         // #unroll J KF*FN/FK
         {
-            let pt = (mine * LP + J * FK) / 4u;
+            let pt = mine * (LP / 4u) + J * FK / 4u;
             pf[J] = coopLoadT<FA>(&probs[pt], LP / 4u);
         }
         // #end
@@ -223,7 +223,7 @@ fn main(
     // The output rows through this subgroup's scratch, divided by their sums.
     // #unroll B DH/FN
     {
-        let ot = (mine * LS + B * FN) / 4u;
+        let ot = mine * (LS / 4u) + B * FN / 4u;
         coopStoreT(acc[B], &scratch[ot], LS / 4u);
     }
     // #end
@@ -259,7 +259,7 @@ fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32, masked: bool) -> bool 
     {
         // The weights P·V uses: rounded to f16, summed as rounded.
         let w = narrow(exp2(sv[I] - now));
-        probs[(row * LP + first) / 4u + I] = tiled(w);
+        probs[row * (LP / 4u) + first / 4u + I] = tiled(w);
         sum += dot(widen(w), vec4<f32>(1.0));
     }
     // #end
@@ -278,7 +278,7 @@ fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32, masked: bool) -> bool 
 fn rescale(acc: ptr<function, array<FC, NB>>, mine: u32, lane: u32) {
     // #unroll B DH/FN
     {
-        let ot = (mine * LS + B * FN) / 4u;
+        let ot = mine * (LS / 4u) + B * FN / 4u;
         coopStoreT((*acc)[B], &scratch[ot], LS / 4u);
     }
     // #end
@@ -290,7 +290,7 @@ fn rescale(acc: ptr<function, array<FC, NB>>, mine: u32, lane: u32) {
     workgroupBarrier();
     // #unroll B DH/FN
     {
-        let ot = (mine * LS + B * FN) / 4u;
+        let ot = mine * (LS / 4u) + B * FN / 4u;
         (*acc)[B] = coopLoadT<FC>(&scratch[ot], LS / 4u);
     }
     // #end

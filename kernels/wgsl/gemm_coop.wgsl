@@ -156,13 +156,15 @@ fn main(
             // #unroll I WT
             {
                 // Offsets bound to a `let`: naga 30's SPIR-V output panics on inline ones here.
-                let at = ((sm + I * FM) * LDA + kk) / UW;
+                // Each a sum of a part fixed for the loop and kk's own, in units (every term is
+                // a multiple of UW), so that the compilers fold kk's into the loads' offsets.
+                let at = (sm + I * FM) * (LDA / UW) + kk / UW;
                 fa[I] = coopLoadT<FA>(&a_tile[at], LDA / UW);
                 if BT == 1u {
-                    let bt = ((sn + I * FN) * LDA + kk) / UW;
+                    let bt = (sn + I * FN) * (LDA / UW) + kk / UW;
                     fb[I] = coopLoad<FB>(&b_tile[bt], LDA / UW);
                 } else {
-                    let bt = (kk * LDB + sn + I * FN) / UW;
+                    let bt = kk * (LDB / UW) + (sn + I * FN) / UW;
                     fb[I] = coopLoadT<FB>(&b_tile[bt], LDB / UW);
                 }
             }
