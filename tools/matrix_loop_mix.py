@@ -11,9 +11,11 @@ Reads what Mesa's drivers print while `vkdiff devices --compile` compiles (on a 
     python3 tools/matrix_loop_mix.py radv.txt   (or nvk.txt)
 
 For every compiled shader holding matrix instructions (v_wmma, hmma), it prints the loops that
-hold them (a backward branch's range, the innermost first) and counts their instructions by
-class: matrix, shared-memory loads and stores, global loads, waits and barriers, vector and
-scalar ALU. Static counts, not timings: one pass through the loop body as compiled.
+hold them (a backward branch's range, the innermost first): all their instructions, and those of
+one pass, the shortest path through the loop's blocks, which skips the branches a pass rarely
+takes (the stores of a last, partial K-step; attention's masked chunks and rescaling). It
+counts that pass by class: matrix, shared-memory loads and stores, global loads, waits and
+barriers, vector and scalar ALU (NAK: ALU, moves and selects). Static counts, not timings.
 No dependency beyond Python 3.
 """
 import collections
