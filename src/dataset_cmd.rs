@@ -9,8 +9,8 @@ use vkdiff_args::Progress;
 use vkdiff_args::{dataset_flag, CropArgs, SceneSettings};
 use vkdiff_args::{ModelArgs, SamplingArgs};
 use vkdiff_pipeline::dataset::{
-    merge, parse_size, read_prompts, size, Crops, DatasetEvent, DatasetJob, DatasetSettings, Finish, Merged,
-    Progress as Event, Report, RunOptions, ShardRequest,
+    merge, parse_size, read_prompts, size, stop_on_signals, Crops, DatasetEvent, DatasetJob, DatasetSettings, Finish,
+    Merged, Progress as Event, Report, RunOptions, ShardRequest, VersionChange,
 };
 use vkdiff_pipeline::Sampling;
 
@@ -74,13 +74,21 @@ pub struct DatasetArgs {
     /// Shards in a Kubernetes Indexed Job (its completions); the index is JOB_COMPLETION_INDEX.
     #[arg(long)]
     shards: Option<u64>,
+    /// Finish a set that another vkdiff version began (its kernels may give other bytes); the
+    /// version is recorded in dataset.json, and later runs of it need no flag.
+    #[arg(long)]
+    allow_version_change: bool,
 }
 
 #[derive(Subcommand, Debug)]
 enum DatasetCommand {
     /// Join every image's annotations into DIR/annotations.json, once every shard is done.
     Merge {
+        /// The dataset folder.
         dir: PathBuf,
+        /// Merge a set that another vkdiff version began (recorded in dataset.json).
+        #[arg(long)]
+        allow_version_change: bool,
     },
     Export(crate::dataset_export_cmd::ExportArgs),
     Stats(crate::dataset_stats_cmd::StatsArgs),
@@ -89,8 +97,8 @@ enum DatasetCommand {
 
 pub fn run(args: &DatasetArgs) -> Result<()> {
     match &args.command {
-        Some(DatasetCommand::Merge { dir }) => {
-            print_merged(dir, &merge(dir)?);
+        Some(DatasetCommand::Merge { dir, allow_version_change }) => {
+            print_merged(dir, &merge(dir, versions(*allow_version_change))?);
             return Ok(());
         }
         Some(DatasetCommand::Export(export)) => return crate::dataset_export_cmd::run(export),
@@ -100,13 +108,20 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     }
     let out = args.out.as_deref().context("--out DIR is required")?;
     let shard = ShardRequest { shard: args.shard.clone(), shards: args.shards };
-    let options = RunOptions { batch: args.batch, threads: args.scene.threads, min_free: args.min_free };
+    let options = RunOptions {
+        batch: args.batch,
+        threads: args.scene.threads,
+        min_free: args.min_free,
+        versions: versions(args.allow_version_change),
+    };
     let mut job = DatasetJob::new(settings(args)?, out, shard, options, &|k| std::env::var(k).ok())?;
     for why in job.redo() {
         eprintln!("making again: {why}");
     }
     eprintln!("{}", job.plan_line());
     if job.todo() > 0 {
+        // Ctrl-C or a scheduler's SIGTERM: the images in hand are written, then exit code 4.
+        stop_on_signals();
         let ctx = job.needs_device().then(|| crate::open_device(&args.model.device)).transpose()?;
         let done = job.done() as usize;
         let total = done + job.todo() as usize;
@@ -181,11 +196,12 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
     );
     let models = match (args.render_only, args.model.model_flag_given()) {
         (true, Some(flag)) => {
-            anyhow::bail!(
+            return Err(vkdiff_args::Usage(format!(
                 "{} makes the shaded renders the images: drop {}",
                 dataset_flag("render_only"),
                 dataset_flag(flag)
-            )
+            ))
+            .into())
         }
         (true, None) => None,
         (false, _) => Some(args.model.settings()?),
@@ -237,4 +253,12 @@ fn closing_line(report: &Report, elapsed: Duration, peak: Option<u64>) -> String
         s(t.waiting),
         peak >> 20
     )
+}
+
+fn versions(allow_change: bool) -> VersionChange {
+    if allow_change {
+        VersionChange::Allow
+    } else {
+        VersionChange::Refuse
+    }
 }

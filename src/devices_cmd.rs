@@ -198,7 +198,7 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
         return Ok(());
     }
     if devices.is_empty() {
-        anyhow::bail!("no Vulkan device found; install a driver (mesa-vulkan-drivers gives the CPU device lavapipe)");
+        return Err(vkdiff_runtime::Error::NoDevice.into());
     }
     for d in &devices {
         println!("{}", describe(d, chosen == Some(d.index)));

@@ -23,11 +23,12 @@ pub fn run(request: &CompileRequest) -> Result<()> {
     let mut variants = selectable_variants(info, gpu_paths_requested());
     let known: Vec<&str> = variants.iter().map(|v| v.kernel).collect();
     if let Some(unknown) = request.kernels.iter().find(|k| !known.contains(&k.as_str())) {
-        bail!(
+        return Err(vkdiff_args::Usage(format!(
             "--kernel {unknown}: `{}` runs no kernel of that name (it runs: {})",
             info.name,
             distinct(&known).join(", ")
-        );
+        ))
+        .into());
     }
     if !request.kernels.is_empty() {
         variants.retain(|v| request.kernels.iter().any(|k| k == v.kernel));

@@ -45,7 +45,7 @@ enum AreaFromArg {
 pub fn run(args: &EvalArgs) -> Result<()> {
     let iou_type = if args.iou_type == "bbox" { IouType::Bbox } else { IouType::Segm };
     let max_dets: [usize; 3] =
-        args.max_dets.clone().try_into().map_err(|_| anyhow::anyhow!("--max-dets takes three numbers"))?;
+        args.max_dets.clone().try_into().map_err(|_| vkdiff_args::Usage("--max-dets takes three numbers".into()))?;
     let rule = match args.area_from {
         AreaFromArg::Loadres => AreaRule::LoadRes,
         AreaFromArg::Mask => AreaRule::Mask,

@@ -8,6 +8,7 @@ mod dataset_stats_cmd;
 mod devices_cmd;
 mod devices_compile;
 mod eval_cmd;
+mod exit_code;
 mod fid_cmd;
 mod gen_cmd;
 mod scene_cmd;
@@ -17,7 +18,8 @@ use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 #[derive(Parser)]
 #[command(
     name = "vkdiff",
-    version,
+    version = env!("VKDIFF_VERSION"),
+    after_help = exit_code::EXIT_CODES_HELP,
     about = "Procedural scenes to photorealistic, exactly annotated training images, on any Vulkan GPU"
 )]
 struct Cli {
@@ -46,6 +48,11 @@ enum Command {
 }
 
 fn main() {
+    // Output piped into `head` or `grep -q` ends quietly when the reader goes, as a shell
+    // command does, not with a panic.
+    // SAFETY: restoring a signal's default action before any thread starts.
+    unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
+    vkdiff_setting::install_version(env!("VKDIFF_VERSION"));
     let cli = parse();
     // The libraries name settings as data; errors here name them by this command's flags.
     let names = if matches!(cli.command, Command::Dataset(_)) { vkdiff_args::dataset_flag } else { vkdiff_args::flag };
@@ -61,7 +68,7 @@ fn main() {
     };
     if let Err(e) = result {
         eprintln!("error: {}", one_line(&e));
-        std::process::exit(1);
+        std::process::exit(exit_code::of(&e));
     }
 }
 

@@ -627,16 +627,55 @@ fn the_slurm_array_and_its_merge_make_the_one_run() {
     assert_same_folder(&dir, reference());
 }
 
+/// A stand-in `scontrol` on PATH that notes its arguments in `root/scontrol.log`; the PATH.
+fn fake_scontrol(root: &Path) -> String {
+    let bin = root.join("bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    let script = bin.join("scontrol");
+    std::fs::write(&script, format!("#!/bin/sh\necho \"$@\" >> {}/scontrol.log\n", root.display())).unwrap();
+    std::fs::set_permissions(&script, std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+    format!("{}:{}", bin.display(), std::env::var("PATH").unwrap_or_default())
+}
+
 #[test]
-fn the_slurm_task_refuses_a_node_without_a_gpu_driver() {
+fn the_slurm_task_refuses_a_node_without_a_gpu_driver_and_requeues() {
     let root = scratch("dataset-slurm-cpu");
     let (dir, args) = (root.join("set"), args_file(&root));
-    let out = deploy("bash", &["deploy/slurm/dataset.sbatch"], &dir, &args, &[("VKDIFF_REQUIRE_GPU", "")])
-        .wait_with_output()
-        .unwrap();
+    let path = fake_scontrol(&root);
+    let env = [("VKDIFF_REQUIRE_GPU", ""), ("PATH", &path), ("SLURM_JOB_ID", "4242")];
+    let out = deploy("bash", &["deploy/slurm/dataset.sbatch"], &dir, &args, &env).wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && stderr.contains("error: a GPU is required"), "{stderr}");
+    assert!(out.status.code() == Some(3) && stderr.contains("error: a GPU is required"), "{stderr}");
     assert!(!dir.join("annotations.json").exists());
+    // A device failure may pass on another node: the task is requeued.
+    let log = std::fs::read_to_string(root.join("scontrol.log")).unwrap_or_default();
+    assert_eq!(log.trim(), "requeue 4242", "{stderr}");
+}
+
+#[test]
+fn the_slurm_task_fails_bad_input_without_requeueing() {
+    let root = scratch("dataset-slurm-bad");
+    let dir = root.join("set");
+    let args = root.join("bad.args");
+    std::fs::write(&args, "--crop-size\n48\n--crops\n2\n--prompt\nx\n--model\n/nowhere\n").unwrap();
+    let path = fake_scontrol(&root);
+    let env = [("PATH", path.as_str()), ("SLURM_JOB_ID", "4243")];
+    let out = deploy("bash", &["deploy/slurm/dataset.sbatch"], &dir, &args, &env).wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(!root.join("scontrol.log").exists(), "bad input was requeued: {stderr}");
+}
+
+#[test]
+fn the_kubernetes_job_fails_at_once_on_bad_input() {
+    // podFailurePolicy: exit 2 fails the Job; it needs restartPolicy Never.
+    let yaml =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("deploy/kubernetes/dataset-job.yaml"))
+            .unwrap();
+    let rules: String = yaml.lines().skip_while(|l| !l.contains("podFailurePolicy:")).take(12).collect();
+    assert!(rules.contains("action: FailJob") && rules.contains("values: [2]"), "{rules}");
+    assert!(rules.contains("containerName: vkdiff") && yaml.contains("- name: vkdiff\n"), "{rules}");
+    assert!(yaml.contains("restartPolicy: Never") && !yaml.contains("restartPolicy: OnFailure"));
 }
 
 #[test]

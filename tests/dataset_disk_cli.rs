@@ -39,7 +39,7 @@ fn a_run_stops_before_the_disk_is_full_and_resumes_once_there_is_room() {
     let read = |name: &str| std::fs::read_to_string(dir.join(name)).unwrap_or_default();
     let full = read("full.err");
     let errors: Vec<&str> = full.lines().filter(|l| l.starts_with("error")).collect();
-    assert_eq!(read("full.rc").trim(), "1", "{full}");
+    assert_eq!(read("full.rc").trim(), "4", "a resumable stop exits 4: {full}");
     assert!(
         errors.len() == 1 && errors[0].contains("stopped before filling the disk") && errors[0].contains("free"),
         "{full}"

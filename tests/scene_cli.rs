@@ -46,7 +46,7 @@ fn bad_arguments_print_one_error_line_and_write_nothing() {
         (vec!["--clumping", "2"], "--clumping 2: must lie in [0, 1]"),
     ] {
         let result = vkdiff(&[&["scene", "--out", out_arg][..], &SMALL, &args].concat());
-        assert_eq!(result.status.code(), Some(1), "{args:?}");
+        assert_eq!(result.status.code(), Some(2), "{args:?}: bad input exits 2");
         // One line: the binary's error prefix, then the message.
         let stderr = String::from_utf8_lossy(&result.stderr);
         assert!(stderr.trim().lines().count() == 1 && stderr.trim().ends_with(message), "{args:?}: {stderr}");

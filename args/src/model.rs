@@ -1,6 +1,7 @@
 //! The flags `vkdiff gen` and `vkdiff dataset` share: the model with its guides and LoRAs, and
 //! how images are sampled.
 
+use crate::hub::{resolve_model, Wants};
 use crate::scene::ControlMode;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
@@ -60,9 +61,15 @@ enum IpModeArg {
 /// The model, its guides and LoRAs: what loads once.
 #[derive(Args, Debug)]
 pub struct ModelArgs {
-    /// SDXL model: a diffusers folder or an original single-file checkpoint.
-    #[arg(long, required = true)]
+    /// SDXL model: a diffusers folder, an original single-file checkpoint, or a Hugging Face id
+    /// found offline in its cache (ORG/NAME[@REVISION][/FILE]; never downloaded).
+    #[arg(short = 'm', long, required = true, value_name = "DIR|FILE|ID")]
     model: Option<PathBuf>,
+    /// A VAE in place of the model's: a diffusers AutoencoderKL folder, or a single file in the
+    /// diffusers or original layout (a config.json beside it is read), or a Hugging Face id, such
+    /// as madebyollin/sdxl-vae-fp16-fix, whose config lets it decode in f16.
+    #[arg(long, value_name = "DIR|FILE|ID")]
+    vae: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = Precision::F16)]
     precision: Precision,
     #[command(flatten)]
@@ -74,8 +81,8 @@ pub struct ModelArgs {
     #[arg(long, default_value = "auto", value_name = "auto|off|on|PIXELS")]
     vae_tiling: VaeTilingSetting,
     /// Depth ControlNet: a diffusers folder, or one .safetensors in the diffusers or original
-    /// (cldm) layout.
-    #[arg(long)]
+    /// (cldm) layout, or a Hugging Face id.
+    #[arg(long, value_name = "DIR|FILE|ID")]
     controlnet: Option<PathBuf>,
     /// How a depth EXR maps to brightness (near is bright either way).
     #[arg(long, value_enum, default_value_t = ControlMode::Inverse)]
@@ -89,12 +96,14 @@ pub struct ModelArgs {
     /// Fraction of the steps after which the ControlNet is off.
     #[arg(long, default_value_t = 1.0)]
     control_end: f64,
-    /// IP-Adapter for SDXL (h94 layout, .safetensors, plain or plus): style images steer the look.
-    #[arg(long, requires = "image_encoder")]
+    /// IP-Adapter for SDXL (h94 layout, .safetensors, plain or plus), or a Hugging Face id
+    /// (h94/IP-Adapter/sdxl_models/ip-adapter_sdxl.safetensors): style images steer the look.
+    #[arg(long, requires = "image_encoder", value_name = "FILE|ID")]
     ip_adapter: Option<PathBuf>,
     /// The adapter's CLIP vision encoder: a folder with config.json and model.safetensors
-    /// (and preprocessor_config.json, else CLIP's defaults at the encoder's image size).
-    #[arg(long, requires = "ip_adapter")]
+    /// (and preprocessor_config.json, else CLIP's defaults at the encoder's image size), or a
+    /// Hugging Face id (h94/IP-Adapter/sdxl_models/image_encoder).
+    #[arg(long, requires = "ip_adapter", value_name = "DIR|ID")]
     image_encoder: Option<PathBuf>,
     /// Weight of the image tokens' attention [default: 1]: one number for every layer, or
     /// BLOCK=SCALE (repeat it) for chosen blocks with every other layer 0, as diffusers'
@@ -106,9 +115,9 @@ pub struct ModelArgs {
     /// --ip-scale (one number); every other layer is off.
     #[arg(long, value_enum, requires = "ip_adapter")]
     ip_mode: Option<IpModeArg>,
-    /// A LoRA (kohya or diffusers/PEFT .safetensors) as FILE or FILE:STRENGTH (default 1);
-    /// repeat it for several. Merged into the weights on the device.
-    #[arg(long, value_parser = parse_lora)]
+    /// A LoRA (kohya or diffusers/PEFT .safetensors, or a Hugging Face id) as FILE or
+    /// FILE:STRENGTH (default 1); repeat it for several. Merged into the weights on the device.
+    #[arg(long, value_parser = parse_lora, value_name = "FILE[:STRENGTH]")]
     lora: Vec<LoraSetting>,
 }
 
@@ -134,6 +143,7 @@ impl ModelArgs {
     pub fn model_flag_given(&self) -> Option<&'static str> {
         [
             ("model", self.model.is_some()),
+            ("vae", self.vae.is_some()),
             ("controlnet", self.controlnet.is_some()),
             ("ip_adapter", self.ip_adapter.is_some()),
             ("lora", !self.lora.is_empty()),
@@ -142,9 +152,13 @@ impl ModelArgs {
         .find_map(|(flag, given)| given.then_some(flag))
     }
 
+    /// The settings, every model named by a path or a Hugging Face id resolved to its files.
     pub fn settings(&self) -> anyhow::Result<ModelSettings> {
-        let controlnet = self.controlnet.as_ref().map(|model| ControlNetSettings {
-            model: model.clone(),
+        let resolve = |flag: &str, path: &PathBuf, wants| resolve_model(&format!("--{flag}"), path, wants);
+        let controlnet =
+            self.controlnet.as_ref().map(|model| resolve("controlnet", model, Wants::Either)).transpose()?;
+        let controlnet = controlnet.map(|model| ControlNetSettings {
+            model,
             depth_mode: self.control_depth.into(),
             scale: self.control_scale,
             start: self.control_start,
@@ -157,19 +171,25 @@ impl ModelArgs {
         });
         let scale = IpScale::parse(&self.ip_scale, mode)?;
         let ip_adapter = match (&self.ip_adapter, &self.image_encoder) {
-            (Some(adapter), Some(encoder)) => {
-                Some(IpAdapterSettings { adapter: adapter.clone(), encoder: encoder.clone(), scale })
-            }
+            (Some(adapter), Some(encoder)) => Some(IpAdapterSettings {
+                adapter: resolve("ip-adapter", adapter, Wants::File)?,
+                encoder: resolve("image-encoder", encoder, Wants::Folder)?,
+                scale,
+            }),
             _ => None,
         };
         // Required by the parser wherever these flags are read (not for `dataset merge`).
-        let model = self.model.clone().unwrap_or_default();
+        let model = self.model.as_ref().map(|m| resolve("model", m, Wants::Either)).transpose()?.unwrap_or_default();
+        let loras = (self.lora.iter())
+            .map(|l| Ok(LoraSetting { path: resolve("lora", &l.path, Wants::File)?, strength: l.strength }))
+            .collect::<anyhow::Result<_>>()?;
         Ok(ModelSettings {
             model,
+            vae: self.vae.as_ref().map(|v| resolve("vae", v, Wants::Either)).transpose()?,
             precision: self.precision.dtype(),
             controlnet,
             ip_adapter,
-            loras: self.lora.clone(),
+            loras,
             vae_tiling: self.vae_tiling,
         })
     }

@@ -40,12 +40,10 @@ pub struct DatasetArgs {
 }
 
 pub fn run(args: &DatasetArgs) -> Result<()> {
-    anyhow::ensure!(
-        args.size.is_multiple_of(32) && args.size >= 64,
-        "--size {} must be a multiple of 32, at least 64",
-        args.size
-    );
-    anyhow::ensure!(args.batch > 0, "--batch must be at least 1");
+    vkdiff_args::ensure_usage(args.size.is_multiple_of(32) && args.size >= 64, || {
+        format!("--size {} must be a multiple of 32, at least 64", args.size)
+    })?;
+    vkdiff_args::ensure_usage(args.batch > 0, || "--batch must be at least 1".into())?;
     let dtype = args.precision.dtype();
     let ctx = Context::new(&args.device.choice())?;
     let start = Instant::now();
@@ -68,7 +66,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     let dataset = dataset_settings(args, &models.settings);
     let dir = std::env::temp_dir().join(format!("vkdiff-bench-dataset-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let folder = Dataset::open(&dir, &dataset)?;
+    let folder = Dataset::open(&dir, &dataset, Default::default())?;
     let pending = folder.pending(Shard::ALL)?;
     let styles = vec![style_images().to_vec()];
     // One image as `vkdiff gen` makes it: its own text encoding, guides and recording (first:
@@ -94,7 +92,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         &mut models,
         &styles,
         pending,
-        &RunOptions { batch: args.batch, threads: 0, min_free: 0 },
+        &RunOptions { batch: args.batch, threads: 0, min_free: 0, versions: Default::default() },
         &mut |event| {
             if let vkdiff_pipeline::dataset::Progress::Images { done, total } = event {
                 eprintln!("{done}/{total} images");
@@ -157,6 +155,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
 fn model_settings(precision: vkdiff_runtime::Dtype, loras: &[(LoraFile, f32); 2]) -> ModelSettings {
     ModelSettings {
         model: "random-sdxl-base".into(),
+        vae: None,
         precision,
         controlnet: Some(ControlNetSettings {
             model: "random-controlnet-depth".into(),

@@ -46,10 +46,9 @@ struct Row {
 }
 
 pub fn run(args: &FidArgs) -> Result<()> {
-    anyhow::ensure!(
-        args.images > 0 && args.size > 0 && args.batch > 0,
-        "--images, --size and --batch must be positive"
-    );
+    vkdiff_args::ensure_usage(args.images > 0 && args.size > 0 && args.batch > 0, || {
+        "--images, --size and --batch must be positive".into()
+    })?;
     let dir = std::env::temp_dir().join(format!("vkdiff-bench-fid-{}", std::process::id()));
     let result = bench(args, &dir);
     let _ = std::fs::remove_dir_all(&dir);

@@ -83,7 +83,9 @@ pub fn run(args: &UnetArgs) -> Result<()> {
     let dtype = args.precision.dtype();
     let config = UNetConfig::sdxl_base();
     for &size in &args.size {
-        anyhow::ensure!(size % 32 == 0 && size > 0, "--size {size}: SDXL needs a multiple of 32 pixels");
+        vkdiff_args::ensure_usage(size % 32 == 0 && size > 0, || {
+            format!("--size {size}: SDXL needs a multiple of 32 pixels")
+        })?;
         let mut row = measure(args, &config, dtype, size)?;
         if !args.common.no_cpu_reference {
             match reference(size / 8, args) {

@@ -192,7 +192,7 @@ fn measure(args: &VaeArgs, config: &str) -> Result<Row> {
     let dtype = args.precision.dtype();
     let vae = AutoencoderKl::load(&ctx, config, &Checkpoint::random(&ctx, dtype, 0))?;
     let tiling = VaeTiling { tile: args.tile };
-    vae.check_tiling(tiling)?;
+    vae.config().check_tiling(tiling)?;
     let weights = ctx.live_bytes();
     let h = args.size / vae.config().downscale();
     let latents: Vec<f32> = (0..h * h * 4).map(|i| ((i * 7919) % 1000) as f32 / 500.0 - 1.0).collect();
@@ -215,7 +215,7 @@ fn measure(args: &VaeArgs, config: &str) -> Result<Row> {
             tile: tile.map(|t| t.tile),
             seconds,
             activations_mib: mib(ctx.peak_bytes() - weights),
-            estimate_mib: mib(vae.decode_bytes(1, side, side)),
+            estimate_mib: mib(vae.config().decode_bytes(vae.dtype(), 1, side, side)),
             host: Host::of(host),
         })
     };

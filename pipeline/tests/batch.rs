@@ -15,6 +15,7 @@ use vkdiff_testkit::fixture;
 fn settings(precision: Dtype) -> ModelSettings {
     ModelSettings {
         model: fixture("pipeline/tiny-sdxl"),
+        vae: None,
         precision,
         controlnet: Some(ControlNetSettings {
             model: fixture("workflow/controlnet"),

@@ -111,6 +111,7 @@ fn settings(prompt: &str, negative: Option<&str>, sampler: &str, karras: bool) -
     GenSettings {
         models: ModelSettings {
             model: "/models/stable-diffusion-xl-base-1.0".into(),
+            vae: None,
             precision: Dtype::F16,
             controlnet: Some(ControlNetSettings {
                 model: "/models/controlnet-depth-sdxl-1.0".into(),

@@ -69,6 +69,50 @@ fn single_file_matches_diffusers() {
     check("tiny-sdxl.safetensors", Dtype::F32, 1e-4, 50.0, Some(3));
 }
 
+/// `--vae`: another VAE in the model's place, as diffusers' `vae=` swaps it
+/// (tools/make_vae_swap_fixtures.py): its own scaling factor, and its config's `force_upcast:
+/// false` lets it decode in f16. Its folder, its diffusers-named file and its original-layout
+/// file (each reading the config beside it) give the same images.
+#[test]
+fn a_swapped_vae_matches_diffusers() {
+    let dir = fixture("vae_swap");
+    let records = SafeTensors::open(&dir.join("records.safetensors")).unwrap();
+    let json: Value = serde_json::from_str(&std::fs::read_to_string(dir.join("records.json")).unwrap()).unwrap();
+    let vae = dir.join("tiny-vae");
+    let runs = [
+        (vae.clone(), Dtype::F32, 1e-4, 50.0),
+        (vae.join("diffusion_pytorch_model.safetensors"), Dtype::F32, 1e-4, 50.0),
+        (vae.join("sdxl_vae.safetensors"), Dtype::F32, 1e-4, 50.0),
+        (vae.join("sdxl_vae.safetensors"), Dtype::F16, 2e-2, 30.0),
+    ];
+    for (path, dtype, tol, min_psnr) in runs {
+        let model = fixture("pipeline").join("tiny-sdxl");
+        let sdxl = Sdxl::load_with_vae(&ctx(), &model, Some(&path), dtype, &mut |_| {}).unwrap();
+        assert_eq!(
+            sdxl.vae_dtype(),
+            dtype,
+            "{}: force_upcast false runs the VAE at the run's precision",
+            path.display()
+        );
+        for case in json["cases"].as_array().unwrap() {
+            let name = case["name"].as_str().unwrap();
+            let out = sdxl.text_to_image(&job(case), &Guides::default(), &mut |_, _| {}).unwrap();
+            let (_, want) = records.values(&format!("{name}.latents")).unwrap();
+            let rel = relative_l2(&out.latents, &want);
+            assert!(rel <= tol, "{} {dtype:?} {name}: latents relative L2 error {rel:.2e}", path.display());
+            let (s, image) = records.values(&format!("{name}.image")).unwrap();
+            let p = psnr(&out.image.pixels, &image, [s[1], s[2], s[3]]);
+            assert!(p >= min_psnr, "{} {dtype:?} {name}: image PSNR {p:.1} dB < {min_psnr} dB", path.display());
+        }
+    }
+    // Without a config beside it, a VAE file is SDXL's: forced to f32.
+    let alone = vkdiff_testkit::scratch("vae-alone").join("vae.safetensors");
+    std::fs::copy(vae.join("sdxl_vae.safetensors"), &alone).unwrap();
+    let model = fixture("pipeline").join("tiny-sdxl");
+    let sdxl = Sdxl::load_with_vae(&ctx(), &model, Some(&alone), Dtype::F16, &mut |_| {}).unwrap();
+    assert_eq!(sdxl.vae_dtype(), Dtype::F32);
+}
+
 #[test]
 fn released_text_encoders_free_their_memory_and_later_prompts_fail_clearly() {
     // A private context: its live bytes are this test's alone.

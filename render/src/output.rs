@@ -90,7 +90,7 @@ pub fn scene_files(seed: u64, config: &SceneConfig, options: &OutputOptions) -> 
 fn provenance(seed: u64, config: &SceneConfig) -> Value {
     json!({
         "description": "vkdiff procedural white button mushroom bed",
-        "version": env!("CARGO_PKG_VERSION"),
+        "version": vkdiff_setting::version(),
         "seed": seed,
         "frame_size_px": [config.width, config.height],
         "density_per_m2": config.bed.density,

@@ -37,7 +37,7 @@ pub use kernel_census::{selectable_variants, CompiledKernel};
 pub use matrix_unit_trial::{run_trial, run_trial_timed_by, CooperativeSetting, MatrixUnitTrial, TrialClock};
 pub use matrix_units::{built_cooperative_variants, requested_fragment, Fragment, MatrixShape};
 pub use memory::Placement;
-pub use memory_budget::MemoryRoom;
+pub use memory_budget::{MemoryRoom, HOST_MEMORY};
 pub use pipeline::Kernel;
 pub use pipeline_stats::{describe as describe_statistics, variant_label, StatisticValue, Statistics};
 pub use recorder::{Recorder, Recording, Timing};

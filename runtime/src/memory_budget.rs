@@ -1,8 +1,11 @@
 //! How much device memory this process may still take: `VKDIFF_MEMORY_BUDGET` where set (and
-//! then enforced: an allocation past it fails), else `VK_EXT_memory_budget`'s heap budget less
-//! the heap's use, else the device-local heap less vkdiff's own live buffers.
+//! then enforced: an allocation past it fails); on a CPU device (lavapipe), whose memory is the
+//! host's whatever heap it reports (Mesa 22.3: 2 GiB), the host memory still available (and the
+//! cgroup's limit, in a container); else `VK_EXT_memory_budget`'s heap budget less the heap's
+//! use, else the device-local heap less vkdiff's own live buffers.
 
 use crate::context::{Context, Shared};
+use crate::device::DeviceKind;
 use crate::error::{Error, Result};
 use ash::vk;
 use std::sync::atomic::Ordering;
@@ -47,6 +50,13 @@ impl Context {
         if let Some(budget) = shared.memory_budget {
             return MemoryRoom { free: budget.saturating_sub(live), budget, source: "VKDIFF_MEMORY_BUDGET" };
         }
+        if shared.info.kind == DeviceKind::Cpu {
+            if let Some((total, available)) = host_memory(&|path| std::fs::read_to_string(path).ok()) {
+                // Idle buffers are host memory this process would give back first.
+                let idle = shared.idle.lock().unwrap().bytes();
+                return MemoryRoom { free: available + idle, budget: total, source: HOST_MEMORY };
+            }
+        }
         if let Some((total, used)) = device_heap(shared) {
             let idle = shared.idle.lock().unwrap().bytes();
             let free = total.saturating_sub(used.saturating_sub(idle));
@@ -55,6 +65,26 @@ impl Context {
         let heap = shared.info.device_local_bytes;
         MemoryRoom { free: heap.saturating_sub(live), budget: heap, source: "the device-local heap" }
     }
+}
+
+/// The source a CPU device's room comes from.
+pub const HOST_MEMORY: &str = "the host's available memory (a CPU device)";
+
+/// The host's (total, available) memory: /proc/meminfo's MemTotal and MemAvailable, within the
+/// cgroup v2 limit of this process's container where one is set. `read` reads a file.
+pub(crate) fn host_memory(read: &dyn Fn(&str) -> Option<String>) -> Option<(u64, u64)> {
+    let meminfo = read("/proc/meminfo")?;
+    let kib = |key: &str| -> Option<u64> {
+        let line = meminfo.lines().find(|l| l.starts_with(key))?;
+        Some(line[key.len()..].trim().trim_end_matches("kB").trim().parse::<u64>().ok()? * 1024)
+    };
+    let (mut total, mut available) = (kib("MemTotal:")?, kib("MemAvailable:")?);
+    let number = |path: &str| read(path).and_then(|t| t.trim().parse::<u64>().ok());
+    if let (Some(max), Some(current)) = (number("/sys/fs/cgroup/memory.max"), number("/sys/fs/cgroup/memory.current")) {
+        total = total.min(max);
+        available = available.min(max.saturating_sub(current));
+    }
+    Some((total, available))
 }
 
 /// `VK_EXT_memory_budget`'s (budget, usage) of the largest device-local heap, where the device
@@ -77,7 +107,27 @@ fn device_heap(shared: &Shared) -> Option<(u64, u64)> {
 
 #[cfg(test)]
 mod tests {
-    use super::budget_override;
+    use super::{budget_override, host_memory};
+
+    #[test]
+    fn host_memory_is_meminfos_within_the_cgroups_limit() {
+        let meminfo = "MemTotal:       24576000 kB\nMemFree:         1000 kB\nMemAvailable:   20480000 kB\n";
+        let files = |cgroup: Option<(&'static str, &'static str)>| {
+            move |path: &str| match (path, cgroup) {
+                ("/proc/meminfo", _) => Some(meminfo.to_string()),
+                ("/sys/fs/cgroup/memory.max", Some((max, _))) => Some(max.to_string()),
+                ("/sys/fs/cgroup/memory.current", Some((_, current))) => Some(current.to_string()),
+                _ => None,
+            }
+        };
+        assert_eq!(host_memory(&files(None)), Some((24_576_000 * 1024, 20_480_000 * 1024)));
+        // A container limited to 8 GiB that holds 2 GiB.
+        let limited = host_memory(&files(Some(("8589934592\n", "2147483648\n"))));
+        assert_eq!(limited, Some((8 << 30, 6 << 30)));
+        // No limit set.
+        assert_eq!(host_memory(&files(Some(("max\n", "2147483648\n")))), Some((24_576_000 * 1024, 20_480_000 * 1024)));
+        assert_eq!(host_memory(&|_| None), None);
+    }
 
     #[test]
     fn reads_sizes_with_units() {

@@ -5,6 +5,10 @@
 //! `--crop-size`) installs its names once with [`name_settings_with`], and every message then
 //! reads in its words. Without a front end's names a message prints the field names.
 
+mod version;
+
+pub use version::{install_version, version};
+
 use std::fmt;
 use std::sync::OnceLock;
 

@@ -2,7 +2,8 @@
 //! comparison against it (the paper's ablation compares eight generated sets with one real set).
 //! One safetensors file per folder, weights and precision: the features as rows, and which file
 //! each row belongs to (path, size, modification time) in the metadata. An image whose file
-//! changed, or is new, is encoded again; the file is rewritten atomically.
+//! changed, or is new, is encoded again, and so is every image when another vkdiff version made
+//! the file; the file is rewritten atomically.
 
 use super::features::file_stamp;
 use crate::{EvalError, Result};
@@ -50,7 +51,9 @@ impl FeatureCache {
         let stamps: Option<Vec<String>> = file.metadata.get("files").and_then(|s| serde_json::from_str(s).ok());
         let (Some(stamps), Some(fp)) = (stamps, file.metadata.get("fingerprint")) else { return };
         let Ok((shape, values)) = file.values("features") else { return };
-        if *fp != self.fingerprint || shape != [stamps.len(), INCEPTION_FEATURES] {
+        // Another build's kernels may give other features: recompute them.
+        let same_build = file.metadata.get("vkdiff").is_some_and(|v| v == vkdiff_setting::version());
+        if *fp != self.fingerprint || !same_build || shape != [stamps.len(), INCEPTION_FEATURES] {
             return;
         }
         self.rows = stamps.iter().cloned().zip(values.chunks_exact(INCEPTION_FEATURES).map(<[f32]>::to_vec)).collect();
@@ -78,7 +81,7 @@ impl FeatureCache {
         let metadata = BTreeMap::from([
             ("files".to_string(), serde_json::to_string(&stamps).expect("strings serialise")),
             ("fingerprint".to_string(), self.fingerprint.clone()),
-            ("vkdiff".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+            ("vkdiff".to_string(), vkdiff_setting::version().to_string()),
         ]);
         let values = rows.concat();
         write_safetensors_f32(&self.path, &[("features", &[files.len(), INCEPTION_FEATURES], &values)], &metadata)

@@ -7,7 +7,7 @@ use crate::layers::biased_attention::BiasedSelfAttention;
 use crate::layers::nn::{Conv2d, Graph, GroupNorm};
 use crate::layers::resnet::{Downsample2D, NormSpec, ResnetBlock2D, Upsample2D};
 use crate::vae::config::VaeConfig;
-use crate::vae::names::{infer_vae_config, vae_names, SINGLE_FILE_VAE};
+use crate::vae::names::{infer_vae_config, vae_names, SingleFileVae};
 use crate::weights::read_config;
 use crate::weights::{component_folder, Checkpoint, Weights};
 use std::path::Path;
@@ -89,8 +89,12 @@ pub struct AutoencoderKl {
 }
 
 impl AutoencoderKl {
-    /// The VAE of an SDXL model: a diffusers folder (`vae/`) or an original single file
-    /// (`first_stage_model.*`). It runs in f32 when the config forces upcasting, else in `dtype`.
+    /// The VAE of an SDXL model, or a VAE alone (`--vae`): a diffusers folder (`vae/` or the
+    /// folder itself), a whole single-file checkpoint (`first_stage_model.*`), or a VAE file in
+    /// the original or diffusers names. A VAE file's config is the diffusers config.json beside
+    /// it where there is one (the fp16-fix VAE's lets it run in f16), else read from its shapes
+    /// with SDXL's scaling and forced f32. It runs in f32 when the config forces upcasting,
+    /// else in `dtype`.
     pub fn load_sdxl(ctx: &Context, path: &Path, dtype: Dtype) -> Result<AutoencoderKl> {
         if path.is_dir() {
             // The config first: it decides the precision, and so which weight variant to open.
@@ -104,10 +108,10 @@ impl AutoencoderKl {
             return Self::load(ctx, config, &ckpt);
         }
         let file = SafeTensors::open(path)?;
-        let config = infer_vae_config(&file)?;
-        let names = vae_names(&config);
-        let ckpt =
-            Checkpoint::single_file_part(ctx, file, SINGLE_FILE_VAE, Some(names), Self::run_dtype(&config, dtype));
+        let layout = SingleFileVae::of(&file);
+        let config = single_file_config(path, &file, layout)?;
+        let names = (!layout.diffusers_names).then(|| vae_names(&config));
+        let ckpt = Checkpoint::single_file_part(ctx, file, layout.prefix, names, Self::run_dtype(&config, dtype));
         Self::load(ctx, config, &ckpt)
     }
 
@@ -116,7 +120,8 @@ impl AutoencoderKl {
         if path.is_dir() {
             read_config(&component_folder(path, "vae")?.join("config.json"), "an AutoencoderKL")
         } else {
-            infer_vae_config(&SafeTensors::open(path)?)
+            let file = SafeTensors::open(path)?;
+            single_file_config(path, &file, SingleFileVae::of(&file))
         }
     }
 
@@ -260,4 +265,20 @@ impl AutoencoderKl {
         }
         Ok((mean, logvar))
     }
+}
+
+/// A single file's VAE config: for a VAE file alone, a diffusers `AutoencoderKL` config.json
+/// beside it (as its repository keeps one); else from the shapes.
+fn single_file_config(path: &Path, file: &SafeTensors, layout: SingleFileVae) -> Result<VaeConfig> {
+    let beside = path.with_file_name("config.json");
+    if layout.prefix.is_empty() && beside.is_file() {
+        let text = std::fs::read_to_string(&beside).unwrap_or_default();
+        let class = serde_json::from_str::<serde_json::Value>(&text)
+            .ok()
+            .and_then(|v| v["_class_name"].as_str().map(String::from));
+        if class.as_deref() == Some("AutoencoderKL") {
+            return read_config(&beside, "an AutoencoderKL");
+        }
+    }
+    infer_vae_config(file, layout)
 }

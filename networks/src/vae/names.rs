@@ -1,5 +1,6 @@
-//! The VAE in the original single-file layout (`first_stage_model.*`, reference/sdxl.md §2.3):
-//! the renaming from diffusers names and the config read back from shapes.
+//! The VAE in single files: the original layout's renaming from diffusers names (whole SDXL
+//! checkpoints under `first_stage_model.*`, and VAE files such as `sdxl_vae.safetensors`), VAE
+//! files in diffusers' names, and the config read back from shapes.
 
 use crate::error::{Error, Result};
 use crate::vae::config::VaeConfig;
@@ -55,34 +56,66 @@ pub fn vae_names(config: &VaeConfig) -> OriginalNames {
     n
 }
 
+/// Where a single file keeps its VAE: under `first_stage_model.` in a whole SDXL checkpoint, at
+/// the top of a VAE file; named as the original code names them, or as diffusers does.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SingleFileVae {
+    pub prefix: &'static str,
+    pub diffusers_names: bool,
+}
+
+impl SingleFileVae {
+    /// How `file` stores its VAE.
+    pub fn of(file: &SafeTensors) -> SingleFileVae {
+        // A whole checkpoint (its UNet under `model.diffusion_model.`) keeps the VAE under its prefix.
+        let whole =
+            file.entries.keys().any(|k| k.starts_with(SINGLE_FILE_VAE) || k.starts_with("model.diffusion_model."));
+        let prefix = if whole { SINGLE_FILE_VAE } else { "" };
+        let diffusers_names = file.entries.keys().any(|k| k.starts_with(&format!("{prefix}decoder.up_blocks.")));
+        SingleFileVae { prefix, diffusers_names }
+    }
+
+    /// The stored name of the tensor the original layout calls `name` (only the names the
+    /// config is read from).
+    fn stored(&self, name: &str) -> String {
+        if !self.diffusers_names {
+            return format!("{}{name}", self.prefix);
+        }
+        let renamed = name
+            .replace("encoder.down.", "encoder.down_blocks.")
+            .replace(".block.", ".resnets.")
+            .replace("decoder.mid.attn_1.q.", "decoder.mid_block.attentions.0.to_q.");
+        format!("{}{renamed}", self.prefix)
+    }
+}
+
 /// A VAE config from single-file shapes. The scaling factor (0.13025), 32 norm groups and
 /// forced f32 are SDXL's, which shapes cannot show.
-pub fn infer_vae_config(file: &SafeTensors) -> Result<VaeConfig> {
+pub fn infer_vae_config(file: &SafeTensors, layout: SingleFileVae) -> Result<VaeConfig> {
     let shape = |name: &str| {
-        file.entries.get(&format!("{SINGLE_FILE_VAE}{name}")).map(|e| e.shape.clone()).ok_or_else(|| {
-            Error::Checkpoint(format!(
-                "{}: no tensor `{SINGLE_FILE_VAE}{name}`; not a single-file checkpoint with a VAE",
-                file.path.display()
-            ))
+        let stored = layout.stored(name);
+        file.entries.get(&stored).map(|e| e.shape.clone()).ok_or_else(|| {
+            Error::Checkpoint(format!("{}: no tensor `{stored}`; not a single file with a VAE", file.path.display()))
         })
     };
     let dim = |name: &str, i: usize| {
         let s = shape(name)?;
         s.get(i).copied().ok_or_else(|| {
             Error::Checkpoint(format!(
-                "{}: tensor `{SINGLE_FILE_VAE}{name}` has shape {s:?}; a weight there has more dimensions",
-                file.path.display()
+                "{}: tensor `{}` has shape {s:?}; a weight there has more dimensions",
+                file.path.display(),
+                layout.stored(name)
             ))
         })
     };
     let indices = |prefix: &str| -> BTreeSet<usize> {
-        let p = format!("{SINGLE_FILE_VAE}{prefix}");
+        let p = layout.stored(prefix);
         file.entries.keys().filter_map(|k| k.strip_prefix(&p)?.split('.').next()?.parse().ok()).collect()
     };
     let levels = indices("encoder.down.").len();
     let channels =
         (0..levels).map(|i| dim(&format!("encoder.down.{i}.block.0.conv1.weight"), 0)).collect::<Result<Vec<_>>>()?;
-    let has = |name: &str| file.entries.contains_key(&format!("{SINGLE_FILE_VAE}{name}"));
+    let has = |name: &str| file.entries.contains_key(&layout.stored(name));
     let config = serde_json::json!({
         "in_channels": dim("encoder.conv_in.weight", 1)?,
         "out_channels": dim("decoder.conv_out.weight", 0)?,

@@ -5,7 +5,8 @@
 //! differs from the whole decode (slightly for trained VAEs); this is what diffusers users get.
 
 use crate::error::{Error, Result};
-use crate::vae::AutoencoderKl;
+use crate::vae::{AutoencoderKl, VaeConfig};
+use vkdiff_runtime::Dtype;
 
 /// diffusers' fixed `tile_overlap_factor`.
 const OVERLAP: f64 = 0.25;
@@ -32,31 +33,31 @@ impl Tile {
     }
 }
 
-impl AutoencoderKl {
-    /// Device memory a decode's activations take, for `batch` images of `height`×`width` pixels
+impl VaeConfig {
+    /// Device memory the activations of a decode in `dtype` take, for `batch` images of `height`×`width` pixels
     /// (a tile's, when tiled): per output pixel 4·(c₀ + c₁) + c₀ values of the first two levels'
     /// channels, and a tenth more. Measured on lavapipe (peak less weights, linear in pixels):
     /// SDXL's VAE [128, 256, …] 1,547 values per pixel (f32 at 128² and 256², f16 at 256²), the
     /// tiny test VAE [32, 32, …] 289 (64² to 256², batch 1 and 2); this gives 1,830 and 317.
-    pub fn decode_bytes(&self, batch: usize, height: usize, width: usize) -> u64 {
-        let ch = &self.config().block_out_channels;
+    pub fn decode_bytes(&self, dtype: Dtype, batch: usize, height: usize, width: usize) -> u64 {
+        let ch = &self.block_out_channels;
         let (c0, c1) = (ch[0], *ch.get(1).unwrap_or(&ch[0]));
         let values = (4 * (c0 + c1) + c0) as f64 * 1.1;
-        (values * (batch * height * width * vkdiff_runtime::dtype_size(self.dtype())) as f64) as u64
+        (values * (batch * height * width * vkdiff_runtime::dtype_size(dtype)) as f64) as u64
     }
 
     /// The largest single activation of a decode (one buffer, held to `maxMemoryAllocationSize`):
     /// the second level's channels at full resolution.
-    pub fn decode_largest_tensor(&self, batch: usize, height: usize, width: usize) -> u64 {
-        let ch = &self.config().block_out_channels;
+    pub fn decode_largest_tensor(&self, dtype: Dtype, batch: usize, height: usize, width: usize) -> u64 {
+        let ch = &self.block_out_channels;
         let c1 = *ch.get(1).unwrap_or(&ch[0]);
-        (batch * height * width * c1 * vkdiff_runtime::dtype_size(self.dtype())) as u64
+        (batch * height * width * c1 * vkdiff_runtime::dtype_size(dtype)) as u64
     }
 
     /// Whether `tiling` tiles a latent of `h`×`w`, as diffusers decides: only when a side passes
     /// the latent tile.
     pub fn tiles(&self, tiling: VaeTiling, h: usize, w: usize) -> bool {
-        let latent = tiling.tile / self.config().downscale();
+        let latent = tiling.tile / self.downscale();
         h > latent || w > latent
     }
 
@@ -64,7 +65,7 @@ impl AutoencoderKl {
     /// (three quarters of a tile) and its crop (a tile less its blend) are the same length and
     /// the tiles rebuild the image exactly.
     pub fn check_tiling(&self, tiling: VaeTiling) -> Result<()> {
-        let unit = 4 * self.config().downscale();
+        let unit = 4 * self.downscale();
         if tiling.tile == 0 || !tiling.tile.is_multiple_of(unit) {
             return Err(Error::Config(format!(
                 "a VAE tile must be a positive multiple of {unit} pixels, not {}",
@@ -73,7 +74,9 @@ impl AutoencoderKl {
         }
         Ok(())
     }
+}
 
+impl AutoencoderKl {
     /// [`AutoencoderKl::decode`] in tiles of `tiling` (the whole decode when the latent fits one).
     pub fn decode_tiled(
         &self,
@@ -81,9 +84,9 @@ impl AutoencoderKl {
         shape: [usize; 4],
         tiling: VaeTiling,
     ) -> Result<(Vec<f32>, [usize; 4])> {
-        self.check_tiling(tiling)?;
+        self.config().check_tiling(tiling)?;
         let [b, h, w, c] = shape;
-        if !self.tiles(tiling, h, w) {
+        if !self.config().tiles(tiling, h, w) {
             return self.decode(latents, shape);
         }
         let s = self.config().downscale();

@@ -18,7 +18,7 @@ fn tiled_decode_matches_diffusers_enable_tiling() {
     let (whole, _) = vae.decode(&nhwc, shape).unwrap();
     for tile in [64, 32] {
         let tiling = VaeTiling { tile };
-        assert!(vae.tiles(tiling, s[2], s[3]));
+        assert!(vae.config().tiles(tiling, s[2], s[3]));
         let (out, out_shape) = vae.decode_tiled(&nhwc, shape, tiling).unwrap();
         let got = nhwc_to_nchw(&out, out_shape);
         let (want_shape, want) = rec.values(&format!("tiled_{tile}")).unwrap();
@@ -31,7 +31,7 @@ fn tiled_decode_matches_diffusers_enable_tiling() {
     }
     // A latent within one tile decodes whole, as diffusers does.
     let one_tile = VaeTiling { tile: 128 };
-    assert!(!vae.tiles(one_tile, s[2], s[3]));
+    assert!(!vae.config().tiles(one_tile, s[2], s[3]));
     assert_eq!(vae.decode_tiled(&nhwc, shape, one_tile).unwrap().0, whole);
     let err = vae.decode_tiled(&nhwc, shape, VaeTiling { tile: 40 }).unwrap_err().to_string();
     assert!(err.contains("multiple of 32 pixels"), "{err}");

@@ -84,7 +84,7 @@ pub fn check_margin(dir: &Path, min_free: u64) -> Result<()> {
 }
 
 fn refusal(dir: &Path, free: u64, what: &str, min_free: u64) -> Error {
-    Error::Setting(
+    Error::DiskFull(
         Message::text(format!(
             "stopped before filling the disk: {} has {} free; {what}, and ",
             dir.display(),

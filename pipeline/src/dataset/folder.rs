@@ -13,12 +13,23 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::Error as FileError;
 use vkdiff_render::coco::{serialize_sorted, Annotation};
-use vkdiff_setting::Message;
+use vkdiff_setting::{version, Message};
 
 pub const MANIFEST: &str = "dataset.json";
 pub const ANNOTATIONS: &str = "annotations.json";
 const FORMAT: &str = "vkdiff-dataset/1";
-const VERSION: &str = env!("CARGO_PKG_VERSION");
+/// dataset.json's list of the versions that `--allow-version-change` let finish the set.
+const ALLOWED: &str = "versions_allowed";
+
+/// Whether a build of another version than the one that made a set may add to it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum VersionChange {
+    /// Refused: another build's kernels may give other bytes.
+    #[default]
+    Refuse,
+    /// Allowed, and recorded in dataset.json (`--allow-version-change`).
+    Allow,
+}
 
 /// What one finished image left: its files' sizes, its COCO image entry and its annotations
 /// (ids local to the image: the instance's id in its mask).
@@ -68,10 +79,11 @@ impl Pending {
 }
 
 impl Dataset {
-    /// Creates the folder for `settings`, or opens it when it was made with the same settings;
-    /// refuses one made otherwise (naming the first differing flag) or a folder that is not a
-    /// dataset. Nothing is written before these checks pass.
-    pub fn open(dir: &Path, settings: &DatasetSettings) -> Result<Dataset> {
+    /// Creates the folder for `settings`, or opens it when it was made with the same settings
+    /// by this version (or `versions` allows another); refuses one made otherwise (naming the
+    /// first differing flag, or both versions) or a folder that is not a dataset. Nothing is
+    /// written before these checks pass.
+    pub fn open(dir: &Path, settings: &DatasetSettings, versions: VersionChange) -> Result<Dataset> {
         let wanted = manifest(settings);
         let path = dir.join(MANIFEST);
         let io = |p: &Path| {
@@ -83,14 +95,12 @@ impl Dataset {
             std::fs::create_dir_all(dir).map_err(io(dir))?;
             create_once(&path, &to_text(&wanted))?;
         }
-        let recorded = read_manifest(&path)?;
-        if recorded["vkdiff"] != wanted["vkdiff"] || recorded["format"] != wanted["format"] {
+        let mut recorded = read_manifest(&path)?;
+        if recorded["format"] != wanted["format"] {
             return Err(Error::Setting(
                 Message::text(format!(
-                    "{} was made by vkdiff {} ({}); this is vkdiff {VERSION}: finish it with that version, or give \
-                    another ",
+                    "{} is a {} folder; this vkdiff writes {FORMAT}: give another ",
                     dir.display(),
-                    recorded["vkdiff"],
                     recorded["format"]
                 ))
                 .and("out"),
@@ -104,19 +114,25 @@ impl Dataset {
                     .and("out"),
             ));
         }
+        accept_version(dir, &mut recorded, versions)?;
         for folder in FOLDERS {
             std::fs::create_dir_all(dir.join(folder)).map_err(io(&dir.join(folder)))?;
         }
-        Ok(Dataset::from_manifest(dir, wanted))
+        // The set keeps the fingerprint it was made with: records of an allowed version change
+        // stay done.
+        Ok(Dataset::from_manifest(dir, recorded))
     }
 
-    /// A finished or unfinished dataset, as `dataset.json` describes it (for merging).
+    /// A finished or unfinished dataset that this version may merge (see [`Dataset::open`]).
+    pub fn for_merge(dir: &Path, versions: VersionChange) -> Result<Dataset> {
+        let mut manifest = read_manifest(&manifest_path(dir)?)?;
+        accept_version(dir, &mut manifest, versions)?;
+        Ok(Dataset::from_manifest(dir, manifest))
+    }
+
+    /// A finished or unfinished dataset, as `dataset.json` describes it (for reading).
     pub fn read(dir: &Path) -> Result<Dataset> {
-        let path = dir.join(MANIFEST);
-        if !path.is_file() {
-            return Err(Error::Config(format!("{}: no {MANIFEST}; not a vkdiff dataset folder", dir.display())));
-        }
-        Ok(Dataset::from_manifest(dir, read_manifest(&path)?))
+        Ok(Dataset::from_manifest(dir, read_manifest(&manifest_path(dir)?)?))
     }
 
     fn from_manifest(dir: &Path, m: Value) -> Dataset {
@@ -240,8 +256,8 @@ fn manifest(settings: &DatasetSettings) -> Value {
     let s = settings.to_json();
     json!({
         "format": FORMAT,
-        "vkdiff": VERSION,
-        "fingerprint": fnv1a(&format!("{FORMAT} {VERSION} {s}")),
+        "vkdiff": version(),
+        "fingerprint": fnv1a(&format!("{FORMAT} {} {s}", version())),
         "scenes": settings.count,
         "images": settings.images(),
         "layout": {
@@ -255,6 +271,43 @@ fn manifest(settings: &DatasetSettings) -> Value {
         },
         "settings": s,
     })
+}
+
+fn manifest_path(dir: &Path) -> Result<PathBuf> {
+    let path = dir.join(MANIFEST);
+    if !path.is_file() {
+        return Err(Error::Config(format!("{}: no {MANIFEST}; not a vkdiff dataset folder", dir.display())));
+    }
+    Ok(path)
+}
+
+/// Accepts this version for the set `manifest` describes: the one that made it, one allowed
+/// before, or (with [`VersionChange::Allow`]) a new one, which dataset.json then lists.
+fn accept_version(dir: &Path, manifest: &mut Value, versions: VersionChange) -> Result<()> {
+    let made_by = manifest["vkdiff"].as_str().unwrap_or("unknown").to_string();
+    let allowed = manifest[ALLOWED].as_array().is_some_and(|a| a.iter().any(|v| v == version()));
+    if made_by == version() || allowed {
+        return Ok(());
+    }
+    if versions == VersionChange::Refuse {
+        return Err(Error::Setting(
+            Message::text(format!(
+                "{} was made by vkdiff {made_by}; this is vkdiff {}, whose kernels may give other bytes: finish it \
+                with vkdiff {made_by}, give another ",
+                dir.display(),
+                version()
+            ))
+            .and("out")
+            .then(", or pass ")
+            .and("allow_version_change"),
+        ));
+    }
+    let list = manifest.as_object_mut().expect("a checked manifest is an object").entry(ALLOWED).or_insert(json!([]));
+    if let Some(list) = list.as_array_mut() {
+        list.push(json!(version()));
+    }
+    write_atomic(&dir.join(MANIFEST), to_text(manifest).as_bytes())?;
+    Ok(())
 }
 
 fn to_text(v: &Value) -> String {

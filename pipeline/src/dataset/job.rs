@@ -73,7 +73,7 @@ impl DatasetJob {
         }
         let styles = settings.ip_sets.iter().map(|set| read_images(set)).collect::<Result<Vec<_>>>()?;
         check_margin(out, options.min_free)?;
-        let dataset = Dataset::open(out, &settings)?;
+        let dataset = Dataset::open(out, &settings, options.versions)?;
         let pending = dataset.pending(shard)?;
         let disk = DiskGuard::new(&dataset, options.min_free, pending.done_bytes, pending.done);
         disk.check(pending.images())?;
@@ -172,7 +172,7 @@ impl DatasetJob {
         let dir = &self.dataset.dir;
         let (recorded, total) = (Dataset::read(dir)?.recorded(), self.settings.images());
         if recorded == total {
-            Ok(Finish::Merged(merge(dir)?))
+            Ok(Finish::Merged(merge(dir, self.options.versions)?))
         } else {
             Ok(Finish::ShardDone { recorded, total })
         }

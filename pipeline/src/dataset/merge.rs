@@ -2,7 +2,7 @@
 //! COCO `annotations.json` in index order, annotation ids renumbered from 1 in that order. Refuses
 //! while any image is missing or was made with other settings.
 
-use super::folder::{Dataset, ANNOTATIONS};
+use super::folder::{Dataset, VersionChange, ANNOTATIONS};
 use crate::error::{Error, Result};
 use crate::files::write_atomic_with;
 use serde_json::json;
@@ -15,9 +15,10 @@ pub struct Merged {
     pub annotations: u64,
 }
 
-/// Joins the records of the dataset in `dir` into `dir/annotations.json`.
-pub fn merge(dir: &Path) -> Result<Merged> {
-    let dataset = Dataset::read(dir)?;
+/// Joins the records of the dataset in `dir` into `dir/annotations.json`, if this version made
+/// the set or `versions` allows another.
+pub fn merge(dir: &Path, versions: VersionChange) -> Result<Merged> {
+    let dataset = Dataset::for_merge(dir, versions)?;
     let mut missing = Vec::new();
     let mut images = Vec::with_capacity(dataset.images as usize);
     let mut annotations = 0;
@@ -50,7 +51,7 @@ pub fn merge(dir: &Path) -> Result<Merged> {
     let head = json!({
         "info": {
             "description": "vkdiff dataset: procedural white button mushroom beds made photoreal by SDXL on Vulkan",
-            "version": env!("CARGO_PKG_VERSION"),
+            "version": vkdiff_setting::version(),
             "fingerprint": dataset.fingerprint,
             "settings": dataset.settings,
         },

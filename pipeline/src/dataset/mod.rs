@@ -16,10 +16,11 @@ mod run;
 mod scenes;
 mod settings;
 mod stats;
+mod stop;
 
 pub use disk::{parse_size, size, DiskGuard, DEFAULT_MIN_FREE};
 pub use export::{export, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions};
-pub use folder::{Dataset, ImageRecord, Pending, ANNOTATIONS, MANIFEST};
+pub use folder::{Dataset, ImageRecord, Pending, VersionChange, ANNOTATIONS, MANIFEST};
 pub use job::{DatasetEvent, DatasetJob, Finish, ShardRequest};
 pub use merge::{merge, Merged};
 pub use plan::{choose, image_seed, Choice, ImageFiles, Shard};
@@ -27,3 +28,4 @@ pub use preview::{preview, Preview};
 pub use run::{generate, Progress, Report, RunOptions, StageTimes};
 pub use settings::{read_prompts, Crops, DatasetSettings};
 pub use stats::{stats, write_charts};
+pub use stop::{stop_on_signals, stop_requested};

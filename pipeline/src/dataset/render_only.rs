@@ -8,6 +8,7 @@ use super::folder::{Dataset, Pending};
 use super::run::{Progress, Report, RunOptions, StageTimes};
 use super::scenes::render_scenes;
 use super::settings::DatasetSettings;
+use super::stop::{interrupted, stop_requested};
 use crate::error::{Error, Result};
 use serde_json::json;
 use std::time::{Duration, Instant};
@@ -27,6 +28,9 @@ pub fn write_renders(
     let mut made = 0;
     loop {
         let waited = Instant::now();
+        if stop_requested() {
+            return Err(interrupted(done, total));
+        }
         let Ok(scene) = stream.images.recv() else { break };
         times.waiting += waited.elapsed();
         let scene = scene?;

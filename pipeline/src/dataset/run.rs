@@ -3,10 +3,11 @@
 //! its record. Prompts and style-image sets are encoded once each and reused.
 
 use super::disk::DiskGuard;
-use super::folder::{Dataset, Pending};
+use super::folder::{Dataset, Pending, VersionChange};
 use super::plan::{choose, image_seed, Choice};
 use super::scenes::{render_scenes, SceneImage};
 use super::settings::DatasetSettings;
+use super::stop::{interrupted, stop_requested};
 use crate::error::{Error, Result};
 use crate::files::png_bytes;
 use crate::sdxl::denoiser::{Denoiser, ItemInputs};
@@ -29,6 +30,8 @@ pub struct RunOptions {
     pub threads: usize,
     /// Free space to leave on the dataset's file system (`--min-free`).
     pub min_free: u64,
+    /// Whether a build of another version may add to a set (`--allow-version-change`).
+    pub versions: VersionChange,
 }
 
 /// What the loop tells its caller as it goes.
@@ -189,6 +192,9 @@ impl<'a> Loop<'a> {
                 }
             }
             let Some(fallback) = queue.front().map(|first| self.shape(first)) else { return Ok(made) };
+            if stop_requested() {
+                return Err(interrupted(done, total));
+            }
             let items = self.take_batch(&mut queue, fallback, batch);
             for finished in self.batch(items, on_progress)? {
                 disk.check(total.saturating_sub(done - made + disk.images_written()))?;

@@ -5,6 +5,7 @@
 use crate::error::{Error, Result};
 use crate::sdxl::Sdxl;
 use crate::settings::ip_scale::IpScale;
+use crate::settings::models::recorded_path;
 use crate::settings::prompt_syntax::PromptSyntax;
 use crate::settings::sampling::{Sampling, SizeConditioning};
 use crate::settings::{control_depth_name, precision_name, schedule_name, ModelSettings, RNG};
@@ -78,7 +79,7 @@ impl DatasetSettings {
         let multiple = match &models {
             Some(models) => {
                 check_diffusion(models, &prompts, &negative_prompt, &sampling, &ip_sets)?;
-                Sdxl::probe_pixel_multiple(&models.model)? as u32
+                Sdxl::probe_pixel_multiple(&models.model, models.vae.as_deref())? as u32
             }
             None => {
                 check_render_only(&prompts, &negative_prompt, &sampling, &ip_sets)?;
@@ -191,7 +192,7 @@ impl DatasetSettings {
     fn diffusion_json(&self, m: &ModelSettings) -> Map<String, Value> {
         let s = &self.sampling;
         let mut map = object(json!({
-            "model": m.model.display().to_string(),
+            "model": recorded_path(&m.model),
             "precision": precision_name(m.precision),
             "prompt": self.prompts,
             "negative-prompt": self.negative_prompt,
@@ -210,6 +211,9 @@ impl DatasetSettings {
         if let Some(strength) = s.strength {
             map.insert("init-strength".into(), json!(strength));
         }
+        if let Some(vae) = &m.vae {
+            map.insert("vae".into(), json!(recorded_path(vae)));
+        }
         if *c != SizeConditioning::default() {
             map.extend(object(json!({
                 "original-size": size(c.original),
@@ -219,7 +223,7 @@ impl DatasetSettings {
         }
         if let Some(c) = &m.controlnet {
             map.extend(object(json!({
-                "controlnet": c.model.display().to_string(),
+                "controlnet": recorded_path(&c.model),
                 "control-scale": c.scale,
                 "control-start": c.start,
                 "control-end": c.end,
@@ -229,8 +233,8 @@ impl DatasetSettings {
             let sets: Vec<Vec<String>> =
                 self.ip_sets.iter().map(|set| set.iter().map(|p| p.display().to_string()).collect()).collect();
             map.extend(object(json!({
-                "ip-adapter": ip.adapter.display().to_string(),
-                "image-encoder": ip.encoder.display().to_string(),
+                "ip-adapter": recorded_path(&ip.adapter),
+                "image-encoder": recorded_path(&ip.encoder),
                 "ip-scale": ip_scale_json(&ip.scale),
                 "ip-set": sets,
             })));

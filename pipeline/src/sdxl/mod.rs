@@ -24,6 +24,7 @@ pub use workflow_models::{StyleModels, WorkflowModels};
 
 use crate::error::{Error, Result};
 use crate::schedulers::SchedulerConfig;
+use crate::settings::models::flagged;
 use crate::tokenizer::ClipTokenizer;
 use std::path::Path;
 use vkdiff_formats::Error as FileError;
@@ -59,6 +60,18 @@ pub struct Sdxl {
 impl Sdxl {
     /// Loads every component, reporting each by name to `progress` before it loads.
     pub fn load(ctx: &Context, path: &Path, dtype: Dtype, progress: &mut dyn FnMut(&str)) -> Result<Sdxl> {
+        Sdxl::load_with_vae(ctx, path, None, dtype, progress)
+    }
+
+    /// [`Sdxl::load`] with the VAE taken from `vae` (`--vae`: a folder, or a file in either
+    /// layout) instead of the model's.
+    pub fn load_with_vae(
+        ctx: &Context,
+        path: &Path,
+        vae: Option<&Path>,
+        dtype: Dtype,
+        progress: &mut dyn FnMut(&str),
+    ) -> Result<Sdxl> {
         if !path.exists() {
             return Err(Error::Config(format!("{}: no such model folder or file", path.display())));
         }
@@ -79,7 +92,10 @@ impl Sdxl {
         let (unet_config, ckpt) = unet_checkpoint(ctx, path, dtype)?;
         let unet = UNet::load(&unet_config, &ckpt)?;
         progress("VAE");
-        let vae = AutoencoderKl::load_sdxl(ctx, path, dtype)?;
+        let vae = match vae {
+            Some(file) => flagged("vae", file, AutoencoderKl::load_sdxl(ctx, file, dtype))?,
+            None => AutoencoderKl::load_sdxl(ctx, path, dtype)?,
+        };
         let scheduler = match folder.map(|d| d.join("scheduler/scheduler_config.json")).filter(|p| p.is_file()) {
             Some(p) => SchedulerConfig::load(&p)?,
             None => SchedulerConfig::sdxl_base(),
@@ -159,6 +175,11 @@ impl Sdxl {
     }
 
     /// Pixels per latent along each side.
+    /// The precision the VAE runs in: f32 where its config forces upcasting.
+    pub fn vae_dtype(&self) -> Dtype {
+        self.vae.dtype()
+    }
+
     pub fn vae_scale(&self) -> usize {
         self.vae.config().downscale()
     }
@@ -175,12 +196,15 @@ impl Sdxl {
 
     /// [`Sdxl::pixel_multiple`] of the model at `path`, read from its configs or tensor shapes
     /// without loading any weight (to check sizes before the long load).
-    pub fn probe_pixel_multiple(path: &Path) -> Result<usize> {
+    pub fn probe_pixel_multiple(path: &Path, vae: Option<&Path>) -> Result<usize> {
         if !path.exists() {
             return Err(Error::Config(format!("{}: no such model folder or file", path.display())));
         }
         let unet = read_unet_config(path)?;
-        let vae = AutoencoderKl::sdxl_config(path)?;
+        let vae = match vae {
+            Some(file) => flagged("vae", file, AutoencoderKl::sdxl_config(file))?,
+            None => AutoencoderKl::sdxl_config(path)?,
+        };
         if unet.block_out_channels.is_empty() || vae.block_out_channels.is_empty() {
             return Err(Error::Config(format!("{}: a UNet or VAE config without block_out_channels", path.display())));
         }

@@ -6,8 +6,8 @@
 use crate::error::{Error, Result};
 use crate::sdxl::Sdxl;
 use crate::settings::VaeTilingSetting;
-use vkdiff_networks::VaeTiling;
-use vkdiff_runtime::MemoryRoom;
+use vkdiff_networks::{VaeConfig, VaeTiling};
+use vkdiff_runtime::{Dtype, MemoryRoom};
 use vkdiff_setting::Message;
 
 /// The smallest tile `auto` takes: below it the blends are a large part of each tile.
@@ -41,25 +41,27 @@ fn mib(bytes: u64) -> String {
     format!("{} MiB", bytes.div_ceil(1 << 20))
 }
 
-impl Sdxl {
-    /// Plans the decodes of `batch` images of `width`×`height` pixels as `setting` says, and
-    /// keeps the plan for [`Sdxl::decode`].
-    pub fn plan_vae(
-        &mut self,
+impl VaePlan {
+    /// Plans the decodes of `batch` images of `width`×`height` pixels by a VAE of `config` in
+    /// `dtype`, as `setting` says and `room` allows (each buffer within `max_allocation`, 0 for
+    /// no limit).
+    #[allow(clippy::too_many_arguments)]
+    pub fn choose(
+        config: &VaeConfig,
+        dtype: Dtype,
+        room: MemoryRoom,
+        max_allocation: u64,
         setting: VaeTilingSetting,
         batch: usize,
         width: usize,
         height: usize,
     ) -> Result<VaePlan> {
-        let vae = &self.vae;
-        let room = self.ctx.memory_room();
         let usable = usable(room);
-        let max_allocation = self.ctx.info().max_allocation;
-        let s = vae.config().downscale();
+        let s = config.downscale();
         let (lh, lw) = (height / s, width / s);
         let need = |tile: Option<usize>| {
             let (h, w) = tile.map_or((height, width), |t| (t.min(height), t.min(width)));
-            (vae.decode_bytes(batch, h, w), vae.decode_largest_tensor(batch, h, w))
+            (config.decode_bytes(dtype, batch, h, w), config.decode_largest_tensor(dtype, batch, h, w))
         };
         let fits = |tile: Option<usize>| {
             let (bytes, largest) = need(tile);
@@ -67,11 +69,11 @@ impl Sdxl {
         };
         let whole_bytes = need(None).0;
         let plan = |tile: Option<usize>| {
-            let tiling = tile.map(|tile| VaeTiling { tile }).filter(|&t| vae.tiles(t, lh, lw));
+            let tiling = tile.map(|tile| VaeTiling { tile }).filter(|&t| config.tiles(t, lh, lw));
             VaePlan { tiling, whole_bytes, planned_bytes: need(tiling.map(|t| t.tile)).0, room }
         };
         let refused = |what: String| Error::Setting(Message::setting("vae_tiling").then(what));
-        let chosen = match setting {
+        Ok(match setting {
             VaeTilingSetting::Off if fits(None) => plan(None),
             VaeTilingSetting::Off => {
                 return Err(refused(format!(
@@ -85,17 +87,17 @@ impl Sdxl {
             VaeTilingSetting::On | VaeTilingSetting::Pixels(_) => {
                 let tile = match setting {
                     VaeTilingSetting::Pixels(tile) => tile,
-                    _ => vae.config().tile_sample_size(),
+                    _ => config.tile_sample_size(),
                 };
                 let tiling = VaeTiling { tile };
-                vae.check_tiling(tiling).map_err(|e| refused(format!(" {tile}: {e}")))?;
+                config.check_tiling(tiling).map_err(|e| refused(format!(" {tile}: {e}")))?;
                 plan(Some(tile))
             }
             VaeTilingSetting::Auto if fits(None) => plan(None),
             VaeTilingSetting::Auto => {
                 // diffusers' tile, then halves of it, down to 128 px (or the VAE's own smaller tile).
                 let unit = 4 * s;
-                let largest = (vae.config().tile_sample_size() / unit * unit).max(unit);
+                let largest = (config.tile_sample_size() / unit * unit).max(unit);
                 let smallest = SMALLEST_AUTO_TILE.min(largest).max(unit);
                 let tiles: Vec<usize> = std::iter::successors(Some(largest), |t| Some(t / 2 / unit * unit))
                     .take_while(|&t| t >= smallest)
@@ -117,7 +119,24 @@ impl Sdxl {
                     }
                 }
             }
-        };
+        })
+    }
+}
+
+impl Sdxl {
+    /// Plans the decodes of `batch` images of `width`×`height` pixels as `setting` says and the
+    /// device's free memory allows ([`VaePlan::choose`]), and keeps the plan for [`Sdxl::decode`].
+    pub fn plan_vae(
+        &mut self,
+        setting: VaeTilingSetting,
+        batch: usize,
+        width: usize,
+        height: usize,
+    ) -> Result<VaePlan> {
+        let (config, dtype) = (self.vae.config(), self.vae.dtype());
+        let room = self.ctx.memory_room();
+        let max_allocation = self.ctx.info().max_allocation;
+        let chosen = VaePlan::choose(config, dtype, room, max_allocation, setting, batch, width, height)?;
         self.vae_plan = Some(chosen);
         Ok(chosen)
     }

@@ -9,7 +9,7 @@
 use crate::error::{Error, Result};
 use crate::images::{load_control_image, read_image};
 use crate::schedulers::SamplerKind;
-use crate::settings::models::{flagged, ModelSettings};
+use crate::settings::models::{flagged, recorded_path, ModelSettings};
 use crate::settings::names::{control_depth_name, precision_name, schedule_name, RNG};
 use crate::settings::prompt_syntax::PromptSyntax;
 use crate::settings::sampling::{SizeConditioning, TextToImage};
@@ -53,11 +53,15 @@ fn a1111_sampler(kind: SamplerKind) -> &'static str {
 /// A model's name as A1111 gives it: the file name without its extension, or the folder name
 /// (diffusers folders such as `stable-diffusion-xl-base-1.0` keep their dots).
 fn model_name(path: &Path) -> String {
+    let recorded = recorded_path(path);
+    let path = Path::new(&recorded);
     let is_file = path
         .extension()
         .is_some_and(|e| ["safetensors", "ckpt", "pt", "bin"].iter().any(|x| e.eq_ignore_ascii_case(x)));
     let name = if is_file { path.file_stem() } else { path.file_name() };
-    name.map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+    // A Hugging Face repository's name, without its `@COMMIT`.
+    let name = name.map_or_else(|| recorded.clone(), |n| n.to_string_lossy().into_owned());
+    name.split('@').next().unwrap_or_default().to_string()
 }
 
 fn join_paths(paths: &[PathBuf], separator: &str) -> String {
@@ -80,8 +84,8 @@ impl GenSettings {
             ("height".into(), s.height.to_string()),
             ("precision".into(), precision_name(m.precision).into()),
             ("rng".into(), RNG.into()),
-            ("model".into(), m.model.display().to_string()),
-            ("software".into(), format!("vkdiff {}", env!("CARGO_PKG_VERSION"))),
+            ("model".into(), recorded_path(&m.model)),
+            ("software".into(), format!("vkdiff {}", vkdiff_setting::version())),
         ]);
         if let Some(n) = &job.negative_prompt {
             text.insert("negative_prompt".into(), n.clone());
@@ -101,7 +105,7 @@ impl GenSettings {
             text.insert("target_size".into(), size(c.target));
         }
         if let Some(c) = &m.controlnet {
-            text.insert("controlnet".into(), c.model.display().to_string());
+            text.insert("controlnet".into(), recorded_path(&c.model));
             text.insert("depth".into(), self.depth.as_deref().map(|d| d.display().to_string()).unwrap_or_default());
             text.insert("control_depth".into(), control_depth_name(c.depth_mode).into());
             text.insert("control_scale".into(), c.scale.to_string());
@@ -109,13 +113,16 @@ impl GenSettings {
             text.insert("control_end".into(), c.end.to_string());
         }
         if let Some(ip) = &m.ip_adapter {
-            text.insert("ip_adapter".into(), ip.adapter.display().to_string());
-            text.insert("image_encoder".into(), ip.encoder.display().to_string());
+            text.insert("ip_adapter".into(), recorded_path(&ip.adapter));
+            text.insert("image_encoder".into(), recorded_path(&ip.encoder));
             text.insert("ip_images".into(), join_paths(&self.ip_images, "\n"));
             text.insert("ip_scale".into(), ip.scale.to_string());
         }
         if !m.loras.is_empty() {
             text.insert("loras".into(), m.lora_flags().join("\n"));
+        }
+        if let Some(vae) = &m.vae {
+            text.insert("vae".into(), recorded_path(vae));
         }
         text
     }
@@ -137,6 +144,9 @@ impl GenSettings {
             format!("RNG: {RNG}"),
             format!("Precision: {}", precision_name(m.precision).to_uppercase()),
         ];
+        if let Some(vae) = &m.vae {
+            pairs.push(format!("VAE: {}", quoted(&model_name(vae))));
+        }
         if let Some(strength) = s.strength {
             pairs.push(format!("Denoising strength: {strength}"));
         }

@@ -4,7 +4,7 @@
 
 mod gen;
 pub(crate) mod ip_scale;
-mod models;
+pub(crate) mod models;
 pub(crate) mod names;
 pub(crate) mod prompt_syntax;
 pub(crate) mod sampling;

@@ -41,6 +41,8 @@ pub struct LoraSetting {
 #[derive(Clone, Debug, PartialEq)]
 pub struct ModelSettings {
     pub model: PathBuf,
+    /// A VAE in place of the model's (`--vae`): a diffusers folder or a single file.
+    pub vae: Option<PathBuf>,
     pub precision: Dtype,
     pub controlnet: Option<ControlNetSettings>,
     pub ip_adapter: Option<IpAdapterSettings>,
@@ -49,10 +51,25 @@ pub struct ModelSettings {
     pub vae_tiling: VaeTilingSetting,
 }
 
+/// How settings and files record a model's path: a file or folder of a Hugging Face cache
+/// snapshot as `ORG/NAME@COMMIT[/path/in/repo]`, the same on every machine whatever its cache
+/// folder (and accepted back by every model flag); any other path as given.
+pub fn recorded_path(path: &Path) -> String {
+    let parts: Vec<&str> = path.iter().map(|p| p.to_str().unwrap_or("")).collect();
+    for (i, part) in parts.iter().enumerate() {
+        let Some((org, name)) = part.strip_prefix("models--").and_then(|r| r.split_once("--")) else { continue };
+        if let (Some(&"snapshots"), Some(commit)) = (parts.get(i + 1), parts.get(i + 2)) {
+            let inner: String = parts[i + 3..].iter().map(|p| format!("/{p}")).collect();
+            return format!("{org}/{name}@{commit}{inner}");
+        }
+    }
+    path.display().to_string()
+}
+
 impl ModelSettings {
     /// The LoRAs as `--lora` takes them, FILE:STRENGTH.
     pub fn lora_flags(&self) -> Vec<String> {
-        self.loras.iter().map(|l| format!("{}:{}", l.path.display(), l.strength)).collect()
+        self.loras.iter().map(|l| format!("{}:{}", recorded_path(&l.path), l.strength)).collect()
     }
 
     /// Settings that are wrong whatever the model, before anything loads.
@@ -89,6 +106,9 @@ impl ModelSettings {
             };
             flagged("controlnet", &c.model, checked)?;
         }
+        if let Some(vae) = &self.vae {
+            flagged("vae", vae, vkdiff_networks::AutoencoderKl::sdxl_config(vae))?;
+        }
         if let Some(ip) = &self.ip_adapter {
             flagged("image_encoder", &ip.encoder, ClipVisionConfig::from_file(&ip.encoder.join("config.json")))?;
             if ip.adapter.extension().is_some_and(|e| e == "safetensors") {
@@ -101,6 +121,7 @@ impl ModelSettings {
     /// Every file or folder the settings name, with the setting's name.
     fn files(&self) -> Vec<(&Path, &'static str)> {
         let mut files = vec![(self.model.as_path(), "model")];
+        files.extend(self.vae.iter().map(|v| (v.as_path(), "vae")));
         files.extend(self.controlnet.iter().map(|c| (c.model.as_path(), "controlnet")));
         if let Some(ip) = &self.ip_adapter {
             files.extend([(ip.adapter.as_path(), "ip_adapter"), (ip.encoder.as_path(), "image_encoder")]);

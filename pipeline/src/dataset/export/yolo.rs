@@ -71,7 +71,7 @@ fn data_yaml(set: &FinishedSet) -> String {
     let mut yaml = format!(
         "# YOLO segmentation labels exported by vkdiff {} from a vkdiff dataset, split by scene\n\
          # (val fraction {}, test fraction {}, seed {}). Ultralytics takes this file's folder as the root.\n",
-        env!("CARGO_PKG_VERSION"),
+        vkdiff_setting::version(),
         set.fractions.val,
         set.fractions.test,
         set.fractions.seed

@@ -1,0 +1,136 @@
+//! Exit codes a scheduler can act on: 2 for usage and bad input (fix the command, do not
+//! retry), 3 for the device (none, lost, hung, refused by `--require-gpu`: another node may
+//! do), 4 for a stop that the same command resumes (disk full, interrupted), 1 for anything
+//! else. Each library error is classified here, at the edge, by matching every variant, so a
+//! new variant cannot go unclassified.
+
+use std::io::ErrorKind;
+use vkdiff_formats::Error as FileError;
+use vkdiff_runtime::Error as DeviceError;
+
+pub const OTHER: i32 = 1;
+pub const USAGE: i32 = 2;
+pub const DEVICE: i32 = 3;
+pub const RESUMABLE: i32 = 4;
+
+/// The `--help` and README text of the codes.
+pub const EXIT_CODES_HELP: &str = "Exit codes: 0 done; 2 usage or bad input (flags, files, settings: do not retry); \
+3 the device (none, lost, hung, --require-gpu); 4 stopped, the same command resumes (disk full, interrupted); \
+1 anything else.";
+
+/// The code for `error`: the first cause in its chain that a library or the command line
+/// classifies decides it.
+pub fn of(error: &anyhow::Error) -> i32 {
+    error.chain().find_map(classify).unwrap_or(OTHER)
+}
+
+fn classify(cause: &(dyn std::error::Error + 'static)) -> Option<i32> {
+    if cause.is::<vkdiff_args::Usage>() {
+        return Some(USAGE);
+    }
+    if let Some(e) = cause.downcast_ref::<vkdiff_pipeline::Error>() {
+        return Some(pipeline(e));
+    }
+    if let Some(e) = cause.downcast_ref::<vkdiff_eval::EvalError>() {
+        return Some(match e {
+            vkdiff_eval::EvalError::Invalid(_) | vkdiff_eval::EvalError::Setting(_) => USAGE,
+        });
+    }
+    if let Some(e) = cause.downcast_ref::<vkdiff_networks::Error>() {
+        return Some(networks(e));
+    }
+    if let Some(e) = cause.downcast_ref::<vkdiff_lora::Error>() {
+        return Some(lora(e));
+    }
+    if let Some(e) = cause.downcast_ref::<vkdiff_render::RenderError>() {
+        return Some(render(e));
+    }
+    if let Some(e) = cause.downcast_ref::<DeviceError>() {
+        return Some(device(e));
+    }
+    if let Some(e) = cause.downcast_ref::<FileError>() {
+        return Some(file(e));
+    }
+    cause.downcast_ref::<std::io::Error>().map(io)
+}
+
+fn pipeline(e: &vkdiff_pipeline::Error) -> i32 {
+    use vkdiff_pipeline::Error as E;
+    match e {
+        E::Config(_) | E::Setting(_) => USAGE,
+        E::DiskFull(_) | E::Interrupted(_) => RESUMABLE,
+        E::NotFinite { .. } => OTHER,
+        E::Context(_, inner) => pipeline(inner),
+        E::File(e) => file(e),
+        E::Network(e) => networks(e),
+        E::Lora(e) => lora(e),
+        E::Render(e) => render(e),
+        E::Runtime(e) => device(e),
+    }
+}
+
+fn networks(e: &vkdiff_networks::Error) -> i32 {
+    use vkdiff_networks::Error as E;
+    match e {
+        E::Checkpoint(_) | E::Config(_) => USAGE,
+        E::File(e) => file(e),
+        E::Runtime(e) => device(e),
+    }
+}
+
+fn lora(e: &vkdiff_lora::Error) -> i32 {
+    use vkdiff_lora::Error as E;
+    match e {
+        E::Unsupported { .. } | E::Unmatched { .. } | E::Shape { .. } => USAGE,
+        E::Network(e) => networks(e),
+        E::File(e) => file(e),
+        E::Runtime(e) => device(e),
+    }
+}
+
+fn render(e: &vkdiff_render::RenderError) -> i32 {
+    use vkdiff_render::RenderError as E;
+    match e {
+        E::Setting(_) | E::OutputExists { .. } | E::TooManyInstances { .. } => USAGE,
+        E::Io { error, .. } => io(error),
+    }
+}
+
+fn device(e: &DeviceError) -> i32 {
+    use DeviceError as E;
+    match e {
+        // What the user named or set wrongly.
+        E::BadDeviceIndex { .. } | E::BadDeviceSpec(_) | E::NoSuchDevice { .. } | E::BadSetting(_) => USAGE,
+        E::NoValidationLayer => USAGE,
+        // The node's device: none, not visible, lost, hung, refused, out of memory, failing.
+        E::NoLoader(_) | E::NoDevice | E::NotVisible(_) | E::NoGpu(_) | E::Unsupported { .. } => DEVICE,
+        E::Vulkan { .. } | E::DeviceLost(_) | E::SubmitTimeout { .. } | E::Memory(_) => DEVICE,
+        // vkdiff's own mistakes.
+        E::Shape(_) | E::NoVariant { .. } => OTHER,
+    }
+}
+
+fn file(e: &FileError) -> i32 {
+    match e {
+        FileError::Io { source, .. } => io(source),
+        FileError::Format { .. } | FileError::Tensor(_) => USAGE,
+    }
+}
+
+/// A full disk or quota stops a run that resumes once there is room; a file that is missing,
+/// unreadable or in the way is the command's to fix.
+fn io(e: &std::io::Error) -> i32 {
+    match e.kind() {
+        ErrorKind::StorageFull | ErrorKind::QuotaExceeded => RESUMABLE,
+        ErrorKind::Interrupted => RESUMABLE,
+        ErrorKind::NotFound
+        | ErrorKind::PermissionDenied
+        | ErrorKind::AlreadyExists
+        | ErrorKind::NotADirectory
+        | ErrorKind::IsADirectory
+        | ErrorKind::InvalidData
+        | ErrorKind::InvalidInput
+        | ErrorKind::ReadOnlyFilesystem => USAGE,
+        _ => OTHER,
+    }
+}
