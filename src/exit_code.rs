@@ -13,11 +13,6 @@ pub const USAGE: i32 = 2;
 pub const DEVICE: i32 = 3;
 pub const RESUMABLE: i32 = 4;
 
-/// The `--help` and README text of the codes.
-pub const EXIT_CODES_HELP: &str = "Exit codes: 0 done; 2 usage or bad input (flags, files, settings: do not retry); \
-3 the device (none, lost, hung, --require-gpu); 4 stopped, the same command resumes (disk full, interrupted); \
-1 anything else.";
-
 /// The code for `error`: the first cause in its chain that a library or the command line
 /// classifies decides it.
 pub fn of(error: &anyhow::Error) -> i32 {

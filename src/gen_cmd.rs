@@ -12,10 +12,11 @@ use vkdiff_pipeline::{GenEvent, GenJob, GenRequest, GenSettings, TextToImage};
 pub struct GenArgs {
     #[command(flatten)]
     model: ModelArgs,
-    #[arg(long)]
+    /// The prompt (see --prompt-syntax for weights and prompts past 75 tokens).
+    #[arg(short, long)]
     prompt: String,
     /// torch.Generator("cpu").manual_seed(seed): diffusers gives the same noise for the same seed.
-    #[arg(long, default_value_t = 0)]
+    #[arg(short, long, default_value_t = 0)]
     seed: u64,
     #[command(flatten)]
     sampling: SamplingArgs,
@@ -45,7 +46,7 @@ pub struct GenArgs {
     #[arg(long)]
     latents_out: Option<PathBuf>,
     /// Output PNG.
-    #[arg(long)]
+    #[arg(short, long)]
     out: PathBuf,
     /// Replace --out (and --latents-out) when they exist.
     #[arg(long)]

@@ -11,6 +11,7 @@ mod eval_cmd;
 mod exit_code;
 mod fid_cmd;
 mod gen_cmd;
+mod help;
 mod scene_cmd;
 
 use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
@@ -19,7 +20,7 @@ use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 #[command(
     name = "vkdiff",
     version = env!("VKDIFF_VERSION"),
-    after_help = exit_code::EXIT_CODES_HELP,
+    after_help = help::top(),
     about = "Procedural scenes to photorealistic, exactly annotated training images, on any Vulkan GPU"
 )]
 struct Cli {
@@ -32,18 +33,22 @@ enum Command {
     /// Render procedural mushroom beds: metric depth (EXR), instance masks, COCO, control images.
     Scene(scene_cmd::SceneArgs),
     /// Text-to-image with an SDXL model: prompt in, PNG (with its settings) out.
+    #[command(after_help = help::gen())]
     Gen(Box<gen_cmd::GenArgs>),
     /// Scenes made into photoreal, exactly annotated training images: sharded, resumable.
+    #[command(after_help = help::dataset())]
     Dataset(Box<dataset_cmd::DatasetArgs>),
     /// List every Vulkan device and what vkdiff would use on it.
     Devices(devices_cmd::DevicesArgs),
     /// Score COCO predictions against COCO ground truth: AP/AR as pycocotools, F1, mIoU.
+    #[command(after_help = help::eval())]
     Eval(eval_cmd::EvalArgs),
     /// FID and KID between real photos and generated images, as torch-fidelity computes them,
     /// with its InceptionV3 on the Vulkan device.
+    #[command(after_help = help::fid())]
     Fid(fid_cmd::FidArgs),
     /// Measure speed: kernels, networks, scene generation.
-    #[command(subcommand)]
+    #[command(subcommand, after_help = help::bench())]
     Bench(vkdiff_bench::BenchCommand),
 }
 
@@ -124,4 +129,34 @@ fn one_line(error: &anyhow::Error) -> String {
         line.push_str(&text);
     }
     line
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    /// Every flag and positional of every command, `bench` and `dataset`'s subcommands
+    /// included, says what it is; the commands users start from show examples.
+    #[test]
+    fn every_argument_has_help_and_the_main_commands_have_examples() {
+        fn walk(command: &clap::Command, path: &str, missing: &mut Vec<String>) {
+            for arg in command.get_arguments().filter(|a| !["help", "version"].contains(&a.get_id().as_str())) {
+                if arg.get_help().is_none_or(|h| h.to_string().trim().is_empty()) {
+                    missing.push(format!("{path} {}", arg.get_id()));
+                }
+            }
+            for sub in command.get_subcommands() {
+                walk(sub, &format!("{path} {}", sub.get_name()), missing);
+            }
+        }
+        let cli = super::Cli::command();
+        let mut missing = Vec::new();
+        walk(&cli, "vkdiff", &mut missing);
+        assert!(missing.is_empty(), "arguments without help: {missing:?}");
+        for name in ["gen", "dataset", "eval", "fid", "bench"] {
+            let sub = cli.find_subcommand(name).unwrap();
+            let after = sub.get_after_help().map(|h| h.to_string()).unwrap_or_default();
+            assert!(after.contains("Examples") && after.contains("Exit codes"), "{name}: {after}");
+        }
+    }
 }

@@ -33,3 +33,24 @@ fn bench_vae_decodes_whole_and_in_tiles_in_f16() {
     // f16 weights: half of the f32 VAE's 319 MiB.
     assert!((row["weights_mib"].as_f64().unwrap() - 159.6).abs() < 1.0, "{row}");
 }
+
+#[test]
+fn bench_vae_times_a_given_vae_at_the_precision_its_config_allows() {
+    let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/vae_swap/tiny-vae");
+    let row = |vae: &std::path::Path| {
+        let args = ["bench", "vae", "--size", "64", "--tile", "32", "--precision", "f16", "--json", "--vae"];
+        let result = vkdiff(&[&args[..], &[vae.to_str().unwrap()]].concat());
+        assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+        let stdout = String::from_utf8_lossy(&result.stdout).into_owned();
+        serde_json::from_str::<serde_json::Value>(stdout.lines().last().unwrap_or("")).expect("one JSON line")
+    };
+    // Its config.json says force_upcast: false: the tiny VAE's weights in f16, 2.7 MiB.
+    let given = row(&fixtures);
+    assert_eq!(given["precision"], "f16", "{given}");
+    assert!((given["weights_mib"].as_f64().unwrap() - 2.67).abs() < 0.1, "{given}");
+    // The same file with no config beside it is SDXL's, which forces f32.
+    let alone = cli::scratch("bench-vae-alone").join("vae.safetensors");
+    std::fs::copy(fixtures.join("sdxl_vae.safetensors"), &alone).unwrap();
+    let forced = row(&alone);
+    assert!(forced["precision"] == "f32" && forced["weights_mib"].as_f64().unwrap() > 5.0, "{forced}");
+}

@@ -220,3 +220,41 @@ fn a_local_folder_named_like_an_id_wins_and_says_so() {
     assert!(notes[0].contains("local path") && notes[0].contains("not used"), "{}", notes[0]);
     assert_eq!(text(&out, "model"), "vkdiff-test/tiny-sdxl");
 }
+
+#[test]
+fn a_dataset_records_its_models_by_id_and_resumes_on_another_cache_folder() {
+    let dir = scratch("hub-dataset");
+    let set = dir.join("set");
+    let args = [
+        "dataset",
+        "--out",
+        set.to_str().unwrap(),
+        "--count",
+        "1",
+        "--width",
+        "96",
+        "--height",
+        "64",
+        "--steps",
+        "1",
+        "--prompt",
+        "white button mushrooms",
+        "-m",
+        "vkdiff-test/tiny-sdxl",
+        "--vae",
+        "vkdiff-test/tiny-vae-fp16-fix",
+    ];
+    ok(&run_in(&dir, &args, &[("HF_HUB_CACHE", &hub())]));
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(set.join("dataset.json")).unwrap()).unwrap();
+    let settings = &manifest["settings"];
+    let recorded = |key: &str| settings[key].as_str().map(String::from).unwrap_or_else(|| settings.to_string());
+    assert_eq!(recorded("model"), format!("vkdiff-test/tiny-sdxl@{}", commit("vkdiff-test/tiny-sdxl")));
+    assert_eq!(recorded("vae"), format!("vkdiff-test/tiny-vae-fp16-fix@{}", commit("vkdiff-test/tiny-vae-fp16-fix")));
+    // Another machine keeps its cache elsewhere: the same ids are the same settings.
+    let elsewhere = dir.join("elsewhere");
+    std::fs::create_dir_all(&elsewhere).unwrap();
+    std::os::unix::fs::symlink(hub(), elsewhere.join("hub")).unwrap();
+    let again = ok(&run_in(&dir, &args, &[("HF_HOME", &elsewhere)]));
+    assert!(again.contains("0 to make, 1 already done"), "{again}");
+}

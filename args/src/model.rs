@@ -70,6 +70,8 @@ pub struct ModelArgs {
     /// as madebyollin/sdxl-vae-fp16-fix, whose config lets it decode in f16.
     #[arg(long, value_name = "DIR|FILE|ID")]
     vae: Option<PathBuf>,
+    /// f16: f16 storage, f32 arithmetic, the matrix units where the GPU has them; f32 throughout
+    /// (slower; for reference checks). A VAE whose config forces upcasting decodes in f32 either way.
     #[arg(long, value_enum, default_value_t = Precision::F16)]
     precision: Precision,
     #[command(flatten)]
@@ -201,6 +203,7 @@ pub struct SamplingArgs {
     /// Without it, the negative conditioning is zeros (diffusers' SDXL default).
     #[arg(long)]
     pub negative_prompt: Option<String>,
+    /// Denoising steps (with img2img, of the full schedule, as diffusers counts them).
     #[arg(long, default_value_t = 30)]
     steps: usize,
     /// Classifier-free guidance scale; 1 or less runs without the negative pass.
@@ -209,6 +212,7 @@ pub struct SamplingArgs {
     /// euler, euler_a, dpmpp_2m or ddim.
     #[arg(long, default_value = "euler")]
     sampler: SamplerKind,
+    /// Noise levels: the model's scheduler_config.json as it is, or Karras et al.'s (euler, dpmpp_2m).
     #[arg(long, value_enum, default_value_t = Schedule::Default)]
     scheduler: Schedule,
     /// Noise generator: torch-cpu reproduces torch.randn on a CPU generator bit for bit.

@@ -13,8 +13,10 @@ pub struct SceneSettings {
     /// give byte-identical files.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Frame width in pixels (the camera's 1920×1080 by default).
     #[arg(long, default_value_t = 1920)]
     width: u32,
+    /// Frame height in pixels.
     #[arg(long, default_value_t = 1080)]
     height: u32,
     /// Mushrooms proposed per m² of bed (the default gives about 145 visible per 1920×1080 frame).
@@ -44,6 +46,7 @@ pub struct CropArgs {
     /// 1920×1080 → 1920×1056 for SDXL's multiples of 32).
     #[arg(long, default_value_t = 0)]
     pub crops: usize,
+    /// The crops' side in pixels (SDXL's 1024 by default; with a model, a multiple of 32).
     #[arg(long, default_value_t = 1024)]
     pub crop_size: u32,
     /// Drop an instance from a crop when less than this share of its visible pixels falls inside.

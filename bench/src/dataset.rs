@@ -24,14 +24,19 @@ pub struct DatasetArgs {
     /// Image side (square crops of a frame 1920×1080 scaled by size/1024, three per scene).
     #[arg(long, default_value_t = 512)]
     size: usize,
+    /// Scenes, three crops each.
     #[arg(long, default_value_t = 1)]
     scenes: u64,
+    /// Denoising steps timed per image (--production-steps extrapolates).
     #[arg(long, default_value_t = 2)]
     steps: usize,
+    /// Images per UNet pass.
     #[arg(long, default_value_t = 1)]
     batch: usize,
+    /// Rank of the two random LoRAs merged.
     #[arg(long, default_value_t = 32)]
     lora_rank: usize,
+    /// f16 (f32 arithmetic, matrix units where the GPU has them) or f32.
     #[arg(long, value_enum, default_value_t = vkdiff_args::Precision::F16)]
     precision: vkdiff_args::Precision,
     /// Steps per image in production, for the share of time that is not denoising.

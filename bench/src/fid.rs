@@ -26,6 +26,7 @@ pub struct FidArgs {
     /// Images per batch, on both sides.
     #[arg(long, default_value_t = 8)]
     batch: usize,
+    /// f32 (torch-fidelity's) or f16.
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     precision: Precision,
 }

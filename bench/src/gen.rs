@@ -17,8 +17,10 @@ pub struct GenArgs {
     /// Image sizes in pixels (square).
     #[arg(long, value_delimiter = ',', default_values_t = [512, 1024])]
     size: Vec<usize>,
+    /// Denoising steps.
     #[arg(long, default_value_t = 4)]
     steps: usize,
+    /// f16 (f32 arithmetic, matrix units where the GPU has them) or f32.
     #[arg(long, value_enum, default_value_t = vkdiff_args::Precision::F16)]
     precision: vkdiff_args::Precision,
 }

@@ -14,8 +14,10 @@ const REFERENCE: &str = include_str!("../../tools/lora_merge_cpu_reference.py");
 pub struct LoraArgs {
     #[command(flatten)]
     device: vkdiff_args::DeviceArgs,
+    /// The random LoRA's rank.
     #[arg(long, default_value_t = 32)]
     rank: usize,
+    /// f16 (f32 arithmetic, matrix units where the GPU has them) or f32.
     #[arg(long, value_enum, default_value_t = vkdiff_args::Precision::F16)]
     precision: vkdiff_args::Precision,
     /// Skip torch on the CPU (needs python with torch: $VKDIFF_REFERENCE_PYTHON or python3).

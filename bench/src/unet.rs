@@ -32,6 +32,7 @@ pub struct UnetArgs {
     /// Batch (2 = one classifier-free-guidance step).
     #[arg(long, default_value_t = 2)]
     batch: usize,
+    /// f16 (f32 arithmetic, matrix units where the GPU has them) or f32.
     #[arg(long, value_enum, default_value_t = Precision::F16)]
     precision: Precision,
     /// Timed evaluations per size; the best is reported.

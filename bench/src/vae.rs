@@ -25,6 +25,11 @@ pub struct VaeArgs {
     /// f32 (SDXL's VAE, which asks for it), or f16 (the fp16-fix VAE's config: `force_upcast` false).
     #[arg(long, value_enum, default_value_t = Precision::F32)]
     precision: Precision,
+    /// Time this VAE instead of random weights (a folder, a single file, a Hugging Face id); it
+    /// decodes in f16 only where its config allows. A reference times SDXL's architecture at the
+    /// same precision.
+    #[arg(long, value_name = "DIR|FILE|ID")]
+    vae: Option<std::path::PathBuf>,
     /// Tile side in pixels for the tiled decode (a multiple of 32).
     #[arg(long, default_value_t = 256)]
     tile: usize,
@@ -141,11 +146,17 @@ fn reference(config: &str, args: &VaeArgs, device: ReferenceDevice) -> std::resu
 }
 
 pub fn run(args: &VaeArgs) -> Result<()> {
+    let vae =
+        args.vae.as_ref().map(|v| vkdiff_args::resolve_model("--vae", v, vkdiff_args::Wants::Either)).transpose()?;
     let mut config: serde_json::Value = serde_json::from_str(SDXL_VAE_CONFIG)?;
     // f16 is the fp16-fix VAE: SDXL's architecture, with a config that does not ask for f32.
-    config["force_upcast"] = matches!(args.precision, Precision::F32).into();
+    let upcast = match &vae {
+        Some(path) => AutoencoderKl::sdxl_config(path)?.force_upcast || matches!(args.precision, Precision::F32),
+        None => matches!(args.precision, Precision::F32),
+    };
+    config["force_upcast"] = upcast.into();
     let config = config.to_string();
-    let mut row = measure(args, &config)?;
+    let mut row = measure(args, &config, vae.as_deref())?;
     row.reference = args.reference_device.map(|device| reference(&config, args, device));
     if args.json {
         println!("{}", serde_json::to_string(&row)?);
@@ -185,12 +196,16 @@ pub fn run(args: &VaeArgs) -> Result<()> {
     Ok(())
 }
 
-/// vkdiff's decodes; the device and every buffer are released before a reference runs.
-fn measure(args: &VaeArgs, config: &str) -> Result<Row> {
+/// vkdiff's decodes (of the VAE at `path`, else random weights of `config`); the device and
+/// every buffer are released before a reference runs.
+fn measure(args: &VaeArgs, config: &str, path: Option<&std::path::Path>) -> Result<Row> {
     let ctx = Context::new(&args.device.choice())?;
     let config: VaeConfig = serde_json::from_str(config)?;
-    let dtype = args.precision.dtype();
-    let vae = AutoencoderKl::load(&ctx, config, &Checkpoint::random(&ctx, dtype, 0))?;
+    let vae = match path {
+        Some(path) => AutoencoderKl::load_sdxl(&ctx, path, args.precision.dtype())?,
+        None => AutoencoderKl::load(&ctx, config, &Checkpoint::random(&ctx, args.precision.dtype(), 0))?,
+    };
+    let dtype = vae.dtype();
     let tiling = VaeTiling { tile: args.tile };
     vae.config().check_tiling(tiling)?;
     let weights = ctx.live_bytes();

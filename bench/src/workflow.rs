@@ -19,10 +19,13 @@ pub struct WorkflowArgs {
     /// Image sizes in pixels (square).
     #[arg(long, value_delimiter = ',', default_values_t = [1024])]
     size: Vec<usize>,
+    /// Denoising steps timed.
     #[arg(long, default_value_t = 2)]
     steps: usize,
+    /// Rank of the two random LoRAs merged.
     #[arg(long, default_value_t = 32)]
     lora_rank: usize,
+    /// f16 (f32 arithmetic, matrix units where the GPU has them) or f32.
     #[arg(long, value_enum, default_value_t = vkdiff_args::Precision::F16)]
     precision: vkdiff_args::Precision,
     /// Leaves out the plain text-to-image step (and the ratio to it): for memory runs.
