@@ -15,8 +15,8 @@ pub struct FidArgs {
     /// The generated images, or a `vkdiff dataset` folder (its images/).
     fake: PathBuf,
     /// torch-fidelity's InceptionV3 weights, `weights-inception-2015-12-05-6726825d.pth` as torch
-    /// saved it, or the same tensors as .safetensors.
-    #[arg(long)]
+    /// saved it, or the same tensors as .safetensors; a path or a Hugging Face id.
+    #[arg(long, value_name = "FILE|ID")]
     inception: PathBuf,
     /// Keep each folder's features (by file, size and time) and reuse them: the real set is
     /// encoded once for every comparison against it.
@@ -54,7 +54,7 @@ pub fn run(args: &FidArgs) -> Result<()> {
     let job = FidJob::new(FidRequest {
         real: args.real.clone(),
         fake: args.fake.clone(),
-        inception: args.inception.clone(),
+        inception: vkdiff_args::resolve_model("--inception", &args.inception, vkdiff_args::Wants::File)?,
         dtype: args.precision.dtype(),
         batch: args.batch,
         kid_subsets: args.kid_subsets,

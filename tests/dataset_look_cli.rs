@@ -145,3 +145,31 @@ fn the_preview_page_shows_the_images_with_their_outlines_in_headless_chromium() 
     let refused = vkdiff(&["dataset", "preview", set().to_str().unwrap(), "--count", "0"]);
     assert!(String::from_utf8_lossy(&refused.stderr).contains("--count must be at least 1"));
 }
+
+/// The README's picture is what its two commands under it make, byte for byte (run them in the
+/// README's own words, from a scratch folder).
+#[test]
+fn the_readme_picture_is_remade_by_the_commands_under_it() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let commands: Vec<&str> =
+        readme.lines().filter(|l| l.starts_with("vkdiff dataset ") && l.contains("beds")).take(2).collect();
+    assert_eq!(
+        commands.iter().map(|c| c.split('#').next().unwrap().trim()).collect::<Vec<_>>(),
+        [
+            "vkdiff dataset --render-only --out beds --count 4 --crops 2 --crop-size 512 --seed 0",
+            "vkdiff dataset preview beds --count 8"
+        ],
+        "the README's commands under its picture changed"
+    );
+    let dir = scratch("readme-picture");
+    std::fs::create_dir_all(&dir).unwrap();
+    for command in &commands {
+        let words: Vec<&str> = command.split('#').next().unwrap().split_whitespace().skip(1).collect();
+        let out = cli::command().args(&words).current_dir(&dir).output().unwrap();
+        assert!(out.status.success(), "{command}: {}", String::from_utf8_lossy(&out.stderr));
+    }
+    let made = std::fs::read(dir.join("beds/preview.png")).unwrap();
+    let committed = std::fs::read(root.join("docs/images/render-only-beds.png")).unwrap();
+    assert!(made == committed, "docs/images/render-only-beds.png is not what the README's commands make");
+}
