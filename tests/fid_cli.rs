@@ -61,6 +61,30 @@ fn fid_and_kid_match_torch_fidelity_and_the_cache_reuses_features() {
     assert_eq!((second["real"]["cached"].as_u64(), second["fake"]["cached"].as_u64()), (Some(5), Some(6)));
     assert_eq!(first["fid"], second["fid"]);
     assert_eq!(first["kid_mean"], second["kid_mean"]);
+
+    // Features another vkdiff version cached (its kernels may differ) are computed again.
+    let real_cache = std::fs::read_dir(&cache)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.file_name().unwrap().to_string_lossy().starts_with("real-"))
+        .expect("the real folder's cache file");
+    let file = vkdiff_formats::SafeTensors::open(&real_cache).unwrap();
+    let mut metadata = file.metadata.clone();
+    assert_eq!(metadata.get("vkdiff").map(String::as_str), Some(version().as_str()));
+    metadata.insert("vkdiff".into(), "0.1.0".into());
+    let (shape, values) = file.values("features").unwrap();
+    drop(file);
+    write_safetensors_f32(&real_cache, &[("features", &shape, &values)], &metadata).unwrap();
+    let third = fid_json(&[&[real.as_str(), fake.as_str()], &args[..]].concat());
+    assert_eq!((third["real"]["cached"].as_u64(), third["fake"]["cached"].as_u64()), (Some(0), Some(6)));
+    assert_eq!(first["fid"], third["fid"]);
+}
+
+/// `vkdiff --version`'s version, as the files it writes record it.
+fn version() -> String {
+    let out = vkdiff(&["--version"]);
+    String::from_utf8_lossy(&out.stdout).trim().trim_start_matches("vkdiff ").to_string()
 }
 
 #[test]
