@@ -10,7 +10,8 @@ use vkdiff_args::{dataset_flag, CropArgs, SceneSettings};
 use vkdiff_args::{ModelArgs, SamplingArgs};
 use vkdiff_pipeline::dataset::{
     merge, parse_size, read_prompts, size, stop_on_signals, Crops, DatasetEvent, DatasetJob, DatasetSettings, Finish,
-    Merged, Progress as Event, Report, RunOptions, ShardRequest, VersionChange,
+    Merged, Progress as Event, RenderedScenes, Report, RunOptions, SceneSource, ShardRequest, VersionChange,
+    DEFAULT_FAR,
 };
 use vkdiff_pipeline::Sampling;
 
@@ -25,9 +26,22 @@ pub struct DatasetArgs {
     /// Dataset folder; a folder made with the same settings is resumed.
     #[arg(long, required = true)]
     out: Option<PathBuf>,
-    /// Scenes (seeds --seed … --seed + count − 1); images = count × max(crops, 1).
-    #[arg(long, default_value_t = 1)]
-    count: u64,
+    /// Scenes (seeds --seed … --seed + count − 1); images = count × max(crops, 1) [default: 1, or
+    /// with --scenes every scene there].
+    #[arg(long)]
+    count: Option<u64>,
+    /// Scenes rendered elsewhere instead of the procedural mushroom bed: a folder of scene folders
+    /// (depth.exr or depth.png, instances.png, categories.json, shaded.png, prompt.txt; what
+    /// `vkdiff scene` writes) or of BlenderProc's .hdf5 files, taken in name order.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["width", "height", "density", "clumping"])]
+    scenes: Option<PathBuf>,
+    /// With --scenes: the category of every instance of a scene folder without categories.json.
+    #[arg(long, default_value = "object", requires = "scenes")]
+    category: String,
+    /// With --scenes: depth at or past this value (and infinite, NaN, zero or negative depth) is
+    /// background; renderers write a far value there (BlenderProc: 1e10).
+    #[arg(long, default_value_t = DEFAULT_FAR, requires = "scenes")]
+    far: f32,
     #[command(flatten)]
     scene: SceneSettings,
     #[command(flatten)]
@@ -208,10 +222,17 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
     };
     let crops =
         Crops { count: args.crops.crops, size: args.crops.crop_size, min_fraction: args.crops.crop_min_fraction };
+    let source = match &args.scenes {
+        Some(dir) => {
+            eprintln!("reading the scenes in {}", dir.display());
+            SceneSource::Rendered(RenderedScenes::scan(dir, &args.category, args.far)?)
+        }
+        None => SceneSource::Procedural(args.scene.config()),
+    };
     Ok(DatasetSettings::new(
         args.scene.seed,
         args.count,
-        args.scene.config(),
+        source,
         crops,
         args.model.control_depth(),
         models,

@@ -6,10 +6,11 @@ use serde_json::Value;
 use std::path::PathBuf;
 use vkdiff_pipeline::dataset::{stats, write_charts};
 
-/// What a finished set holds, in figures and two charts.
+/// What a finished set holds, in figures and charts.
 ///
 /// Images, instances per image, mask areas by COCO size class, instances cut by the image edge,
-/// the seeds, prompts and style sets used; charts of instances per image and mask areas as PNG.
+/// each category's instances, images and median area, the seeds, prompts and style sets used;
+/// charts of instances per image, mask areas and instances by category as PNG.
 #[derive(Args, Debug)]
 pub struct StatsArgs {
     /// The dataset folder.
@@ -73,6 +74,22 @@ fn report(s: &Value) -> String {
             "cut by the image edge: {} instances ({:.1} %)",
             cut["instances"],
             100.0 * cut["share"].as_f64().unwrap_or(0.0)
+        ),
+        format!(
+            "categories: {}",
+            s["categories"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .map(|c| format!(
+                    "{} {} instances in {} images (median {} px)",
+                    c["name"].as_str().unwrap_or("?"),
+                    c["instances"],
+                    c["images"],
+                    c["median_area_px"]
+                ))
+                .collect::<Vec<_>>()
+                .join("; ")
         ),
         format!("image seeds: {} distinct; sources: {}", s["image_seeds"], tally(&s["sources"])),
         format!("prompts: {}", tally(&s["prompts"])),

@@ -71,6 +71,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             summary.rows.iter().map(|(k, x)| (k.clone(), serde_json::json!(x))).collect();
         map.insert("area_from".into(), areas.name().into());
         map.insert("area_rule".into(), rule_name.into());
+        map.insert("per_category".into(), serde_json::to_value(&summary.per_category)?);
         println!("{}", serde_json::to_string_pretty(&Value::Object(map))?);
         return Ok(());
     }
@@ -88,6 +89,15 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     println!("detection areas from each {} ({why})", areas.name());
     for (name, x) in &summary.rows {
         println!("{name:<16} {x:.4}");
+    }
+    if summary.per_category.len() > 1 {
+        println!("per category (all areas, the last detection cap):");
+        for c in &summary.per_category {
+            println!(
+                "  {:>4} {:<20} AP {:.4}  AP50 {:.4}  AR {:.4}  ({} ground truth)",
+                c.id, c.name, c.ap, c.ap50, c.ar, c.ground_truth
+            );
+        }
     }
     Ok(())
 }

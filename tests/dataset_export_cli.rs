@@ -220,15 +220,25 @@ fn hf_metadata_lists_every_image_with_its_objects() {
             );
             let objects = &row["objects"];
             let n = objects["bbox"].as_array().unwrap().len();
-            for key in ["id", "area", "categories", "segmentation", "iscrowd", "mask_id"] {
+            for key in ["id", "area", "category", "segmentation", "iscrowd", "mask_id"] {
                 assert_eq!(objects[key].as_array().unwrap().len(), n, "{key}");
             }
-            assert!(objects["categories"].as_array().unwrap().iter().all(|c| c == 0));
+            assert!(objects["category"].as_array().unwrap().iter().all(|c| c == 0));
             rows += 1;
         }
     }
     assert_eq!(rows, 20);
     assert!(!out.join("test").exists(), "no test split asked for");
+    // The card names the splits' folders and the category, as `load_dataset(OUT)` reads them.
+    let card = std::fs::read_to_string(out.join("README.md")).unwrap();
+    for needed in [
+        "- split: train\n    path: train/**",
+        "- split: validation",
+        "'0': \"mushroom\"",
+        "- name: mask\n    dtype: image",
+    ] {
+        assert!(card.contains(needed), "{needed}: {card}");
+    }
 }
 
 #[test]

@@ -35,6 +35,38 @@ fn prints_pycocotools_statistics_f1_and_miou() {
 }
 
 #[test]
+fn per_category_scores_are_pycocotools_per_category_slices() {
+    let expected: Value = serde_json::from_str(&std::fs::read_to_string(fixture("expected.json")).unwrap()).unwrap();
+    for (pred, iou, key) in
+        [("dt_segm.json", "segm", "segm [1, 10, 100]"), ("dt_bbox.json", "bbox", "bbox [1, 10, 100]")]
+    {
+        let out = vkdiff(&["eval", "--gt", &fixture("gt.json"), "--pred", &fixture(pred), "--iou-type", iou, "--json"]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let got: Value = serde_json::from_slice(&out.stdout).unwrap();
+        let (got, want) = (got["per_category"].as_array().unwrap(), expected[key]["per_category"].as_array().unwrap());
+        assert_eq!(got.len(), want.len(), "{key}: {got:?}");
+        for (g, w) in got.iter().zip(want) {
+            assert_eq!(g["id"], w["id"]);
+            for name in ["AP", "AP50", "AR"] {
+                let (g, w) = (g[name].as_f64().unwrap(), w[name].as_f64().unwrap());
+                assert!((g - w).abs() <= 1e-6, "{key} category {}: {name} {g} against pycocotools {w}", w);
+            }
+        }
+        assert_eq!((got[0]["name"].as_str(), got[1]["name"].as_str()), (Some("cap"), Some("stem")));
+    }
+    // Results of a category the ground truth does not list: one line naming both sets.
+    let mut pred: Value = serde_json::from_str(&std::fs::read_to_string(fixture("dt_segm.json")).unwrap()).unwrap();
+    pred[0]["category_id"] = 9.into();
+    let path = cli::scratch("eval-categories").join("pred.json");
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    std::fs::write(&path, pred.to_string()).unwrap();
+    let out = vkdiff(&["eval", "--gt", &fixture("gt.json"), "--pred", path.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("category 9") && err.contains("1 (cap), 2 (stem)"), "{err}");
+}
+
+#[test]
 fn detector_files_are_scored_by_box_areas_unless_area_from_mask() {
     let expected: Value = serde_json::from_str(&std::fs::read_to_string(fixture("expected.json")).unwrap()).unwrap();
     let stats = |args: &[&str]| {

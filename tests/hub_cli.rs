@@ -5,7 +5,7 @@
 
 mod cli;
 
-use cli::{command, png_text, scratch};
+use cli::{command, png_pixels, png_text, scratch};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -39,15 +39,6 @@ fn ok(out: &Output) -> String {
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert!(out.status.success(), "{stderr}");
     stderr
-}
-
-fn pixels(path: &Path) -> Vec<u8> {
-    let mut reader =
-        png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap())).read_info().unwrap();
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    let info = reader.next_frame(&mut buf).unwrap();
-    buf.truncate(info.buffer_size());
-    buf
 }
 
 fn text(path: &Path, key: &str) -> String {
@@ -101,7 +92,7 @@ fn every_model_flag_takes_an_id_from_the_cache_and_records_it() {
     let model = fixtures().join("pipeline/tiny-sdxl");
     let args: Vec<&str> = gen_args(model.to_str().unwrap(), &by_path, &paths).into_iter().chain(guides).collect();
     ok(&run_in(&dir, &args, &[]));
-    assert_eq!(pixels(&by_id), pixels(&by_path), "the same files by id and by path");
+    assert_eq!(png_pixels(&by_id), png_pixels(&by_path), "the same files by id and by path");
 
     // Recorded as ORG/NAME@COMMIT[/PATH]: the same on every machine, whatever its cache folder.
     let sdxl = commit("vkdiff-test/tiny-sdxl");
@@ -154,7 +145,7 @@ fn the_cache_is_found_where_huggingface_hub_keeps_it() {
         // v1 is a second ref to the same commit.
         let id = if i % 2 == 0 { "vkdiff-test/tiny-sdxl" } else { "vkdiff-test/tiny-sdxl@v1" };
         ok(&run_in(&dir, &gen_args(id, &out, &[]), env));
-        assert_eq!(pixels(&out), pixels(&local), "{place}");
+        assert_eq!(png_pixels(&out), png_pixels(&local), "{place}");
     }
 }
 

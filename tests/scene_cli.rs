@@ -22,11 +22,13 @@ fn scene_writes_the_folder_with_its_crops() {
     for file in [
         "depth.exr",
         "instances.png",
+        "categories.json",
         "annotations.json",
         "camera.json",
         "control.png",
         "preview.png",
         "shaded.png",
+        "crops/1/categories.json",
         "crops/1/depth.exr",
         "crops/1/shaded.png",
         "crops/1/camera.json",

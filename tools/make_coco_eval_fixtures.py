@@ -12,7 +12,8 @@ polygon). The segm-only results are also scored as boxes (`loadRes` takes each b
 Usage: make_coco_eval_fixtures.py OUT_DIR
   (writes gt.json, dt_segm.json, dt_bbox.json, dt_both.json, dt_mixed.json, expected.json)
 Made with pycocotools 2.0.11 and numpy 2.4.6 (Python 3.11); the values of the first three files
-are those pycocotools 2.0.10 gave.
+are those pycocotools 2.0.10 gave. The per-category figures were added with pycocotools 2.0.11 and
+numpy 2.4.6 (Python 3.11); the files it writes are byte for byte the earlier ones.
 """
 import contextlib
 import copy
@@ -136,6 +137,15 @@ for iou_type, dt_file, max_dets, label in runs:
     # them); its own mean at the last cap, for vkdiff, which reports that.
     p = e.eval["precision"][:, :, :, 0, 2]
     expected[key]["ap_at_last_max_dets"] = float(np.mean(p[p > -1])) if (p > -1).any() else -1.0
+    # Per category (e.params.catIds order), all areas, the last cap: AP, AP50 and AR as the
+    # per-category slices of precision[t, r, k, a, m] and recall[t, k, a, m] give them.
+    def mean(v):
+        return float(np.mean(v[v > -1])) if (v > -1).any() else -1.0
+    pr, rc = e.eval["precision"], e.eval["recall"]
+    expected[key]["per_category"] = [
+        {"id": int(c), "AP": mean(pr[:, :, k, 0, -1]), "AP50": mean(pr[0, :, k, 0, -1]), "AR": mean(rc[:, k, 0, -1])}
+        for k, c in enumerate(e.params.catIds)
+    ]
 
 # Every polygon's mask, to hold the rasteriser to frPyObjects pixel for pixel.
 expected["polygon_rles"] = [

@@ -8,7 +8,7 @@ use crate::random_models::{gradient_depth, style_images, RandomGuides};
 use anyhow::Result;
 use std::time::{Duration, Instant};
 use vkdiff_lora::LoraFile;
-use vkdiff_pipeline::dataset::{generate, Crops, Dataset, DatasetSettings, DiskGuard, RunOptions, Shard};
+use vkdiff_pipeline::dataset::{generate, Crops, Dataset, DatasetSettings, DiskGuard, RunOptions, SceneSource, Shard};
 use vkdiff_pipeline::images::{ClipPreprocess, ControlDepth};
 use vkdiff_pipeline::{
     ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, SamplerKind, Sampling, Sdxl,
@@ -200,11 +200,16 @@ fn dataset_settings(args: &DatasetArgs, models: &ModelSettings) -> DatasetSettin
     DatasetSettings {
         seed: 0,
         count: args.scenes,
-        scene: SceneConfig { width: scale(1920), height: scale(1080), ..SceneConfig::default() },
+        source: SceneSource::Procedural(SceneConfig {
+            width: scale(1920),
+            height: scale(1080),
+            ..SceneConfig::default()
+        }),
         crops: Crops { count: 3, size: args.size as u32, min_fraction: 0.1 },
         control_depth: ControlDepth::Inverse,
         models: Some(models.clone()),
         prompts: vec!["white button mushrooms on dark black soil compost mycelium".into()],
+        user_prompts: 1,
         negative_prompt: None,
         sampling,
         ip_sets: vec![vec!["style-1.png".into(), "style-2.png".into()]],

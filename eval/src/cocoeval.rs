@@ -42,6 +42,8 @@ pub struct Stats {
     /// recall[t][k][a][m], -1 where undefined.
     pub recall: Vec<f64>,
     pub dims: [usize; 5],
+    /// The category ids along the k axis, ascending (pycocotools' `catIds`).
+    pub categories: Vec<u64>,
     /// Mean over ground-truth instances (not crowd, any area) of the IoU with the detection
     /// matched to them at IoU ≥ 0.5 within the last detection cap, 0 for those unmatched.
     pub mean_instance_iou: f64,
@@ -265,7 +267,7 @@ pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
     let (mean_instance_iou, mean_matched_iou) = (mean(&matched, all_area.len()), mean(&matched, matched.len()));
     let dims = [t_n, r_n, k_n, a_n, m_n];
     let (names, values) = summarize(&precision, &recall, dims, p.max_dets);
-    Ok(Stats { names, values, precision, recall, dims, mean_instance_iou, mean_matched_iou })
+    Ok(Stats { names, values, precision, recall, dims, categories: cats, mean_instance_iou, mean_matched_iou })
 }
 
 /// pycocotools' `summarize()`: means over the defined (> -1) entries.
@@ -329,4 +331,30 @@ fn summarize(
         ar(3, 2),
     ];
     (names.to_vec(), values)
+}
+
+impl Stats {
+    /// Category `k`'s AP over IoU 0.50:0.95, AP at 0.50, and AR, all areas, the last detection
+    /// cap: the means pycocotools' per-category `precision[:, :, k, 0, -1]` and
+    /// `recall[:, k, 0, -1]` give (-1 where the category has no ground truth).
+    pub fn per_category(&self, k: usize) -> [f64; 3] {
+        let [t_n, r_n, k_n, a_n, m_n] = self.dims;
+        let mean = |v: Vec<f64>| {
+            let v: Vec<f64> = v.into_iter().filter(|&x| x > -1.0).collect();
+            if v.is_empty() {
+                -1.0
+            } else {
+                v.iter().sum::<f64>() / v.len() as f64
+            }
+        };
+        let precision = |ts: std::ops::Range<usize>| {
+            mean(
+                ts.flat_map(|t| (0..r_n).map(move |r| (t, r)))
+                    .map(|(t, r)| self.precision[(((t * r_n + r) * k_n + k) * a_n) * m_n + m_n - 1])
+                    .collect(),
+            )
+        };
+        let recall = mean((0..t_n).map(|t| self.recall[((t * k_n + k) * a_n) * m_n + m_n - 1]).collect());
+        [precision(0..t_n), precision(0..1), recall]
+    }
 }

@@ -78,6 +78,8 @@ impl AreaSource {
 pub struct Dataset {
     pub images: HashMap<u64, (u32, u32)>,
     pub categories: Vec<u64>,
+    /// The ground truth's category names, by id.
+    pub category_names: HashMap<u64, String>,
     pub annotations: Vec<Annotation>,
 }
 
@@ -174,6 +176,9 @@ impl Dataset {
                 .enumerate()
                 .map(|(i, c)| id(field(c, "id", &format!("categories[{i}]"))?, "category id"))
                 .collect::<Result<_>>()?;
+            for (c, &k) in cats.iter().zip(&d.categories) {
+                d.category_names.insert(k, c.get("name").and_then(Value::as_str).unwrap_or_default().to_string());
+            }
         }
         for (i, a) in json
             .get("annotations")
@@ -212,12 +217,39 @@ impl Dataset {
         Ok(d)
     }
 
+    /// Results name their categories by the ground truth's ids: a result whose category the
+    /// ground truth does not list scores against nothing, so it is refused, naming both sets.
+    fn check_categories(&self, gt: &Dataset) -> Result<()> {
+        if gt.categories.is_empty() {
+            return Ok(());
+        }
+        let Some(stray) = self.annotations.iter().map(|a| a.category_id).find(|c| !gt.categories.contains(c)) else {
+            return Ok(());
+        };
+        let count = self.annotations.iter().filter(|a| a.category_id == stray).count();
+        let listed: Vec<String> = gt
+            .categories
+            .iter()
+            .map(|c| format!("{c} ({})", gt.category_names.get(c).map_or("", String::as_str)))
+            .collect();
+        Err(err(format!(
+            "{count} results have category {stray}, which the ground truth does not list (its categories: {}); \
+             results name categories by the ground truth's ids",
+            listed.join(", ")
+        )))
+    }
+
     /// COCO results on the images of `gt`, as `loadRes` reads them: ids 1, 2, … in file order,
     /// not crowd; with areas from boxes, each w·h, or from masks, and a result's missing mask the
     /// polygon of its box (box areas) or its missing box the mask's (mask areas).
     pub fn results(json: &Value, gt: &Dataset, masks: bool, areas: AreaSource) -> Result<Dataset> {
         let list = json.as_array().ok_or_else(|| err("results are not a JSON list of detections".into()))?;
-        let mut d = Dataset { images: gt.images.clone(), categories: gt.categories.clone(), annotations: Vec::new() };
+        let mut d = Dataset {
+            images: gt.images.clone(),
+            categories: gt.categories.clone(),
+            category_names: gt.category_names.clone(),
+            annotations: Vec::new(),
+        };
         for (i, a) in list.iter().enumerate() {
             let what = format!("results[{i}]");
             let image_id = id(field(a, "image_id", &what)?, &what)?;
@@ -269,6 +301,7 @@ impl Dataset {
                 geometry,
             });
         }
+        d.check_categories(gt)?;
         Ok(d)
     }
 }

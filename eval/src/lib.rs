@@ -11,7 +11,7 @@ mod summary;
 pub use cocoeval::{evaluate, EvalParams, IouType, Stats};
 pub use dataset::{Annotation, AreaRule, AreaSource, Dataset, Geometry};
 pub use masks::{bbox_iou, foreground_iou, mask_iou, polygon_rle, union};
-pub use summary::{summarize, Summary, SummaryRequest};
+pub use summary::{summarize, CategoryScores, Summary, SummaryRequest};
 use vkdiff_setting::Message;
 
 /// What evaluation can fail with, in one line.

@@ -31,8 +31,24 @@ pub struct Summary {
     pub areas: AreaSource,
     /// Each statistic by name, in the order they are printed.
     pub rows: Vec<(String, f64)>,
+    /// Each category's scores, by id.
+    pub per_category: Vec<CategoryScores>,
     /// Things the user should know about the files.
     pub warnings: Vec<String>,
+}
+
+/// One category's AP (IoU 0.50:0.95), AP50 and AR, as pycocotools' per-category arrays give them.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CategoryScores {
+    pub id: u64,
+    pub name: String,
+    pub ground_truth: usize,
+    #[serde(rename = "AP")]
+    pub ap: f64,
+    #[serde(rename = "AP50")]
+    pub ap50: f64,
+    #[serde(rename = "AR")]
+    pub ar: f64,
 }
 
 /// 2·a·b / (a + b), -1 where either is undefined.
@@ -102,12 +118,29 @@ pub fn summarize(request: &SummaryRequest) -> Result<Summary> {
         }
         rows.push(("foreground_IoU".into(), foreground_iou(&per_image.into_values().collect::<Vec<_>>())));
     }
+    let per_category = stats
+        .categories
+        .iter()
+        .enumerate()
+        .map(|(k, &id)| {
+            let [ap, ap50, ar] = stats.per_category(k);
+            CategoryScores {
+                id,
+                name: gt.category_names.get(&id).cloned().unwrap_or_default(),
+                ground_truth: gt.annotations.iter().filter(|a| a.category_id == id && !a.iscrowd).count(),
+                ap,
+                ap50,
+                ar,
+            }
+        })
+        .collect();
     Ok(Summary {
         images: gt.images.len(),
         gt_annotations: gt.annotations.len(),
         predictions: dt.annotations.len(),
         areas,
         rows,
+        per_category,
         warnings,
     })
 }

@@ -70,7 +70,7 @@ fn time_frame(seed: u64, config: &SceneConfig) -> Result<([Duration; STAGES.len(
     lap(2);
     let frame = Frame::from_raster(raster, &scene.camera, &scene.bed);
     lap(3);
-    let annotations = coco_json(&frame, &instance_masks(&frame), json!({}));
+    let annotations = coco_json(&frame, &instance_masks(&frame), &[crate::coco::mushroom_category()], json!({}));
     lap(4);
     // Every file of the folder, encoded in memory (no disk), COCO included once more.
     let files = frame_files(&frame, json!({}), ControlDepth::Inverse, "");

@@ -1,12 +1,13 @@
-//! COCO instance segmentation for a frame: one category (`mushroom`, id 1), annotation id = the
-//! instance id in instances.png (1..K), compressed RLE masks, `area` = mask pixel count, `bbox`
-//! from the mask, `iscrowd` 0, and what each mushroom is as extra fields.
+//! COCO instance segmentation for a frame: annotation id = the instance id in instances.png
+//! (1..K), each instance's category (the procedural bed's one: `mushroom`, id 1), compressed RLE
+//! masks, `area` = mask pixel count, `bbox` from the mask, `iscrowd` 0, and the instance's
+//! attributes (what each mushroom is) as extra fields.
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
-use crate::frame::{Frame, InstanceInfo};
+use crate::frame::{Frame, MUSHROOM};
 use crate::rle::{PixelBox, Rle};
 
 /// Where the frame's annotations point for the picture itself: the control image, the one image
@@ -23,7 +24,7 @@ pub struct InstanceMask {
 
 /// Masks of instances 1..=K, computed in parallel; each reads only its own bounding box.
 pub fn instance_masks(frame: &Frame) -> Vec<InstanceMask> {
-    let (w, h) = (frame.camera.width, frame.camera.height);
+    let (w, h) = (frame.width, frame.height);
     let bounds = instance_bounds(&frame.ids, w as usize, frame.instances.len());
     bounds
         .par_iter()
@@ -63,11 +64,11 @@ fn instance_bounds(ids: &[u16], width: usize, count: usize) -> Vec<Option<PixelB
 }
 
 #[derive(Serialize)]
-struct CocoFile {
+struct CocoFile<'a> {
     info: Value,
     images: [Image; 1],
     annotations: Vec<Annotation>,
-    categories: [Category; 1],
+    categories: &'a [Category],
     licenses: [(); 0],
 }
 
@@ -79,11 +80,13 @@ struct Image {
     height: u32,
 }
 
-#[derive(Serialize)]
+/// A COCO category, as the scenes name it.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Category {
     pub id: u32,
-    pub name: &'static str,
-    pub supercategory: &'static str,
+    pub name: String,
+    #[serde(default)]
+    pub supercategory: String,
 }
 
 /// A compressed RLE mask, as pycocotools' `encode` writes it.
@@ -93,7 +96,7 @@ pub struct Segmentation {
     pub counts: String,
 }
 
-/// One COCO annotation as vkdiff writes it, with what the mushroom is as extra fields.
+/// One COCO annotation as vkdiff writes it, with the instance's attributes as extra fields.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Annotation {
     /// None only in a dataset's per-image records, which are numbered when merged.
@@ -110,7 +113,7 @@ pub struct Annotation {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mask_id: Option<u64>,
     #[serde(flatten)]
-    pub instance: InstanceInfo,
+    pub attributes: serde_json::Map<String, Value>,
 }
 
 impl Annotation {
@@ -134,7 +137,7 @@ pub fn serialize_sorted<S: serde::Serializer>(annotations: &[Annotation], s: S) 
 
 /// The annotations of `frame`, id k for the instance with id k in the mask, image id 1.
 pub fn annotations(frame: &Frame, masks: &[InstanceMask]) -> Vec<Annotation> {
-    let (w, h) = (frame.camera.width, frame.camera.height);
+    let (w, h) = (frame.width, frame.height);
     masks
         .iter()
         .zip(&frame.instances)
@@ -142,28 +145,31 @@ pub fn annotations(frame: &Frame, masks: &[InstanceMask]) -> Vec<Annotation> {
         .map(|(k, (mask, instance))| Annotation {
             id: Some(k as u64 + 1),
             image_id: 1,
-            category_id: CATEGORY.id,
+            category_id: instance.category_id,
             segmentation: Segmentation { size: [h, w], counts: mask.rle.to_coco_string() },
             area: mask.area,
             bbox: mask.bbox.to_xywh(),
             iscrowd: 0,
             mask_id: None,
-            instance: instance.clone(),
+            attributes: instance.attributes.clone(),
         })
         .collect()
 }
 
-/// The COCO category every annotation belongs to.
-pub const CATEGORY: Category = Category { id: 1, name: "mushroom", supercategory: "mushroom" };
+/// The procedural bed's one category.
+pub fn mushroom_category() -> Category {
+    Category { id: MUSHROOM, name: "mushroom".into(), supercategory: "mushroom".into() }
+}
 
-/// annotations.json for `frame`, whose masks are `masks`; `info` records where it came from.
-pub fn coco_json(frame: &Frame, masks: &[InstanceMask], info: Value) -> String {
-    let (w, h) = (frame.camera.width, frame.camera.height);
+/// annotations.json for `frame`, whose masks are `masks` and whose instances belong to
+/// `categories`; `info` records where it came from.
+pub fn coco_json(frame: &Frame, masks: &[InstanceMask], categories: &[Category], info: Value) -> String {
+    let (w, h) = (frame.width, frame.height);
     let file = CocoFile {
         info,
         images: [Image { id: 1, file_name: IMAGE_FILE, width: w, height: h }],
         annotations: annotations(frame, masks),
-        categories: [CATEGORY],
+        categories,
         licenses: [],
     };
     let mut text = serde_json::to_string(&file).expect("COCO structures always serialise");

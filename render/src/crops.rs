@@ -73,7 +73,14 @@ pub fn crop_frame(frame: &Frame, window: CropWindow, min_fraction: f64) -> Frame
     let kept =
         renumber(&mut ids, labels, |id| in_crop[id] > 0 && in_crop[id] as f64 >= min_fraction * in_frame[id] as f64);
     let instances = kept.iter().map(|&id| frame.instances[id - 1].clone()).collect();
-    Frame { camera: frame.camera.crop(window.x0, window.y0, window.width, window.height), depth, ids, instances }
+    Frame {
+        width: window.width,
+        height: window.height,
+        camera: frame.camera.as_ref().map(|c| c.crop(window.x0, window.y0, window.width, window.height)),
+        depth,
+        ids,
+        instances,
+    }
 }
 
 pub fn validate_min_fraction(min_fraction: f64) -> Result<()> {

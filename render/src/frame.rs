@@ -1,6 +1,7 @@
-//! A labelled frame: planar depth, instance ids 1..K in the order of the bed (0 = background),
-//! and what each instance is. Mushrooms with no visible pixel get no id, so ids match the COCO
-//! annotation ids one to one.
+//! A labelled frame: planar depth, instance ids 1..K (0 = background), and what each instance is
+//! (its category, and attributes the annotations carry). The procedural bed numbers its visible
+//! mushrooms in bed order; frames rendered elsewhere come numbered in the order of their ids.
+//! Instances with no visible pixel get no id, so ids match the COCO annotation ids one to one.
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -9,7 +10,7 @@ use crate::bed::Bed;
 use crate::camera::Camera;
 use crate::raster::RasterImage;
 
-/// What an instance is, written next to its mask in the COCO annotation.
+/// What a mushroom of the procedural bed is, written next to its mask in the COCO annotation.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct InstanceInfo {
     /// Index of the mushroom in the bed: the same mushroom has the same index in the full frame
@@ -26,23 +27,60 @@ pub struct InstanceInfo {
     pub variant_stage: usize,
 }
 
+impl InstanceInfo {
+    /// As annotation fields.
+    pub fn attributes(&self) -> serde_json::Map<String, serde_json::Value> {
+        match serde_json::to_value(self).expect("numbers always serialise") {
+            serde_json::Value::Object(map) => map,
+            _ => unreachable!("a struct serialises to an object"),
+        }
+    }
+}
+
+/// One instance of a frame: its COCO category, and what else its annotation records.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Instance {
+    pub category_id: u32,
+    /// Extra annotation fields (the procedural bed's: [`InstanceInfo`]'s).
+    pub attributes: serde_json::Map<String, serde_json::Value>,
+}
+
+/// The procedural bed's only category.
+pub const MUSHROOM: u32 = 1;
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Frame {
-    pub camera: Camera,
+    pub width: u32,
+    pub height: u32,
+    /// The camera it was seen by, where known (the procedural bed's; a scene folder's
+    /// camera.json).
+    pub camera: Option<Camera>,
     /// Planar depth in metres, row-major; +∞ where nothing was drawn.
     pub depth: Vec<f32>,
     /// 0 = background, k = `instances[k - 1]`.
     pub ids: Vec<u16>,
-    pub instances: Vec<InstanceInfo>,
+    pub instances: Vec<Instance>,
 }
 
 impl Frame {
     pub fn width(&self) -> usize {
-        self.camera.width as usize
+        self.width as usize
     }
 
     pub fn height(&self) -> usize {
-        self.camera.height as usize
+        self.height as usize
+    }
+
+    /// Focal lengths in pixels: the camera's, else Blender's default lens (50 mm on a 36 mm
+    /// sensor across the width), for shading a frame seen by an unknown camera.
+    pub fn focal(&self) -> (f64, f64) {
+        match &self.camera {
+            Some(c) => (c.fx, c.fy),
+            None => {
+                let f = self.width as f64 * 50.0 / 36.0;
+                (f, f)
+            }
+        }
     }
 
     /// Keeps the visible mushrooms of `raster` (raster id = bed index + 1), numbered 1..K in bed
@@ -51,8 +89,18 @@ impl Frame {
         let counts = pixel_counts(&raster.ids, bed.instances.len() + 1);
         let mut ids = raster.ids;
         let kept = renumber(&mut ids, counts.len(), |raw| counts[raw] > 0);
-        let instances = kept.iter().map(|&raw| instance_info(bed, raw - 1)).collect();
-        Frame { camera: camera.clone(), depth: raster.depth, ids, instances }
+        let instances = kept
+            .iter()
+            .map(|&raw| Instance { category_id: MUSHROOM, attributes: instance_info(bed, raw - 1).attributes() })
+            .collect();
+        Frame {
+            width: camera.width,
+            height: camera.height,
+            camera: Some(camera.clone()),
+            depth: raster.depth,
+            ids,
+            instances,
+        }
     }
 }
 

@@ -1,6 +1,7 @@
 //! What `vkdiff scene` writes: one folder per scene with depth.exr, instances.png,
-//! annotations.json, camera.json, control.png, shaded.png and preview.png, plus `crops/<k>/` with
-//! the same files (but the preview) for each crop. Files are produced in memory and the folder appears
+//! categories.json, annotations.json, camera.json, control.png, shaded.png and preview.png, plus
+//! `crops/<k>/` with the same files (but the preview) for each crop: the scene-folder format
+//! `vkdiff dataset --scenes` reads. Files are produced in memory and the folder appears
 //! atomically; the bytes depend on the seed and the settings only.
 
 use std::path::Path;
@@ -8,7 +9,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde_json::{json, Value};
 
-use crate::coco::{coco_json, instance_masks};
+use crate::coco::{coco_json, instance_masks, mushroom_category, Category};
 use crate::control::{control_image, ControlDepth};
 use crate::crops::{crop_frame, crop_windows, validate_min_fraction, CropWindow};
 use crate::error::{RenderError, Result};
@@ -98,9 +99,20 @@ fn provenance(seed: u64, config: &SceneConfig) -> Value {
     })
 }
 
-/// The files describing one frame (full or crop), under `prefix`.
+/// categories.json: the categories, and which each instance (by its id in instances.png) is.
+pub fn categories_json(frame: &Frame, categories: &[Category]) -> String {
+    let instances: serde_json::Map<String, Value> =
+        frame.instances.iter().enumerate().map(|(k, i)| ((k + 1).to_string(), json!(i.category_id))).collect();
+    let mut text = serde_json::to_string_pretty(&json!({ "categories": categories, "instances": instances }))
+        .expect("categories always serialise");
+    text.push('\n');
+    text
+}
+
+/// The files describing one frame (full or crop) of the procedural bed, under `prefix`.
 pub fn frame_files(frame: &Frame, info: Value, control: ControlDepth, prefix: &str) -> Vec<SceneFile> {
-    let (w, h) = (frame.camera.width, frame.camera.height);
+    let (w, h) = (frame.width, frame.height);
+    let categories = [mushroom_category()];
     let (((depth, ids), shaded), (annotations, control)) = rayon::join(
         || {
             rayon::join(
@@ -110,16 +122,18 @@ pub fn frame_files(frame: &Frame, info: Value, control: ControlDepth, prefix: &s
         },
         || {
             rayon::join(
-                || coco_json(frame, &instance_masks(frame), info),
+                || coco_json(frame, &instance_masks(frame), &categories, info),
                 || rgb8(w, h, &control_image(&frame.depth, control)),
             )
         },
     );
-    let mut camera = serde_json::to_string_pretty(&frame.camera.to_json()).expect("camera JSON always serialises");
+    let camera = frame.camera.as_ref().expect("the procedural bed's frames have their camera");
+    let mut camera = serde_json::to_string_pretty(&camera.to_json()).expect("camera JSON always serialises");
     camera.push('\n');
     [
         ("depth.exr", depth),
         ("instances.png", ids),
+        ("categories.json", categories_json(frame, &categories).into_bytes()),
         ("annotations.json", annotations.into_bytes()),
         ("camera.json", camera.into_bytes()),
         ("control.png", control),

@@ -25,6 +25,7 @@ fn draw(frame: &Frame, mark_instances: bool) -> Vec<u8> {
     let (w, h) = (frame.width(), frame.height());
     let light = normalize([-0.45, -0.55, -1.0]); // towards the light, camera axes (z forward)
     let tints: Vec<[f64; 3]> = (0..=frame.instances.len()).map(|id| instance_colour(id as u16)).collect();
+    let (fx, fy) = frame.focal();
     let mut rgb = vec![0u8; w * h * 3];
     rgb.par_chunks_mut(w * 3).enumerate().for_each(|(y, row)| {
         for x in 0..w {
@@ -46,7 +47,7 @@ fn draw(frame: &Frame, mark_instances: bool) -> Vec<u8> {
                 }
             };
             // Depth slope per metre across the image plane; a pixel spans z / f metres there.
-            let (sx, sy) = (frame.camera.fx / z, frame.camera.fy / z);
+            let (sx, sy) = (fx / z, fy / z);
             let gx = (at(1, 0) - at(-1, 0)) / 2.0 * sx;
             let gy = (at(0, 1) - at(0, -1)) / 2.0 * sy;
             let normal = normalize([gx, gy, -1.0]);

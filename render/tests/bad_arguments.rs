@@ -89,7 +89,16 @@ fn an_existing_scene_is_kept_unless_replacing() {
     write_scene(&dir, 1, &small(), &OutputOptions { replace: true, ..OutputOptions::default() }).unwrap();
     assert_eq!(
         entries(&dir),
-        ["annotations.json", "camera.json", "control.png", "depth.exr", "instances.png", "preview.png", "shaded.png"]
+        [
+            "annotations.json",
+            "camera.json",
+            "categories.json",
+            "control.png",
+            "depth.exr",
+            "instances.png",
+            "preview.png",
+            "shaded.png"
+        ]
     );
     assert_eq!(entries(&root), ["scene"], "no staging or replaced folder left behind");
 }

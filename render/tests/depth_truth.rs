@@ -105,14 +105,15 @@ fn mask_pixels_carry_the_depth_of_their_own_mushroom_and_nothing_is_in_front() {
     let config = SceneConfig::default(); // the paper's 1920×1080 frame
     let scene = Scene::build(11, &config).unwrap();
     let frame = scene.render();
-    let cam = &frame.camera;
+    let cam = frame.camera.as_ref().expect("the bed's frames have their camera");
     let (w, h) = (frame.width(), frame.height());
     let meshes: Vec<Mushroom> = frame
         .instances
         .iter()
         .map(|info| {
-            let variant = &scene.bed.variants[scene.bed.instances[info.bed_index].variant];
-            mushroom(cam, &scene.bed.instance_positions(info.bed_index), &variant.mesh.triangles)
+            let bed_index = info.attributes["bed_index"].as_u64().unwrap() as usize;
+            let variant = &scene.bed.variants[scene.bed.instances[bed_index].variant];
+            mushroom(cam, &scene.bed.instance_positions(bed_index), &variant.mesh.triangles)
         })
         .collect();
     assert!(meshes.len() > 100, "{} visible mushrooms", meshes.len());

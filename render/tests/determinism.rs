@@ -20,7 +20,7 @@ fn same_seed_gives_byte_identical_files_on_one_or_two_threads() {
     let one = write(1, "one-thread", 4);
     let two = write(2, "two-threads", 4);
     let names: Vec<&String> = one.keys().collect();
-    assert_eq!(names.len(), 7 + 2 * 6, "{names:?}");
+    assert_eq!(names.len(), 8 + 2 * 7, "{names:?}");
     assert_eq!(one.keys().collect::<Vec<_>>(), two.keys().collect::<Vec<_>>());
     for (name, bytes) in &one {
         assert!(bytes == &two[name], "{name} differs between 1 and 2 threads");

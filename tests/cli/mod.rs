@@ -47,6 +47,17 @@ pub fn png_text(path: &Path) -> Vec<(String, String)> {
     latin1.chain(info.utf8_text.iter().map(|t| (t.keyword.clone(), t.get_text().unwrap()))).collect()
 }
 
+/// A PNG's pixels as decoded, row-major.
+#[allow(dead_code)] // not every test binary reads pixels
+pub fn png_pixels(path: &Path) -> Vec<u8> {
+    let mut reader =
+        png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap())).read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    buf.truncate(info.buffer_size());
+    buf
+}
+
 /// A render-only set (no model) of `count` scenes of `width`×`height` from seed 11, two
 /// `crop`² crops each.
 #[allow(dead_code)] // for the tests that read dataset folders

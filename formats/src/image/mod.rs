@@ -1,9 +1,11 @@
 //! Image files as 8-bit RGB, exactly as Pillow gives them: PNG through the `png` crate and JPEG
 //! through our own decoder written to libjpeg-turbo's arithmetic.
 
+mod grey;
 mod jpeg;
 mod read;
 
+pub use grey::{read_grey_png, GreyImage};
 pub use read::{decode_image, read_control_image, read_image};
 
 /// 8-bit RGB pixels, row-major, 3 bytes per pixel.

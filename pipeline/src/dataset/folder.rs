@@ -12,7 +12,7 @@ use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::Error as FileError;
-use vkdiff_render::coco::{serialize_sorted, Annotation};
+use vkdiff_render::coco::{mushroom_category, serialize_sorted, Annotation, Category};
 use vkdiff_setting::{version, Message};
 
 pub const MANIFEST: &str = "dataset.json";
@@ -145,6 +145,12 @@ impl Dataset {
             images_per_scene: number("images") / number("scenes").max(1),
             settings: m["settings"].clone(),
         }
+    }
+
+    /// The set's COCO categories: the ones its scenes named (dataset.json), else the
+    /// procedural bed's one.
+    pub fn categories(&self) -> Vec<Category> {
+        serde_json::from_value(self.settings["categories"].clone()).unwrap_or_else(|_| vec![mushroom_category()])
     }
 
     pub fn files(&self, index: u64) -> ImageFiles {

@@ -48,15 +48,21 @@ pub fn merge(dir: &Path, versions: VersionChange) -> Result<Merged> {
             if missing.len() > 5 { ", …" } else { "" }
         )));
     }
+    let settings = &dataset.settings;
+    let description = match settings["scenes"].as_str() {
+        Some(dir) => format!("vkdiff dataset: scenes rendered elsewhere ({dir}), with their annotations"),
+        None => "vkdiff dataset: procedural white button mushroom beds".into(),
+    };
+    let made = if settings["render-only"] == true { "as rendered" } else { "made photoreal by SDXL on Vulkan" };
     let head = json!({
         "info": {
-            "description": "vkdiff dataset: procedural white button mushroom beds made photoreal by SDXL on Vulkan",
+            "description": format!("{description}, {made}"),
             "version": vkdiff_setting::version(),
             "fingerprint": dataset.fingerprint,
             "settings": dataset.settings,
         },
         "licenses": [],
-        "categories": [vkdiff_render::coco::CATEGORY],
+        "categories": dataset.categories(),
     });
     // Streamed: a large set's annotations need not fit in memory at once.
     write_atomic_with(&dir.join(ANNOTATIONS), &mut |w| {

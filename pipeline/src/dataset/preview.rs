@@ -1,7 +1,8 @@
 //! `vkdiff dataset preview`: a self-contained HTML page of a finished set's images with their
-//! instance outlines drawn over them (one colour per instance), switchable to the depth, the
-//! control image and the init image, each captioned with its seed, prompt and instance count;
-//! and a contact sheet PNG of the same images with their outlines.
+//! instance outlines drawn over them (one colour per instance; with several categories, one
+//! colour per category and a legend), switchable to the depth, the control image and the init
+//! image, each captioned with its seed, prompt and instance count; and a contact sheet PNG of
+//! the same images with their outlines.
 
 use super::canvas::Canvas;
 use super::export::{FinishedSet, SetImage, SplitFractions};
@@ -40,38 +41,118 @@ pub fn preview(
     let set = FinishedSet::read(dir, &SplitFractions { val: 0.0, test: 0.0, seed: 0 })?;
     let n = count.min(set.images.len());
     let chosen: Vec<&SetImage> = (0..n).map(|k| &set.images[k * set.images.len() / n]).collect();
+    let categories = Categories::of(&set);
     let mut figures = String::new();
     let columns = (n as f64).sqrt().ceil().max(1.0) as usize;
     let rows = n.div_ceil(columns);
-    let mut sheet = Canvas::new(columns * (THUMB + 8) + 8, rows * (THUMB + 30) + 8, [24, 26, 27]);
+    // With several categories, a legend row above the thumbnails.
+    let top = if categories.by_category() { 30 } else { 0 };
+    let mut sheet = Canvas::new(columns * (THUMB + 8) + 8, rows * (THUMB + 30) + 8 + top, [24, 26, 27]);
+    if categories.by_category() {
+        let mut x = 8i64;
+        for (name, color) in &categories.legend {
+            sheet.rect(x, 8, 14, 14, *color);
+            sheet.text(x + 20, 10, name, 2, [230, 230, 230]);
+            x += 20 + Canvas::text_width(name, 2) + 24;
+        }
+    }
     for (k, image) in chosen.iter().enumerate() {
-        let layers = Layers::read(&set.dir, image)?;
+        let layers = Layers::read(&set.dir, image, &categories)?;
         figures += &figure(image, &layers.shrunk(max_side));
         let thumb = layers.outlined_thumbnail();
-        let (x, y) = (8 + (k % columns) * (THUMB + 8), 8 + (k / columns) * (THUMB + 30));
+        let (x, y) = (8 + (k % columns) * (THUMB + 8), 8 + top + (k / columns) * (THUMB + 30));
         sheet.blit(x as i64, y as i64, thumb.width, thumb.height, &thumb.pixels);
         let label = format!("{}  N={}", image.entry["id"], image.annotations.len());
         sheet.text(x as i64, (y + THUMB + 8) as i64, &label, 2, [230, 230, 230]);
         progress(k + 1, n);
     }
     let title = format!("{} · {} of {} images", dir.display(), n, set.images.len());
-    write_atomic(html, page(&title, &figures).as_bytes())?;
+    write_atomic(html, page(&title, &categories.legend_html(), &figures).as_bytes())?;
     let sheet_path = html.with_extension("png");
     write_atomic(&sheet_path, &sheet.png())?;
     Ok(Preview { html: html.to_path_buf(), sheet: sheet_path, images: n })
+}
+
+/// The set's categories and the colours outlines take: one per instance for a set of one
+/// category, one per category (with a legend) for several.
+struct Categories {
+    /// Category id → its colour.
+    colors: std::collections::BTreeMap<u64, [u8; 3]>,
+    /// Name and colour of each category, in the set's order.
+    legend: Vec<(String, [u8; 3])>,
+}
+
+impl Categories {
+    fn of(set: &FinishedSet) -> Categories {
+        let listed = set.categories.as_array().cloned().unwrap_or_default();
+        let mut colors = std::collections::BTreeMap::new();
+        let mut legend = Vec::new();
+        for (k, c) in listed.iter().enumerate() {
+            let color = category_color(k);
+            colors.insert(c["id"].as_u64().unwrap_or(0), color);
+            legend.push((c["name"].as_str().unwrap_or("?").to_string(), color));
+        }
+        Categories { colors, legend }
+    }
+
+    fn by_category(&self) -> bool {
+        self.legend.len() > 1
+    }
+
+    /// The page's legend: a swatch and the name of each category.
+    fn legend_html(&self) -> String {
+        if !self.by_category() {
+            return String::new();
+        }
+        let mut html = String::from("<div class=\"legend\">");
+        for (name, [r, g, b]) in &self.legend {
+            let _ = write!(html, r#"<span><i style="background:rgb({r},{g},{b})"></i>{}</span>"#, escape(name));
+        }
+        html + "</div>"
+    }
+
+    /// Each mask id's outline colour in `image`.
+    fn palette(&self, image: &SetImage) -> Vec<[u8; 3]> {
+        let ids = image.annotations.iter().filter_map(|a| a["mask_id"].as_u64());
+        let mut palette: Vec<[u8; 3]> = (0..=ids.max().unwrap_or(0) as u16).map(instance_color).collect();
+        if self.by_category() {
+            for a in &image.annotations {
+                let (Some(id), Some(category)) = (a["mask_id"].as_u64(), a["category_id"].as_u64()) else { continue };
+                palette[id as usize] = self.colors.get(&category).copied().unwrap_or([255, 255, 255]);
+            }
+        }
+        palette
+    }
+}
+
+/// A colour per category, far apart for the first few.
+fn category_color(k: usize) -> [u8; 3] {
+    const FIRST: [[u8; 3]; 8] = [
+        [255, 80, 80],
+        [80, 200, 255],
+        [255, 220, 60],
+        [120, 255, 120],
+        [255, 120, 255],
+        [255, 160, 60],
+        [160, 120, 255],
+        [60, 255, 220],
+    ];
+    FIRST.get(k).copied().unwrap_or_else(|| instance_color(k as u16 + 1))
 }
 
 /// One image's pictures: the image, its instance ids, and its guides where the set has them.
 struct Layers {
     image: RgbImage,
     ids: Vec<u16>,
+    /// Each mask id's outline colour.
+    palette: Vec<[u8; 3]>,
     depth: Option<RgbImage>,
     control: Option<RgbImage>,
     init: Option<RgbImage>,
 }
 
 impl Layers {
-    fn read(dir: &Path, image: &SetImage) -> Result<Layers> {
+    fn read(dir: &Path, image: &SetImage, categories: &Categories) -> Result<Layers> {
         let file = |key: &str| image.entry[key].as_str().map(|f| dir.join(f));
         let picture = |key: &str| file(key).map(|p| read_image(&p)).transpose();
         let image_rgb = read_image(&dir.join(image.file_name()))?;
@@ -80,7 +161,15 @@ impl Layers {
             None => vec![0; image_rgb.width * image_rgb.height],
         };
         let depth = file("depth_file").map(|p| depth_picture(&p)).transpose()?;
-        Ok(Layers { depth, control: picture("control_file")?, init: picture("init_file")?, image: image_rgb, ids })
+        let palette = categories.palette(image);
+        Ok(Layers {
+            depth,
+            control: picture("control_file")?,
+            init: picture("init_file")?,
+            image: image_rgb,
+            ids,
+            palette,
+        })
     }
 
     /// The layers at most `max_side` pixels on a side (0: as they are): pictures box-averaged
@@ -94,6 +183,7 @@ impl Layers {
         Layers {
             image: box_down(&self.image, f),
             ids: ids.collect(),
+            palette: self.palette.clone(),
             depth: self.depth.as_ref().map(|d| box_down(d, f)),
             control: self.control.as_ref().map(|c| box_down(c, f)),
             init: self.init.as_ref().map(|i| box_down(i, f)),
@@ -122,7 +212,7 @@ impl Layers {
                     || (x + 1 < w && differs(p + 1))
                     || (y > 0 && differs(p - w))
                     || (y + 1 < h && differs(p + w)));
-            edge.then(|| (p, instance_color(id)))
+            edge.then(|| (p, self.palette.get(id as usize).copied().unwrap_or_else(|| instance_color(id))))
         })
     }
 
@@ -183,19 +273,12 @@ fn instance_color(id: u16) -> [u8; 3] {
 
 /// A mask PNG's 16-bit instance ids, checked against the image's size.
 fn read_ids(path: &Path, width: usize, height: usize) -> Result<Vec<u16>> {
-    let bad = |why: String| Error::from(FileError::Format { path: path.to_path_buf(), why });
-    let bytes = std::fs::read(path).map_err(|e| FileError::Io { path: path.to_path_buf(), source: e })?;
-    let mut reader =
-        png::Decoder::new(std::io::Cursor::new(bytes)).read_info().map_err(|e| bad(format!("bad PNG: {e}")))?;
-    let info = reader.info();
-    if (info.color_type, info.bit_depth) != (png::ColorType::Grayscale, png::BitDepth::Sixteen)
-        || (info.width as usize, info.height as usize) != (width, height)
-    {
-        return Err(bad(format!("not a {width}×{height} 16-bit grey instance mask")));
+    let grey = vkdiff_formats::image::read_grey_png(path)?;
+    if grey.bits != 16 || (grey.width, grey.height) != (width, height) {
+        let why = format!("not a {width}×{height} 16-bit grey instance mask");
+        return Err(FileError::Format { path: path.to_path_buf(), why }.into());
     }
-    let mut buf = vec![0; reader.output_buffer_size().ok_or_else(|| bad("too large".into()))?];
-    reader.next_frame(&mut buf).map_err(|e| bad(format!("bad PNG: {e}")))?;
-    Ok(buf.chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]])).collect())
+    Ok(grey.values)
 }
 
 /// The depth as grey, near bright, stretched over its finite range.
@@ -276,7 +359,7 @@ fn figure(image: &SetImage, layers: &Layers) -> String {
     html
 }
 
-fn page(title: &str, figures: &str) -> String {
+fn page(title: &str, legend: &str, figures: &str) -> String {
     format!(
         r#"<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
@@ -294,6 +377,8 @@ body[data-layer="control"] img.control, body[data-layer="init"] img.init {{ disp
 figcaption {{ margin-top: 4px; }}
 .prompt {{ color: #999; }}
 label {{ margin-right: 12px; }}
+.legend span {{ margin-right: 14px; }}
+.legend i {{ display: inline-block; width: 12px; height: 12px; margin-right: 4px; vertical-align: -1px; }}
 </style></head>
 <body class="outlines" data-layer="image">
 <header><strong>{title}</strong><br>
@@ -302,6 +387,7 @@ label {{ margin-right: 12px; }}
 <label><input type="radio" name="layer" value="depth"> depth</label>
 <label><input type="radio" name="layer" value="control"> control</label>
 <label><input type="radio" name="layer" value="init"> init</label>
+{legend}
 </header>
 <main>
 {figures}</main>

@@ -230,7 +230,7 @@ impl<'a> Loop<'a> {
 
     fn item(&self, scene: SceneImage) -> Item {
         let seed = image_seed(self.settings.seed, scene.index);
-        let prompt = choose(seed, Choice::Prompt, self.settings.prompts.len());
+        let prompt = self.settings.prompt_of(scene.scene, seed);
         let style =
             (!self.settings.ip_sets.is_empty()).then(|| choose(seed, Choice::StyleSet, self.settings.ip_sets.len()));
         Item { scene, seed, prompt, style }

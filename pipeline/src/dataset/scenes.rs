@@ -1,9 +1,11 @@
-//! Scenes rendered on the CPU while the GPU denoises: a thread renders the pending scenes in
-//! order and cuts each into its images (depth, control image, mask, annotations, files encoded),
-//! a few scenes ahead of the denoiser and no more.
+//! Scenes made on the CPU while the GPU denoises: a thread takes the pending scenes from their
+//! source in order (rendering the procedural bed, or reading scenes rendered elsewhere) and cuts
+//! each into its images (depth, control image, mask, annotations, files encoded), a few scenes
+//! ahead of the denoiser and no more.
 
 use super::plan::ImageFiles;
 use super::settings::DatasetSettings;
+use super::sources::SourceFrame;
 use crate::error::{Error, Result};
 use crate::RgbImage;
 use serde_json::{json, Value};
@@ -13,15 +15,18 @@ use std::time::{Duration, Instant};
 use vkdiff_render::coco::{annotations, instance_masks, Annotation};
 use vkdiff_render::control::control_image;
 use vkdiff_render::crops::crop_frame;
+use vkdiff_render::crops::CropWindow;
 use vkdiff_render::exr::encode_single_channel;
 use vkdiff_render::png_out::{gray16, rgb8};
 use vkdiff_render::preview::shaded_image;
-use vkdiff_render::scene::Scene;
 
 /// One image's share of its scene, ready to be denoised and written.
 pub struct SceneImage {
     pub index: u64,
+    pub scene: u64,
     pub scene_seed: u64,
+    /// The scene's folder or file, for scenes rendered elsewhere.
+    pub scene_name: Option<String>,
     /// The crop number, for images cut from a frame by `--crops`.
     pub crop: Option<usize>,
     /// Where the image lies in the frame, as the COCO image entry records it.
@@ -56,6 +61,9 @@ impl SceneImage {
             "camera": self.camera,
         });
         entry["crop"]["index"] = json!(self.crop);
+        if let Some(name) = &self.scene_name {
+            entry["scene"] = json!(name);
+        }
         entry
     }
 
@@ -117,8 +125,8 @@ pub fn render_scenes(
 /// The images `indices` of scene number `scene`.
 fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Result<Vec<SceneImage>> {
     let seed = settings.seed + scene;
-    let frame = Scene::build(seed, &settings.scene)?.render();
-    let windows = settings.windows(seed)?;
+    let SourceFrame { frame, shaded } = settings.source.frame(scene, seed)?;
+    let windows = settings.windows(scene, seed)?;
     let per = settings.images_per_scene();
     let cropped = settings.crops.count > 0;
     Ok(indices
@@ -127,24 +135,33 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
             let k = (index % per) as usize;
             let window = windows[k];
             let part = crop_frame(&frame, window, settings.crops.min_fraction);
-            let (w, h) = (part.camera.width, part.camera.height);
+            let (w, h) = (part.width, part.height);
             let pixels = control_image(&part.depth, settings.control_depth);
-            let camera = part.camera.to_json();
+            let camera = part.camera.as_ref().map_or(Value::Null, |c| {
+                let c = c.to_json();
+                json!({
+                    "K": c["K"],
+                    "crop_offset_px": c["crop_offset_px"],
+                    "T_world_camera_opencv": c["T_world_camera_opencv"]["matrix"],
+                })
+            });
+            // The renderer's own image, cut as the frame is; else the frame lit from its depth.
             let init = settings.wants_shaded().then(|| {
-                let shaded = shaded_image(&part);
+                let shaded = match &shaded {
+                    Some(rgb) => cut_rgb(rgb, frame.width(), window),
+                    None => shaded_image(&part),
+                };
                 let png = rgb8(w, h, &shaded);
                 (RgbImage { width: w as usize, height: h as usize, pixels: shaded }, png)
             });
             SceneImage {
                 index,
+                scene,
                 scene_seed: seed,
+                scene_name: settings.source.scene_name(scene).map(String::from),
                 crop: cropped.then_some(k),
                 window: json!({"offset_px": [window.x0, window.y0], "size_px": [window.width, window.height]}),
-                camera: json!({
-                    "K": camera["K"],
-                    "crop_offset_px": camera["crop_offset_px"],
-                    "T_world_camera_opencv": camera["T_world_camera_opencv"]["matrix"],
-                }),
+                camera,
                 depth_exr: encode_single_channel(w, h, "Z", &part.depth),
                 control_png: rgb8(w, h, &pixels),
                 mask_png: gray16(w, h, &part.ids),
@@ -154,4 +171,12 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
             }
         })
         .collect())
+}
+
+/// The pixels of an RGB image `width` wide under `window`.
+fn cut_rgb(rgb: &[u8], width: usize, window: CropWindow) -> Vec<u8> {
+    let (x0, w) = (window.x0 as usize, window.width as usize);
+    (window.y0 as usize..(window.y0 + window.height) as usize)
+        .flat_map(|y| rgb[(y * width + x0) * 3..(y * width + x0 + w) * 3].iter().copied())
+        .collect()
 }

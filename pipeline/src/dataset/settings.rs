@@ -1,7 +1,9 @@
-//! A dataset's settings: the scenes (`vkdiff scene`'s flags), the images (`vkdiff gen`'s), and the
-//! per-image variety (prompts, style-image sets). They are recorded in `dataset.json` under the
-//! flag names, so a run with other settings into the same folder is refused naming the flag.
+//! A dataset's settings: the scenes (the procedural bed with `vkdiff scene`'s flags, or scenes
+//! rendered elsewhere), the images (`vkdiff gen`'s flags), and the per-image variety (prompts,
+//! style-image sets). They are recorded in `dataset.json` under the flag names, so a run with
+//! other settings into the same folder is refused naming the flag.
 
+use super::sources::SceneSource;
 use crate::error::{Error, Result};
 use crate::sdxl::Sdxl;
 use crate::settings::ip_scale::IpScale;
@@ -13,7 +15,6 @@ use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 use vkdiff_render::control::ControlDepth;
 use vkdiff_render::crops::{centered, centered_window, validate_min_fraction, CropWindow};
-use vkdiff_render::scene::SceneConfig;
 use vkdiff_setting::Message;
 
 /// How each scene's frame is cut into images.
@@ -32,13 +33,16 @@ pub struct DatasetSettings {
     pub seed: u64,
     /// Scenes.
     pub count: u64,
-    pub scene: SceneConfig,
+    pub source: SceneSource,
     pub crops: Crops,
     pub control_depth: ControlDepth,
     /// The diffusion models; None for a render-only set, whose images are the shaded renders.
     pub models: Option<ModelSettings>,
-    /// One is chosen per image from its seed.
+    /// The `--prompt`s, one chosen per image from its seed, then every scene's own prompt
+    /// (prompt.txt), which its images take.
     pub prompts: Vec<String>,
+    /// How many of `prompts` are the `--prompt`s.
+    pub user_prompts: usize,
     pub negative_prompt: Option<String>,
     /// Steps, guidance and sampler; the size is the images' (crop size, or the cut frame).
     pub sampling: Sampling,
@@ -49,12 +53,13 @@ pub struct DatasetSettings {
 impl DatasetSettings {
     /// Checks every setting and fixes the image size: crops of `crops.size`, or the frame cut to
     /// sides that are multiples of the model's pixel multiple (`Sdxl::probe_pixel_multiple`;
-    /// SDXL's 8 for a render-only set, `models` None, which takes no prompts or styles).
+    /// SDXL's 8 for a render-only set, `models` None, which takes no prompts or styles). `count`
+    /// is the procedural bed's scenes, or how many of the rendered scenes (all: None).
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         seed: u64,
-        count: u64,
-        scene: SceneConfig,
+        count: Option<u64>,
+        source: SceneSource,
         crops: Crops,
         control_depth: ControlDepth,
         models: Option<ModelSettings>,
@@ -63,8 +68,20 @@ impl DatasetSettings {
         mut sampling: Sampling,
         ip_sets: Vec<Vec<PathBuf>>,
     ) -> Result<DatasetSettings> {
-        scene.validate()?;
+        if let SceneSource::Procedural(scene) = &source {
+            scene.validate()?;
+        }
         validate_min_fraction(crops.min_fraction)?;
+        let count = match (source.available(), count) {
+            (None, count) => count.unwrap_or(1),
+            (Some(all), None) => all,
+            (Some(all), Some(count)) if count <= all => count,
+            (Some(all), Some(count)) => {
+                return Err(Error::Setting(
+                    Message::setting("count").then(format!(" {count}: ")).and("scenes").then(format!(" holds {all}")),
+                ))
+            }
+        };
         if count == 0 {
             return Err(Error::Setting(Message::setting("count").then(" must be at least 1")));
         }
@@ -76,9 +93,11 @@ impl DatasetSettings {
                     .then(format!(" {seed}")),
             ));
         }
+        let scene_prompts = distinct((0..count).filter_map(|k| source.prompt(k)));
         let multiple = match &models {
             Some(models) => {
-                check_diffusion(models, &prompts, &negative_prompt, &sampling, &ip_sets)?;
+                let every_scene_has_one = (0..count).all(|k| source.prompt(k).is_some());
+                check_diffusion(models, &prompts, every_scene_has_one, &negative_prompt, &sampling, &ip_sets)?;
                 Sdxl::probe_pixel_multiple(&models.model, models.vae.as_deref())? as u32
             }
             None => {
@@ -87,14 +106,16 @@ impl DatasetSettings {
             }
         };
         let (width, height) = if crops.count > 0 {
-            if crops.size == 0 || crops.size > scene.width.min(scene.height) {
-                return Err(Error::Setting(Message::setting("crop_size").then(format!(
-                    " {} must lie in [1, {}] to fit the {}×{} frame",
-                    crops.size,
-                    scene.width.min(scene.height),
-                    scene.width,
-                    scene.height
-                ))));
+            for k in 0..count {
+                let (w, h) = source.frame_size(k);
+                if crops.size == 0 || crops.size > w.min(h) {
+                    let of = source.scene_name(k).map_or(String::new(), |n| format!(" of scene {n}"));
+                    return Err(Error::Setting(Message::setting("crop_size").then(format!(
+                        " {} must lie in [1, {}] to fit the {w}×{h} frame{of}",
+                        crops.size,
+                        w.min(h)
+                    ))));
+                }
             }
             if !crops.size.is_multiple_of(multiple) {
                 return Err(Error::Setting(
@@ -104,19 +125,38 @@ impl DatasetSettings {
             }
             (crops.size, crops.size)
         } else {
-            let w = centered_window(scene.width, scene.height, multiple)?;
+            // Whole frames make images of one size: every frame must have the first one's.
+            let first = source.frame_size(0);
+            if let Some(k) = (0..count).find(|&k| source.frame_size(k) != first) {
+                let (w, h) = source.frame_size(k);
+                return Err(Error::Setting(
+                    Message::setting("scenes")
+                        .then(format!(
+                            ": scene {} is {w}×{h}, scene {} {}×{}; frames of several sizes need ",
+                            source.scene_name(k).unwrap_or("?"),
+                            source.scene_name(0).unwrap_or("?"),
+                            first.0,
+                            first.1
+                        ))
+                        .and("crops"),
+                ));
+            }
+            let w = centered_window(first.0, first.1, multiple)?;
             (w.width, w.height)
         };
         sampling.width = width as usize;
         sampling.height = height as usize;
+        let user_prompts = prompts.len();
+        let prompts = prompts.into_iter().chain(scene_prompts).collect();
         Ok(DatasetSettings {
             seed,
             count,
-            scene,
+            source,
             crops,
             control_depth,
             models,
             prompts,
+            user_prompts,
             negative_prompt,
             sampling,
             ip_sets,
@@ -143,23 +183,23 @@ impl DatasetSettings {
         self.count * self.images_per_scene()
     }
 
-    /// The frame windows of scene `scene_seed`'s images, in crop order.
-    pub fn windows(&self, scene_seed: u64) -> Result<Vec<CropWindow>> {
+    /// The frame windows of scene `scene` (seed `scene_seed`)'s images, in crop order.
+    pub fn windows(&self, scene: u64, scene_seed: u64) -> Result<Vec<CropWindow>> {
+        let (width, height) = self.source.frame_size(scene);
         if self.crops.count == 0 {
-            return Ok(vec![self.whole_frame_window()]);
+            // The image made from a whole frame: the frame cut to the image size, centred.
+            return Ok(vec![centered(width, height, self.sampling.width as u32, self.sampling.height as u32)]);
         }
-        Ok(vkdiff_render::crops::crop_windows(
-            scene_seed,
-            self.crops.count,
-            self.crops.size,
-            self.scene.width,
-            self.scene.height,
-        )?)
+        Ok(vkdiff_render::crops::crop_windows(scene_seed, self.crops.count, self.crops.size, width, height)?)
     }
 
-    /// The window of the image made from a whole frame: the frame cut to the image size, centred.
-    fn whole_frame_window(&self) -> CropWindow {
-        centered(self.scene.width, self.scene.height, self.sampling.width as u32, self.sampling.height as u32)
+    /// The prompt (an index into `prompts`) of image `index` of scene `scene`, whose seed is
+    /// `seed`: the scene's own, else one of the `--prompt`s drawn from the seed.
+    pub fn prompt_of(&self, scene: u64, seed: u64) -> usize {
+        match self.source.prompt(scene) {
+            Some(own) => self.prompts.iter().position(|p| p == own).expect("every scene's prompt is listed"),
+            None => crate::dataset::choose(seed, crate::dataset::Choice::Prompt, self.user_prompts),
+        }
     }
 
     /// Every setting that shapes the output, under its flag's name.
@@ -168,10 +208,6 @@ impl DatasetSettings {
         let mut v = json!({
             "seed": self.seed,
             "count": self.count,
-            "width": self.scene.width,
-            "height": self.scene.height,
-            "density": self.scene.bed.density,
-            "clumping": self.scene.bed.clumping.clustered_fraction,
             "crops": self.crops.count,
             "crop-size": self.crops.size,
             "crop-min-fraction": self.crops.min_fraction,
@@ -179,6 +215,7 @@ impl DatasetSettings {
             "image-size": [s.width, s.height],
         });
         let map = v.as_object_mut().expect("an object");
+        map.extend(self.source.to_json());
         match &self.models {
             Some(models) => map.extend(self.diffusion_json(models)),
             None => {
@@ -250,16 +287,16 @@ const RENDER_ONLY_MULTIPLE: u32 = 8;
 fn check_diffusion(
     models: &ModelSettings,
     prompts: &[String],
+    every_scene_has_one: bool,
     negative_prompt: &Option<String>,
     sampling: &Sampling,
     ip_sets: &[Vec<PathBuf>],
 ) -> Result<()> {
-    if prompts.is_empty() || prompts.iter().any(|p| p.trim().is_empty()) {
+    if (prompts.is_empty() && !every_scene_has_one) || prompts.iter().any(|p| p.trim().is_empty()) {
         return Err(Error::Setting(
-            Message::setting("prompt")
-                .then(" (or ")
-                .and("prompts")
-                .then(" FILE) must give at least one prompt, none of them empty"),
+            Message::setting("prompt").then(" (or ").and("prompts").then(
+                " FILE) must give at least one prompt, none of them empty, unless every scene has its prompt.txt",
+            ),
         ));
     }
     match (&models.ip_adapter, ip_sets.is_empty()) {
@@ -365,4 +402,10 @@ pub fn read_prompts(path: &Path) -> Result<Vec<String>> {
         )
     })?;
     Ok(text.lines().map(str::trim).filter(|l| !l.is_empty()).map(String::from).collect())
+}
+
+/// `prompts` once each, in order of first appearance.
+fn distinct<'a>(prompts: impl Iterator<Item = &'a str>) -> Vec<String> {
+    let mut seen = std::collections::HashSet::new();
+    prompts.filter(|p| seen.insert(*p)).map(String::from).collect()
 }

@@ -1,6 +1,7 @@
 //! `vkdiff dataset stats`: what a finished set holds (images, instances per image, mask areas
-//! by COCO size class, instances cut by the image edge, the seeds, prompts and style sets used),
-//! as JSON and as the two charts people look at first.
+//! by COCO size class, instances cut by the image edge, each category's instances, images and
+//! median area, the seeds, prompts and style sets used), as JSON and as the charts people look
+//! at first.
 
 use super::canvas::bar_chart;
 use super::export::{FinishedSet, SplitFractions};
@@ -45,6 +46,30 @@ pub fn stats(dir: &Path) -> Result<Value> {
         }
         counts
     };
+    let categories: Vec<Value> = set
+        .categories
+        .as_array()
+        .into_iter()
+        .flatten()
+        .map(|c| {
+            let of = |a: &&Value| a["category_id"] == c["id"];
+            let mut areas: Vec<u64> = set
+                .images
+                .iter()
+                .flat_map(|i| i.annotations.iter().filter(of))
+                .filter_map(|a| a["area"].as_u64())
+                .collect();
+            let images = set.images.iter().filter(|i| i.annotations.iter().any(|a| of(&a))).count();
+            areas.sort_unstable();
+            json!({
+                "id": c["id"],
+                "name": c["name"],
+                "instances": areas.len(),
+                "images": images,
+                "median_area_px": median(&areas),
+            })
+        })
+        .collect();
     let seeds: BTreeSet<u64> = set.images.iter().filter_map(|i| i.entry["seed"].as_u64()).collect();
     let scenes: BTreeSet<u64> = set.images.iter().map(|i| i.scene_seed).collect();
     let instances = areas.len() as u64;
@@ -67,6 +92,7 @@ pub fn stats(dir: &Path) -> Result<Value> {
             "histogram": histogram(&areas, true),
         },
         "cut_by_image_edge": { "instances": cut, "share": cut as f64 / instances.max(1) as f64 },
+        "categories": categories,
         "image_seeds": seeds.len(),
         "sources": tally("source"),
         "prompts": tally("prompt"),
@@ -99,8 +125,8 @@ fn histogram(values: &[u64], log2: bool) -> Vec<Value> {
         .collect()
 }
 
-/// Writes the charts of `stats` into `folder`: instances per image and mask areas. Returns
-/// their paths.
+/// Writes the charts of `stats` into `folder`: instances per image, mask areas and instances
+/// by category. Returns their paths.
 pub fn write_charts(stats: &Value, folder: &Path) -> Result<Vec<std::path::PathBuf>> {
     std::fs::create_dir_all(folder).map_err(|e| vkdiff_formats::Error::Io { path: folder.to_path_buf(), source: e })?;
     let bars = |histogram: &Value, label: &dyn Fn(u64, u64) -> String| -> Vec<(String, u64)> {
@@ -132,6 +158,19 @@ pub fn write_charts(stats: &Value, folder: &Path) -> Result<Vec<std::path::PathB
                 &format!("MASK AREA ({} INSTANCES)", stats["instances"]),
                 "AREA IN PIXELS, FROM (POWERS OF 2)",
                 &bars(&stats["mask_area_px"]["histogram"], &|from, _| short_number(from)),
+            ),
+        ),
+        (
+            "instances_by_category.png",
+            bar_chart(
+                &format!("INSTANCES BY CATEGORY ({} CATEGORIES)", stats["categories"].as_array().map_or(0, Vec::len)),
+                "CATEGORY",
+                &stats["categories"]
+                    .as_array()
+                    .into_iter()
+                    .flatten()
+                    .map(|c| (c["name"].as_str().unwrap_or("?").to_string(), c["instances"].as_u64().unwrap_or(0)))
+                    .collect::<Vec<_>>(),
             ),
         ),
     ];

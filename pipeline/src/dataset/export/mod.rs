@@ -5,6 +5,7 @@
 
 mod coco;
 mod hf;
+mod hf_card;
 mod polygons;
 mod set;
 mod splits;

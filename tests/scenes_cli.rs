@@ -1,0 +1,432 @@
+//! `vkdiff dataset --scenes`: scenes rendered elsewhere (tests/fixtures/scenes, drawn by
+//! tools/make_scene_fixtures.py: scene folders as a renderer of one's own writes them, and
+//! BlenderProc's .hdf5 frames as its writer writes them, with h5py) made into sets whose every
+//! annotation is the scene's instance-map pixels of one instance inside its crop, with the
+//! scene's category; through --render-only and through the tiny SDXL + ControlNet; exported with
+//! the categories' names; `vkdiff scene`'s own folders fed back; and every refusal in one line.
+
+mod cli;
+
+use cli::{command, png_pixels, scratch, tree};
+use serde_json::Value;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use vkdiff_render::rle::Rle;
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
+}
+
+fn scenes(format: &str) -> PathBuf {
+    fixtures().join("scenes").join(format)
+}
+
+fn run_ok(args: &[&str]) -> String {
+    let out = command().args(args).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{args:?}: {text}");
+    text
+}
+
+fn read_json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// A scene's instance map (the renderer's ids, as written) and each id's category.
+struct SourceScene {
+    width: usize,
+    ids: Vec<u32>,
+    category: BTreeMap<u32, u64>,
+}
+
+fn folder_scene(dir: &Path) -> SourceScene {
+    let mut reader =
+        png::Decoder::new(std::io::BufReader::new(std::fs::File::open(dir.join("instances.png")).unwrap()))
+            .read_info()
+            .unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let ids: Vec<u32> = match info.bit_depth {
+        png::BitDepth::Sixteen => {
+            buf[..info.buffer_size()].chunks(2).map(|b| u16::from_be_bytes([b[0], b[1]]) as u32).collect()
+        }
+        _ => buf[..info.buffer_size()].iter().map(|&v| v as u32).collect(),
+    };
+    let categories = read_json(&dir.join("categories.json"));
+    let category = categories["instances"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(k, v)| (k.parse().unwrap(), v.as_u64().unwrap()))
+        .collect();
+    SourceScene { width: info.width as usize, ids, category }
+}
+
+fn blenderproc_scene(file: &Path) -> SourceScene {
+    let f = hdf5_reader::Hdf5File::open(file).unwrap();
+    let segmap = f.dataset("/instance_segmaps").unwrap();
+    let width = segmap.shape()[1] as usize;
+    let ids: Vec<u32> =
+        segmap.read_raw_bytes().unwrap().chunks(4).map(|b| i32::from_le_bytes(b.try_into().unwrap()) as u32).collect();
+    let attributes: Value =
+        serde_json::from_str(&f.dataset("/instance_attribute_maps").unwrap().read_string().unwrap()).unwrap();
+    let category = attributes
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| (a["idx"].as_u64().unwrap() as u32, a["category_id"].as_u64().unwrap()))
+        .collect();
+    SourceScene { width, ids, category }
+}
+
+/// Every image of the set at `set` against its scene: each annotation is exactly the pixels of
+/// one instance of the scene's map inside the image's window, of that instance's category; and
+/// every instance with at least a tenth of its pixels inside (the default --crop-min-fraction)
+/// and a category other than 0 (BlenderProc's background) has its annotation. Returns the
+/// annotations checked.
+fn assert_masks_are_the_scenes(set: &Path, source: &dyn Fn(&str) -> SourceScene) -> usize {
+    let coco = read_json(&set.join("annotations.json"));
+    let mut by_image: BTreeMap<u64, Vec<&Value>> = BTreeMap::new();
+    for a in coco["annotations"].as_array().unwrap() {
+        by_image.entry(a["image_id"].as_u64().unwrap()).or_default().push(a);
+    }
+    let mut checked = 0;
+    for image in coco["images"].as_array().unwrap() {
+        let scene = source(image["scene"].as_str().expect("images of rendered scenes name their scene"));
+        let [x0, y0] = [0, 1].map(|i| image["crop"]["offset_px"][i].as_u64().unwrap() as usize);
+        let [w, h] = [0, 1].map(|i| image["crop"]["size_px"][i].as_u64().unwrap() as usize);
+        let at = |x: usize, y: usize| scene.ids[(y0 + y) * scene.width + x0 + x];
+        let mut annotated = BTreeSet::new();
+        for a in by_image.remove(&image["id"].as_u64().unwrap()).unwrap_or_default() {
+            let s = &a["segmentation"];
+            let mask = Rle::from_coco_string(s["counts"].as_str().unwrap(), h as u32, w as u32).unwrap().to_mask();
+            let first = mask.iter().position(|&m| m).expect("no empty annotation");
+            let raw = at(first % w, first / w);
+            for (p, &m) in mask.iter().enumerate() {
+                assert_eq!(
+                    m,
+                    at(p % w, p / w) == raw,
+                    "image {}: annotation {} against instance {raw}",
+                    image["id"],
+                    a["id"]
+                );
+            }
+            assert_eq!(a["category_id"].as_u64(), scene.category.get(&raw).copied(), "instance {raw}'s category");
+            assert!(annotated.insert(raw), "instance {raw} annotated twice");
+            checked += 1;
+        }
+        let count = |inside: bool| {
+            let mut n: BTreeMap<u32, usize> = BTreeMap::new();
+            for (p, &id) in scene.ids.iter().enumerate() {
+                let (x, y) = (p % scene.width, p / scene.width);
+                if !inside || (x0..x0 + w).contains(&x) && (y0..y0 + h).contains(&y) {
+                    *n.entry(id).or_default() += 1;
+                }
+            }
+            n
+        };
+        let (frame, crop) = (count(false), count(true));
+        let wanted: BTreeSet<u32> = crop
+            .iter()
+            .filter(|(&id, &n)| id != 0 && scene.category.get(&id) != Some(&0) && n as f64 >= 0.1 * frame[&id] as f64)
+            .map(|(&id, _)| id)
+            .collect();
+        assert_eq!(annotated, wanted, "image {}: the instances annotated", image["id"]);
+    }
+    checked
+}
+
+#[test]
+fn scene_folders_make_a_set_whose_masks_are_the_instance_maps() {
+    let dir = scratch("scenes-folders").join("set");
+    let scenes_dir = scenes("folders");
+    let render = |out: &Path| {
+        let cut = ["--crops", "3", "--crop-size", "64", "--seed", "5"];
+        let set =
+            ["dataset", "--render-only", "--scenes", scenes_dir.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        run_ok(&[&set[..], &cut].concat());
+    };
+    render(&dir);
+    let checked = assert_masks_are_the_scenes(&dir, &|name| folder_scene(&scenes_dir.join(name)));
+    assert!(checked > 40, "{checked} annotations");
+    let coco = read_json(&dir.join("annotations.json"));
+    let expected = read_json(&fixtures().join("scenes/expected.json"));
+    assert_eq!(coco["categories"], expected["categories"], "the scenes' categories, ids and names kept");
+    assert_eq!(coco["images"].as_array().unwrap().len(), 9);
+    // Images cut from the frames at the edge hold instances the edge cuts.
+    let cut = coco["annotations"].as_array().unwrap().iter().filter(|a| {
+        let b = &a["bbox"];
+        b[0] == 0 || b[1] == 0 || b[0].as_u64().unwrap() + b[2].as_u64().unwrap() == 64
+    });
+    assert!(cut.count() > 5);
+    // The same seed and settings give the same bytes.
+    let again = scratch("scenes-folders-again").join("set");
+    render(&again);
+    assert!(tree(&dir) == tree(&again));
+}
+
+#[test]
+fn the_same_scenes_through_the_tiny_sdxl_and_controlnet() {
+    let root = scratch("scenes-diffusion");
+    let scenes_dir = scenes("folders");
+    let (rendered, diffused) = (root.join("rendered"), root.join("diffused"));
+    let common = ["--scenes", scenes_dir.to_str().unwrap(), "--crops", "2", "--crop-size", "64", "--seed", "9"];
+    let out = |d: &Path| ["--out".to_string(), d.display().to_string()];
+    let args = |extra: &[&str], d: &Path| -> Vec<String> {
+        ["dataset"]
+            .iter()
+            .map(|s| s.to_string())
+            .chain(common.iter().map(|s| s.to_string()))
+            .chain(out(d))
+            .chain(extra.iter().map(|s| s.to_string()))
+            .collect()
+    };
+    run_ok(&strs(&args(&["--render-only"], &rendered)));
+    let model = fixtures().join("pipeline/tiny-sdxl");
+    let controlnet = fixtures().join("workflow/controlnet");
+    let diffusion = [
+        "--model",
+        model.to_str().unwrap(),
+        "--controlnet",
+        controlnet.to_str().unwrap(),
+        "--steps",
+        "2",
+        "--prompt",
+        "an orchard",
+        "--init-strength",
+        "0.6",
+    ];
+    run_ok(&strs(&args(&diffusion, &diffused)));
+    let records = |d: &Path| -> Vec<Value> {
+        (0..6).map(|i| read_json(&d.join(format!("records/{i:06}.json")))["annotations"].clone()).collect()
+    };
+    assert_eq!(records(&rendered), records(&diffused), "the same annotations whatever makes the images");
+    assert_masks_are_the_scenes(&diffused, &|name| folder_scene(&scenes_dir.join(name)));
+    let coco = read_json(&diffused.join("annotations.json"));
+    for image in coco["images"].as_array().unwrap() {
+        let own = (image["scene"] == "orchard-a").then_some("ripe red apples among green leaves on a branch");
+        assert_eq!(image["prompt"].as_str(), Some(own.unwrap_or("an orchard")), "{image}");
+    }
+    // img2img starts from the renderer's own image where the scene has one (orchard-a's shaded.png).
+    let init = png_pixels(&diffused.join("init/000000.png"));
+    let shaded = png_pixels(&scenes_dir.join("orchard-a/shaded.png"));
+    let entry = &coco["images"][0];
+    let [x0, y0] = [0, 1].map(|i| entry["crop"]["offset_px"][i].as_u64().unwrap() as usize);
+    assert_eq!(&init[..3], &shaded[(y0 * 160 + x0) * 3..][..3], "the first pixel of the crop of shaded.png");
+}
+
+#[test]
+fn blenderproc_files_make_a_set_with_their_categories_and_names() {
+    let dir = scratch("scenes-blenderproc").join("set");
+    let scenes_dir = scenes("blenderproc");
+    run_ok(&["dataset", "--render-only", "--scenes", scenes_dir.to_str().unwrap(), "--out", dir.to_str().unwrap()]);
+    let checked = assert_masks_are_the_scenes(&dir, &|name| blenderproc_scene(&scenes_dir.join(name)));
+    let expected = read_json(&fixtures().join("scenes/expected.json"));
+    let instances: usize =
+        expected["blenderproc"].as_object().unwrap().values().map(|s| s["instances"].as_object().unwrap().len()).sum();
+    assert_eq!(checked, instances, "every instance, the ground plane (category 0) left out");
+    let coco = read_json(&dir.join("annotations.json"));
+    assert_eq!(coco["categories"], expected["categories"], "names from categories.json beside the files");
+    assert!(coco["annotations"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|a| a["name"].as_str().is_some_and(|n| n.contains('.'))));
+    // Whole frames of 144×112, the far value (1e10) background.
+    assert_eq!((coco["images"][0]["width"].as_u64(), coco["images"][0]["height"].as_u64()), (Some(144), Some(112)));
+    // Without categories.json the categories are named by their ids.
+    let bare = scratch("scenes-blenderproc-bare");
+    std::fs::create_dir_all(&bare).unwrap();
+    std::fs::copy(scenes_dir.join("0.hdf5"), bare.join("0.hdf5")).unwrap();
+    let set = bare.join("set");
+    run_ok(&["dataset", "--render-only", "--scenes", bare.to_str().unwrap(), "--out", set.to_str().unwrap()]);
+    let names: Vec<String> = read_json(&set.join("annotations.json"))["categories"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(names, ["category_1", "category_2", "category_3"]);
+}
+
+#[test]
+fn exports_carry_the_categories_names() {
+    let root = scratch("scenes-exports");
+    let (dir, scenes_dir) = (root.join("set"), scenes("folders"));
+    run_ok(&[
+        "dataset",
+        "--render-only",
+        "--scenes",
+        scenes_dir.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+        "--crops",
+        "2",
+        "--crop-size",
+        "64",
+    ]);
+    let yolo = root.join("yolo");
+    run_ok(&["dataset", "export", dir.to_str().unwrap(), "--format", "yolo", "--out", yolo.to_str().unwrap()]);
+    let yaml = std::fs::read_to_string(yolo.join("data.yaml")).unwrap();
+    assert!(yaml.contains("names:\n  0: \"apple\"\n  1: \"leaf\"\n  2: \"branch\"\n"), "{yaml}");
+    let hf = root.join("hf");
+    run_ok(&["dataset", "export", dir.to_str().unwrap(), "--format", "hf", "--out", hf.to_str().unwrap()]);
+    let card = std::fs::read_to_string(hf.join("README.md")).unwrap();
+    assert!(
+        card.contains("'0': \"apple\"") && card.contains("'1': \"leaf\"") && card.contains("'2': \"branch\""),
+        "{card}"
+    );
+    let metadata = std::fs::read_to_string(hf.join("train/metadata.jsonl")).unwrap();
+    let row: Value = serde_json::from_str(metadata.lines().next().unwrap()).unwrap();
+    let categories = row["objects"]["category"].as_array().unwrap();
+    assert!(!categories.is_empty() && categories.iter().all(|c| c.as_u64().is_some_and(|c| c < 3)), "{row}");
+    let stats = run_ok(&["dataset", "stats", dir.to_str().unwrap()]);
+    let out = command().args(["dataset", "stats", dir.to_str().unwrap(), "--json"]).output().unwrap();
+    let stats_json: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let names: Vec<&str> =
+        stats_json["categories"].as_array().unwrap().iter().map(|c| c["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["apple", "leaf", "branch"], "{stats}");
+    let total: u64 =
+        stats_json["categories"].as_array().unwrap().iter().map(|c| c["instances"].as_u64().unwrap()).sum();
+    assert_eq!(total, stats_json["instances"].as_u64().unwrap());
+}
+
+#[test]
+fn vkdiff_scene_folders_fed_back_give_the_built_in_annotations() {
+    let root = scratch("scenes-round-trip");
+    let beds = root.join("beds");
+    let size = ["--width", "480", "--height", "272"];
+    run_ok(&[&["scene", "--seed", "3", "--count", "2", "--out", beds.to_str().unwrap()][..], &size].concat());
+    let (built_in, fed_back) = (root.join("built-in"), root.join("fed-back"));
+    let cut = ["--render-only", "--seed", "3", "--crops", "2", "--crop-size", "128"];
+    run_ok(&[&["dataset", "--out", built_in.to_str().unwrap(), "--count", "2"][..], &cut, &size].concat());
+    run_ok(&[&["dataset", "--out", fed_back.to_str().unwrap(), "--scenes", beds.to_str().unwrap()][..], &cut].concat());
+    let annotations = |d: &Path| -> Vec<Value> {
+        let coco = read_json(&d.join("annotations.json"));
+        coco["annotations"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|a| {
+                let keep = ["id", "image_id", "category_id", "segmentation", "area", "bbox", "iscrowd", "mask_id"];
+                keep.iter().map(|k| (k.to_string(), a[*k].clone())).collect::<serde_json::Map<_, _>>().into()
+            })
+            .collect()
+    };
+    assert_eq!(annotations(&built_in), annotations(&fed_back));
+    assert_eq!(
+        read_json(&built_in.join("annotations.json"))["categories"],
+        read_json(&fed_back.join("annotations.json"))["categories"]
+    );
+    for name in ["depth/000000.exr", "masks/000001.png", "control/000002.png"] {
+        assert!(std::fs::read(built_in.join(name)).unwrap() == std::fs::read(fed_back.join(name)).unwrap(), "{name}");
+    }
+}
+
+/// The one `error:` line of a refused run, which must exit 2 and write nothing.
+fn refusal(scenes_dir: &Path, extra: &[&str]) -> String {
+    let out_dir = scenes_dir.parent().unwrap().join("never");
+    let mut args =
+        vec!["dataset", "--render-only", "--scenes", scenes_dir.to_str().unwrap(), "--out", out_dir.to_str().unwrap()];
+    args.extend(extra);
+    let out = command().args(&args).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+    assert_eq!(errors.len(), 1, "{stderr}");
+    assert!(!out_dir.exists(), "a refused run wrote {}", out_dir.display());
+    errors[0].to_string()
+}
+
+/// A copy of the fixture's scene folders with `change` made to it.
+fn changed(name: &str, change: &dyn Fn(&Path)) -> PathBuf {
+    let dir = scratch(&format!("scenes-bad-{name}")).join("scenes");
+    for scene in ["orchard-a", "orchard-b"] {
+        let (from, to) = (scenes("folders").join(scene), dir.join(scene));
+        std::fs::create_dir_all(&to).unwrap();
+        for entry in std::fs::read_dir(&from).unwrap().flatten() {
+            std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
+        }
+    }
+    change(&dir);
+    dir
+}
+
+/// A change made to a copy of the scenes.
+type Change = Box<dyn Fn(&Path)>;
+
+#[test]
+fn bad_scenes_are_refused_in_one_line_naming_them() {
+    let cases: Vec<(&str, Change, &str)> = vec![
+        (
+            "missing",
+            Box::new(|d: &Path| std::fs::remove_file(d.join("orchard-b/instances.png")).unwrap()),
+            "scene orchard-b: instances.png:",
+        ),
+        (
+            "size",
+            Box::new(|d: &Path| {
+                std::fs::copy(scenes("folders").join("orchard-c/instances.png"), d.join("orchard-b/instances.png"))
+                    .unwrap();
+            }),
+            "scene orchard-b: instances.png: 192×144, the depth is 160×128",
+        ),
+        (
+            "no-category",
+            Box::new(|d: &Path| {
+                let path = d.join("orchard-a/categories.json");
+                let mut c = read_json(&path);
+                let first = c["instances"].as_object().unwrap().keys().next().unwrap().clone();
+                c["instances"].as_object_mut().unwrap().remove(&first);
+                std::fs::write(path, c.to_string()).unwrap();
+            }),
+            "has no category",
+        ),
+        (
+            "twice",
+            Box::new(|d: &Path| {
+                let path = d.join("orchard-a/categories.json");
+                let mut c = read_json(&path);
+                c["categories"][1]["id"] = 1.into();
+                std::fs::write(path, c.to_string()).unwrap();
+            }),
+            "scene orchard-a: categories.json: category id 1 is listed twice",
+        ),
+        (
+            "unreadable",
+            Box::new(|d: &Path| std::fs::write(d.join("orchard-b/depth.exr"), b"not an exr").unwrap()),
+            "scene orchard-b:",
+        ),
+        (
+            "renamed",
+            Box::new(|d: &Path| {
+                let path = d.join("orchard-b/categories.json");
+                let mut c = read_json(&path);
+                c["categories"][0]["name"] = "pear".into();
+                std::fs::write(path, c.to_string()).unwrap();
+            }),
+            "category id 1 is `apple` in orchard-a and `pear` in orchard-b",
+        ),
+        (
+            "empty",
+            Box::new(|d: &Path| std::fs::remove_dir_all(d).and_then(|_| std::fs::create_dir_all(d)).unwrap()),
+            "holds no scene folders",
+        ),
+    ];
+    for (name, change, needle) in cases {
+        let dir = changed(name, &*change);
+        let line = refusal(&dir, &[]);
+        assert!(line.starts_with("error: --scenes") && line.contains(needle), "{name}: {line}");
+    }
+    let dir = scenes("folders");
+    assert!(refusal(&dir, &["--count", "4"]).contains("--count 4: --scenes holds 3"));
+    let out = command()
+        .args(["dataset", "--render-only", "--scenes", dir.to_str().unwrap(), "--out", "x", "--width", "64"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "--scenes with the procedural bed's --width");
+}
+
+fn strs(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}

@@ -1,0 +1,156 @@
+#!/usr/bin/env python3
+"""Scenes rendered "elsewhere" for `vkdiff dataset --scenes`: scene folders as a renderer of one's
+own writes them (OpenEXR through the OpenEXR library, PNGs through Pillow), and BlenderProc frames
+as BlenderProc's `write_hdf5` writes them (h5py, gzip datasets, the attribute maps as a JSON byte
+string), drawn here with numpy: an orchard of apples, leaves and branches that touch and occlude,
+a sky at infinite depth, objects cut by the frame's edges.
+
+Versions used to write the committed fixtures: Python 3.11, numpy 2.4.6, Pillow 12.1.0,
+OpenEXR 3.5.3, h5py 3.16.0.
+Setup and rerun:
+  python3 -m venv /tmp/ref && /tmp/ref/bin/pip install numpy pillow OpenEXR h5py
+  /tmp/ref/bin/python tools/make_scene_fixtures.py [--out tests/fixtures/scenes]
+
+Writes under --out:
+  folders/<name>/: depth.exr (or depth.png + depth.json), instances.png (16-bit, or 8-bit),
+      categories.json, and in some shaded.png and prompt.txt; frames of two sizes.
+  blenderproc/0.hdf5, 1.hdf5: `colors`, `depth` (background 1e10, as BlenderProc writes it),
+      `instance_segmaps` (int32: the instance idx), `instance_attribute_maps` (idx, category_id,
+      name; the ground plane is category 0, background) and `blender_proc_version`;
+      categories.json beside them with the category names.
+  expected.json: what each scene holds, for the tests: its size, and each instance id with its
+      category and pixel count.
+"""
+import argparse
+import json
+import pathlib
+import shutil
+
+import h5py
+import numpy as np
+import OpenEXR
+from PIL import Image
+
+CATEGORIES = [
+    {"id": 1, "name": "apple", "supercategory": "fruit"},
+    {"id": 2, "name": "leaf", "supercategory": "plant"},
+    {"id": 3, "name": "branch", "supercategory": "plant"},
+]
+SKY = np.inf
+
+
+def draw(width, height, seed, shapes):
+    """Paints `shapes` (kind, category, centre, size, depth) far to near: depth and instance ids,
+    with the ground plane behind everything below the horizon and sky (infinite depth) above."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[:height, :width].astype(np.float64)
+    horizon = height // 4
+    depth = np.where(yy < horizon, SKY, 3.0 + 4.0 * (height - yy) / height).astype(np.float32)
+    ids = np.zeros((height, width), np.uint16)
+    colors = np.zeros((height, width, 3), np.uint8)
+    colors[:] = np.where((yy < horizon)[..., None], [150, 190, 235], [90, 70, 50]).astype(np.uint8)
+    order = sorted(range(len(shapes)), key=lambda k: -shapes[k][4])
+    categories = {}
+    for k in order:
+        kind, category, (cx, cy), (rx, ry), z = shapes[k]
+        if kind == "ellipse":
+            inside = ((xx - cx) / rx) ** 2 + ((yy - cy) / ry) ** 2 <= 1
+        else:  # a bar: a branch
+            inside = (abs(xx - cx) <= rx) & (abs(yy - cy) <= ry)
+        inside &= depth > z
+        instance = 3 * k + 2  # ids with gaps, as renderers number objects
+        ids[inside] = instance
+        depth[inside] = z + rng.uniform(0, 0.01, inside.sum()).astype(np.float32)
+        colors[inside] = {1: [200, 30, 40], 2: [40, 150, 50], 3: [110, 80, 40]}[category]
+        categories[instance] = category
+    return depth, ids, colors, categories
+
+
+def orchard(width, height, seed, count):
+    rng = np.random.default_rng(seed)
+    shapes = [("bar", 3, (width * 0.5, height * 0.55), (width * 0.45, 3.0), 1.9)]
+    for _ in range(count):
+        category = int(rng.choice([1, 1, 2]))
+        r = rng.uniform(6, 14) if category == 1 else rng.uniform(4, 8)
+        shapes.append(("ellipse", category, (rng.uniform(-5, width + 5), rng.uniform(height * 0.2, height + 5)),
+                       (r, r if category == 1 else 2.2 * r), rng.uniform(1.0, 2.5)))
+    return draw(width, height, seed, shapes)
+
+
+def write_exr(path, depth, channel):
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                 {channel: depth.astype(np.float32)}).write(str(path))
+
+
+def summary(ids, categories):
+    present = {int(i): int((ids == i).sum()) for i in np.unique(ids) if i != 0}
+    return {str(i): {"category_id": categories[i], "pixels": n} for i, n in sorted(present.items())}
+
+
+def folders(out, expected):
+    root = out / "folders"
+    specs = [
+        # name, width, height, seed, objects, depth as, instances bits, shaded, prompt
+        ("orchard-a", 160, 128, 1, 14, "exr Z", 16, True, "ripe red apples among green leaves on a branch"),
+        ("orchard-b", 160, 128, 2, 18, "exr ViewLayer.Depth.Z", 8, False, None),
+        ("orchard-c", 192, 144, 3, 22, "png", 16, True, None),
+    ]
+    for name, w, h, seed, n, depth_as, bits, shaded, prompt in specs:
+        d = root / name
+        d.mkdir(parents=True)
+        depth, ids, colors, categories = orchard(w, h, seed, n)
+        if depth_as == "png":
+            scale = 0.001  # millimetres; 0 is background
+            Image.fromarray(np.where(np.isinf(depth), 0, np.round(depth / scale)).astype(np.uint16)).save(d / "depth.png")
+            (d / "depth.json").write_text(json.dumps({"scale": scale, "offset": 0.0}) + "\n")
+        else:
+            write_exr(d / "depth.exr", depth, depth_as.split(" ")[1])
+        Image.fromarray(ids.astype(np.uint8) if bits == 8 else ids).save(d / "instances.png")
+        (d / "categories.json").write_text(json.dumps(
+            {"categories": CATEGORIES, "instances": {str(i): c for i, c in sorted(categories.items())}}, indent=1) + "\n")
+        if shaded:
+            Image.fromarray(colors).save(d / "shaded.png")
+        if prompt:
+            (d / "prompt.txt").write_text(prompt + "\n")
+        expected["folders"][name] = {"width": w, "height": h, "instances": summary(ids, categories)}
+
+
+def blenderproc(out, expected):
+    root = out / "blenderproc"
+    root.mkdir(parents=True)
+    for frame, seed in enumerate([4, 5]):
+        depth, ids, colors, categories = orchard(144, 112, seed, 16)
+        ground = 1  # BlenderProc's ground plane: an object of category 0
+        segmap = ids.astype(np.int32)
+        segmap[(segmap == 0) & np.isfinite(depth)] = ground
+        depth = np.where(np.isinf(depth), 1e10, depth).astype(np.float32)  # its far value
+        attributes = [{"idx": 0, "category_id": 0, "name": "World"}, {"idx": ground, "category_id": 0, "name": "Plane"}]
+        attributes += [{"idx": int(i), "category_id": c, "name": f"{['', 'Apple', 'Leaf', 'Branch'][c]}.{i:03d}"}
+                       for i, c in sorted(categories.items())]
+        # As blenderproc/python/writer/WriterUtility.py writes each output: arrays as gzip
+        # datasets, lists of dicts as one JSON byte string.
+        with h5py.File(root / f"{frame}.hdf5", "w") as f:
+            f.create_dataset("colors", data=colors, compression="gzip")
+            f.create_dataset("depth", data=depth, compression="gzip")
+            f.create_dataset("instance_segmaps", data=segmap, compression="gzip")
+            f.create_dataset("instance_attribute_maps", data=np.bytes_(json.dumps(attributes)))
+            f.create_dataset("blender_proc_version", data=np.bytes_("2.8.0"))
+        expected["blenderproc"][f"{frame}.hdf5"] = {"width": 144, "height": 112, "instances": summary(ids, categories)}
+    (root / "categories.json").write_text(json.dumps({"categories": CATEGORIES}, indent=1) + "\n")
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", default="tests/fixtures/scenes")
+    out = pathlib.Path(ap.parse_args().out)
+    if out.exists():
+        shutil.rmtree(out)
+    expected = {"categories": CATEGORIES, "folders": {}, "blenderproc": {}}
+    folders(out, expected)
+    blenderproc(out, expected)
+    (out / "expected.json").write_text(json.dumps(expected, indent=1) + "\n")
+    print("wrote", out)
+
+
+if __name__ == "__main__":
+    main()
