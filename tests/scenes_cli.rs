@@ -430,3 +430,37 @@ fn bad_scenes_are_refused_in_one_line_naming_them() {
 fn strs(v: &[String]) -> Vec<&str> {
     v.iter().map(String::as_str).collect()
 }
+
+#[test]
+fn shards_and_a_scene_without_categories_json() {
+    // Two shards into one folder make the set one run makes.
+    let root = scratch("scenes-shards");
+    let scenes_dir = scenes("folders");
+    let set = |out: &Path, extra: &[&str]| {
+        let args =
+            ["dataset", "--render-only", "--scenes", scenes_dir.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        run_ok(&[&args[..], &["--crops", "2", "--crop-size", "64"], extra].concat());
+    };
+    let (one, sharded) = (root.join("one"), root.join("sharded"));
+    set(&one, &[]);
+    set(&sharded, &["--shard", "0/2"]);
+    set(&sharded, &["--shard", "1/2"]);
+    assert!(tree(&one) == tree(&sharded), "two shards and one run differ");
+    // A scene folder with no categories.json: every instance is --category, id 1.
+    let bare = root.join("bare");
+    std::fs::create_dir_all(bare.join("only")).unwrap();
+    for file in ["depth.exr", "instances.png"] {
+        std::fs::copy(scenes_dir.join("orchard-a").join(file), bare.join("only").join(file)).unwrap();
+    }
+    let out = root.join("trees");
+    let args = ["dataset", "--render-only", "--scenes", bare.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    run_ok(&[&args[..], &["--category", "tree"]].concat());
+    let coco = read_json(&out.join("annotations.json"));
+    assert_eq!(coco["categories"], serde_json::json!([{"id": 1, "name": "tree", "supercategory": "tree"}]));
+    assert!(coco["annotations"].as_array().unwrap().iter().all(|a| a["category_id"] == 1));
+    let expected = read_json(&fixtures().join("scenes/expected.json"));
+    assert_eq!(
+        coco["annotations"].as_array().unwrap().len(),
+        expected["folders"]["orchard-a"]["instances"].as_object().unwrap().len()
+    );
+}
