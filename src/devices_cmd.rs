@@ -176,12 +176,15 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
     let chosen = choose(&devices, &Default::default()).ok();
     if args.json {
         let gpu_paths = gpu_paths_requested();
+        // The Vulkan instance is created at this version (VKDIFF_VULKAN_API caps it).
+        let (major, minor) = vkdiff_runtime::api_limit()?;
         let list: Vec<_> = devices
             .iter()
             .map(|d| {
                 serde_json::json!({
                     "index": d.index, "name": d.name, "kind": d.kind.label(), "driver": d.driver,
                     "vulkan": format!("{}.{}.{}", d.api_version.0, d.api_version.1, d.api_version.2),
+                    "instance_vulkan": format!("{major}.{minor}"),
                     "f16": d.supports_f16(), "subgroup_size": d.subgroup_size,
                     "subgroup_size_range": d.subgroup_size_range,
                     "cooperative_matrix_shapes": d.matrix_shapes.iter().map(|s| s.label()).collect::<Vec<_>>(),

@@ -301,3 +301,19 @@ fn a_decode_past_the_budget_runs_in_tiles_and_one_that_must_be_whole_fails_first
     let stderr = String::from_utf8_lossy(&result.stderr);
     assert!(stderr.contains("--vae-tiling 40: a VAE tile must be a positive multiple of 32 pixels"), "{stderr}");
 }
+
+/// The Vulkan version vkdiff runs at is the one asked for: 1.3, or 1.2 under
+/// `VKDIFF_VULKAN_API=1.2` (the CI pass that runs these tests on the 1.2 paths), for the instance
+/// and for every device.
+#[test]
+fn the_instance_and_devices_run_the_vulkan_version_asked_for() {
+    let asked = std::env::var("VKDIFF_VULKAN_API").ok().filter(|v| !v.is_empty()).unwrap_or_else(|| "1.3".into());
+    let out = vkdiff(&["devices", "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let devices: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for d in devices.as_array().unwrap() {
+        assert_eq!(d["instance_vulkan"].as_str(), Some(asked.as_str()), "{d}");
+        let version = d["vulkan"].as_str().unwrap();
+        assert!(version.starts_with(&format!("{asked}.")), "device {} runs Vulkan {version}, {asked} asked", d["name"]);
+    }
+}

@@ -26,6 +26,7 @@ mod tensor;
 mod validation;
 
 pub use arena::Arena;
+pub use vkdiff_kernels::Variant;
 pub use context::{gpu_paths_requested, CompileNotice, Context, GemmFamily};
 pub use cpu_vectors::wider_lavapipe_vectors_available;
 pub use device::{api_limit, list_devices, DeviceInfo, DeviceKind};

@@ -14,6 +14,8 @@ pub const PUSH_BYTES: u32 = 128;
 /// A kernel variant ready to dispatch: `bindings` storage buffers at set 0, push constants.
 pub struct Kernel {
     pub name: &'static str,
+    /// The compiled variant (its family, dtype and tile and fragment parameters).
+    pub variant: &'static Variant,
     pub(crate) pipeline: vk::Pipeline,
     pub(crate) layout: vk::PipelineLayout,
     pub(crate) set_layout: vk::DescriptorSetLayout,
@@ -141,7 +143,7 @@ pub(crate) fn create_kernel(
         };
         let reported = statistics.map(|loader| pipeline_stats::query(loader, pipeline));
         let kernel =
-            Kernel { name: variant.kernel, pipeline, layout, set_layout, bindings, dispatched: AtomicBool::new(false) };
+            Kernel { name: variant.kernel, variant, pipeline, layout, set_layout, bindings, dispatched: AtomicBool::new(false) };
         Ok((kernel, reported))
     }
 }

@@ -10,6 +10,7 @@ use crate::submit_budget::SubmitBudget;
 use crate::tensor::Tensor;
 use ash::vk;
 use std::collections::HashSet;
+use vkdiff_kernels::Variant;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -389,6 +390,12 @@ pub struct Recording {
 }
 
 impl Recording {
+    /// The kernel variants this recording dispatches, each once, in the order first dispatched:
+    /// what tests assert the kernel choice by.
+    pub fn variants(&self) -> Vec<&'static Variant> {
+        self.res.kernels.iter().map(|k| k.variant).collect()
+    }
+
     /// Runs the recording to completion: the first time one submission per chunk, then as
     /// many chunks a submission as [`SubmitBudget::merge`] allows.
     pub fn run(&self) -> Result<()> {
@@ -512,9 +519,16 @@ fn human_bytes(n: u64) -> String {
 impl Context {
     /// Records with `f`, then runs the recording once.
     pub fn run(&self, f: impl FnOnce(&mut Recorder) -> Result<()>) -> Result<()> {
+        self.run_listing(f).map(drop)
+    }
+
+    /// [`Context::run`], returning the kernel variants the recording dispatched.
+    pub fn run_listing(&self, f: impl FnOnce(&mut Recorder) -> Result<()>) -> Result<Vec<&'static Variant>> {
         let mut rec = Recorder::new(self, false)?;
         f(&mut rec)?;
-        rec.finish()?.run()
+        let recording = rec.finish()?;
+        recording.run()?;
+        Ok(recording.variants())
     }
 }
 

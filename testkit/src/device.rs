@@ -1,6 +1,7 @@
 //! The device tests run on: lavapipe in CI, whatever `Context::new` picks elsewhere.
 
 use std::sync::OnceLock;
+use crate::choice::expect_cooperative;
 use vkdiff_runtime::{Context, GemmFamily};
 
 /// The Vulkan device the tests share. No device is a failure, not a skip.
@@ -55,10 +56,6 @@ pub fn ctx_with(family: GemmFamily) -> Context {
     }
     c.set_gemm_family(family);
     c
-}
-
-fn expect_cooperative() -> bool {
-    std::env::var("VKDIFF_EXPECT_COOPERATIVE").is_ok_and(|v| v == "1")
 }
 
 /// A new context; under `VKDIFF_EXPECT_COOPERATIVE=1` a matrix-unit trial that dropped the units

@@ -2,10 +2,12 @@
 //! a failure that says what to install, never a skip), deterministic data, the repository's
 //! fixture paths, scratch folders, and comparisons that name the worst element.
 
+mod choice;
 mod compare;
 mod device;
 mod paths;
 
+pub use choice::{assert_attention_kernel, assert_product_family, expect_cooperative};
 pub use compare::{assert_close, assert_within, random, storage_rtol, stored, DTYPES};
 pub use device::{ctx, ctx_with, gpu_ctx, private_ctx, quick_ctx};
 pub use paths::{fixture, repo, scratch};

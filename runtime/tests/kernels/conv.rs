@@ -1,7 +1,7 @@
 //! conv2d (implicit GEMM, NHWC) against an f64 direct convolution.
 
 use vkdiff_runtime::ops::{conv2d, oihw_to_ohwi, ConvParams, Padding};
-use vkdiff_runtime::{Context, Dtype, GemmFamily};
+use vkdiff_runtime::{Variant, Context, Dtype, GemmFamily};
 use vkdiff_testkit::*;
 
 struct Case {
@@ -20,11 +20,13 @@ struct Case {
     relu: bool,
 }
 
-fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) {
-    check_on(&ctx_with(family), dtype, c, seed);
+fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static Variant> {
+    check_on(&ctx_with(family), dtype, c, seed)
 }
 
-fn check_on(ctx: &Context, dtype: Dtype, c: &Case, seed: u64) {
+/// Runs the convolution on `ctx` against the reference, asserts the family it ran on, and
+/// returns the product's variants.
+fn check_on(ctx: &Context, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static Variant> {
     let family = (ctx.gemm_family(), if ctx.quick_compile() { "quick" } else { "" });
     let [kh, kw] = c.k;
     let ho = (c.h + c.pad.top + c.pad.bottom - kh) / c.stride + 1;
@@ -43,7 +45,7 @@ fn check_on(ctx: &Context, dtype: Dtype, c: &Case, seed: u64) {
     };
     let out = ctx.upload(&[c.b, ho, wo, c.cout], dtype, &prior).unwrap();
     let params = ConvParams { stride: c.stride, pad: c.pad, accumulate: c.accumulate, relu: c.relu };
-    ctx.run(|rec| conv2d(rec, &tx, &tw, Some(&tb), &out, &params)).unwrap();
+    let variants = ctx.run_listing(|rec| conv2d(rec, &tx, &tw, Some(&tb), &out, &params)).unwrap();
     let mut want = vec![0.0f64; out.numel()];
     let mut mag = vec![0.0f64; out.numel()];
     for n in 0..c.b {
@@ -81,14 +83,25 @@ fn check_on(ctx: &Context, dtype: Dtype, c: &Case, seed: u64) {
     );
     // Same bound as GEMM: 1e-5 of Σ|x·w| for f32 accumulation, plus output storage rounding.
     assert_within(&what, &out.download().unwrap(), &want, |i| 1e-6 + 1e-5 * mag[i] + rtol * want[i].abs());
+    assert_product_family(ctx, dtype, &variants, &what, false)
 }
 
-fn all(c: Case, seed: u64) {
+/// Every family and dtype; returns the `param` values of the `kernel` variants `family` ran.
+fn all(c: Case, seed: u64) -> Vec<(GemmFamily, Vec<&'static Variant>)> {
+    let mut ran = Vec::new();
     for family in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative] {
         for dtype in DTYPES {
-            check(family, dtype, &c, seed);
+            ran.push((family, check(family, dtype, &c, seed)));
         }
     }
+    ran
+}
+
+fn params_of(ran: &[(GemmFamily, Vec<&'static Variant>)], family: GemmFamily, kernel: &str, param: &str) -> Vec<u32> {
+    ran.iter()
+        .filter(|(f, _)| *f == family)
+        .flat_map(|(_, v)| v.iter().filter(|v| v.kernel == kernel).filter_map(|v| v.param(param)))
+        .collect()
 }
 
 #[test]
@@ -141,7 +154,7 @@ fn conv_large_products_take_the_large_tiles() {
     // 66·66 = 4356 output pixels × 132 channels: over 128 tiles of 64 (lavapipe's 8×8 fragments);
     // two images: over 128 tiles of 128, the tiled kernel's 128-row tiles.
     for (b, seed) in [(1, 28), (2, 29)] {
-        all(
+        let ran = all(
             Case {
                 b,
                 h: 66,
@@ -156,6 +169,8 @@ fn conv_large_products_take_the_large_tiles() {
             },
             seed,
         );
+        let rows = params_of(&ran, GemmFamily::Tiled, "conv_tiled_v4", "RH");
+        assert!(rows.iter().all(|&rh| rh == b as u32), "{b} images: RH {rows:?}");
     }
 }
 
@@ -163,7 +178,7 @@ fn conv_large_products_take_the_large_tiles() {
 fn conv_large_images_take_the_large_row_tiles() {
     // 34×34 = 1156 and 2·13·13 = 338 output pixels select the 64- and 32-row variants where
     // the weights number at least 2¹⁷ (3·3·128·116; smaller convolutions take 16 rows).
-    all(
+    let ran = all(
         Case {
             b: 1,
             h: 34,
@@ -178,7 +193,8 @@ fn conv_large_images_take_the_large_row_tiles() {
         },
         26,
     );
-    all(
+    assert_eq!(params_of(&ran, GemmFamily::Subgroup, "conv_sg", "TM"), [64, 64], "1156 pixels: 64 rows");
+    let ran = all(
         Case {
             b: 2,
             h: 13,
@@ -193,6 +209,7 @@ fn conv_large_images_take_the_large_row_tiles() {
         },
         27,
     );
+    assert_eq!(params_of(&ran, GemmFamily::Subgroup, "conv_sg", "TM"), [32, 32], "338 pixels: 32 rows");
 }
 
 #[test]
@@ -212,7 +229,11 @@ fn conv_quick_compiles_take_the_eight_row_tiles() {
         relu: false,
     };
     for dtype in DTYPES {
-        check_on(&quick_ctx(), dtype, &case, 29);
+        let ctx = quick_ctx();
+        let ran = check_on(&ctx, dtype, &case, 29);
+        if ctx.gemm_family() == GemmFamily::Subgroup {
+            assert!(ran.iter().all(|v| v.param("TM") == Some(8)), "the quick 8-row variants");
+        }
     }
 }
 

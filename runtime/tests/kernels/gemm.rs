@@ -1,7 +1,7 @@
 //! GEMM / linear against an f64 reference, for both kernel families and both storage dtypes.
 
 use vkdiff_runtime::ops::{linear, linear_geglu, matmul, Matmul, GEGLU_COLUMNS};
-use vkdiff_runtime::{Arena, Context, Dtype, GemmFamily};
+use vkdiff_runtime::{Arena, Context, Dtype, GemmFamily, Variant};
 use vkdiff_testkit::*;
 
 /// Reference C and Σ|a·b| per element (the scale that bounds rounding error of a dot product).
@@ -40,11 +40,13 @@ fn accumulation_tol() -> f64 {
     1e-5
 }
 
-fn check(family: GemmFamily, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64) {
-    check_on(&ctx_with(family), dtype, s, with_bias, seed);
+fn check(family: GemmFamily, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64) -> Vec<&'static Variant> {
+    check_on(&ctx_with(family), dtype, s, with_bias, seed)
 }
 
-fn check_on(ctx: &Context, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64) {
+/// Runs the product on `ctx` against the reference, asserts the family it ran on (a shape off
+/// the vec4 grid may fall back to the tiled kernel), and returns the product's variants.
+fn check_on(ctx: &Context, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64) -> Vec<&'static Variant> {
     let family = (ctx.gemm_family(), if ctx.quick_compile() { "quick" } else { "" });
     let (b_rows, b_cols) = if s.b_transposed { (s.n, s.k) } else { (s.k, s.n) };
     let a_len = (s.batch - 1) * s.a_batch + (s.m - 1) * s.lda + s.k;
@@ -58,24 +60,36 @@ fn check_on(ctx: &Context, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64)
     let tb = ctx.upload(&[b_len], dtype, &b).unwrap();
     let tbias = ctx.upload(&[s.n], dtype, &bias).unwrap();
     let tc = ctx.upload(&[c_len], dtype, &c0).unwrap();
-    ctx.run(|rec| matmul(rec, &ta, &tb, with_bias.then_some(&tbias), &tc, s)).unwrap();
+    let variants = ctx.run_listing(|rec| matmul(rec, &ta, &tb, with_bias.then_some(&tbias), &tc, s)).unwrap();
     let got = tc.download().unwrap();
     let (want, mag) = reference(&a, &b, with_bias.then_some(&bias[..]), &c0, s);
     // Elements the product does not cover (strided C) must be untouched.
     let want: Vec<f64> =
         want.iter().zip(&c0).zip(&mag).map(|((&w, &c), &m)| if m == 0.0 { c as f64 } else { w }).collect();
     let rtol = storage_rtol(dtype);
-    assert_within(&format!("{family:?} {dtype:?} {s:?}"), &got, &want, |i| {
-        1e-6 + accumulation_tol() * mag[i] + rtol * want[i].abs()
-    });
+    let what = format!("{family:?} {dtype:?} {s:?}");
+    assert_within(&what, &got, &want, |i| 1e-6 + accumulation_tol() * mag[i] + rtol * want[i].abs());
+    let off_grid = !(s.n.is_multiple_of(4) && s.k.is_multiple_of(4));
+    assert_product_family(ctx, dtype, &variants, &what, off_grid)
 }
 
-fn both(s: Matmul, bias: bool, seed: u64) {
+/// Every family and dtype; returns each run's product variants with its family and dtype.
+fn both(s: Matmul, bias: bool, seed: u64) -> Vec<(GemmFamily, Dtype, Vec<&'static Variant>)> {
+    let mut ran = Vec::new();
     for family in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative] {
         for dtype in DTYPES {
-            check(family, dtype, &s, bias, seed);
+            ran.push((family, dtype, check(family, dtype, &s, bias, seed)));
         }
     }
+    ran
+}
+
+/// The values of `param` of the variants `family` ran (in `dtype`, or any dtype).
+fn params_of(ran: &[(GemmFamily, Dtype, Vec<&'static Variant>)], family: GemmFamily, kernel: &str, param: &str) -> Vec<u32> {
+    ran.iter()
+        .filter(|(f, _, _)| *f == family)
+        .flat_map(|(_, _, v)| v.iter().filter(|v| v.kernel == kernel).filter_map(|v| v.param(param)))
+        .collect()
 }
 
 #[test]
@@ -89,8 +103,10 @@ fn square_and_rectangular() {
 fn tall_shapes_take_the_large_row_tiles() {
     // M ≥ 256 and ≥ 1024 select the 32- and 64-row subgroup variants for products of at least
     // 2¹⁷ weights (smaller ones take 16 rows); M off their multiples.
-    both(Matmul::dense(300, 516, 256, true), true, 8);
-    both(Matmul::dense(1030, 520, 256, false), false, 9);
+    let ran = both(Matmul::dense(300, 516, 256, true), true, 8);
+    assert_eq!(params_of(&ran, GemmFamily::Subgroup, "gemm_sg", "TM"), [32, 32], "M ≥ 256: 32 rows");
+    let ran = both(Matmul::dense(1030, 520, 256, false), false, 9);
+    assert_eq!(params_of(&ran, GemmFamily::Subgroup, "gemm_sg", "TM"), [64, 64], "M ≥ 1024: 64 rows");
 }
 
 #[test]
@@ -105,7 +121,11 @@ fn quick_compiles_take_the_eight_row_tiles() {
         (Matmul::dense(3, 260, 520, false), 15),
     ] {
         for dtype in DTYPES {
-            check_on(&ctx, dtype, &s, true, seed);
+            let ran = check_on(&ctx, dtype, &s, true, seed);
+            if ctx.gemm_family() == GemmFamily::Subgroup {
+                let rows: Vec<Option<u32>> = ran.iter().map(|v| v.param("TM")).collect();
+                assert!(rows.iter().all(|&r| r == Some(8)), "{s:?}: the quick 8-row variants, not {rows:?}");
+            }
         }
     }
 }
@@ -117,9 +137,17 @@ fn large_products_take_the_large_tiles() {
     // 32-lane GPUs and Intel's shapes keep 2×2); at least 128 of 128×128, the tiled kernel's
     // 128-row tiles (the first product; the second takes 64 rows); M, N and K off every tile's
     // multiple. The matrix units read K = 36 in units of 4, the others in units of 8.
-    both(Matmul::dense(1030, 2052, 24, true), true, 10);
-    both(Matmul::dense(520, 1000, 40, false), false, 11);
-    both(Matmul::dense(1030, 2052, 36, true), false, 16);
+    let ran = both(Matmul::dense(1030, 2052, 24, true), true, 10);
+    assert!(params_of(&ran, GemmFamily::Tiled, "gemm_tiled_v4", "RH").iter().all(|&rh| rh == 2), "128-row tiles");
+    let ran = both(Matmul::dense(520, 1000, 40, false), false, 11);
+    assert!(params_of(&ran, GemmFamily::Tiled, "gemm_tiled_v4", "RH").iter().all(|&rh| rh == 1), "64-row tiles");
+    let ran = both(Matmul::dense(1030, 2052, 36, true), false, 16);
+    // K = 36 is no multiple of 8: the matrix units read it in units of 4.
+    assert!(params_of(&ran, GemmFamily::Cooperative, "gemm_coop", "UW").iter().all(|&uw| uw == 4));
+    let coop = params_of(&ran, GemmFamily::Cooperative, "gemm_coop", "WT");
+    if ctx().info().cooperative_variant().is_some_and(|f| f.lanes != 32 && f.m == f.n && f.n == f.k) {
+        assert!(coop.iter().all(|&wt| wt == 4), "4×4 fragments a subgroup where built: {coop:?}");
+    }
 }
 
 #[test]

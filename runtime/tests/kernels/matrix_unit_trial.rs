@@ -23,3 +23,19 @@ fn the_matrix_unit_trial_runs_both_families_and_they_agree() {
         assert_eq!(ctx.gemm_family(), GemmFamily::Cooperative, "the trial leaves the family as it found it");
     }
 }
+
+/// A context whose device has matrix units, on the GPU paths with `VKDIFF_COOPERATIVE` unset (the
+/// CI pass of the trial at each start, on Mesa 26.1), has run the trial as it started; and any new
+/// context, trial or not, starts holding no live, idle or peak bytes of its own.
+#[test]
+fn a_fresh_context_ran_its_trial_and_holds_nothing() {
+    let ctx = private_ctx();
+    let trial_due = ctx.gpu_paths()
+        && ctx.info().cooperative_variant().is_some()
+        && std::env::var("VKDIFF_COOPERATIVE").map_or(true, |v| v.is_empty() || v == "auto");
+    if trial_due {
+        let trial = ctx.matrix_unit_trial().expect("the matrix units' trial ran as the context started");
+        assert!(trial.cooperative_ms > 0.0 && trial.tiled_ms > 0.0, "{trial:?}");
+    }
+    assert_eq!((ctx.live_bytes(), ctx.idle_bytes(), ctx.peak_bytes()), (0, 0, 0), "trial due: {trial_due}");
+}

@@ -1,0 +1,74 @@
+//! What a test asserts of the kernels that ran (`Context::run_listing`, `Recording::variants`):
+//! the family its context takes for the products, with, on the matrix units, the fragment shape
+//! the device runs (`VKDIFF_FRAGMENT`'s where asked); and attention on the matrix units where
+//! the CI pass of a driver with them says it must. A regressed selection then fails the test
+//! instead of passing on another kernel.
+
+use vkdiff_runtime::{Context, Dtype, GemmFamily, Variant};
+
+/// Whether the CI pass runs on a driver whose matrix units must be used.
+pub fn expect_cooperative() -> bool {
+    std::env::var("VKDIFF_EXPECT_COOPERATIVE").is_ok_and(|v| v == "1")
+}
+
+fn names(variants: &[&Variant]) -> Vec<String> {
+    variants.iter().map(|v| format!("{}{:?}", v.kernel, v.params)).collect()
+}
+
+/// The family name a product kernel belongs to: `_coop`, `_tiled` (`gemm_tiled_v4` too) or `_sg`.
+fn family_of(kernel: &str) -> Option<&'static str> {
+    ["_coop", "_tiled", "_sg"].into_iter().find(|f| kernel.contains(f))
+}
+
+/// Asserts that every product (GEMM or convolution) in `variants` ran on the family `ctx` takes
+/// for `dtype`; with `fallback`, a shape the family cannot take (off the vec4 grid) may run on the
+/// tiled kernels instead. Returns the products' variants.
+pub fn assert_product_family<'a>(
+    ctx: &Context,
+    dtype: Dtype,
+    variants: &[&'a Variant],
+    what: &str,
+    fallback: bool,
+) -> Vec<&'a Variant> {
+    let products: Vec<&Variant> =
+        variants.iter().copied().filter(|v| v.kernel.starts_with("gemm_") || v.kernel.starts_with("conv_")).collect();
+    assert!(!products.is_empty(), "{what}: no product kernel ran: {:?}", names(variants));
+    let fragment = ctx.info().cooperative_variant();
+    let expected = match (ctx.gemm_family(), dtype, fragment) {
+        (GemmFamily::Cooperative, Dtype::F16, Some(_)) => "_coop",
+        (GemmFamily::Subgroup, _, _) => "_sg",
+        _ => "_tiled",
+    };
+    for v in &products {
+        let family = family_of(v.kernel);
+        let allowed = family == Some(expected) || fallback && family == Some("_tiled");
+        assert!(allowed, "{what}: {:?} ran {} where {expected} was due", ctx.gemm_family(), v.kernel);
+        if family == Some("_coop") {
+            let f = fragment.expect("a matrix-unit kernel on a device with a fragment");
+            let shape = [v.param("FM"), v.param("FN"), v.param("FK")];
+            assert_eq!(shape, [Some(f.m), Some(f.n), Some(f.k)], "{what}: {} in the device's fragment", v.kernel);
+        }
+    }
+    if expected == "_coop" && expect_cooperative() && !fallback {
+        assert!(products.iter().all(|v| v.kernel.ends_with("_coop")), "{what}: {:?}", names(&products));
+    }
+    products
+}
+
+/// Asserts attention's kernel where the choice is certain: on the matrix units for f16 heads of
+/// up to 64 on a GPU-path context with them, in the CI pass that expects them; `attention_tiled`
+/// for such heads on GPU paths without them (f32, or no units). Contexts that take the quickly
+/// compiled kernels run `attention_wg` instead.
+pub fn assert_attention_kernel(ctx: &Context, dtype: Dtype, head_dim: usize, kernels: &[&str], what: &str) {
+    if !ctx.gpu_paths() || ctx.quick_compile() || head_dim > 64 {
+        return;
+    }
+    let units = ctx.gemm_family() == GemmFamily::Cooperative && ctx.info().cooperative_variant().is_some();
+    if units && dtype == Dtype::F16 {
+        if expect_cooperative() {
+            assert!(kernels.contains(&"attention_coop"), "{what}: f16 heads of {head_dim} ran {kernels:?}");
+        }
+    } else if dtype == Dtype::F32 || !units {
+        assert!(kernels.contains(&"attention_tiled"), "{what}: heads of {head_dim} ran {kernels:?}");
+    }
+}
