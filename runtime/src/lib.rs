@@ -26,7 +26,6 @@ mod tensor;
 mod validation;
 
 pub use arena::Arena;
-pub use vkdiff_kernels::Variant;
 pub use context::{gpu_paths_requested, CompileNotice, Context, GemmFamily};
 pub use cpu_vectors::wider_lavapipe_vectors_available;
 pub use device::{api_limit, list_devices, DeviceInfo, DeviceKind};
@@ -44,3 +43,4 @@ pub use pipeline_stats::{describe as describe_statistics, variant_label, Statist
 pub use recorder::{Recorder, Recording, Timing};
 pub use submit_budget::{SubmitBudget, DEFAULT_SUBMIT_GFLOP, DISPATCHES_PER_SUBMIT};
 pub use tensor::{dtype_size, uniform_values, Dtype, Tensor};
+pub use vkdiff_kernels::Variant;

@@ -142,8 +142,15 @@ pub(crate) fn create_kernel(
             }
         };
         let reported = statistics.map(|loader| pipeline_stats::query(loader, pipeline));
-        let kernel =
-            Kernel { name: variant.kernel, variant, pipeline, layout, set_layout, bindings, dispatched: AtomicBool::new(false) };
+        let kernel = Kernel {
+            name: variant.kernel,
+            variant,
+            pipeline,
+            layout,
+            set_layout,
+            bindings,
+            dispatched: AtomicBool::new(false),
+        };
         Ok((kernel, reported))
     }
 }

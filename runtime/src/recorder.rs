@@ -10,10 +10,10 @@ use crate::submit_budget::SubmitBudget;
 use crate::tensor::Tensor;
 use ash::vk;
 use std::collections::HashSet;
-use vkdiff_kernels::Variant;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
+use vkdiff_kernels::Variant;
 
 const SETS_PER_POOL: u32 = 256;
 const MAX_BINDINGS: u32 = 8;

@@ -1,7 +1,7 @@
 //! The device tests run on: lavapipe in CI, whatever `Context::new` picks elsewhere.
 
-use std::sync::OnceLock;
 use crate::choice::expect_cooperative;
+use std::sync::OnceLock;
 use vkdiff_runtime::{Context, GemmFamily};
 
 /// The Vulkan device the tests share. No device is a failure, not a skip.

@@ -1,7 +1,7 @@
 //! conv2d (implicit GEMM, NHWC) against an f64 direct convolution.
 
 use vkdiff_runtime::ops::{conv2d, oihw_to_ohwi, ConvParams, Padding};
-use vkdiff_runtime::{Variant, Context, Dtype, GemmFamily};
+use vkdiff_runtime::{Context, Dtype, GemmFamily, Variant};
 use vkdiff_testkit::*;
 
 struct Case {

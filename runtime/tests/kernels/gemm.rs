@@ -85,7 +85,12 @@ fn both(s: Matmul, bias: bool, seed: u64) -> Vec<(GemmFamily, Dtype, Vec<&'stati
 }
 
 /// The values of `param` of the variants `family` ran (in `dtype`, or any dtype).
-fn params_of(ran: &[(GemmFamily, Dtype, Vec<&'static Variant>)], family: GemmFamily, kernel: &str, param: &str) -> Vec<u32> {
+fn params_of(
+    ran: &[(GemmFamily, Dtype, Vec<&'static Variant>)],
+    family: GemmFamily,
+    kernel: &str,
+    param: &str,
+) -> Vec<u32> {
     ran.iter()
         .filter(|(f, _, _)| *f == family)
         .flat_map(|(_, _, v)| v.iter().filter(|v| v.kernel == kernel).filter_map(|v| v.param(param)))
