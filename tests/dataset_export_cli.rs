@@ -57,6 +57,37 @@ fn fill(points: &[(f64, f64)], width: usize, height: usize) -> Vec<bool> {
     mask
 }
 
+/// The set's COCO file: its images by file name, and its annotations by image id.
+fn coco_of(dir: &Path) -> (HashMap<String, Value>, HashMap<u64, Vec<Value>>) {
+    let coco = read_json(&dir.join("annotations.json"));
+    let images =
+        coco["images"].as_array().unwrap().iter().map(|i| (i["file_name"].as_str().unwrap().into(), i.clone()));
+    let mut annotations: HashMap<u64, Vec<Value>> = HashMap::new();
+    for a in coco["annotations"].as_array().unwrap() {
+        annotations.entry(a["image_id"].as_u64().unwrap()).or_default().push(a.clone());
+    }
+    (images.collect(), annotations)
+}
+
+/// An exported instance mask (16-bit grey PNG) holds, under each annotation's `mask_id`,
+/// exactly the pixels of the annotation's COCO RLE.
+fn assert_mask_holds(png_bytes: &[u8], annotations: &[Value], what: &str) {
+    let mut reader = png::Decoder::new(std::io::Cursor::new(png_bytes)).read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let frame = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(frame.bit_depth, png::BitDepth::Sixteen, "{what}");
+    let ids: Vec<u16> = buf[..frame.buffer_size()].chunks(2).map(|b| u16::from_be_bytes([b[0], b[1]])).collect();
+    for a in annotations {
+        let rle = Rle::from_coco_string(a["segmentation"]["counts"].as_str().unwrap(), frame.height, frame.width);
+        let coco_mask = rle.unwrap().to_mask();
+        let id = a["mask_id"].as_u64().unwrap() as u16;
+        // `to_mask` is row-major, as the PNG is.
+        assert_eq!(coco_mask.len(), ids.len(), "{what}");
+        let differ = coco_mask.iter().zip(&ids).filter(|(&c, &m)| c != (m == id)).count();
+        assert_eq!(differ, 0, "{what}: instance {id} differs from its COCO mask in {differ} pixels");
+    }
+}
+
 /// At full-HD scale, where most instances are large enough for their outlines to be simplified.
 #[test]
 fn yolo_polygons_cover_every_instance_mask() {
@@ -167,6 +198,7 @@ fn coco_splits_keep_scenes_together_and_stay_put_as_the_set_grows() {
 fn webdataset_shards_hold_every_sample_as_gnu_tar_reads_them() {
     let out = scratch("export-wds").join("wds");
     export(set(), &out, &["--format", "webdataset", "--shard-size", "1", "--val-fraction", "0.2"]);
+    let (images, by_image) = coco_of(set());
     let shards: Vec<PathBuf> = tree(&out).keys().map(|k| out.join(k)).collect();
     assert!(shards.iter().all(|s| s.extension().unwrap() == "tar") && shards.len() >= 3, "{shards:?}");
     let mut members = Vec::new();
@@ -185,14 +217,20 @@ fn webdataset_shards_hold_every_sample_as_gnu_tar_reads_them() {
             .success());
         for (name, bytes) in tree(&unpack) {
             let key = name.split('.').next().unwrap().to_string();
+            let image = &images[&format!("images/{key}.png")];
+            let annotations = &by_image[&image["id"].as_u64().unwrap()];
             let source = match &name[key.len()..] {
                 ".png" => format!("images/{key}.png"),
-                ".mask.png" => format!("masks/{key}.png"),
+                ".mask.png" => {
+                    assert_mask_holds(&bytes, annotations, &name);
+                    format!("masks/{key}.png")
+                }
                 ".depth.exr" => format!("depth/{key}.exr"),
                 ".json" => {
+                    // The image and its annotations (boxes, areas, RLEs and all) as the COCO file has them.
                     let meta: Value = serde_json::from_slice(&bytes).unwrap();
-                    assert_eq!(meta["image"]["file_name"], format!("images/{key}.png"));
-                    assert!(meta["annotations"].as_array().is_some_and(|a| !a.is_empty()));
+                    assert_eq!(&meta["image"], image, "{name}");
+                    assert_eq!(meta["annotations"].as_array().unwrap(), annotations, "{name}");
                     continue;
                 }
                 other => panic!("unexpected member {other}"),
@@ -207,23 +245,36 @@ fn webdataset_shards_hold_every_sample_as_gnu_tar_reads_them() {
 fn hf_metadata_lists_every_image_with_its_objects() {
     let out = scratch("export-hf").join("hf");
     export(set(), &out, &["--format", "hf", "--val-fraction", "0.3"]);
+    let (images, by_image) = coco_of(set());
     let mut rows = 0;
     for split in ["train", "validation"] {
         let text = std::fs::read_to_string(out.join(split).join("metadata.jsonl")).unwrap();
         for line in text.lines() {
             let row: Value = serde_json::from_str(line).unwrap();
             assert!(out.join(split).join(row["file_name"].as_str().unwrap()).is_file());
-            let mask = out.join(split).join(row["mask_file_name"].as_str().unwrap());
-            assert!(
-                std::fs::read(mask).unwrap()
-                    == std::fs::read(set().join(format!("masks/{}", row["file_name"].as_str().unwrap()))).unwrap()
-            );
+            let file = row["file_name"].as_str().unwrap();
+            let annotations = &by_image[&images[&format!("images/{file}")]["id"].as_u64().unwrap()];
+            assert_eq!(row["image_id"], annotations[0]["image_id"]);
+            let mask = std::fs::read(out.join(split).join(row["mask_file_name"].as_str().unwrap())).unwrap();
+            assert!(mask == std::fs::read(set().join(format!("masks/{file}"))).unwrap());
+            assert_mask_holds(&mask, annotations, file);
+            // Each object column, row by row, is the COCO annotations' field, in their order;
+            // the class label counts from 0 where COCO's one category is id 1.
             let objects = &row["objects"];
-            let n = objects["bbox"].as_array().unwrap().len();
-            for key in ["id", "area", "category", "segmentation", "iscrowd", "mask_id"] {
-                assert_eq!(objects[key].as_array().unwrap().len(), n, "{key}");
+            for (column, field) in [
+                ("id", "id"),
+                ("bbox", "bbox"),
+                ("area", "area"),
+                ("segmentation", "segmentation"),
+                ("iscrowd", "iscrowd"),
+                ("mask_id", "mask_id"),
+            ] {
+                let want: Vec<&Value> = annotations.iter().map(|a| &a[field]).collect();
+                let got: Vec<&Value> = objects[column].as_array().unwrap().iter().collect();
+                assert_eq!(got, want, "{file}: objects.{column}");
             }
-            assert!(objects["category"].as_array().unwrap().iter().all(|c| c == 0));
+            let categories: Vec<u64> = annotations.iter().map(|a| a["category_id"].as_u64().unwrap() - 1).collect();
+            assert_eq!(objects["category"], serde_json::json!(categories), "{file}");
             rows += 1;
         }
     }

@@ -25,6 +25,38 @@ fn ok(args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// A PNG's width, height and pixels: RGB bytes for 8-bit colour, ids for 16-bit grey.
+fn png_read(path: &Path) -> (usize, usize, Vec<u8>) {
+    let mut reader =
+        png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap())).read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let frame = reader.next_frame(&mut buf).unwrap();
+    buf.truncate(frame.buffer_size());
+    (frame.width as usize, frame.height as usize, buf)
+}
+
+/// The bars of a chart, left to right: the height of each run of columns holding the bars' blue.
+fn bar_heights(chart: &Path) -> Vec<usize> {
+    let (w, h, rgb) = png_read(chart);
+    let blue = |x: usize, y: usize| rgb[3 * (y * w + x)..][..3] == [70, 110, 170];
+    let column: Vec<usize> = (0..w).map(|x| (0..h).filter(|&y| blue(x, y)).count()).collect();
+    let mut bars = Vec::new();
+    let mut x = 0;
+    while x < w {
+        if column[x] == 0 {
+            x += 1;
+            continue;
+        }
+        let start = x;
+        while x < w && column[x] > 0 {
+            x += 1;
+        }
+        assert!(column[start..x].iter().all(|&c| c == column[start]), "{}: a ragged bar", chart.display());
+        bars.push(column[start]);
+    }
+    bars
+}
+
 fn png_size(path: &Path) -> (u32, u32) {
     let reader = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap())).read_info().unwrap();
     (reader.info().width, reader.info().height)
@@ -68,10 +100,25 @@ fn stats_count_what_the_coco_file_holds() {
     assert!(cut > 0);
     assert_eq!(stats["cut_by_image_edge"]["instances"].as_u64(), Some(cut));
     assert_eq!(stats["sources"]["render"].as_u64(), Some(12));
-    for chart in ["instances_per_image.png", "mask_area.png"] {
-        let (w, h) = png_size(&charts.join(chart));
-        assert!(w >= 360 && h >= 300, "{chart}: {w}×{h}");
-    }
+    // The area histogram's bins as the COCO file fills them, and the chart's bars as tall as
+    // their counts (the tallest the plot's full height; empty bins draw nothing).
+    let bins = area["histogram"].as_array().unwrap();
+    let counts: Vec<u64> = bins
+        .iter()
+        .map(|b| {
+            let (from, to) = (b["from"].as_u64().unwrap(), b["to"].as_u64().unwrap());
+            annotations.iter().filter(|a| (from..to).contains(&a["area"].as_u64().unwrap())).count() as u64
+        })
+        .collect();
+    assert_eq!(bins.iter().map(|b| b["count"].as_u64().unwrap()).collect::<Vec<_>>(), counts);
+    assert_eq!(counts.iter().sum::<u64>(), annotations.len() as u64, "bins that miss an area");
+    let bars = bar_heights(&charts.join("mask_area.png"));
+    let (tallest, most) = (*bars.iter().max().unwrap() as f64, *counts.iter().max().unwrap() as f64);
+    let want: Vec<usize> =
+        counts.iter().filter(|&&c| c > 0).map(|&c| (c as f64 / most * tallest).round() as usize).collect();
+    assert!(tallest >= 200.0 && bars == want, "bars {bars:?}, counts {counts:?}");
+    let (w, h) = png_size(&charts.join("instances_per_image.png"));
+    assert!(w >= 360 && h >= 300, "instances_per_image.png: {w}×{h}");
     let text = ok(&["dataset", "stats", set().to_str().unwrap(), "--charts", charts.to_str().unwrap()]);
     assert!(text.contains("12 images of 6 scenes") && text.contains("cut by the image edge"), "{text}");
     let refused = vkdiff(&["dataset", "stats", charts.to_str().unwrap()]);
@@ -122,6 +169,7 @@ fn the_preview_page_shows_the_images_with_their_outlines_in_headless_chromium() 
     assert!(!page.contains("src=\"images/") && !page.contains("file:"), "the page is self-contained");
     let (w, h) = png_size(&dir.join("page.png"));
     assert!(w >= 2 * 256 && h >= 2 * 256, "contact sheet {w}×{h}");
+    first_tile_is_the_first_image_outlined(&dir.join("page.png"));
     // --max-side shrinks the page's pictures (the 128² images to 64²), not what they show.
     let small = dir.join("small.html");
     preview(&small, "64");
@@ -144,6 +192,53 @@ fn the_preview_page_shows_the_images_with_their_outlines_in_headless_chromium() 
     assert!(differ(&plain, &depth) > 10_000, "the depth toggle does not switch the layer");
     let refused = vkdiff(&["dataset", "preview", set().to_str().unwrap(), "--count", "0"]);
     assert!(String::from_utf8_lossy(&refused.stderr).contains("--count must be at least 1"));
+}
+
+/// The contact sheet's first tile (8 px in, 256² from a 128² image) is the set's first image,
+/// each pixel a 2×2 block, except its instances' edge pixels (those with a 4-neighbour of
+/// another id), which take one colour per instance.
+fn first_tile_is_the_first_image_outlined(sheet: &Path) {
+    let coco: Value = serde_json::from_slice(&std::fs::read(set().join("annotations.json")).unwrap()).unwrap();
+    let first = &coco["images"][0];
+    let (w, h, image) = png_read(&set().join(first["file_name"].as_str().unwrap()));
+    let (_, _, mask) = png_read(&set().join(first["mask_file"].as_str().unwrap()));
+    let ids: Vec<u16> = mask.chunks(2).map(|b| u16::from_be_bytes([b[0], b[1]])).collect();
+    let (sw, _, tiles) = png_read(sheet);
+    assert_eq!((w, h), (128, 128));
+    let mut edge_colours: std::collections::HashMap<u16, std::collections::HashSet<[u8; 3]>> = Default::default();
+    let (mut plain, mut edges) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let id = ids[y * w + x];
+            let other = |nx: usize, ny: usize| ids[ny * w + nx] != id;
+            let edge = id != 0
+                && ((x > 0 && other(x - 1, y))
+                    || (x + 1 < w && other(x + 1, y))
+                    || (y > 0 && other(x, y - 1))
+                    || (y + 1 < h && other(x, y + 1)));
+            let block: Vec<[u8; 3]> = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                .iter()
+                .map(|(dx, dy)| {
+                    let at = 3 * ((8 + 2 * y + dy) * sw + 8 + 2 * x + dx);
+                    [tiles[at], tiles[at + 1], tiles[at + 2]]
+                })
+                .collect();
+            assert!(block.iter().all(|c| *c == block[0]), "tile pixel ({x}, {y}) is not a 2×2 block");
+            if edge {
+                edge_colours.entry(id).or_default().insert(block[0]);
+                edges += 1;
+            } else {
+                assert_eq!(
+                    block[0],
+                    [image[3 * (y * w + x)], image[3 * (y * w + x) + 1], image[3 * (y * w + x) + 2]],
+                    "tile pixel ({x}, {y})"
+                );
+                plain += 1;
+            }
+        }
+    }
+    assert!(edges > 100 && plain > 100, "{edges} edge pixels, {plain} others");
+    assert!(edge_colours.values().all(|c| c.len() == 1), "an instance's outline in several colours");
 }
 
 /// The README's picture is what its two commands under it make, byte for byte (run them in the

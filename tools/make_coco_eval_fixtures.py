@@ -13,7 +13,8 @@ Usage: make_coco_eval_fixtures.py OUT_DIR
   (writes gt.json, dt_segm.json, dt_bbox.json, dt_both.json, dt_mixed.json, expected.json)
 Made with pycocotools 2.0.11 and numpy 2.4.6 (Python 3.11); the values of the first three files
 are those pycocotools 2.0.10 gave. The per-category figures were added with pycocotools 2.0.11 and
-numpy 2.4.6 (Python 3.11); the files it writes are byte for byte the earlier ones.
+numpy 2.4.6 (Python 3.11); the files it writes are byte for byte the earlier ones. So were the
+mIoU and foreground IoU figures (`mask_scores`).
 """
 import contextlib
 import copy
@@ -147,6 +148,48 @@ for iou_type, dt_file, max_dets, label in runs:
         for k, c in enumerate(e.params.catIds)
     ]
 
+# Instance mIoU and foreground IoU, computed apart from COCOeval's IoU code: numpy over the
+# masks pycocotools decodes. The matches are COCOeval's own (IoU 0.5, area "all", the last cap);
+# an instance without a match counts 0 in mIoU and is left out of the matched mean.
+def mask_scores(dt_file, thresholds):
+    with contextlib.redirect_stdout(io.StringIO()):
+        coco = COCO(f"{out}/gt.json")
+        res = coco.loadRes(f"{out}/{dt_file}")
+        e = COCOeval(coco, res, "segm")
+        e.evaluate()
+    ious = []
+    for ev in e.evalImgs:
+        if ev is None or ev["aRng"] != e.params.areaRng[0]:
+            continue
+        for gid, dt_id, ignored in zip(ev["gtIds"], ev["gtMatches"][0], ev["gtIgnore"]):
+            if ignored:
+                continue
+            if dt_id == 0:
+                ious.append(None)
+                continue
+            g, d = coco.annToMask(coco.anns[gid]).astype(bool), res.annToMask(res.anns[int(dt_id)]).astype(bool)
+            ious.append(float((g & d).sum() / (g | d).sum()))
+    matched = [v for v in ious if v is not None]
+    scores = {"mIoU": sum(matched) / len(ious), "mIoU_matched": sum(matched) / len(matched),
+              "instances": len(ious), "matched": len(matched)}
+    for threshold in thresholds:
+        inter = union = 0
+        for img in coco.getImgIds():
+            g = np.zeros((H, W), bool)
+            for a in coco.loadAnns(coco.getAnnIds(imgIds=[img])):
+                g |= coco.annToMask(a).astype(bool)
+            p = np.zeros((H, W), bool)
+            for a in res.loadAnns(res.getAnnIds(imgIds=[img])):
+                if a["score"] >= threshold:
+                    p |= res.annToMask(a).astype(bool)
+            inter += int((g & p).sum())
+            union += int((g | p).sum())
+        scores[f"foreground_IoU@{threshold}"] = inter / union
+    return scores
+
+
+expected["mask_scores"] = {f: mask_scores(f, [0.5, 0.3]) for f in ["dt_segm.json", "dt_mixed.json"]}
+
 # Every polygon's mask, to hold the rasteriser to frPyObjects pixel for pixel.
 expected["polygon_rles"] = [
     {"id": a["id"], "counts": mask_utils.merge(mask_utils.frPyObjects(a["segmentation"], H, W))["counts"].decode()}
@@ -154,4 +197,4 @@ expected["polygon_rles"] = [
 ]
 with open(f"{out}/expected.json", "w") as f:
     json.dump(expected, f, indent=1)
-print({k: v["stats"][:3] for k, v in expected.items() if isinstance(v, dict)})
+print({k: v["stats"][:3] for k, v in expected.items() if isinstance(v, dict) and "stats" in v})

@@ -202,3 +202,28 @@ pub fn foreground_iou(images: &[(Vec<&Rle>, Vec<&Rle>)]) -> f64 {
         inter as f64 / uni as f64
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 2×3 mask whose ones are the flat (column-major) pixels [start, end).
+    fn run(start: u32, end: u32) -> Rle {
+        Rle { height: 2, width: 3, counts: vec![start, end - start, 6 - end] }
+    }
+
+    #[test]
+    fn foreground_iou_sums_intersections_and_unions_of_each_images_unions() {
+        let (a1, a2, a3) = (run(0, 3), run(2, 4), run(3, 6));
+        let (b, c) = (run(0, 2), run(1, 2));
+        // Image 1: ground truth 0..4 (its two masks overlap at pixel 2), prediction 3..6: 1 of 6.
+        // Image 2: a prediction only (0 of 2); image 3: ground truth only (0 of 1).
+        let images = [(vec![&a1, &a2], vec![&a3]), (vec![], vec![&b]), (vec![&c], vec![])];
+        assert_eq!(foreground_iou(&images), 1.0 / 9.0);
+        // Masks that repeat one another change nothing.
+        let doubled = [(vec![&a1, &a2, &a1], vec![&a3, &a3]), (vec![], vec![&b]), (vec![&c], vec![])];
+        assert_eq!(foreground_iou(&doubled), 1.0 / 9.0);
+        assert_eq!(foreground_iou(&[(vec![&a1], vec![&a1])]), 1.0);
+        assert_eq!(foreground_iou(&[(vec![], vec![])]), 0.0);
+    }
+}
