@@ -107,6 +107,29 @@ fn yolo_polygons_cover_every_instance_mask() {
     export(&set, &no_val, &["--format", "yolo", "--val-fraction", "0"]);
     let yaml = std::fs::read_to_string(no_val.join("data.yaml")).unwrap();
     assert!(yaml.lines().any(|l| l == "val: images/train") && !yaml.contains("test:"), "{yaml}");
+    let mut ious = polygon_ious(&set, &out);
+    // Whole frames, wider than tall: x and y are each normalised by their own side.
+    let wide = dir.join("wide");
+    let mut args = vec!["dataset", "--render-only", "--out", wide.to_str().unwrap()];
+    args.extend("--seed 11 --crops 0 --count 2 --width 640 --height 360".split(' '));
+    let rendered = vkdiff(&args);
+    assert!(rendered.status.success(), "{}", String::from_utf8_lossy(&rendered.stderr));
+    export(&wide, &dir.join("wide-yolo"), &["--format", "yolo"]);
+    ious.extend(polygon_ious(&wide, &dir.join("wide-yolo")));
+    let min = ious.iter().copied().fold(1.0, f64::min);
+    let mean = ious.iter().sum::<f64>() / ious.len() as f64;
+    let points = read_labels_points(&out);
+    eprintln!(
+        "{} polygons ({points} points) rasterised back: IoU with their masks min {min:.3}, mean {mean:.3}",
+        ious.len()
+    );
+    assert!(ious.len() > 100 && min >= 0.9, "{} instances, IoU min {min}", ious.len());
+    assert!(mean < 1.0, "no outline was simplified: the test misses what it is for");
+}
+
+/// Each YOLO polygon of the export in `out` of `set`, normalised coordinates scaled back by the
+/// image's own width and height and filled, against its instance's COCO mask: the IoUs.
+fn polygon_ious(set: &Path, out: &Path) -> Vec<f64> {
     let coco = read_json(&set.join("annotations.json"));
     let mut masks: HashMap<u64, Vec<&Value>> = HashMap::new();
     for a in coco["annotations"].as_array().unwrap() {
@@ -137,15 +160,7 @@ fn yolo_polygons_cover_every_instance_mask() {
             ious.push(both as f64 / either as f64);
         }
     }
-    let min = ious.iter().copied().fold(1.0, f64::min);
-    let mean = ious.iter().sum::<f64>() / ious.len() as f64;
-    let points = read_labels_points(&out);
-    eprintln!(
-        "{} polygons ({points} points) rasterised back: IoU with their masks min {min:.3}, mean {mean:.3}",
-        ious.len()
-    );
-    assert!(ious.len() > 100 && min >= 0.9, "{} instances, IoU min {min}", ious.len());
-    assert!(mean < 1.0, "no outline was simplified: the test misses what it is for");
+    ious
 }
 
 /// Polygon points in every label file.

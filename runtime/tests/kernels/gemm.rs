@@ -178,6 +178,21 @@ fn batched_strided_alpha_accumulate() {
     s.ldb = 32;
     s.b_batch = 0;
     both(s, false, 7);
+    // N and ldc off the vec4 grid: the scalar tiled kernel, whose store is its own, scales and
+    // accumulates too (a planted error that dropped its alpha passed every test before this).
+    let mut odd = Matmul::dense(40, 23, 32, false);
+    odd.batch = 2;
+    odd.ldc = 27;
+    odd.c_batch = 40 * 27 + 3;
+    odd.alpha = 0.37;
+    odd.accumulate = true;
+    let ran = both(odd, true, 8);
+    let tiled: Vec<&str> = ran
+        .iter()
+        .filter(|(f, _, _)| *f == GemmFamily::Tiled)
+        .flat_map(|(_, _, v)| v.iter().map(|v| v.kernel))
+        .collect();
+    assert!(tiled.iter().all(|&k| k == "gemm_tiled") && !tiled.is_empty(), "{tiled:?}");
 }
 
 #[test]
