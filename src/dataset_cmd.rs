@@ -127,6 +127,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         threads: args.scene.threads,
         min_free: args.min_free,
         versions: versions(args.allow_version_change),
+        keep_text_encoders: false,
     };
     let mut job = DatasetJob::new(settings(args)?, out, shard, options, &|k| std::env::var(k).ok())?;
     for why in job.redo() {

@@ -79,6 +79,9 @@ Environment:
 pub fn bench() -> String {
     format!(
         "Examples (real architectures with random weights: nothing to download):
+  vkdiff bench report --out my-gpu.json                     (the whole suite: the paper's image first)
+  vkdiff bench report --quick --out lavapipe.json           (the small suite, minutes on a CPU device)
+  vkdiff bench compare h200.json my-gpu.json --markdown --html compare.html
   vkdiff bench unet --size 1024 --reference-device cuda     (beside diffusers on the same GPU)
   vkdiff bench dataset --size 1024 --steps 30               (the paper's image, end to end)
   vkdiff bench kernels --filter linear --no-cpu-reference

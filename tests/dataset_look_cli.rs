@@ -3,10 +3,9 @@
 
 mod cli;
 
-use cli::{render_set_of, scratch, vkdiff};
+use cli::{chromium, render_set_of, scratch, screenshot, vkdiff};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 /// Six scenes, twelve images of 128², made once.
@@ -127,30 +126,6 @@ fn stats_count_what_the_coco_file_holds() {
         !refused.status.success() && stderr.lines().count() == 1 && stderr.contains("not a vkdiff dataset"),
         "{stderr}"
     );
-}
-
-/// Debian's chromium (or `VKDIFF_CHROMIUM`); the test fails, naming the package, without it.
-fn chromium() -> String {
-    let candidates = std::env::var("VKDIFF_CHROMIUM").into_iter().chain(["chromium".into(), "chromium-browser".into()]);
-    for candidate in candidates {
-        if Command::new(&candidate).arg("--version").output().is_ok_and(|o| o.status.success()) {
-            return candidate;
-        }
-    }
-    panic!("headless Chromium is needed to look at the preview: apt-get install chromium (or set VKDIFF_CHROMIUM)");
-}
-
-/// A 1200×900 screenshot of `url`, decoded to RGB.
-fn screenshot(browser: &str, url: &str, out: &Path) -> Vec<[u8; 3]> {
-    let status = Command::new(browser)
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--window-size=1200,900"])
-        .arg(format!("--screenshot={}", out.display()))
-        .arg(url)
-        .output()
-        .unwrap();
-    assert!(status.status.success() && out.is_file(), "{}", String::from_utf8_lossy(&status.stderr));
-    let image = vkdiff_pipeline::images::read_image(out).unwrap();
-    image.pixels.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect()
 }
 
 #[test]

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """diffusers' UNet2DConditionModel on the CPU (torch, float32) or a CUDA GPU (float16 or float32):
-milliseconds per evaluation and the peak memory (the process's resident set on the CPU, torch's
+milliseconds per evaluation (the best, and each) and the peak memory (the process's resident set on the CPU, torch's
 allocated device memory on the GPU).
 
 Run by `vkdiff bench unet` in the same run as its own measurement, with the same config (passed as
@@ -55,7 +55,8 @@ def main():
     else:
         peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux reports KiB
         where = f"CPU float32, {torch.get_num_threads()} threads"
-    print(json.dumps(dict(ms=1000 * min(times), peak_mib=peak_mib, torch=torch.__version__,
+    print(json.dumps(dict(ms=1000 * min(times), times_ms=[1000 * t for t in times], peak_mib=peak_mib,
+                          torch=torch.__version__,
                           diffusers=diffusers.__version__, where=where)))
 
 

@@ -14,7 +14,7 @@ mod usage;
 pub use device::DeviceArgs;
 pub use flags::{dataset_flag, flag};
 pub use hub::{hub_cache, resolve_in, resolve_model, Resolved, Wants};
-pub use model::{ModelArgs, Precision, SamplingArgs};
+pub use model::{parse_lora, ModelArgs, Precision, SamplingArgs};
 pub use progress::Progress;
 pub use scene::{ControlMode, CropArgs, SceneSettings};
 pub use usage::{ensure_usage, Usage};

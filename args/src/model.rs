@@ -124,7 +124,7 @@ pub struct ModelArgs {
 }
 
 /// `FILE[:STRENGTH]`; a colon whose tail is not a number belongs to the path.
-fn parse_lora(text: &str) -> Result<LoraSetting, String> {
+pub fn parse_lora(text: &str) -> Result<LoraSetting, String> {
     let (path, strength) = match text.rsplit_once(':').map(|(p, s)| (p, s.parse::<f32>())) {
         Some((p, Ok(s))) if s.is_finite() => (p, s),
         _ => (text, 1.0),

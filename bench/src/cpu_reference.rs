@@ -90,6 +90,16 @@ pub fn run_python_reference<S: AsRef<std::ffi::OsStr>>(
     serde_json::from_str(out.lines().last().unwrap_or("")).map_err(|e| format!("reference output is not JSON: {e}"))
 }
 
+/// What ran a diffusers reference, from the fields its script prints.
+pub fn label(v: &serde_json::Value) -> String {
+    format!(
+        "{}, torch {} / diffusers {}",
+        v["where"].as_str().unwrap_or("?"),
+        v["torch"].as_str().unwrap_or("?"),
+        v["diffusers"].as_str().unwrap_or("?"),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

@@ -8,14 +8,16 @@ use crate::random_models::{gradient_depth, style_images, RandomGuides};
 use anyhow::Result;
 use std::time::{Duration, Instant};
 use vkdiff_lora::LoraFile;
-use vkdiff_pipeline::dataset::{generate, Crops, Dataset, DatasetSettings, DiskGuard, RunOptions, SceneSource, Shard};
+use vkdiff_pipeline::dataset::{
+    generate, Crops, Dataset, DatasetSettings, DiskGuard, Report, RunOptions, SceneSource, Shard,
+};
 use vkdiff_pipeline::images::{ClipPreprocess, ControlDepth};
 use vkdiff_pipeline::{
     ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, SamplerKind, Sampling, Sdxl,
     StyleModels, TextToImage, WorkflowModels,
 };
 use vkdiff_render::scene::SceneConfig;
-use vkdiff_runtime::Context;
+use vkdiff_runtime::{Context, Dtype};
 
 #[derive(clap::Args)]
 pub struct DatasetArgs {
@@ -51,28 +53,8 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     vkdiff_args::ensure_usage(args.batch > 0, || "--batch must be at least 1".into())?;
     let dtype = args.precision.dtype();
     let ctx = Context::new(&args.device.choice())?;
-    let start = Instant::now();
-    let sdxl = Sdxl::random_sdxl_base(&ctx, dtype)?;
-    let RandomGuides { controlnet, encoder, adapter, loras } = RandomGuides::build(&ctx, &sdxl, dtype, args.lora_rank)?;
-    let load = start.elapsed();
-    let settings = model_settings(dtype, &loras);
-    let preprocess = ClipPreprocess::square(encoder.config().image_size);
-    let mut models = WorkflowModels {
-        sdxl,
-        controlnet: Some(controlnet),
-        style: Some(StyleModels { adapter, encoder, preprocess }),
-        settings,
-    };
-    let refs: Vec<(&LoraFile, f32)> = loras.iter().map(|(f, s)| (f, *s)).collect();
-    let merge = models.sdxl.set_loras(&refs)?.map_or(Duration::ZERO, |s| Duration::from_secs_f64(s.seconds));
-    let load_once = load + merge;
-    eprintln!("models built in {:.1} s, LoRAs merged in {:.1} s", load.as_secs_f64(), merge.as_secs_f64());
-
-    let dataset = dataset_settings(args, &models.settings);
-    let dir = std::env::temp_dir().join(format!("vkdiff-bench-dataset-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    let folder = Dataset::open(&dir, &dataset, Default::default())?;
-    let pending = folder.pending(Shard::ALL)?;
+    let RandomWorkflow { mut models, load: load_once, .. } = random_workflow(&ctx, dtype, args.lora_rank)?;
+    let dataset = paper_set(args.size, args.scenes, 3, args.steps, &models.settings);
     let styles = vec![style_images().to_vec()];
     // One image as `vkdiff gen` makes it: its own text encoding, guides and recording (first:
     // the set releases the text encoders once its prompts are encoded).
@@ -88,25 +70,8 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         eprintln!("single image: step {done}/{total}")
     })?;
     let single_wall = start.elapsed();
-    let images = pending.images();
-    let start = Instant::now();
-    let report = generate(
-        &folder,
-        &DiskGuard::new(&folder, 0, 0, 0),
-        &dataset,
-        &mut models,
-        &styles,
-        pending,
-        &RunOptions { batch: args.batch, threads: 0, min_free: 0, versions: Default::default() },
-        &mut |event| {
-            if let vkdiff_pipeline::dataset::Progress::Images { done, total } = event {
-                eprintln!("{done}/{total} images");
-            }
-        },
-    )?;
-    let wall = start.elapsed();
-    std::fs::remove_dir_all(&dir)?;
-
+    let (report, wall) = make_set(&mut models, &dataset, &styles, args.batch, false)?;
+    let images = report.made;
     let per = |d: Duration| d.as_secs_f64() / images.max(1) as f64;
     let t = &report.times;
     let step = per(t.denoise) / args.steps as f64;
@@ -156,8 +121,72 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     Ok(())
 }
 
+/// The paper's workflow with full-size architectures and random weights, its two LoRAs merged.
+pub(crate) struct RandomWorkflow {
+    pub models: WorkflowModels,
+    /// The merged LoRAs' files and strengths.
+    pub loras: Vec<(LoraFile, f32)>,
+    /// Building the models and merging the LoRAs (what one `vkdiff gen` pays before its image).
+    pub load: Duration,
+}
+
+/// Builds [`RandomWorkflow`].
+pub(crate) fn random_workflow(ctx: &Context, dtype: Dtype, lora_rank: usize) -> Result<RandomWorkflow> {
+    let start = Instant::now();
+    let sdxl = Sdxl::random_sdxl_base(ctx, dtype)?;
+    let RandomGuides { controlnet, encoder, adapter, loras } = RandomGuides::build(ctx, &sdxl, dtype, lora_rank)?;
+    let load = start.elapsed();
+    let settings = model_settings(dtype, &loras.each_ref().map(|(_, s)| *s));
+    let preprocess = ClipPreprocess::square(encoder.config().image_size);
+    let mut models = WorkflowModels {
+        sdxl,
+        controlnet: Some(controlnet),
+        style: Some(StyleModels { adapter, encoder, preprocess }),
+        settings,
+    };
+    let refs: Vec<(&LoraFile, f32)> = loras.iter().map(|(f, s)| (f, *s)).collect();
+    let merge = models.sdxl.set_loras(&refs)?.map_or(Duration::ZERO, |s| Duration::from_secs_f64(s.seconds));
+    eprintln!("models built in {:.1} s, LoRAs merged in {:.1} s", load.as_secs_f64(), merge.as_secs_f64());
+    Ok(RandomWorkflow { models, loras: loras.into(), load: load + merge })
+}
+
+/// Makes `settings`' set in a fresh temporary folder, removed after: the loop's report and wall
+/// time. `keep_text_encoders` lets further sets follow on the same models.
+pub(crate) fn make_set(
+    models: &mut WorkflowModels,
+    settings: &DatasetSettings,
+    styles: &[Vec<vkdiff_pipeline::RgbImage>],
+    batch: usize,
+    keep_text_encoders: bool,
+) -> Result<(Report, Duration)> {
+    static SETS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = SETS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("vkdiff-bench-dataset-{}-{n}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let folder = Dataset::open(&dir, settings, Default::default())?;
+    let pending = folder.pending(Shard::ALL)?;
+    let start = Instant::now();
+    let report = generate(
+        &folder,
+        &DiskGuard::new(&folder, 0, 0, 0),
+        settings,
+        models,
+        styles,
+        pending,
+        &RunOptions { batch, threads: 0, min_free: 0, versions: Default::default(), keep_text_encoders },
+        &mut |event| {
+            if let vkdiff_pipeline::dataset::Progress::Images { done, total } = event {
+                eprintln!("{done}/{total} images");
+            }
+        },
+    );
+    let wall = start.elapsed();
+    std::fs::remove_dir_all(&dir)?;
+    Ok((report?, wall))
+}
+
 /// The paths only name the random models in the images' metadata.
-fn model_settings(precision: vkdiff_runtime::Dtype, loras: &[(LoraFile, f32); 2]) -> ModelSettings {
+pub(crate) fn model_settings(precision: Dtype, lora_strengths: &[f32]) -> ModelSettings {
     ModelSettings {
         model: "random-sdxl-base".into(),
         vae: None,
@@ -174,44 +203,53 @@ fn model_settings(precision: vkdiff_runtime::Dtype, loras: &[(LoraFile, f32); 2]
             encoder: "random-vit-h".into(),
             scale: vkdiff_pipeline::IpScale::All(0.6),
         }),
-        loras: loras
+        loras: lora_strengths
             .iter()
             .enumerate()
-            .map(|(k, (_, s))| LoraSetting { path: format!("random-lora-{k}").into(), strength: *s })
+            .map(|(k, s)| LoraSetting { path: format!("random-lora-{k}").into(), strength: *s })
             .collect(),
         vae_tiling: Default::default(),
     }
 }
 
-/// The paper's set in small: frames of 1920×1080 scaled by size/1024, three crops each.
-fn dataset_settings(args: &DatasetArgs, models: &ModelSettings) -> DatasetSettings {
-    let scale = |v: usize| (v * args.size / 1024) as u32;
+/// The paper's set in small: `scenes` frames of 1920×1080 scaled by size/1024, `crops` crops each.
+pub(crate) fn paper_set(
+    size: usize,
+    scenes: u64,
+    crops: usize,
+    steps: usize,
+    models: &ModelSettings,
+) -> DatasetSettings {
+    let scale = |v: usize| (v * size / 1024) as u32;
     let sampling = Sampling {
-        steps: args.steps,
+        steps,
         guidance_scale: 5.0,
         sampler: SamplerKind::Euler,
         karras: false,
-        width: args.size,
-        height: args.size,
+        width: size,
+        height: size,
         size_conditioning: Default::default(),
         strength: None,
         prompt_syntax: Default::default(),
     };
     DatasetSettings {
         seed: 0,
-        count: args.scenes,
+        count: scenes,
         source: SceneSource::Procedural(SceneConfig {
             width: scale(1920),
             height: scale(1080),
             ..SceneConfig::default()
         }),
-        crops: Crops { count: 3, size: args.size as u32, min_fraction: 0.1 },
+        crops: Crops { count: crops, size: size as u32, min_fraction: 0.1 },
         control_depth: ControlDepth::Inverse,
         models: Some(models.clone()),
         prompts: vec!["white button mushrooms on dark black soil compost mycelium".into()],
         user_prompts: 1,
         negative_prompt: None,
         sampling,
-        ip_sets: vec![vec!["style-1.png".into(), "style-2.png".into()]],
+        ip_sets: match models.ip_adapter {
+            Some(_) => vec![vec!["style-1.png".into(), "style-2.png".into()]],
+            None => Vec::new(),
+        },
     }
 }

@@ -189,6 +189,57 @@ fn self_attention_case(ctx: &Context, dtype: Dtype, heads: usize, d: usize, seed
     })
 }
 
+/// The 64×64 level's 3×3 convolution, 640 channels in and out.
+fn conv3x3_case(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Case> {
+    let (hw, c) = (64 * 64, 640);
+    Ok(Case {
+        name: "conv2d 3x3",
+        shape: "64x64, 640->640, stride 1".into(),
+        work: Work::Flops(2.0 * (hw * c * 9 * c) as f64),
+        gemm: None,
+        on_gemm_family: true,
+        tensors: vec![
+            rand_tensor(ctx, &[1, 64, 64, c], dtype, 3)?,
+            rand_tensor(ctx, &[c, 3, 3, c], dtype, 4)?,
+            rand_tensor(ctx, &[c], dtype, 5)?,
+            ctx.zeros(&[1, 64, 64, c], dtype)?,
+        ],
+        record: |rec, t| ops::conv2d(rec, &t[0], &t[1], Some(&t[2]), &t[3], &ConvParams::new(1, 1)),
+    })
+}
+
+/// A headline product of `bench report`, timed.
+pub(crate) struct HeadlineRuns {
+    pub id: &'static str,
+    pub label: String,
+    /// The first run, one repetition (kernels compiled on first dispatch).
+    pub first_s: f64,
+    /// TFLOP/s of each timed run.
+    pub tflops: Vec<f64>,
+}
+
+/// SDXL's headline products at 1024²: the 32×32 level's feed-forward output (a 2048×1280×5120
+/// linear), the 64×64 level's 3×3 convolution and its self-attention over 4096 tokens.
+pub(crate) fn headline(ctx: &Context, dtype: Dtype, runs: usize) -> Result<Vec<HeadlineRuns>> {
+    let cases = [
+        ("linear", gemm_case(ctx, dtype, 2 * 1024, 1280, 5120, true)?),
+        ("conv", conv3x3_case(ctx, dtype)?),
+        ("attention", self_attention_case(ctx, dtype, 10, 64, 6)?),
+    ];
+    let mut out = Vec::new();
+    for (id, case) in cases {
+        let Work::Flops(flops) = case.work else { unreachable!("products count FLOPs") };
+        let (first, timed) = time_case_runs(ctx, &case, runs)?;
+        out.push(HeadlineRuns {
+            id,
+            label: format!("{} {}, {}", case.name, case.shape, dtype_name(dtype)),
+            first_s: first.as_secs_f64(),
+            tflops: timed.iter().map(|t| flops / t.as_secs_f64() / 1e12).collect(),
+        });
+    }
+    Ok(out)
+}
+
 fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
     let bytes = |n: usize| (n * vkdiff_runtime::dtype_size(dtype)) as f64;
     let (hw, c) = (64 * 64, 640);
@@ -201,20 +252,7 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
         gemm_case(ctx, dtype, 2 * 1024, 1280, 1280, true)?,
         gemm_case(ctx, dtype, 2 * 1024, 1280, 5120, true)?,
         gemm_case(ctx, dtype, 2 * 4096, 640, 640, true)?,
-        Case {
-            name: "conv2d 3x3",
-            shape: "64x64, 640->640, stride 1".into(),
-            work: Work::Flops(2.0 * (hw * c * 9 * c) as f64),
-            gemm: None,
-            on_gemm_family: true,
-            tensors: vec![
-                rand_tensor(ctx, &[1, 64, 64, c], dtype, 3)?,
-                rand_tensor(ctx, &[c, 3, 3, c], dtype, 4)?,
-                rand_tensor(ctx, &[c], dtype, 5)?,
-                ctx.zeros(&[1, 64, 64, c], dtype)?,
-            ],
-            record: |rec, t| ops::conv2d(rec, &t[0], &t[1], Some(&t[2]), &t[3], &ConvParams::new(1, 1)),
-        },
+        conv3x3_case(ctx, dtype)?,
         self_attention_case(ctx, dtype, 10, 64, 6)?,
         // The VAE decoder's mid-block at 512² (a 64×64 latent): one head of all 512 channels.
         self_attention_case(ctx, dtype, 1, 512, 14)?,
@@ -316,27 +354,36 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
     .collect())
 }
 
-/// Best time of one case per repetition: a warm-up (the driver JITs on first dispatch), then
-/// `samples` runs of a recording that repeats the case enough to last about half a second.
+/// Best time of one case per repetition (see `time_case_runs`).
 fn time_case(ctx: &Context, case: &Case, samples: usize) -> Result<Duration> {
-    let once = |reps: usize| -> Result<Duration> {
+    Ok(time_case_runs(ctx, case, samples)?.1.into_iter().min().expect("at least one sample"))
+}
+
+/// The first run of one case (the driver JITs on first dispatch), then `samples` runs of a
+/// recording that repeats the case enough to last about half a second: each per repetition.
+fn time_case_runs(ctx: &Context, case: &Case, samples: usize) -> Result<(Duration, Vec<Duration>)> {
+    let record = |reps: usize| -> Result<vkdiff_runtime::Recording> {
         let mut rec = Recorder::new(ctx, false)?;
         for _ in 0..reps {
             (case.record)(&mut rec, &case.tensors)?;
         }
-        let recording = rec.finish()?;
-        recording.run()?;
-        let mut best = Duration::MAX;
-        for _ in 0..samples.max(1) {
-            let t = Instant::now();
-            recording.run()?;
-            best = best.min(t.elapsed());
-        }
-        Ok(best / reps as u32)
+        Ok(rec.finish()?)
     };
-    let first = once(1)?;
-    let reps = (0.5 / first.as_secs_f64().max(1e-6)).clamp(1.0, 200.0) as usize;
-    Ok(if reps > 1 { once(reps)? } else { first })
+    let timed = |recording: &vkdiff_runtime::Recording| -> Result<Duration> {
+        let t = Instant::now();
+        recording.run()?;
+        Ok(t.elapsed())
+    };
+    let once = record(1)?;
+    let first = timed(&once)?;
+    let warm = timed(&once)?;
+    let reps = (0.5 / warm.as_secs_f64().max(1e-6)).clamp(1.0, 200.0) as usize;
+    let recording = if reps > 1 { record(reps)? } else { once };
+    if reps > 1 {
+        recording.run()?;
+    }
+    let runs = (0..samples.max(1)).map(|_| Ok(timed(&recording)? / reps as u32)).collect::<Result<_>>()?;
+    Ok((first, runs))
 }
 
 /// One case timed on the context's current family.

@@ -3,6 +3,7 @@
 //! runner, `cpu_reference`). The networks are full size with random weights.
 
 mod common;
+mod compare;
 mod cpu_reference;
 mod dataset;
 mod fid;
@@ -12,6 +13,7 @@ mod lora;
 mod peaks;
 mod profile;
 mod random_models;
+pub mod report;
 mod scene;
 mod unet;
 mod vae;
@@ -21,6 +23,13 @@ use anyhow::Result;
 
 #[derive(clap::Subcommand)]
 pub enum BenchCommand {
+    /// One fixed suite on this device, each figure the median of its runs beside a reference
+    /// run the same invocation: the paper's image end to end (and its ablation), SDXL's UNet
+    /// and VAE, the headline kernels; a table and, with --out, a JSON for `bench compare`.
+    Report(report::ReportArgs),
+    /// Reports of one suite side by side: a column per report, a row per figure, speeds
+    /// relative to the first; text, Markdown, or an HTML page with charts.
+    Compare(compare::CompareArgs),
     /// GFLOP/s or GB/s per kernel on SDXL-sized shapes.
     Kernels(kernels::KernelsArgs),
     /// Frames per second of depth + masks + COCO at 1920×1080, against the paper's Blender.
@@ -50,6 +59,8 @@ pub enum BenchCommand {
 
 pub fn run(cmd: BenchCommand) -> Result<()> {
     match cmd {
+        BenchCommand::Report(args) => report::run(&args),
+        BenchCommand::Compare(args) => compare::run(&args),
         BenchCommand::Kernels(args) => kernels::run(&args),
         BenchCommand::Scene(args) => scene::run(&args),
         BenchCommand::Unet(args) => unet::run(&args),

@@ -6,10 +6,10 @@ use crate::kernels::{dtype_name, rand_tensor};
 use crate::peaks;
 use crate::profile::{self, by_kernel, KernelTime};
 use anyhow::{Context as _, Result};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 use vkdiff_args::Precision;
 use vkdiff_networks::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_runtime::{Context, Dtype, Tensor};
 
 const REFERENCE: &str = include_str!("../../tools/unet_reference.py");
 
@@ -137,55 +137,25 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
     let unet = UNet::load(config, &ckpt)?;
     let load_s = start.elapsed().as_secs_f64();
     let weights = ctx.live_bytes();
-    let (b, h) = (args.batch, size / 8);
-    let sample = rand_tensor(&ctx, &[b, h, h, config.in_channels], dtype, 1)?;
-    let timesteps = ctx.upload(&[b], Dtype::F32, &vec![500.0; b])?;
-    let context = rand_tensor(&ctx, &[b, 77, config.cross_attention_dim], dtype, 2)?;
-    let text_dim =
-        config.projection_class_embeddings_input_dim.unwrap_or(0) - 6 * config.addition_time_embed_dim.unwrap_or(0);
-    let text = rand_tensor(&ctx, &[b, text_dim], dtype, 3)?;
-    let px = size as f32;
-    let ids = ctx.upload(&[b, 6], Dtype::F32, &[px, px, 0.0, 0.0, px, px].repeat(b))?;
-    let start = Instant::now();
-    let inputs = UNetInputs {
-        sample: &sample,
-        timesteps: &timesteps,
-        encoder_hidden_states: &context,
-        added: Some((&text, &ids)),
-        control: None,
-        ip: &[],
-    };
-    let pass = unet.record(&inputs)?;
-    pass.project_conditioning()?;
-    let record_s = start.elapsed().as_secs_f64();
-    let (mut best, mut longest) = (f64::INFINITY, Default::default());
-    for _ in 0..args.samples.max(1) {
-        let start = Instant::now();
-        let submissions = pass.run_submissions()?;
-        let seconds = start.elapsed().as_secs_f64();
-        if seconds < best {
-            (best, longest) = (seconds, submissions);
-        }
-    }
-    let out = pass.output.download()?;
-    let tflop = pass.flops() / 1e12;
-    drop(pass);
-    let profile = if args.profile { profile(&ctx, &unet, &inputs)? } else { Vec::new() };
-    anyhow::ensure!(out.iter().all(|v| v.is_finite()), "the UNet output holds NaN or infinity");
+    let tensors = RandomInputs::new(&ctx, config, dtype, args.batch, size)?;
+    let timed = time_unet(&unet, &tensors.inputs(), false, args.samples.max(1))?;
+    let best = timed.seconds.iter().copied().fold(f64::INFINITY, f64::min);
+    let profile = if args.profile { profile(&ctx, &unet, &tensors.inputs())? } else { Vec::new() };
     let mib = |b: u64| b as f64 / (1 << 20) as f64;
+    let tflop = timed.flops / 1e12;
     Ok(Row {
         device: ctx.info().name.clone(),
         size,
-        batch: b,
+        batch: args.batch,
         precision: dtype_name(dtype),
         gemm_kernels: peaks::family_label(&ctx, dtype),
         matrix_unit_trial: peaks::trial_label(&ctx),
         load_s,
-        record_s,
+        record_s: timed.record_s,
         ms: best * 1e3,
         tflop,
-        submissions: longest.len(),
-        longest_submission_ms: longest.iter().max().map_or(0.0, |d: &std::time::Duration| d.as_secs_f64() * 1e3),
+        submissions: timed.fastest_submissions.len(),
+        longest_submission_ms: timed.fastest_submissions.iter().max().map_or(0.0, |d| d.as_secs_f64() * 1e3),
         tflops: tflop / best,
         matrix_peak_share: peaks::share_label(&ctx, tflop * 1e12 / best),
         weights_mib: mib(weights),
@@ -198,6 +168,80 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
     })
 }
 
+/// A UNet's inputs at `size`² pixels: random latents and text, timestep 500, size conditioning.
+pub(crate) struct RandomInputs {
+    sample: Tensor,
+    timesteps: Tensor,
+    context: Tensor,
+    text: Tensor,
+    ids: Tensor,
+}
+
+impl RandomInputs {
+    pub(crate) fn new(ctx: &Context, config: &UNetConfig, dtype: Dtype, batch: usize, size: usize) -> Result<Self> {
+        let h = size / 8;
+        let text_dim =
+            config.projection_class_embeddings_input_dim.unwrap_or(0) - 6 * config.addition_time_embed_dim.unwrap_or(0);
+        let px = size as f32;
+        Ok(RandomInputs {
+            sample: rand_tensor(ctx, &[batch, h, h, config.in_channels], dtype, 1)?,
+            timesteps: ctx.upload(&[batch], Dtype::F32, &vec![500.0; batch])?,
+            context: rand_tensor(ctx, &[batch, 77, config.cross_attention_dim], dtype, 2)?,
+            text: rand_tensor(ctx, &[batch, text_dim], dtype, 3)?,
+            ids: ctx.upload(&[batch, 6], Dtype::F32, &[px, px, 0.0, 0.0, px, px].repeat(batch))?,
+        })
+    }
+
+    pub(crate) fn inputs(&self) -> UNetInputs<'_> {
+        UNetInputs {
+            sample: &self.sample,
+            timesteps: &self.timesteps,
+            encoder_hidden_states: &self.context,
+            added: Some((&self.text, &self.ids)),
+            control: None,
+            ip: &[],
+        }
+    }
+}
+
+/// One evaluation recorded once and run `runs` times (after one untimed run with `warm_up`).
+pub(crate) struct UnetRuns {
+    pub record_s: f64,
+    /// Recording and the first run: kernels compiled, memory first touched.
+    pub first_s: f64,
+    pub seconds: Vec<f64>,
+    /// Matrix-product arithmetic of one evaluation, counted from the recorded dispatches.
+    pub flops: f64,
+    /// The submissions of the fastest timed run (what a GPU watchdog holds against).
+    pub fastest_submissions: Vec<Duration>,
+}
+
+pub(crate) fn time_unet(unet: &UNet, inputs: &UNetInputs, warm_up: bool, runs: usize) -> Result<UnetRuns> {
+    let start = Instant::now();
+    let pass = unet.record(inputs)?;
+    pass.project_conditioning()?;
+    let record_s = start.elapsed().as_secs_f64();
+    if warm_up {
+        pass.run_submissions()?;
+    }
+    let first_s = start.elapsed().as_secs_f64();
+    let (mut seconds, mut fastest) = (Vec::new(), Vec::new());
+    for _ in 0..runs {
+        let start = Instant::now();
+        let submissions = pass.run_submissions()?;
+        let s = start.elapsed().as_secs_f64();
+        if seconds.iter().all(|&b| s < b) {
+            fastest = submissions;
+        }
+        seconds.push(s);
+    }
+    let out = pass.output.download()?;
+    anyhow::ensure!(out.iter().all(|v| v.is_finite()), "the UNet output holds NaN or infinity");
+    // Without a warm-up, the first timed run is the first run.
+    let first_s = if warm_up { first_s } else { first_s + seconds.first().copied().unwrap_or(0.0) };
+    Ok(UnetRuns { record_s, first_s, seconds, flops: pass.flops(), fastest_submissions: fastest })
+}
+
 /// Device time per kernel over one evaluation recorded with timestamps, largest first.
 fn profile(ctx: &Context, unet: &UNet, inputs: &UNetInputs) -> Result<Vec<KernelTime>> {
     ctx.set_profiling(true);
@@ -208,37 +252,47 @@ fn profile(ctx: &Context, unet: &UNet, inputs: &UNetInputs) -> Result<Vec<Kernel
     Ok(by_kernel(pass.run_profiled()?))
 }
 
-/// diffusers: best milliseconds per evaluation, its peak memory, and what ran it.
-struct Reference {
-    ms: f64,
-    peak_mib: f64,
-    what: String,
+/// diffusers: milliseconds of each timed evaluation (the best first), its peak memory, and what
+/// ran it.
+pub(crate) struct Reference {
+    pub ms: f64,
+    pub times_ms: Vec<f64>,
+    pub peak_mib: f64,
+    pub what: String,
 }
 
 fn reference(latent: usize, args: &UnetArgs) -> std::result::Result<Reference, String> {
-    let mut script_args = vec![
-        SDXL_BASE_CONFIG.to_string(),
-        latent.to_string(),
-        latent.to_string(),
-        args.batch.to_string(),
-        args.samples.max(1).to_string(),
-    ];
-    if args.reference_device == ReferenceDevice::Cuda {
-        script_args.extend(["cuda".to_string(), dtype_name(args.precision.dtype()).to_string()]);
+    let cuda = (args.reference_device == ReferenceDevice::Cuda).then(|| args.precision.dtype());
+    diffusers_unet(SDXL_BASE_CONFIG, latent, args.batch, args.samples.max(1), cuda)
+}
+
+/// diffusers' UNet2DConditionModel of `config` (random weights) on the CPU in f32, or with
+/// `cuda` on the CUDA GPU at that precision, `samples` timed evaluations.
+pub(crate) fn diffusers_unet(
+    config: &str,
+    latent: usize,
+    batch: usize,
+    samples: usize,
+    cuda: Option<Dtype>,
+) -> std::result::Result<Reference, String> {
+    let mut script_args =
+        vec![config.to_string(), latent.to_string(), latent.to_string(), batch.to_string(), samples.to_string()];
+    if let Some(dtype) = cuda {
+        script_args.extend(["cuda".to_string(), dtype_name(dtype).to_string()]);
     }
     let v = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
     let ms = v["ms"].as_f64().context("no ms").map_err(|e| e.to_string())?;
-    let what = format!(
-        "{}, torch {} / diffusers {}",
-        v["where"].as_str().unwrap_or("?"),
-        v["torch"].as_str().unwrap_or("?"),
-        v["diffusers"].as_str().unwrap_or("?"),
-    );
-    Ok(Reference { ms, peak_mib: v["peak_mib"].as_f64().unwrap_or(0.0), what })
+    let times_ms = v["times_ms"].as_array().map_or(vec![ms], |t| t.iter().filter_map(|x| x.as_f64()).collect());
+    Ok(Reference {
+        ms,
+        times_ms,
+        peak_mib: v["peak_mib"].as_f64().unwrap_or(0.0),
+        what: crate::cpu_reference::label(&v),
+    })
 }
 
 /// "71.5 TFLOP/s", or "38 GFLOP/s" below one TFLOP/s (CPU devices would read "0.0 TFLOP/s").
-fn rate(tflops: f64) -> String {
+pub(crate) fn rate(tflops: f64) -> String {
     if tflops >= 1.0 {
         format!("{tflops:.1} TFLOP/s")
     } else {

@@ -13,7 +13,7 @@ use anyhow::{Context as _, Result};
 use std::time::Instant;
 use vkdiff_args::Precision;
 use vkdiff_networks::{AutoencoderKl, Checkpoint, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
-use vkdiff_runtime::{Context, HostStats};
+use vkdiff_runtime::{Context, Dtype, HostStats};
 
 #[derive(clap::Args)]
 pub struct VaeArgs {
@@ -101,11 +101,13 @@ struct Row {
 /// diffusers' fastest whole decode, in the precision's own arithmetic, and (f32 on CUDA) with
 /// torch's default of TF32 convolutions.
 #[derive(serde::Serialize)]
-struct Reference {
-    seconds: f64,
-    seconds_tf32: Option<f64>,
-    peak_mib: f64,
-    what: String,
+pub(crate) struct Reference {
+    pub seconds: f64,
+    /// Each timed decode, in the precision's own arithmetic.
+    pub times: Vec<f64>,
+    pub seconds_tf32: Option<f64>,
+    pub peak_mib: f64,
+    pub what: String,
 }
 
 impl Reference {
@@ -127,22 +129,57 @@ impl Reference {
 const REFERENCE: &str = include_str!("../../tools/vae_reference.py");
 
 fn reference(config: &str, args: &VaeArgs, device: ReferenceDevice) -> std::result::Result<Reference, String> {
+    diffusers_vae(config, args.size, args.samples as usize, device, args.precision.dtype())
+}
+
+/// diffusers' whole decode of a `size`² image with `config` (random weights), `samples` times
+/// after a warm-up, on `device` in `dtype`.
+pub(crate) fn diffusers_vae(
+    config: &str,
+    size: usize,
+    samples: usize,
+    device: ReferenceDevice,
+    dtype: Dtype,
+) -> std::result::Result<Reference, String> {
     let device = match device {
         ReferenceDevice::Cpu => "cpu",
         ReferenceDevice::Cuda => "cuda",
     };
-    let dtype = dtype_name(args.precision.dtype());
-    let script_args = [config, &args.size.to_string(), &args.samples.to_string(), device, dtype].map(str::to_string);
+    let script_args = [config, &size.to_string(), &samples.to_string(), device, dtype_name(dtype)].map(str::to_string);
     let v = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
     let field = |name: &str| v[name].as_f64();
     let seconds = field("seconds").context("no seconds").map_err(|e| e.to_string())?;
-    let what = format!(
-        "{}, torch {} / diffusers {}",
-        v["where"].as_str().unwrap_or("?"),
-        v["torch"].as_str().unwrap_or("?"),
-        v["diffusers"].as_str().unwrap_or("?"),
-    );
-    Ok(Reference { seconds, seconds_tf32: field("seconds_tf32"), peak_mib: field("peak_mib").unwrap_or(0.0), what })
+    let times = v["times"].as_array().map_or(vec![seconds], |t| t.iter().filter_map(|x| x.as_f64()).collect());
+    let what = crate::cpu_reference::label(&v);
+    Ok(Reference {
+        seconds,
+        times,
+        seconds_tf32: field("seconds_tf32"),
+        peak_mib: field("peak_mib").unwrap_or(0.0),
+        what,
+    })
+}
+
+/// The latents a `size`² decode starts from: a fixed pattern, the same in every run.
+fn latents(vae: &AutoencoderKl, size: usize) -> (Vec<f32>, [usize; 4]) {
+    let h = size / vae.config().downscale();
+    ((0..h * h * 4).map(|i| ((i * 7919) % 1000) as f32 / 500.0 - 1.0).collect(), [1, h, h, 4])
+}
+
+/// Whole decodes of a `size`² image: the first (kernels compiled, memory first touched) and
+/// `runs` more, in seconds.
+pub(crate) fn time_whole_decode(vae: &AutoencoderKl, size: usize, runs: usize) -> Result<(f64, Vec<f64>)> {
+    let (latents, shape) = latents(vae, size);
+    let start = Instant::now();
+    vae.decode(&latents, shape)?;
+    let first = start.elapsed().as_secs_f64();
+    let mut times = Vec::new();
+    for _ in 0..runs {
+        let start = Instant::now();
+        vae.decode(&latents, shape)?;
+        times.push(start.elapsed().as_secs_f64());
+    }
+    Ok((first, times))
 }
 
 pub fn run(args: &VaeArgs) -> Result<()> {
@@ -209,8 +246,7 @@ fn measure(args: &VaeArgs, config: &str, path: Option<&std::path::Path>) -> Resu
     let tiling = VaeTiling { tile: args.tile };
     vae.config().check_tiling(tiling)?;
     let weights = ctx.live_bytes();
-    let h = args.size / vae.config().downscale();
-    let latents: Vec<f32> = (0..h * h * 4).map(|i| ((i * 7919) % 1000) as f32 / 500.0 - 1.0).collect();
+    let (latents, shape) = latents(&vae, args.size);
     let mib = |b: u64| b as f64 / (1 << 20) as f64;
     let decode = |tile: Option<VaeTiling>| -> Result<Decode> {
         ctx.reset_peak();
@@ -219,8 +255,8 @@ fn measure(args: &VaeArgs, config: &str, path: Option<&std::path::Path>) -> Resu
         for _ in 0..args.samples {
             let (start, before) = (Instant::now(), ctx.host_stats());
             match tile {
-                Some(t) => vae.decode_tiled(&latents, [1, h, h, 4], t)?,
-                None => vae.decode(&latents, [1, h, h, 4])?,
+                Some(t) => vae.decode_tiled(&latents, shape, t)?,
+                None => vae.decode(&latents, shape)?,
             };
             seconds = seconds.min(start.elapsed().as_secs_f64());
             host = ctx.host_stats().since(&before);
@@ -237,7 +273,7 @@ fn measure(args: &VaeArgs, config: &str, path: Option<&std::path::Path>) -> Resu
     let whole = decode(None)?;
     let tiled = decode(Some(tiling))?;
     let profile = if args.profile {
-        let (decoded, timings) = ctx.profiled(|| vae.decode(&latents, [1, h, h, 4]));
+        let (decoded, timings) = ctx.profiled(|| vae.decode(&latents, shape));
         decoded?;
         by_kernel(timings)
     } else {

@@ -89,3 +89,29 @@ pub fn tree(dir: &Path) -> std::collections::BTreeMap<String, Vec<u8>> {
     }
     files
 }
+
+/// Debian's chromium (or `VKDIFF_CHROMIUM`); the test fails, naming the package, without it.
+#[allow(dead_code)] // for the tests that look at pages
+pub fn chromium() -> String {
+    let candidates = std::env::var("VKDIFF_CHROMIUM").into_iter().chain(["chromium".into(), "chromium-browser".into()]);
+    for candidate in candidates {
+        if Command::new(&candidate).arg("--version").output().is_ok_and(|o| o.status.success()) {
+            return candidate;
+        }
+    }
+    panic!("headless Chromium is needed to look at the pages vkdiff writes: apt-get install chromium (or set VKDIFF_CHROMIUM)");
+}
+
+/// A 1200×900 screenshot of `url`, decoded to RGB.
+#[allow(dead_code)] // for the tests that look at pages
+pub fn screenshot(browser: &str, url: &str, out: &Path) -> Vec<[u8; 3]> {
+    let status = Command::new(browser)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--window-size=1200,900"])
+        .arg(format!("--screenshot={}", out.display()))
+        .arg(url)
+        .output()
+        .unwrap();
+    assert!(status.status.success() && out.is_file(), "{}", String::from_utf8_lossy(&status.stderr));
+    let image = vkdiff_pipeline::images::read_image(out).unwrap();
+    image.pixels.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect()
+}

@@ -308,7 +308,8 @@ fn rgba_png(width: u32, height: u32, rgba: &[u8]) -> Vec<u8> {
     bytes
 }
 
-fn data_uri(png: &[u8]) -> String {
+/// A PNG as a `data:` URI, for self-contained pages.
+pub fn data_uri(png: &[u8]) -> String {
     const DIGITS: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut text = String::with_capacity(22 + png.len().div_ceil(3) * 4);
     text.push_str("data:image/png;base64,");
@@ -326,7 +327,8 @@ fn data_uri(png: &[u8]) -> String {
     text
 }
 
-fn escape(text: &str) -> String {
+/// Text made safe for HTML.
+pub fn escape(text: &str) -> String {
     text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 

@@ -32,6 +32,9 @@ pub struct RunOptions {
     pub min_free: u64,
     /// Whether a build of another version may add to a set (`--allow-version-change`).
     pub versions: VersionChange,
+    /// Keep the text encoders once the prompts are encoded (a benchmark makes several sets from
+    /// one load); otherwise their memory goes before the denoiser's comes.
+    pub keep_text_encoders: bool,
 }
 
 /// What the loop tells its caller as it goes.
@@ -116,7 +119,9 @@ pub fn generate(
         })
         .collect::<Result<HashMap<usize, Conditioning>>>()?;
     // Every prompt is encoded: the encoders' memory goes before the denoiser's comes.
-    models.sdxl.release_text_encoders();
+    if !options.keep_text_encoders {
+        models.sdxl.release_text_encoders();
+    }
     let models = &*models;
     let stream = render_scenes(settings, pending.scenes, options.threads, 2 * options.batch);
     let (to_writer, writer) = start_writer(dataset.clone(), disk.clone(), options.batch);

@@ -1,0 +1,207 @@
+//! The paper's image as `vkdiff dataset` makes it (scene, control image, guides, the steps with
+//! ControlNet, IP-Adapter and merged LoRAs, VAE, PNG and annotations written), and the paper's
+//! ablation (its Table 4: the workflow without each of its parts), timed image by image.
+
+use super::figure::{Figure, Reference, Runs};
+use super::Plan;
+use crate::dataset::{make_set, model_settings, paper_set, random_workflow};
+use crate::random_models::style_images;
+use anyhow::Result;
+use std::time::Duration;
+use vkdiff_lora::LoraFile;
+use vkdiff_pipeline::{ControlNetSettings, IpAdapterSettings, ModelSettings, RgbImage, WorkflowModels};
+use vkdiff_runtime::Context;
+
+/// The workflow loaded once, with its LoRAs' files kept so that the ablation can merge subsets.
+pub struct Workflow {
+    pub models: WorkflowModels,
+    loras: Vec<(LoraFile, f32)>,
+}
+
+impl Workflow {
+    /// Random full-size weights, or the models `user` names (their LoRAs merged here).
+    pub fn load(ctx: &Context, plan: &Plan, user: Option<&ModelSettings>) -> Result<Workflow> {
+        let Some(user) = user else {
+            let random = random_workflow(ctx, plan.dtype, 32)?;
+            return Ok(Workflow { models: random.models, loras: random.loras });
+        };
+        let mut unmerged = user.clone();
+        unmerged.loras.clear();
+        let mut models = WorkflowModels::load(ctx, &unmerged, &mut |line| eprintln!("{line}"))?;
+        models.settings = user.clone();
+        let loras =
+            user.loras.iter().map(|l| Ok((LoraFile::open(&l.path)?, l.strength))).collect::<Result<Vec<_>>>()?;
+        let mut workflow = Workflow { models, loras };
+        workflow.merge(&[true; 8])?;
+        Ok(workflow)
+    }
+
+    /// Merges the LoRAs `on` selects (by index), restoring the others.
+    fn merge(&mut self, on: &[bool]) -> Result<()> {
+        let refs: Vec<(&LoraFile, f32)> =
+            self.loras.iter().zip(on).filter(|(_, &on)| on).map(|((f, s), _)| (f, *s)).collect();
+        self.models.sdxl.set_loras(&refs)?;
+        Ok(())
+    }
+}
+
+/// One image made as a set of one: its wall time, its set's once-per-set setup, its stages.
+struct ImageRun {
+    /// What a further image of a set costs: the wall time without the set's setup, with the
+    /// steps not timed added at the timed steps' rate.
+    per_image: f64,
+    /// What the set of one cost, its setup included (steps counted the same way).
+    whole: f64,
+    parts: Vec<(String, f64)>,
+}
+
+fn image_run(models: &mut WorkflowModels, plan: &Plan, styles: &[Vec<RgbImage>]) -> Result<ImageRun> {
+    let settings = paper_set(plan.image_size, 1, 1, plan.steps_timed, &models.settings);
+    let (report, wall) = make_set(models, &settings, styles, 1, true)?;
+    let t = &report.times;
+    let secs = Duration::as_secs_f64;
+    let step = secs(&t.denoise) / plan.steps_timed as f64;
+    let denoise = step * plan.steps as f64;
+    let per_image = secs(&wall) - secs(&t.setup) + denoise - secs(&t.denoise);
+    let named = [("scene", secs(&t.scene)), ("guides", secs(&t.guides)), ("denoise", denoise), ("VAE", secs(&t.vae))];
+    let mut parts: Vec<(String, f64)> = named.iter().map(|(n, v)| (n.to_string(), *v)).collect();
+    let counted: f64 = named.iter().map(|(_, v)| v).sum();
+    parts.push(("writing and the rest".into(), (per_image - counted).max(0.0)));
+    parts.push(("once per set (prompt, styles, recording)".into(), secs(&t.setup)));
+    Ok(ImageRun { per_image, whole: per_image + secs(&t.setup), parts })
+}
+
+/// `plan.runs` images after a warm-up image: the figure.
+fn image_figure(models: &mut WorkflowModels, plan: &Plan, ctx: &Context, id: &str, label: String) -> Result<Figure> {
+    let styles = if models.style.is_some() { vec![style_images().to_vec()] } else { Vec::new() };
+    ctx.reset_peak();
+    let first = if plan.warm_up { Some(image_run(models, plan, &styles)?.whole) } else { None };
+    let runs: Vec<ImageRun> = (0..plan.runs).map(|_| image_run(models, plan, &styles)).collect::<Result<_>>()?;
+    let values: Vec<f64> = runs.iter().map(|r| r.per_image).collect();
+    let stats = Runs::of(&values).expect("at least one run");
+    // The stages of the run nearest the median.
+    let middle =
+        runs.iter().min_by(|a, b| (a.per_image - stats.median).abs().total_cmp(&(b.per_image - stats.median).abs()));
+    let note = (plan.steps_timed < plan.steps)
+        .then(|| format!("{} of the {} steps timed, the others counted at their rate", plan.steps_timed, plan.steps));
+    Ok(Figure {
+        id: id.into(),
+        group: if id == "image" { "image".into() } else { "ablation".into() },
+        label,
+        unit: "s".into(),
+        higher_is_better: false,
+        first_run: first.or(runs.first().map(|r| r.whole)),
+        peak_mib: Some(ctx.peak_bytes() as f64 / (1 << 20) as f64),
+        parts: middle.map(|r| r.parts.clone()).unwrap_or_default(),
+        note,
+        peak_share: None,
+        runs: stats,
+        reference: Reference::Missing { why: String::new() },
+    })
+}
+
+/// What the workflow holds, for the figure's label.
+fn describe(models: &WorkflowModels) -> String {
+    let mut parts = vec!["SDXL".to_string()];
+    if models.controlnet.is_some() {
+        parts.push("depth ControlNet".into());
+    }
+    if models.style.is_some() {
+        parts.push("IP-Adapter (2 style images)".into());
+    }
+    let loras = models.settings.loras.len();
+    if loras > 0 {
+        parts.push(format!("{loras} LoRA{} merged", if loras > 1 { "s" } else { "" }));
+    }
+    parts.join(" + ")
+}
+
+/// The paper's image: the whole workflow.
+pub fn paper_image(workflow: &mut Workflow, plan: &Plan, ctx: &Context) -> Result<Figure> {
+    let label =
+        format!("the paper's image, {}², {} steps: {}", plan.image_size, plan.steps, describe(&workflow.models));
+    image_figure(&mut workflow.models, plan, ctx, "image", label)
+}
+
+/// One row of the paper's ablation (its Table 4): which parts of the workflow run.
+struct Variant {
+    id: &'static str,
+    name: &'static str,
+    controlnet: bool,
+    ip_adapter: bool,
+    loras: [bool; 2],
+}
+
+const ABLATION: [Variant; 8] = [
+    Variant {
+        id: "ablation.bsd",
+        name: "BSD (SDXL, text only)",
+        controlnet: false,
+        ip_adapter: false,
+        loras: [false; 2],
+    },
+    Variant { id: "ablation.cnet", name: "+CNET", controlnet: true, ip_adapter: false, loras: [false; 2] },
+    Variant { id: "ablation.ip", name: "+IP", controlnet: true, ip_adapter: true, loras: [false; 2] },
+    Variant { id: "ablation.l1", name: "+L1", controlnet: true, ip_adapter: false, loras: [true, false] },
+    Variant { id: "ablation.l2", name: "+L2", controlnet: true, ip_adapter: false, loras: [false, true] },
+    Variant { id: "ablation.ip_l1", name: "+IP+L1", controlnet: true, ip_adapter: true, loras: [true, false] },
+    Variant { id: "ablation.ip_l2", name: "+IP+L2", controlnet: true, ip_adapter: true, loras: [false, true] },
+    Variant { id: "ablation.l1_l2", name: "+L1+L2", controlnet: true, ip_adapter: false, loras: [true, true] },
+];
+
+/// The ablation's variants the loaded workflow can make (a LoRA it lacks drops its rows), each
+/// timed as the paper's image is; the workflow is whole again after.
+pub fn ablation(workflow: &mut Workflow, plan: &Plan, ctx: &Context) -> Result<Vec<Figure>> {
+    let m = &mut workflow.models;
+    let mut controlnet = (m.controlnet.take(), m.settings.controlnet.take());
+    let mut style = (m.style.take(), m.settings.ip_adapter.take());
+    let all_loras = m.settings.loras.clone();
+    let mut figures = Vec::new();
+    for v in &ABLATION {
+        let wants_lora = v.loras.iter().enumerate().any(|(k, &on)| on && k >= workflow.loras.len());
+        if wants_lora || (v.controlnet && controlnet.0.is_none()) || (v.ip_adapter && style.0.is_none()) {
+            continue;
+        }
+        let m = &mut workflow.models;
+        if v.controlnet {
+            (m.controlnet, m.settings.controlnet) = (controlnet.0.take(), controlnet.1.take());
+        }
+        if v.ip_adapter {
+            (m.style, m.settings.ip_adapter) = (style.0.take(), style.1.take());
+        }
+        m.settings.loras = all_loras.iter().zip(v.loras).filter(|(_, on)| *on).map(|(l, _)| l.clone()).collect();
+        workflow.merge(&v.loras)?;
+        eprintln!("report: ablation {}", v.name);
+        let label = format!("ablation {}: {}", v.name, describe(&workflow.models));
+        let figure = image_figure(&mut workflow.models, plan, ctx, v.id, label);
+        let m = &mut workflow.models;
+        if v.controlnet {
+            controlnet = (m.controlnet.take(), m.settings.controlnet.take());
+        }
+        if v.ip_adapter {
+            style = (m.style.take(), m.settings.ip_adapter.take());
+        }
+        figures.push(figure?);
+    }
+    let m = &mut workflow.models;
+    (m.controlnet, m.settings.controlnet) = controlnet;
+    (m.style, m.settings.ip_adapter) = style;
+    m.settings.loras = all_loras;
+    workflow.merge(&[true; 8])?;
+    Ok(figures)
+}
+
+/// The settings `bench report` gives user models: the paper's guide strengths, as the random
+/// workflow has them.
+pub fn user_settings(plan: &Plan, guides: &super::UserModels) -> ModelSettings {
+    let paper = model_settings(plan.dtype, &[]);
+    let controlnet =
+        guides.controlnet.clone().zip(paper.controlnet).map(|(model, c)| ControlNetSettings { model, ..c });
+    let ip_adapter = match (&guides.ip_adapter, &guides.image_encoder, paper.ip_adapter) {
+        (Some(adapter), Some(encoder), Some(ip)) => {
+            Some(IpAdapterSettings { adapter: adapter.clone(), encoder: encoder.clone(), ..ip })
+        }
+        _ => None,
+    };
+    ModelSettings { model: guides.model.clone(), controlnet, ip_adapter, loras: guides.loras.clone(), ..paper }
+}

@@ -1,0 +1,242 @@
+//! `vkdiff bench report`: one fixed suite on the chosen device, each figure the median of its
+//! runs after a warm-up, with its spread, peak memory and first run, beside a reference measured
+//! in the same invocation; a table on the terminal and a JSON that `bench compare` lines up with
+//! other machines' (llama-bench's rows, MLPerf's fixed work and medians, the system described).
+
+mod figure;
+mod image;
+mod networks;
+mod system;
+mod table;
+
+pub use figure::{show, Figure, Reference, Runs};
+pub use system::System;
+
+use anyhow::Result;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+use vkdiff_pipeline::LoraSetting;
+use vkdiff_runtime::{Context, Dtype};
+
+/// Changes whenever a figure's work changes: reports of other versions do not compare.
+pub const SUITE_VERSION: u32 = 1;
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Group {
+    /// The paper's image end to end.
+    Image,
+    /// The paper's Table 4: the image without each of its parts (in the full suite only,
+    /// unless named).
+    Ablation,
+    /// SDXL's UNet, one evaluation.
+    Unet,
+    /// SDXL's VAE, one decode.
+    Vae,
+    /// The headline products: a linear layer, a convolution, attention.
+    Kernels,
+}
+
+/// Where the reference runs.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ReferenceChoice {
+    /// diffusers (and numpy) in float32 on this machine's CPU.
+    Cpu,
+    /// diffusers on the CUDA GPU, at the figure's precision.
+    Cuda,
+    /// None: vkdiff's figures only.
+    None,
+}
+
+#[derive(clap::Args)]
+pub struct ReportArgs {
+    #[command(flatten)]
+    device: vkdiff_args::DeviceArgs,
+    /// The small suite: 512² images with 2 of their 30 steps timed (the rest counted at their
+    /// rate), the UNet and VAE at 512² in f16, one timed run of each after its warm-up; for CPU
+    /// devices and a first look. Reports of the two suites do not compare.
+    #[arg(long)]
+    quick: bool,
+    /// Where the reference beside each figure runs (diffusers for the networks, numpy for the
+    /// linear layer), with $VKDIFF_REFERENCE_PYTHON, else python3.
+    #[arg(long, value_enum, default_value = "cpu")]
+    reference_device: ReferenceChoice,
+    /// Also write the report as JSON here (for `bench compare`).
+    #[arg(long, value_name = "FILE.json")]
+    out: Option<PathBuf>,
+    /// Image side in pixels for the image, UNet and VAE figures, in place of the suite's (1024;
+    /// 512 with --quick): a multiple of 64. Reports of other sizes do not compare.
+    #[arg(long, value_name = "PIXELS")]
+    size: Option<usize>,
+    /// Timed runs of each figure after its warm-up [default: 3; 1 with --quick].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    runs: Option<u32>,
+    /// Only these groups (comma-separated): image, ablation, unet, vae, kernels [default: all,
+    /// the ablation in the full suite only].
+    #[arg(long, value_enum, value_delimiter = ',')]
+    only: Vec<Group>,
+    /// Time these models instead of random weights of SDXL base's architecture: an SDXL model
+    /// (folder, single file or Hugging Face id), with the guides below where given.
+    #[arg(long, value_name = "DIR|FILE|ID")]
+    model: Option<PathBuf>,
+    /// A depth ControlNet for --model.
+    #[arg(long, requires = "model", value_name = "DIR|FILE|ID")]
+    controlnet: Option<PathBuf>,
+    /// An IP-Adapter for --model (with --image-encoder).
+    #[arg(long, requires_all = ["model", "image_encoder"], value_name = "FILE|ID")]
+    ip_adapter: Option<PathBuf>,
+    /// The IP-Adapter's image encoder.
+    #[arg(long, requires = "ip_adapter", value_name = "DIR|ID")]
+    image_encoder: Option<PathBuf>,
+    /// A LoRA for --model, FILE[:STRENGTH]; repeat it for several (the ablation's L1 and L2
+    /// are the first two).
+    #[arg(long, requires = "model", value_parser = vkdiff_args::parse_lora, value_name = "FILE[:STRENGTH]")]
+    lora: Vec<LoraSetting>,
+}
+
+/// The models a user gave, resolved.
+pub struct UserModels {
+    pub model: PathBuf,
+    pub controlnet: Option<PathBuf>,
+    pub ip_adapter: Option<PathBuf>,
+    pub image_encoder: Option<PathBuf>,
+    pub loras: Vec<LoraSetting>,
+}
+
+/// The work of the chosen suite.
+pub struct Plan {
+    pub quick: bool,
+    pub dtype: Dtype,
+    pub image_size: usize,
+    /// Steps of the paper's image, and how many of them are timed.
+    pub steps: usize,
+    pub steps_timed: usize,
+    pub network_size: usize,
+    pub runs: usize,
+    /// Whether each figure runs once untimed first (the quick suite's first timed run is its
+    /// warm-up: on CPU devices the kernels compile as they are recorded, not as they first run).
+    pub warm_up: bool,
+    pub reference: ReferenceChoice,
+}
+
+impl Plan {
+    fn of(args: &ReportArgs) -> Plan {
+        let quick = args.quick;
+        let size = args.size.unwrap_or(if quick { 512 } else { 1024 });
+        Plan {
+            quick,
+            dtype: Dtype::F16,
+            image_size: size,
+            steps: 30,
+            steps_timed: if quick { 2 } else { 30 },
+            network_size: size,
+            runs: args.runs.map_or(if quick { 1 } else { 3 }, |r| r as usize),
+            warm_up: !quick,
+            reference: args.reference_device,
+        }
+    }
+
+    fn suite(&self, args: &ReportArgs) -> String {
+        let quick = if self.quick { " --quick" } else { "" };
+        let size = args.size.map_or(String::new(), |s| format!(" --size {s}"));
+        format!("vkdiff bench report/{SUITE_VERSION}{quick}{size}")
+    }
+}
+
+/// A whole report: the suite, the machine, what ran, the figures.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Report {
+    pub suite: String,
+    pub suite_version: u32,
+    pub system: System,
+    /// The weights timed: random (the real architectures) or the user's.
+    pub models: String,
+    pub figures: Vec<Figure>,
+}
+
+fn wants(args: &ReportArgs, group: Group) -> bool {
+    if args.only.is_empty() {
+        group != Group::Ablation || !args.quick
+    } else {
+        args.only.contains(&group)
+    }
+}
+
+pub fn run(args: &ReportArgs) -> Result<()> {
+    if let Some(out) = &args.out {
+        let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+        vkdiff_args::ensure_usage(parent.is_dir(), || {
+            format!("--out {}: no such folder {}", out.display(), parent.display())
+        })?;
+    }
+    if let Some(size) = args.size {
+        vkdiff_args::ensure_usage(size >= 64 && size.is_multiple_of(64), || {
+            format!("--size {size} must be a multiple of 64, at least 64")
+        })?;
+    }
+    let user = match &args.model {
+        Some(model) => {
+            let resolve = |flag: &str, p: &PathBuf, wants| vkdiff_args::resolve_model(flag, p, wants);
+            use vkdiff_args::Wants;
+            Some(UserModels {
+                model: resolve("--model", model, Wants::Either)?,
+                controlnet: args.controlnet.as_ref().map(|p| resolve("--controlnet", p, Wants::Either)).transpose()?,
+                ip_adapter: args.ip_adapter.as_ref().map(|p| resolve("--ip-adapter", p, Wants::File)).transpose()?,
+                image_encoder: args
+                    .image_encoder
+                    .as_ref()
+                    .map(|p| resolve("--image-encoder", p, Wants::Folder))
+                    .transpose()?,
+                loras: args
+                    .lora
+                    .iter()
+                    .map(|l| Ok(LoraSetting { path: resolve("--lora", &l.path, Wants::File)?, ..l.clone() }))
+                    .collect::<Result<_>>()?,
+            })
+        }
+        None => None,
+    };
+    let plan = Plan::of(args);
+    let ctx = Context::new(&args.device.choice())?;
+    let system = System::of(&ctx);
+    eprintln!("report: {} on {} ({})", plan.suite(args), system.device, system.driver);
+    let mut jobs: Vec<(Figure, networks::Job)> = Vec::new();
+    if wants(args, Group::Image) || wants(args, Group::Ablation) {
+        let settings = user.as_ref().map(|u| image::user_settings(&plan, u));
+        let mut workflow = image::Workflow::load(&ctx, &plan, settings.as_ref())?;
+        let mut images = Vec::new();
+        if wants(args, Group::Image) {
+            eprintln!("report: the paper's image");
+            images.push(image::paper_image(&mut workflow, &plan, &ctx)?);
+        }
+        if wants(args, Group::Ablation) {
+            images.extend(image::ablation(&mut workflow, &plan, &ctx)?);
+        }
+        let why = "diffusers' ControlNet + IP-Adapter + LoRA pipeline is not run beside it yet";
+        jobs.extend(images.into_iter().map(|f| (f, networks::Job::None(why.into()))));
+    }
+    let model = user.as_ref().map(|u| u.model.as_path());
+    if wants(args, Group::Unet) {
+        jobs.extend(networks::unet(&ctx, &plan, model)?);
+    }
+    if wants(args, Group::Vae) {
+        jobs.extend(networks::vae(&ctx, &plan, model)?);
+    }
+    if wants(args, Group::Kernels) {
+        jobs.extend(networks::kernels(&ctx, &plan)?);
+    }
+    drop(ctx);
+    let figures = networks::references(&plan, jobs);
+    let models = match &user {
+        Some(u) => format!("{}", u.model.display()),
+        None => "random weights of SDXL base, its depth ControlNet, a ViT-H IP-Adapter and two rank-32 LoRAs".into(),
+    };
+    let report = Report { suite: plan.suite(args), suite_version: SUITE_VERSION, system, models, figures };
+    print!("{}", table::markdown(&report));
+    if let Some(out) = &args.out {
+        let json = serde_json::to_vec_pretty(&report)?;
+        vkdiff_formats::atomic::write_atomic(out, &json)?;
+        eprintln!("report: written to {}", out.display());
+    }
+    Ok(())
+}

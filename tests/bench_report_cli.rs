@@ -1,0 +1,145 @@
+//! `vkdiff bench report` and `bench compare` as a user runs them: two reports of the tiny models
+//! (the small suite at 128², on lavapipe at two vector widths), their JSON and table, compared
+//! as Markdown and as a page headless Chromium shows; bad input refused in one line.
+
+mod cli;
+
+use cli::{chromium, error_line_with, scratch, screenshot, vkdiff, vkdiff_with};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+use vkdiff_testkit::fixture;
+
+/// The tiny workflow's flags: SDXL, its depth ControlNet, an IP-Adapter and a LoRA.
+fn model_flags() -> Vec<String> {
+    let f = |p: &str| fixture(p).display().to_string();
+    [
+        ("--model", f("pipeline/tiny-sdxl")),
+        ("--controlnet", f("workflow/controlnet")),
+        ("--ip-adapter", f("workflow/ip-adapter_tiny.safetensors")),
+        ("--image-encoder", f("workflow/image_encoder")),
+        ("--lora", f("workflow/lora-peft.safetensors")),
+    ]
+    .into_iter()
+    .flat_map(|(flag, value)| [flag.to_string(), value])
+    .collect()
+}
+
+/// A report of the image, UNet and VAE at 128² at lavapipe's `bits`-bit vectors: its JSON file
+/// and its table.
+fn report(dir: &Path, bits: &str) -> (PathBuf, String) {
+    let out = dir.join(format!("report-{bits}.json"));
+    let mut args: Vec<String> = "bench report --quick --size 128 --only image,unet,vae --reference-device none"
+        .split(' ')
+        .map(String::from)
+        .collect();
+    args.extend(model_flags());
+    args.extend(["--out".into(), out.display().to_string()]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let result = vkdiff_with(&args, &[("LP_NATIVE_VECTOR_WIDTH", bits)]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    (out, String::from_utf8(result.stdout).unwrap())
+}
+
+/// The two reports, made once.
+fn reports() -> &'static [(PathBuf, String); 2] {
+    static REPORTS: OnceLock<[(PathBuf, String); 2]> = OnceLock::new();
+    REPORTS.get_or_init(|| {
+        let dir = scratch("bench-report");
+        [report(&dir, "128"), report(&dir, "256")]
+    })
+}
+
+fn read_json(path: &Path) -> Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap()
+}
+
+#[test]
+fn a_report_names_its_machine_and_times_each_figure() {
+    let (path, table) = &reports()[0];
+    let report = read_json(path);
+    assert_eq!(
+        (report["suite"].as_str(), report["suite_version"].as_u64()),
+        (Some("vkdiff bench report/1 --quick --size 128"), Some(1))
+    );
+    let system = &report["system"];
+    assert!(system["device"].as_str().unwrap().contains("128 bits"), "{system}");
+    for key in ["vendor", "driver", "vulkan", "kernels_f16", "kernels_f32", "cpu", "os", "vkdiff", "command", "date"] {
+        assert!(system[key].as_str().is_some_and(|v| !v.is_empty()), "system.{key}: {system}");
+    }
+    let version = String::from_utf8(vkdiff(&["--version"]).stdout).unwrap();
+    assert!(version.contains(system["vkdiff"].as_str().unwrap()), "{version} against {system}");
+    let figures = report["figures"].as_array().unwrap();
+    let ids: Vec<&str> = figures.iter().map(|f| f["id"].as_str().unwrap()).collect();
+    // The tiny VAE's config forces f32: it has no f16 row.
+    assert_eq!(ids, ["image", "unet.f16", "vae.f32"]);
+    for f in figures {
+        let runs = &f["runs"];
+        assert_eq!(runs["count"], 1, "{f}");
+        assert!(
+            runs["median"].as_f64().unwrap() > 0.0 && runs["min"] == runs["median"] && runs["max"] == runs["median"]
+        );
+        assert!(f["peak_mib"].as_f64().unwrap() > 0.0 && f["first_run"].as_f64().unwrap() > 0.0, "{f}");
+        assert_eq!(f["reference"]["why"], "not asked for (--reference-device none)");
+        assert!(table.contains(f["label"].as_str().unwrap()), "{table}");
+    }
+    // The image's stages add up to it (the set's once-per-set setup beside them), with the
+    // steps not timed counted at the timed ones' rate.
+    let image = &figures[0];
+    let parts: Vec<(String, f64)> = serde_json::from_value(image["parts"].clone()).unwrap();
+    let per_image: f64 = parts.iter().filter(|(n, _)| !n.starts_with("once per set")).map(|(_, v)| v).sum();
+    let median = image["runs"]["median"].as_f64().unwrap();
+    assert!((per_image - median).abs() <= 1e-6 * median, "{parts:?} against {median}");
+    assert_eq!(image["note"], "2 of the 30 steps timed, the others counted at their rate");
+    assert!(table.contains("| figure | vkdiff (median) |") && table.contains("Reproduce by: `"), "{table}");
+}
+
+#[test]
+fn reports_compare_as_markdown_and_as_a_page_with_charts() {
+    let [(a, _), (b, _)] = reports();
+    let (a, b) = (a.to_str().unwrap(), b.to_str().unwrap());
+    let page = scratch("bench-compare").join("compare.html");
+    let out = vkdiff(&["bench", "compare", a, b, "--markdown", "--html", page.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let markdown = String::from_utf8(out.stdout).unwrap();
+    let rows: Vec<&str> = markdown.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| figure")).collect();
+    assert_eq!(rows.len(), 3, "{markdown}");
+    // The second column holds each value beside its speed relative to the first report.
+    let (ra, rb) = (read_json(Path::new(a)), read_json(Path::new(b)));
+    for (row, (fa, fb)) in
+        rows.iter().zip(ra["figures"].as_array().unwrap().iter().zip(rb["figures"].as_array().unwrap()))
+    {
+        let speed = fa["runs"]["median"].as_f64().unwrap() / fb["runs"]["median"].as_f64().unwrap();
+        assert!(row.ends_with(&format!("({speed:.2}×) |")), "{row}: {speed:.2}");
+    }
+    assert!(markdown.contains("- A: llvmpipe") && markdown.contains("128 bits") && markdown.contains("256 bits"));
+    let html = std::fs::read_to_string(&page).unwrap();
+    assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 3, "a chart per group");
+    let shot = screenshot(&chromium(), &format!("file://{}", page.display()), &page.with_extension("png"));
+    assert_eq!(shot[0], [255, 255, 255], "the screenshot is not the page");
+    let bars = shot.iter().filter(|p| **p == [70, 110, 170]).count();
+    assert!(bars > 5000, "only {bars} pixels of bars: the charts did not render");
+}
+
+#[test]
+fn bad_reports_and_arguments_are_refused_in_one_line() {
+    let [(a, _), _] = reports();
+    let dir = scratch("bench-refusals");
+    let mut other = read_json(a);
+    other["suite"] = "vkdiff bench report/1".into();
+    let other_path = dir.join("full.json");
+    std::fs::write(&other_path, other.to_string()).unwrap();
+    let not_report = dir.join("not.json");
+    std::fs::write(&not_report, "{\"images\": []}").unwrap();
+    let (a, other, not_report) = (a.to_str().unwrap(), other_path.to_str().unwrap(), not_report.to_str().unwrap());
+    for (args, says) in [
+        (vec!["bench", "compare", a, other], "reports of different suites do not compare"),
+        (vec!["bench", "compare", a, not_report], "not a `vkdiff bench report` JSON"),
+        (vec!["bench", "report", "--size", "100"], "--size 100 must be a multiple of 64"),
+        (vec!["bench", "report", "--out", "/no/such/folder/r.json"], "no such folder /no/such/folder"),
+    ] {
+        let line = error_line_with(&args, &[]);
+        assert!(line.contains(says), "{args:?}: {line}");
+        assert_eq!(vkdiff(&args).status.code(), Some(2), "{args:?}: a usage error");
+    }
+}

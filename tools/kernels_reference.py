@@ -1,0 +1,62 @@
+#!/usr/bin/env python3
+"""torch's own kernels at the shapes of `vkdiff bench report`'s headline products, on the CPU
+(float32) or a CUDA GPU (float16 or float32): a 2048x1280x5120 linear layer (the UNet's 32x32
+level's feed-forward output at 1024²), the 64x64 level's 3x3 convolution (640 channels in and
+out) and self-attention over its 4096 tokens in 10 heads of 64 (scaled_dot_product_attention:
+FlashAttention on CUDA). TFLOP/s of each timed run after a warm-up. Prints one JSON line.
+
+Run by `vkdiff bench report` in the same invocation as its own kernels.
+Setup: pip install torch   (vkdiff runs it with $VKDIFF_REFERENCE_PYTHON, else python3)
+Usage: kernels_reference.py RUNS [cpu | cuda f16 | cuda f32]
+"""
+import json
+import sys
+import time
+
+import torch
+import torch.nn.functional as F
+
+
+def timed(fn, flops, runs, sync):
+    fn()  # the first call picks kernels
+    sync()
+    start = time.perf_counter()
+    fn()
+    sync()
+    once = time.perf_counter() - start
+    reps = max(1, min(200, int(0.5 / max(once, 1e-6))))
+    rates = []
+    for _ in range(runs):
+        sync()
+        start = time.perf_counter()
+        for _ in range(reps):
+            fn()
+        sync()
+        rates.append(flops * reps / (time.perf_counter() - start) / 1e12)
+    return rates
+
+
+def main():
+    runs = int(sys.argv[1])
+    device = sys.argv[2] if len(sys.argv) > 2 else "cpu"
+    dtype = torch.float16 if device == "cuda" and sys.argv[3:4] == ["f16"] else torch.float32
+    make = dict(device=device, dtype=dtype)
+    torch.manual_seed(0)
+    sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
+    x, w = torch.randn(2048, 5120, **make), torch.randn(1280, 5120, **make)
+    image, kernel = torch.randn(1, 640, 64, 64, **make), torch.randn(640, 640, 3, 3, **make)
+    q, k, v = (torch.randn(1, 10, 4096, 64, **make) for _ in range(3))
+    with torch.inference_mode():
+        result = {
+            "linear": timed(lambda: F.linear(x, w), 2.0 * 2048 * 1280 * 5120, runs, sync),
+            "conv": timed(lambda: F.conv2d(image, kernel, padding=1), 2.0 * 4096 * 640 * 9 * 640, runs, sync),
+            "attention": timed(lambda: F.scaled_dot_product_attention(q, k, v), 4.0 * 4096 * 4096 * 640, runs, sync),
+        }
+    name = str(dtype).removeprefix("torch.")
+    where = f"{torch.cuda.get_device_name()} {name}" if device == "cuda" else f"CPU {name}, {torch.get_num_threads()} threads"
+    result.update(torch=torch.__version__, where=where)
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main()
