@@ -226,4 +226,33 @@ mod tests {
         assert_eq!(foreground_iou(&[(vec![&a1], vec![&a1])]), 1.0);
         assert_eq!(foreground_iou(&[(vec![], vec![])]), 0.0);
     }
+
+    #[test]
+    fn a_run_down_a_column_into_the_next_spans_the_whole_height() {
+        // 3×3, column-major: pixels (x 0, y 2) and (x 1, y 0), one run; a run that wraps a
+        // column spans the image's full height, as pycocotools 2.0.11's toBbox gives both boxes.
+        let r = Rle { height: 3, width: 3, counts: vec![2, 2, 5] };
+        assert_eq!(bbox(&r), [0.0, 0.0, 2.0, 3.0]);
+        assert_eq!(bbox(&run(1, 2)), [0.0, 1.0, 1.0, 1.0]);
+    }
+
+    /// Every ground-truth mask of the eval fixtures (polygons of one and two parts, RLE and
+    /// compressed RLE) against the box and area pycocotools' `toBbox` and `area` gave for it.
+    #[test]
+    fn fixture_masks_have_pycocotools_boxes_and_areas() {
+        let json: serde_json::Value = serde_json::from_str(include_str!("../../tests/fixtures/eval/gt.json")).unwrap();
+        let written: std::collections::HashMap<u64, &serde_json::Value> =
+            json["annotations"].as_array().unwrap().iter().map(|a| (a["id"].as_u64().unwrap(), a)).collect();
+        let gt = crate::dataset::Dataset::ground_truth(&json, true).unwrap();
+        assert!(gt.annotations.len() > 20);
+        for a in &gt.annotations {
+            let crate::dataset::Geometry::Mask(r) = &a.geometry else { panic!("annotation {} has no mask", a.id) };
+            let want = written[&a.id];
+            let want_box: Vec<f64> = want["bbox"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+            assert_eq!(bbox(r).to_vec(), want_box, "annotation {}", a.id);
+            assert_eq!(r.area() as f64, want["area"].as_f64().unwrap(), "annotation {}", a.id);
+            let pixels: u64 = r.counts.iter().map(|&c| c as u64).sum();
+            assert_eq!(pixels, r.height as u64 * r.width as u64, "annotation {}: runs past the image", a.id);
+        }
+    }
 }

@@ -28,6 +28,10 @@ fn check_as(iou_type: IouType, results: &str, max_dets: [usize; 3], rule: AreaRu
     let kind = if masks { "segm" } else { "bbox" };
     let key = format!("{kind} {max_dets:?}{label}");
     let want = &fixture("expected.json")[&key];
+    // The twelve statistics, each named (a short list must not pass by zipping less).
+    assert_eq!((stats.names.len(), stats.values.len()), (12, 12), "{key}: {:?}", stats.names);
+    let tag = if max_dets[2] == 100 { String::new() } else { format!("@{}", max_dets[2]) };
+    assert_eq!(stats.names[0], format!("AP{tag}"));
     for (i, (name, got)) in stats.names.iter().zip(&stats.values).enumerate() {
         // pycocotools reports AP at 100 detections whatever the caps; vkdiff at the last cap.
         let expected =
