@@ -212,8 +212,24 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         if wants(args, Group::Ablation) {
             images.extend(image::ablation(&mut workflow, &plan, &ctx)?);
         }
-        let why = "diffusers' ControlNet + IP-Adapter + LoRA pipeline is not run beside it yet";
-        jobs.extend(images.into_iter().map(|f| (f, networks::Job::None(why.into()))));
+        let configs = match &user {
+            Some(u) => networks::workflow_configs(Some(&u.model), u.controlnet.as_deref()),
+            None => networks::workflow_configs(None, None),
+        };
+        for figure in images {
+            let job = match &configs {
+                Some(configs) if figure.id == "image" => networks::Job::Workflow {
+                    configs: configs.clone(),
+                    size: plan.image_size,
+                    steps_timed: plan.steps_timed,
+                    steps: plan.steps,
+                    dtype: plan.dtype,
+                },
+                Some(_) => networks::Job::None("diffusers' pipeline runs beside the whole workflow only".into()),
+                None => networks::Job::None("diffusers' pipeline needs diffusers folders (with a ControlNet)".into()),
+            };
+            jobs.push((figure, job));
+        }
     }
     let model = user.as_ref().map(|u| u.model.as_path());
     if wants(args, Group::Unet) {
@@ -226,17 +242,26 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         jobs.extend(networks::kernels(&ctx, &plan)?);
     }
     drop(ctx);
-    let figures = networks::references(&plan, jobs);
     let models = match &user {
         Some(u) => format!("{}", u.model.display()),
         None => "random weights of SDXL base, its depth ControlNet, a ViT-H IP-Adapter and two rank-32 LoRAs".into(),
     };
-    let report = Report { suite: plan.suite(args), suite_version: SUITE_VERSION, system, models, figures };
+    let mut report = Report { suite: plan.suite(args), suite_version: SUITE_VERSION, system, models, figures: vec![] };
+    // vkdiff's own figures first, in case the references do not finish (a lent GPU's minutes).
+    report.figures = jobs.iter().map(|(f, _)| f.clone()).collect();
+    write(args, &report)?;
+    report.figures = networks::references(&plan, jobs);
     print!("{}", table::markdown(&report));
+    write(args, &report)?;
     if let Some(out) = &args.out {
-        let json = serde_json::to_vec_pretty(&report)?;
-        vkdiff_formats::atomic::write_atomic(out, &json)?;
         eprintln!("report: written to {}", out.display());
+    }
+    Ok(())
+}
+
+fn write(args: &ReportArgs, report: &Report) -> Result<()> {
+    if let Some(out) = &args.out {
+        vkdiff_formats::atomic::write_atomic(out, &serde_json::to_vec_pretty(report)?)?;
     }
     Ok(())
 }

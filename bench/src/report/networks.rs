@@ -14,13 +14,59 @@ use vkdiff_runtime::{Context, Dtype};
 
 /// The reference a figure waits for, run after the device is released.
 pub enum Job {
-    Unet { config: String, latent: usize, batch: usize, dtype: Dtype },
-    Vae { config: String, size: usize, dtype: Dtype },
-    Kernel { id: &'static str, dtype: Dtype },
+    /// diffusers' ControlNet + IP-Adapter pipeline; `configs` its models' configs as JSON.
+    Workflow {
+        configs: String,
+        size: usize,
+        steps_timed: usize,
+        steps: usize,
+        dtype: Dtype,
+    },
+    Unet {
+        config: String,
+        latent: usize,
+        batch: usize,
+        dtype: Dtype,
+    },
+    Vae {
+        config: String,
+        size: usize,
+        dtype: Dtype,
+    },
+    Kernel {
+        id: &'static str,
+        dtype: Dtype,
+    },
     None(String),
 }
 
 const KERNELS_REFERENCE: &str = include_str!("../../../tools/kernels_reference.py");
+const WORKFLOW_REFERENCE: &str = include_str!("../../../tools/workflow_reference.py");
+
+/// The configs diffusers' pipeline is built from: SDXL base's with its depth ControlNet, or those
+/// of a user's diffusers folders (None for single files).
+pub fn workflow_configs(model: Option<&Path>, controlnet: Option<&Path>) -> Option<String> {
+    let read = |path: &Path| {
+        std::fs::read_to_string(path).ok().and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+    };
+    let builtin = |text: &str| serde_json::from_str::<serde_json::Value>(text).ok();
+    let (unet, vae, scheduler, control) = match (model, controlnet) {
+        (None, _) => (
+            builtin(SDXL_BASE_CONFIG)?,
+            builtin(SDXL_VAE_CONFIG)?,
+            builtin(vkdiff_pipeline::SDXL_SCHEDULER_CONFIG)?,
+            builtin(vkdiff_networks::SDXL_CONTROLNET_CONFIG)?,
+        ),
+        (Some(m), Some(c)) => (
+            read(&m.join("unet/config.json"))?,
+            read(&m.join("vae/config.json"))?,
+            read(&m.join("scheduler/scheduler_config.json"))?,
+            read(&c.join("config.json"))?,
+        ),
+        (Some(_), None) => return None,
+    };
+    Some(serde_json::json!({"unet": unet, "controlnet": control, "vae": vae, "scheduler": scheduler}).to_string())
+}
 
 fn mib(bytes: u64) -> f64 {
     bytes as f64 / (1 << 20) as f64
@@ -166,6 +212,19 @@ pub fn references(plan: &Plan, jobs: Vec<(Figure, Job)>) -> Vec<Figure> {
             figure.reference = match (device, job) {
                 (None, _) => Reference::Missing { why: "not asked for (--reference-device none)".into() },
                 (_, Job::None(why)) => Reference::Missing { why },
+                (Some(d), Job::Workflow { configs, size, steps_timed, steps, dtype }) => {
+                    eprintln!("report: diffusers' pipeline for {}", figure.label);
+                    let mut args = [size, steps_timed, steps, plan.runs].map(|n| n.to_string()).to_vec();
+                    if d == ReferenceDevice::Cuda {
+                        args.extend(["cuda".into(), dtype_name(dtype).into()]);
+                    }
+                    let run = crate::cpu_reference::run_python_reference(WORKFLOW_REFERENCE, args, Some(&configs));
+                    measured(run.map(|v| {
+                        let times =
+                            v["times"].as_array().map_or(vec![], |a| a.iter().filter_map(|x| x.as_f64()).collect());
+                        (times, crate::cpu_reference::label(&v))
+                    }))
+                }
                 (Some(d), Job::Unet { config, latent, batch, dtype }) => {
                     eprintln!("report: diffusers' UNet for {}", figure.label);
                     let cuda = (d == ReferenceDevice::Cuda).then_some(dtype);

@@ -11,7 +11,8 @@ use std::path::Path;
 use vkdiff_formats::Error as FileError;
 
 /// stabilityai/stable-diffusion-xl-base-1.0 `scheduler/scheduler_config.json`.
-const SDXL_BASE: &str = r#"{
+/// SDXL base's `scheduler_config.json`.
+pub const SDXL_SCHEDULER_CONFIG: &str = r#"{
   "_class_name": "EulerDiscreteScheduler",
   "_diffusers_version": "0.19.0.dev0",
   "beta_end": 0.012,
@@ -71,7 +72,7 @@ impl SchedulerConfig {
     pub fn sdxl_base() -> SchedulerConfig {
         SchedulerConfig {
             source: "SDXL base scheduler config".into(),
-            keys: parse(SDXL_BASE).expect("built-in config is valid JSON"),
+            keys: parse(SDXL_SCHEDULER_CONFIG).expect("built-in config is valid JSON"),
         }
     }
 

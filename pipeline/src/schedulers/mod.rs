@@ -10,7 +10,7 @@ mod ddim;
 mod dpmsolver_multistep;
 mod euler_discrete;
 
-pub use config::SchedulerConfig;
+pub use config::{SchedulerConfig, SDXL_SCHEDULER_CONFIG};
 
 use crate::rng::TorchCpuRng;
 use crate::{Error, Result};

@@ -1,0 +1,61 @@
+#!/usr/bin/env bash
+# What minutes on a lent GPU should run, in order of worth, each step bounded so that the whole
+# fits in 10 minutes (or GPU_CHECK_SECONDS), every figure and log under $OUT (the log appended as it goes: a call cut
+# at its limit still brings back what ran):
+#   1. `vkdiff devices --json`, the driver and torch's versions;
+#   2. `vkdiff bench report` (the full suite: the paper's image first) beside diffusers and
+#      torch on CUDA where torch is installed, else without references;
+#   3. the kernel tests on the device, its matrix units required where it has them;
+#   4. `vkdiff devices --compile` (every kernel through the driver's own compiler);
+#   5. the paper's ablation (`bench report --only ablation`), where time is left.
+# KIT is what tools/gpu-kit.sh made on a build machine.
+#   OUT=/some/folder tools/gpu-check.sh [KIT]     (default KIT: .gpu-kit)
+set -uo pipefail
+kit=$(cd "${1:-$(dirname "$0")/../.gpu-kit}" && pwd)
+out=${OUT:?set OUT to the folder that takes the results}
+mkdir -p "$out"
+log=$out/gpu-check.log
+work=$(mktemp -d)
+start=$SECONDS
+
+# Every step's limit is cut to what is left of GPU_CHECK_SECONDS (570 by default).
+budget=${GPU_CHECK_SECONDS:-570}
+step() {
+    local limit=$1 left=$((budget - (SECONDS - start)))
+    shift
+    [ "$limit" -le "$left" ] || limit=$left
+    if [ "$limit" -lt 15 ]; then
+        echo "=== skipped, no time left: $*" >>"$log"
+        return
+    fi
+    echo "=== $(date -u +%T) [$((SECONDS - start)) s] $*" >>"$log"
+    local s=$SECONDS
+    timeout "$limit" "$@" >>"$log" 2>&1
+    echo "=== rc=$? in $((SECONDS - s)) s" >>"$log"
+}
+
+# The Vulkan loader and the GL dispatch libraries beside NVIDIA's driver, where they are missing.
+if ! ldconfig -p | grep -q 'libGLX.so.0' || ! ldconfig -p | grep -q 'libvulkan.so.1'; then
+    for deb in "$kit"/*.deb; do dpkg -x "$deb" /; done
+    ldconfig
+fi
+for f in vkdiff kernels-test; do xz -d -c "$kit/$f.xz" >"$work/$f" && chmod +x "$work/$f"; done
+reference=none
+if python3 -c 'import torch; assert torch.cuda.is_available()' 2>/dev/null; then
+    python3 -m pip install -q --no-index --no-deps --no-compile --target "$work/site" "$kit"/*.whl &&
+        export PYTHONPATH=$work/site && reference=cuda
+fi
+export VKDIFF_REFERENCE_PYTHON=python3
+{
+    nvidia-smi --query-gpu=name,driver_version,clocks.sm,clocks.max.sm --format=csv 2>&1
+    python3 -c 'import torch, diffusers; print("torch", torch.__version__, "diffusers", diffusers.__version__)' 2>&1
+    echo "references: $reference"
+} >>"$log"
+step 30 sh -c "'$work/vkdiff' devices --json >'$out/devices.json'"
+step 330 "$work/vkdiff" bench report --only image,unet,vae,kernels --reference-device "$reference" \
+    --out "$out/report.json"
+step 100 env VKDIFF_EXPECT_COOPERATIVE=1 "$work/kernels-test" --test-threads 4
+step 40 sh -c "'$work/vkdiff' devices --compile --json >'$out/compile.json'"
+step 570 "$work/vkdiff" bench report --only ablation --runs 1 --reference-device none --out "$out/ablation.json"
+echo "=== done [$((SECONDS - start)) s]" >>"$log"
+rm -rf "$work"
