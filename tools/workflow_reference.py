@@ -8,7 +8,8 @@ as vkdiff's set encodes them once), and LoRAs fused into the weights cost nothin
 loaded). With STEPS_TIMED below STEPS, the steps not run are counted at the timed steps' median
 rate, as vkdiff's quick suite counts its own. Prints one JSON line.
 
-Standard input: {"unet": {...}, "controlnet": {...}, "vae": {...}, "scheduler": {...}}
+Standard input: {"unet": {...}, "controlnet": {...}, "vae": {...}, "scheduler": {...},
+                 "ip_adapter": true}   (false: no IP-Adapter, as the workflow timed has none)
 Setup: pip install torch diffusers transformers   (vkdiff runs it with $VKDIFF_REFERENCE_PYTHON)
 Usage: workflow_reference.py SIZE STEPS_TIMED STEPS RUNS [cpu | cuda f16 | cuda f32]
 """
@@ -67,7 +68,9 @@ def main():
     configs = json.load(sys.stdin)
     torch.manual_seed(0)
     with torch.device("meta"):
-        unet = with_ip_adapter(UNet2DConditionModel(**configs["unet"]))
+        unet = UNet2DConditionModel(**configs["unet"])
+        if configs.get("ip_adapter", True):
+            unet = with_ip_adapter(unet)
         controlnet = ControlNetModel(**configs["controlnet"])
         vae = AutoencoderKL(**configs["vae"])
     unet, controlnet, vae = (random(m, device, dtype) for m in (unet, controlnet, vae))
@@ -81,8 +84,9 @@ def main():
     pooled = configs["unet"]["projection_class_embeddings_input_dim"] - 6 * configs["unet"]["addition_time_embed_dim"]
     # The set's prompt and two style images, encoded once: negative first, as guidance takes them.
     embeds = dict(prompt_embeds=torch.randn(1, 77, context, **make), negative_prompt_embeds=torch.zeros(1, 77, context, **make),
-                  pooled_prompt_embeds=torch.randn(1, pooled, **make), negative_pooled_prompt_embeds=torch.zeros(1, pooled, **make),
-                  ip_adapter_image_embeds=[torch.cat([torch.zeros(1, 2, 1024, **make), torch.randn(1, 2, 1024, **make)])])
+                  pooled_prompt_embeds=torch.randn(1, pooled, **make), negative_pooled_prompt_embeds=torch.zeros(1, pooled, **make))
+    if configs.get("ip_adapter", True):
+        embeds["ip_adapter_image_embeds"] = [torch.cat([torch.zeros(1, 2, 1024, **make), torch.randn(1, 2, 1024, **make)])]
     depth = Image.fromarray((torch.arange(size).repeat(size, 1) * 255 // size).to(torch.uint8).numpy()).convert("RGB")
     sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
     marks = []

@@ -174,62 +174,14 @@ pub fn run(args: &ReportArgs) -> Result<()> {
             format!("--size {size} must be a multiple of 64, at least 64")
         })?;
     }
-    let user = match &args.model {
-        Some(model) => {
-            let resolve = |flag: &str, p: &PathBuf, wants| vkdiff_args::resolve_model(flag, p, wants);
-            use vkdiff_args::Wants;
-            Some(UserModels {
-                model: resolve("--model", model, Wants::Either)?,
-                controlnet: args.controlnet.as_ref().map(|p| resolve("--controlnet", p, Wants::Either)).transpose()?,
-                ip_adapter: args.ip_adapter.as_ref().map(|p| resolve("--ip-adapter", p, Wants::File)).transpose()?,
-                image_encoder: args
-                    .image_encoder
-                    .as_ref()
-                    .map(|p| resolve("--image-encoder", p, Wants::Folder))
-                    .transpose()?,
-                loras: args
-                    .lora
-                    .iter()
-                    .map(|l| Ok(LoraSetting { path: resolve("--lora", &l.path, Wants::File)?, ..l.clone() }))
-                    .collect::<Result<_>>()?,
-            })
-        }
-        None => None,
-    };
+    let user = resolve_user(args)?;
     let plan = Plan::of(args);
     let ctx = Context::new(&args.device.choice())?;
     let system = System::of(&ctx);
     eprintln!("report: {} on {} ({})", plan.suite(args), system.device, system.driver);
     let mut jobs: Vec<(Figure, networks::Job)> = Vec::new();
     if wants(args, Group::Image) || wants(args, Group::Ablation) {
-        let settings = user.as_ref().map(|u| image::user_settings(&plan, u));
-        let mut workflow = image::Workflow::load(&ctx, &plan, settings.as_ref())?;
-        let mut images = Vec::new();
-        if wants(args, Group::Image) {
-            eprintln!("report: the paper's image");
-            images.push(image::paper_image(&mut workflow, &plan, &ctx)?);
-        }
-        if wants(args, Group::Ablation) {
-            images.extend(image::ablation(&mut workflow, &plan, &ctx)?);
-        }
-        let configs = match &user {
-            Some(u) => networks::workflow_configs(Some(&u.model), u.controlnet.as_deref()),
-            None => networks::workflow_configs(None, None),
-        };
-        for figure in images {
-            let job = match &configs {
-                Some(configs) if figure.id == "image" => networks::Job::Workflow {
-                    configs: configs.clone(),
-                    size: plan.image_size,
-                    steps_timed: plan.steps_timed,
-                    steps: plan.steps,
-                    dtype: plan.dtype,
-                },
-                Some(_) => networks::Job::None("diffusers' pipeline runs beside the whole workflow only".into()),
-                None => networks::Job::None("diffusers' pipeline needs diffusers folders (with a ControlNet)".into()),
-            };
-            jobs.push((figure, job));
-        }
+        jobs.extend(image_jobs(args, &plan, &ctx, user.as_ref())?);
     }
     let model = user.as_ref().map(|u| u.model.as_path());
     if wants(args, Group::Unet) {
@@ -257,6 +209,65 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         eprintln!("report: written to {}", out.display());
     }
     Ok(())
+}
+
+/// The models `--model` and its guides name, resolved (Hugging Face ids to their files).
+fn resolve_user(args: &ReportArgs) -> Result<Option<UserModels>> {
+    use vkdiff_args::Wants;
+    let Some(model) = &args.model else { return Ok(None) };
+    let resolve = |flag: &str, p: &PathBuf, wants| vkdiff_args::resolve_model(flag, p, wants);
+    let optional = |flag: &str, p: &Option<PathBuf>, wants| p.as_ref().map(|p| resolve(flag, p, wants)).transpose();
+    Ok(Some(UserModels {
+        model: resolve("--model", model, Wants::Either)?,
+        controlnet: optional("--controlnet", &args.controlnet, Wants::Either)?,
+        ip_adapter: optional("--ip-adapter", &args.ip_adapter, Wants::File)?,
+        image_encoder: optional("--image-encoder", &args.image_encoder, Wants::Folder)?,
+        loras: args
+            .lora
+            .iter()
+            .map(|l| Ok(LoraSetting { path: resolve("--lora", &l.path, Wants::File)?, ..l.clone() }))
+            .collect::<Result<_>>()?,
+    }))
+}
+
+/// The paper's image and its ablation, each with the reference it waits for: diffusers' own
+/// pipeline beside the whole workflow.
+fn image_jobs(
+    args: &ReportArgs,
+    plan: &Plan,
+    ctx: &Context,
+    user: Option<&UserModels>,
+) -> Result<Vec<(Figure, networks::Job)>> {
+    let settings = user.map(|u| image::user_settings(plan, u));
+    let mut workflow = image::Workflow::load(ctx, plan, settings.as_ref())?;
+    let mut images = Vec::new();
+    if wants(args, Group::Image) {
+        eprintln!("report: the paper's image");
+        images.push(image::paper_image(&mut workflow, plan, ctx)?);
+    }
+    if wants(args, Group::Ablation) {
+        images.extend(image::ablation(&mut workflow, plan, ctx)?);
+    }
+    let ip_adapter = workflow.models.style.is_some();
+    let configs =
+        networks::workflow_configs(user.map(|u| u.model.as_path()), user.map(|u| u.controlnet.as_deref()), ip_adapter);
+    Ok(images
+        .into_iter()
+        .map(|figure| {
+            let job = match &configs {
+                Some(configs) if figure.id == "image" => networks::Job::Workflow {
+                    configs: configs.clone(),
+                    size: plan.image_size,
+                    steps_timed: plan.steps_timed,
+                    steps: plan.steps,
+                    dtype: plan.dtype,
+                },
+                Some(_) => networks::Job::None("diffusers' pipeline runs beside the whole workflow only".into()),
+                None => networks::Job::None("diffusers' pipeline needs diffusers folders (with a ControlNet)".into()),
+            };
+            (figure, job)
+        })
+        .collect())
 }
 
 fn write(args: &ReportArgs, report: &Report) -> Result<()> {

@@ -44,8 +44,10 @@ const KERNELS_REFERENCE: &str = include_str!("../../../tools/kernels_reference.p
 const WORKFLOW_REFERENCE: &str = include_str!("../../../tools/workflow_reference.py");
 
 /// The configs diffusers' pipeline is built from: SDXL base's with its depth ControlNet, or those
-/// of a user's diffusers folders (None for single files).
-pub fn workflow_configs(model: Option<&Path>, controlnet: Option<&Path>) -> Option<String> {
+/// of a user's diffusers folders (None for single files or without a ControlNet); `user` is the
+/// user's ControlNet where `model` is given. With `ip_adapter`, the pipeline adds one.
+pub fn workflow_configs(model: Option<&Path>, user: Option<Option<&Path>>, ip_adapter: bool) -> Option<String> {
+    let controlnet = user.flatten();
     let read = |path: &Path| {
         std::fs::read_to_string(path).ok().and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
     };
@@ -65,7 +67,10 @@ pub fn workflow_configs(model: Option<&Path>, controlnet: Option<&Path>) -> Opti
         ),
         (Some(_), None) => return None,
     };
-    Some(serde_json::json!({"unet": unet, "controlnet": control, "vae": vae, "scheduler": scheduler}).to_string())
+    let configs = serde_json::json!({
+        "unet": unet, "controlnet": control, "vae": vae, "scheduler": scheduler, "ip_adapter": ip_adapter,
+    });
+    Some(configs.to_string())
 }
 
 fn mib(bytes: u64) -> f64 {
