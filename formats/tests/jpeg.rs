@@ -94,3 +94,20 @@ fn malformed_jpeg_is_an_error_not_a_panic() {
         }
     }
 }
+
+/// Pillow opens no image past twice its `MAX_IMAGE_PIXELS` (89,478,485): a decompression bomb.
+/// vkdiff refuses the same frames, from their header alone, before reading any data.
+#[test]
+fn a_frame_past_pillows_pixel_limit_is_refused_from_its_header() {
+    // SOI, then a baseline frame header of side × side with one component, then EOI.
+    let frame = |side: u16| {
+        let [hi, lo] = side.to_be_bytes();
+        vec![0xFF, 0xD8, 0xFF, 0xC0, 0, 11, 8, hi, lo, hi, lo, 1, 1, 0x11, 0, 0xFF, 0xD9]
+    };
+    let why =
+        |side: u16| vkdiff_formats::image::decode_image(&frame(side), Path::new("big.jpg")).unwrap_err().to_string();
+    // 13,378² = 178,970,884 pixels: past 178,956,970; 13,377² = 178,944,129 is not (Pillow 13.0.0
+    // raises DecompressionBombError for the first, OSError for the second: it has no scan).
+    assert!(why(13_378).contains("13378x13378 JPEG: more pixels than Pillow opens (178956970)"), "{}", why(13_378));
+    assert!(!why(13_377).contains("more pixels"), "{}", why(13_377));
+}
