@@ -2,7 +2,9 @@
 """torch.randn streams and diffusers scheduler runs, for vkdiff-pipeline's rng and sampler tests.
 
 Versions used to write the committed fixtures: Python 3.11, torch 2.15.0 (CPU, x86-64 with AVX2),
-diffusers 0.42.1, numpy 2.4, safetensors 0.8.0. Setup and rerun:
+diffusers 0.42.1, numpy 2.4, safetensors 0.8.0. The `add_noise` tensors were added later (2026-11-28,
+the same versions, on a 2-core AMD EPYC) beside the others as first written: a rerun on another CPU
+gives the loops' tensors within an ulp or so (torch's MKL), inside the tests' tolerance. Setup and rerun:
   python3 -m venv /tmp/ref && /tmp/ref/bin/pip install torch diffusers safetensors
   /tmp/ref/bin/python tools/make_sampler_fixtures.py [--out tests/fixtures/pipeline]
 
@@ -19,6 +21,9 @@ Writes samplers.safetensors (every tensor float32) and samplers.json, which list
       whose result is `<case>/final` (and `<case>/latents`, every step stacked, for 7-step cases).
       `model` is a synthetic ε-model built from IEEE-exact operations only, so a replica can match
       it bit for bit: eps = x_in / (1 + |x_in|) * 0.5 + t / 5000 (float32).
+      Cases of 2 steps or more have `<case>/add_noise`: img2img's start, a fresh scheduler after
+      set_timesteps(steps) and set_begin_index(steps // 2), add_noise(x0, noise, timesteps[begin])
+      where g = manual_seed(seed + 1); x0 = randn(shape, generator=g); noise = randn(shape, g).
       Cases with "error": true are settings vkdiff refuses (no tensors): Karras sigmas for DDIM
       (unsupported by diffusers) and for Euler-ancestral (diffusers 0.42.1 silently ignores
       use_karras_sigmas there; checked below), and DDIM with a negative timestep.
@@ -118,6 +123,17 @@ def run_case(case, seed, tensors):
     tensors[f"{name}/final"] = latents.contiguous()
     if case["steps"] == 7:
         tensors[f"{name}/latents"] = torch.stack(per_step).contiguous()
+    # img2img's start: a fresh scheduler begun at step `steps // 2`, as the pipelines'
+    # get_timesteps sets it, noising x0 to that step's timestep.
+    if case["steps"] >= 2:
+        start = sched.__class__.from_config(case["config"], use_karras_sigmas=case["karras"])
+        start.set_timesteps(case["steps"])
+        begin = case["steps"] // 2
+        if hasattr(start, "set_begin_index"):  # DDIM noises by the timestep alone
+            start.set_begin_index(begin)
+        g = torch.Generator("cpu").manual_seed(seed + 1)
+        x0, noise = (torch.randn(SHAPE, generator=g, dtype=torch.float32) for _ in range(2))
+        tensors[f"{name}/add_noise"] = start.add_noise(x0, noise, start.timesteps[begin:begin + 1]).contiguous()
 
 
 def check_ancestral_ignores_karras():

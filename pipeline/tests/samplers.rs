@@ -134,6 +134,27 @@ fn denoising_loops_match_diffusers() {
     }
 }
 
+/// img2img's start: x0 noised to the timestep of step `steps / 2`, as diffusers' `add_noise`
+/// does after the pipelines' `set_begin_index`, for every sampler and schedule.
+#[test]
+fn img2img_noise_matches_diffusers_add_noise() {
+    let (tensors, listing) = fixtures();
+    let mut checked = 0;
+    for case in cases(&listing, false).filter(|c| c["steps"].as_u64().unwrap() >= 2) {
+        let name = case["name"].as_str().unwrap();
+        let sampler = sampler(case).unwrap();
+        let mut rng = TorchCpuRng::new(case["seed"].as_u64().unwrap() + 1);
+        let (x0, noise) = (rng.randn(4 * 8 * 8), rng.randn(4 * 8 * 8));
+        let begin = case["steps"].as_u64().unwrap() as usize / 2;
+        let got = sampler.add_noise(begin, &x0, &noise);
+        let want = values(&tensors, &format!("{name}/add_noise"));
+        let error = relative_l2(&got, &want);
+        assert!(error <= 1e-6, "{name}: relative L2 error {error:e}");
+        checked += 1;
+    }
+    assert!(checked > 60, "only {checked} cases");
+}
+
 #[test]
 fn refused_settings_are_one_line_errors() {
     let (_, listing) = fixtures();
