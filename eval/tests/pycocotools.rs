@@ -39,6 +39,22 @@ fn check_as(iou_type: IouType, results: &str, max_dets: [usize; 3], rule: AreaRu
                 .unwrap();
         assert!((got - expected).abs() <= 1e-6, "{key}: {name} = {got}, pycocotools {expected}");
     }
+    // Per category, the last cap: pycocotools' slices of precision and recall.
+    for (k, w) in want["per_category"].as_array().unwrap().iter().enumerate() {
+        assert_eq!(stats.categories[k], w["id"].as_u64().unwrap(), "{key}");
+        for (got, name) in stats.per_category(k).into_iter().zip(["AP", "AP50", "AR"]) {
+            let expected = w[name].as_f64().unwrap();
+            assert!((got - expected).abs() <= 1e-6, "{key}: category {k} {name} = {got}, pycocotools {expected}");
+        }
+    }
+    // Instance mIoU over COCOeval's matches, against numpy over pycocotools' decoded masks.
+    if key == "segm [1, 10, 100]" {
+        let scores = &fixture("expected.json")["mask_scores"]["dt_segm.json"];
+        for (got, name) in [(stats.mean_instance_iou, "mIoU"), (stats.mean_matched_iou, "mIoU_matched")] {
+            let expected = scores[name].as_f64().unwrap();
+            assert!((got - expected).abs() <= 1e-12, "{name} = {got}, numpy {expected}");
+        }
+    }
     let sum = |v: &[f64]| v.iter().sum::<f64>();
     for (what, got) in [("precision_sum", sum(&stats.precision)), ("recall_sum", sum(&stats.recall))] {
         let expected = want[what].as_f64().unwrap();
