@@ -272,7 +272,11 @@ mod tests {
     }
 
     fn assert_exact(mask: &MaskWindow) {
-        let (polygon, iou) = mask.polygon(1.0);
+        assert_exact_at(mask, 1.0);
+    }
+
+    fn assert_exact_at(mask: &MaskWindow, min_iou: f64) {
+        let (polygon, iou) = mask.polygon(min_iou);
         assert_eq!(iou, 1.0);
         let local: Vec<Point> = polygon.iter().map(|&[x, y]| [x - 10.0, y - 20.0]).collect();
         assert_eq!(rasterize(&local, mask.width, mask.height), mask.pixels);
@@ -284,6 +288,27 @@ mod tests {
         assert_exact(&window(&["##...", "##...", ".....", "...##", "...##"]));
         assert_exact(&window(&["#.#.", ".#.#", "#.#.", "..##"]));
         assert_exact(&window(&["#"]));
+    }
+
+    /// Random masks (blobs, holes, diagonal touches, every kind of corner in both turning
+    /// directions), all smaller than SIMPLIFY_FROM, come back exactly whatever IoU is asked.
+    #[test]
+    fn random_masks_come_back_exactly() {
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        for _ in 0..200 {
+            let (w, h) = (1 + (state % 9) as usize, 1 + (state / 9 % 9) as usize);
+            let pixels: Vec<bool> = (0..w * h)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    state % 5 < 3
+                })
+                .collect();
+            if pixels.iter().any(|&p| p) {
+                assert_exact_at(&MaskWindow { origin: [10, 20], width: w, height: h, pixels }, 0.5);
+            }
+        }
     }
 
     #[test]
