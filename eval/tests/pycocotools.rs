@@ -135,3 +135,15 @@ fn polygons_rasterise_as_pycocotools_does() {
         assert_eq!(got.to_mask(), want.to_mask(), "annotation {}", ann["id"]);
     }
 }
+
+#[test]
+fn detection_caps_must_be_positive_and_ascending() {
+    let gt = Dataset::ground_truth(&fixture("gt.json"), false).unwrap();
+    let json = fixture("dt_bbox.json");
+    let dt = Dataset::results(&json, &gt, false, AreaSource::of_results(&json, AreaRule::LoadRes).unwrap()).unwrap();
+    for caps in [[10, 1, 100], [1, 100, 10], [0, 10, 100]] {
+        let refused = evaluate(&gt, &dt, &EvalParams { iou_type: IouType::Bbox, max_dets: caps });
+        assert!(refused.is_err_and(|e| e.to_string().contains("must be positive and ascending")), "{caps:?}");
+    }
+    assert!(evaluate(&gt, &dt, &EvalParams { iou_type: IouType::Bbox, max_dets: [1, 1, 1] }).is_ok());
+}
