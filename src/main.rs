@@ -73,7 +73,14 @@ fn main() {
     };
     if let Err(e) = result {
         eprintln!("error: {}", one_line(&e));
-        std::process::exit(exit_code::of(&e));
+        let code = exit_code::of(&e);
+        if vkdiff_runtime::device_hung() {
+            use std::io::Write;
+            let _ = std::io::stdout().flush();
+            // SAFETY: ends the process at once; the timed-out work's threads end with it.
+            unsafe { libc::_exit(code) };
+        }
+        std::process::exit(code);
     }
 }
 

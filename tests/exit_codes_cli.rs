@@ -24,7 +24,9 @@ fn failure(args: &[&str], env: &[(&str, &str)]) -> (i32, String) {
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
     assert!(errors.len() == 1, "{args:?}: {stderr}");
-    (out.status.code().expect("an exit code, not a signal"), errors[0].to_string())
+    let code =
+        out.status.code().unwrap_or_else(|| panic!("{args:?} ended by {:?}, not an exit code: {stderr}", out.status));
+    (code, errors[0].to_string())
 }
 
 /// A one-step tiny image into `out`, and `more` flags.

@@ -41,6 +41,7 @@ pub use memory_budget::{MemoryRoom, HOST_MEMORY};
 pub use pipeline::Kernel;
 pub use pipeline_stats::{describe as describe_statistics, variant_label, StatisticValue, Statistics};
 pub use recorder::{Recorder, Recording, Timing};
+pub use submit::device_hung;
 pub use submit_budget::{SubmitBudget, DEFAULT_SUBMIT_GFLOP, DISPATCHES_PER_SUBMIT};
 pub use tensor::{dtype_size, uniform_values, Dtype, Tensor};
 pub use vkdiff_kernels::Variant;

@@ -3,7 +3,19 @@
 use crate::context::Context;
 use crate::error::{Error, Result, VkContext};
 use ash::vk;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+
+/// Whether any context's wait for the device timed out in this process (see [`device_hung`]).
+static ANY_HUNG: AtomicBool = AtomicBool::new(false);
+
+/// Whether a wait for a device timed out in this process: its driver may still run that work,
+/// on a CPU device in this process's own threads, so the process should end without the
+/// libraries' exit handlers, which tear down what those threads use (seen as a segmentation
+/// fault on lavapipe after a timed-out submission).
+pub fn device_hung() -> bool {
+    ANY_HUNG.load(Ordering::SeqCst)
+}
 
 /// Records `f` into a fresh command buffer, submits it and waits for it to finish.
 pub(crate) fn submit_once(ctx: &Context, f: impl FnOnce(&ash::Device, vk::CommandBuffer)) -> Result<()> {
@@ -51,7 +63,7 @@ pub(crate) fn submit_once(ctx: &Context, f: impl FnOnce(&ash::Device, vk::Comman
             device.end_command_buffer(cmd).vk("vkEndCommandBuffer")?;
             submit_and_wait(ctx, cmd)
         })();
-        if !ctx.shared.hung.load(std::sync::atomic::Ordering::SeqCst) {
+        if !ctx.shared.hung.load(Ordering::SeqCst) {
             device.destroy_command_pool(pool, None);
         }
         result
@@ -88,7 +100,8 @@ pub(crate) fn submit_groups_and_wait(ctx: &Context, groups: &[&[vk::CommandBuffe
                 match device.wait_for_fences(&[*fence], true, timeout.as_nanos().min(u64::MAX as u128) as u64) {
                     Err(vk::Result::TIMEOUT) => {
                         // The device may still run these chunks: nothing they use is freed.
-                        ctx.shared.hung.store(true, std::sync::atomic::Ordering::SeqCst);
+                        ctx.shared.hung.store(true, Ordering::SeqCst);
+                        ANY_HUNG.store(true, Ordering::SeqCst);
                         return Err(Error::SubmitTimeout { seconds: timeout.as_secs_f64() });
                     }
                     other => other.vk("vkWaitForFences")?,
@@ -98,7 +111,7 @@ pub(crate) fn submit_groups_and_wait(ctx: &Context, groups: &[&[vk::CommandBuffe
             }
             Ok(times)
         })();
-        if !ctx.shared.hung.load(std::sync::atomic::Ordering::SeqCst) {
+        if !ctx.shared.hung.load(Ordering::SeqCst) {
             for fence in fences {
                 device.destroy_fence(fence, None);
             }
