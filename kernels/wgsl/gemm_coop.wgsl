@@ -1,7 +1,10 @@
 // GEMM core on the device's matrix units (VK_KHR_cooperative_matrix): f16 operands, f32
-// accumulation. A workgroup is 4 subgroups of SG lanes in a 2×2 grid, each computing WT×WT
+// accumulation. A workgroup is 2·GN subgroups of SG lanes in a 2×GN grid, each computing WM×WN
 // fragments of FM×FN (A fragments FM×FK, B fragments FK×FN: the prelude's FA, FB, FC types), so
-// a workgroup's tile is BM×BN with BM = 2·WT·FM and BN = 2·WT·FN, over K-steps of BK = KS·FK.
+// a workgroup's tile is BM×BN with BM = 2·WM·FM and BN = GN·WN·FN, over K-steps of BK = KS·FK:
+// 4 subgroups of 2×2 (or 4×4) fragments, or 8 of 4×2 fragments with K-steps of two (the tiles
+// of NVIDIA's own sample and ggml: 128×128 at 16×16×16, each staged byte feeding twice the
+// products of a 64×64 tile, with the sums in 64 registers a lane).
 // Operands are aligned to units of UW = 4 or 8 values (the runtime takes 8 where sizes and
 // strides allow, and sends shapes off the vec4 grid to the tiled kernel): each invocation
 // stages units of UW f16 along K (A, and B stored N×K) or along N (B stored K×N), one 8- or
@@ -19,26 +22,27 @@
 // loads need), padded off a power of two against bank conflicts. Each fragment leaves through a
 // small per-subgroup scratch, four columns at a time, so the epilogue and the edge masks are
 // those of the vec4 subgroup kernel (gemm_store4.wgsl).
-const BM: u32 = 2u * WT * FM;
-const BN: u32 = 2u * WT * FN;
+const NS: u32 = 2u * GN; // subgroups
+const BM: u32 = 2u * WM * FM;
+const BN: u32 = GN * WN * FN;
 const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): 4 values, then their 4 gates
 const BK: u32 = KS * FK;
-const WG: u32 = 4u * SG;
+const WG: u32 = NS * SG;
 const LDA: u32 = BK + 8u; // A tile [BM][LDA]; B tile [BN][LDA] (BT = 1) or [BK][LDB] (BT = 0)
 const LDB: u32 = BN + 8u;
 const LDS: u32 = FN + 4u; // a subgroup's f32 scratch [FM][LDS]
 // Units along a tile row of K, A's and B's units per invocation (the unroll counts below), and
 // the tile rows between an invocation's units (WG is a multiple of UK in every variant).
 const UK: u32 = BK / UW;
-const PA: u32 = BM * BK / (UW * WG); // WT·FM·FK·KS/SG/2/UW
-const PB: u32 = BN * BK / (UW * WG); // WT·FN·FK·KS/SG/2/UW
+const PA: u32 = BM * BK / (UW * WG); // WM·FM·FK·KS/GN/SG/UW
+const PB: u32 = BN * BK / (UW * WG); // WN·FN·FK·KS/SG/2/UW
 const STEP: u32 = WG / UK;
 // B stored K×N: units along a tile row of N.
 const UN: u32 = BN / UW;
 
 var<workgroup> a_tile: array<Words, BM * LDA / UW>;
 var<workgroup> b_tile: array<Words, max(BN * LDA, BK * LDB) / UW>;
-var<workgroup> scratch: array<vec4<f32>, FM * LDS>; // 4 subgroups × [FM][LDS] f32
+var<workgroup> scratch: array<vec4<f32>, NS * FM * LDS / 4u>; // NS subgroups × [FM][LDS] f32
 
 // Where this invocation's B unit i of the K-step at k0 lies in the product, (k, n): B's rows
 // alike A's (BT = 1), or units t + WG·i of the [BK][BN] step (BT = 0).
@@ -64,11 +68,11 @@ fn fetch(
     col0: u32,
     boff: u32,
 ) {
-    // #unroll I WT*FM*FK*KS/SG/2/UW
+    // #unroll I WM*FM*FK*KS/GN/SG/UW
     (*ra)[I] = a_unit((*rows)[I], kc);
     (*ia)[I] = a_unit_inside((*rows)[I], kc);
     // #end
-    // #unroll I WT*FN*FK*KS/SG/2/UW
+    // #unroll I WN*FN*FK*KS/SG/2/UW
     {
         let kn = b_at(I, k0, t, col0);
         (*rb)[I] = b_unit(boff, kn.x, kn.y);
@@ -97,10 +101,10 @@ fn stage(
     let tu = t % UK;
     let tr = t / UK;
     let in_k = !tail | (k0 + UW * tu < p.g.k);
-    // #unroll I WT*FM*FK*KS/SG/2/UW
+    // #unroll I WM*FM*FK*KS/GN/SG/UW
     a_tile[(tr + STEP * I) * (LDA / UW) + tu] = staged((*ra)[I], (*ia)[I] & in_k);
     // #end
-    // #unroll I WT*FN*FK*KS/SG/2/UW
+    // #unroll I WN*FN*FK*KS/SG/2/UW
     {
         let kn = b_at(I, k0, t, col0);
         let unit = staged((*rb)[I], !tail | b_unit_inside(kn.x, kn.y));
@@ -126,12 +130,12 @@ fn main(
     let batch = wg.z;
     let boff = batch * p.g.b_batch;
     // This subgroup's fragments start at row sm, column sn of the tile.
-    let sm = (sid / 2u) * WT * FM;
-    let sn = (sid % 2u) * WT * FN;
+    let sm = (sid / GN) * WM * FM;
+    let sn = (sid % GN) * WN * FN;
     let tu = t % UK;
     let tr = t / UK;
     var rows: array<RowCtx, PA>;
-    // #unroll I WT*FM*FK*KS/SG/2/UW
+    // #unroll I WM*FM*FK*KS/GN/SG/UW
     rows[I] = row_ctx(batch, row0 + tr + STEP * I);
     // #end
     var ra: array<Unit, PA>;
@@ -140,7 +144,7 @@ fn main(
     let step = k_step(BK);
     var walk = k_walk(UW * tu);
     fetch(&rows, &ra, &rb, &ia, k_at(walk), 0u, t, col0, boff);
-    var acc: array<FC, WT * WT>;
+    var acc: array<FC, WM * WN>;
     for (var k0 = 0u; k0 < p.g.k; k0 += BK) {
         if k0 + BK <= p.g.k {
             stage(&ra, &rb, &ia, k0, t, col0, false);
@@ -151,28 +155,29 @@ fn main(
         walk = k_next(walk, step);
         fetch(&rows, &ra, &rb, &ia, k_at(walk), k0 + BK, t, col0, boff);
         for (var kk = 0u; kk < BK; kk += FK) {
-            var fa: array<FA, WT>;
-            var fb: array<FB, WT>;
-            // #unroll I WT
-            {
-                // Offsets bound to a `let`: naga 30's SPIR-V output panics on inline ones here.
-                // Each a sum of a part fixed for the loop and kk's own, in units (every term is
-                // a multiple of UW), so that the compilers fold kk's into the loads' offsets.
-                let at = (sm + I * FM) * (LDA / UW) + kk / UW;
-                fa[I] = coopLoadT<FA>(&a_tile[at], LDA / UW);
-                if BT == 1u {
-                    let bt = (sn + I * FN) * (LDA / UW) + kk / UW;
-                    fb[I] = coopLoad<FB>(&b_tile[bt], LDA / UW);
-                } else {
-                    let bt = kk * (LDB / UW) + (sn + I * FN) / UW;
-                    fb[I] = coopLoadT<FB>(&b_tile[bt], LDB / UW);
-                }
+            // B's fragments for the step, then A's one at a time against them: a lane holds
+            // WN + 1 operand fragments, not WM + WN.
+            var fb: array<FB, WN>;
+            // Offsets bound to a `let`: naga 30's SPIR-V output panics on inline ones here. Each
+            // a sum of a part fixed for the loop and kk's own, in units (every term is a
+            // multiple of UW), so that the compilers fold kk's into the loads' offsets.
+            // #unroll J WN
+            if BT == 1u {
+                let bt = (sn + J * FN) * (LDA / UW) + kk / UW;
+                fb[J] = coopLoad<FB>(&b_tile[bt], LDA / UW);
+            } else {
+                let bt = kk * (LDB / UW) + (sn + J * FN) / UW;
+                fb[J] = coopLoadT<FB>(&b_tile[bt], LDB / UW);
             }
             // #end
-            // #unroll I WT
-            // #unroll J WT
-            acc[WT * I + J] = coopMultiplyAdd(fa[I], fb[J], acc[WT * I + J]);
-            // #end
+            // #unroll I WM
+            {
+                let at = (sm + I * FM) * (LDA / UW) + kk / UW;
+                let fa = coopLoadT<FA>(&a_tile[at], LDA / UW);
+                // #unroll J WN
+                acc[WN * I + J] = coopMultiplyAdd(fa, fb[J], acc[WN * I + J]);
+                // #end
+            }
             // #end
         }
         workgroupBarrier();
@@ -180,10 +185,10 @@ fn main(
     // One fragment at a time through this subgroup's scratch; every subgroup takes the same
     // number of steps, so the workgroup barriers between them are uniform.
     let own = sid * FM * LDS / 4u;
-    // #unroll I WT
-    // #unroll J WT
+    // #unroll I WM
+    // #unroll J WN
     {
-        coopStoreT(acc[WT * I + J], &scratch[own], LDS / 4u);
+        coopStoreT(acc[WN * I + J], &scratch[own], LDS / 4u);
         workgroupBarrier();
         if GE == 1u {
             for (var e = lane; e < FM * FN / 8u; e += SG) {

@@ -93,6 +93,8 @@ pub(crate) struct Shared {
     /// Where kernels' statistics are printed as they are compiled (`VKDIFF_PIPELINE_STATS=1`).
     pub(crate) statistics: Option<ash::khr::pipeline_executable_properties::Device>,
     pub(crate) gemm_family: Mutex<GemmFamily>,
+    /// See [`Context::matrix_tile`].
+    pub(crate) matrix_tile: Mutex<crate::MatrixTile>,
     pub(crate) binding_limit: AtomicU64,
     /// The largest buffer one allocation may hold (`maxMemoryAllocationSize`).
     pub(crate) allocation_limit: AtomicU64,
@@ -294,6 +296,7 @@ impl Context {
         .map_err(|e| Error::Memory(e.to_string()))?;
         let gpu_paths = gpu_paths_requested();
         let gemm_family = info.gemm_family(gpu_paths);
+        let matrix_tile = crate::MatrixTile::from_env()?;
         let env = |name: &str| std::env::var(name).ok();
         let submit_budget = SubmitBudget::for_device(&info, &env)?;
         let memory_budget = crate::memory_budget::budget_override(&env)?;
@@ -321,6 +324,7 @@ impl Context {
             pipelines: PipelineCache::default(),
             statistics,
             gemm_family: Mutex::new(gemm_family),
+            matrix_tile: Mutex::new(matrix_tile),
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
             allocation_limit: AtomicU64::new(info.max_allocation),
             workgroup_limit: Mutex::new(info.max_workgroup_count),
@@ -425,6 +429,16 @@ impl Context {
     /// Overrides the per-device choice of GEMM kernels (benchmarks and tests run both).
     pub fn set_gemm_family(&self, family: GemmFamily) {
         *self.shared.gemm_family.lock().unwrap() = family;
+    }
+
+    /// The matrix-unit GEMM and convolution's workgroup tile: `VKDIFF_MATRIX_TILE`, or what
+    /// [`Context::set_matrix_tile`] set.
+    pub fn matrix_tile(&self) -> crate::MatrixTile {
+        *self.shared.matrix_tile.lock().unwrap()
+    }
+
+    pub fn set_matrix_tile(&self, tile: crate::MatrixTile) {
+        *self.shared.matrix_tile.lock().unwrap() = tile;
     }
 
     /// The most bytes one kernel binding may span; ops split larger tensors into bands below it.

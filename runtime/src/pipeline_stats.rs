@@ -62,7 +62,7 @@ pub(crate) fn query(
         .collect()
 }
 
-/// "gemm_coop F16 FM=16 FN=16 FK=16 SG=32 WT=4", how these lines and `vkdiff devices --compile` name a variant.
+/// "gemm_coop F16 FM=16 FN=16 FK=16 SG=32 GN=2 WM=4 WN=4 …", how these lines and `vkdiff devices --compile` name a variant.
 pub fn variant_label(variant: &Variant) -> String {
     let params: Vec<String> = variant.params.iter().map(|(k, v)| format!(" {k}={v}")).collect();
     format!("{} {:?}{}", variant.kernel, variant.dtype, params.concat())

@@ -369,6 +369,7 @@ impl Recorder {
         self.ctx.shared.host_stats.lock().unwrap().recording_seconds += self.started.elapsed().as_secs_f64();
         let mut res = self.res;
         res.chunks.push(self.cmd);
+        crate::listing::note(res.kernels.iter().map(|k| k.variant));
         Ok(Recording { ctx: self.ctx, res, flops: self.flops, merged: Mutex::new(None) })
     }
 

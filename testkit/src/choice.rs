@@ -1,6 +1,7 @@
 //! What a test asserts of the kernels that ran (`Context::run_listing`, `Recording::variants`):
 //! the family its context takes for the products, with, on the matrix units, the fragment shape
-//! the device runs (`VKDIFF_FRAGMENT`'s where asked); and attention on the matrix units where
+//! the device runs (`VKDIFF_FRAGMENT`'s where asked) and the workgroup tile the context asks
+//! for (`VKDIFF_MATRIX_TILE`); and attention on the matrix units where
 //! the CI pass of a driver with them says it must. A regressed selection then fails the test
 //! instead of passing on another kernel.
 
@@ -11,6 +12,14 @@ pub fn expect_cooperative() -> bool {
     std::env::var("VKDIFF_EXPECT_COOPERATIVE").is_ok_and(|v| v == "1")
 }
 
+/// `VKDIFF_FRAGMENT=MxNxK` as the CI passes for Intel's shapes set it, read here apart from the
+/// runtime's own parser, so that a runtime that ignored it fails.
+fn asked_fragment() -> Option<[u32; 3]> {
+    let text = std::env::var("VKDIFF_FRAGMENT").ok().filter(|t| !t.is_empty())?;
+    let sides: Vec<u32> = text.split('x').map(|n| n.parse().expect("VKDIFF_FRAGMENT as MxNxK")).collect();
+    Some(sides.try_into().expect("VKDIFF_FRAGMENT as MxNxK"))
+}
+
 fn names(variants: &[&Variant]) -> Vec<String> {
     variants.iter().map(|v| format!("{}{:?}", v.kernel, v.params)).collect()
 }
@@ -18,6 +27,15 @@ fn names(variants: &[&Variant]) -> Vec<String> {
 /// The family name a product kernel belongs to: `_coop`, `_tiled` (`gemm_tiled_v4` too) or `_sg`.
 fn family_of(kernel: &str) -> Option<&'static str> {
     ["_coop", "_tiled", "_sg"].into_iter().find(|f| kernel.contains(f))
+}
+
+/// The product family `ctx` takes for `dtype`: `_coop`, `_sg` or `_tiled`.
+fn due_family(ctx: &Context, dtype: Dtype) -> &'static str {
+    match (ctx.gemm_family(), dtype, ctx.info().cooperative_variant()) {
+        (GemmFamily::Cooperative, Dtype::F16, Some(_)) => "_coop",
+        (GemmFamily::Subgroup, _, _) => "_sg",
+        _ => "_tiled",
+    }
 }
 
 /// Asserts that every product (GEMM or convolution) in `variants` ran on the family `ctx` takes
@@ -34,11 +52,7 @@ pub fn assert_product_family<'a>(
         variants.iter().copied().filter(|v| v.kernel.starts_with("gemm_") || v.kernel.starts_with("conv_")).collect();
     assert!(!products.is_empty(), "{what}: no product kernel ran: {:?}", names(variants));
     let fragment = ctx.info().cooperative_variant();
-    let expected = match (ctx.gemm_family(), dtype, fragment) {
-        (GemmFamily::Cooperative, Dtype::F16, Some(_)) => "_coop",
-        (GemmFamily::Subgroup, _, _) => "_sg",
-        _ => "_tiled",
-    };
+    let expected = due_family(ctx, dtype);
     for v in &products {
         let family = family_of(v.kernel);
         let allowed = family == Some(expected) || fallback && family == Some("_tiled");
@@ -47,6 +61,13 @@ pub fn assert_product_family<'a>(
             let f = fragment.expect("a matrix-unit kernel on a device with a fragment");
             let shape = [v.param("FM"), v.param("FN"), v.param("FK")];
             assert_eq!(shape, [Some(f.m), Some(f.n), Some(f.k)], "{what}: {} in the device's fragment", v.kernel);
+            if let Some(asked) = asked_fragment() {
+                assert_eq!(shape, asked.map(Some), "{what}: {} in VKDIFF_FRAGMENT's shape", v.kernel);
+            }
+            let eight = vkdiff_kernels::find(v.kernel, Dtype::F16, &[f.params().as_slice(), &[("GN", 4)]].concat());
+            let subgroups = 2 * v.param("GN").unwrap_or(0);
+            let due = if ctx.matrix_tile().eight_subgroups() && eight.is_some() { 8 } else { 4 };
+            assert_eq!(subgroups, due, "{what}: {} in workgroups of {due} subgroups", v.kernel);
         }
     }
     if expected == "_coop" && expect_cooperative() && !fallback {
@@ -70,5 +91,24 @@ pub fn assert_attention_kernel(ctx: &Context, dtype: Dtype, head_dim: usize, ker
         }
     } else if dtype == Dtype::F32 || !units {
         assert!(kernels.contains(&"attention_tiled"), "{what}: heads of {head_dim} ran {kernels:?}");
+    }
+}
+
+/// Asserts the products and attention of a whole network's recordings (`listing_variants`):
+/// every product on the family `ctx` takes for `dtype` or, for a layer off the vec4 grid, the
+/// tiled kernels, and at least one on that family; attention, where the network has any, as
+/// [`assert_attention_kernel`] says for heads of up to `head_dim`.
+pub fn assert_network_kernels(ctx: &Context, dtype: Dtype, variants: &[&Variant], head_dim: usize, what: &str) {
+    let products = assert_product_family(ctx, dtype, variants, what, true);
+    let due = due_family(ctx, dtype);
+    assert!(
+        products.iter().any(|v| family_of(v.kernel) == Some(due)),
+        "{what}: no product ran on {due}: {:?}",
+        names(&products)
+    );
+    // Networks without attention (the small ControlNet) have no choice of it to assert.
+    let kernels: Vec<&str> = variants.iter().map(|v| v.kernel).collect();
+    if kernels.iter().any(|k| k.starts_with("attention")) {
+        assert_attention_kernel(ctx, dtype, head_dim, &kernels, what);
     }
 }

@@ -2,7 +2,7 @@
 
 use crate::choice::expect_cooperative;
 use std::sync::OnceLock;
-use vkdiff_runtime::{Context, GemmFamily};
+use vkdiff_runtime::{Context, GemmFamily, MatrixTile};
 
 /// The Vulkan device the tests share. No device is a failure, not a skip.
 pub fn ctx() -> Context {
@@ -56,6 +56,20 @@ pub fn ctx_with(family: GemmFamily) -> Context {
     }
     c.set_gemm_family(family);
     c
+}
+
+/// The matrix-unit contexts a product test runs: the cooperative family with the workgroup
+/// tile `VKDIFF_MATRIX_TILE` gives, and, where the device has a matrix-unit variant, the other
+/// tile too, so that every matrix-unit pass tests the kernels of both.
+pub fn cooperative_ctxs() -> Vec<Context> {
+    let first = ctx_with(GemmFamily::Cooperative);
+    if first.info().cooperative_variant().is_none() {
+        return vec![first];
+    }
+    let other = if first.matrix_tile().eight_subgroups() { MatrixTile::Four } else { MatrixTile::Eight };
+    let second = ctx_with(GemmFamily::Cooperative);
+    second.set_matrix_tile(other);
+    vec![first, second]
 }
 
 /// A new context; under `VKDIFF_EXPECT_COOPERATIVE=1` a matrix-unit trial that dropped the units

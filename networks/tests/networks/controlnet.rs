@@ -7,9 +7,9 @@ use crate::forward::errors;
 use vkdiff_formats::SafeTensors;
 use vkdiff_networks::unet_checkpoint;
 use vkdiff_networks::{nchw_to_nhwc, nhwc_to_nchw, ControlNetInputs, ControlNetModel};
-use vkdiff_runtime::{Context, Dtype, Tensor};
-use vkdiff_testkit::ctx;
+use vkdiff_runtime::{listing_variants, Context, Dtype, Tensor};
 use vkdiff_testkit::fixture;
+use vkdiff_testkit::{assert_network_kernels, ctx};
 
 fn unet_config() -> vkdiff_networks::UNetConfig {
     let tiny = fixture("pipeline/tiny-sdxl");
@@ -45,7 +45,8 @@ fn check(path: &str, records_of: &str, dtype: Dtype, tol: f64) {
         hint: &hint,
         scale: 1.0,
     };
-    let pass = net.record(&inputs).unwrap();
+    let (pass, ran) = listing_variants(|| net.record(&inputs).unwrap());
+    assert_network_kernels(&ctx, dtype, &ran, 64, &format!("ControlNet {path} {dtype:?}"));
     pass.project_conditioning().unwrap();
     pass.run().unwrap();
     let r = &pass.residuals;

@@ -7,9 +7,9 @@ use vkdiff_networks::{
     UNetInputs,
 };
 use vkdiff_networks::{single_file_unet_checkpoint, unet_checkpoint};
-use vkdiff_runtime::{Context, Dtype, Tensor};
-use vkdiff_testkit::ctx;
+use vkdiff_runtime::{listing_variants, Context, Dtype, Tensor};
 use vkdiff_testkit::fixture;
+use vkdiff_testkit::{assert_network_kernels, ctx};
 
 /// The recorded inputs of one fixture, on the device.
 pub(crate) struct Inputs {
@@ -99,7 +99,9 @@ fn check_loaded(fixture_name: &str, model: &Path, dtype: Dtype, (config, ckpt): 
         ("out_ip", None, &ip[..]),
         ("out_both", Some(&control), &ip[..]),
     ] {
-        let pass = unet.record(&inputs.unet(control, ip)).unwrap();
+        let (pass, ran) = listing_variants(|| unet.record(&inputs.unet(control, ip)).unwrap());
+        // The fixtures' heads are of 64 values at most.
+        assert_network_kernels(&ctx, dtype, &ran, 64, &format!("{fixture_name} {dtype:?} {variant}"));
         pass.project_conditioning().unwrap();
         pass.run().unwrap();
         let s = pass.output.shape().to_vec();

@@ -5,9 +5,9 @@ use crate::forward::errors;
 use std::path::PathBuf;
 use vkdiff_formats::SafeTensors;
 use vkdiff_networks::{nchw_to_nhwc, nhwc_to_nchw, AutoencoderKl, ClipTextModel, TextEncoderSlot};
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_runtime::{listing_variants, Context, Dtype};
 use vkdiff_testkit::fixture;
-use vkdiff_testkit::{ctx, ctx_with};
+use vkdiff_testkit::{assert_network_kernels, ctx, ctx_with};
 
 fn records() -> SafeTensors {
     SafeTensors::open(&fixture("pipeline").join("records.safetensors")).unwrap()
@@ -39,8 +39,10 @@ fn text_encoders_match_transformers() {
                 let ids = |n: usize| {
                     rec.values(&format!("text.{i}.ids_{n}")).unwrap().1.iter().map(|&v| v as u32).collect::<Vec<u32>>()
                 };
-                let e1 = te1.encode(&[ids(1)]).unwrap();
-                let e2 = te2.encode(&[ids(2)]).unwrap();
+                let ((e1, e2), ran) =
+                    listing_variants(|| (te1.encode(&[ids(1)]).unwrap(), te2.encode(&[ids(2)]).unwrap()));
+                // Heads of 64 values in both tiny encoders.
+                assert_network_kernels(&ctx(), dtype, &ran, 64, &format!("text encoders {dtype:?} case {i}"));
                 for (what, got, name) in [
                     ("hidden_1", &e1.penultimate, "hidden_1"),
                     ("hidden_2", &e2.penultimate, "hidden_2"),

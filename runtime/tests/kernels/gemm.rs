@@ -74,11 +74,17 @@ fn check_on(ctx: &Context, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64)
 }
 
 /// Every family and dtype; returns each run's product variants with its family and dtype.
+/// On the matrix units, in both workgroup tiles ([`cooperative_ctxs`]).
 fn both(s: Matmul, bias: bool, seed: u64) -> Vec<(GemmFamily, Dtype, Vec<&'static Variant>)> {
     let mut ran = Vec::new();
-    for family in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative] {
+    for family in [GemmFamily::Subgroup, GemmFamily::Tiled] {
         for dtype in DTYPES {
             ran.push((family, dtype, check(family, dtype, &s, bias, seed)));
+        }
+    }
+    for ctx in cooperative_ctxs() {
+        for dtype in DTYPES {
+            ran.push((GemmFamily::Cooperative, dtype, check_on(&ctx, dtype, &s, bias, seed)));
         }
     }
     ran
@@ -110,8 +116,10 @@ fn tall_shapes_take_the_large_row_tiles() {
     // 2¹⁷ weights (smaller ones take 16 rows); M off their multiples.
     let ran = both(Matmul::dense(300, 516, 256, true), true, 8);
     assert_eq!(params_of(&ran, GemmFamily::Subgroup, "gemm_sg", "TM"), [32, 32], "M ≥ 256: 32 rows");
+    // 16 lanes stop at 32 rows (for code size).
+    let tallest = if ctx().info().gemm_subgroup_width() == Some(16) { 32 } else { 64 };
     let ran = both(Matmul::dense(1030, 520, 256, false), false, 9);
-    assert_eq!(params_of(&ran, GemmFamily::Subgroup, "gemm_sg", "TM"), [64, 64], "M ≥ 1024: 64 rows");
+    assert_eq!(params_of(&ran, GemmFamily::Subgroup, "gemm_sg", "TM"), [tallest; 2], "M ≥ 1024: {tallest} rows");
 }
 
 #[test]
@@ -149,9 +157,18 @@ fn large_products_take_the_large_tiles() {
     let ran = both(Matmul::dense(1030, 2052, 36, true), false, 16);
     // K = 36 is no multiple of 8: the matrix units read it in units of 4.
     assert!(params_of(&ran, GemmFamily::Cooperative, "gemm_coop", "UW").iter().all(|&uw| uw == 4));
-    let coop = params_of(&ran, GemmFamily::Cooperative, "gemm_coop", "WT");
+    // In workgroups of four subgroups (GN = 2).
+    let coop: Vec<(Option<u32>, Option<u32>)> = ran
+        .iter()
+        .filter(|(f, _, _)| *f == GemmFamily::Cooperative)
+        .flat_map(|(_, _, v)| v.iter().filter(|v| v.kernel == "gemm_coop" && v.param("GN") == Some(2)))
+        .map(|v| (v.param("WM"), v.param("WN")))
+        .collect();
     if ctx().info().cooperative_variant().is_some_and(|f| f.lanes != 32 && f.m == f.n && f.n == f.k) {
-        assert!(coop.iter().all(|&wt| wt == 4), "4×4 fragments a subgroup where built: {coop:?}");
+        assert!(
+            !coop.is_empty() && coop.iter().all(|&w| w == (Some(4), Some(4))),
+            "4×4 fragments where built: {coop:?}"
+        );
     }
 }
 
@@ -265,12 +282,11 @@ fn linear_geglu_fused_into_the_product() {
     // kernel, as do products of fewer than 2¹⁷ weights (all but 64→2048) and every width where
     // the context prefers quick compiles. Rows stay under 256, so the subgroup kernels compile
     // at 16 rows only.
+    // The matrix units in both workgroup tiles.
     let c = GEGLU_COLUMNS;
-    for (family, quick) in [GemmFamily::Subgroup, GemmFamily::Tiled, GemmFamily::Cooperative]
-        .into_iter()
-        .flat_map(|f| [(f, false), (f, true)])
-    {
-        let ctx = ctx_with(family);
+    let mut contexts = vec![ctx_with(GemmFamily::Subgroup), ctx_with(GemmFamily::Tiled)];
+    contexts.extend(cooperative_ctxs());
+    for (ctx, quick) in contexts.iter().flat_map(|ctx| [(ctx, false), (ctx, true)]) {
         ctx.set_quick_compile(quick);
         for dtype in DTYPES {
             for (i, shape) in [
@@ -284,9 +300,9 @@ fn linear_geglu_fused_into_the_product() {
             .into_iter()
             .enumerate()
             {
-                check_linear_geglu(&ctx, dtype, shape, false, 20 + 3 * i as u64);
+                check_linear_geglu(ctx, dtype, shape, false, 20 + 3 * i as u64);
                 if shape.2 % c == 0 {
-                    check_linear_geglu(&ctx, dtype, shape, true, 20 + 3 * i as u64);
+                    check_linear_geglu(ctx, dtype, shape, true, 20 + 3 * i as u64);
                 }
             }
         }
