@@ -98,7 +98,9 @@ fn device(e: &DeviceError) -> i32 {
         E::BadDeviceIndex { .. } | E::BadDeviceSpec(_) | E::NoSuchDevice { .. } | E::BadSetting(_) => USAGE,
         E::NoValidationLayer => USAGE,
         // The node's device: none, not visible, lost, hung, refused, out of memory, failing.
-        E::NoLoader(_) | E::NoDevice | E::NotVisible(_) | E::NoGpu(_) | E::Unsupported { .. } => DEVICE,
+        E::NoLoader(_) | E::NoDevice | E::NoDriver(_) | E::NotVisible(_) | E::NoGpu(_) | E::Unsupported { .. } => {
+            DEVICE
+        }
         E::Vulkan { .. } | E::DeviceLost(_) | E::SubmitTimeout { .. } | E::Memory(_) => DEVICE,
         // vkdiff's own mistakes.
         E::Shape(_) | E::NoVariant { .. } => OTHER,

@@ -95,6 +95,35 @@ fn a_report_names_its_machine_and_times_each_figure() {
 }
 
 #[test]
+fn the_peer_times_vkdiff_from_one_file_and_says_why_sd_cpp_did_not_run() {
+    // The tiny SDXL's single file, with no Python that has stable-diffusion.cpp: vkdiff's steps
+    // from the file, and one line saying why the peer's figure is missing.
+    let out = scratch("bench-report-peer").join("peer.json");
+    let model = fixture("pipeline/tiny-sdxl.safetensors");
+    let args = ["bench", "report", "--quick", "--size", "64", "--only", "peer", "--reference-device", "none"];
+    let args: Vec<&str> =
+        args.into_iter().chain(["--model", model.to_str().unwrap(), "--out", out.to_str().unwrap()]).collect();
+    let result = vkdiff_with(&args, &[("VKDIFF_REFERENCE_PYTHON", "/nonexistent/python3")]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let report = read_json(&out);
+    let figures = report["figures"].as_array().unwrap();
+    assert_eq!(figures.len(), 1, "{figures:?}");
+    let peer = &figures[0];
+    assert_eq!(
+        (peer["id"].as_str(), peer["group"].as_str(), peer["unit"].as_str()),
+        (Some("peer.sdcpp"), Some("peer"), Some("s"))
+    );
+    assert_eq!(peer["runs"]["count"], 2, "the suite's two timed steps");
+    assert!(peer["runs"]["median"].as_f64().unwrap() > 0.0, "{peer}");
+    let why = peer["reference"]["why"].as_str().unwrap();
+    assert!(
+        why.starts_with("stable-diffusion.cpp (tools/sdcpp_reference.py, cyllama-vulkan): /nonexistent/python3"),
+        "{why}"
+    );
+    assert!(model.exists(), "the user's file stays");
+}
+
+#[test]
 fn reports_compare_as_markdown_and_as_a_page_with_charts() {
     let [(a, _), (b, _)] = reports();
     let (a, b) = (a.to_str().unwrap(), b.to_str().unwrap());

@@ -73,6 +73,12 @@ fn usage_and_bad_input_exit_2() {
 fn device_failures_exit_3() {
     let dir = scratch("exit-3");
     let out = dir.join("x.png");
+    // No Vulkan driver at all.
+    let (code, line) = failure(&strs(&gen(&out, &[])), &[("VK_DRIVER_FILES", "/nonexistent/icd.json")]);
+    assert!(
+        code == 3 && line.contains("no Vulkan driver found (VK_DRIVER_FILES=/nonexistent/icd.json)"),
+        "{code}: {line}"
+    );
     // CI's only device is lavapipe, which --require-gpu refuses.
     let (code, line) = failure(&strs(&gen(&out, &["--require-gpu"])), &[]);
     assert!(code == 3 && line.contains("a GPU is required"), "{code}: {line}");

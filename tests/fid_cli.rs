@@ -22,11 +22,16 @@ fn weights(dir: &Path) -> PathBuf {
 }
 
 fn fid_json(args: &[&str]) -> Value {
+    fid_json_with(args, &[])
+}
+
+fn fid_json_with(args: &[&str], env: &[(&str, &Path)]) -> Value {
     // The network on the GPU paths is tests/unet/inception.rs' part; here the command runs on the
     // default paths, where eleven images take seconds instead of minutes on lavapipe.
     let out = Command::new(env!("CARGO_BIN_EXE_vkdiff"))
         .args([&["fid"], args, &["--json"]].concat())
         .env_remove("VKDIFF_GPU_PATHS")
+        .envs(env.iter().copied())
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
@@ -79,6 +84,23 @@ fn fid_and_kid_match_torch_fidelity_and_the_cache_reuses_features() {
     let third = fid_json(&[&[real.as_str(), fake.as_str()], &args[..]].concat());
     assert_eq!((third["real"]["cached"].as_u64(), third["fake"]["cached"].as_u64()), (Some(0), Some(6)));
     assert_eq!(first["fid"], third["fid"]);
+
+    // The weights by Hugging Face id, from a cache laid out as huggingface_hub lays one
+    // (refs/main → snapshots/COMMIT/FILE → a relative link into blobs/; tests/hub_cli.rs holds
+    // the layout against huggingface_hub itself): the same figures.
+    let hub = dir.join("hub");
+    let repo = hub.join("models--vkdiff-test--inception");
+    let commit = "0123456789abcdef0123456789abcdef01234567";
+    std::fs::create_dir_all(repo.join("refs")).unwrap();
+    std::fs::create_dir_all(repo.join("blobs")).unwrap();
+    std::fs::create_dir_all(repo.join("snapshots").join(commit)).unwrap();
+    std::fs::write(repo.join("refs/main"), commit).unwrap();
+    std::fs::copy(&w, repo.join("blobs/weights-blob")).unwrap();
+    let link = repo.join("snapshots").join(commit).join("inception-random.safetensors");
+    std::os::unix::fs::symlink("../../blobs/weights-blob", link).unwrap();
+    let by_id = ["--inception", "vkdiff-test/inception/inception-random.safetensors", "--batch", "3"];
+    let fourth = fid_json_with(&[&[real.as_str(), fake.as_str()], &by_id[..]].concat(), &[("HF_HUB_CACHE", &hub)]);
+    assert_eq!(first["fid"], fourth["fid"]);
 }
 
 /// `vkdiff --version`'s version, as the files it writes record it.

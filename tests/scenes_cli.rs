@@ -427,12 +427,35 @@ fn bad_scenes_are_refused_in_one_line_naming_them() {
     assert_eq!(out.status.code(), Some(2), "--scenes with the procedural bed's --width");
 }
 
+#[test]
+fn broken_blenderproc_frames_are_refused_in_one_line_naming_them() {
+    // tools/make_scene_fixtures.py writes each fault with h5py as BlenderProc's writer would.
+    for (fault, needle) in [
+        ("no-segmaps", "no `instance_segmaps`"),
+        ("no-depth", "no `depth` or `distance`"),
+        ("depth-shape", "`depth` has shape [39, 48], the segmentation 40×48"),
+        ("idx-twice", "lists idx"),
+        ("attributes-not-json", "`instance_attribute_maps` is not a list of {idx, category_id}"),
+        ("stereo", "one H×W map per file"),
+        ("truncated", "cut short: 6222 bytes, where its HDF5 superblock says 12444"),
+    ] {
+        let copy = scratch(&format!("blenderproc-bad-{fault}")).join("scenes");
+        std::fs::create_dir_all(&copy).unwrap();
+        std::fs::copy(scenes("blenderproc-bad").join(fault).join("0.hdf5"), copy.join("0.hdf5")).unwrap();
+        let line = refusal(&copy, &[]);
+        assert!(
+            line.starts_with("error: --scenes") && line.contains("0.hdf5") && line.contains(needle),
+            "{fault}: {line}"
+        );
+    }
+}
+
 fn strs(v: &[String]) -> Vec<&str> {
     v.iter().map(String::as_str).collect()
 }
 
 #[test]
-fn shards_and_a_scene_without_categories_json() {
+fn shards_a_resume_and_a_scene_without_categories_json() {
     // Two shards into one folder make the set one run makes.
     let root = scratch("scenes-shards");
     let scenes_dir = scenes("folders");
@@ -446,6 +469,20 @@ fn shards_and_a_scene_without_categories_json() {
     set(&sharded, &["--shard", "0/2"]);
     set(&sharded, &["--shard", "1/2"]);
     assert!(tree(&one) == tree(&sharded), "two shards and one run differ");
+    // A run stopped after its fourth image (its later images and the annotations never
+    // written) resumes into the same set.
+    let resumed = root.join("resumed");
+    set(&resumed, &[]);
+    std::fs::remove_file(resumed.join("annotations.json")).unwrap();
+    for n in 4..6 {
+        for (dir, ext) in
+            [("records", "json"), ("images", "png"), ("masks", "png"), ("depth", "exr"), ("control", "png")]
+        {
+            std::fs::remove_file(resumed.join(dir).join(format!("{n:06}.{ext}"))).unwrap();
+        }
+    }
+    set(&resumed, &[]);
+    assert!(tree(&one) == tree(&resumed), "a resumed set differs from one run's");
     // A scene folder with no categories.json: every instance is --category, id 1.
     let bare = root.join("bare");
     std::fs::create_dir_all(bare.join("only")).unwrap();

@@ -14,7 +14,7 @@ EXPORTS_DIR holds `coco/`, `yolo/`, `webdataset/` and `hf/`, each exported from 
 - hf: `datasets.load_dataset(OUT)` loads every split with its objects, `objects.category` a ClassLabel
   of the set's category names.
 
-Made with: ultralytics 8.3, webdataset 1.0, datasets 4, pycocotools 2.0, opencv-python-headless 4.
+Last run with: ultralytics 8.4.190, webdataset 1.0.2, datasets 5.2.0, pycocotools 2.0, opencv-python 5.0.
 """
 
 import glob
@@ -22,6 +22,7 @@ import json
 import os
 import sys
 import tarfile
+import tempfile
 
 import numpy as np
 from pycocotools import mask as mask_utils
@@ -89,7 +90,7 @@ def check_yolo(dataset, out):
     ious, coco_ious = np.array(ious), np.array(coco_ious)
     assert loaded == len(full["images"]) and min(ious.min(), coco_ious.min()) >= 0.9, (loaded, ious.min(), coco_ious.min())
     print(
-        f"yolo: Ultralytics loaded {loaded} images; {len(coco_ious)} polygons vs their COCO masks, IoU min/mean: "
+        f"yolo: Ultralytics loaded {loaded} images, classes {list(data['names'].values())}; {len(coco_ious)} polygons vs their COCO masks, IoU min/mean: "
         f"Ultralytics' polygon2mask {ious.min():.3f}/{ious.mean():.3f} (masks of 100 px or more), "
         f"pycocotools' frPyObjects {coco_ious.min():.3f}/{coco_ious.mean():.3f}"
     )
@@ -117,8 +118,9 @@ def check_hf(dataset, out):
     from datasets import load_dataset
 
     # The folder itself, as the Hub loads it: its README.md card declares the features, the
-    # categories' names among them.
-    loaded = load_dataset(out)
+    # categories' names among them. A cache of its own: datasets 5.2 served another folder's
+    # cached splits for a second export of the same file names.
+    loaded = load_dataset(out, cache_dir=tempfile.mkdtemp())
     coco = json.load(open(os.path.join(dataset, "annotations.json")))
     total = len(coco["images"])
     names = loaded["train"].features["objects"]["category"].feature.names

@@ -3,15 +3,21 @@
 # fits in 10 minutes (or GPU_CHECK_SECONDS), every figure and log under $OUT (the log appended as it goes: a call cut
 # at its limit still brings back what ran):
 #   1. `vkdiff devices --json`, the driver and torch's versions;
-#   2. `vkdiff bench report` (the full suite: the paper's image first) beside diffusers and
+#   2. the matrix units' two workgroup tiles, one after the other on one machine: the SDXL
+#      products (`bench kernels`, which times both) and the SDXL UNet at 1024² with
+#      VKDIFF_MATRIX_TILE=4 and 8, to decide which `auto` takes;
+#   3. `vkdiff bench report` (the full suite: the paper's image first) beside diffusers and
 #      torch on CUDA where torch is installed, else without references;
-#   3. the kernel tests on the device, its matrix units required where it has them;
-#   4. `vkdiff devices --compile` (every kernel through the driver's own compiler);
-#   5. the paper's ablation (`bench report --only ablation`), where time is left.
+#   4. stable-diffusion.cpp's Vulkan build beside vkdiff (`bench report --only peer`);
+#   5. the kernel and network tests on the device, its matrix units required where it has them
+#      (the network tests read the fixtures of the repository this script is in);
+#   6. `vkdiff devices --compile` (every kernel through the driver's own compiler);
+#   7. the paper's ablation (`bench report --only ablation`), where time is left.
 # KIT is what tools/gpu-kit.sh made on a build machine.
 #   OUT=/some/folder tools/gpu-check.sh [KIT]     (default KIT: .gpu-kit)
 set -uo pipefail
 kit=$(cd "${1:-$(dirname "$0")/../.gpu-kit}" && pwd)
+repo=$(cd "$(dirname "$0")/.." && pwd)
 out=${OUT:?set OUT to the folder that takes the results}
 mkdir -p "$out"
 log=$out/gpu-check.log
@@ -39,7 +45,7 @@ if ! ldconfig -p | grep -q 'libGLX.so.0' || ! ldconfig -p | grep -q 'libvulkan.s
     for deb in "$kit"/*.deb; do dpkg -x "$deb" /; done
     ldconfig
 fi
-for f in vkdiff kernels-test; do xz -d -c "$kit/$f.xz" >"$work/$f" && chmod +x "$work/$f"; done
+for f in vkdiff kernels-test networks-test; do xz -d -c "$kit/$f.xz" >"$work/$f" && chmod +x "$work/$f"; done
 reference=none
 if python3 -c 'import torch; assert torch.cuda.is_available()' 2>/dev/null; then
     python3 -m pip install -q --no-index --no-deps --no-compile --target "$work/site" "$kit"/*.whl &&
@@ -52,9 +58,18 @@ export VKDIFF_REFERENCE_PYTHON=python3
     echo "references: $reference"
 } >>"$log"
 step 30 sh -c "'$work/vkdiff' devices --json >'$out/devices.json'"
-step 330 "$work/vkdiff" bench report --only image,unet,vae,kernels --reference-device "$reference" \
+for filter in linear conv2d; do
+    step 60 sh -c "'$work/vkdiff' bench kernels --no-cpu-reference --filter $filter >'$out/kernels-$filter.txt'"
+done
+for tile in 8 4; do
+    step 70 sh -c "VKDIFF_MATRIX_TILE=$tile '$work/vkdiff' bench unet --size 1024 --samples 3 --profile \
+        --no-cpu-reference >'$out/unet-tile-$tile.txt'"
+done
+step 220 "$work/vkdiff" bench report --only image,unet,vae,kernels --reference-device "$reference" \
     --out "$out/report.json"
+step 150 "$work/vkdiff" bench report --only peer --runs 1 --reference-device none --out "$out/peer.json"
 step 100 env VKDIFF_EXPECT_COOPERATIVE=1 "$work/kernels-test" --test-threads 4
+step 60 env VKDIFF_EXPECT_COOPERATIVE=1 VKDIFF_REPO="$repo" "$work/networks-test" --test-threads 4
 step 40 sh -c "'$work/vkdiff' devices --compile --json >'$out/compile.json'"
 step 570 "$work/vkdiff" bench report --only ablation --runs 1 --reference-device none --out "$out/ablation.json"
 echo "=== done [$((SECONDS - start)) s]" >>"$log"

@@ -18,6 +18,9 @@ Writes under --out:
       `instance_segmaps` (int32: the instance idx), `instance_attribute_maps` (idx, category_id,
       name; the ground plane is category 0, background) and `blender_proc_version`;
       categories.json beside them with the category names.
+  blenderproc-bad/<fault>/0.hdf5: frames broken one way each (a dataset missing, shapes that
+      disagree, an idx listed twice, attributes that are not JSON, a stereo pair in one file, a
+      file cut short), for the refusals (`--only-broken` writes these alone).
   expected.json: what each scene holds, for the tests: its size, and each instance id with its
       category and pixel count.
 """
@@ -139,15 +142,56 @@ def blenderproc(out, expected):
     (root / "categories.json").write_text(json.dumps({"categories": CATEGORIES}, indent=1) + "\n")
 
 
+def blenderproc_bad(out):
+    """One folder per way a BlenderProc frame can be broken, each holding a 0.hdf5 written as
+    BlenderProc writes its files, but for the one fault, and a copy of a good frame cut short."""
+    root = out / "blenderproc-bad"
+    if root.exists():
+        shutil.rmtree(root)
+    depth, ids, colors, categories = orchard(48, 40, 9, 4)
+    depth = np.where(np.isinf(depth), 1e10, depth).astype(np.float32)
+    good = [{"idx": 0, "category_id": 0, "name": "World"}]
+    good += [{"idx": int(i), "category_id": c} for i, c in sorted(categories.items())]
+    twice = good + [good[-1]]
+    cases = {
+        "no-segmaps": {"depth": depth, "instance_attribute_maps": good},
+        "no-depth": {"instance_segmaps": ids.astype(np.int32), "instance_attribute_maps": good},
+        "depth-shape": {"depth": depth[:-1], "instance_segmaps": ids.astype(np.int32), "instance_attribute_maps": good},
+        "idx-twice": {"depth": depth, "instance_segmaps": ids.astype(np.int32), "instance_attribute_maps": twice},
+        "attributes-not-json": {"depth": depth, "instance_segmaps": ids.astype(np.int32),
+                                "instance_attribute_maps": "{idx: 1"},
+        "stereo": {"depth": depth, "instance_segmaps": np.stack([ids, ids]).astype(np.int32),
+                   "instance_attribute_maps": good},
+    }
+    for name, datasets in cases.items():
+        (root / name).mkdir(parents=True)
+        with h5py.File(root / name / "0.hdf5", "w") as f:
+            for key, value in datasets.items():
+                if isinstance(value, np.ndarray):
+                    f.create_dataset(key, data=value, compression="gzip")
+                else:
+                    text = value if isinstance(value, str) else json.dumps(value)
+                    f.create_dataset(key, data=np.bytes_(text))
+    whole = (root / "idx-twice" / "0.hdf5").read_bytes()
+    (root / "truncated").mkdir()
+    (root / "truncated" / "0.hdf5").write_bytes(whole[: len(whole) // 2])
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default="tests/fixtures/scenes")
-    out = pathlib.Path(ap.parse_args().out)
+    ap.add_argument("--only-broken", action="store_true", help="write blenderproc-bad/ alone")
+    args = ap.parse_args()
+    out = pathlib.Path(args.out)
+    if args.only_broken:
+        blenderproc_bad(out)
+        return
     if out.exists():
         shutil.rmtree(out)
     expected = {"categories": CATEGORIES, "folders": {}, "blenderproc": {}}
     folders(out, expected)
     blenderproc(out, expected)
+    blenderproc_bad(out)
     (out / "expected.json").write_text(json.dumps(expected, indent=1) + "\n")
     print("wrote", out)
 

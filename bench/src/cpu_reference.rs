@@ -36,7 +36,7 @@ pub struct CpuGemm {
 /// GFLOP/s for each (M, N, K), or why it could not be measured (no python3 or numpy).
 pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String> {
     let args: Vec<String> = shapes.iter().flat_map(|&(m, n, k)| [m, n, k]).map(|x| x.to_string()).collect();
-    run_script(SCRIPT, args, None)?
+    run_script(SCRIPT, args, None, None)?
         .lines()
         .map(|line| {
             let v: serde_json::Value = serde_json::from_str(line).map_err(|e| e.to_string())?;
@@ -63,6 +63,7 @@ fn run_script<S: AsRef<std::ffi::OsStr>>(
     script: &str,
     args: impl IntoIterator<Item = S>,
     input: Option<&str>,
+    timeout: Option<std::time::Duration>,
 ) -> Result<String, String> {
     let (python, mut command) = reference_python();
     command.arg("-c").arg(script).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
@@ -72,7 +73,21 @@ fn run_script<S: AsRef<std::ffi::OsStr>>(
         stdin.write_all(input.as_bytes()).map_err(|e| format!("{python}: {e}"))?;
     }
     drop(stdin);
-    let out = child.wait_with_output().map_err(|e| format!("{python}: {e}"))?;
+    let pid = child.id();
+    let (sender, finished) = std::sync::mpsc::channel();
+    std::thread::spawn(move || sender.send(child.wait_with_output()));
+    let out = match timeout.map_or_else(|| finished.recv().ok(), |t| finished.recv_timeout(t).ok()) {
+        Some(out) => out.map_err(|e| format!("{python}: {e}"))?,
+        None => {
+            let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
+            let seconds = timeout.map_or(0, |t| t.as_secs());
+            return Err(format!("did not finish in {seconds} s and was stopped"));
+        }
+    };
+    if let Some(signal) = std::os::unix::process::ExitStatusExt::signal(&out.status) {
+        let name = if signal == 11 { " (a segmentation fault)" } else { "" };
+        return Err(format!("{python} ended by signal {signal}{name}"));
+    }
     if !out.status.success() {
         let err = String::from_utf8_lossy(&out.stderr);
         return Err(format!("{python}: {}", err.lines().last().unwrap_or("failed")));
@@ -86,7 +101,17 @@ pub fn run_python_reference<S: AsRef<std::ffi::OsStr>>(
     args: impl IntoIterator<Item = S>,
     input: Option<&str>,
 ) -> Result<serde_json::Value, String> {
-    let out = run_script(script, args, input)?;
+    run_python_reference_within(script, args, input, None)
+}
+
+/// [`run_python_reference`], stopped past `timeout` (a reference that may hang on a device).
+pub fn run_python_reference_within<S: AsRef<std::ffi::OsStr>>(
+    script: &str,
+    args: impl IntoIterator<Item = S>,
+    input: Option<&str>,
+    timeout: Option<std::time::Duration>,
+) -> Result<serde_json::Value, String> {
+    let out = run_script(script, args, input, timeout)?;
     serde_json::from_str(out.lines().last().unwrap_or("")).map_err(|e| format!("reference output is not JSON: {e}"))
 }
 

@@ -5,7 +5,7 @@ use crate::peaks;
 use anyhow::Result;
 use std::time::{Duration, Instant};
 use vkdiff_runtime::ops::{self, AttentionLayout, ConvParams, Matmul, MatrixCeiling, UnaryOp};
-use vkdiff_runtime::{Context, DeviceKind, Dtype, GemmFamily, Recorder, Tensor};
+use vkdiff_runtime::{eight_subgroups_built, Context, DeviceKind, Dtype, GemmFamily, MatrixTile, Recorder, Tensor};
 
 #[derive(clap::Args)]
 pub struct KernelsArgs {
@@ -410,7 +410,7 @@ fn time_row(ctx: &Context, case: &Case, dtype: Dtype, product: bool, samples: us
 fn print_row(row: &Row) {
     let show = |x: Option<f64>| x.map_or(String::from("-"), |v| format!("{v:.1}"));
     println!(
-        "{:<26} {:<5} {:<20} {:<32} {:>10.3} {:>9} {:>8} {:>10}",
+        "{:<26} {:<5} {:<28} {:<32} {:>10.3} {:>9} {:>8} {:>10}",
         row.kernel,
         row.dtype,
         row.family.as_deref().unwrap_or("-"),
@@ -440,28 +440,37 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             println!("matrix-unit trial: {trial}");
         }
         println!(
-            "{:<26} {:<5} {:<20} {:<32} {:>10} {:>9} {:>8} {:>10}",
+            "{:<26} {:<5} {:<28} {:<32} {:>10} {:>9} {:>8} {:>10}",
             "kernel", "dtype", "GEMM kernels", "shape", "ms", "GFLOP/s", "GB/s", "of matrix peak"
         );
     }
     let default_family = ctx.gemm_family();
+    let default_tile = ctx.matrix_tile();
     for dtype in dtypes {
         for case in cases(&ctx, dtype)? {
             if args.filter.as_ref().is_some_and(|f| !case.name.contains(f.as_str())) {
                 continue;
             }
-            // Products run on each family the device has, so one run compares them.
+            // Products run on each family the device has, the matrix units in both workgroup
+            // tiles where both are built, so one run compares them.
+            let four = MatrixTile::Four;
             let families = match (case.on_gemm_family, default_family) {
-                (false, _) => vec![None],
+                (false, _) => vec![(None, default_tile)],
                 (true, GemmFamily::Cooperative | GemmFamily::Tiled)
                     if dtype == Dtype::F16 && peaks::has_matrix_units(&ctx) =>
                 {
-                    vec![Some(GemmFamily::Cooperative), Some(GemmFamily::Tiled)]
+                    let units = Some(GemmFamily::Cooperative);
+                    let eight = ctx.info().cooperative_variant().is_some_and(|f| eight_subgroups_built(&f));
+                    let mut runs = vec![(units, four)];
+                    runs.extend(eight.then_some((units, MatrixTile::Eight)));
+                    runs.push((Some(GemmFamily::Tiled), four));
+                    runs
                 }
-                (true, family) => vec![Some(family)],
+                (true, family) => vec![(Some(family), default_tile)],
             };
-            for family in families {
+            for (family, tile) in families {
                 ctx.set_gemm_family(family.unwrap_or(default_family));
+                ctx.set_matrix_tile(tile);
                 let row = time_row(&ctx, &case, dtype, family.is_some(), args.samples)?;
                 if !args.common.json {
                     print_row(&row);
@@ -472,6 +481,7 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
                 rows.push((row, case.gemm));
             }
             ctx.set_gemm_family(default_family);
+            ctx.set_matrix_tile(default_tile);
         }
     }
     gemm_shapes.dedup();

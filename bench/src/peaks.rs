@@ -39,7 +39,10 @@ pub(crate) fn share_label(ctx: &Context, flops_per_s: f64) -> String {
 /// The GEMM/convolution kernels a product in `dtype` runs on with the context's family now.
 pub(crate) fn family_label(ctx: &Context, dtype: Dtype) -> String {
     match (ctx.gemm_family(), ctx.info().cooperative_variant()) {
-        (GemmFamily::Cooperative, Some(f)) if dtype == Dtype::F16 => format!("matrix units {}", f.shape()),
+        (GemmFamily::Cooperative, Some(f)) if dtype == Dtype::F16 => {
+            let eight = ctx.matrix_tile().eight_subgroups() && vkdiff_runtime::eight_subgroups_built(&f);
+            format!("matrix units {}{}", f.shape(), if eight { ", 8 SG" } else { "" })
+        }
         (GemmFamily::Subgroup, _) => "subgroup-register".into(),
         _ => "tiled".into(),
     }

@@ -13,7 +13,7 @@ mod torch_pth;
 pub use error::{Error, Result};
 pub use image::RgbImage;
 pub use safetensors::{
-    decode, f32_file_bytes as safetensors_f32_bytes, write_f32 as write_safetensors_f32, Entry, SafeTensors,
-    SourceDtype,
+    decode, f32_file_bytes as safetensors_f32_bytes, write_f16_streamed as write_safetensors_f16_streamed,
+    write_f32 as write_safetensors_f32, Entry, SafeTensors, SourceDtype,
 };
 pub use torch_pth::TorchPth;

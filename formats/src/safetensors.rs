@@ -180,26 +180,55 @@ pub fn write_f32(path: &Path, tensors: &[(&str, &[usize], &[f32])], metadata: &B
 
 /// The bytes of a safetensors file of f32 tensors with string metadata.
 pub fn f32_file_bytes(tensors: &[(&str, &[usize], &[f32])], metadata: &BTreeMap<String, String>) -> Vec<u8> {
+    let shapes: Vec<(&str, &[usize])> = tensors.iter().map(|(n, s, _)| (*n, *s)).collect();
+    let mut bytes = header_bytes(&shapes, "F32", metadata);
+    for (_, _, data) in tensors {
+        bytes.extend(data.iter().flat_map(|v| v.to_le_bytes()));
+    }
+    bytes
+}
+
+/// Writes tensors of `shapes` in f16, the values of tensor i made by `values(i)` only as it is
+/// written (a whole SDXL is 7 GB), atomically.
+pub fn write_f16_streamed(
+    path: &Path,
+    shapes: &[(&str, &[usize])],
+    metadata: &BTreeMap<String, String>,
+    values: &mut dyn FnMut(usize) -> Vec<f32>,
+) -> Result<()> {
+    crate::atomic::write_atomic_with(path, &mut |out| {
+        out.write_all(&header_bytes(shapes, "F16", metadata))?;
+        for (i, (name, shape)) in shapes.iter().enumerate() {
+            let data = values(i);
+            assert_eq!(data.len(), shape.iter().product::<usize>(), "values of {name}");
+            let halves: Vec<u8> = data.iter().flat_map(|&v| f16::from_f32(v).to_le_bytes()).collect();
+            out.write_all(&halves)?;
+        }
+        Ok(())
+    })
+}
+
+/// The length-prefixed JSON header of tensors of `shapes` stored as `dtype` (F32 or F16), in
+/// order, with string metadata, padded with spaces so the data starts 8-byte aligned as the
+/// format's writers align it.
+fn header_bytes(shapes: &[(&str, &[usize])], dtype: &str, metadata: &BTreeMap<String, String>) -> Vec<u8> {
+    let size = if dtype == "F16" { 2 } else { 4 };
     let mut header = serde_json::Map::new();
     if !metadata.is_empty() {
         header.insert("__metadata__".into(), serde_json::to_value(metadata).expect("strings serialise"));
     }
     let mut offset = 0;
-    for (name, shape, data) in tensors {
-        let end = offset + 4 * data.len();
+    for (name, shape) in shapes {
+        let end = offset + size * shape.iter().product::<usize>();
         header.insert(
             (*name).into(),
-            serde_json::json!({ "dtype": "F32", "shape": shape, "data_offsets": [offset, end] }),
+            serde_json::json!({ "dtype": dtype, "shape": shape, "data_offsets": [offset, end] }),
         );
         offset = end;
     }
     let mut json = serde_json::to_vec(&Value::Object(header)).expect("header serialises");
-    // The data starts 8-byte aligned, as the format's writers pad the header with spaces.
     json.resize(json.len().div_ceil(8) * 8, b' ');
     let mut bytes = (json.len() as u64).to_le_bytes().to_vec();
     bytes.extend(json);
-    for (_, _, data) in tensors {
-        bytes.extend(data.iter().flat_map(|v| v.to_le_bytes()));
-    }
     bytes
 }

@@ -9,6 +9,7 @@ mod error;
 pub mod inception;
 pub mod ip_adapter;
 mod layers;
+mod random_single_file;
 pub mod unet;
 pub mod vae;
 pub mod weights;
@@ -24,6 +25,7 @@ pub use ip_adapter::{IpAdapter, IpAdapterKind};
 pub use layers::attention::{CrossAttention, IpAdapterInput, IpLayer};
 pub use layers::nn::Linear;
 pub use layers::{nchw_to_nhwc, nhwc_to_nchw};
+pub use random_single_file::{write_random_single_file, SdxlConfigs, RANDOM_SEEDS};
 pub use unet::{
     read_unet_config, single_file_unet_checkpoint, unet_checkpoint, unet_names, ControlResiduals, UNet, UNetConfig,
     UNetInputs, UNetPass, SDXL_BASE_CONFIG,

@@ -12,6 +12,11 @@ pub enum Error {
     NoLoader(String),
     #[error("no Vulkan device found; install a driver (mesa-vulkan-drivers gives the CPU device lavapipe)")]
     NoDevice,
+    #[error(
+        "no Vulkan driver found ({0}); install your GPU's Vulkan driver, or mesa-vulkan-drivers for the CPU device \
+        lavapipe"
+    )]
+    NoDriver(String),
     #[error("device {index} requested ({requested_by}) but only {count} Vulkan device(s) exist; see `vkdiff devices`")]
     BadDeviceIndex { index: usize, count: usize, requested_by: Message },
     #[error("{0}")]

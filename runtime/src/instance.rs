@@ -29,10 +29,22 @@ pub(crate) fn shared() -> Result<Arc<Instance>> {
     }
     // SAFETY: loading the system Vulkan loader; its symbols follow the Vulkan ABI.
     let entry = unsafe { ash::Entry::load() }.map_err(|e| Error::NoLoader(e.to_string()))?;
-    let raw = create_instance(&entry, api)?;
+    let raw = create_instance(&entry, api).map_err(|e| match e {
+        Error::Vulkan { result: ash::vk::Result::ERROR_INCOMPATIBLE_DRIVER, .. } => Error::NoDriver(searched()),
+        e => e,
+    })?;
     let made = Arc::new(Instance { entry, raw, api, validated });
     open.push(made.clone());
     Ok(made)
+}
+
+/// Where the loader looked for drivers, for the error that found none.
+fn searched() -> String {
+    let env = |k: &str| std::env::var(k).ok();
+    match env("VK_DRIVER_FILES").or_else(|| env("VK_ICD_FILENAMES")).filter(|v| !v.is_empty()) {
+        Some(list) => format!("VK_DRIVER_FILES={list}"),
+        None => "no driver manifest in the loader's icd.d folders (/usr/share/vulkan/icd.d and the like)".into(),
+    }
 }
 
 #[cfg(test)]

@@ -37,7 +37,7 @@ pub use flexible_dimensions::FEATURE_NAMES as COOPERATIVE_MATRIX2_FEATURES;
 pub use host_stats::HostStats;
 pub use kernel_census::{selectable_variants, CompiledKernel};
 pub use listing::listing_variants;
-pub use matrix_tile::MatrixTile;
+pub use matrix_tile::{eight_subgroups_built, MatrixTile};
 pub use matrix_unit_trial::{run_trial, run_trial_timed_by, CooperativeSetting, MatrixUnitTrial, TrialClock};
 pub use matrix_units::{built_cooperative_variants, requested_fragment, Fragment, MatrixShape};
 pub use memory::Placement;

@@ -1,6 +1,7 @@
 //! `VKDIFF_MATRIX_TILE`: the workgroup tile of the matrix-unit GEMM and convolution.
 
 use crate::error::{Error, Result};
+use crate::matrix_units::Fragment;
 
 /// How many subgroups share a workgroup's tile in `gemm_coop` and `conv_coop`
 /// (kernels/src/spec.rs).
@@ -42,6 +43,12 @@ impl MatrixTile {
     }
 }
 
+/// Whether eight-subgroup variants are built for fragment `f` (all but AMD's 64 lanes).
+pub fn eight_subgroups_built(f: &Fragment) -> bool {
+    let want: Vec<(&str, u32)> = f.params().into_iter().chain([("GN", 4)]).collect();
+    vkdiff_kernels::find("gemm_coop", vkdiff_kernels::Dtype::F16, &want).is_some()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -54,6 +61,9 @@ mod tests {
             assert_eq!(MatrixTile::parse(value).unwrap(), tile, "{value:?}");
         }
         assert!(MatrixTile::Eight.eight_subgroups() && !MatrixTile::Auto.eight_subgroups());
+        let fragment = |m, n, k, lanes| Fragment { m, n, k, lanes, flexible: false };
+        assert!(eight_subgroups_built(&fragment(16, 16, 16, 32)) && eight_subgroups_built(&fragment(8, 8, 8, 8)));
+        assert!(!eight_subgroups_built(&fragment(16, 16, 16, 64)), "AMD's 64 lanes reach 128×128 with four");
         let err = MatrixTile::parse("128").unwrap_err().to_string();
         assert!(err.starts_with("VKDIFF_MATRIX_TILE=128: use 4"), "{err}");
     }

@@ -3,9 +3,13 @@
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
-/// `path` relative to the repository root.
+/// `path` relative to the repository root: the one the tests were built in, or `VKDIFF_REPO`
+/// (tools/gpu-check.sh runs test binaries built elsewhere against a copy of the repository).
 pub fn repo(path: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
+    let root = std::env::var_os("VKDIFF_REPO")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(".."));
+    root.join(path)
 }
 
 /// `tests/fixtures/<path>`.

@@ -6,6 +6,7 @@
 mod figure;
 mod image;
 mod networks;
+mod peer;
 mod system;
 mod table;
 
@@ -35,6 +36,9 @@ pub enum Group {
     Vae,
     /// The headline products: a linear layer, a convolution, attention.
     Kernels,
+    /// stable-diffusion.cpp's Vulkan build beside vkdiff, SDXL text-to-image from one single
+    /// file on the same device (in the full suite only, unless named).
+    Peer,
 }
 
 /// Where the reference runs.
@@ -71,8 +75,8 @@ pub struct ReportArgs {
     /// Timed runs of each figure after its warm-up [default: 3; 1 with --quick].
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     runs: Option<u32>,
-    /// Only these groups (comma-separated): image, ablation, unet, vae, kernels [default: all,
-    /// the ablation in the full suite only].
+    /// Only these groups (comma-separated): image, ablation, unet, vae, kernels, peer [default:
+    /// all, the ablation and the peer in the full suite only].
     #[arg(long, value_enum, value_delimiter = ',')]
     only: Vec<Group>,
     /// Time these models instead of random weights of SDXL base's architecture: an SDXL model
@@ -88,6 +92,10 @@ pub struct ReportArgs {
     /// The IP-Adapter's image encoder.
     #[arg(long, requires = "ip_adapter", value_name = "DIR|ID")]
     image_encoder: Option<PathBuf>,
+    /// Seconds stable-diffusion.cpp (the peer) may take to load its file and run its steps
+    /// before it is stopped and the report says so.
+    #[arg(long, default_value_t = 600, value_name = "SECONDS")]
+    peer_timeout: u64,
     /// A LoRA for --model, FILE[:STRENGTH]; repeat it for several (the ablation's L1 and L2
     /// are the first two).
     #[arg(long, requires = "model", value_parser = vkdiff_args::parse_lora, value_name = "FILE[:STRENGTH]")]
@@ -117,6 +125,7 @@ pub struct Plan {
     /// warm-up: on CPU devices the kernels compile as they are recorded, not as they first run).
     pub warm_up: bool,
     pub reference: ReferenceChoice,
+    pub peer_timeout: std::time::Duration,
 }
 
 impl Plan {
@@ -133,6 +142,7 @@ impl Plan {
             runs: args.runs.map_or(if quick { 1 } else { 3 }, |r| r as usize),
             warm_up: !quick,
             reference: args.reference_device,
+            peer_timeout: std::time::Duration::from_secs(args.peer_timeout),
         }
     }
 
@@ -156,7 +166,7 @@ pub struct Report {
 
 fn wants(args: &ReportArgs, group: Group) -> bool {
     if args.only.is_empty() {
-        group != Group::Ablation || !args.quick
+        !matches!(group, Group::Ablation | Group::Peer) || !args.quick
     } else {
         args.only.contains(&group)
     }
@@ -192,6 +202,9 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     }
     if wants(args, Group::Kernels) {
         jobs.extend(networks::kernels(&ctx, &plan)?);
+    }
+    if wants(args, Group::Peer) {
+        jobs.push(peer::peer(&ctx, &plan, model)?);
     }
     drop(ctx);
     let models = match &user {

@@ -37,6 +37,12 @@ pub enum Job {
         id: &'static str,
         dtype: Dtype,
     },
+    /// stable-diffusion.cpp on the same device, from the file vkdiff timed (see `peer.rs`).
+    Peer {
+        file: super::peer::PeerFile,
+        size: usize,
+        steps: usize,
+    },
     None(String),
 }
 
@@ -215,6 +221,8 @@ pub fn references(plan: &Plan, jobs: Vec<(Figure, Job)>) -> Vec<Figure> {
     jobs.into_iter()
         .map(|(mut figure, job)| {
             figure.reference = match (device, job) {
+                // The peer runs on vkdiff's own Vulkan device, whatever device diffusers takes.
+                (_, Job::Peer { file, size, steps }) => super::peer::sdcpp(&file, size, steps, plan.peer_timeout),
                 (None, _) => Reference::Missing { why: "not asked for (--reference-device none)".into() },
                 (_, Job::None(why)) => Reference::Missing { why },
                 (Some(d), Job::Workflow { configs, size, steps_timed, steps, dtype }) => {

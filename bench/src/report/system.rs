@@ -44,7 +44,9 @@ impl System {
             cpu: cpu_name(),
             os: os_name(),
             vkdiff: vkdiff_setting::version().into(),
-            command: std::env::args().collect::<Vec<_>>().join(" "),
+            // As a user types it, whatever path ran the binary; the environment variables that
+            // change the kernels in front.
+            command: command_line(),
             date: utc_now(),
         }
     }
@@ -112,6 +114,15 @@ fn utc(secs: u64) -> String {
     let month = if mp < 10 { mp + 3 } else { mp - 9 };
     let year = yoe + era * 400 + i64::from(month <= 2);
     format!("{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z", rest / 3600, rest % 3600 / 60, rest % 60)
+}
+
+/// This run's command as a user types it: `vkdiff` and its arguments, after the `VKDIFF_*`
+/// variables that choose kernels (a report made under them is made again only with them).
+fn command_line() -> String {
+    let chosen = ["VKDIFF_COOPERATIVE", "VKDIFF_MATRIX_TILE", "VKDIFF_FRAGMENT", "VKDIFF_GPU_PATHS"];
+    let env = chosen.iter().filter_map(|k| std::env::var(k).ok().map(|v| format!("{k}={v} ")));
+    let args = std::env::args().skip(1);
+    env.collect::<String>() + &std::iter::once("vkdiff".to_string()).chain(args).collect::<Vec<_>>().join(" ")
 }
 
 #[cfg(test)]

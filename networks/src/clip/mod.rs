@@ -6,6 +6,7 @@ mod text_config;
 pub(crate) mod text_model;
 mod vision_model;
 
+pub(crate) use names::open_clip_names;
 pub use names::TextEncoderSlot;
 pub use text_config::{ClipTextConfig, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG};
 pub use text_model::{ClipTextModel, TextEncoding};

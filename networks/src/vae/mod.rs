@@ -8,4 +8,5 @@ mod tiled_decode;
 
 pub use autoencoder_kl::AutoencoderKl;
 pub use config::{VaeConfig, SDXL_VAE_CONFIG};
+pub(crate) use names::vae_names;
 pub use tiled_decode::VaeTiling;

@@ -40,6 +40,8 @@ pub struct Checkpoint {
     source: Source,
     used: Mutex<BTreeSet<String>>,
     placed: Mutex<Parameters>,
+    /// Every (diffusers name, PyTorch shape) asked for, in order (see [`Checkpoint::requests`]).
+    requested: Mutex<Vec<(String, Vec<usize>)>>,
 }
 
 impl Checkpoint {
@@ -69,6 +71,7 @@ impl Checkpoint {
             source: Source::Random { seed },
             used: Mutex::default(),
             placed: Mutex::default(),
+            requested: Mutex::default(),
         }
     }
 
@@ -87,7 +90,14 @@ impl Checkpoint {
             }
         }
         let source = Source::Files { files, index, prefix: prefix.into(), original, omitted: None, describe };
-        Checkpoint { ctx: ctx.clone(), dtype, source, used: Mutex::default(), placed: Mutex::default() }
+        Checkpoint {
+            ctx: ctx.clone(),
+            dtype,
+            source,
+            used: Mutex::default(),
+            placed: Mutex::default(),
+            requested: Mutex::default(),
+        }
     }
 
     /// The whole checkpoint as a view.
@@ -108,6 +118,24 @@ impl Checkpoint {
 
     fn place(&self, name: String, tensor: Tensor, torch_shape: &[usize], layout: ParamLayout) {
         self.placed.lock().unwrap().insert(name, Parameter { tensor, torch_shape: torch_shape.to_vec(), layout });
+    }
+
+    /// Every tensor the network built from this checkpoint asked for, by diffusers name with its
+    /// PyTorch shape, each once, in the order first asked.
+    pub fn requests(&self) -> Vec<(String, Vec<usize>)> {
+        self.requested.lock().unwrap().clone()
+    }
+
+    fn note_request(&self, name: &str, shape: &[usize]) {
+        let mut requested = self.requested.lock().unwrap();
+        if !requested.iter().any(|(n, _)| n == name) {
+            requested.push((name.to_string(), shape.to_vec()));
+        }
+    }
+
+    /// The values a random checkpoint of `seed` gives `name` of `shape` (PyTorch layout).
+    pub fn random_values(seed: u64, name: &str, shape: &[usize]) -> Vec<f32> {
+        random_values(seed, name, shape)
     }
 
     /// Stored tensors under the network's prefix that no module asked for.
@@ -222,6 +250,7 @@ impl Checkpoint {
 
     /// Values of `name` as f32 on the host.
     fn host(&self, name: &str, shape: &[usize]) -> Result<Vec<f32>> {
+        self.note_request(name, shape);
         Ok(match self.stored(name, shape)? {
             Some((dtype, bytes, transposed)) => {
                 let values = decode(dtype, bytes).expect("dtype checked by Checkpoint::stored");
@@ -241,6 +270,7 @@ impl Checkpoint {
     /// `name` in the run precision, placed as `at` says; bytes already in it are streamed
     /// unconverted.
     fn tensor(&self, name: &str, shape: &[usize], at: Placement) -> Result<Tensor> {
+        self.note_request(name, shape);
         if let Some((src, bytes, false)) = self.stored(name, shape)? {
             if matches!((src, self.dtype), (SourceDtype::F16, Dtype::F16) | (SourceDtype::F32, Dtype::F32)) {
                 return Ok(self.ctx.upload_bytes_to(at, shape, self.dtype, bytes)?);
@@ -318,14 +348,15 @@ impl<'a> Weights<'a> {
     pub fn stacked(&self, names: &[&str], rows: usize, cols: usize) -> Result<Tensor> {
         // Grown as the parts are read: each part's shape is checked first, so a config asking
         // for absurd sizes fails on the stored shape instead of on the allocation.
+        // Columns of 1 are biases, asked for in their PyTorch shape.
+        let shape = if cols == 1 { vec![rows] } else { vec![rows, cols] };
         let mut data = Vec::new();
         for n in names {
-            data.extend(self.host(n, &[rows, cols])?);
+            data.extend(self.host(n, &shape)?);
         }
         let t = self.ckpt.upload(&[names.len() * rows, cols], &data, self.placement)?;
         for (k, n) in names.iter().enumerate() {
             if let Ok(part) = t.narrow(k * rows, rows) {
-                let shape = if cols == 1 { vec![rows] } else { vec![rows, cols] };
                 self.ckpt.place(self.path(n), part, &shape, ParamLayout::AsStored);
             }
         }

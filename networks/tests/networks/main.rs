@@ -8,5 +8,6 @@ mod forward;
 mod inception;
 mod ip_adapter;
 mod malformed;
+mod random_single_file;
 mod text_and_vae;
 mod vae_tiling;

@@ -122,17 +122,24 @@ impl Sdxl {
         Ok(model)
     }
 
-    /// SDXL base's architecture with random weights (benchmarks: real sizes, no download).
+    /// SDXL base's architecture with random weights (benchmarks: real sizes, no download), the
+    /// ones `write_random_single_file` writes.
     pub fn random_sdxl_base(ctx: &Context, dtype: Dtype) -> Result<Sdxl> {
+        use vkdiff_networks::RANDOM_SEEDS as SEEDS;
         let text_encoders = [
-            ClipTextModel::load(ctx, builtin(SDXL_CLIP_L_CONFIG), &Checkpoint::random(ctx, dtype, 1), false)?,
-            ClipTextModel::load(ctx, builtin(SDXL_BIGG_CONFIG), &Checkpoint::random(ctx, dtype, 2), true)?,
+            ClipTextModel::load(
+                ctx,
+                builtin(SDXL_CLIP_L_CONFIG),
+                &Checkpoint::random(ctx, dtype, SEEDS.clip_l),
+                false,
+            )?,
+            ClipTextModel::load(ctx, builtin(SDXL_BIGG_CONFIG), &Checkpoint::random(ctx, dtype, SEEDS.big_g), true)?,
         ];
         let unet_config = UNetConfig::sdxl_base();
-        let unet = UNet::load(&unet_config, &Checkpoint::random(ctx, dtype, 3))?;
+        let unet = UNet::load(&unet_config, &Checkpoint::random(ctx, dtype, SEEDS.unet))?;
         let vae_config: VaeConfig = builtin(SDXL_VAE_CONFIG);
         let vae_dtype = AutoencoderKl::run_dtype(&vae_config, dtype);
-        let vae = AutoencoderKl::load(ctx, vae_config, &Checkpoint::random(ctx, vae_dtype, 4))?;
+        let vae = AutoencoderKl::load(ctx, vae_config, &Checkpoint::random(ctx, vae_dtype, SEEDS.vae))?;
         let tokenizers = [ClipTokenizer::builtin("<|endoftext|>")?, ClipTokenizer::builtin("!")?];
         let scheduler = SchedulerConfig::sdxl_base();
         Ok(Sdxl {

@@ -25,6 +25,11 @@ struct InstanceAttributes {
 pub fn read_hdf5(path: &Path) -> Result<(RawScene, Vec<u32>), SceneError> {
     let fail = |why: String| SceneError::new(why);
     let file = Hdf5File::open(path).map_err(|e| fail(format!("not an HDF5 file BlenderProc wrote: {e}")))?;
+    // A copy cut short (an interrupted transfer) opens, then lacks whatever lay past its end.
+    let (size, end) = (std::fs::metadata(path).map_or(0, |m| m.len()), file.superblock().eof_address);
+    if size < end {
+        return Err(fail(format!("cut short: {size} bytes, where its HDF5 superblock says {end}")));
+    }
     let dataset = |name: &str| file.dataset(&format!("/{name}")).ok();
     let segmap = dataset("instance_segmaps").ok_or_else(|| {
         fail("no `instance_segmaps` (BlenderProc writes it with bproc.renderer.enable_segmentation_output(map_by=[\"instance\", ...]))".into())
