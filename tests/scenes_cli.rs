@@ -3,7 +3,7 @@
 //! BlenderProc's .hdf5 frames as its writer writes them, with h5py) made into sets whose every
 //! annotation is the scene's instance-map pixels of one instance inside its crop, with the
 //! scene's category; through --render-only and through the tiny SDXL + ControlNet; exported with
-//! the categories' names; `vkdiff scene`'s own folders fed back; and every refusal in one line.
+//! the categories' names; `vkdiff scene`'s own folders fed back (refusals: scenes_refusal_cli.rs).
 
 mod cli;
 
@@ -320,133 +320,6 @@ fn vkdiff_scene_folders_fed_back_give_the_built_in_annotations() {
     );
     for name in ["depth/000000.exr", "masks/000001.png", "control/000002.png"] {
         assert!(std::fs::read(built_in.join(name)).unwrap() == std::fs::read(fed_back.join(name)).unwrap(), "{name}");
-    }
-}
-
-/// The one `error:` line of a refused run, which must exit 2 and write nothing.
-fn refusal(scenes_dir: &Path, extra: &[&str]) -> String {
-    let out_dir = scenes_dir.parent().unwrap().join("never");
-    let mut args =
-        vec!["dataset", "--render-only", "--scenes", scenes_dir.to_str().unwrap(), "--out", out_dir.to_str().unwrap()];
-    args.extend(extra);
-    let out = command().args(&args).output().unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
-    assert_eq!(errors.len(), 1, "{stderr}");
-    assert!(!out_dir.exists(), "a refused run wrote {}", out_dir.display());
-    errors[0].to_string()
-}
-
-/// A copy of the fixture's scene folders with `change` made to it.
-fn changed(name: &str, change: &dyn Fn(&Path)) -> PathBuf {
-    let dir = scratch(&format!("scenes-bad-{name}")).join("scenes");
-    for scene in ["orchard-a", "orchard-b"] {
-        let (from, to) = (scenes("folders").join(scene), dir.join(scene));
-        std::fs::create_dir_all(&to).unwrap();
-        for entry in std::fs::read_dir(&from).unwrap().flatten() {
-            std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
-        }
-    }
-    change(&dir);
-    dir
-}
-
-/// A change made to a copy of the scenes.
-type Change = Box<dyn Fn(&Path)>;
-
-#[test]
-fn bad_scenes_are_refused_in_one_line_naming_them() {
-    let cases: Vec<(&str, Change, &str)> = vec![
-        (
-            "missing",
-            Box::new(|d: &Path| std::fs::remove_file(d.join("orchard-b/instances.png")).unwrap()),
-            "scene orchard-b: instances.png:",
-        ),
-        (
-            "size",
-            Box::new(|d: &Path| {
-                std::fs::copy(scenes("folders").join("orchard-c/instances.png"), d.join("orchard-b/instances.png"))
-                    .unwrap();
-            }),
-            "scene orchard-b: instances.png: 192×144, the depth is 160×128",
-        ),
-        (
-            "no-category",
-            Box::new(|d: &Path| {
-                let path = d.join("orchard-a/categories.json");
-                let mut c = read_json(&path);
-                let first = c["instances"].as_object().unwrap().keys().next().unwrap().clone();
-                c["instances"].as_object_mut().unwrap().remove(&first);
-                std::fs::write(path, c.to_string()).unwrap();
-            }),
-            "has no category",
-        ),
-        (
-            "twice",
-            Box::new(|d: &Path| {
-                let path = d.join("orchard-a/categories.json");
-                let mut c = read_json(&path);
-                c["categories"][1]["id"] = 1.into();
-                std::fs::write(path, c.to_string()).unwrap();
-            }),
-            "scene orchard-a: categories.json: category id 1 is listed twice",
-        ),
-        (
-            "unreadable",
-            Box::new(|d: &Path| std::fs::write(d.join("orchard-b/depth.exr"), b"not an exr").unwrap()),
-            "scene orchard-b:",
-        ),
-        (
-            "renamed",
-            Box::new(|d: &Path| {
-                let path = d.join("orchard-b/categories.json");
-                let mut c = read_json(&path);
-                c["categories"][0]["name"] = "pear".into();
-                std::fs::write(path, c.to_string()).unwrap();
-            }),
-            "category id 1 is `apple` in orchard-a and `pear` in orchard-b",
-        ),
-        (
-            "empty",
-            Box::new(|d: &Path| std::fs::remove_dir_all(d).and_then(|_| std::fs::create_dir_all(d)).unwrap()),
-            "holds no scene folders",
-        ),
-    ];
-    for (name, change, needle) in cases {
-        let dir = changed(name, &*change);
-        let line = refusal(&dir, &[]);
-        assert!(line.starts_with("error: --scenes") && line.contains(needle), "{name}: {line}");
-    }
-    let dir = scenes("folders");
-    assert!(refusal(&dir, &["--count", "4"]).contains("--count 4: --scenes holds 3"));
-    let out = command()
-        .args(["dataset", "--render-only", "--scenes", dir.to_str().unwrap(), "--out", "x", "--width", "64"])
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(2), "--scenes with the procedural bed's --width");
-}
-
-#[test]
-fn broken_blenderproc_frames_are_refused_in_one_line_naming_them() {
-    // tools/make_scene_fixtures.py writes each fault with h5py as BlenderProc's writer would.
-    for (fault, needle) in [
-        ("no-segmaps", "no `instance_segmaps`"),
-        ("no-depth", "no `depth` or `distance`"),
-        ("depth-shape", "`depth` has shape [39, 48], the segmentation 40×48"),
-        ("idx-twice", "lists idx"),
-        ("attributes-not-json", "`instance_attribute_maps` is not a list of {idx, category_id}"),
-        ("stereo", "one H×W map per file"),
-        ("truncated", "cut short: 6222 bytes, where its HDF5 superblock says 12444"),
-    ] {
-        let copy = scratch(&format!("blenderproc-bad-{fault}")).join("scenes");
-        std::fs::create_dir_all(&copy).unwrap();
-        std::fs::copy(scenes("blenderproc-bad").join(fault).join("0.hdf5"), copy.join("0.hdf5")).unwrap();
-        let line = refusal(&copy, &[]);
-        assert!(
-            line.starts_with("error: --scenes") && line.contains("0.hdf5") && line.contains(needle),
-            "{fault}: {line}"
-        );
     }
 }
 

@@ -3,10 +3,9 @@
 use super::bands::{bands, elem, fit, row_view, rows_per_band, span_view};
 use super::{f, kernel, same_dtype, u};
 use crate::arena::Arena;
-use crate::context::{Context, GemmFamily};
-use crate::device::{DeviceInfo, DeviceKind};
+use crate::context::GemmFamily;
+use crate::device::DeviceInfo;
 use crate::error::{ensure, Error, Result};
-use crate::matrix_units::Fragment;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -259,7 +258,7 @@ pub(super) fn dispatch_gemm_family(
     let cooperative =
         ctx.info().cooperative_variant().filter(|_| family == GemmFamily::Cooperative && dtype == Dtype::F16 && s.vec4);
     if let Some(fragment) = cooperative {
-        let tile = cooperative_tile(&ctx, s, &fragment, names.cooperative, params);
+        let tile = super::coop_tile::cooperative_tile(&ctx, s, &fragment, names.cooperative, params);
         let unit = if s.vec8 { 8 } else { 4 };
         let want: Vec<(&str, u32)> = fragment
             .params()
@@ -313,54 +312,6 @@ fn tiled_row_halves(device: &DeviceInfo, s: &GemmShape) -> u32 {
 /// B (33). At RH = 2 that is 16.5 KiB, past the 16 KiB Vulkan guarantees.
 fn tiled_v4_workgroup_bytes(rh: u32) -> u32 {
     16 * (16 * rh + 1 + 33) * 16
-}
-
-/// A matrix-unit workgroup's tile: a 2×`across` grid of subgroups, each `rows`×`cols` fragments
-/// (GN, WM and WN in kernels/src/spec.rs).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct CoopTile {
-    across: u32,
-    rows: u32,
-    cols: u32,
-}
-
-impl CoopTile {
-    fn params(&self) -> [(&'static str, u32); 3] {
-        [("GN", self.across), ("WM", self.rows), ("WN", self.cols)]
-    }
-
-    /// Rows and columns of C a workgroup computes.
-    fn size(&self, f: &Fragment) -> (usize, usize) {
-        ((2 * self.rows * f.m) as usize, (self.across * self.cols * f.n) as usize)
-    }
-}
-
-/// The cooperative kernels' tile for a product: eight subgroups of 4×2 fragments where the
-/// context asks for them ([`crate::MatrixTile`]) and such a variant is built; else four of 4×4
-/// fragments (tiles of 8·FM × 8·FN) where such a variant is built, the product still makes 128
-/// such tiles, enough to keep a GPU's 100+ compute units busy, and the accumulators fit a GPU
-/// lane's registers (at most 64 f32 each: 16×16 fragments on 64-lane subgroups); else four of
-/// 2×2. At 32 lanes 4×4 fragments take 128 registers a lane for the sums alone, and NVIDIA's
-/// compiler then spilled (H200: 255 registers, the products 1.5× slower than 2×2). CPU devices
-/// (lavapipe's 8×8×8 kernels) have no register file to fill and take both sizes.
-fn cooperative_tile(ctx: &Context, s: &GemmShape, f: &Fragment, kernel: &str, params: &[(&str, u32)]) -> CoopTile {
-    let built = |tile: CoopTile| {
-        let want: Vec<(&str, u32)> =
-            f.params().into_iter().chain(tile.params()).chain(params.iter().copied()).collect();
-        vkdiff_kernels::find(kernel, Dtype::F16, &want).is_some()
-    };
-    let eight = CoopTile { across: 4, rows: 4, cols: 2 };
-    if ctx.matrix_tile().eight_subgroups() && built(eight) {
-        return eight;
-    }
-    let large = CoopTile { across: 2, rows: 4, cols: 4 };
-    let fills = s.m.div_ceil(8 * f.m as usize) * s.n.div_ceil(8 * f.n as usize) * s.batch >= 128;
-    let fits = 16 * f.m * f.n / f.lanes <= 64 || ctx.info().kind == DeviceKind::Cpu;
-    if fills && fits && built(large) {
-        large
-    } else {
-        CoopTile { across: 2, rows: 2, cols: 2 }
-    }
 }
 
 /// Rows per workgroup of the subgroup kernels: more rows load each B value fewer times (64 ran
@@ -454,6 +405,7 @@ pub fn linear(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>,
 mod tests {
     use super::*;
     use crate::device::tests::device;
+    use crate::device::DeviceKind;
 
     #[test]
     fn the_tiled_kernel_takes_its_tall_tiles_where_they_fill_and_fit() {

@@ -7,6 +7,7 @@ mod bands;
 mod ceiling;
 mod conv;
 mod conv_padded;
+mod coop_tile;
 mod elementwise;
 mod gemm;
 mod norm;
