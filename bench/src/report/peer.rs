@@ -26,11 +26,19 @@ pub struct PeerFile {
 /// Times vkdiff's text-to-image from one file (the user's `--model`, else SDXL's random weights
 /// written for the purpose) and returns the figure with the job that times sd.cpp on it.
 pub fn peer(ctx: &Context, plan: &Plan, user: Option<&Path>) -> Result<(Figure, Job)> {
+    let dir = std::env::temp_dir().join(format!("vkdiff-report-peer-{}", std::process::id()));
+    let made = write_and_time(ctx, plan, user, &dir);
+    if made.is_err() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    made
+}
+
+fn write_and_time(ctx: &Context, plan: &Plan, user: Option<&Path>, dir: &Path) -> Result<(Figure, Job)> {
     let (file, note) = match user {
         Some(model) => (PeerFile { written: None, model: model.to_path_buf() }, None),
         None => {
-            let dir = std::env::temp_dir().join(format!("vkdiff-report-peer-{}", std::process::id()));
-            std::fs::create_dir_all(&dir)?;
+            std::fs::create_dir_all(dir)?;
             let model = dir.join("sdxl-random.safetensors");
             eprintln!("report: SDXL's random weights in the original single-file layout, for stable-diffusion.cpp");
             let start = Instant::now();
@@ -40,7 +48,7 @@ pub fn peer(ctx: &Context, plan: &Plan, user: Option<&Path>) -> Result<(Figure, 
                 bytes as f64 / 1e9,
                 start.elapsed().as_secs_f64()
             );
-            (PeerFile { written: Some(dir), model }, Some(note))
+            (PeerFile { written: Some(dir.to_path_buf()), model }, Some(note))
         }
     };
     let model = file.model.clone();
