@@ -8,7 +8,7 @@ use crate::clip::{open_clip_names, ClipTextConfig, ClipTextModel, TextEncoderSlo
 use crate::error::Result;
 use crate::unet::{unet_names, UNet, UNetConfig};
 use crate::vae::{vae_names, AutoencoderKl, VaeConfig};
-use crate::weights::{Checkpoint, OriginalNames};
+use crate::weights::{transpose, Checkpoint, OriginalNames};
 use std::collections::BTreeMap;
 use std::path::Path;
 use vkdiff_runtime::{Context, Dtype};
@@ -116,7 +116,8 @@ fn add_part(
             stored_shape.extend([1, 1]);
         }
         let block = at.rows.map_or(0, |(part, _)| part);
-        match stored.iter_mut().find(|s| s.name == full).filter(|_| at.rows.is_some()) {
+        // Only a row block of a fused tensor joins one already stored.
+        match at.rows.and_then(|_| stored.iter_mut().find(|s| s.name == full)) {
             Some(fused) => {
                 fused.shape[0] += shape[0];
                 fused.parts.push((block, seed, name, shape));
@@ -142,8 +143,7 @@ fn values_of(s: &Stored) -> Vec<f32> {
     for (_, seed, name, shape) in &s.parts {
         let values = Checkpoint::random_values(*seed, name, shape);
         if s.transposed {
-            let (rows, cols) = (shape[0], shape[1]);
-            out.extend((0..rows * cols).map(|i| values[(i % rows) * cols + i / rows]));
+            out.extend(transpose(&values, shape[0], shape[1]));
         } else {
             out.extend(values);
         }

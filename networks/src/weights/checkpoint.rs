@@ -120,13 +120,17 @@ impl Checkpoint {
         self.placed.lock().unwrap().insert(name, Parameter { tensor, torch_shape: torch_shape.to_vec(), layout });
     }
 
-    /// Every tensor the network built from this checkpoint asked for, by diffusers name with its
-    /// PyTorch shape, each once, in the order first asked.
+    /// Every tensor the network built from this random checkpoint asked for, by diffusers name
+    /// with its PyTorch shape, each once, in the order first asked (empty for files).
     pub fn requests(&self) -> Vec<(String, Vec<usize>)> {
         self.requested.lock().unwrap().clone()
     }
 
     fn note_request(&self, name: &str, shape: &[usize]) {
+        // Only random checkpoints are asked (write_random_single_file): a file's loads skip it.
+        if !matches!(self.source, Source::Random { .. }) {
+            return;
+        }
         let mut requested = self.requested.lock().unwrap();
         if !requested.iter().any(|(n, _)| n == name) {
             requested.push((name.to_string(), shape.to_vec()));
@@ -411,7 +415,7 @@ fn shards(index_path: &Path) -> Result<Vec<SafeTensors>> {
 }
 
 /// The transpose of a row-major [rows, cols] matrix.
-fn transpose(values: &[f32], rows: usize, cols: usize) -> Vec<f32> {
+pub(crate) fn transpose(values: &[f32], rows: usize, cols: usize) -> Vec<f32> {
     (0..cols * rows).map(|i| values[(i % rows) * cols + i / rows]).collect()
 }
 

@@ -7,6 +7,7 @@ mod original_names;
 mod parameters;
 
 pub(crate) use checkpoint::component_folder;
+pub(crate) use checkpoint::transpose;
 pub use checkpoint::{Checkpoint, Weights};
 pub(crate) use config_file::read_config;
 pub use original_names::{Inner, OriginalNames, StoredAs};
