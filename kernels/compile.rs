@@ -78,11 +78,21 @@ fn fragment_shape(params: &[(&str, u32)]) -> Option<(u32, u32, u32)> {
     Some((get("FM")?, get("FN")?, get("FK")?))
 }
 
+/// The scope of a cooperative variant's matrices: Workgroup (2) where WS = 1
+/// (VK_NV_cooperative_matrix2's workgroup scope), else Subgroup (3), as naga writes them.
+fn fragment_scope(params: &[(&str, u32)]) -> u32 {
+    if params.contains(&("WS", 1)) {
+        2
+    } else {
+        3
+    }
+}
+
 /// Gives every `OpTypeCooperativeMatrixKHR` in `words` the shape its use takes in an
-/// M×N×K product: A (MatrixA) M×K, B (MatrixB) K×N, the accumulator M×N; and A and B f16
-/// components ([`prelude`]). The row and column counts are 32-bit unsigned constants; those
-/// missing are declared just before the type.
-fn shape_fragments(words: &[u32], (m, n, k): (u32, u32, u32)) -> Result<Vec<u32>, String> {
+/// M×N×K product: A (MatrixA) M×K, B (MatrixB) K×N, the accumulator M×N; A and B f16
+/// components ([`prelude`]); and `scope` (a SPIR-V Scope). The scope, row and column counts are
+/// 32-bit unsigned constants; those missing are declared just before the type.
+fn shape_fragments(words: &[u32], (m, n, k): (u32, u32, u32), scope: u32) -> Result<Vec<u32>, String> {
     const OP_TYPE_INT: u32 = 21;
     const OP_TYPE_FLOAT: u32 = 22;
     const OP_CONSTANT: u32 = 43;
@@ -121,8 +131,8 @@ fn shape_fragments(words: &[u32], (m, n, k): (u32, u32, u32)) -> Result<Vec<u32>
                     constants.push((v, id));
                     id
                 };
-                let (r, c) = (id_of(rows), id_of(cols));
-                out.extend([inst[0], inst[1], component, inst[3], r, c, inst[6]]);
+                let (s, r, c) = (id_of(scope), id_of(rows), id_of(cols));
+                out.extend([inst[0], inst[1], component, s, r, c, inst[6]]);
                 at += count;
                 continue;
             }
@@ -132,6 +142,29 @@ fn shape_fragments(words: &[u32], (m, n, k): (u32, u32, u32)) -> Result<Vec<u32>
         at += count;
     }
     out[3] = bound;
+    Ok(out)
+}
+
+/// `words` with `OpExtension "name"` declared after the capabilities, before the first
+/// instruction that must follow the extensions (an import or the memory model).
+fn with_extension(words: &[u32], name: &str) -> Result<Vec<u32>, String> {
+    const OP_EXTENSION: u32 = 10;
+    const FOLLOWERS: [u32; 2] = [11, 14]; // OpExtInstImport, OpMemoryModel
+    let mut at = 5;
+    while at < words.len() && !FOLLOWERS.contains(&(words[at] & 0xffff)) {
+        at += (words[at] >> 16).max(1) as usize;
+    }
+    if at >= words.len() {
+        return Err("no memory model to declare an extension before".into());
+    }
+    // A literal string: its UTF-8 bytes and a NUL, in little-endian words.
+    let mut bytes = name.as_bytes().to_vec();
+    bytes.resize((bytes.len() / 4 + 1) * 4, 0);
+    let literal = bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]));
+    let mut out = words[..at].to_vec();
+    out.push(((1 + bytes.len() as u32 / 4) << 16) | OP_EXTENSION);
+    out.extend(literal);
+    out.extend_from_slice(&words[at..]);
     Ok(out)
 }
 
@@ -281,7 +314,14 @@ fn compile(
     let words =
         spv::write_vec(&module, &info, &options, Some(&pipeline)).map_err(|e| format!("{what}: SPIR-V output: {e}"))?;
     match fragment_shape(params).filter(|_| cooperative) {
-        Some(shape) => shape_fragments(&words, shape).map_err(|e| format!("{what}: fragment shapes: {e}")),
+        Some(shape) => {
+            let scope = fragment_scope(params);
+            let words = shape_fragments(&words, shape, scope).map_err(|e| format!("{what}: fragment shapes: {e}"))?;
+            match scope {
+                2 => with_extension(&words, "SPV_NV_cooperative_matrix2").map_err(|e| format!("{what}: {e}")),
+                _ => Ok(words),
+            }
+        }
         None if cooperative => Err(format!("{what}: a cooperative kernel needs the parameters FM, FN and FK")),
         None => Ok(words),
     }

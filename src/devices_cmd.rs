@@ -156,7 +156,12 @@ fn matrix2_features(d: &DeviceInfo) -> String {
     let missing: Vec<&str> =
         COOPERATIVE_MATRIX2_FEATURES.iter().copied().filter(|f| !d.cooperative_matrix2.contains(f)).collect();
     let missing = if missing.is_empty() { String::new() } else { format!(" (not {})", missing.join(", ")) };
-    format!("; VK_NV_cooperative_matrix2 features: {}{missing}", d.cooperative_matrix2.join(", "))
+    let tiles: Vec<String> = d.matrix2_tiles().iter().map(|t| t.label()).collect();
+    let probe = match tiles.is_empty() {
+        true => String::new(),
+        false => format!("; its probe (bench kernels) runs {}", tiles.join(", ")),
+    };
+    format!("; VK_NV_cooperative_matrix2 features: {}{missing}{probe}", d.cooperative_matrix2.join(", "))
 }
 
 pub fn run(args: &DevicesArgs) -> Result<()> {
@@ -189,6 +194,7 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
                     "subgroup_size_range": d.subgroup_size_range,
                     "cooperative_matrix_shapes": d.matrix_shapes.iter().map(|s| s.label()).collect::<Vec<_>>(),
                     "cooperative_matrix2_features": d.cooperative_matrix2,
+                    "cooperative_matrix2_probe_tiles": d.matrix2_tiles().iter().map(|t| t.label()).collect::<Vec<_>>(),
                     "cooperative_variant": d.cooperative_variant().map(|f| serde_json::json!({
                         "m": f.m, "n": f.n, "k": f.k, "lanes": f.lanes, "flexible_dimensions": f.flexible })), "device_memory_bytes": d.device_local_bytes,
                     "max_storage_buffer_range": d.max_storage_buffer_range, "usable": d.unsupported_reason().is_none(),

@@ -7,6 +7,8 @@ use std::time::{Duration, Instant};
 use vkdiff_runtime::ops::{self, AttentionLayout, ConvParams, Matmul, MatrixCeiling, UnaryOp};
 use vkdiff_runtime::{eight_subgroups_built, Context, DeviceKind, Dtype, GemmFamily, MatrixTile, Recorder, Tensor};
 
+mod matrix2;
+
 #[derive(clap::Args)]
 pub struct KernelsArgs {
     #[command(flatten)]
@@ -240,18 +242,21 @@ pub(crate) fn headline(ctx: &Context, dtype: Dtype, runs: usize) -> Result<Vec<H
     Ok(out)
 }
 
+/// The linear rows: a 64×64 level's projection, then the UNet's own products at 1024² with
+/// guidance (two latents): the 32×32 level's attention projections and feed-forward output, and
+/// the 64×64 level's projections.
+const LINEAR_ROWS: [(usize, usize, usize); 4] =
+    [(4096, 640, 640), (2 * 1024, 1280, 1280), (2 * 1024, 1280, 5120), (2 * 4096, 640, 640)];
+
 fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
     let bytes = |n: usize| (n * vkdiff_runtime::dtype_size(dtype)) as f64;
     let (hw, c) = (64 * 64, 640);
-    Ok(vec![
-        gemm_case(ctx, dtype, 1024, 1024, 1024, false)?,
-        gemm_case(ctx, dtype, 4096, 640, 640, false)?,
-        gemm_case(ctx, dtype, 4096, 640, 640, true)?,
-        // The UNet's own products at 1024² with guidance (two latents): the 32×32 level's
-        // attention projections and feed-forward output, and the 64×64 level's projections.
-        gemm_case(ctx, dtype, 2 * 1024, 1280, 1280, true)?,
-        gemm_case(ctx, dtype, 2 * 1024, 1280, 5120, true)?,
-        gemm_case(ctx, dtype, 2 * 4096, 640, 640, true)?,
+    let mut cases =
+        vec![gemm_case(ctx, dtype, 1024, 1024, 1024, false)?, gemm_case(ctx, dtype, 4096, 640, 640, false)?];
+    for &(m, n, k) in &LINEAR_ROWS {
+        cases.push(gemm_case(ctx, dtype, m, n, k, true)?);
+    }
+    cases.extend([
         conv3x3_case(ctx, dtype)?,
         self_attention_case(ctx, dtype, 10, 64, 6)?,
         // The VAE decoder's mid-block at 512² (a 64×64 latent): one head of all 512 channels.
@@ -348,10 +353,12 @@ fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<Case>> {
         },
         linear_geglu_case(ctx, dtype, true)?,
         linear_geglu_case(ctx, dtype, false)?,
-    ]
-    .into_iter()
-    .chain(if dtype == Dtype::F16 { ceiling_cases(ctx)? } else { Vec::new() })
-    .collect())
+    ]);
+    if dtype == Dtype::F16 {
+        cases.extend(ceiling_cases(ctx)?);
+        cases.extend(matrix2::cases(ctx, &LINEAR_ROWS)?);
+    }
+    Ok(cases)
 }
 
 /// Best time of one case per repetition (see `time_case_runs`).

@@ -141,6 +141,41 @@ mod compile_tests {
         assert!(err.contains("needs the parameters FM, FN and FK"), "{err}");
     }
 
+    /// The scopes of the cooperative matrix types in `words`, and its extensions' names.
+    fn scopes_and_extensions(words: &[u32]) -> (Vec<u32>, Vec<String>) {
+        let (mut constants, mut scopes, mut extensions) = (Vec::new(), Vec::new(), Vec::new());
+        for inst in instructions(words) {
+            match inst[0] & 0xffff {
+                10 => {
+                    let bytes: Vec<u8> =
+                        inst[1..].iter().flat_map(|w| w.to_le_bytes()).take_while(|&b| b != 0).collect();
+                    extensions.push(String::from_utf8(bytes).unwrap());
+                }
+                43 => constants.push((inst[2], inst[3])),
+                4456 => scopes.push(constants.iter().find(|(c, _)| *c == inst[3]).map(|(_, v)| *v).unwrap()),
+                _ => {}
+            }
+        }
+        (scopes, extensions)
+    }
+
+    #[test]
+    fn workgroup_scope_variants_declare_cooperative_matrix2() {
+        let body = "@group(0) @binding(0) var<storage, read_write> w: array<f32>;\n@compute @workgroup_size(SG)\n\
+            fn main() {\n    let a = coopLoadT<FA>(&w[0], 4u);\n    let b = coopLoad<FB>(&w[0], 4u);\n    var c: FC;\n    \
+            c = coopMultiplyAdd(a, b, c);\n    coopStoreT(c, &w[0], 4u);\n}\n";
+        let cm2 = "SPV_NV_cooperative_matrix2".to_string();
+        for (ws, scope) in [(0, 3), (1, 2)] {
+            let params = [("FM", 32), ("FN", 32), ("FK", 16), ("SG", 8), ("WS", ws)];
+            let src = Source::new(&prelude(true, &params, true), &[("k.wgsl".into(), body.into())]);
+            let words = compile(src, &params, (true, Target::Gpu), "kernel `t`").unwrap();
+            let (scopes, extensions) = scopes_and_extensions(&words);
+            assert_eq!(scopes, [scope; 3], "WS = {ws}: every matrix of scope {scope}");
+            assert_eq!(extensions.contains(&cm2), ws == 1, "WS = {ws}: {extensions:?}");
+            assert!(extensions.contains(&"SPV_KHR_cooperative_matrix".to_string()), "{extensions:?}");
+        }
+    }
+
     /// Whether `words` hold a composite of 32-bit all-ones constants: naga's loop-bounding
     /// counter starts at vec2(u32::MAX), and nothing in a kernel builds one.
     fn has_loop_counter(words: &[u32]) -> bool {

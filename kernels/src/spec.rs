@@ -363,6 +363,20 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
             &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("GN", 4), ("WM", 4), ("WN", 2), ("BT", 1), ("GE", 0), ("KS", 2), ("UW", 8)],
         ],
     },
+    // VK_NV_cooperative_matrix2's probe of the linear rows, for `bench kernels`: one FM×FN
+    // accumulator a workgroup of WG invocations, of workgroup scope (WS = 1, NVIDIA's drivers:
+    // ggml's 128×128 and 256×128 tiles at 256 invocations, K-steps of 32) or of subgroup scope
+    // through flexible dimensions (WS = 0: Mesa 26.1's lavapipe at 8 and 16 lanes, for CI).
+    KernelSpec {
+        name: "gemm_cm2",
+        files: &["gemm_cm2.wgsl"],
+        params: &[
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 8), ("WS", 0), ("WG", 8)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 16), ("WS", 0), ("WG", 16)],
+            &[("FM", 128), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256)],
+            &[("FM", 256), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256)],
+        ],
+    },
     // The matrix units' rate with no device memory in the loop, for `bench kernels`: SRC = 0
     // operands in registers, 1 loaded from workgroup memory before each multiply-add.
     KernelSpec {

@@ -221,7 +221,8 @@ impl Context {
             .shader_float16(info.shader_f16)
             .vulkan_memory_model(info.cooperative_features);
         let mut cooperative = vk::PhysicalDeviceCooperativeMatrixFeaturesKHR::default().cooperative_matrix(true);
-        let mut flexible = CooperativeMatrix2Features::new(true);
+        let matrix2_tiles = info.matrix2_tiles();
+        let mut matrix2 = CooperativeMatrix2Features::new(true, matrix2_tiles.iter().any(|t| t.workgroup_scope()));
         let size_control = info.subgroup_size_range.is_some();
         let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
             .subgroup_size_control(size_control)
@@ -256,9 +257,9 @@ impl Context {
             extensions.push(ash::khr::cooperative_matrix::NAME.as_ptr());
             create = create.push_next(&mut cooperative);
         }
-        if info.cooperative_variant().is_some_and(|f| f.flexible) {
+        if info.cooperative_variant().is_some_and(|f| f.flexible) || !matrix2_tiles.is_empty() {
             extensions.push(CooperativeMatrix2Features::EXTENSION.as_ptr());
-            create = create.push_next(&mut flexible);
+            create = create.push_next(&mut matrix2);
         }
         if info.memory_budget {
             extensions.push(ash::ext::memory_budget::NAME.as_ptr());

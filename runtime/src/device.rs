@@ -3,6 +3,7 @@
 use crate::device_choice::PciAddress;
 use crate::error::{Error, Result, VkContext};
 use crate::flexible_dimensions::{self, CooperativeMatrix2Features};
+use crate::matrix2_tile::{self, Matrix2Tile};
 use crate::matrix_units::{self, Fragment, MatrixShape};
 use ash::vk;
 use std::ffi::CStr;
@@ -163,6 +164,11 @@ impl DeviceInfo {
         matrix_units::pick(&self.matrix_shapes, &self.flexible_shapes, pinnable, self.fragment_request)
     }
 
+    /// The tiles of `VK_NV_cooperative_matrix2`'s probe (`ops::linear_cm2`) this device runs.
+    pub fn matrix2_tiles(&self) -> Vec<Matrix2Tile> {
+        matrix2_tile::offered(self)
+    }
+
     /// Whether a kernel written for a subgroup of exactly `size` lanes can be pinned to it.
     pub fn can_use_subgroup(&self, size: u32) -> bool {
         match self.subgroup_size_range {
@@ -259,7 +265,7 @@ pub(crate) fn describe(
     let mut size_control_features = vk::PhysicalDeviceSubgroupSizeControlFeatures::default();
     let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default();
     let mut cooperative = vk::PhysicalDeviceCooperativeMatrixFeaturesKHR::default();
-    let mut cooperative2 = CooperativeMatrix2Features::new(false);
+    let mut cooperative2 = CooperativeMatrix2Features::new(false, false);
     let mut feats2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f11).push_next(&mut f12);
     if core13 {
         feats2 = feats2.push_next(&mut f13);

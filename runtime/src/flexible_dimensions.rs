@@ -7,7 +7,8 @@ use ash::vk;
 
 /// `VkPhysicalDeviceCooperativeMatrix2FeaturesNV` (`VK_NV_cooperative_matrix2`, newer than
 /// ash's headers): its seven features in the header's order ([`FEATURE_NAMES`]); vkdiff enables
-/// only `cooperativeMatrixFlexibleDimensions`.
+/// `cooperativeMatrixFlexibleDimensions` and, for its probe (`ops::linear_cm2`),
+/// `cooperativeMatrixWorkgroupScope`.
 #[repr(C)]
 pub(crate) struct CooperativeMatrix2Features {
     s_type: vk::StructureType,
@@ -25,6 +26,7 @@ pub const FEATURE_NAMES: [&str; 7] = [
     "tensor addressing",
     "block loads",
 ];
+const WORKGROUP_SCOPE: usize = 0;
 const FLEXIBLE_DIMENSIONS: usize = 1;
 
 // SAFETY: the struct is laid out as the Vulkan one, which extends both chains.
@@ -34,10 +36,11 @@ unsafe impl vk::ExtendsDeviceCreateInfo for CooperativeMatrix2Features {}
 impl CooperativeMatrix2Features {
     pub(crate) const EXTENSION: &'static std::ffi::CStr = c"VK_NV_cooperative_matrix2";
 
-    /// Every feature off, or (`flexible_dimensions`) that one on.
-    pub(crate) fn new(flexible_dimensions: bool) -> Self {
+    /// Every feature off but flexible dimensions and workgroup scope, as asked.
+    pub(crate) fn new(flexible_dimensions: bool, workgroup_scope: bool) -> Self {
         let mut features = [vk::FALSE; 7];
         features[FLEXIBLE_DIMENSIONS] = flexible_dimensions.into();
+        features[WORKGROUP_SCOPE] = workgroup_scope.into();
         CooperativeMatrix2Features {
             s_type: vk::StructureType::from_raw(1_000_593_000),
             p_next: std::ptr::null_mut(),
@@ -113,6 +116,7 @@ pub(crate) fn query(entry: &ash::Entry, instance: &ash::Instance, pd: vk::Physic
             k: f.k_granularity,
             types: f.types.map(component),
             subgroup_scope: f.scope == vk::ScopeKHR::SUBGROUP,
+            workgroup_invocations: if f.scope == vk::ScopeKHR::WORKGROUP { f.workgroup_invocations } else { 0 },
         })
         .collect()
 }
@@ -123,12 +127,13 @@ mod tests {
 
     #[test]
     fn reported_features_are_named_in_the_headers_order() {
-        let mut f = CooperativeMatrix2Features::new(true);
+        let mut f = CooperativeMatrix2Features::new(true, false);
         assert!(f.flexible_dimensions());
         assert_eq!(f.reported(), ["flexible dimensions"]);
+        assert_eq!(CooperativeMatrix2Features::new(true, true).reported(), ["workgroup scope", "flexible dimensions"]);
         f.features = [vk::TRUE, vk::FALSE, vk::FALSE, vk::FALSE, vk::FALSE, vk::TRUE, vk::TRUE];
         assert!(!f.flexible_dimensions());
         assert_eq!(f.reported(), ["workgroup scope", "tensor addressing", "block loads"]);
-        assert!(CooperativeMatrix2Features::new(false).reported().is_empty());
+        assert!(CooperativeMatrix2Features::new(false, false).reported().is_empty());
     }
 }

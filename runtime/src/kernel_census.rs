@@ -38,17 +38,22 @@ impl CompiledKernel {
 /// particular subgroup width (element-wise, norms, the tiled GEMMs and attention kernels), in
 /// f16 only where the device runs f16; then on CPU devices (lavapipe, without
 /// `VKDIFF_GPU_PATHS`) the subgroup-register variants of its width, and on GPUs the matrix-unit
-/// variants of the fragment and width it takes.
+/// variants of the fragment and width it takes; and the `VK_NV_cooperative_matrix2` probe's
+/// tiles the device runs (`bench kernels` takes them).
 pub fn selectable_variants(info: &DeviceInfo, gpu_paths: bool) -> Vec<&'static Variant> {
     let fragment = match info.gemm_family(gpu_paths) {
         GemmFamily::Cooperative => info.cooperative_variant(),
         _ => None,
     };
     let subgroup_width = (!gpu_paths && info.kind == DeviceKind::Cpu).then_some(info.subgroup_size);
+    let matrix2_tiles = info.matrix2_tiles();
     VARIANTS
         .iter()
         .filter(|v| v.dtype == Dtype::F32 || info.supports_f16())
         .filter(|v| match (v.param("SG"), v.param("FM")) {
+            _ if v.kernel == "gemm_cm2" => {
+                matrix2_tiles.iter().any(|t| t.params().iter().all(|(n, x)| v.param(n) == Some(*x)))
+            }
             (None, _) => true,
             (Some(_), Some(_)) => fragment.is_some_and(|f| f.params().iter().all(|(n, x)| v.param(n) == Some(*x))),
             (Some(sg), None) => subgroup_width == Some(sg),
@@ -115,7 +120,14 @@ mod tests {
 
     #[test]
     fn a_gpu_with_matrix_units_takes_its_fragment_at_its_width() {
-        let shape = MatrixShape { m: 16, n: 16, k: 16, types: ["f16", "f16", "f32", "f32"], subgroup_scope: true };
+        let shape = MatrixShape {
+            m: 16,
+            n: 16,
+            k: 16,
+            types: ["f16", "f16", "f32", "f32"],
+            subgroup_scope: true,
+            workgroup_invocations: 0,
+        };
         let info = DeviceInfo {
             matrix_shapes: vec![shape],
             cooperative_features: true,
@@ -130,5 +142,18 @@ mod tests {
             assert!(coop.iter().any(|n| n.starts_with(kernel)), "{kernel}");
         }
         assert!(!picked.iter().any(|n| n.starts_with("gemm_sg")));
+        assert!(!picked.iter().any(|n| n.starts_with("gemm_cm2")), "no VK_NV_cooperative_matrix2 offered");
+        // A driver of workgroup scope at 256 invocations adds the probe's tiles, nothing else.
+        let granularity =
+            MatrixShape { subgroup_scope: false, workgroup_invocations: 256, ..info.matrix_shapes[0].clone() };
+        let cm2 = DeviceInfo {
+            flexible_shapes: vec![granularity],
+            cooperative_matrix2: vec!["workgroup scope", "flexible dimensions"],
+            ..info
+        };
+        let with_probe = names(&selectable_variants(&cm2, false));
+        let probe: Vec<&String> = with_probe.iter().filter(|n| n.starts_with("gemm_cm2")).collect();
+        assert!(!probe.is_empty() && probe.iter().all(|n| n.contains(" WS=1 WG=256")), "{probe:?}");
+        assert_eq!(with_probe.len(), picked.len() + probe.len());
     }
 }

@@ -12,15 +12,35 @@ pub struct MatrixShape {
     pub k: u32,
     /// Component types of A, B, C and the result ("f16", "f32", "i8", …).
     pub types: [&'static str; 4],
-    /// Whether a subgroup computes it together (the only scope the kernels use).
+    /// Whether a subgroup computes it together (the only scope the kernels but the
+    /// `VK_NV_cooperative_matrix2` probe use).
     pub subgroup_scope: bool,
+    /// At workgroup scope, the workgroup size it is offered for (flexible dimensions); else 0.
+    pub workgroup_invocations: u32,
 }
 
 impl MatrixShape {
     pub fn label(&self) -> String {
         let [a, b, c, r] = self.types;
-        let scope = if self.subgroup_scope { "" } else { " (not subgroup scope)" };
+        let scope = match (self.subgroup_scope, self.workgroup_invocations) {
+            (true, _) => String::new(),
+            (false, 0) => " (not subgroup scope)".into(),
+            (false, n) => format!(" (workgroup scope, {n} invocations)"),
+        };
         format!("{}×{}×{} {a}·{b}+{c}→{r}{scope}", self.m, self.n, self.k)
+    }
+
+    /// As flexible-dimension granularities of workgroup scope: whether an M×N×K f16·f16+f32
+    /// product on `invocations` is a multiple of them.
+    pub(crate) fn divides_for_workgroup(&self, (m, n, k): (u32, u32, u32), invocations: u32) -> bool {
+        let multiple = |x: u32, g: u32| g > 0 && x.is_multiple_of(g);
+        let types = self.types == ["f16", "f16", "f32", "f32"];
+        types
+            && !self.subgroup_scope
+            && self.workgroup_invocations == invocations
+            && multiple(m, self.m)
+            && multiple(n, self.n)
+            && multiple(k, self.k)
     }
 
     /// M×N×K with f16 operands and f32 accumulation at subgroup scope: what the kernels compute.
@@ -30,7 +50,7 @@ impl MatrixShape {
 
     /// As flexible-dimension granularities: whether M×N×K f16·f16+f32 at subgroup scope is a
     /// multiple of them.
-    fn divides(&self, m: u32, n: u32, k: u32) -> bool {
+    pub(crate) fn divides(&self, m: u32, n: u32, k: u32) -> bool {
         let multiple = |x: u32, g: u32| g > 0 && x.is_multiple_of(g);
         multiple(m, self.m) && multiple(n, self.n) && multiple(k, self.k) && self.computes_f16_f32()
     }
@@ -75,6 +95,7 @@ pub(crate) fn query(entry: &ash::Entry, instance: &ash::Instance, pd: vk::Physic
             k: p.k_size,
             types: [p.a_type, p.b_type, p.c_type, p.result_type].map(component),
             subgroup_scope: p.scope == vk::ScopeKHR::SUBGROUP,
+            workgroup_invocations: 0,
         })
         .collect()
 }
@@ -174,7 +195,7 @@ mod tests {
     use super::*;
 
     fn shape(m: u32, n: u32, k: u32, c: &'static str) -> MatrixShape {
-        MatrixShape { m, n, k, types: ["f16", "f16", c, c], subgroup_scope: true }
+        MatrixShape { m, n, k, types: ["f16", "f16", c, c], subgroup_scope: true, workgroup_invocations: 0 }
     }
 
     fn fits(m: u32, n: u32, k: u32, lanes: u32, flexible: bool) -> Option<Fragment> {

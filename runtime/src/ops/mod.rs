@@ -10,6 +10,7 @@ mod conv_padded;
 mod coop_tile;
 mod elementwise;
 mod gemm;
+mod linear_cm2;
 mod norm;
 mod pool;
 
@@ -21,6 +22,7 @@ pub use elementwise::{
     BinaryOp, TimestepEmbedding, UnaryOp,
 };
 pub use gemm::{linear, linear_geglu, matmul, Matmul, GEGLU_COLUMNS};
+pub use linear_cm2::linear_cm2;
 pub use norm::{group_norm, layer_norm, softmax};
 pub use pool::{pool2d, resize_tf1, upload_image_bytes, Pool, PoolOp};
 

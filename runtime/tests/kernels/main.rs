@@ -7,6 +7,7 @@ mod ceiling;
 mod conv;
 mod elementwise;
 mod gemm;
+mod linear_cm2;
 mod matrix_unit_trial;
 mod norm;
 mod pool;
