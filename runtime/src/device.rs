@@ -191,7 +191,10 @@ pub fn api_limit() -> Result<(u32, u32)> {
 /// vkdiff's instance for Vulkan up to `api` (major, minor), validated under `VKDIFF_VALIDATE=1`.
 /// Where the loader offers `VK_KHR_portability_enumeration`, portability devices (MoltenVK) are
 /// listed too.
-pub(crate) fn create_instance(entry: &ash::Entry, api: (u32, u32)) -> Result<ash::Instance> {
+pub(crate) fn create_instance(
+    entry: &ash::Entry,
+    api: (u32, u32),
+) -> Result<(ash::Instance, Option<vk::DebugUtilsMessengerEXT>)> {
     let app = vk::ApplicationInfo::default()
         .application_name(c"vkdiff")
         .engine_name(c"vkdiff")

@@ -36,6 +36,7 @@ pub use device_choice::{choose, loader_icds, DeviceChoice, DeviceSpec, PciAddres
 pub use error::{Error, Result};
 pub use flexible_dimensions::FEATURE_NAMES as COOPERATIVE_MATRIX2_FEATURES;
 pub use host_stats::HostStats;
+pub use instance::release_idle_instances;
 pub use kernel_census::{selectable_variants, CompiledKernel};
 pub use listing::listing_variants;
 pub use matrix2_tile::{built as built_matrix2_tiles, Matrix2Tile};

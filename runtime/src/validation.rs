@@ -13,17 +13,18 @@ pub(crate) fn requested() -> bool {
     std::env::var("VKDIFF_VALIDATE").is_ok_and(|v| v == "1")
 }
 
-/// Creates the instance `info` describes with `extensions`, validated when asked for (its
-/// debug messenger then lives as long as the instance: the process, see [`crate::instance`]).
+/// Creates the instance `info` describes with `extensions`, validated when asked for, with the
+/// debug messenger that prints the layer's messages (destroyed with the instance,
+/// [`crate::instance`]).
 pub(crate) fn create_instance(
     entry: &ash::Entry,
     info: vk::InstanceCreateInfo,
     mut extensions: Vec<*const c_char>,
-) -> Result<ash::Instance> {
+) -> Result<(ash::Instance, Option<vk::DebugUtilsMessengerEXT>)> {
     if !requested() {
         let info = info.enabled_extension_names(&extensions);
         // SAFETY: the create info and everything it points to outlive the call.
-        return unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance");
+        return Ok((unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance")?, None));
     }
     // SAFETY: a plain query of the loader.
     let layers = unsafe { entry.enumerate_instance_layer_properties() }.vk("vkEnumerateInstanceLayerProperties")?;
@@ -44,7 +45,7 @@ pub(crate) fn create_instance(
         .pfn_user_callback(Some(on_message));
     // SAFETY: the instance was created with the debug-utils extension.
     match unsafe { loader.create_debug_utils_messenger(&create, None) } {
-        Ok(_messenger) => Ok(instance),
+        Ok(messenger) => Ok((instance, Some(messenger))),
         Err(e) => {
             // SAFETY: nothing else was created from the instance.
             unsafe { instance.destroy_instance(None) };
