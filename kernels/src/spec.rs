@@ -365,8 +365,9 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
     },
     // VK_NV_cooperative_matrix2's probe of the linear rows, for `bench kernels`: one FM×FN
     // accumulator a workgroup of WG invocations, of workgroup scope (WS = 1, NVIDIA's drivers:
-    // ggml's 128×128 and 256×128 tiles at 256 invocations, K-steps of 32) or of subgroup scope
-    // through flexible dimensions (WS = 0: Mesa 26.1's lavapipe at 8 and 16 lanes, for CI).
+    // ggml's 128×128 and 256×128 tiles at 256 invocations, and 128×64 at 128, whichever sizes
+    // the driver offers that scope for; K-steps of 32) or of subgroup scope through flexible
+    // dimensions (WS = 0: Mesa 26.1's lavapipe at 8 and 16 lanes, for CI).
     KernelSpec {
         name: "gemm_cm2",
         files: &["gemm_cm2.wgsl"],
@@ -375,6 +376,7 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
             &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 16), ("WS", 0), ("WG", 16)],
             &[("FM", 128), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256)],
             &[("FM", 256), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256)],
+            &[("FM", 128), ("FN", 64), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 128)],
         ],
     },
     // The matrix units' rate with no device memory in the loop, for `bench kernels`: SRC = 0

@@ -98,11 +98,15 @@ mod tests {
         let tiles = offered(&nvidia);
         assert!(tiles.iter().any(|t| (t.m, t.n, t.k) == (128, 128, 32)), "{tiles:?}");
         assert!(tiles.iter().all(|t| t.workgroup_scope() && t.invocations == 256), "{tiles:?}");
-        // The scope unreported, another workgroup size, or no matrix units: none.
+        // At 128 invocations, the tile built for them.
+        nvidia.flexible_shapes = vec![granularity(16, false, 128)];
+        let tiles = offered(&nvidia);
+        assert!(!tiles.is_empty() && tiles.iter().all(|t| t.invocations == 128), "{tiles:?}");
+        // The scope unreported, a workgroup size no tile is built for, or no matrix units: none.
         nvidia.cooperative_matrix2 = vec!["flexible dimensions"];
         assert!(offered(&nvidia).is_empty());
         nvidia.cooperative_matrix2 = vec!["workgroup scope", "flexible dimensions"];
-        nvidia.flexible_shapes = vec![granularity(16, false, 128)];
+        nvidia.flexible_shapes = vec![granularity(16, false, 512)];
         assert!(offered(&nvidia).is_empty());
         lavapipe.cooperative_features = false;
         assert!(offered(&lavapipe).is_empty());
