@@ -12,8 +12,7 @@ fn record_tile<const I: usize>(rec: &mut Recorder, t: &[Tensor]) -> vkdiff_runti
 }
 
 /// One recorder per built tile, in `built_matrix2_tiles`' order.
-const RECORDERS: [Record; 5] =
-    [record_tile::<0>, record_tile::<1>, record_tile::<2>, record_tile::<3>, record_tile::<4>];
+const RECORDERS: [Record; 4] = [record_tile::<0>, record_tile::<1>, record_tile::<2>, record_tile::<3>];
 
 /// The probe's rows: each of `shapes` (M, N, K) on each tile the device runs that divides it.
 pub(super) fn cases(ctx: &Context, shapes: &[(usize, usize, usize)]) -> vkdiff_runtime::Result<Vec<Case>> {
