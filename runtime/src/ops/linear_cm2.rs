@@ -36,7 +36,7 @@ pub fn linear_cm2(rec: &mut Recorder, a: &Tensor, w: &Tensor, out: &Tensor, tile
     let fits = m > 0 && m % tile.m as usize == 0 && n % tile.n as usize == 0 && k > 0 && k % tile.k as usize == 0;
     ensure(fits, || format!("linear_cm2: {m}×{n}×{k} is not a multiple of the tile {}", tile.label()))?;
     rec.count_flops(2.0 * (m * n * k) as f64);
-    let k_ = kernel(&ctx, "gemm_cm2", Dtype::F16, &tile.params(), 3)?;
+    let probe = kernel(&ctx, "gemm_cm2", Dtype::F16, &tile.params(), 3)?;
     let groups = [u(n / tile.n as usize), u(m / tile.m as usize), 1];
-    rec.dispatch(&k_, &[a, w], &[out], &[u(m), u(n), u(k)], groups)
+    rec.dispatch(&probe, &[a, w], &[out], &[u(m), u(n), u(k)], groups)
 }
