@@ -59,12 +59,15 @@ pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String>
 
 /// Runs `script` with `$VKDIFF_REFERENCE_PYTHON` (else python3), `args` and, if given, `input` on
 /// its standard input; its standard output, or why it could not run (the last line of its errors).
+/// The Vulkan instances no context holds are destroyed first: a CPU driver may keep the device's
+/// memory until then, which a CPU reference needs (`vkdiff_runtime::release_idle_instances`).
 fn run_script<S: AsRef<std::ffi::OsStr>>(
     script: &str,
     args: impl IntoIterator<Item = S>,
     input: Option<&str>,
     timeout: Option<std::time::Duration>,
 ) -> Result<String, String> {
+    vkdiff_runtime::release_idle_instances();
     let (python, mut command) = reference_python();
     command.arg("-c").arg(script).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
     let mut child = command.spawn().map_err(|e| format!("{python} not runnable ({e})"))?;

@@ -36,8 +36,9 @@ impl Drop for Instance {
 /// Destroys the instances no context holds, so that a driver which keeps device memory until
 /// its instance goes gives it back: Mesa 26.1's lavapipe keeps all it ever allocated (one
 /// memfd, 13.5 GB after `bench report`'s image) until then, and the diffusers references the
-/// report runs next were killed for want of it. The next context makes a new instance. For the
-/// end of a process's Vulkan work (NVIDIA's driver failed after 30 such cycles, above).
+/// report runs next were killed for want of it (`bench` calls this before each CPU reference).
+/// The next context makes a new instance. For the end of a stretch of Vulkan work, not between
+/// contexts (NVIDIA's driver failed after 30 such cycles, above).
 pub fn release_idle_instances() {
     let mut open = OPEN.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
     open.retain(|instance| Arc::strong_count(instance) > 1);

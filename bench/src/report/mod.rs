@@ -212,8 +212,6 @@ pub fn run(args: &ReportArgs) -> Result<()> {
         }
     }
     drop(ctx);
-    // The references need the host memory a CPU driver may keep for the device until then.
-    vkdiff_runtime::release_idle_instances();
     let models = match &user {
         Some(u) => format!("{}", u.model.display()),
         None => "random weights of SDXL base, its depth ControlNet, a ViT-H IP-Adapter and two rank-32 LoRAs".into(),
