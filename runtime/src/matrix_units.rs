@@ -33,14 +33,8 @@ impl MatrixShape {
     /// As flexible-dimension granularities of workgroup scope: whether an M×N×K f16·f16+f32
     /// product on `invocations` is a multiple of them.
     pub(crate) fn divides_for_workgroup(&self, (m, n, k): (u32, u32, u32), invocations: u32) -> bool {
-        let multiple = |x: u32, g: u32| g > 0 && x.is_multiple_of(g);
-        let types = self.types == ["f16", "f16", "f32", "f32"];
-        types
-            && !self.subgroup_scope
-            && self.workgroup_invocations == invocations
-            && multiple(m, self.m)
-            && multiple(n, self.n)
-            && multiple(k, self.k)
+        let workgroup = !self.subgroup_scope && self.workgroup_invocations == invocations;
+        workgroup && self.has_f16_f32_types() && self.granularities_divide(m, n, k)
     }
 
     /// M×N×K with f16 operands and f32 accumulation at subgroup scope: what the kernels compute.
@@ -51,12 +45,21 @@ impl MatrixShape {
     /// As flexible-dimension granularities: whether M×N×K f16·f16+f32 at subgroup scope is a
     /// multiple of them.
     pub(crate) fn divides(&self, m: u32, n: u32, k: u32) -> bool {
+        self.granularities_divide(m, n, k) && self.computes_f16_f32()
+    }
+
+    /// Whether M, N and K are multiples of this shape's sides, read as granularities.
+    fn granularities_divide(&self, m: u32, n: u32, k: u32) -> bool {
         let multiple = |x: u32, g: u32| g > 0 && x.is_multiple_of(g);
-        multiple(m, self.m) && multiple(n, self.n) && multiple(k, self.k) && self.computes_f16_f32()
+        multiple(m, self.m) && multiple(n, self.n) && multiple(k, self.k)
+    }
+
+    fn has_f16_f32_types(&self) -> bool {
+        self.types == ["f16", "f16", "f32", "f32"]
     }
 
     fn computes_f16_f32(&self) -> bool {
-        self.types == ["f16", "f16", "f32", "f32"] && self.subgroup_scope
+        self.has_f16_f32_types() && self.subgroup_scope
     }
 }
 
