@@ -28,6 +28,7 @@ fn read_files(spec: &KernelSpec) -> Vec<(String, String)> {
 fn main() {
     println!("cargo::rerun-if-changed=src/spec.rs");
     println!("cargo::rerun-if-changed=compile.rs");
+    println!("cargo::rerun-if-changed=spirv_rewrite.rs");
     println!("cargo::rerun-if-changed=wgsl");
     let out = env::var("OUT_DIR").unwrap();
     let mut table = String::from("pub static VARIANTS: &[Variant] = &[\n");

@@ -2,6 +2,8 @@
 // naga parsing, validation and SPIR-V output, with errors mapped back to `file:line`.
 // Included by build.rs (which compiles every variant) and by the crate's tests.
 
+include!("spirv_rewrite.rs");
+
 /// A kernel's source: a one-line prelude followed by its files, with where each file starts.
 struct Source {
     text: String,
@@ -72,10 +74,17 @@ fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
     text
 }
 
-/// The fragment shape of a cooperative variant's parameters: (FM, FN, FK).
-fn fragment_shape(params: &[(&str, u32)]) -> Option<(u32, u32, u32)> {
+/// The products of a cooperative variant's matrices ([`Products`]): those declared 8×8 (the
+/// prelude's FA, FB and FC) take the FM×FN×FK product; with PV = 1, those declared 16×16 take
+/// the FM×FK×FN product that follows it (attention's P·V after Q·Kᵀ, FN keys and FK values a
+/// head).
+fn fragment_products(params: &[(&str, u32)]) -> Option<Vec<Product>> {
     let get = |name: &str| params.iter().find(|(n, _)| *n == name).map(|(_, v)| *v);
-    Some((get("FM")?, get("FN")?, get("FK")?))
+    let (m, n, k) = (get("FM")?, get("FN")?, get("FK")?);
+    Some(match get("PV") {
+        Some(1) => vec![(8, (m, n, k)), (16, (m, k, n))],
+        _ => vec![(8, (m, n, k))],
+    })
 }
 
 /// The scope of a cooperative variant's matrices: Workgroup (2) where WS = 1
@@ -86,86 +95,6 @@ fn fragment_scope(params: &[(&str, u32)]) -> u32 {
     } else {
         3
     }
-}
-
-/// Gives every `OpTypeCooperativeMatrixKHR` in `words` the shape its use takes in an
-/// M×N×K product: A (MatrixA) M×K, B (MatrixB) K×N, the accumulator M×N; A and B f16
-/// components ([`prelude`]); and `scope` (a SPIR-V Scope). The scope, row and column counts are
-/// 32-bit unsigned constants; those missing are declared just before the type.
-fn shape_fragments(words: &[u32], (m, n, k): (u32, u32, u32), scope: u32) -> Result<Vec<u32>, String> {
-    const OP_TYPE_INT: u32 = 21;
-    const OP_TYPE_FLOAT: u32 = 22;
-    const OP_CONSTANT: u32 = 43;
-    const OP_TYPE_COOPERATIVE_MATRIX: u32 = 4456;
-    let mut out = words.get(..5).ok_or("SPIR-V shorter than its header")?.to_vec();
-    let mut bound = out[3];
-    let mut uint = None;
-    let mut f16 = None;
-    let mut constants: Vec<(u32, u32)> = Vec::new(); // (value, id) of 32-bit unsigned constants
-    let mut at = 5;
-    while at < words.len() {
-        let count = (words[at] >> 16) as usize;
-        let op = words[at] & 0xffff;
-        let inst = words.get(at..at + count).filter(|_| count > 0).ok_or("truncated SPIR-V instruction")?;
-        match op {
-            OP_TYPE_INT if inst[2..] == [32, 0] => uint = Some(inst[1]),
-            OP_TYPE_FLOAT if inst[2] == 16 => f16 = Some(inst[1]),
-            OP_CONSTANT if Some(inst[1]) == uint && count == 4 => constants.push((inst[3], inst[2])),
-            OP_TYPE_COOPERATIVE_MATRIX if count == 7 => {
-                let value = |id: u32| constants.iter().find(|(_, c)| *c == id).map(|(v, _)| *v);
-                let f16 = f16.ok_or("no f16 type before a cooperative matrix");
-                let (rows, cols, component) = match value(inst[6]) {
-                    Some(0) => (m, k, f16?),
-                    Some(1) => (k, n, f16?),
-                    Some(2) => (m, n, inst[2]),
-                    other => return Err(format!("cooperative matrix use {other:?}: not A, B or an accumulator")),
-                };
-                let uint = uint.ok_or("no 32-bit unsigned type before a cooperative matrix")?;
-                let mut id_of = |v: u32| {
-                    if let Some(&(_, id)) = constants.iter().find(|(x, _)| *x == v) {
-                        return id;
-                    }
-                    let id = bound;
-                    bound += 1;
-                    out.extend([(4 << 16) | OP_CONSTANT, uint, id, v]);
-                    constants.push((v, id));
-                    id
-                };
-                let (s, r, c) = (id_of(scope), id_of(rows), id_of(cols));
-                out.extend([inst[0], inst[1], component, s, r, c, inst[6]]);
-                at += count;
-                continue;
-            }
-            _ => {}
-        }
-        out.extend_from_slice(inst);
-        at += count;
-    }
-    out[3] = bound;
-    Ok(out)
-}
-
-/// `words` with `OpExtension "name"` declared after the capabilities, before the first
-/// instruction that must follow the extensions (an import or the memory model).
-fn with_extension(words: &[u32], name: &str) -> Result<Vec<u32>, String> {
-    const OP_EXTENSION: u32 = 10;
-    const FOLLOWERS: [u32; 2] = [11, 14]; // OpExtInstImport, OpMemoryModel
-    let mut at = 5;
-    while at < words.len() && !FOLLOWERS.contains(&(words[at] & 0xffff)) {
-        at += (words[at] >> 16).max(1) as usize;
-    }
-    if at >= words.len() {
-        return Err("no memory model to declare an extension before".into());
-    }
-    // A literal string: its UTF-8 bytes and a NUL, in little-endian words.
-    let mut bytes = name.as_bytes().to_vec();
-    bytes.resize((bytes.len() / 4 + 1) * 4, 0);
-    let literal = bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]));
-    let mut out = words[..at].to_vec();
-    out.push(((1 + bytes.len() as u32 / 4) << 16) | OP_EXTENSION);
-    out.extend(literal);
-    out.extend_from_slice(&words[at..]);
-    Ok(out)
 }
 
 /// Expands `// #unroll NAME COUNT` … `// #end` blocks: the body repeated COUNT times (a number
@@ -295,10 +224,12 @@ fn compile(
     // Measured with naga 30 on lavapipe: SPIR-V 1.3 for subgroups, native workgroup zero-init (the polyfill costs
     // seconds of JIT on lavapipe), no StorageInputOutput16 (lavapipe lacks it), Restrict bounds for buffers; loop
     // counters and array indices as `target` says.
+    // VK_NV_cooperative_matrix2's placeholders are found by their names: only their kernels carry naga's.
+    let placeholders = cooperative && src.text.contains("fn nv_");
     let restrict = naga::proc::BoundsCheckPolicy::Restrict;
     let options = spv::Options {
         lang_version: (1, 3),
-        flags: spv::WriterFlags::empty(),
+        flags: if placeholders { spv::WriterFlags::DEBUG } else { spv::WriterFlags::empty() },
         zero_initialize_workgroup_memory: spv::ZeroInitializeWorkgroupMemoryMode::Native,
         force_loop_bounding: target == Target::Any,
         use_storage_input_output_16: false,
@@ -313,16 +244,16 @@ fn compile(
     let pipeline = spv::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".into() };
     let words =
         spv::write_vec(&module, &info, &options, Some(&pipeline)).map_err(|e| format!("{what}: SPIR-V output: {e}"))?;
-    match fragment_shape(params).filter(|_| cooperative) {
-        Some(shape) => {
-            let scope = fragment_scope(params);
-            let words = shape_fragments(&words, shape, scope).map_err(|e| format!("{what}: fragment shapes: {e}"))?;
-            match scope {
-                2 => with_extension(&words, "SPV_NV_cooperative_matrix2").map_err(|e| format!("{what}: {e}")),
-                _ => Ok(words),
-            }
-        }
-        None if cooperative => Err(format!("{what}: a cooperative kernel needs the parameters FM, FN and FK")),
-        None => Ok(words),
+    if !cooperative {
+        return Ok(words);
+    }
+    let products = fragment_products(params)
+        .ok_or_else(|| format!("{what}: a cooperative kernel needs the parameters FM, FN and FK"))?;
+    let scope = fragment_scope(params);
+    let words = shape_fragments(&words, &products, scope).map_err(|e| format!("{what}: fragment shapes: {e}"))?;
+    let (words, capabilities) = lower_placeholders(&words).map_err(|e| format!("{what}: {e}"))?;
+    match scope == 2 || !capabilities.is_empty() {
+        true => declare(&words, "SPV_NV_cooperative_matrix2", &capabilities).map_err(|e| format!("{what}: {e}")),
+        false => Ok(words),
     }
 }

@@ -159,7 +159,7 @@ fn matrix2_features(d: &DeviceInfo) -> String {
     let tiles: Vec<String> = d.matrix2_tiles().iter().map(|t| t.label()).collect();
     let probe = match tiles.is_empty() {
         true => String::new(),
-        false => format!("; its probe (bench kernels) runs {}", tiles.join(", ")),
+        false => format!("; its probes (bench kernels) run {}", tiles.join(", ")),
     };
     format!("; VK_NV_cooperative_matrix2 features: {}{missing}{probe}", d.cooperative_matrix2.join(", "))
 }

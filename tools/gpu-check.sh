@@ -4,8 +4,8 @@
 # at its limit still brings back what ran):
 #   1. `vkdiff devices --json`, the driver and torch's versions;
 #   2. the matrix units' two workgroup tiles, one after the other on one machine: the SDXL
-#      products (`bench kernels`, which times both, and VK_NV_cooperative_matrix2's probe on the
-#      linear rows where the driver offers workgroup scope) and the SDXL UNet at 1024² with
+#      products (`bench kernels`, which times both, and VK_NV_cooperative_matrix2's probes on the
+#      linear and attention rows where the driver offers workgroup scope) and the SDXL UNet at 1024² with
 #      VKDIFF_MATRIX_TILE=4 and 8, to decide which `auto` takes;
 #   3. `vkdiff bench report` (the full suite: the paper's image first) beside diffusers and
 #      torch on CUDA where torch is installed, else without references;
@@ -59,7 +59,7 @@ export VKDIFF_REFERENCE_PYTHON=python3
     echo "references: $reference"
 } >>"$log"
 step 30 sh -c "'$work/vkdiff' devices --json >'$out/devices.json'"
-for filter in linear conv2d; do
+for filter in linear conv2d attention; do
     step 90 sh -c "'$work/vkdiff' bench kernels --no-cpu-reference --filter $filter >'$out/kernels-$filter.txt'"
 done
 for tile in 8 4; do

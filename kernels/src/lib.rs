@@ -94,21 +94,10 @@ mod compile_tests {
         assert_eq!(unroll_count("CM/0", &params), None);
     }
 
-    /// The instructions of a SPIR-V module, after its header.
-    fn instructions(words: &[u32]) -> Vec<&[u32]> {
-        let (mut out, mut at) = (Vec::new(), 5);
-        while at < words.len() {
-            let count = (words[at] >> 16) as usize;
-            out.push(&words[at..at + count]);
-            at += count;
-        }
-        out
-    }
-
     /// (rows, columns, use, component bits) of each cooperative matrix type in `words`.
     fn fragment_types(words: &[u32]) -> Vec<(u32, u32, u32, u32)> {
         let (mut constants, mut floats, mut types) = (Vec::new(), Vec::new(), Vec::new());
-        for inst in instructions(words) {
+        for inst in instructions(words).unwrap() {
             let value = |id: u32| constants.iter().find(|(c, _)| *c == id).map(|(_, v)| *v).unwrap();
             let bits = |id: u32| floats.iter().find(|(f, _)| *f == id).map(|(_, b)| *b).unwrap();
             match inst[0] & 0xffff {
@@ -144,7 +133,7 @@ mod compile_tests {
     /// The scopes of the cooperative matrix types in `words`, and its extensions' names.
     fn scopes_and_extensions(words: &[u32]) -> (Vec<u32>, Vec<String>) {
         let (mut constants, mut scopes, mut extensions) = (Vec::new(), Vec::new(), Vec::new());
-        for inst in instructions(words) {
+        for inst in instructions(words).unwrap() {
             match inst[0] & 0xffff {
                 10 => {
                     let bytes: Vec<u8> =
@@ -176,11 +165,76 @@ mod compile_tests {
         }
     }
 
+    /// A kernel on VK_NV_cooperative_matrix2's placeholders (spirv_rewrite.rs): a row maximum,
+    /// a per-element sum with a matrix operand, and a conversion to an A operand.
+    const PLACEHOLDERS: &str = "@group(0) @binding(0) var<storage, read_write> w: array<f32>;\n\
+        fn larger(a: f32, b: f32) -> f32 {\n    return max(a, b);\n}\n\
+        fn plus(row: u32, col: u32, x: f32, y: f32) -> f32 {\n    return x + y;\n}\n\
+        fn nv_reduce_rows(m: FC, f: f32) -> FC {\n    return m;\n}\n\
+        fn nv_each_with(m: FC, f: f32, y: FC) -> FC {\n    return m;\n}\n\
+        fn nv_convert(m: FC) -> FA {\n    var z: FA;\n    return z;\n}\n\
+        @compute @workgroup_size(SG)\nfn main() {\n    let c = coopLoadT<FC>(&w[0], 8u);\n    \
+        let r = nv_each_with(nv_reduce_rows(c, larger(0.0, 0.0)), plus(0u, 0u, 0.0, 0.0), c);\n    \
+        var acc: FC;\n    acc = coopMultiplyAdd(nv_convert(r), coopLoad<FB>(&w[0], 8u), acc);\n    \
+        coopStoreT(acc, &w[0], 8u);\n}\n";
+
+    fn compile_placeholders(body: &str, params: &[(&str, u32)]) -> Result<Vec<u32>, String> {
+        let src = Source::new(&prelude(true, params, true), &[("k.wgsl".into(), body.into())]);
+        compile(src, params, (true, Target::Gpu), "kernel `t`")
+    }
+
+    #[test]
+    fn placeholders_become_the_extension_s_operations() {
+        let params = [("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8)];
+        let words = compile_placeholders(PLACEHOLDERS, &params).unwrap();
+        let insts = instructions(&words).unwrap();
+        let id_named =
+            |name: &str| insts.iter().find(|i| i[0] & 0xffff == 5 && name_of(i) == name).map(|i| i[1]).unwrap();
+        let (larger, plus, main) = (id_named("larger"), id_named("plus"), id_named("main"));
+        let of = |op: u32| insts.iter().filter(move |i| i[0] & 0xffff == op);
+        let reduce: Vec<_> = of(5366).collect();
+        assert!(reduce.len() == 1 && reduce[0][4] == 1 && reduce[0][5] == larger, "a row reduction by `larger`");
+        let each: Vec<_> = of(5369).collect();
+        assert!(each.len() == 1 && each[0][4] == plus && each[0].len() == 6, "`plus` with one matrix operand");
+        assert_eq!(of(115).count(), 1, "one OpFConvert");
+        assert_eq!(of(57).count(), 0, "no call is left: the placeholders' and the naming ones are gone");
+        let capabilities: Vec<u32> = of(17).map(|i| i[1]).collect();
+        assert!([5430, 5431, 5432].iter().all(|c| capabilities.contains(c)), "{capabilities:?}");
+        let (_, extensions) = scopes_and_extensions(&words);
+        assert!(extensions.contains(&"SPV_NV_cooperative_matrix2".to_string()), "{extensions:?}");
+        let at = |f: u32| insts.iter().position(|i| i[0] & 0xffff == 54 && i[2] == f).unwrap();
+        assert!(at(main) < at(larger) && at(main) < at(plus), "the applied functions follow the entry point");
+    }
+
+    #[test]
+    fn placeholders_misused_and_coinciding_shapes_are_build_errors() {
+        let params = [("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8)];
+        let unknown = PLACEHOLDERS.replace("nv_convert", "nv_transpose");
+        let err = compile_placeholders(&unknown, &params).unwrap_err();
+        assert!(err.contains("`nv_transpose`: not a placeholder"), "{err}");
+        let uncalled = PLACEHOLDERS.replace("nv_reduce_rows(c, larger(0.0, 0.0))", "nv_reduce_rows(c, 1.0)");
+        let err = compile_placeholders(&uncalled, &params).unwrap_err();
+        assert!(err.contains("`nv_reduce_rows`: its second argument must call a function"), "{err}");
+        // PV = 1 gives 16×16 declarations the second product; with FN = FK its matrices would
+        // repeat the first's types.
+        let second = "@group(0) @binding(0) var<storage, read_write> w: array<f32>;\n@compute @workgroup_size(SG)\n\
+            fn main() {\n    let a = coopLoadT<FC>(&w[0], 8u);\n    let b = coopLoadT<coop_mat16x16<f32, C>>(&w[0], 8u);\n    \
+            coopStoreT(a, &w[0], 8u);\n    coopStoreT(b, &w[0], 8u);\n}\n";
+        let err = compile_placeholders(second, &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 8), ("PV", 1)]).unwrap_err();
+        assert!(err.contains("two matrix types of one use coincide at 8×16"), "{err}");
+        let words = compile_placeholders(second, &[("FM", 8), ("FN", 16), ("FK", 32), ("SG", 8), ("PV", 1)]).unwrap();
+        let mut types = fragment_types(&words);
+        types.sort();
+        // The prelude's A and B (8×32 and 32×16 f16) and S (8×16) take Q·Kᵀ's shapes, the 16×16
+        // accumulator P·V's (8×32).
+        assert_eq!(types, [(8, 16, 2, 32), (8, 32, 0, 16), (8, 32, 2, 32), (32, 16, 1, 16)]);
+    }
+
     /// Whether `words` hold a composite of 32-bit all-ones constants: naga's loop-bounding
     /// counter starts at vec2(u32::MAX), and nothing in a kernel builds one.
     fn has_loop_counter(words: &[u32]) -> bool {
         let mut all_ones = Vec::new();
-        instructions(words).into_iter().any(|inst| match inst[0] & 0xffff {
+        instructions(words).unwrap().into_iter().any(|inst| match inst[0] & 0xffff {
             43 if inst.len() == 4 && inst[3] == u32::MAX => {
                 all_ones.push(inst[2]);
                 false
@@ -192,7 +246,7 @@ mod compile_tests {
 
     /// Whether `words` clamp an index with GLSL.std.450's UMin (naga's `Restrict` policy).
     fn clamps_an_index(words: &[u32]) -> bool {
-        instructions(words).iter().any(|i| i[0] & 0xffff == 12 && i[4] == 38)
+        instructions(words).unwrap().iter().any(|i| i[0] & 0xffff == 12 && i[4] == 38)
     }
 
     #[test]
@@ -201,7 +255,10 @@ mod compile_tests {
             for (var i = 0u; i < 8u; i++) {\n        w[i] = i;\n    }\n}\n";
         for target in [Target::Gpu, Target::Any] {
             let words = compile(one_file(body), &[], (false, target), "kernel `t`").unwrap();
-            assert!(instructions(&words).iter().any(|i| i[0] & 0xffff == 246), "the loop is there (OpLoopMerge)");
+            assert!(
+                instructions(&words).unwrap().iter().any(|i| i[0] & 0xffff == 246),
+                "the loop is there (OpLoopMerge)"
+            );
             assert_eq!(has_loop_counter(&words), target == Target::Any, "{target:?}");
             assert_eq!(clamps_an_index(&words), target == Target::Any, "{target:?}");
         }

@@ -379,6 +379,23 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
             &[("FM", 128), ("FN", 64), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 128)],
         ],
     },
+    // VK_NV_cooperative_matrix2's probe of attention, for `bench kernels`: FM query rows against
+    // chunks of FN keys, heads of up to FK = 64 values (FN ≠ FK: compile.rs would give two of the
+    // matrix types one shape), the softmax on the extension's reductions and per-element
+    // operations. Workgroup scope (WS = 1) at 128 invocations for NVIDIA's drivers, within 48 KiB
+    // of workgroup memory; subgroup scope at 8 lanes (Mesa 26.1's lavapipe) for CI, FM = 8: that
+    // driver splits larger matrices into 8×8 pieces and, past the first band of 8 rows, reduces
+    // rows from the wrong pieces (FM = 16 fails the kernel test). PV = 1: the second product;
+    // PU = FN·(FK/4)/WG, attention_staging.wgsl's units per invocation.
+    KernelSpec {
+        name: "attention_cm2",
+        files: &["attention_common.wgsl", "attention_staging.wgsl", "attention_cm2.wgsl"],
+        params: &[
+            &[("FM", 8), ("FN", 32), ("FK", 64), ("SG", 8), ("WS", 0), ("WG", 8), ("PV", 1), ("PU", 64)],
+            &[("FM", 64), ("FN", 32), ("FK", 64), ("SG", 32), ("WS", 1), ("WG", 128), ("PV", 1), ("PU", 4)],
+            &[("FM", 32), ("FN", 128), ("FK", 64), ("SG", 32), ("WS", 1), ("WG", 128), ("PV", 1), ("PU", 16)],
+        ],
+    },
     // The matrix units' rate with no device memory in the loop, for `bench kernels`: SRC = 0
     // operands in registers, 1 loaded from workgroup memory before each multiply-add.
     KernelSpec {
@@ -402,17 +419,17 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
     // Attention with both products on the matrix units, heads of up to DH = 64 (SDXL's, CLIP's);
     // wider heads take attention_rows. KF = FN-wide key fragments per chunk, LPR = lanes per row
     // in the softmax (SG/FM on GPUs; 2 at 8 lanes, so that lavapipe's two passes test the
-    // joined softmax).
+    // joined softmax). PU = KF·FN·(DH/4)/(4·SG), attention_staging.wgsl's units per invocation.
     KernelSpec {
         name: "attention_coop",
-        files: &["attention_common.wgsl", "attention_coop.wgsl"],
+        files: &["attention_common.wgsl", "attention_staging.wgsl", "attention_coop.wgsl"],
         params: &[
-            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2)],
-            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 32), ("DH", 64), ("KF", 4), ("LPR", 2)],
-            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("DH", 64), ("KF", 4), ("LPR", 4)],
-            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16), ("DH", 64), ("KF", 4), ("LPR", 2)],
-            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2)],
-            &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2)],
+            &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2), ("PU", 16)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 32), ("DH", 64), ("KF", 4), ("LPR", 2), ("PU", 8)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 64), ("DH", 64), ("KF", 4), ("LPR", 4), ("PU", 4)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 16), ("DH", 64), ("KF", 4), ("LPR", 2), ("PU", 16)],
+            &[("FM", 8), ("FN", 16), ("FK", 16), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2), ("PU", 32)],
+            &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2), ("PU", 16)],
         ],
     },
 ];

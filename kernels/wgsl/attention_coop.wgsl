@@ -17,15 +17,16 @@
 // moves one; the first chunk holds key 0, which no mask hides, so every reference is finite
 // from then on. Workgroup memory is held as vec4s (four f16 or f32 per access; cooperative
 // loads and stores then count strides in vec4s), and a lane's keys in the softmax are
-// contiguous, so each of its shared accesses moves four values. Operands: attention_common.wgsl.
+// contiguous, so each of its shared accesses moves four values. Operands: attention_common.wgsl;
+// their staging: attention_staging.wgsl.
 const KC: u32 = KF * FN; // keys per chunk (a multiple of FK)
 const ROWS: u32 = 4u * FM; // query rows per workgroup (≤ 2·KC: Q is staged where K and V go)
 const WG: u32 = 4u * SG;
+const_assert PU == KC * SLOTS / WG; // a chunk's K (and V) units per invocation
 const SLOTS: u32 = DH / 4u;
 const NB: u32 = DH / FN; // output fragments along a head
 const RPP: u32 = SG / LPR; // rows per pass of the softmax (LPR lanes a row; RPP divides FM)
 const PK: u32 = KC / LPR; // a lane's keys per chunk, PK/4 vec4s (the `#unroll I KF*FN/LPR/4`)
-const PU: u32 = KC * SLOTS / WG; // a chunk's K (and V) units per invocation
 const LAZY: f32 = 11.0;
 const LOG2E: f32 = 1.4426950408889634;
 // Row strides: f16 ones multiples of 8 (16 bytes, what cooperative loads need), f32 ones of 4,
@@ -41,47 +42,6 @@ var<workgroup> row_ref: array<f32, ROWS>;
 var<workgroup> row_sum: array<f32, ROWS>;
 var<workgroup> row_scale: array<f32, ROWS>;
 var<workgroup> moved: array<u32, 4>; // per subgroup: a reference moved in this chunk
-
-// A unit of the operands widened to f32, and four values rounded to f16 as a unit.
-fn widen(u: Unit) -> vec4<f32> {
-    return vec4<f32>(unpack2x16float(u.x), unpack2x16float(u.y));
-}
-
-fn narrow(x: vec4<f32>) -> Unit {
-    return Unit(pack2x16float(x.xy), pack2x16float(x.zw));
-}
-
-// A unit as the tiles hold it (gemm_coop.wgsl): its bits.
-fn tiled(u: Unit) -> Words {
-    return bitcast<Words>(u);
-}
-
-// Units t + WG·u of the chunk at key j0 (K and V rows [KC][SLOTS]) into registers, staged as
-// loaded: keys past the end clamped (their scores are masked, so their weights are zero), slots
-// past the head clamped too (in K they meet Q's zeros; in V they make output columns that are
-// never stored).
-fn fetch_kv(
-    rk: ptr<function, array<Unit, PU>>,
-    rv: ptr<function, array<Unit, PU>>,
-    j0: u32,
-    t: u32,
-    head: u32,
-    batch: u32,
-) {
-    let slots = p.d / 4u;
-    // #unroll U KF*FN*DH/SG/16
-    {
-        let i = t + WG * U;
-        let s = i % SLOTS;
-        let key = min(j0 + i / SLOTS, p.nk - 1u);
-        let sl = min(s, slots - 1u);
-        let ka = (p.k_off + batch * p.k_batch + key * p.k_ld + head * p.d) / 4u + sl;
-        let va = (p.v_off + batch * p.v_batch + key * p.v_ld + head * p.d) / 4u + sl;
-        (*rk)[U] = k[ka];
-        (*rv)[U] = v[va];
-    }
-    // #end
-}
 
 fn joined_max(x: f32) -> f32 {
     var m = x;
@@ -129,14 +89,7 @@ fn main(
     var rk: array<Unit, PU>;
     var rv: array<Unit, PU>;
     fetch_kv(&rk, &rv, 0u, t, head, batch);
-    // Scaled Q rows through `kv` (rows past the end clamped, slots past the head zero).
-    for (var i = t; i < ROWS * SLOTS; i += WG) {
-        let r = i / SLOTS;
-        let s = i % SLOTS;
-        let token = min(row0 + r, p.nq - 1u);
-        let at = (p.q_off + batch * p.q_batch + token * p.q_ld + head * p.d) / 4u + min(s, slots - 1u);
-        kv[r * (LD / 4u) + s] = tiled(select(Unit(), narrow(p.scale * widen(q[at])), s < slots));
-    }
+    stage_q(row0, head, batch, t);
     if t < ROWS {
         row_ref[t] = NEG;
         row_sum[t] = 0.0;
@@ -152,13 +105,7 @@ fn main(
     var acc: array<FC, NB>;
     workgroupBarrier();
     for (var j0 = 0u; j0 < p.nk; j0 += KC) {
-        // #unroll U KF*FN*DH/SG/16
-        {
-            let i = t + WG * U;
-            kv[(i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(rk[U]);
-            kv[(KC + i / SLOTS) * (LD / 4u) + i % SLOTS] = tiled(rv[U]);
-        }
-        // #end
+        store_kv(&rk, &rv, t);
         workgroupBarrier();
         // Unconditional (the last chunk's fetch reads clamped keys, never used): a branch
         // around it made AMD's compiler wait for the loads at its end.

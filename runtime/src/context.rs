@@ -222,7 +222,7 @@ impl Context {
             .vulkan_memory_model(info.cooperative_features);
         let mut cooperative = vk::PhysicalDeviceCooperativeMatrixFeaturesKHR::default().cooperative_matrix(true);
         let matrix2_tiles = info.matrix2_tiles();
-        let mut matrix2 = CooperativeMatrix2Features::new(true, matrix2_tiles.iter().any(|t| t.workgroup_scope()));
+        let mut matrix2 = CooperativeMatrix2Features::enabling(&crate::matrix2_tile::features(&matrix2_tiles));
         let size_control = info.subgroup_size_range.is_some();
         let mut f13 = vk::PhysicalDeviceVulkan13Features::default()
             .subgroup_size_control(size_control)

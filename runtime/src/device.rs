@@ -268,7 +268,7 @@ pub(crate) fn describe(
     let mut size_control_features = vk::PhysicalDeviceSubgroupSizeControlFeatures::default();
     let mut zero_init = vk::PhysicalDeviceZeroInitializeWorkgroupMemoryFeatures::default();
     let mut cooperative = vk::PhysicalDeviceCooperativeMatrixFeaturesKHR::default();
-    let mut cooperative2 = CooperativeMatrix2Features::new(false, false);
+    let mut cooperative2 = CooperativeMatrix2Features::enabling(&[]);
     let mut feats2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f11).push_next(&mut f12);
     if core13 {
         feats2 = feats2.push_next(&mut f13);

@@ -7,8 +7,8 @@ use ash::vk;
 
 /// `VkPhysicalDeviceCooperativeMatrix2FeaturesNV` (`VK_NV_cooperative_matrix2`, newer than
 /// ash's headers): its seven features in the header's order ([`FEATURE_NAMES`]); vkdiff enables
-/// `cooperativeMatrixFlexibleDimensions` and, for its probe (`ops::linear_cm2`),
-/// `cooperativeMatrixWorkgroupScope`.
+/// `cooperativeMatrixFlexibleDimensions` and, for its probes (`ops::linear_cm2`,
+/// `ops::attention_cm2`), the scope and operations their tiles use.
 #[repr(C)]
 pub(crate) struct CooperativeMatrix2Features {
     s_type: vk::StructureType,
@@ -26,7 +26,6 @@ pub const FEATURE_NAMES: [&str; 7] = [
     "tensor addressing",
     "block loads",
 ];
-const WORKGROUP_SCOPE: usize = 0;
 const FLEXIBLE_DIMENSIONS: usize = 1;
 
 // SAFETY: the struct is laid out as the Vulkan one, which extends both chains.
@@ -36,11 +35,9 @@ unsafe impl vk::ExtendsDeviceCreateInfo for CooperativeMatrix2Features {}
 impl CooperativeMatrix2Features {
     pub(crate) const EXTENSION: &'static std::ffi::CStr = c"VK_NV_cooperative_matrix2";
 
-    /// Every feature off but flexible dimensions and workgroup scope, as asked.
-    pub(crate) fn new(flexible_dimensions: bool, workgroup_scope: bool) -> Self {
-        let mut features = [vk::FALSE; 7];
-        features[FLEXIBLE_DIMENSIONS] = flexible_dimensions.into();
-        features[WORKGROUP_SCOPE] = workgroup_scope.into();
+    /// Every feature off but those `named` ([`FEATURE_NAMES`]).
+    pub(crate) fn enabling(named: &[&str]) -> Self {
+        let features = FEATURE_NAMES.map(|name| named.contains(&name).into());
         CooperativeMatrix2Features {
             s_type: vk::StructureType::from_raw(1_000_593_000),
             p_next: std::ptr::null_mut(),
@@ -127,13 +124,14 @@ mod tests {
 
     #[test]
     fn reported_features_are_named_in_the_headers_order() {
-        let mut f = CooperativeMatrix2Features::new(true, false);
+        let mut f = CooperativeMatrix2Features::enabling(&["flexible dimensions"]);
         assert!(f.flexible_dimensions());
         assert_eq!(f.reported(), ["flexible dimensions"]);
-        assert_eq!(CooperativeMatrix2Features::new(true, true).reported(), ["workgroup scope", "flexible dimensions"]);
+        let both = CooperativeMatrix2Features::enabling(&["flexible dimensions", "workgroup scope"]);
+        assert_eq!(both.reported(), ["workgroup scope", "flexible dimensions"]);
         f.features = [vk::TRUE, vk::FALSE, vk::FALSE, vk::FALSE, vk::FALSE, vk::TRUE, vk::TRUE];
         assert!(!f.flexible_dimensions());
         assert_eq!(f.reported(), ["workgroup scope", "tensor addressing", "block loads"]);
-        assert!(CooperativeMatrix2Features::new(false, false).reported().is_empty());
+        assert!(CooperativeMatrix2Features::enabling(&[]).reported().is_empty());
     }
 }

@@ -51,9 +51,9 @@ pub fn selectable_variants(info: &DeviceInfo, gpu_paths: bool) -> Vec<&'static V
         .iter()
         .filter(|v| v.dtype == Dtype::F32 || info.supports_f16())
         .filter(|v| match (v.param("SG"), v.param("FM")) {
-            _ if v.kernel == "gemm_cm2" => {
-                matrix2_tiles.iter().any(|t| t.params().iter().all(|(n, x)| v.param(n) == Some(*x)))
-            }
+            _ if v.kernel.ends_with("_cm2") => matrix2_tiles
+                .iter()
+                .any(|t| t.probe.kernel() == v.kernel && t.params().iter().all(|(n, x)| v.param(n) == Some(*x))),
             (None, _) => true,
             (Some(_), Some(_)) => fragment.is_some_and(|f| f.params().iter().all(|(n, x)| v.param(n) == Some(*x))),
             (Some(sg), None) => subgroup_width == Some(sg),

@@ -39,7 +39,7 @@ pub use host_stats::HostStats;
 pub use instance::release_idle_instances;
 pub use kernel_census::{selectable_variants, CompiledKernel};
 pub use listing::listing_variants;
-pub use matrix2_tile::{built as built_matrix2_tiles, Matrix2Tile};
+pub use matrix2_tile::{built as built_matrix2_tiles, Matrix2Probe, Matrix2Tile};
 pub use matrix_tile::{eight_subgroups_built, MatrixTile};
 pub use matrix_unit_trial::{run_trial, run_trial_timed_by, CooperativeSetting, MatrixUnitTrial, TrialClock};
 pub use matrix_units::{built_cooperative_variants, requested_fragment, Fragment, MatrixShape};

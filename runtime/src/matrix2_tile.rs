@@ -1,15 +1,45 @@
-//! Which tiles of `VK_NV_cooperative_matrix2`'s probe (kernels/wgsl/gemm_cm2.wgsl,
-//! `ops::linear_cm2`) a device runs: those of workgroup scope where the driver offers that scope
-//! for their workgroup size, those of subgroup scope where its flexible dimensions take them.
+//! Which tiles of `VK_NV_cooperative_matrix2`'s probes a device runs: the linear layers'
+//! product (kernels/wgsl/gemm_cm2.wgsl, `ops::linear_cm2`) and attention
+//! (kernels/wgsl/attention_cm2.wgsl, `ops::attention_cm2`); those of workgroup scope where the
+//! driver offers that scope for their workgroup size, those of subgroup scope where its flexible
+//! dimensions take them, each with the features its kernel uses.
 
 use crate::device::DeviceInfo;
 use vkdiff_kernels::Dtype;
 
-/// One built variant of the probe: an m×n accumulator a workgroup of `invocations`, walking K in
-/// steps of k, on subgroups of `lanes`; its matrices of workgroup scope, or of subgroup scope
-/// where the workgroup is one subgroup.
+/// What a probe computes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Matrix2Probe {
+    /// out = A·Bᵀ: an m×n accumulator walking K in steps of k.
+    Linear,
+    /// Attention: m query rows against chunks of n keys, heads of up to k values.
+    Attention,
+}
+
+impl Matrix2Probe {
+    pub fn kernel(self) -> &'static str {
+        match self {
+            Matrix2Probe::Linear => "gemm_cm2",
+            Matrix2Probe::Attention => "attention_cm2",
+        }
+    }
+
+    /// The extension's features the kernel uses beyond its matrices' dimensions and scope (as
+    /// `DeviceInfo::cooperative_matrix2` names them).
+    pub fn features(self) -> &'static [&'static str] {
+        match self {
+            Matrix2Probe::Linear => &[],
+            Matrix2Probe::Attention => &["reductions", "conversions", "per-element operations"],
+        }
+    }
+}
+
+/// One built variant of a probe: m, n and k as [`Matrix2Probe`] reads them, on subgroups of
+/// `lanes`; its matrices of workgroup scope, or of subgroup scope where the workgroup is one
+/// subgroup.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Matrix2Tile {
+    pub probe: Matrix2Probe,
     pub m: u32,
     pub n: u32,
     pub k: u32,
@@ -34,22 +64,37 @@ impl Matrix2Tile {
         ]
     }
 
-    /// "128×128×32, workgroup scope (256 invocations)".
+    /// The products its matrices take: the linear tile's m×n×k; attention's S = Q·Kᵀ (m×n×k)
+    /// and O = P·V (m×k×n).
+    fn products(&self) -> Vec<(u32, u32, u32)> {
+        match self.probe {
+            Matrix2Probe::Linear => vec![(self.m, self.n, self.k)],
+            Matrix2Probe::Attention => vec![(self.m, self.n, self.k), (self.m, self.k, self.n)],
+        }
+    }
+
+    /// "128×128×32, workgroup scope (256 invocations)"; "attention 16 rows × 32 keys, heads of
+    /// up to 64, subgroup scope (8 lanes)".
     pub fn label(&self) -> String {
         let scope = match self.workgroup_scope() {
             true => format!("workgroup scope ({} invocations)", self.invocations),
             false => format!("subgroup scope ({} lanes)", self.lanes),
         };
-        format!("{}×{}×{}, {scope}", self.m, self.n, self.k)
+        match self.probe {
+            Matrix2Probe::Linear => format!("{}×{}×{}, {scope}", self.m, self.n, self.k),
+            Matrix2Probe::Attention => {
+                format!("attention {} rows × {} keys, heads of up to {}, {scope}", self.m, self.n, self.k)
+            }
+        }
     }
 }
 
-/// Every tile built (kernels/src/spec.rs).
-pub fn built() -> Vec<Matrix2Tile> {
-    vkdiff_kernels::variants("gemm_cm2", Dtype::F16)
+/// Every tile built of `probe` (kernels/src/spec.rs).
+pub fn built(probe: Matrix2Probe) -> Vec<Matrix2Tile> {
+    vkdiff_kernels::variants(probe.kernel(), Dtype::F16)
         .map(|v| {
-            let get = |name| v.param(name).expect("gemm_cm2 variants carry FM, FN, FK, SG and WG");
-            Matrix2Tile { m: get("FM"), n: get("FN"), k: get("FK"), lanes: get("SG"), invocations: get("WG") }
+            let get = |name| v.param(name).expect("the probes' variants carry FM, FN, FK, SG and WG");
+            Matrix2Tile { probe, m: get("FM"), n: get("FN"), k: get("FK"), lanes: get("SG"), invocations: get("WG") }
         })
         .collect()
 }
@@ -58,16 +103,36 @@ pub(crate) fn offered(info: &DeviceInfo) -> Vec<Matrix2Tile> {
     if !info.cooperative_features || !info.supports_f16() {
         return Vec::new();
     }
-    let workgroup_scope = info.cooperative_matrix2.contains(&"workgroup scope");
-    let runs = |t: &Matrix2Tile| match t.workgroup_scope() {
-        true => {
-            workgroup_scope
-                && t.invocations <= info.max_workgroup_invocations
-                && info.flexible_shapes.iter().any(|s| s.divides_for_workgroup((t.m, t.n, t.k), t.invocations))
-        }
-        false => info.flexible_shapes.iter().any(|s| s.divides(t.m, t.n, t.k)),
+    let reported = |feature: &&str| info.cooperative_matrix2.contains(feature);
+    let workgroup_scope = reported(&"workgroup scope");
+    let runs = |t: &Matrix2Tile| {
+        let divide = |s: &crate::matrix_units::MatrixShape| match t.workgroup_scope() {
+            true => t.products().into_iter().all(|p| s.divides_for_workgroup(p, t.invocations)),
+            false => t.products().into_iter().all(|(m, n, k)| s.divides(m, n, k)),
+        };
+        let scope = !t.workgroup_scope() || (workgroup_scope && t.invocations <= info.max_workgroup_invocations);
+        scope && t.probe.features().iter().all(reported) && info.flexible_shapes.iter().any(divide)
     };
-    built().into_iter().filter(|t| info.can_use_subgroup(t.lanes) && runs(t)).collect()
+    [Matrix2Probe::Linear, Matrix2Probe::Attention]
+        .into_iter()
+        .flat_map(built)
+        .filter(|t| info.can_use_subgroup(t.lanes) && runs(t))
+        .collect()
+}
+
+/// The extension's features a context enables: flexible dimensions (the matrix-unit kernels'
+/// fragments may take them), and what `tiles` use.
+pub(crate) fn features(tiles: &[Matrix2Tile]) -> Vec<&'static str> {
+    let mut features = vec!["flexible dimensions"];
+    if tiles.iter().any(|t| t.workgroup_scope()) {
+        features.push("workgroup scope");
+    }
+    for feature in tiles.iter().flat_map(|t| t.probe.features()) {
+        if !features.contains(feature) {
+            features.push(feature);
+        }
+    }
+    features
 }
 
 #[cfg(test)]
@@ -90,6 +155,15 @@ mod tests {
         lavapipe.flexible_shapes = vec![granularity(8, true, 0)];
         let tiles = offered(&lavapipe);
         assert!(!tiles.is_empty() && tiles.iter().all(|t| !t.workgroup_scope() && t.lanes == 8), "{tiles:?}");
+        assert!(tiles.iter().all(|t| t.probe == Matrix2Probe::Linear), "attention needs reductions: {tiles:?}");
+        // With the reductions, conversions and per-element operations it reports, attention too.
+        lavapipe.cooperative_matrix2 =
+            vec!["flexible dimensions", "reductions", "conversions", "per-element operations"];
+        let attention: Vec<_> = offered(&lavapipe).into_iter().filter(|t| t.probe == Matrix2Probe::Attention).collect();
+        assert_eq!(attention.len(), 1, "{attention:?}");
+        assert_eq!((attention[0].m, attention[0].n, attention[0].k, attention[0].lanes), (8, 32, 64, 8));
+        lavapipe.cooperative_matrix2.pop();
+        assert!(offered(&lavapipe).iter().all(|t| t.probe == Matrix2Probe::Linear));
         // A driver of workgroup scope at 256 invocations in multiples of 16, 32 lanes.
         let mut nvidia = device(1, DeviceKind::Discrete, true);
         nvidia.cooperative_features = true;
@@ -102,6 +176,11 @@ mod tests {
         nvidia.flexible_shapes = vec![granularity(16, false, 128)];
         let tiles = offered(&nvidia);
         assert!(!tiles.is_empty() && tiles.iter().all(|t| t.invocations == 128), "{tiles:?}");
+        assert!(tiles.iter().all(|t| t.probe == Matrix2Probe::Linear), "{tiles:?}");
+        nvidia.cooperative_matrix2.extend(Matrix2Probe::Attention.features());
+        let attention = offered(&nvidia).into_iter().filter(|t| t.probe == Matrix2Probe::Attention).count();
+        assert_eq!(attention, 2, "both attention tiles of 128 invocations");
+        nvidia.cooperative_matrix2.truncate(2);
         // The scope unreported, a workgroup size no tile is built for, or no matrix units: none.
         nvidia.cooperative_matrix2 = vec!["flexible dimensions"];
         assert!(offered(&nvidia).is_empty());

@@ -73,38 +73,14 @@ pub fn attention(
     l: &AttentionLayout,
     scale: f32,
 ) -> Result<()> {
-    let dtype = same_dtype(rec.context(), "attention", &[q, k, v, out])?;
-    ensure(l.batch > 0 && l.heads > 0 && l.q_tokens > 0 && l.kv_tokens > 0, || {
-        format!("attention: empty layout {l:?}")
-    })?;
-    ensure(!l.causal || l.q_tokens == l.kv_tokens, || {
-        format!("attention: a causal mask needs as many queries as keys, got {l:?}")
-    })?;
-    let need = |ld: usize, bs: usize, tokens: usize| (l.batch - 1) * bs + (tokens - 1) * ld + l.heads * l.head_dim;
-    let need_at = |off: usize, ld: usize, bs: usize, tokens: usize| off + need(ld, bs, tokens);
-    ensure(q.numel() >= need_at(l.q_offset, l.q_ld, l.q_batch, l.q_tokens), || {
-        format!("attention: Q {:?} too small", q.shape())
-    })?;
-    ensure(k.numel() >= need_at(l.k_offset, l.k_ld, l.k_batch, l.kv_tokens), || {
-        format!("attention: K {:?} too small", k.shape())
-    })?;
-    ensure(v.numel() >= need_at(l.v_offset, l.v_ld, l.v_batch, l.kv_tokens), || {
-        format!("attention: V {:?} too small", v.shape())
-    })?;
-    ensure(out.numel() >= need(l.o_ld, l.o_batch, l.q_tokens), || {
-        format!("attention: output {:?} too small", out.shape())
-    })?;
+    let dtype = checked_dtype(rec, "attention", [q, k, v, out], l)?;
     if let Some(rows) = rows_per_chunk(rec, dtype, l) {
         return attention_by_products(rec, [q, k, v], out, l, scale, rows);
     }
     if !fit(rec.context(), &[q, k, v, out]) {
         return attention_banded(rec, [q, k, v], out, l, scale);
     }
-    let strides = [
-        l.head_dim, l.q_ld, l.k_ld, l.v_ld, l.o_ld, l.q_batch, l.k_batch, l.v_batch, l.o_batch, l.q_offset, l.k_offset,
-        l.v_offset,
-    ];
-    if strides.iter().any(|s| s % 4 != 0) {
+    if !vec4_aligned(l) {
         return padded_attention(rec, [q, k, v], out, l, scale);
     }
     let ctx = rec.context().clone();
@@ -127,7 +103,52 @@ pub fn attention(
     // Query rows per workgroup: TM, 4·FM on the matrix units, or attention_rows' one per invocation.
     let tm = variant.param("TM").or(variant.param("FM").map(|fm| 4 * fm)).unwrap_or(ROWS_PER_WORKGROUP) as usize;
     let kern = ctx.kernel(variant, 4)?;
-    let push = [
+    let push = push_constants(l, scale);
+    rec.count_flops(4.0 * (l.batch * l.heads * l.q_tokens) as f64 * (l.kv_tokens * l.head_dim) as f64);
+    rec.dispatch(&kern, &[q, k, v], &[out], &push, [u(l.q_tokens.div_ceil(tm)), u(l.heads), u(l.batch)])
+}
+
+/// The operands' dtype, once their layout `l` is checked against their sizes (`op` names the
+/// caller in errors).
+pub(super) fn checked_dtype(
+    rec: &Recorder,
+    op: &str,
+    [q, k, v, out]: [&Tensor; 4],
+    l: &AttentionLayout,
+) -> Result<Dtype> {
+    let dtype = same_dtype(rec.context(), op, &[q, k, v, out])?;
+    ensure(l.batch > 0 && l.heads > 0 && l.q_tokens > 0 && l.kv_tokens > 0, || format!("{op}: empty layout {l:?}"))?;
+    ensure(!l.causal || l.q_tokens == l.kv_tokens, || {
+        format!("{op}: a causal mask needs as many queries as keys, got {l:?}")
+    })?;
+    let need = |ld: usize, bs: usize, tokens: usize| (l.batch - 1) * bs + (tokens - 1) * ld + l.heads * l.head_dim;
+    let need_at = |off: usize, ld: usize, bs: usize, tokens: usize| off + need(ld, bs, tokens);
+    ensure(q.numel() >= need_at(l.q_offset, l.q_ld, l.q_batch, l.q_tokens), || {
+        format!("{op}: Q {:?} too small", q.shape())
+    })?;
+    ensure(k.numel() >= need_at(l.k_offset, l.k_ld, l.k_batch, l.kv_tokens), || {
+        format!("{op}: K {:?} too small", k.shape())
+    })?;
+    ensure(v.numel() >= need_at(l.v_offset, l.v_ld, l.v_batch, l.kv_tokens), || {
+        format!("{op}: V {:?} too small", v.shape())
+    })?;
+    ensure(out.numel() >= need(l.o_ld, l.o_batch, l.q_tokens), || format!("{op}: output {:?} too small", out.shape()))?;
+    Ok(dtype)
+}
+
+/// Whether the head size and every stride and offset of `l` are multiples of 4, as the kernels
+/// read the operands (vec4s).
+pub(super) fn vec4_aligned(l: &AttentionLayout) -> bool {
+    let strides = [
+        l.head_dim, l.q_ld, l.k_ld, l.v_ld, l.o_ld, l.q_batch, l.k_batch, l.v_batch, l.o_batch, l.q_offset, l.k_offset,
+        l.v_offset,
+    ];
+    strides.iter().all(|s| s % 4 == 0)
+}
+
+/// The kernels' parameters (attention_common.wgsl's `Params`).
+pub(super) fn push_constants(l: &AttentionLayout, scale: f32) -> [u32; 16] {
+    [
         u(l.q_tokens),
         u(l.kv_tokens),
         u(l.head_dim),
@@ -144,9 +165,7 @@ pub fn attention(
         u(l.k_offset),
         u(l.v_offset),
         l.causal as u32,
-    ];
-    rec.count_flops(4.0 * (l.batch * l.heads * l.q_tokens) as f64 * (l.kv_tokens * l.head_dim) as f64);
-    rec.dispatch(&kern, &[q, k, v], &[out], &push, [u(l.q_tokens.div_ceil(tm)), u(l.heads), u(l.batch)])
+    ]
 }
 
 /// Attention with fewer channels (heads × head size) than this is small enough to take the

@@ -2,8 +2,9 @@
 //! which `bench kernels` times beside the matrix-unit GEMM; no network takes it yet.
 
 use super::{kernel, u};
+use crate::context::Context;
 use crate::error::{ensure, Error, Result};
-use crate::matrix2_tile::Matrix2Tile;
+use crate::matrix2_tile::{Matrix2Probe, Matrix2Tile};
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -12,13 +13,7 @@ use crate::tensor::{Dtype, Tensor};
 /// the tile's m, n and k.
 pub fn linear_cm2(rec: &mut Recorder, a: &Tensor, w: &Tensor, out: &Tensor, tile: &Matrix2Tile) -> Result<()> {
     let ctx = rec.context().clone();
-    if !ctx.info().matrix2_tiles().contains(tile) {
-        return Err(Error::Shape(format!(
-            "linear_cm2: device `{}` does not run the VK_NV_cooperative_matrix2 tile {}",
-            ctx.info().name,
-            tile.label()
-        )));
-    }
+    ensure_offered(&ctx, "linear_cm2", Matrix2Probe::Linear, tile)?;
     let (&[m, k], &[n, kw], &[mo, no]) = (a.shape(), w.shape(), out.shape()) else {
         return Err(Error::Shape(format!(
             "linear_cm2: a {:?}, w {:?} and out {:?} must be matrices",
@@ -39,4 +34,16 @@ pub fn linear_cm2(rec: &mut Recorder, a: &Tensor, w: &Tensor, out: &Tensor, tile
     let probe = kernel(&ctx, "gemm_cm2", Dtype::F16, &tile.params(), 3)?;
     let groups = [u(n / tile.n as usize), u(m / tile.m as usize), 1];
     rec.dispatch(&probe, &[a, w], &[out], &[u(m), u(n), u(k)], groups)
+}
+
+/// An error unless `tile` is one of `probe`'s that the context's device runs.
+pub(super) fn ensure_offered(ctx: &Context, op: &str, probe: Matrix2Probe, tile: &Matrix2Tile) -> Result<()> {
+    match tile.probe == probe && ctx.info().matrix2_tiles().contains(tile) {
+        true => Ok(()),
+        false => Err(Error::Shape(format!(
+            "{op}: device `{}` does not run the VK_NV_cooperative_matrix2 tile {}",
+            ctx.info().name,
+            tile.label()
+        ))),
+    }
 }

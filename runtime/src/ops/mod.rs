@@ -2,6 +2,7 @@
 //! and records one dispatch. Networks are compositions of these.
 
 mod attention;
+mod attention_cm2;
 mod attention_products;
 mod bands;
 mod ceiling;
@@ -15,6 +16,7 @@ mod norm;
 mod pool;
 
 pub use attention::{attention, copy_heads, AttentionLayout, HeadSpan};
+pub use attention_cm2::attention_cm2;
 pub use ceiling::{matrix_ceiling, MatrixCeiling};
 pub use conv::{conv2d, oihw_to_ohwi, ConvParams, Padding};
 pub use elementwise::{

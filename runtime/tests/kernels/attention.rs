@@ -4,7 +4,7 @@ use vkdiff_runtime::ops::{attention, AttentionLayout};
 use vkdiff_runtime::{Context, Dtype, Recorder};
 use vkdiff_testkit::*;
 
-fn reference(q: &[f32], k: &[f32], v: &[f32], l: &AttentionLayout, scale: f64) -> Vec<f64> {
+pub(super) fn reference(q: &[f32], k: &[f32], v: &[f32], l: &AttentionLayout, scale: f64) -> Vec<f64> {
     let d = l.head_dim;
     let mut out = vec![0.0f64; l.batch * l.q_tokens * l.heads * d];
     let mut scores = vec![0.0f64; l.kv_tokens];

@@ -3,7 +3,7 @@
 //! tiles through flexible dimensions.
 
 use vkdiff_runtime::ops::linear_cm2;
-use vkdiff_runtime::{built_matrix2_tiles, Dtype, Recorder};
+use vkdiff_runtime::{built_matrix2_tiles, Dtype, Matrix2Probe, Recorder};
 use vkdiff_testkit::*;
 
 /// a [M, K] · w [N, K]ᵀ, and the sums of |a·w| that bound its rounding.
@@ -24,14 +24,14 @@ fn reference(a: &[f32], w: &[f32], (m, n, k): (usize, usize, usize)) -> (Vec<f64
 #[test]
 fn linear_cm2_multiplies_on_every_tile_the_device_runs() {
     let ctx = ctx();
-    let tiles = ctx.info().matrix2_tiles();
+    let tiles: Vec<_> = ctx.info().matrix2_tiles().into_iter().filter(|t| t.probe == Matrix2Probe::Linear).collect();
     let lavapipe_26 = ctx.info().lavapipe_mesa.is_some_and(|v| v >= (26, 1));
     assert!(
         !(tiles.is_empty() && expect_cooperative() && lavapipe_26),
         "VKDIFF_EXPECT_COOPERATIVE=1 on Mesa 26.1's lavapipe, whose flexible dimensions run the probe: {tiles:?}"
     );
     if tiles.is_empty() {
-        let tile = built_matrix2_tiles()[0];
+        let tile = built_matrix2_tiles(Matrix2Probe::Linear)[0];
         let (a, w) = (
             ctx.zeros(&[tile.m as usize, 32], Dtype::F16).unwrap(),
             ctx.zeros(&[tile.n as usize, 32], Dtype::F16).unwrap(),

@@ -2,6 +2,7 @@
 //! f16 storage, with the tolerance each test states.
 
 mod attention;
+mod attention_cm2;
 mod bands;
 mod ceiling;
 mod conv;
