@@ -95,6 +95,8 @@ pub(crate) struct Shared {
     pub(crate) gemm_family: Mutex<GemmFamily>,
     /// See [`Context::matrix_tile`].
     pub(crate) matrix_tile: Mutex<crate::MatrixTile>,
+    /// See [`Context::attention_kernel`].
+    pub(crate) attention_kernel: Mutex<crate::AttentionKernel>,
     pub(crate) binding_limit: AtomicU64,
     /// The largest buffer one allocation may hold (`maxMemoryAllocationSize`).
     pub(crate) allocation_limit: AtomicU64,
@@ -298,6 +300,7 @@ impl Context {
         let gpu_paths = gpu_paths_requested();
         let gemm_family = info.gemm_family(gpu_paths);
         let matrix_tile = crate::MatrixTile::from_env()?;
+        let attention_kernel = crate::AttentionKernel::from_env()?;
         let env = |name: &str| std::env::var(name).ok();
         let submit_budget = SubmitBudget::for_device(&info, &env)?;
         let memory_budget = crate::memory_budget::budget_override(&env)?;
@@ -326,6 +329,7 @@ impl Context {
             statistics,
             gemm_family: Mutex::new(gemm_family),
             matrix_tile: Mutex::new(matrix_tile),
+            attention_kernel: Mutex::new(attention_kernel),
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
             allocation_limit: AtomicU64::new(info.max_allocation),
             workgroup_limit: Mutex::new(info.max_workgroup_count),
@@ -421,132 +425,5 @@ impl Context {
 
     pub fn reset_peak(&self) {
         self.shared.peak_bytes.store(self.live_bytes(), Ordering::SeqCst);
-    }
-
-    pub fn gemm_family(&self) -> GemmFamily {
-        *self.shared.gemm_family.lock().unwrap()
-    }
-
-    /// Overrides the per-device choice of GEMM kernels (benchmarks and tests run both).
-    pub fn set_gemm_family(&self, family: GemmFamily) {
-        *self.shared.gemm_family.lock().unwrap() = family;
-    }
-
-    /// The matrix-unit GEMM and convolution's workgroup tile: `VKDIFF_MATRIX_TILE`, or what
-    /// [`Context::set_matrix_tile`] set.
-    pub fn matrix_tile(&self) -> crate::MatrixTile {
-        *self.shared.matrix_tile.lock().unwrap()
-    }
-
-    pub fn set_matrix_tile(&self, tile: crate::MatrixTile) {
-        *self.shared.matrix_tile.lock().unwrap() = tile;
-    }
-
-    /// The most bytes one kernel binding may span; ops split larger tensors into bands below it.
-    pub fn binding_limit(&self) -> u64 {
-        self.shared.binding_limit.load(Ordering::SeqCst)
-    }
-
-    /// Lowers the binding limit below the device's own (tests exercise the splitting paths with
-    /// small tensors); values above the device limit are clamped to it.
-    pub fn set_binding_limit(&self, bytes: u64) {
-        self.shared.binding_limit.store(bytes.min(self.shared.info.max_storage_buffer_range), Ordering::SeqCst);
-    }
-
-    /// Lowers the largest allocation below the device's `maxMemoryAllocationSize` (tests
-    /// exercise the refusal with small tensors); values above the device's are clamped to it.
-    pub fn set_allocation_limit(&self, bytes: u64) {
-        let device = self.shared.info.max_allocation;
-        let bytes = if device > 0 { bytes.min(device) } else { bytes };
-        self.shared.allocation_limit.store(bytes, Ordering::SeqCst);
-    }
-
-    /// Whether `VKDIFF_GPU_PATHS=1` runs this device as a discrete GPU would: device-only memory
-    /// reached through staging buffers, the GPU GEMM/convolution kernels (on the matrix units
-    /// where they fit, else tiled) and the GPU attention kernels. On lavapipe this proves the
-    /// code a GPU runs.
-    pub fn gpu_paths(&self) -> bool {
-        self.shared.gpu_paths.load(Ordering::SeqCst)
-    }
-
-    /// Turns the GPU paths on or off for this context (tests run both on one device); turning
-    /// them on also selects the GEMM family a GPU would take (cooperative where it fits, else
-    /// tiled) and, as on a GPU, the kernels that run fastest whatever their compile time.
-    pub fn set_gpu_paths(&self, on: bool) {
-        self.shared.gpu_paths.store(on, Ordering::SeqCst);
-        if on {
-            self.set_gemm_family(self.shared.info.gemm_family(true));
-            self.set_quick_compile(self.shared.info.quick_compile(true));
-        }
-    }
-
-    /// Makes every recording started from now on time its dispatches, so a network's
-    /// recording can be profiled without threading a flag through its layers.
-    pub fn set_profiling(&self, on: bool) {
-        self.shared.profiling.store(on, Ordering::SeqCst);
-    }
-
-    pub(crate) fn profiling(&self) -> bool {
-        self.shared.profiling.load(Ordering::SeqCst)
-    }
-
-    /// Runs `f` with every recording it makes timing its dispatches, and returns what `f` returns
-    /// with the device time of each dispatch its runs made, in order: a whole network call
-    /// (a VAE decode, tiles and all) profiled without a handle on its recordings.
-    pub fn profiled<T>(&self, f: impl FnOnce() -> T) -> (T, Vec<Timing>) {
-        *self.shared.collected.lock().unwrap() = Some(Vec::new());
-        self.set_profiling(true);
-        let out = f();
-        self.set_profiling(false);
-        (out, self.shared.collected.lock().unwrap().take().unwrap_or_default())
-    }
-
-    /// Whether small products take the kernel variants that compile quickly rather than those
-    /// that run fastest (8 rows per workgroup for the subgroup GEMM and convolution with fewer
-    /// than 2¹⁷ weights or at most 8 rows, the workgroup attention for fewer than 256 channels:
-    /// tiny models, whose products take milliseconds); starts as [`DeviceInfo::quick_compile`].
-    pub fn quick_compile(&self) -> bool {
-        self.shared.quick_compile.load(Ordering::SeqCst)
-    }
-
-    /// Overrides [`Context::quick_compile`] (tests run both).
-    pub fn set_quick_compile(&self, on: bool) {
-        self.shared.quick_compile.store(on, Ordering::SeqCst);
-    }
-
-    /// Sets what to call before a submission on a device that compiles its kernels at their
-    /// first dispatch (lavapipe) when kernels that never ran in this process are in it: the
-    /// first runs on a cold Mesa shader cache can take minutes, so say what the wait is.
-    pub fn on_compile(&self, notice: CompileNotice) {
-        *self.shared.compile_notice.lock().unwrap() = Some(notice);
-    }
-
-    /// Where recordings split into submissions and how long a wait for one may last (see
-    /// [`SubmitBudget`]).
-    pub fn submit_budget(&self) -> SubmitBudget {
-        *self.shared.submit_budget.lock().unwrap()
-    }
-
-    /// Sets the submission budget for recordings started from now on (tests split recordings
-    /// at every dispatch, benchmarks measure what splitting costs).
-    pub fn set_submit_budget(&self, budget: SubmitBudget) {
-        *self.shared.submit_budget.lock().unwrap() = budget;
-    }
-
-    /// The most workgroups one dispatch may have per dimension.
-    pub fn workgroup_limit(&self) -> [u32; 3] {
-        *self.shared.workgroup_limit.lock().unwrap()
-    }
-
-    /// Lowers the per-dispatch workgroup limit below the device's own (tests exercise the
-    /// splitting of large grids); values above the device limit are clamped to it.
-    pub fn set_workgroup_limit(&self, limit: [u32; 3]) {
-        let device = self.shared.info.max_workgroup_count;
-        *self.shared.workgroup_limit.lock().unwrap() = [0, 1, 2].map(|i| limit[i].clamp(1, device[i]));
-    }
-
-    /// Whether this device can pin a kernel to a subgroup of `size` lanes.
-    pub(crate) fn subgroup_ok(&self, size: u32) -> bool {
-        self.shared.info.can_use_subgroup(size)
     }
 }

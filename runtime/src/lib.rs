@@ -2,7 +2,9 @@
 //! recording with barriers and profiling, and the typed operations networks are built from.
 
 mod arena;
+mod attention_setting;
 mod context;
+mod context_settings;
 mod cpu_vectors;
 mod device;
 mod device_choice;
@@ -29,6 +31,7 @@ mod tensor;
 mod validation;
 
 pub use arena::Arena;
+pub use attention_setting::AttentionKernel;
 pub use context::{gpu_paths_requested, CompileNotice, Context, GemmFamily};
 pub use cpu_vectors::wider_lavapipe_vectors_available;
 pub use device::{api_limit, list_devices, DeviceInfo, DeviceKind};

@@ -2,10 +2,11 @@
 //! the family its context takes for the products, with, on the matrix units, the fragment shape
 //! the device runs (`VKDIFF_FRAGMENT`'s where asked) and the workgroup tile the context asks
 //! for (`VKDIFF_MATRIX_TILE`); and attention on the matrix units where
-//! the CI pass of a driver with them says it must. A regressed selection then fails the test
+//! the CI pass of a driver with them says it must, or on VK_NV_cooperative_matrix2's probe where
+//! `VKDIFF_ATTENTION=cm2` asks for it. A regressed selection then fails the test
 //! instead of passing on another kernel.
 
-use vkdiff_runtime::{Context, Dtype, GemmFamily, Variant};
+use vkdiff_runtime::{AttentionKernel, Context, Dtype, GemmFamily, Matrix2Probe, Variant};
 
 /// Whether the CI pass runs on a driver whose matrix units must be used.
 pub fn expect_cooperative() -> bool {
@@ -76,11 +77,23 @@ pub fn assert_product_family<'a>(
     products
 }
 
-/// Asserts attention's kernel where the choice is certain: on the matrix units for f16 heads of
-/// up to 64 on a GPU-path context with them, in the CI pass that expects them; `attention_tiled`
+/// Asserts attention's kernel where the choice is certain: `attention_cm2` for f16 heads of up to
+/// 64 where `VKDIFF_ATTENTION=cm2` asks for it and the device runs it; on the matrix units for
+/// such heads on a GPU-path context with them, in the CI pass that expects them; `attention_tiled`
 /// for such heads on GPU paths without them (f32, or no units). Contexts that take the quickly
 /// compiled kernels run `attention_wg` instead.
 pub fn assert_attention_kernel(ctx: &Context, dtype: Dtype, head_dim: usize, kernels: &[&str], what: &str) {
+    // VKDIFF_ATTENTION is read here too, so that a runtime that ignored it fails.
+    let asked = ctx.attention_kernel() == AttentionKernel::Matrix2
+        || std::env::var("VKDIFF_ATTENTION").is_ok_and(|v| v.trim().eq_ignore_ascii_case("cm2"));
+    let matrix2 = ctx.info().matrix2_tiles().iter().any(|t| t.probe == Matrix2Probe::Attention);
+    if asked && matrix2 && dtype == Dtype::F16 && head_dim <= 64 {
+        assert!(
+            kernels.contains(&"attention_cm2"),
+            "{what}: VKDIFF_ATTENTION=cm2, heads of {head_dim} ran {kernels:?}"
+        );
+        return;
+    }
     if !ctx.gpu_paths() || ctx.quick_compile() || head_dim > 64 {
         return;
     }

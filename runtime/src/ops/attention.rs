@@ -63,7 +63,9 @@ impl AttentionLayout {
 /// Subgroup widths attention has variants for.
 const WIDTHS: [u32; 3] = [4, 8, 16];
 
-/// out = softmax(scale · Q·Kᵀ)·V for every batch and head.
+/// out = softmax(scale · Q·Kᵀ)·V for every batch and head; f16 heads of up to 64 values through
+/// `VK_NV_cooperative_matrix2`'s probe where the context asks for it ([`crate::AttentionKernel`])
+/// and the device runs it.
 pub fn attention(
     rec: &mut Recorder,
     q: &Tensor,
@@ -82,6 +84,9 @@ pub fn attention(
     }
     if !vec4_aligned(l) {
         return padded_attention(rec, [q, k, v], out, l, scale);
+    }
+    if let Some(tile) = super::attention_cm2::chosen_tile(rec.context(), dtype, l.head_dim) {
+        return super::attention_cm2::attention_cm2(rec, [q, k, v], out, l, scale, &tile);
     }
     let ctx = rec.context().clone();
     let slots = u(l.head_dim / 4);

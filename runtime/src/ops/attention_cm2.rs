@@ -6,6 +6,7 @@ use super::attention::{checked_dtype, push_constants, vec4_aligned, AttentionLay
 use super::bands::fit;
 use super::linear_cm2::ensure_offered;
 use super::{kernel, u};
+use crate::context::Context;
 use crate::error::{ensure, Result};
 use crate::matrix2_tile::{Matrix2Probe, Matrix2Tile};
 use crate::recorder::Recorder;
@@ -34,4 +35,14 @@ pub fn attention_cm2(
     let probe = kernel(&ctx, "attention_cm2", Dtype::F16, &tile.params(), 4)?;
     let groups = [u(l.q_tokens.div_ceil(tile.m as usize)), u(l.heads), u(l.batch)];
     rec.dispatch(&probe, &[q, k, v], &[out], &push_constants(l, scale), groups)
+}
+
+/// The attention tile `ops::attention` takes for f16 heads of `head_dim` where the context asks
+/// for this probe (`VKDIFF_ATTENTION=cm2`): the first the device runs that holds them.
+pub(super) fn chosen_tile(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<Matrix2Tile> {
+    if ctx.attention_kernel() != crate::AttentionKernel::Matrix2 || dtype != Dtype::F16 {
+        return None;
+    }
+    let fits = |t: &Matrix2Tile| t.probe == Matrix2Probe::Attention && head_dim <= t.k as usize;
+    ctx.info().matrix2_tiles().into_iter().find(fits)
 }

@@ -3,8 +3,8 @@
 //! subgroup-scope tile, with the row reductions, per-element operations and conversions.
 
 use super::attention::reference;
-use vkdiff_runtime::ops::{attention_cm2, AttentionLayout};
-use vkdiff_runtime::{built_matrix2_tiles, Context, Dtype, Matrix2Probe, Matrix2Tile, Recorder};
+use vkdiff_runtime::ops::{attention, attention_cm2, AttentionLayout};
+use vkdiff_runtime::{built_matrix2_tiles, AttentionKernel, Context, Dtype, Matrix2Probe, Matrix2Tile, Recorder};
 use vkdiff_testkit::*;
 
 /// Runs the probe on `tile` over random f16 Q, K, V laid out as `l` (output dense), key token t's
@@ -102,5 +102,26 @@ fn attention_cm2_matches_the_reference_on_every_tile_the_device_runs() {
         let small = AttentionLayout::dense(1, 1, 16, 2, 2);
         let err = attention_cm2(&mut rec, [&t32, &t32, &t32], &t32, &small, 1.0, tile).unwrap_err().to_string();
         assert!(err.contains("must be f16"), "{err}");
+    }
+}
+
+#[test]
+fn attention_takes_the_probe_where_the_context_asks_for_it() {
+    // A context of its own: the setting would reach other tests' attention in a shared one.
+    let ctx = private_ctx();
+    let offered = ctx.info().matrix2_tiles().iter().any(|t| t.probe == Matrix2Probe::Attention);
+    let l = AttentionLayout::dense(2, 2, 64, 37, 77);
+    let [q, k, v] = [11, 12, 13].map(|seed| stored(&random(2 * 77 * 128, seed), Dtype::F16));
+    let [tq, tk, tv] = [&q, &k, &v].map(|x| ctx.upload(&[x.len()], Dtype::F16, x).unwrap());
+    let out = ctx.zeros(&[2, 37, 128], Dtype::F16).unwrap();
+    let want = reference(&q, &k, &v, &l, 0.125);
+    for kernel in [AttentionKernel::Matrix2, AttentionKernel::Auto] {
+        ctx.set_attention_kernel(kernel);
+        let mut rec = Recorder::new(&ctx, true).unwrap();
+        attention(&mut rec, &tq, &tk, &tv, &out, &l, 0.125).unwrap();
+        let ran: Vec<&str> = rec.finish().unwrap().run_profiled().unwrap().iter().map(|t| t.kernel).collect();
+        let what = format!("attention with {kernel:?}");
+        assert_eq!(ran.contains(&"attention_cm2"), offered && kernel == AttentionKernel::Matrix2, "{what}: {ran:?}");
+        assert_close(&what, &out.download().unwrap(), &want, 1e-3, storage_rtol(Dtype::F16));
     }
 }
