@@ -174,6 +174,9 @@ fn lower_placeholders(words: &[u32]) -> Result<(Vec<u32>, Vec<u32>), String> {
     let mut naming = std::collections::HashSet::new();
     for inst in insts.iter().filter(|i| i[0] & 0xffff == OP_FUNCTION_CALL) {
         if let Some((kind, ..)) = placeholder(inst[3])? {
+            if inst.len() < 5 {
+                return Err(format!("`{}`: takes the matrix as its first argument", names[&inst[3]]));
+            }
             if kind != Placeholder::Convert {
                 let named = inst.get(5).filter(|id| callee.contains_key(id));
                 naming.insert(*named.ok_or_else(|| format!("`{}`: its second argument must call a function", names[&inst[3]]))?);
