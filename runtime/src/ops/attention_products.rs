@@ -6,8 +6,9 @@
 //! scratch first and the results rounded back, since f16 scores would lose the softmax's
 //! precision.
 
-use super::attention::{copy_heads, AttentionLayout, HeadSpan};
+use super::attention::AttentionLayout;
 use super::bands::{bands, row_view, span_view};
+use super::copy_heads::{copy_heads, HeadSpan};
 use super::gemm::{matmul, Matmul};
 use super::norm::softmax;
 use crate::error::{ensure, Result};

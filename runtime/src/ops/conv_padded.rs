@@ -5,8 +5,8 @@
 //! channels are left behind. The scalar kernel this replaces ran the VAE's 128 → 3 convolution
 //! at 0.1 GFLOP/s of useful work on lavapipe, a fifth of a 512² decode (BENCHMARKS.md).
 
-use super::attention::{copy_heads, HeadSpan};
 use super::conv::{conv2d, ConvParams};
+use super::copy_heads::{copy_heads, HeadSpan};
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
 use crate::tensor::Tensor;

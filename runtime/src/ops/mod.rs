@@ -9,16 +9,18 @@ mod ceiling;
 mod conv;
 mod conv_padded;
 mod coop_tile;
+mod copy_heads;
 mod elementwise;
 mod gemm;
 mod linear_cm2;
 mod norm;
 mod pool;
 
-pub use attention::{attention, copy_heads, AttentionLayout, HeadSpan};
+pub use attention::{attention, AttentionLayout};
 pub use attention_cm2::attention_cm2;
 pub use ceiling::{matrix_ceiling, MatrixCeiling};
 pub use conv::{conv2d, oihw_to_ohwi, ConvParams, Padding};
+pub use copy_heads::{copy_heads, HeadSpan};
 pub use elementwise::{
     add, binary, concat_channels, copy_into_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x,
     BinaryOp, TimestepEmbedding, UnaryOp,
