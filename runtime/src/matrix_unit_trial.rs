@@ -170,7 +170,7 @@ fn timed_products(ctx: &Context, clock: TrialClock) -> Result<(Timed, Timed)> {
     Ok((run(GemmFamily::Cooperative)?, run(GemmFamily::Tiled)?))
 }
 
-fn products(ctx: &Context, x: &Tensor, w: &Tensor, out: &Tensor, timed: bool) -> Result<crate::recorder::Recording> {
+fn products(ctx: &Context, x: &Tensor, w: &Tensor, out: &Tensor, timed: bool) -> Result<crate::recording::Recording> {
     let mut rec = Recorder::new(ctx, timed)?;
     for _ in 0..REPEATS {
         linear(&mut rec, x, w, None, out)?;
