@@ -1,7 +1,7 @@
-//! Vulkan instance, physical-device discovery and the choice of device.
+//! Physical-device discovery: what each Vulkan device offers vkdiff (`DeviceInfo`).
 
 use crate::device_choice::PciAddress;
-use crate::error::{Error, Result, VkContext};
+use crate::error::{Result, VkContext};
 use crate::flexible_dimensions::{self, CooperativeMatrix2Features};
 use crate::matrix2_tile::{self, Matrix2Tile};
 use crate::matrix_units::{self, Fragment, MatrixShape};
@@ -176,40 +176,6 @@ impl DeviceInfo {
             None => self.subgroup_size == size,
         }
     }
-}
-
-/// The newest Vulkan version vkdiff asks for: 1.3, or 1.2 under `VKDIFF_VULKAN_API=1.2`, which
-/// runs the 1.2 paths (extensions where 1.3 has core features) on a 1.3 driver.
-pub fn api_limit() -> Result<(u32, u32)> {
-    match std::env::var("VKDIFF_VULKAN_API").as_deref() {
-        Err(_) | Ok("") | Ok("1.3") => Ok((1, 3)),
-        Ok("1.2") => Ok((1, 2)),
-        Ok(other) => Err(Error::BadSetting(format!("VKDIFF_VULKAN_API={other}: vkdiff runs Vulkan 1.2 or 1.3"))),
-    }
-}
-
-/// vkdiff's instance for Vulkan up to `api` (major, minor), validated under `VKDIFF_VALIDATE=1`.
-/// Where the loader offers `VK_KHR_portability_enumeration`, portability devices (MoltenVK) are
-/// listed too.
-pub(crate) fn create_instance(
-    entry: &ash::Entry,
-    api: (u32, u32),
-) -> Result<(ash::Instance, Option<vk::DebugUtilsMessengerEXT>)> {
-    let app = vk::ApplicationInfo::default()
-        .application_name(c"vkdiff")
-        .engine_name(c"vkdiff")
-        .api_version(vk::make_api_version(0, api.0, api.1, 0));
-    // SAFETY: a plain query of the loader.
-    let available =
-        unsafe { entry.enumerate_instance_extension_properties(None) }.vk("vkEnumerateInstanceExtensionProperties")?;
-    let portability = ash::khr::portability_enumeration::NAME;
-    let mut info = vk::InstanceCreateInfo::default().application_info(&app);
-    let mut extensions = Vec::new();
-    if available.iter().any(|e| e.extension_name_as_c_str() == Ok(portability)) {
-        extensions.push(portability.as_ptr());
-        info = info.flags(vk::InstanceCreateFlags::ENUMERATE_PORTABILITY_KHR);
-    }
-    crate::validation::create_instance(entry, info, extensions)
 }
 
 fn has_extension(instance: &ash::Instance, pd: vk::PhysicalDevice, name: &CStr) -> bool {
