@@ -88,7 +88,12 @@ fn dataset_flags(out: &Path) -> Vec<String> {
 
 /// The binary, shielded from a Slurm or Kubernetes job the tests may themselves run in.
 fn vk() -> Command {
-    let mut command = Command::new(env!("CARGO_BIN_EXE_vkdiff"));
+    shielded(Command::new(env!("CARGO_BIN_EXE_vkdiff")))
+}
+
+/// `command` without the variables by which a Slurm array or Kubernetes indexed job gives a
+/// process its shard.
+fn shielded(mut command: Command) -> Command {
     for var in [
         "SLURM_ARRAY_TASK_ID",
         "SLURM_ARRAY_TASK_MIN",

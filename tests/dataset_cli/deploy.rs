@@ -13,17 +13,8 @@ fn args_file(dir: &Path) -> PathBuf {
 
 /// `script` run by `shell` with the deploy scripts' variables and `env`.
 fn deploy(shell: &str, script: &[&str], dir: &Path, args: &Path, env: &[(&str, &str)]) -> std::process::Child {
-    let mut command = Command::new(shell);
+    let mut command = shielded(Command::new(shell));
     command.args(script).current_dir(env!("CARGO_MANIFEST_DIR"));
-    for var in [
-        "SLURM_ARRAY_TASK_ID",
-        "SLURM_ARRAY_TASK_MIN",
-        "SLURM_ARRAY_TASK_COUNT",
-        "SLURM_ARRAY_TASK_STEP",
-        "JOB_COMPLETION_INDEX",
-    ] {
-        command.env_remove(var);
-    }
     command.envs([
         // The jobs refuse a CPU device, and CI has only lavapipe.
         ("VKDIFF_REQUIRE_GPU", "0"),
