@@ -7,6 +7,7 @@ pub mod atomic;
 mod error;
 pub mod image;
 mod safetensors;
+mod stored_zip;
 mod torch_pickle;
 mod torch_pth;
 
