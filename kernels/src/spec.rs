@@ -149,7 +149,7 @@ pub const KERNELS: &[KernelSpec] = &[
     // subgroup variants cover lavapipe's widths; `attention_wg` every other width and head size.
     KernelSpec {
         name: "attention",
-        files: &["attention_common.wgsl", "attention.wgsl"],
+        files: &["attention_common.wgsl", "attention_operands.wgsl", "attention.wgsl"],
         params: &[
             &[("SG", 4), ("DV", 1), ("TM", 16)],
             &[("SG", 4), ("DV", 2), ("TM", 16)],
@@ -169,16 +169,16 @@ pub const KERNELS: &[KernelSpec] = &[
     // chunk in workgroup memory (2·KC·DS vec4s: 32 KiB at most).
     KernelSpec {
         name: "attention_rows",
-        files: &["attention_common.wgsl", "attention_rows.wgsl"],
+        files: &["attention_common.wgsl", "attention_operands.wgsl", "attention_rows.wgsl"],
         params: &[&[("DS", 16), ("KC", 64)], &[("DS", 32), ("KC", 32)]],
     },
     // GPU attention for heads of up to 64 values, 4×4 scores and outputs an invocation: TM = 64
     // query rows per workgroup of 16×16.
-    KernelSpec { name: "attention_tiled", files: &["attention_common.wgsl", "attention_tiled.wgsl"], params: &[&[("TM", 64)]] },
+    KernelSpec { name: "attention_tiled", files: &["attention_common.wgsl", "attention_operands.wgsl", "attention_tiled.wgsl"], params: &[&[("TM", 64)]] },
     // Workgroup-memory attention: W invocations, no subgroup operations.
     KernelSpec {
         name: "attention_wg",
-        files: &["attention_common.wgsl", "attention_wg.wgsl"],
+        files: &["attention_common.wgsl", "attention_operands.wgsl", "attention_wg.wgsl"],
         params: &[
             &[("W", 64), ("DV", 1), ("TM", 8)],
             &[("W", 64), ("DV", 2), ("TM", 4)],
@@ -422,7 +422,7 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
     // joined softmax). PU = KF·FN·(DH/4)/(4·SG), attention_staging.wgsl's units per invocation.
     KernelSpec {
         name: "attention_coop",
-        files: &["attention_common.wgsl", "attention_staging.wgsl", "attention_coop.wgsl"],
+        files: &["attention_common.wgsl", "attention_operands.wgsl", "attention_staging.wgsl", "attention_coop.wgsl"],
         params: &[
             &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8), ("DH", 64), ("KF", 4), ("LPR", 2), ("PU", 16)],
             &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 32), ("DH", 64), ("KF", 4), ("LPR", 2), ("PU", 8)],

@@ -11,8 +11,11 @@
 // here, and O += P·V the FM×FK×FN one, declared 16×16; compile.rs gives them their shapes, PV = 1,
 // so FN ≠ FK). WS = 1 gives the matrices workgroup scope, shared by WG invocations (NVIDIA's
 // drivers); WS = 0 subgroup scope on a workgroup of one subgroup (Mesa 26.1's lavapipe, for CI).
-// Q and each chunk's K and V are staged in workgroup memory as attention_coop.wgsl stages them
-// (attention_staging.wgsl), keys past the end clamped and then masked. The online softmax is
+// Q is staged in workgroup memory as attention_coop.wgsl stages it (attention_staging.wgsl). K and
+// V load in place, the driver staging them as it sees fit (what workgroup scope is for), where
+// the heads are FK values wide, every offset and stride a multiple of 8 values (rows of 16
+// bytes, as matrix loads need) and the chunk is whole; other chunks (the last, past the keys'
+// end) are staged too, keys past the end clamped and then masked. The online softmax is
 // in base 2 with the reference moving every chunk: M = max(M, rowmax(S)), P = 2^(S − M) rounded
 // to f16 as P·V takes it (and summed so), O and the row sums L scaled by 2^(M_old − M). Row
 // statistics (M, L) are held as FM×FN accumulators whose rows repeat one value, and smeared to
@@ -27,7 +30,15 @@ const LOG2E: f32 = 1.4426950408889634;
 const LD: u32 = DH + 8u; // Q, K and V rows (f16; a multiple of 8 values, 16 bytes)
 const LO: u32 = DH + 4u; // output rows (f32)
 
-var<workgroup> kv: array<Words, 2u * KC * LD / 4u>; // Q's rows, then each chunk's K rows and V rows
+// The operands as words of f16 pairs seen as f32 (naga types a matrix load by the pointer it
+// reads through); the staging reads them as their bits.
+@group(0) @binding(0) var<storage, read> q: array<Words>;
+@group(0) @binding(1) var<storage, read> k: array<Words>;
+@group(0) @binding(2) var<storage, read> v: array<Words>;
+@group(0) @binding(3) var<storage, read_write> o: array<Words>;
+
+var<workgroup> kv: array<Words, 2u * KC * LD / 4u>; // Q's rows, then a staged chunk's K rows and V rows
+var<workgroup> chunk_in_place: u32; // whether this chunk's K and V load in place
 var<workgroup> out_rows: array<Words, ROWS * LO / 2u>;
 
 alias FP = coop_mat16x16<f32, A>; // P: FM×FN, f16
@@ -121,10 +132,8 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
     let head = wg.y;
     let batch = wg.z;
     let row0 = wg.x * ROWS;
-    // The first chunk's keys and values are loaded while Q is staged.
     var rk: array<Unit, PU>;
     var rv: array<Unit, PU>;
-    fetch_kv(&rk, &rv, 0u, t, head, batch);
     stage_q(row0, head, batch, t);
     workgroupBarrier();
     let qt = 0u; // indices and strides through `let`s (gemm_cm2.wgsl says why)
@@ -136,14 +145,35 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
     var acc: FO; // O
     let kt = 0u;
     let vt = KC * LD / 4u;
+    let aligned = ((p.k_off | p.k_batch | p.k_ld | p.v_off | p.v_batch | p.v_ld) % 8u) == 0u;
+    let in_place = (p.d == DH) & aligned;
+    let ks = p.k_ld / 4u;
+    let vs = p.v_ld / 4u;
     for (var j0 = 0u; j0 < p.nk; j0 += KC) {
-        // Every matrix is done with the chunk before (and Q) before this one is staged.
-        workgroupBarrier();
-        store_kv(&rk, &rv, t);
-        workgroupBarrier();
-        fetch_kv(&rk, &rv, j0 + KC, t, head, batch);
-        // S = Q·Kᵀ in base 2: K rows [key][d] read column-major are Kᵀ.
-        var s = coopMultiplyAdd(qf, coopLoad<FB>(&kv[kt], qs), zero) * LOG2E;
+        // K rows [key][d] read column-major are Kᵀ; V rows are read row-major.
+        var kf: FB;
+        var vf: FV;
+        // The same for every invocation, but naga proves a matrix load's control flow uniform only
+        // through workgroup memory (its analysis takes the loop counter for divergent).
+        if t == 0u {
+            chunk_in_place = u32(in_place & (j0 + KC <= p.nk));
+        }
+        if workgroupUniformLoad(&chunk_in_place) != 0u {
+            let ka = (p.k_off + batch * p.k_batch + j0 * p.k_ld + head * DH) / 4u;
+            let va = (p.v_off + batch * p.v_batch + j0 * p.v_ld + head * DH) / 4u;
+            kf = coopLoad<FB>(&k[ka], ks);
+            vf = coopLoadT<FV>(&v[va], vs);
+        } else {
+            // Every matrix is done with what `kv` held (Q, or the chunk staged before) first.
+            workgroupBarrier();
+            fetch_kv(&rk, &rv, j0, t, head, batch);
+            store_kv(&rk, &rv, t);
+            workgroupBarrier();
+            kf = coopLoad<FB>(&kv[kt], qs);
+            vf = coopLoadT<FV>(&kv[vt], qs);
+        }
+        // S = Q·Kᵀ in base 2.
+        var s = coopMultiplyAdd(qf, kf, zero) * LOG2E;
         if (j0 + KC > p.nk) | (p.causal != 0u) {
             s = nv_each_masked(s, unmasked(0u, 0u, 0.0, 0u, 0u), j0, row0);
         }
@@ -155,7 +185,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
         let chunk_sums = nv_reduce_rows(weights, plus(0.0, 0.0));
         sums = nv_each_with_two(sums, scaled_sum(0u, 0u, 0.0, 0.0, 0.0), scale, chunk_sums);
         acc = nv_each_out(acc, times(0u, 0u, 0.0, 0.0), nv_reduce_rows_to_out(scale, larger(0.0, 0.0)));
-        acc = coopMultiplyAdd(nv_convert(weights), coopLoadT<FV>(&kv[vt], qs), acc);
+        acc = coopMultiplyAdd(nv_convert(weights), vf, acc);
     }
     acc = nv_each_out(acc, over(0u, 0u, 0.0, 0.0), nv_reduce_rows_to_out(sums, larger(0.0, 0.0)));
     let ot = 0u;
@@ -170,7 +200,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
         if (query < p.nq) & (s < slots) {
             let at = r * os + 2u * s;
             let x = vec4<f32>(out_rows[at], out_rows[at + 1u]);
-            o[(batch * p.o_batch + query * p.o_ld + head * p.d) / 4u + s] = narrow(x);
+            o[(batch * p.o_batch + query * p.o_ld + head * p.d) / 4u + s] = bitcast<Words>(narrow(x));
         }
     }
 }

@@ -1,11 +1,7 @@
-// Attention's operands and parameters, shared by the subgroup (attention.wgsl) and workgroup
-// (attention_wg.wgsl) kernels. Element (b, token, head, d) of an operand lies at
-// off + b·batch + token·ld + head·D + d; D and every stride and offset % 4 = 0 (vec4 reads).
-@group(0) @binding(0) var<storage, read> q: array<Unit>;
-@group(0) @binding(1) var<storage, read> k: array<Unit>;
-@group(0) @binding(2) var<storage, read> v: array<Unit>;
-@group(0) @binding(3) var<storage, read_write> o: array<Unit>;
-
+// Attention's parameters, shared by every attention kernel: element (b, token, head, d) of an
+// operand lies at off + b·batch + token·ld + head·D + d; D and every stride and offset % 4 = 0
+// (vec4 reads). The operands are bound as attention_operands.wgsl declares them, or as the
+// kernel does (attention_cm2.wgsl).
 struct Params {
     nq: u32,
     nk: u32,

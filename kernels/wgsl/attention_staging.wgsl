@@ -1,9 +1,11 @@
 // How the matrix-unit attention kernels (attention_coop.wgsl, attention_cm2.wgsl) stage their
 // operands in workgroup memory: Q's ROWS rows, then each chunk of KC keys' K and V rows, all f16
-// rows of LD values in `kv` (K's first, then V's), fetched into registers while the chunk before
-// is computed so that the loads' latency hides. Each kernel declares `kv`, ROWS, KC, SLOTS
+// rows of LD values in `kv` (K's first, then V's), fetched into registers first (attention_coop
+// fetches each chunk while the one before is computed, so that the loads' latency hides). Each
+// kernel declares `kv`, ROWS, KC, SLOTS
 // (DH/4, a head's units), LD and WG; PU (a parameter: the `#unroll` count) is KC·SLOTS/WG, the
-// units of a chunk's K (and V) per invocation.
+// units of a chunk's K (and V) per invocation. The operands are read as their bits, in whichever
+// type of unit the kernel binds them (attention_operands.wgsl's, or attention_cm2.wgsl's).
 
 // A unit of the operands widened to f32, and four values rounded to f16 as a unit.
 fn widen(u: Unit) -> vec4<f32> {
@@ -28,7 +30,7 @@ fn stage_q(row0: u32, head: u32, batch: u32, t: u32) {
         let s = i % SLOTS;
         let token = min(row0 + r, p.nq - 1u);
         let at = (p.q_off + batch * p.q_batch + token * p.q_ld + head * p.d) / 4u + min(s, slots - 1u);
-        kv[r * (LD / 4u) + s] = tiled(select(Unit(), narrow(p.scale * widen(q[at])), s < slots));
+        kv[r * (LD / 4u) + s] = tiled(select(Unit(), narrow(p.scale * widen(bitcast<Unit>(q[at]))), s < slots));
     }
 }
 
@@ -53,8 +55,8 @@ fn fetch_kv(
         let sl = min(s, slots - 1u);
         let ka = (p.k_off + batch * p.k_batch + key * p.k_ld + head * p.d) / 4u + sl;
         let va = (p.v_off + batch * p.v_batch + key * p.v_ld + head * p.d) / 4u + sl;
-        (*rk)[U] = k[ka];
-        (*rv)[U] = v[va];
+        (*rk)[U] = bitcast<Unit>(k[ka]);
+        (*rv)[U] = bitcast<Unit>(v[va]);
     }
     // #end
 }

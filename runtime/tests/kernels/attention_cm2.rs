@@ -65,8 +65,9 @@ fn attention_cm2_matches_the_reference_on_every_tile_the_device_runs() {
     }
     for tile in &tiles {
         let (rows, keys) = (tile.m as usize, tile.n as usize);
-        // Self-attention over row-tile and chunk edges; cross-attention to CLIP's 77 tokens with
-        // heads narrower than the tile's; two batches throughout.
+        // Self-attention over row-tile and chunk edges (whole chunks load in place, the last is
+        // staged); cross-attention to CLIP's 77 tokens with heads narrower than the tile's (all
+        // staged); two batches throughout.
         check(&ctx, tile, &AttentionLayout::dense(2, 2, 64, 2 * rows + 3, 3 * keys + 5), 11, ones);
         check(&ctx, tile, &AttentionLayout::dense(2, 3, 40, rows + 1, 77), 12, ones);
         // Keys whose scores jump up in later chunks: the running maximum moves and rescales O and
@@ -92,6 +93,10 @@ fn attention_cm2_matches_the_reference_on_every_tile_the_device_runs() {
         (fused.q_batch, fused.k_batch, fused.v_batch) = (n * 3 * w, n * 3 * w, n * 3 * w);
         (fused.k_offset, fused.v_offset) = (w, 2 * w);
         check(&ctx, tile, &fused, 15, ones);
+        // Offsets of 4 values: rows off the 16 bytes matrix loads need, so every chunk is staged.
+        let mut shifted = AttentionLayout::dense(1, 2, 64, rows + 2, 2 * keys + 3);
+        (shifted.q_offset, shifted.k_offset, shifted.v_offset) = (4, 4, 4);
+        check(&ctx, tile, &shifted, 16, ones);
         // Heads past the tile's and f32 operands are refused before anything is recorded.
         let wide = AttentionLayout::dense(1, 1, tile.k as usize + 4, 2, 2);
         let t = ctx.zeros(&[4 * wide.head_dim], Dtype::F16).unwrap();
