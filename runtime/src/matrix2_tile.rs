@@ -147,6 +147,19 @@ mod tests {
     }
 
     #[test]
+    fn a_context_enables_the_features_its_tiles_use() {
+        assert_eq!(features(&[]), ["flexible dimensions"]);
+        let [linear, attention] = [Matrix2Probe::Linear, Matrix2Probe::Attention].map(built);
+        let subgroup = linear.iter().find(|t| !t.workgroup_scope()).copied().unwrap();
+        let workgroup = linear.iter().find(|t| t.workgroup_scope()).copied().unwrap();
+        assert_eq!(features(&[subgroup]), ["flexible dimensions"]);
+        assert_eq!(features(&[subgroup, workgroup]), ["flexible dimensions", "workgroup scope"]);
+        let twin = attention.iter().find(|t| !t.workgroup_scope()).copied().unwrap();
+        let all = ["flexible dimensions", "reductions", "conversions", "per-element operations"];
+        assert_eq!(features(&[subgroup, twin, twin]), all, "each feature once");
+    }
+
+    #[test]
     fn tiles_are_offered_by_scope_workgroup_size_and_granularity() {
         // Mesa 26.1's lavapipe: flexible dimensions in multiples of 8 at subgroup scope, 8 lanes.
         let mut lavapipe = device(0, DeviceKind::Cpu, true);
