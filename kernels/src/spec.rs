@@ -379,10 +379,10 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
             &[("FM", 128), ("FN", 64), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 128)],
         ],
     },
-    // VK_NV_cooperative_matrix2's probe of attention, for `bench kernels`: FM query rows against
-    // chunks of FN keys, heads of up to FK = 64 values (FN ≠ FK: compile.rs would give two of the
-    // matrix types one shape), the softmax on the extension's reductions and per-element
-    // operations. Workgroup scope (WS = 1) at 128 invocations for NVIDIA's drivers, within 48 KiB
+    // VK_NV_cooperative_matrix2's probe of attention, for `bench kernels` and
+    // `VKDIFF_ATTENTION=cm2`: FM query rows against chunks of FN keys, heads of up to FK = 64
+    // values (FN ≠ FK: compile.rs would give two of the matrix types one shape), the softmax on
+    // the extension's reductions and per-element operations. Workgroup scope (WS = 1) at 128 invocations for NVIDIA's drivers, within 48 KiB
     // of workgroup memory; subgroup scope at 8 lanes (Mesa 26.1's lavapipe) for CI, FM = 8: that
     // driver splits larger matrices into 8×8 pieces and, past the first band of 8 rows, reduces
     // rows from the wrong pieces (FM = 16 fails the kernel test). PV = 1: the second product;

@@ -1,6 +1,6 @@
-// Attention through VK_NV_cooperative_matrix2, for `bench kernels` and its kernel test only (a
-// probe, as gemm_cm2.wgsl is: no network takes it until a GPU has timed it against
-// attention_coop.wgsl). The softmax stays in the matrix registers, as ggml's flash_attn_cm2
+// Attention through VK_NV_cooperative_matrix2, for `bench kernels`, its kernel test and
+// `VKDIFF_ATTENTION=cm2` (a probe, as gemm_cm2.wgsl is: no network takes it unasked until a GPU
+// has timed it against attention_coop.wgsl). The softmax stays in the matrix registers, as ggml's flash_attn_cm2
 // keeps it: the extension's row reductions give each row's maximum and sum, its per-element
 // operations the powers, the mask and the rescaling, and its conversion turns the weights into
 // P·V's operand; nothing passes through workgroup memory between the two products, where

@@ -1,6 +1,7 @@
 //! `VK_NV_cooperative_matrix2`'s probe of attention (kernels/wgsl/attention_cm2.wgsl: the
 //! softmax on the extension's row reductions and per-element operations), which `bench kernels`
-//! times beside the matrix-unit attention; no network takes it yet.
+//! times beside the matrix-unit attention; networks take it only where `VKDIFF_ATTENTION=cm2`
+//! asks.
 
 use super::attention::{checked_dtype, push_constants, vec4_aligned, AttentionLayout};
 use super::bands::fit;
