@@ -168,6 +168,8 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
     // A malformed request would otherwise show as the device's default choice.
     requested_fragment()?;
     CooperativeSetting::from_env()?;
+    vkdiff_runtime::MatrixTile::from_env()?;
+    vkdiff_runtime::AttentionKernel::from_env()?;
     if args.compile {
         let request = crate::devices_compile::CompileRequest {
             choice: args.device.choice(),

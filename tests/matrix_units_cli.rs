@@ -1,4 +1,5 @@
-//! Where the matrix units run: `VKDIFF_COOPERATIVE` and the trial each run makes as it starts.
+//! Where the matrix units run: `VKDIFF_COOPERATIVE` and the trial each run makes as it starts;
+//! the refusal of settings that name nothing.
 //! On a driver without matrix units (Mesa 22.3 lavapipe) no trial runs; CI's Mesa 26.1 pass
 //! runs these tests where one does.
 
@@ -7,14 +8,21 @@ mod cli;
 use cli::{command, error_line_with, scratch};
 
 #[test]
-fn a_cooperative_setting_that_is_no_switch_is_refused() {
+fn matrix_unit_settings_that_name_nothing_are_refused() {
     let out = scratch("cooperative-setting").join("x.png");
     let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pipeline/tiny-sdxl");
     let gen =
         ["gen", "--model", model.to_str().unwrap(), "--prompt", "x", "--steps", "1", "--out", out.to_str().unwrap()];
-    for args in [&["devices"][..], &gen] {
-        let line = error_line_with(args, &[("VKDIFF_COOPERATIVE", "sometimes")]);
-        assert!(line.contains("VKDIFF_COOPERATIVE=sometimes: use 1"), "{args:?}: {line}");
+    let settings = [
+        ("VKDIFF_COOPERATIVE", "sometimes", "VKDIFF_COOPERATIVE=sometimes: use 1"),
+        ("VKDIFF_MATRIX_TILE", "128", "VKDIFF_MATRIX_TILE=128: use 4"),
+        ("VKDIFF_ATTENTION", "flash", "VKDIFF_ATTENTION=flash: use cm2"),
+    ];
+    for (variable, value, says) in settings {
+        for args in [&["devices"][..], &gen] {
+            let line = error_line_with(args, &[(variable, value)]);
+            assert!(line.contains(says), "{args:?}: {line}");
+        }
     }
     assert!(!out.exists());
 }
