@@ -73,6 +73,16 @@ impl Matrix2Tile {
         }
     }
 
+    /// The workgroup memory its kernel declares: none for the linear probe (the driver stages its
+    /// operands); attention_cm2.wgsl's staged K and V rows (f16, 8 values of padding each), its
+    /// output rows (f32, 4 of padding) and one flag.
+    pub fn workgroup_bytes(&self) -> u32 {
+        match self.probe {
+            Matrix2Probe::Linear => 0,
+            Matrix2Probe::Attention => 2 * self.n * (self.k + 8) * 2 + self.m * (self.k + 4) * 4 + 4,
+        }
+    }
+
     /// "128×128×32, workgroup scope (256 invocations)"; "attention 16 rows × 32 keys, heads of
     /// up to 64, subgroup scope (8 lanes)".
     pub fn label(&self) -> String {
@@ -111,7 +121,8 @@ pub(crate) fn offered(info: &DeviceInfo) -> Vec<Matrix2Tile> {
             false => t.products().into_iter().all(|(m, n, k)| s.divides(m, n, k)),
         };
         let scope = !t.workgroup_scope() || (workgroup_scope && t.invocations <= info.max_workgroup_invocations);
-        scope && t.probe.features().iter().all(reported) && info.flexible_shapes.iter().any(divide)
+        let memory = t.workgroup_bytes() <= info.max_shared_memory;
+        scope && memory && t.probe.features().iter().all(reported) && info.flexible_shapes.iter().any(divide)
     };
     [Matrix2Probe::Linear, Matrix2Probe::Attention]
         .into_iter()
@@ -191,8 +202,13 @@ mod tests {
         assert!(!tiles.is_empty() && tiles.iter().all(|t| t.invocations == 128), "{tiles:?}");
         assert!(tiles.iter().all(|t| t.probe == Matrix2Probe::Linear), "{tiles:?}");
         nvidia.cooperative_matrix2.extend(Matrix2Probe::Attention.features());
-        let attention = offered(&nvidia).into_iter().filter(|t| t.probe == Matrix2Probe::Attention).count();
-        assert_eq!(attention, 2, "both attention tiles of 128 invocations");
+        let attention = |info: &DeviceInfo| offered(info).into_iter().filter(|t| t.probe == Matrix2Probe::Attention);
+        nvidia.max_shared_memory = 49152; // NVIDIA's 48 KiB
+        assert_eq!(attention(&nvidia).count(), 2, "both attention tiles of 128 invocations");
+        // With 32 KiB of workgroup memory, the 32×128 tile's 45 KiB does not fit.
+        nvidia.max_shared_memory = 32768;
+        let fitting: Vec<_> = attention(&nvidia).map(|t| (t.m, t.n, t.workgroup_bytes())).collect();
+        assert_eq!(fitting, [(64, 32, 26628)]);
         nvidia.cooperative_matrix2.truncate(2);
         // The scope unreported, a workgroup size no tile is built for, or no matrix units: none.
         nvidia.cooperative_matrix2 = vec!["flexible dimensions"];
