@@ -89,9 +89,9 @@ fn literal(name: &str) -> Vec<u32> {
     bytes.chunks_exact(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
 }
 
-/// The string an `OpName` (`inst`) gives.
-fn name_of(inst: &[u32]) -> String {
-    let bytes: Vec<u8> = inst[2..].iter().flat_map(|w| w.to_le_bytes()).take_while(|&b| b != 0).collect();
+/// The literal string that `words` (an instruction's operands from the string on) begin with.
+fn string_of(words: &[u32]) -> String {
+    let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).take_while(|&b| b != 0).collect();
     String::from_utf8_lossy(&bytes).into_owned()
 }
 
@@ -164,7 +164,7 @@ fn lower_placeholders(words: &[u32]) -> Result<(Vec<u32>, Vec<u32>), String> {
     let mut callee = std::collections::HashMap::new(); // call result → function called
     for inst in &insts {
         match inst[0] & 0xffff {
-            OP_NAME => _ = names.insert(inst[1], name_of(inst)),
+            OP_NAME => _ = names.insert(inst[1], string_of(&inst[2..])),
             OP_FUNCTION_CALL => _ = callee.insert(inst[2], inst[3]),
             _ => {}
         }

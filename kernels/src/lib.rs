@@ -135,11 +135,7 @@ mod compile_tests {
         let (mut constants, mut scopes, mut extensions) = (Vec::new(), Vec::new(), Vec::new());
         for inst in instructions(words).unwrap() {
             match inst[0] & 0xffff {
-                10 => {
-                    let bytes: Vec<u8> =
-                        inst[1..].iter().flat_map(|w| w.to_le_bytes()).take_while(|&b| b != 0).collect();
-                    extensions.push(String::from_utf8(bytes).unwrap());
-                }
+                10 => extensions.push(string_of(&inst[1..])),
                 43 => constants.push((inst[2], inst[3])),
                 4456 => scopes.push(constants.iter().find(|(c, _)| *c == inst[3]).map(|(_, v)| *v).unwrap()),
                 _ => {}
@@ -189,7 +185,7 @@ mod compile_tests {
         let words = compile_placeholders(PLACEHOLDERS, &params).unwrap();
         let insts = instructions(&words).unwrap();
         let id_named =
-            |name: &str| insts.iter().find(|i| i[0] & 0xffff == 5 && name_of(i) == name).map(|i| i[1]).unwrap();
+            |name: &str| insts.iter().find(|i| i[0] & 0xffff == 5 && string_of(&i[2..]) == name).map(|i| i[1]).unwrap();
         let (larger, plus, main) = (id_named("larger"), id_named("plus"), id_named("main"));
         let of = |op: u32| insts.iter().filter(move |i| i[0] & 0xffff == op);
         let reduce: Vec<_> = of(5366).collect();

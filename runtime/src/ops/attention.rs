@@ -86,8 +86,10 @@ pub fn attention(
     if !vec4_aligned(l) {
         return padded_attention(rec, [q, k, v], out, l, scale);
     }
+    // Checked above: the layout, the binding limit and the vec4 grid; `chosen_tile` takes f16
+    // heads the tile holds.
     if let Some(tile) = super::attention_cm2::chosen_tile(rec.context(), dtype, l.head_dim) {
-        return super::attention_cm2::attention_cm2(rec, [q, k, v], out, l, scale, &tile);
+        return super::attention_cm2::record(rec, [q, k, v], out, l, scale, &tile);
     }
     let ctx = rec.context().clone();
     let slots = u(l.head_dim / 4);

@@ -32,8 +32,21 @@ pub fn attention_cm2(
         format!("attention_cm2: heads of up to {} values and strides that are multiples of 4, not {l:?}", tile.k)
     })?;
     ensure(fit(&ctx, &[q, k, v, out]), || "attention_cm2: an operand is past the binding limit".to_string())?;
+    record(rec, [q, k, v], out, l, scale, tile)
+}
+
+/// Records the probe on operands [`attention_cm2`]'s checks (or `ops::attention`'s, with
+/// [`chosen_tile`]'s) have passed.
+pub(super) fn record(
+    rec: &mut Recorder,
+    [q, k, v]: [&Tensor; 3],
+    out: &Tensor,
+    l: &AttentionLayout,
+    scale: f32,
+    tile: &Matrix2Tile,
+) -> Result<()> {
     rec.count_flops(4.0 * (l.batch * l.heads * l.q_tokens) as f64 * (l.kv_tokens * l.head_dim) as f64);
-    let probe = kernel(&ctx, "attention_cm2", Dtype::F16, &tile.params(), 4)?;
+    let probe = kernel(rec.context(), "attention_cm2", Dtype::F16, &tile.params(), 4)?;
     let groups = [u(l.q_tokens.div_ceil(tile.m as usize)), u(l.heads), u(l.batch)];
     rec.dispatch(&probe, &[q, k, v], &[out], &push_constants(l, scale), groups)
 }
