@@ -5,7 +5,7 @@
 #   1. `vkdiff devices --json`, the driver and torch's versions;
 #   2. the matrix units' two workgroup tiles, one after the other on one machine: the SDXL
 #      products (`bench kernels`, which times both, and VK_NV_cooperative_matrix2's probes on the
-#      linear and attention rows where the driver offers workgroup scope) and the SDXL UNet at 1024² with
+#      linear, convolution and attention rows where the driver offers workgroup scope) and the SDXL UNet at 1024² with
 #      VKDIFF_MATRIX_TILE=4 and 8, to decide which `auto` takes, and with VKDIFF_ATTENTION=cm2
 #      where the driver runs that probe's attention;
 #   3. `vkdiff bench report` (the full suite: the paper's image first) beside diffusers and
@@ -60,8 +60,10 @@ export VKDIFF_REFERENCE_PYTHON=python3
     echo "references: $reference"
 } >>"$log"
 step 30 sh -c "'$work/vkdiff' devices --json >'$out/devices.json'"
-for filter in linear conv2d attention; do
-    step 90 sh -c "'$work/vkdiff' bench kernels --no-cpu-reference --filter $filter >'$out/kernels-$filter.txt'"
+# The convolution rows are four shapes on every family and probe tile: more time.
+for filter in linear:90 conv2d:120 attention:90; do
+    step "${filter#*:}" sh -c "'$work/vkdiff' bench kernels --no-cpu-reference --filter ${filter%:*} \
+        >'$out/kernels-${filter%:*}.txt'"
 done
 for tile in 8 4; do
     step 70 sh -c "VKDIFF_MATRIX_TILE=$tile '$work/vkdiff' bench unet --size 1024 --samples 3 --profile \

@@ -9,7 +9,7 @@ use vkdiff_runtime::{eight_subgroups_built, Context, Dtype, GemmFamily, MatrixTi
 mod cases;
 mod matrix2;
 
-use cases::{cases, conv3x3_case, gemm_case, self_attention_case};
+use cases::{cases, conv3x3_case, gemm_case, self_attention_case, CONV_ROWS};
 
 #[derive(clap::Args)]
 pub struct KernelsArgs {
@@ -88,7 +88,7 @@ pub(crate) struct HeadlineRuns {
 pub(crate) fn headline(ctx: &Context, dtype: Dtype, runs: usize) -> Result<Vec<HeadlineRuns>> {
     let cases = [
         ("linear", gemm_case(ctx, dtype, 2 * 1024, 1280, 5120, true)?),
-        ("conv", conv3x3_case(ctx, dtype)?),
+        ("conv", conv3x3_case(ctx, dtype, CONV_ROWS[0])?),
         ("attention", self_attention_case(ctx, dtype, 10, 64, 6)?),
     ];
     let mut out = Vec::new();

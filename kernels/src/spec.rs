@@ -379,6 +379,18 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
             &[("FM", 128), ("FN", 64), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 128)],
         ],
     },
+    // VK_NV_cooperative_matrix2's probe of the convolution, for `bench kernels`: gemm_cm2's tiles
+    // (FN = 64 too, for SDXL's 320 channels), A gathered in units of UW = 8 input channels.
+    KernelSpec {
+        name: "conv_cm2",
+        files: &["conv_taps.wgsl", "a_conv_v4.wgsl", "conv_cm2.wgsl"],
+        params: &[
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 8), ("WS", 0), ("WG", 8), ("UW", 8)],
+            &[("FM", 128), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256), ("UW", 8)],
+            &[("FM", 256), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256), ("UW", 8)],
+            &[("FM", 128), ("FN", 64), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 128), ("UW", 8)],
+        ],
+    },
     // VK_NV_cooperative_matrix2's probe of attention, for `bench kernels` and
     // `VKDIFF_ATTENTION=cm2`: FM query rows against chunks of FN keys, heads of up to FK = 64
     // values (FN ≠ FK: compile.rs would give two of the matrix types one shape), the softmax on

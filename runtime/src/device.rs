@@ -164,7 +164,8 @@ impl DeviceInfo {
         matrix_units::pick(&self.matrix_shapes, &self.flexible_shapes, pinnable, self.fragment_request)
     }
 
-    /// The tiles of `VK_NV_cooperative_matrix2`'s probe (`ops::linear_cm2`) this device runs.
+    /// The tiles of `VK_NV_cooperative_matrix2`'s probes (`ops::linear_cm2`, `ops::conv2d_cm2`,
+    /// `ops::attention_cm2`) this device runs.
     pub fn matrix2_tiles(&self) -> Vec<Matrix2Tile> {
         matrix2_tile::offered(self)
     }

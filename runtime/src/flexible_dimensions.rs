@@ -7,7 +7,7 @@ use ash::vk;
 
 /// `VkPhysicalDeviceCooperativeMatrix2FeaturesNV` (`VK_NV_cooperative_matrix2`, newer than
 /// ash's headers): its seven features in the header's order ([`FEATURE_NAMES`]); vkdiff enables
-/// `cooperativeMatrixFlexibleDimensions` and, for its probes (`ops::linear_cm2`,
+/// `cooperativeMatrixFlexibleDimensions` and, for its probes (`ops::linear_cm2`, `ops::conv2d_cm2`,
 /// `ops::attention_cm2`), the scope and operations their tiles use.
 #[repr(C)]
 pub(crate) struct CooperativeMatrix2Features {

@@ -143,7 +143,8 @@ mod tests {
         }
         assert!(!picked.iter().any(|n| n.starts_with("gemm_sg")));
         assert!(!picked.iter().any(|n| n.starts_with("gemm_cm2")), "no VK_NV_cooperative_matrix2 offered");
-        // A driver of workgroup scope at 256 invocations adds the probe's tiles, nothing else.
+        // A driver of workgroup scope at 256 invocations adds the linear and convolution probes'
+        // tiles of that size, nothing else (attention's needs the reductions too).
         let granularity =
             MatrixShape { subgroup_scope: false, workgroup_invocations: 256, ..info.matrix_shapes[0].clone() };
         let cm2 = DeviceInfo {
@@ -152,8 +153,11 @@ mod tests {
             ..info
         };
         let with_probe = names(&selectable_variants(&cm2, false));
-        let probe: Vec<&String> = with_probe.iter().filter(|n| n.starts_with("gemm_cm2")).collect();
-        assert!(!probe.is_empty() && probe.iter().all(|n| n.contains(" WS=1 WG=256")), "{probe:?}");
+        let probe: Vec<&String> = with_probe.iter().filter(|n| n.contains("_cm2")).collect();
+        assert!(probe.iter().all(|n| n.contains(" WS=1 WG=256")), "{probe:?}");
+        for kernel in ["gemm_cm2", "conv_cm2"] {
+            assert_eq!(probe.iter().filter(|n| n.starts_with(kernel)).count(), 2, "{kernel}: {probe:?}");
+        }
         assert_eq!(with_probe.len(), picked.len() + probe.len());
     }
 }

@@ -1,5 +1,6 @@
 //! Which tiles of `VK_NV_cooperative_matrix2`'s probes a device runs: the linear layers'
-//! product (kernels/wgsl/gemm_cm2.wgsl, `ops::linear_cm2`) and attention
+//! product (kernels/wgsl/gemm_cm2.wgsl, `ops::linear_cm2`), the convolution
+//! (kernels/wgsl/conv_cm2.wgsl, `ops::conv2d_cm2`) and attention
 //! (kernels/wgsl/attention_cm2.wgsl, `ops::attention_cm2`); those of workgroup scope where the
 //! driver offers that scope for their workgroup size, those of subgroup scope where its flexible
 //! dimensions take them, each with the features its kernel uses.
@@ -12,6 +13,8 @@ use vkdiff_kernels::Dtype;
 pub enum Matrix2Probe {
     /// out = A·Bᵀ: an m×n accumulator walking K in steps of k.
     Linear,
+    /// A convolution's implicit GEMM: m output pixels × n output channels, K in steps of k.
+    Conv,
     /// Attention: m query rows against chunks of n keys, heads of up to k values.
     Attention,
 }
@@ -20,6 +23,7 @@ impl Matrix2Probe {
     pub fn kernel(self) -> &'static str {
         match self {
             Matrix2Probe::Linear => "gemm_cm2",
+            Matrix2Probe::Conv => "conv_cm2",
             Matrix2Probe::Attention => "attention_cm2",
         }
     }
@@ -28,7 +32,7 @@ impl Matrix2Probe {
     /// `DeviceInfo::cooperative_matrix2` names them).
     pub fn features(self) -> &'static [&'static str] {
         match self {
-            Matrix2Probe::Linear => &[],
+            Matrix2Probe::Linear | Matrix2Probe::Conv => &[],
             Matrix2Probe::Attention => &["reductions", "conversions", "per-element operations"],
         }
     }
@@ -64,36 +68,41 @@ impl Matrix2Tile {
         ]
     }
 
-    /// The products its matrices take: the linear tile's m×n×k; attention's S = Q·Kᵀ (m×n×k)
+    /// The products its matrices take: the linear and convolution tiles' m×n×k; attention's S = Q·Kᵀ (m×n×k)
     /// and O = P·V (m×k×n).
     fn products(&self) -> Vec<(u32, u32, u32)> {
         match self.probe {
-            Matrix2Probe::Linear => vec![(self.m, self.n, self.k)],
+            Matrix2Probe::Linear | Matrix2Probe::Conv => vec![(self.m, self.n, self.k)],
             Matrix2Probe::Attention => vec![(self.m, self.n, self.k), (self.m, self.k, self.n)],
         }
     }
 
     /// The workgroup memory its kernel declares: none for the linear probe (the driver stages its
-    /// operands); attention_cm2.wgsl's staged K and V rows (f16, 8 values of padding each), its
+    /// operands); conv_cm2.wgsl's gathered A step (f16, 8 values of padding a row); attention_cm2.wgsl's staged K and V rows (f16, 8 values of padding each), its
     /// output rows (f32, 4 of padding) and one flag.
     pub fn workgroup_bytes(&self) -> u32 {
         match self.probe {
             Matrix2Probe::Linear => 0,
+            Matrix2Probe::Conv => self.m * (self.k + 8) * 2,
             Matrix2Probe::Attention => 2 * self.n * (self.k + 8) * 2 + self.m * (self.k + 4) * 4 + 4,
         }
     }
 
-    /// "128×128×32, workgroup scope (256 invocations)"; "attention 16 rows × 32 keys, heads of
-    /// up to 64, subgroup scope (8 lanes)".
+    /// "linear 128×128×32 at workgroup scope (256 invocations)"; "convolution 128 pixels × 64
+    /// channels in K-steps of 32 at …"; "attention 8 rows × 32 keys with heads of up to 64 at
+    /// subgroup scope (8 lanes)": no commas, so that a list of them reads.
     pub fn label(&self) -> String {
         let scope = match self.workgroup_scope() {
             true => format!("workgroup scope ({} invocations)", self.invocations),
             false => format!("subgroup scope ({} lanes)", self.lanes),
         };
         match self.probe {
-            Matrix2Probe::Linear => format!("{}×{}×{}, {scope}", self.m, self.n, self.k),
+            Matrix2Probe::Linear => format!("linear {}×{}×{} at {scope}", self.m, self.n, self.k),
+            Matrix2Probe::Conv => {
+                format!("convolution {} pixels × {} channels in K-steps of {} at {scope}", self.m, self.n, self.k)
+            }
             Matrix2Probe::Attention => {
-                format!("attention {} rows × {} keys, heads of up to {}, {scope}", self.m, self.n, self.k)
+                format!("attention {} rows × {} keys with heads of up to {} at {scope}", self.m, self.n, self.k)
             }
         }
     }
@@ -124,7 +133,7 @@ pub(crate) fn offered(info: &DeviceInfo) -> Vec<Matrix2Tile> {
         let memory = t.workgroup_bytes() <= info.max_shared_memory;
         scope && memory && t.probe.features().iter().all(reported) && info.flexible_shapes.iter().any(divide)
     };
-    [Matrix2Probe::Linear, Matrix2Probe::Attention]
+    [Matrix2Probe::Linear, Matrix2Probe::Conv, Matrix2Probe::Attention]
         .into_iter()
         .flat_map(built)
         .filter(|t| info.can_use_subgroup(t.lanes) && runs(t))
@@ -179,7 +188,11 @@ mod tests {
         lavapipe.flexible_shapes = vec![granularity(8, true, 0)];
         let tiles = offered(&lavapipe);
         assert!(!tiles.is_empty() && tiles.iter().all(|t| !t.workgroup_scope() && t.lanes == 8), "{tiles:?}");
-        assert!(tiles.iter().all(|t| t.probe == Matrix2Probe::Linear), "attention needs reductions: {tiles:?}");
+        assert!(tiles.iter().all(|t| t.probe != Matrix2Probe::Attention), "attention needs reductions: {tiles:?}");
+        let linear_and_conv = |tiles: &[Matrix2Tile]| {
+            [Matrix2Probe::Linear, Matrix2Probe::Conv].map(|p| tiles.iter().any(|t| t.probe == p))
+        };
+        assert_eq!(linear_and_conv(&tiles), [true; 2], "{tiles:?}");
         // With the reductions, conversions and per-element operations it reports, attention too.
         lavapipe.cooperative_matrix2 =
             vec!["flexible dimensions", "reductions", "conversions", "per-element operations"];
@@ -187,7 +200,7 @@ mod tests {
         assert_eq!(attention.len(), 1, "{attention:?}");
         assert_eq!((attention[0].m, attention[0].n, attention[0].k, attention[0].lanes), (8, 32, 64, 8));
         lavapipe.cooperative_matrix2.pop();
-        assert!(offered(&lavapipe).iter().all(|t| t.probe == Matrix2Probe::Linear));
+        assert!(offered(&lavapipe).iter().all(|t| t.probe != Matrix2Probe::Attention));
         // A driver of workgroup scope at 256 invocations in multiples of 16, 32 lanes.
         let mut nvidia = device(1, DeviceKind::Discrete, true);
         nvidia.cooperative_features = true;
@@ -195,12 +208,17 @@ mod tests {
         nvidia.flexible_shapes = vec![granularity(16, false, 256)];
         let tiles = offered(&nvidia);
         assert!(tiles.iter().any(|t| (t.m, t.n, t.k) == (128, 128, 32)), "{tiles:?}");
+        assert_eq!(linear_and_conv(&tiles), [true; 2], "{tiles:?}");
         assert!(tiles.iter().all(|t| t.workgroup_scope() && t.invocations == 256), "{tiles:?}");
         // At 128 invocations, the tile built for them.
         nvidia.flexible_shapes = vec![granularity(16, false, 128)];
         let tiles = offered(&nvidia);
         assert!(!tiles.is_empty() && tiles.iter().all(|t| t.invocations == 128), "{tiles:?}");
-        assert!(tiles.iter().all(|t| t.probe == Matrix2Probe::Linear), "{tiles:?}");
+        assert!(tiles.iter().all(|t| t.probe != Matrix2Probe::Attention), "{tiles:?}");
+        // The convolution's gathered A step: 128 rows of 32 + 8 halves.
+        let conv: Vec<_> =
+            tiles.iter().filter(|t| t.probe == Matrix2Probe::Conv).map(|t| (t.n, t.workgroup_bytes())).collect();
+        assert_eq!(conv, [(64, 10240)], "{tiles:?}");
         nvidia.cooperative_matrix2.extend(Matrix2Probe::Attention.features());
         let attention = |info: &DeviceInfo| offered(info).into_iter().filter(|t| t.probe == Matrix2Probe::Attention);
         nvidia.max_shared_memory = 49152; // NVIDIA's 48 KiB

@@ -139,20 +139,34 @@ pub(super) fn self_attention_case(
     })
 }
 
-/// The 64×64 level's 3×3 convolution, 640 channels in and out.
-pub(super) fn conv3x3_case(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Case> {
-    let (hw, c) = (64 * 64, 640);
+/// The 3×3 convolutions timed: (images, side, channels in and out) of the 64×64 level, then the
+/// UNet's own at 1024² with guidance (two latents) at its 128×128, 64×64 and 32×32 levels.
+pub(super) const CONV_ROWS: [(usize, usize, usize); 4] = [(1, 64, 640), (2, 128, 320), (2, 64, 640), (2, 32, 1280)];
+
+/// "2 x 128x128, 320->320": a row of [`CONV_ROWS`], its images counted where there are several.
+pub(super) fn conv_shape((images, side, c): (usize, usize, usize)) -> String {
+    let batch = if images > 1 { format!("{images} x ") } else { String::new() };
+    format!("{batch}{side}x{side}, {c}->{c}")
+}
+
+/// A 3×3 convolution of `images` × side² pixels, `c` channels in and out, stride 1.
+pub(super) fn conv3x3_case(
+    ctx: &Context,
+    dtype: Dtype,
+    (images, side, c): (usize, usize, usize),
+) -> vkdiff_runtime::Result<Case> {
+    let pixels = images * side * side;
     Ok(Case {
         name: "conv2d 3x3",
-        shape: "64x64, 640->640, stride 1".into(),
-        work: Work::Flops(2.0 * (hw * c * 9 * c) as f64),
+        shape: format!("{}, stride 1", conv_shape((images, side, c))),
+        work: Work::Flops(2.0 * (pixels * c * 9 * c) as f64),
         gemm: None,
         on_gemm_family: true,
         tensors: vec![
-            rand_tensor(ctx, &[1, 64, 64, c], dtype, 3)?,
+            rand_tensor(ctx, &[images, side, side, c], dtype, 3)?,
             rand_tensor(ctx, &[c, 3, 3, c], dtype, 4)?,
             rand_tensor(ctx, &[c], dtype, 5)?,
-            ctx.zeros(&[1, 64, 64, c], dtype)?,
+            ctx.zeros(&[images, side, side, c], dtype)?,
         ],
         record: |rec, t| ops::conv2d(rec, &t[0], &t[1], Some(&t[2]), &t[3], &ConvParams::new(1, 1)),
     })
@@ -172,8 +186,10 @@ pub(super) fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<C
     for &(m, n, k) in &LINEAR_ROWS {
         cases.push(gemm_case(ctx, dtype, m, n, k, true)?);
     }
+    for &row in &CONV_ROWS {
+        cases.push(conv3x3_case(ctx, dtype, row)?);
+    }
     cases.extend([
-        conv3x3_case(ctx, dtype)?,
         self_attention_case(ctx, dtype, 10, 64, 6)?,
         // The VAE decoder's mid-block at 512² (a 64×64 latent): one head of all 512 channels.
         self_attention_case(ctx, dtype, 1, 512, 14)?,
@@ -272,7 +288,7 @@ pub(super) fn cases(ctx: &Context, dtype: Dtype) -> vkdiff_runtime::Result<Vec<C
     ]);
     if dtype == Dtype::F16 {
         cases.extend(ceiling_cases(ctx)?);
-        cases.extend(matrix2::cases(ctx, &LINEAR_ROWS)?);
+        cases.extend(matrix2::cases(ctx, &LINEAR_ROWS, &CONV_ROWS)?);
     }
     Ok(cases)
 }

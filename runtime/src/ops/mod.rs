@@ -7,6 +7,7 @@ mod attention_products;
 mod bands;
 mod ceiling;
 mod conv;
+mod conv_cm2;
 mod conv_padded;
 mod coop_tile;
 mod copy_heads;
@@ -20,6 +21,7 @@ pub use attention::{attention, AttentionLayout};
 pub use attention_cm2::attention_cm2;
 pub use ceiling::{matrix_ceiling, MatrixCeiling};
 pub use conv::{conv2d, oihw_to_ohwi, ConvParams, Padding};
+pub use conv_cm2::conv2d_cm2;
 pub use copy_heads::{copy_heads, HeadSpan};
 pub use elementwise::{
     add, binary, concat_channels, copy_into_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x,

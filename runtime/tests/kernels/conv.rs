@@ -4,20 +4,31 @@ use vkdiff_runtime::ops::{conv2d, oihw_to_ohwi, ConvParams, Padding};
 use vkdiff_runtime::{Context, Dtype, GemmFamily, Variant};
 use vkdiff_testkit::*;
 
-struct Case {
-    b: usize,
-    h: usize,
-    w: usize,
-    cin: usize,
-    cout: usize,
+pub(super) struct Case {
+    pub(super) b: usize,
+    pub(super) h: usize,
+    pub(super) w: usize,
+    pub(super) cin: usize,
+    pub(super) cout: usize,
     /// Kernel height and width.
-    k: [usize; 2],
-    stride: usize,
-    pad: Padding,
+    pub(super) k: [usize; 2],
+    pub(super) stride: usize,
+    pub(super) pad: Padding,
     /// Adds into an output that already holds values (a fused residual).
-    accumulate: bool,
+    pub(super) accumulate: bool,
     /// max(·, 0) fused into the store.
-    relu: bool,
+    pub(super) relu: bool,
+}
+
+impl Case {
+    /// The output's height and width.
+    pub(super) fn out_size(&self) -> [usize; 2] {
+        let [kh, kw] = self.k;
+        [
+            (self.h + self.pad.top + self.pad.bottom - kh) / self.stride + 1,
+            (self.w + self.pad.left + self.pad.right - kw) / self.stride + 1,
+        ]
+    }
 }
 
 fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static Variant> {
@@ -28,9 +39,7 @@ fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static 
 /// returns the product's variants.
 fn check_on(ctx: &Context, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static Variant> {
     let family = (ctx.gemm_family(), if ctx.quick_compile() { "quick" } else { "" });
-    let [kh, kw] = c.k;
-    let ho = (c.h + c.pad.top + c.pad.bottom - kh) / c.stride + 1;
-    let wo = (c.w + c.pad.left + c.pad.right - kw) / c.stride + 1;
+    let ([kh, kw], [ho, wo]) = (c.k, c.out_size());
     let x = stored(&random(c.b * c.h * c.w * c.cin, seed), dtype);
     // Weights come as PyTorch stores them and are re-laid out, as the loaders will do.
     let w_oihw = stored(&random(c.cout * c.cin * kh * kw, seed + 1), dtype);
@@ -46,8 +55,23 @@ fn check_on(ctx: &Context, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static Va
     let out = ctx.upload(&[c.b, ho, wo, c.cout], dtype, &prior).unwrap();
     let params = ConvParams { stride: c.stride, pad: c.pad, accumulate: c.accumulate, relu: c.relu };
     let variants = ctx.run_listing(|rec| conv2d(rec, &tx, &tw, Some(&tb), &out, &params)).unwrap();
-    let mut want = vec![0.0f64; out.numel()];
-    let mut mag = vec![0.0f64; out.numel()];
+    let (want, mag) = reference(c, &x, &w_oihw, &bias, &prior);
+    let rtol = storage_rtol(dtype);
+    let what = format!(
+        "{family:?} {dtype:?} {}x{}x{}x{} -> {} k{:?} s{} {:?} accumulate {} relu {}",
+        c.b, c.h, c.w, c.cin, c.cout, c.k, c.stride, c.pad, c.accumulate, c.relu
+    );
+    // Same bound as GEMM: 1e-5 of Σ|x·w| for f32 accumulation, plus output storage rounding.
+    assert_within(&what, &out.download().unwrap(), &want, |i| 1e-6 + 1e-5 * mag[i] + rtol * want[i].abs());
+    assert_product_family(ctx, dtype, &variants, &what, false)
+}
+
+/// The convolution in f64 (bias, then what `prior` held where the case accumulates, then ReLU
+/// where it asks), and the sums of the magnitudes of its terms that bound its rounding.
+pub(super) fn reference(c: &Case, x: &[f32], w_oihw: &[f32], bias: &[f32], prior: &[f32]) -> (Vec<f64>, Vec<f64>) {
+    let ([kh, kw], [ho, wo]) = (c.k, c.out_size());
+    let mut want = vec![0.0f64; c.b * ho * wo * c.cout];
+    let mut mag = vec![0.0f64; want.len()];
     for n in 0..c.b {
         for oy in 0..ho {
             for ox in 0..wo {
@@ -76,14 +100,7 @@ fn check_on(ctx: &Context, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static Va
             }
         }
     }
-    let rtol = storage_rtol(dtype);
-    let what = format!(
-        "{family:?} {dtype:?} {}x{}x{}x{} -> {} k{:?} s{} {:?} accumulate {} relu {}",
-        c.b, c.h, c.w, c.cin, c.cout, c.k, c.stride, c.pad, c.accumulate, c.relu
-    );
-    // Same bound as GEMM: 1e-5 of Σ|x·w| for f32 accumulation, plus output storage rounding.
-    assert_within(&what, &out.download().unwrap(), &want, |i| 1e-6 + 1e-5 * mag[i] + rtol * want[i].abs());
-    assert_product_family(ctx, dtype, &variants, &what, false)
+    (want, mag)
 }
 
 /// Every family and dtype (the matrix units in both workgroup tiles); returns each run's variants.

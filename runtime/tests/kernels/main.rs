@@ -6,6 +6,7 @@ mod attention_cm2;
 mod bands;
 mod ceiling;
 mod conv;
+mod conv_cm2;
 mod elementwise;
 mod gemm;
 mod linear_cm2;

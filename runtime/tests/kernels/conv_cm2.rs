@@ -1,0 +1,94 @@
+//! `VK_NV_cooperative_matrix2`'s probe of the convolution (`bench kernels`) against the f64
+//! direct convolution on every convolution tile the device runs; Mesa 26.1's lavapipe runs its
+//! subgroup-scope tile through flexible dimensions.
+
+use super::conv::{reference, Case};
+use vkdiff_runtime::ops::{conv2d_cm2, oihw_to_ohwi, Padding};
+use vkdiff_runtime::{built_matrix2_tiles, Context, Dtype, Matrix2Probe, Matrix2Tile, Recorder};
+use vkdiff_testkit::*;
+
+/// A case with no bias, residual or ReLU (the probe has none).
+fn case(b: usize, [h, w]: [usize; 2], [cin, cout]: [usize; 2], k: [usize; 2], stride: usize, pad: Padding) -> Case {
+    Case { b, h, w, cin, cout, k, stride, pad, accumulate: false, relu: false }
+}
+
+/// Runs the probe on `tile` over random f16 input and weight and compares.
+fn check(ctx: &Context, tile: &Matrix2Tile, c: &Case, seed: u64) {
+    let ([kh, kw], [ho, wo]) = (c.k, c.out_size());
+    let x = stored(&random(c.b * c.h * c.w * c.cin, seed), Dtype::F16);
+    let w_oihw = stored(&random(c.cout * c.cin * kh * kw, seed + 1), Dtype::F16);
+    let tx = ctx.upload(&[c.b, c.h, c.w, c.cin], Dtype::F16, &x).unwrap();
+    let w = oihw_to_ohwi(&w_oihw, c.cout, c.cin, kh, kw);
+    let tw = ctx.upload(&[c.cout, kh, kw, c.cin], Dtype::F16, &w).unwrap();
+    let out = ctx.zeros(&[c.b, ho, wo, c.cout], Dtype::F32).unwrap();
+    ctx.run(|rec| conv2d_cm2(rec, &tx, &tw, &out, c.stride, c.pad, tile)).unwrap();
+    let (want, mag) = reference(c, &x, &w_oihw, &vec![0.0; c.cout], &vec![0.0; out.numel()]);
+    let what = format!(
+        "conv2d_cm2 {}: {}x{}x{}x{} -> {} k{:?} s{} {:?}",
+        tile.label(),
+        c.b,
+        c.h,
+        c.w,
+        c.cin,
+        c.cout,
+        c.k,
+        c.stride,
+        c.pad
+    );
+    // f32 accumulation of f16 products: 1e-5 of Σ|x·w|, as the convolution tests bound it.
+    assert_within(&what, &out.download().unwrap(), &want, |i| 1e-7 + 1e-5 * mag[i]);
+}
+
+/// The error the probe gives for `c` on `tile`, recording nothing.
+fn refusal(ctx: &Context, tile: &Matrix2Tile, c: &Case) -> String {
+    let ([kh, kw], [ho, wo]) = (c.k, c.out_size());
+    let x = ctx.zeros(&[c.b, c.h, c.w, c.cin], Dtype::F16).unwrap();
+    let w = ctx.zeros(&[c.cout, kh, kw, c.cin], Dtype::F16).unwrap();
+    let out = ctx.zeros(&[c.b, ho, wo, c.cout], Dtype::F32).unwrap();
+    let mut rec = Recorder::new(ctx, false).unwrap();
+    conv2d_cm2(&mut rec, &x, &w, &out, c.stride, c.pad, tile).unwrap_err().to_string()
+}
+
+#[test]
+fn conv2d_cm2_matches_the_reference_on_every_tile_the_device_runs() {
+    let ctx = ctx();
+    let conv = |t: &Matrix2Tile| t.probe == Matrix2Probe::Conv;
+    let tiles: Vec<Matrix2Tile> = ctx.info().matrix2_tiles().into_iter().filter(conv).collect();
+    let lavapipe_26 = ctx.info().lavapipe_mesa.is_some_and(|v| v >= (26, 1));
+    assert!(
+        !(tiles.is_empty() && expect_cooperative() && lavapipe_26),
+        "VKDIFF_EXPECT_COOPERATIVE=1 on Mesa 26.1's lavapipe, whose flexible dimensions run the probe: {tiles:?}"
+    );
+    let same = Padding::same;
+    if tiles.is_empty() {
+        let tile = built_matrix2_tiles(Matrix2Probe::Conv)[0];
+        let c = case(1, [1, tile.m as usize], [tile.k as usize, tile.n as usize], [1, 1], 1, same(0));
+        let err = refusal(&ctx, &tile, &c);
+        assert!(err.contains("does not run the VK_NV_cooperative_matrix2 tile"), "{err}");
+        return;
+    }
+    for tile in tiles {
+        let (m, n, k) = (tile.m as usize, tile.n as usize, tile.k as usize);
+        let vae = Padding { top: 0, left: 0, bottom: 1, right: 1 };
+        let cases = [
+            // 3×3 over two images whose rows the tile's pixels cross: 3·m pixels.
+            case(2, [3, m / 2], [k, 2 * n], [3, 3], 1, same(1)),
+            // Stride 2, K-steps of half a tap's channels.
+            case(1, [8, m / 2], [2 * k, n], [3, 3], 2, same(1)),
+            // diffusers' VAE downsampler: padding on the bottom and right only.
+            case(1, [4, m], [k, n], [3, 3], 2, vae),
+            case(1, [2, m / 2], [3 * k, n], [1, 1], 1, same(0)),
+            // 8 channels: a K-step spans taps, each unit within one.
+            case(1, [3, m / 2 + 1], [8, n], [2, 2], 1, same(0)),
+        ];
+        for (i, c) in cases.iter().enumerate() {
+            check(&ctx, &tile, c, 40 + 3 * i as u64);
+        }
+        // Channels off the 8-value units, and pixels off the tile, are refused before anything
+        // is recorded.
+        for c in [case(1, [1, 2 * m], [12, n], [1, 1], 1, same(0)), case(1, [1, m + 1], [k, n], [1, 1], 1, same(0))] {
+            let err = refusal(&ctx, &tile, &c);
+            assert!(err.contains("not a multiple of the tile"), "{err}");
+        }
+    }
+}
