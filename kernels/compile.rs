@@ -251,6 +251,7 @@ fn compile(
         .ok_or_else(|| format!("{what}: a cooperative kernel needs the parameters FM, FN and FK"))?;
     let scope = fragment_scope(params);
     let words = shape_fragments(&words, &products, scope).map_err(|e| format!("{what}: fragment shapes: {e}"))?;
+    let words = workgroup_barriers(&words).map_err(|e| format!("{what}: barriers: {e}"))?;
     let (words, capabilities) = lower_placeholders(&words).map_err(|e| format!("{what}: {e}"))?;
     match scope == 2 || !capabilities.is_empty() {
         true => declare(&words, "SPV_NV_cooperative_matrix2", &capabilities).map_err(|e| format!("{what}: {e}")),

@@ -71,6 +71,35 @@ fn shape_fragments(words: &[u32], products: &Products, scope: u32) -> Result<Vec
     Ok(out)
 }
 
+/// `words` with every `OpControlBarrier` of Device memory scope given Workgroup memory scope.
+/// naga writes WGSL's `storageBarrier()` with Device scope, which under the Vulkan memory model
+/// (that naga's cooperative SPIR-V declares) needs the VulkanMemoryModelDeviceScope capability;
+/// the matrix-unit kernels order storage accesses among a workgroup's invocations only, which
+/// Workgroup scope says.
+fn workgroup_barriers(words: &[u32]) -> Result<Vec<u32>, String> {
+    const OP_TYPE_INT: u32 = 21;
+    const OP_CONSTANT: u32 = 43;
+    const OP_CONTROL_BARRIER: u32 = 224;
+    const DEVICE: u32 = 1; // Scope
+    const WORKGROUP: u32 = 2;
+    let insts = instructions(words)?;
+    let uint = insts.iter().find(|i| i[0] & 0xffff == OP_TYPE_INT && i[2..] == [32, 0]).map(|i| i[1]);
+    let constant = |value: u32| {
+        let is = |i: &&&[u32]| i[0] & 0xffff == OP_CONSTANT && Some(i[1]) == uint && i.len() == 4 && i[3] == value;
+        insts.iter().find(is).map(|i| i[2])
+    };
+    let mut out = words[..5].to_vec();
+    for inst in insts.iter() {
+        if inst[0] & 0xffff == OP_CONTROL_BARRIER && Some(inst[2]) == constant(DEVICE) {
+            let workgroup = constant(WORKGROUP).ok_or("a device-scope barrier and no Workgroup scope constant")?;
+            out.extend([inst[0], inst[1], workgroup, inst[3]]);
+            continue;
+        }
+        out.extend_from_slice(inst);
+    }
+    Ok(out)
+}
+
 /// The instructions of a module, after its header.
 fn instructions(words: &[u32]) -> Result<Vec<&[u32]>, String> {
     let (mut out, mut at) = (Vec::new(), 5);

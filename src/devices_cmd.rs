@@ -169,7 +169,8 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
     requested_fragment()?;
     CooperativeSetting::from_env()?;
     vkdiff_runtime::MatrixTile::from_env()?;
-    vkdiff_runtime::AttentionKernel::from_env()?;
+    vkdiff_runtime::ProbeChoice::attention_from_env()?;
+    vkdiff_runtime::ProbeChoice::conv_from_env()?;
     if args.compile {
         let request = crate::devices_compile::CompileRequest {
             choice: args.device.choice(),

@@ -226,6 +226,19 @@ mod compile_tests {
         assert_eq!(types, [(8, 16, 2, 32), (8, 32, 0, 16), (8, 32, 2, 32), (32, 16, 1, 16)]);
     }
 
+    #[test]
+    fn storage_barriers_take_workgroup_scope_in_cooperative_kernels() {
+        let body = "@group(0) @binding(0) var<storage, read_write> w: array<f32>;\n\
+            @compute @workgroup_size(SG)\nfn main() {\n    let a = coopLoadT<FC>(&w[0], 8u);\n    \
+            storageBarrier();\n    coopStoreT(a, &w[0], 8u);\n}\n";
+        let words = compile_placeholders(body, &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8)]).unwrap();
+        let insts = instructions(&words).unwrap();
+        let value = |id: u32| insts.iter().find(|i| i[0] & 0xffff == 43 && i[2] == id).map(|i| i[3]);
+        let barriers: Vec<_> =
+            insts.iter().filter(|i| i[0] & 0xffff == 224).map(|i| (value(i[1]), value(i[2]))).collect();
+        assert_eq!(barriers, [(Some(2), Some(2))], "one barrier, of Workgroup execution and memory scope");
+    }
+
     /// Whether `words` hold a composite of 32-bit all-ones constants: naga's loop-bounding
     /// counter starts at vec2(u32::MAX), and nothing in a kernel builds one.
     fn has_loop_counter(words: &[u32]) -> bool {

@@ -379,16 +379,17 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
             &[("FM", 128), ("FN", 64), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 128)],
         ],
     },
-    // VK_NV_cooperative_matrix2's probe of the convolution, for `bench kernels`: gemm_cm2's tiles
-    // (FN = 64 too, for SDXL's 320 channels), A gathered in units of UW = 8 input channels.
+    // VK_NV_cooperative_matrix2's probe of the convolution, for `bench kernels` and
+    // `VKDIFF_CONV=cm2`: gemm_cm2's tiles (FN = 64 too, for SDXL's 320 channels), A gathered in
+    // units of UW = 8 input channels; GE = 0 (gemm_common.wgsl's parameters, conv2d's).
     KernelSpec {
         name: "conv_cm2",
-        files: &["conv_taps.wgsl", "a_conv_v4.wgsl", "conv_cm2.wgsl"],
+        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "conv_cm2.wgsl"],
         params: &[
-            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 8), ("WS", 0), ("WG", 8), ("UW", 8)],
-            &[("FM", 128), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256), ("UW", 8)],
-            &[("FM", 256), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256), ("UW", 8)],
-            &[("FM", 128), ("FN", 64), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 128), ("UW", 8)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 8), ("WS", 0), ("WG", 8), ("UW", 8), ("GE", 0)],
+            &[("FM", 128), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256), ("UW", 8), ("GE", 0)],
+            &[("FM", 256), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256), ("UW", 8), ("GE", 0)],
+            &[("FM", 128), ("FN", 64), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 128), ("UW", 8), ("GE", 0)],
         ],
     },
     // VK_NV_cooperative_matrix2's probe of attention, for `bench kernels` and

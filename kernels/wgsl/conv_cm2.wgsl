@@ -1,37 +1,33 @@
-// A convolution's implicit GEMM through VK_NV_cooperative_matrix2, for `bench kernels` only (a
-// probe, as gemm_cm2.wgsl is: it takes the convolution's place nowhere until a GPU has timed it
-// against gemm_coop.wgsl's conv_coop). Each workgroup holds one FM×FN accumulator, FM output
-// pixels (batch folded in) by FN output channels, and walks K = (ky·KW + kx)·Cin + ci in steps
-// of FK. A matrix load reads a strided block, which a convolution's columns are not, so A's
-// FM×FK slice is gathered from the NHWC input into workgroup memory (conv_taps.wgsl's taps, zero
-// in the padding; ggml's coopmat2 convolution loads through the extension's tensor addressing
-// instead, which no driver here offers to test); the next step's units are read into registers
-// while the matrices work on this one. B's FK×FN slice (the OHWI weight, [Cout][K]) is
-// one block and loads straight from device memory, the driver staging it as gemm_cm2.wgsl's
-// operands are. WS = 1 gives the matrices workgroup scope, shared by WG invocations (NVIDIA's
-// drivers); WS = 0 subgroup scope on a workgroup of one subgroup (Mesa 26.1's lavapipe, for CI).
-// The input (a_conv_v4.wgsl) and the weight are f16, read as their bits; out [M][Cout] is f32.
-// M, Cout and K are multiples of FM, FN and FK and Cin of UW: the runtime refuses the rest.
-struct ConvSize {
-    m: u32,
-    n: u32,
-    k: u32,
-}
-
-struct Params {
-    g: ConvSize,
-    a: AParams,
-}
-
-var<immediate> p: Params;
+// A convolution's implicit GEMM through VK_NV_cooperative_matrix2, for `bench kernels` and
+// `VKDIFF_CONV=cm2` (a probe, as gemm_cm2.wgsl is: it takes the convolution's place nowhere
+// unasked until a GPU has timed it against gemm_coop.wgsl's conv_coop). Each workgroup holds one
+// FM×FN accumulator, FM output pixels (batch folded in) by FN output channels, and walks
+// K = (ky·KW + kx)·Cin + ci in steps of FK. A matrix load reads a strided block, which a
+// convolution's columns are not, so A's FM×FK slice is gathered from the NHWC input into
+// workgroup memory (conv_taps.wgsl's taps, zero in the padding; ggml's coopmat2 convolution loads
+// through the extension's tensor addressing instead, which no driver here offers to test); the
+// next step's units are read into registers while the matrices work on this one. B's FK×FN slice
+// (the OHWI weight, [Cout][K]) is one block and loads straight from device memory, the driver
+// staging it as gemm_cm2.wgsl's operands are. The epilogue of conv2d's other kernels (alpha, the
+// bias, a fused residual, ReLU) runs on the accumulator by the extension's per-element operation,
+// which its conversion then rounds to f16 for the store. WS = 1 gives the matrices workgroup scope,
+// shared by WG invocations (NVIDIA's drivers); WS = 0 subgroup scope on a workgroup of one
+// subgroup (Mesa 26.1's lavapipe, for CI). Operands are f16, the input (a_conv_v4.wgsl) and the
+// weight read as their bits; M, Cout and K are multiples of FM, FN and FK and Cin of UW: the
+// runtime refuses the rest.
+const GB: u32 = 4u; // gemm_common.wgsl's GEGLU blocks: unused (GE = 0)
 @group(0) @binding(1) var<storage, read> b: array<f32>;
-@group(0) @binding(2) var<storage, read_write> out: array<f32>;
+@group(0) @binding(2) var<storage, read> bias: array<f16>;
+@group(0) @binding(3) var<storage, read_write> out: array<f16>;
+
+alias FH = coop_mat8x8<f16, C>; // the accumulator rounded for the store
 
 const UK: u32 = FK / UW; // units along a row of the A tile
 const STEP: u32 = WG / UK; // tile rows between an invocation's units
 const PA: u32 = FM * FK / (UW * WG); // an invocation's units a step
 const LDA: u32 = FK + 8u; // A tile rows in halves: a multiple of 8 (16 bytes, as matrix loads need)
-const_assert WG % UK == 0u && PA * UW * WG == FM * FK;
+const_assert WG % UK == 0u;
+const_assert PA * UW * WG == FM * FK;
 
 var<workgroup> a_tile: array<Words, FM * LDA / UW>;
 
@@ -41,6 +37,35 @@ fn fetch(rows: ptr<function, array<RowCtx, PA>>, units: ptr<function, array<Word
     // #unroll I FM*FK/UW/WG
     (*units)[I] = bitcast<Words>(select(Unit(), a_unit((*rows)[I], kc), a_unit_inside((*rows)[I], kc)));
     // #end
+}
+
+// Element (row, col) of the tile at (row0, col0) as conv2d's other kernels store it
+// (gemm_store4.wgsl): alpha times the sum, then the bias and what the output holds (a fused
+// residual) where the flags ask, then ReLU.
+fn finish(row: u32, col: u32, sum: f32, row0: u32, col0: u32) -> f32 {
+    let n = col0 + col;
+    var v = p.g.alpha * sum;
+    if (p.g.flags & FLAG_BIAS) != 0u {
+        v += f32(bias[n]);
+    }
+    if (p.g.flags & FLAG_ACCUMULATE) != 0u {
+        v += f32(out[(row0 + row) * p.g.ldc + n]);
+    }
+    if (p.g.flags & FLAG_RELU) != 0u {
+        v = max(v, 0.0);
+    }
+    return v;
+}
+
+// Placeholders of the extension's operations (spirv_rewrite.rs replaces their calls; their
+// bodies only give naga a result of the right type).
+fn nv_each_at(m: FC, f: f32, row0: u32, col0: u32) -> FC {
+    return m;
+}
+
+fn nv_convert(m: FC) -> FH {
+    var converted: FH;
+    return converted;
 }
 
 @compute @workgroup_size(WG)
@@ -75,7 +100,12 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
         acc = coopMultiplyAdd(fa, fb, acc);
         workgroupBarrier();
     }
-    let n = p.g.n;
-    let ot = row0 * n + col0;
-    coopStoreT(acc, &out[ot], n);
+    acc = nv_each_at(acc, finish(0u, 0u, 0.0, 0u, 0u), row0, col0);
+    // Every residual read before any store: the operation and the store may spread the
+    // elements over the invocations differently.
+    storageBarrier();
+    let rounded = nv_convert(acc);
+    let ldc = p.g.ldc;
+    let ot = row0 * ldc + col0;
+    coopStoreT(rounded, &out[ot], ldc);
 }

@@ -96,7 +96,9 @@ pub(crate) struct Shared {
     /// See [`Context::matrix_tile`].
     pub(crate) matrix_tile: Mutex<crate::MatrixTile>,
     /// See [`Context::attention_kernel`].
-    pub(crate) attention_kernel: Mutex<crate::AttentionKernel>,
+    pub(crate) attention_kernel: Mutex<crate::ProbeChoice>,
+    /// See [`Context::conv_kernel`].
+    pub(crate) conv_kernel: Mutex<crate::ProbeChoice>,
     pub(crate) binding_limit: AtomicU64,
     /// The largest buffer one allocation may hold (`maxMemoryAllocationSize`).
     pub(crate) allocation_limit: AtomicU64,
@@ -300,7 +302,8 @@ impl Context {
         let gpu_paths = gpu_paths_requested();
         let gemm_family = info.gemm_family(gpu_paths);
         let matrix_tile = crate::MatrixTile::from_env()?;
-        let attention_kernel = crate::AttentionKernel::from_env()?;
+        let attention_kernel = crate::ProbeChoice::attention_from_env()?;
+        let conv_kernel = crate::ProbeChoice::conv_from_env()?;
         let env = |name: &str| std::env::var(name).ok();
         let submit_budget = SubmitBudget::for_device(&info, &env)?;
         let memory_budget = crate::memory_budget::budget_override(&env)?;
@@ -330,6 +333,7 @@ impl Context {
             gemm_family: Mutex::new(gemm_family),
             matrix_tile: Mutex::new(matrix_tile),
             attention_kernel: Mutex::new(attention_kernel),
+            conv_kernel: Mutex::new(conv_kernel),
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
             allocation_limit: AtomicU64::new(info.max_allocation),
             workgroup_limit: Mutex::new(info.max_workgroup_count),

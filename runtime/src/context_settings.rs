@@ -29,12 +29,22 @@ impl Context {
 
     /// The attention kernel where the context has a choice: `VKDIFF_ATTENTION`, or what
     /// [`Context::set_attention_kernel`] set.
-    pub fn attention_kernel(&self) -> crate::AttentionKernel {
+    pub fn attention_kernel(&self) -> crate::ProbeChoice {
         *self.shared.attention_kernel.lock().unwrap()
     }
 
-    pub fn set_attention_kernel(&self, kernel: crate::AttentionKernel) {
+    pub fn set_attention_kernel(&self, kernel: crate::ProbeChoice) {
         *self.shared.attention_kernel.lock().unwrap() = kernel;
+    }
+
+    /// The convolution kernel where the context has a choice: `VKDIFF_CONV`, or what
+    /// [`Context::set_conv_kernel`] set.
+    pub fn conv_kernel(&self) -> crate::ProbeChoice {
+        *self.shared.conv_kernel.lock().unwrap()
+    }
+
+    pub fn set_conv_kernel(&self, kernel: crate::ProbeChoice) {
+        *self.shared.conv_kernel.lock().unwrap() = kernel;
     }
 
     /// The most bytes one kernel binding may span; ops split larger tensors into bands below it.

@@ -143,13 +143,19 @@ mod tests {
         }
         assert!(!picked.iter().any(|n| n.starts_with("gemm_sg")));
         assert!(!picked.iter().any(|n| n.starts_with("gemm_cm2")), "no VK_NV_cooperative_matrix2 offered");
-        // A driver of workgroup scope at 256 invocations adds the linear and convolution probes'
-        // tiles of that size, nothing else (attention's needs the reductions too).
+        // A driver of workgroup scope at 256 invocations, its per-element operations and
+        // conversions, adds the linear and convolution probes' tiles of that size, nothing else
+        // (attention's needs the reductions too).
         let granularity =
             MatrixShape { subgroup_scope: false, workgroup_invocations: 256, ..info.matrix_shapes[0].clone() };
         let cm2 = DeviceInfo {
             flexible_shapes: vec![granularity],
-            cooperative_matrix2: vec!["workgroup scope", "flexible dimensions"],
+            cooperative_matrix2: vec![
+                "workgroup scope",
+                "flexible dimensions",
+                "conversions",
+                "per-element operations",
+            ],
             ..info
         };
         let with_probe = names(&selectable_variants(&cm2, false));

@@ -2,7 +2,6 @@
 //! recording with barriers and profiling, and the typed operations networks are built from.
 
 mod arena;
-mod attention_setting;
 mod context;
 mod context_settings;
 mod cpu_vectors;
@@ -24,6 +23,7 @@ mod memory_budget;
 pub mod ops;
 mod pipeline;
 mod pipeline_stats;
+mod probe_setting;
 mod recorder;
 mod recording;
 mod submit;
@@ -32,7 +32,6 @@ mod tensor;
 mod validation;
 
 pub use arena::Arena;
-pub use attention_setting::AttentionKernel;
 pub use context::{gpu_paths_requested, CompileNotice, Context, GemmFamily};
 pub use cpu_vectors::wider_lavapipe_vectors_available;
 pub use device::{list_devices, DeviceInfo, DeviceKind};
@@ -52,6 +51,7 @@ pub use memory::Placement;
 pub use memory_budget::{MemoryRoom, HOST_MEMORY};
 pub use pipeline::Kernel;
 pub use pipeline_stats::{describe as describe_statistics, variant_label, StatisticValue, Statistics};
+pub use probe_setting::ProbeChoice;
 pub use recorder::{Recorder, Timing};
 pub use recording::Recording;
 pub use submit::device_hung;

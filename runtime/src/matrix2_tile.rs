@@ -32,7 +32,8 @@ impl Matrix2Probe {
     /// `DeviceInfo::cooperative_matrix2` names them).
     pub fn features(self) -> &'static [&'static str] {
         match self {
-            Matrix2Probe::Linear | Matrix2Probe::Conv => &[],
+            Matrix2Probe::Linear => &[],
+            Matrix2Probe::Conv => &["conversions", "per-element operations"],
             Matrix2Probe::Attention => &["reductions", "conversions", "per-element operations"],
         }
     }
@@ -188,19 +189,20 @@ mod tests {
         lavapipe.flexible_shapes = vec![granularity(8, true, 0)];
         let tiles = offered(&lavapipe);
         assert!(!tiles.is_empty() && tiles.iter().all(|t| !t.workgroup_scope() && t.lanes == 8), "{tiles:?}");
-        assert!(tiles.iter().all(|t| t.probe != Matrix2Probe::Attention), "attention needs reductions: {tiles:?}");
-        let linear_and_conv = |tiles: &[Matrix2Tile]| {
-            [Matrix2Probe::Linear, Matrix2Probe::Conv].map(|p| tiles.iter().any(|t| t.probe == p))
+        let probes = |tiles: &[Matrix2Tile]| {
+            [Matrix2Probe::Linear, Matrix2Probe::Conv, Matrix2Probe::Attention]
+                .map(|p| tiles.iter().any(|t| t.probe == p))
         };
-        assert_eq!(linear_and_conv(&tiles), [true; 2], "{tiles:?}");
-        // With the reductions, conversions and per-element operations it reports, attention too.
+        assert_eq!(probes(&tiles), [true, false, false], "the others need operations: {tiles:?}");
+        // With the reductions, conversions and per-element operations it reports, all three.
         lavapipe.cooperative_matrix2 =
             vec!["flexible dimensions", "reductions", "conversions", "per-element operations"];
+        assert_eq!(probes(&offered(&lavapipe)), [true; 3]);
         let attention: Vec<_> = offered(&lavapipe).into_iter().filter(|t| t.probe == Matrix2Probe::Attention).collect();
         assert_eq!(attention.len(), 1, "{attention:?}");
         assert_eq!((attention[0].m, attention[0].n, attention[0].k, attention[0].lanes), (8, 32, 64, 8));
         lavapipe.cooperative_matrix2.pop();
-        assert!(offered(&lavapipe).iter().all(|t| t.probe != Matrix2Probe::Attention));
+        assert_eq!(probes(&offered(&lavapipe)), [true, false, false], "per-element operations unreported");
         // A driver of workgroup scope at 256 invocations in multiples of 16, 32 lanes.
         let mut nvidia = device(1, DeviceKind::Discrete, true);
         nvidia.cooperative_features = true;
@@ -208,17 +210,22 @@ mod tests {
         nvidia.flexible_shapes = vec![granularity(16, false, 256)];
         let tiles = offered(&nvidia);
         assert!(tiles.iter().any(|t| (t.m, t.n, t.k) == (128, 128, 32)), "{tiles:?}");
-        assert_eq!(linear_and_conv(&tiles), [true; 2], "{tiles:?}");
+        assert_eq!(probes(&tiles), [true, false, false], "{tiles:?}");
         assert!(tiles.iter().all(|t| t.workgroup_scope() && t.invocations == 256), "{tiles:?}");
         // At 128 invocations, the tile built for them.
         nvidia.flexible_shapes = vec![granularity(16, false, 128)];
         let tiles = offered(&nvidia);
         assert!(!tiles.is_empty() && tiles.iter().all(|t| t.invocations == 128), "{tiles:?}");
-        assert!(tiles.iter().all(|t| t.probe != Matrix2Probe::Attention), "{tiles:?}");
+        assert!(tiles.iter().all(|t| t.probe == Matrix2Probe::Linear), "{tiles:?}");
+        nvidia.cooperative_matrix2.extend(Matrix2Probe::Conv.features());
         // The convolution's gathered A step: 128 rows of 32 + 8 halves.
-        let conv: Vec<_> =
-            tiles.iter().filter(|t| t.probe == Matrix2Probe::Conv).map(|t| (t.n, t.workgroup_bytes())).collect();
-        assert_eq!(conv, [(64, 10240)], "{tiles:?}");
+        let conv: Vec<_> = offered(&nvidia)
+            .into_iter()
+            .filter(|t| t.probe == Matrix2Probe::Conv)
+            .map(|t| (t.n, t.workgroup_bytes()))
+            .collect();
+        assert_eq!(conv, [(64, 10240)]);
+        nvidia.cooperative_matrix2.truncate(2);
         nvidia.cooperative_matrix2.extend(Matrix2Probe::Attention.features());
         let attention = |info: &DeviceInfo| offered(info).into_iter().filter(|t| t.probe == Matrix2Probe::Attention);
         nvidia.max_shared_memory = 49152; // NVIDIA's 48 KiB

@@ -1,12 +1,12 @@
 //! What a test asserts of the kernels that ran (`Context::run_listing`, `Recording::variants`):
 //! the family its context takes for the products, with, on the matrix units, the fragment shape
 //! the device runs (`VKDIFF_FRAGMENT`'s where asked) and the workgroup tile the context asks
-//! for (`VKDIFF_MATRIX_TILE`); and attention on the matrix units where
-//! the CI pass of a driver with them says it must, or on VK_NV_cooperative_matrix2's probe where
-//! `VKDIFF_ATTENTION=cm2` asks for it. A regressed selection then fails the test
-//! instead of passing on another kernel.
+//! for (`VKDIFF_MATRIX_TILE`), or VK_NV_cooperative_matrix2's convolution where `VKDIFF_CONV=cm2`
+//! asks for it; and attention on the matrix units where the CI pass of a driver with them says it
+//! must, or on VK_NV_cooperative_matrix2's probe where `VKDIFF_ATTENTION=cm2` asks for it. A
+//! regressed selection then fails the test instead of passing on another kernel.
 
-use vkdiff_runtime::{AttentionKernel, Context, Dtype, GemmFamily, Matrix2Probe, Variant};
+use vkdiff_runtime::{Context, Dtype, GemmFamily, Matrix2Probe, ProbeChoice, Variant};
 
 /// Whether the CI pass runs on a driver whose matrix units must be used.
 pub fn expect_cooperative() -> bool {
@@ -19,6 +19,19 @@ fn asked_fragment() -> Option<[u32; 3]> {
     let text = std::env::var("VKDIFF_FRAGMENT").ok().filter(|t| !t.is_empty())?;
     let sides: Vec<u32> = text.split('x').map(|n| n.parse().expect("VKDIFF_FRAGMENT as MxNxK")).collect();
     Some(sides.try_into().expect("VKDIFF_FRAGMENT as MxNxK"))
+}
+
+/// Whether the context takes VK_NV_cooperative_matrix2's probe for `op` where it fits: its
+/// setting, or `variable` (`VKDIFF_ATTENTION`, `VKDIFF_CONV`) read here too, so that a runtime
+/// that ignored it fails.
+fn probe_asked(setting: ProbeChoice, variable: &str) -> bool {
+    setting == ProbeChoice::Matrix2 || std::env::var(variable).is_ok_and(|v| v.trim().eq_ignore_ascii_case("cm2"))
+}
+
+/// Whether `ctx` takes the convolution's probe for f16 convolutions its tiles fit.
+fn conv_probe_due(ctx: &Context, dtype: Dtype) -> bool {
+    let offered = ctx.info().matrix2_tiles().iter().any(|t| t.probe == Matrix2Probe::Conv);
+    probe_asked(ctx.conv_kernel(), "VKDIFF_CONV") && offered && dtype == Dtype::F16
 }
 
 fn names(variants: &[&Variant]) -> Vec<String> {
@@ -40,7 +53,8 @@ fn due_family(ctx: &Context, dtype: Dtype) -> &'static str {
 }
 
 /// Asserts that every product (GEMM or convolution) in `variants` ran on the family `ctx` takes
-/// for `dtype`; with `fallback`, a shape the family cannot take (off the vec4 grid) may run on the
+/// for `dtype`, or a convolution on VK_NV_cooperative_matrix2's probe where `VKDIFF_CONV=cm2`
+/// asks for it; with `fallback`, a shape the family cannot take (off the vec4 grid) may run on the
 /// tiled kernels instead. Returns the products' variants.
 pub fn assert_product_family<'a>(
     ctx: &Context,
@@ -54,7 +68,12 @@ pub fn assert_product_family<'a>(
     assert!(!products.is_empty(), "{what}: no product kernel ran: {:?}", names(variants));
     let fragment = ctx.info().cooperative_variant();
     let expected = due_family(ctx, dtype);
+    let conv_probe = conv_probe_due(ctx, dtype);
     for v in &products {
+        if v.kernel == "conv_cm2" {
+            assert!(conv_probe, "{what}: conv_cm2 ran where VKDIFF_CONV=cm2 did not ask for it");
+            continue;
+        }
         let family = family_of(v.kernel);
         let allowed = family == Some(expected) || fallback && family == Some("_tiled");
         assert!(allowed, "{what}: {:?} ran {} where {expected} was due", ctx.gemm_family(), v.kernel);
@@ -72,7 +91,8 @@ pub fn assert_product_family<'a>(
         }
     }
     if expected == "_coop" && expect_cooperative() && !fallback {
-        assert!(products.iter().all(|v| v.kernel.ends_with("_coop")), "{what}: {:?}", names(&products));
+        let on_units = |v: &&Variant| v.kernel.ends_with("_coop") || v.kernel == "conv_cm2";
+        assert!(products.iter().all(on_units), "{what}: {:?}", names(&products));
     }
     products
 }
@@ -83,9 +103,7 @@ pub fn assert_product_family<'a>(
 /// for such heads on GPU paths without them (f32, or no units). Contexts that take the quickly
 /// compiled kernels run `attention_wg` instead.
 pub fn assert_attention_kernel(ctx: &Context, dtype: Dtype, head_dim: usize, kernels: &[&str], what: &str) {
-    // VKDIFF_ATTENTION is read here too, so that a runtime that ignored it fails.
-    let asked = ctx.attention_kernel() == AttentionKernel::Matrix2
-        || std::env::var("VKDIFF_ATTENTION").is_ok_and(|v| v.trim().eq_ignore_ascii_case("cm2"));
+    let asked = probe_asked(ctx.attention_kernel(), "VKDIFF_ATTENTION");
     let matrix2 = ctx.info().matrix2_tiles().iter().any(|t| t.probe == Matrix2Probe::Attention);
     if asked && matrix2 && dtype == Dtype::F16 && head_dim <= 64 {
         assert!(
@@ -109,8 +127,9 @@ pub fn assert_attention_kernel(ctx: &Context, dtype: Dtype, head_dim: usize, ker
 
 /// Asserts the products and attention of a whole network's recordings (`listing_variants`):
 /// every product on the family `ctx` takes for `dtype` or, for a layer off the vec4 grid, the
-/// tiled kernels, and at least one on that family; attention, where the network has any, as
-/// [`assert_attention_kernel`] says for heads of up to `head_dim`.
+/// tiled kernels, and at least one on that family; where `VKDIFF_CONV=cm2` asks for
+/// VK_NV_cooperative_matrix2's convolution and the network has any, at least one on it; attention, where the
+/// network has any, as [`assert_attention_kernel`] says for heads of up to `head_dim`.
 pub fn assert_network_kernels(ctx: &Context, dtype: Dtype, variants: &[&Variant], head_dim: usize, what: &str) {
     let products = assert_product_family(ctx, dtype, variants, what, true);
     let due = due_family(ctx, dtype);
@@ -119,8 +138,11 @@ pub fn assert_network_kernels(ctx: &Context, dtype: Dtype, variants: &[&Variant]
         "{what}: no product ran on {due}: {:?}",
         names(&products)
     );
-    // Networks without attention (the small ControlNet) have no choice of it to assert.
     let kernels: Vec<&str> = variants.iter().map(|v| v.kernel).collect();
+    if conv_probe_due(ctx, dtype) && kernels.iter().any(|k| k.starts_with("conv_")) {
+        assert!(kernels.contains(&"conv_cm2"), "{what}: VKDIFF_CONV=cm2, the convolutions ran {kernels:?}");
+    }
+    // Networks without attention (the small ControlNet) have no choice of it to assert.
     if kernels.iter().any(|k| k.starts_with("attention")) {
         assert_attention_kernel(ctx, dtype, head_dim, &kernels, what);
     }

@@ -5,7 +5,7 @@
 
 use super::cases::conv_shape;
 use super::{rand_tensor, Case, Work};
-use vkdiff_runtime::ops::{self, AttentionLayout, Padding};
+use vkdiff_runtime::ops::{self, AttentionLayout, ConvParams};
 use vkdiff_runtime::{built_matrix2_tiles, Context, Dtype, Matrix2Probe, Recorder, Tensor};
 
 type Record = fn(&mut Recorder, &[Tensor]) -> vkdiff_runtime::Result<()>;
@@ -15,9 +15,11 @@ fn record_linear<const I: usize>(rec: &mut Recorder, t: &[Tensor]) -> vkdiff_run
     ops::linear_cm2(rec, &t[0], &t[1], &t[2], &built_matrix2_tiles(Matrix2Probe::Linear)[I])
 }
 
-/// The convolution probe on built tile I: a 3×3 convolution, stride 1, padding 1.
+/// The convolution probe on built tile I: a 3×3 convolution with its bias, stride 1, padding 1,
+/// as the "conv2d 3x3" rows run it.
 fn record_conv<const I: usize>(rec: &mut Recorder, t: &[Tensor]) -> vkdiff_runtime::Result<()> {
-    ops::conv2d_cm2(rec, &t[0], &t[1], &t[2], 1, Padding::same(1), &built_matrix2_tiles(Matrix2Probe::Conv)[I])
+    let tile = &built_matrix2_tiles(Matrix2Probe::Conv)[I];
+    ops::conv2d_cm2(rec, [&t[0], &t[1], &t[3]], Some(&t[2]), &ConvParams::new(1, 1), tile)
 }
 
 /// The attention probe on built tile I, over Q and the output [1, queries, heads, d] and K and V
@@ -87,7 +89,8 @@ pub(super) fn cases(
                 tensors: vec![
                     rand_tensor(ctx, &[images, side, side, c], Dtype::F16, 36)?,
                     rand_tensor(ctx, &[c, 3, 3, c], Dtype::F16, 37)?,
-                    ctx.zeros(&[images, side, side, c], Dtype::F32)?,
+                    rand_tensor(ctx, &[c], Dtype::F16, 38)?,
+                    ctx.zeros(&[images, side, side, c], Dtype::F16)?,
                 ],
                 record: CONV[i],
             });

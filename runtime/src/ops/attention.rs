@@ -65,7 +65,7 @@ impl AttentionLayout {
 const WIDTHS: [u32; 3] = [4, 8, 16];
 
 /// out = softmax(scale · Q·Kᵀ)·V for every batch and head; f16 heads of up to 64 values through
-/// `VK_NV_cooperative_matrix2`'s probe where the context asks for it ([`crate::AttentionKernel`])
+/// `VK_NV_cooperative_matrix2`'s probe where the context asks for it ([`crate::ProbeChoice`])
 /// and the device runs it.
 pub fn attention(
     rec: &mut Recorder,

@@ -54,7 +54,7 @@ pub(super) fn record(
 /// The attention tile `ops::attention` takes for f16 heads of `head_dim` where the context asks
 /// for this probe (`VKDIFF_ATTENTION=cm2`): the first the device runs that holds them.
 pub(super) fn chosen_tile(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<Matrix2Tile> {
-    if ctx.attention_kernel() != crate::AttentionKernel::Matrix2 || dtype != Dtype::F16 {
+    if ctx.attention_kernel() != crate::ProbeChoice::Matrix2 || dtype != Dtype::F16 {
         return None;
     }
     let fits = |t: &Matrix2Tile| t.probe == Matrix2Probe::Attention && head_dim <= t.k as usize;

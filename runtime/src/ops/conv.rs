@@ -6,7 +6,7 @@ use super::gemm::{dispatch_gemm_family, GemmKernels, GemmShape};
 use super::{f, same_dtype, u};
 use crate::error::{ensure, Result};
 use crate::recorder::Recorder;
-use crate::tensor::Tensor;
+use crate::tensor::{Dtype, Tensor};
 
 /// Zero padding on each side. Symmetric for the UNet; the VAE's downsampler pads only
 /// bottom and right.
@@ -112,11 +112,44 @@ fn conv2d_whole(
     out: &Tensor,
     p: &ConvParams,
 ) -> Result<()> {
+    let c = checked(rec, "conv2d", [x, w, out], bias, p)?;
+    // Without a bias the kernel never reads binding 2; the output stands in for it.
+    let operands = [x, w, bias.unwrap_or(out)];
+    if let Some(tile) = super::conv_cm2::chosen_tile(rec.context(), &c) {
+        return super::conv_cm2::record(rec, operands, out, &c, &tile);
+    }
+    let (m, n, k, cin) = (c.m, c.n, c.k, c.cin);
+    let shape = GemmShape { m, n, k, batch: 1, vec4: cin % 4 == 0 && n % 4 == 0, vec8: cin % 8 == 0 && n % 4 == 0 };
+    let kernels = GemmKernels { subgroup: "conv_sg", tiled_v4: "conv_tiled_v4", tiled: None, cooperative: "conv_coop" };
+    dispatch_gemm_family(rec, (kernels, c.dtype, &[]), &shape, &operands, out, &c.push)
+}
+
+/// A convolution as its kernels take it: the product's M (output pixels), N (output channels)
+/// and K (taps × input channels), the input's channels, the storage dtype, and the push constants
+/// (gemm_common.wgsl's GemmParams, then conv_taps.wgsl's AParams).
+pub(super) struct ConvProduct {
+    pub m: usize,
+    pub n: usize,
+    pub k: usize,
+    pub cin: usize,
+    pub dtype: Dtype,
+    pub push: [u32; 18],
+}
+
+/// `x` [B, H, W, Cin], `w` [Cout, KH, KW, Cin] and `out` [B, Ho, Wo, Cout] checked against each
+/// other, `bias` and `p`, as `op`'s errors name them.
+pub(super) fn checked(
+    rec: &Recorder,
+    op: &str,
+    [x, w, out]: [&Tensor; 3],
+    bias: Option<&Tensor>,
+    p: &ConvParams,
+) -> Result<ConvProduct> {
     let (stride, pad) = (p.stride, p.pad);
-    let dtype = same_dtype(rec.context(), "conv2d", &[x, w, out])?;
+    let dtype = same_dtype(rec.context(), op, &[x, w, out])?;
     ensure(x.shape().len() == 4 && w.shape().len() == 4 && out.shape().len() == 4, || {
         format!(
-            "conv2d: want NHWC input, OHWI weight, NHWC output; got {:?}, {:?}, {:?}",
+            "{op}: want NHWC input, OHWI weight, NHWC output; got {:?}, {:?}, {:?}",
             x.shape(),
             w.shape(),
             out.shape()
@@ -124,21 +157,22 @@ fn conv2d_whole(
     })?;
     let [b, h, wd, cin] = [x.shape()[0], x.shape()[1], x.shape()[2], x.shape()[3]];
     let [cout, kh, kw, wcin] = [w.shape()[0], w.shape()[1], w.shape()[2], w.shape()[3]];
-    ensure(wcin == cin, || format!("conv2d: weight {:?} takes {wcin} channels, input has {cin}", w.shape()))?;
+    ensure(wcin == cin, || format!("{op}: weight {:?} takes {wcin} channels, input has {cin}", w.shape()))?;
     ensure(stride > 0 && h + pad.top + pad.bottom >= kh && wd + pad.left + pad.right >= kw, || {
-        "conv2d: kernel larger than padded input".into()
+        format!("{op}: kernel larger than padded input")
     })?;
     let ho = (h + pad.top + pad.bottom - kh) / stride + 1;
     let wo = (wd + pad.left + pad.right - kw) / stride + 1;
     ensure(out.shape() == [b, ho, wo, cout], || {
-        format!("conv2d: output {:?}, expected {:?}", out.shape(), [b, ho, wo, cout])
+        format!("{op}: output {:?}, expected {:?}", out.shape(), [b, ho, wo, cout])
     })?;
     if let Some(bias) = bias {
         ensure(bias.numel() == cout && bias.dtype() == dtype, || {
-            format!("conv2d: bias {:?} for {cout} channels", bias.shape())
+            format!("{op}: bias {:?} for {cout} channels", bias.shape())
         })?;
     }
     let (m, n, k) = (b * ho * wo, cout, kh * kw * cin);
+    let flags = bias.is_some() as u32 | (p.accumulate as u32) << 1 | (p.relu as u32) << 2;
     let push = [
         u(m),
         u(n),
@@ -147,7 +181,7 @@ fn conv2d_whole(
         u(n),
         0,
         0,
-        bias.is_some() as u32 | (p.accumulate as u32) << 1 | (p.relu as u32) << 2,
+        flags,
         f(1.0),
         u(h),
         u(wd),
@@ -159,10 +193,5 @@ fn conv2d_whole(
         u(pad.top),
         u(pad.left),
     ];
-    // Without a bias the kernel never reads binding 2; the output stands in for it.
-    let bias = bias.unwrap_or(out);
-    let shape =
-        GemmShape { m, n, k, batch: 1, vec4: cin % 4 == 0 && cout % 4 == 0, vec8: cin % 8 == 0 && cout % 4 == 0 };
-    let kernels = GemmKernels { subgroup: "conv_sg", tiled_v4: "conv_tiled_v4", tiled: None, cooperative: "conv_coop" };
-    dispatch_gemm_family(rec, (kernels, dtype, &[]), &shape, &[x, w, bias], out, &push)
+    Ok(ConvProduct { m, n, k, cin, dtype, push })
 }

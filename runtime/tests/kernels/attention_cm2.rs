@@ -4,7 +4,7 @@
 
 use super::attention::reference;
 use vkdiff_runtime::ops::{attention, attention_cm2, AttentionLayout};
-use vkdiff_runtime::{built_matrix2_tiles, AttentionKernel, Context, Dtype, Matrix2Probe, Matrix2Tile, Recorder};
+use vkdiff_runtime::{built_matrix2_tiles, Context, Dtype, Matrix2Probe, Matrix2Tile, ProbeChoice, Recorder};
 use vkdiff_testkit::*;
 
 /// Runs the probe on `tile` over random f16 Q, K, V laid out as `l` (output dense), key token t's
@@ -120,13 +120,13 @@ fn attention_takes_the_probe_where_the_context_asks_for_it() {
     let [tq, tk, tv] = [&q, &k, &v].map(|x| ctx.upload(&[x.len()], Dtype::F16, x).unwrap());
     let out = ctx.zeros(&[2, 37, 128], Dtype::F16).unwrap();
     let want = reference(&q, &k, &v, &l, 0.125);
-    for kernel in [AttentionKernel::Matrix2, AttentionKernel::Auto] {
+    for kernel in [ProbeChoice::Matrix2, ProbeChoice::Auto] {
         ctx.set_attention_kernel(kernel);
         let mut rec = Recorder::new(&ctx, true).unwrap();
         attention(&mut rec, &tq, &tk, &tv, &out, &l, 0.125).unwrap();
         let ran: Vec<&str> = rec.finish().unwrap().run_profiled().unwrap().iter().map(|t| t.kernel).collect();
         let what = format!("attention with {kernel:?}");
-        assert_eq!(ran.contains(&"attention_cm2"), offered && kernel == AttentionKernel::Matrix2, "{what}: {ran:?}");
+        assert_eq!(ran.contains(&"attention_cm2"), offered && kernel == ProbeChoice::Matrix2, "{what}: {ran:?}");
         assert_close(&what, &out.download().unwrap(), &want, 1e-3, storage_rtol(Dtype::F16));
     }
 }

@@ -3,28 +3,34 @@
 //! subgroup-scope tile through flexible dimensions.
 
 use super::conv::{reference, Case};
-use vkdiff_runtime::ops::{conv2d_cm2, oihw_to_ohwi, Padding};
-use vkdiff_runtime::{built_matrix2_tiles, Context, Dtype, Matrix2Probe, Matrix2Tile, Recorder};
+use vkdiff_runtime::ops::{conv2d, conv2d_cm2, oihw_to_ohwi, ConvParams, Padding};
+use vkdiff_runtime::{built_matrix2_tiles, Context, Dtype, Matrix2Probe, Matrix2Tile, ProbeChoice, Recorder};
 use vkdiff_testkit::*;
 
-/// A case with no bias, residual or ReLU (the probe has none).
+/// A case neither accumulating nor with ReLU (each test adds its bias).
 fn case(b: usize, [h, w]: [usize; 2], [cin, cout]: [usize; 2], k: [usize; 2], stride: usize, pad: Padding) -> Case {
     Case { b, h, w, cin, cout, k, stride, pad, accumulate: false, relu: false }
 }
 
-/// Runs the probe on `tile` over random f16 input and weight and compares.
+/// Runs the probe on `tile` over random f16 input, weight, bias and (where the case
+/// accumulates) output, and compares.
 fn check(ctx: &Context, tile: &Matrix2Tile, c: &Case, seed: u64) {
     let ([kh, kw], [ho, wo]) = (c.k, c.out_size());
     let x = stored(&random(c.b * c.h * c.w * c.cin, seed), Dtype::F16);
     let w_oihw = stored(&random(c.cout * c.cin * kh * kw, seed + 1), Dtype::F16);
+    let bias = stored(&random(c.cout, seed + 2), Dtype::F16);
+    let size = c.b * ho * wo * c.cout;
+    let prior = if c.accumulate { stored(&random(size, seed + 3), Dtype::F16) } else { vec![0.0; size] };
     let tx = ctx.upload(&[c.b, c.h, c.w, c.cin], Dtype::F16, &x).unwrap();
     let w = oihw_to_ohwi(&w_oihw, c.cout, c.cin, kh, kw);
     let tw = ctx.upload(&[c.cout, kh, kw, c.cin], Dtype::F16, &w).unwrap();
-    let out = ctx.zeros(&[c.b, ho, wo, c.cout], Dtype::F32).unwrap();
-    ctx.run(|rec| conv2d_cm2(rec, &tx, &tw, &out, c.stride, c.pad, tile)).unwrap();
-    let (want, mag) = reference(c, &x, &w_oihw, &vec![0.0; c.cout], &vec![0.0; out.numel()]);
+    let tb = ctx.upload(&[c.cout], Dtype::F16, &bias).unwrap();
+    let out = ctx.upload(&[c.b, ho, wo, c.cout], Dtype::F16, &prior).unwrap();
+    let params = ConvParams { stride: c.stride, pad: c.pad, accumulate: c.accumulate, relu: c.relu };
+    ctx.run(|rec| conv2d_cm2(rec, [&tx, &tw, &out], Some(&tb), &params, tile)).unwrap();
+    let (want, mag) = reference(c, &x, &w_oihw, &bias, &prior);
     let what = format!(
-        "conv2d_cm2 {}: {}x{}x{}x{} -> {} k{:?} s{} {:?}",
+        "conv2d_cm2 {}: {}x{}x{}x{} -> {} k{:?} s{} {:?} accumulate {} relu {}",
         tile.label(),
         c.b,
         c.h,
@@ -33,20 +39,25 @@ fn check(ctx: &Context, tile: &Matrix2Tile, c: &Case, seed: u64) {
         c.cout,
         c.k,
         c.stride,
-        c.pad
+        c.pad,
+        c.accumulate,
+        c.relu
     );
-    // f32 accumulation of f16 products: 1e-5 of Σ|x·w|, as the convolution tests bound it.
-    assert_within(&what, &out.download().unwrap(), &want, |i| 1e-7 + 1e-5 * mag[i]);
+    // f32 accumulation of f16 products (1e-5 of Σ|x·w|, as the convolution tests bound it), then
+    // the f16 store's rounding.
+    let rtol = storage_rtol(Dtype::F16);
+    assert_within(&what, &out.download().unwrap(), &want, |i| 1e-6 + 1e-5 * mag[i] + rtol * want[i].abs());
 }
 
 /// The error the probe gives for `c` on `tile`, recording nothing.
-fn refusal(ctx: &Context, tile: &Matrix2Tile, c: &Case) -> String {
+fn refusal(ctx: &Context, tile: &Matrix2Tile, c: &Case, dtype: Dtype) -> String {
     let ([kh, kw], [ho, wo]) = (c.k, c.out_size());
-    let x = ctx.zeros(&[c.b, c.h, c.w, c.cin], Dtype::F16).unwrap();
-    let w = ctx.zeros(&[c.cout, kh, kw, c.cin], Dtype::F16).unwrap();
-    let out = ctx.zeros(&[c.b, ho, wo, c.cout], Dtype::F32).unwrap();
+    let x = ctx.zeros(&[c.b, c.h, c.w, c.cin], dtype).unwrap();
+    let w = ctx.zeros(&[c.cout, kh, kw, c.cin], dtype).unwrap();
+    let out = ctx.zeros(&[c.b, ho, wo, c.cout], dtype).unwrap();
     let mut rec = Recorder::new(ctx, false).unwrap();
-    conv2d_cm2(&mut rec, &x, &w, &out, c.stride, c.pad, tile).unwrap_err().to_string()
+    let params = ConvParams { stride: c.stride, pad: c.pad, accumulate: false, relu: false };
+    conv2d_cm2(&mut rec, [&x, &w, &out], None, &params, tile).unwrap_err().to_string()
 }
 
 #[test]
@@ -63,7 +74,7 @@ fn conv2d_cm2_matches_the_reference_on_every_tile_the_device_runs() {
     if tiles.is_empty() {
         let tile = built_matrix2_tiles(Matrix2Probe::Conv)[0];
         let c = case(1, [1, tile.m as usize], [tile.k as usize, tile.n as usize], [1, 1], 1, same(0));
-        let err = refusal(&ctx, &tile, &c);
+        let err = refusal(&ctx, &tile, &c, Dtype::F16);
         assert!(err.contains("does not run the VK_NV_cooperative_matrix2 tile"), "{err}");
         return;
     }
@@ -80,6 +91,9 @@ fn conv2d_cm2_matches_the_reference_on_every_tile_the_device_runs() {
             case(1, [2, m / 2], [3 * k, n], [1, 1], 1, same(0)),
             // 8 channels: a K-step spans taps, each unit within one.
             case(1, [3, m / 2 + 1], [8, n], [2, 2], 1, same(0)),
+            // A fused residual, and ReLU.
+            Case { accumulate: true, ..case(2, [3, m / 2], [k, n], [3, 3], 1, same(1)) },
+            Case { relu: true, ..case(1, [2, m / 2], [k, 2 * n], [1, 1], 1, same(0)) },
         ];
         for (i, c) in cases.iter().enumerate() {
             check(&ctx, &tile, c, 40 + 3 * i as u64);
@@ -87,8 +101,46 @@ fn conv2d_cm2_matches_the_reference_on_every_tile_the_device_runs() {
         // Channels off the 8-value units, and pixels off the tile, are refused before anything
         // is recorded.
         for c in [case(1, [1, 2 * m], [12, n], [1, 1], 1, same(0)), case(1, [1, m + 1], [k, n], [1, 1], 1, same(0))] {
-            let err = refusal(&ctx, &tile, &c);
+            let err = refusal(&ctx, &tile, &c, Dtype::F16);
             assert!(err.contains("not a multiple of the tile"), "{err}");
+        }
+        let err = refusal(&ctx, &tile, &case(1, [1, m], [k, n], [1, 1], 1, same(0)), Dtype::F32);
+        assert!(err.contains("must be f16"), "{err}");
+    }
+}
+
+#[test]
+fn conv2d_takes_the_probe_where_the_context_asks_and_the_tile_fits() {
+    // A context of its own: the setting would reach other tests' convolutions in a shared one.
+    let ctx = private_ctx();
+    let offered = ctx.info().matrix2_tiles().into_iter().find(|t| t.probe == Matrix2Probe::Conv);
+    let (m, n, k) = offered.map_or((16, 16, 16), |t| (t.m as usize, t.n as usize, t.k as usize));
+    // The first fits the tile; the second's 12 input channels do not.
+    let fitting = Case { accumulate: true, ..case(2, [2, m / 2], [k, n], [3, 3], 1, Padding::same(1)) };
+    let off = case(1, [2, m / 2], [12, n], [3, 3], 1, Padding::same(1));
+    for (c, fits) in [(fitting, true), (off, false)] {
+        let ([kh, kw], [ho, wo]) = (c.k, c.out_size());
+        let x = stored(&random(c.b * c.h * c.w * c.cin, 51), Dtype::F16);
+        let w_oihw = stored(&random(c.cout * c.cin * kh * kw, 52), Dtype::F16);
+        let bias = stored(&random(c.cout, 53), Dtype::F16);
+        let prior = stored(&random(c.b * ho * wo * c.cout, 54), Dtype::F16);
+        let tx = ctx.upload(&[c.b, c.h, c.w, c.cin], Dtype::F16, &x).unwrap();
+        let tw =
+            ctx.upload(&[c.cout, kh, kw, c.cin], Dtype::F16, &oihw_to_ohwi(&w_oihw, c.cout, c.cin, kh, kw)).unwrap();
+        let tb = ctx.upload(&[c.cout], Dtype::F16, &bias).unwrap();
+        let prior = if c.accumulate { prior } else { vec![0.0; prior.len()] };
+        let (want, mag) = reference(&c, &x, &w_oihw, &bias, &prior);
+        let params = ConvParams { stride: c.stride, pad: c.pad, accumulate: c.accumulate, relu: c.relu };
+        for kernel in [ProbeChoice::Matrix2, ProbeChoice::Auto] {
+            ctx.set_conv_kernel(kernel);
+            let out = ctx.upload(&[c.b, ho, wo, c.cout], Dtype::F16, &prior).unwrap();
+            let ran = ctx.run_listing(|rec| conv2d(rec, &tx, &tw, Some(&tb), &out, &params)).unwrap();
+            let ran: Vec<&str> = ran.iter().map(|v| v.kernel).collect();
+            let probe = ran.contains(&"conv_cm2");
+            let what = format!("conv2d with {kernel:?}, {} input channels", c.cin);
+            assert_eq!(probe, offered.is_some() && fits && kernel == ProbeChoice::Matrix2, "{what}: {ran:?}");
+            let rtol = storage_rtol(Dtype::F16);
+            assert_within(&what, &out.download().unwrap(), &want, |i| 1e-6 + 1e-5 * mag[i] + rtol * want[i].abs());
         }
     }
 }
