@@ -18,6 +18,7 @@ fn matrix_unit_settings_that_name_nothing_are_refused() {
         ("VKDIFF_MATRIX_TILE", "128", "VKDIFF_MATRIX_TILE=128: use 4"),
         ("VKDIFF_ATTENTION", "flash", "VKDIFF_ATTENTION=flash: use cm2"),
         ("VKDIFF_CONV", "winograd", "VKDIFF_CONV=winograd: use cm2"),
+        ("VKDIFF_LINEAR", "fast", "VKDIFF_LINEAR=fast: use cm2"),
     ];
     for (variable, value, says) in settings {
         for args in [&["devices"][..], &gen] {

@@ -7,7 +7,7 @@
 #      products (`bench kernels`, which times both, and VK_NV_cooperative_matrix2's probes on the
 #      linear, convolution and attention rows where the driver offers workgroup scope) and the SDXL UNet at 1024² with
 #      VKDIFF_MATRIX_TILE=4 and 8, to decide which `auto` takes, and with VKDIFF_ATTENTION=cm2
-#      and VKDIFF_CONV=cm2 where the driver runs those probes' tiles;
+#      VKDIFF_LINEAR=cm2 and VKDIFF_CONV=cm2 where the driver runs those probes' tiles;
 #   3. `vkdiff bench report` (the full suite: the paper's image first) beside diffusers and
 #      torch on CUDA where torch is installed, else without references;
 #   4. stable-diffusion.cpp's Vulkan build beside vkdiff (`bench report --only peer`);
@@ -69,9 +69,9 @@ for tile in 8 4; do
     step 70 sh -c "VKDIFF_MATRIX_TILE=$tile '$work/vkdiff' bench unet --size 1024 --samples 3 --profile \
         --no-cpu-reference >'$out/unet-tile-$tile.txt'"
 done
-# The UNet with VK_NV_cooperative_matrix2's attention, then its convolution, where the driver
-# runs one of the probe's tiles.
-for probe in 'ATTENTION:attention [0-9]* rows' 'CONV:convolution [0-9]* pixels'; do
+# The UNet with VK_NV_cooperative_matrix2's attention, its linear product, then its convolution,
+# each where the driver runs one of that probe's tiles.
+for probe in 'ATTENTION:attention [0-9]* rows' 'LINEAR:linear [0-9]*×' 'CONV:convolution [0-9]* pixels'; do
     variable=VKDIFF_${probe%%:*} name=${probe%%:*}
     if grep -q "${probe#*:}" "$out/devices.json" 2>/dev/null; then
         step 70 sh -c "$variable=cm2 '$work/vkdiff' bench unet --size 1024 --samples 3 --profile \

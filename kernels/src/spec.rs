@@ -363,20 +363,21 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
             &[("FM", 8), ("FN", 8), ("FK", 16), ("SG", 8), ("GN", 4), ("WM", 4), ("WN", 2), ("BT", 1), ("GE", 0), ("KS", 2), ("UW", 8)],
         ],
     },
-    // VK_NV_cooperative_matrix2's probe of the linear rows, for `bench kernels`: one FM×FN
-    // accumulator a workgroup of WG invocations, of workgroup scope (WS = 1, NVIDIA's drivers:
-    // ggml's 128×128 and 256×128 tiles at 256 invocations, and 128×64 at 128, whichever sizes
-    // the driver offers that scope for; K-steps of 32) or of subgroup scope through flexible
-    // dimensions (WS = 0: Mesa 26.1's lavapipe at 8 lanes, for CI; at 16 it crashes running
-    // flexible-dimension matrices, so no 16-lane twin is built).
+    // VK_NV_cooperative_matrix2's probe of the linear rows, for `bench kernels` and
+    // `VKDIFF_LINEAR=cm2`: one FM×FN accumulator a workgroup of WG invocations, of workgroup
+    // scope (WS = 1, NVIDIA's drivers: ggml's 128×128 and 256×128 tiles at 256 invocations, and
+    // 128×64 at 128, whichever sizes the driver offers that scope for; K-steps of 32) or of
+    // subgroup scope through flexible dimensions (WS = 0: Mesa 26.1's lavapipe at 8 lanes, for
+    // CI; at 16 it crashes running flexible-dimension matrices, so no 16-lane twin is built).
+    // GE = 0: gemm_common.wgsl's parameters, the matrix products'.
     KernelSpec {
         name: "gemm_cm2",
-        files: &["gemm_cm2.wgsl"],
+        files: &["gemm_common.wgsl", "cm2_store.wgsl", "gemm_cm2.wgsl"],
         params: &[
-            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 8), ("WS", 0), ("WG", 8)],
-            &[("FM", 128), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256)],
-            &[("FM", 256), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256)],
-            &[("FM", 128), ("FN", 64), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 128)],
+            &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 8), ("WS", 0), ("WG", 8), ("GE", 0)],
+            &[("FM", 128), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256), ("GE", 0)],
+            &[("FM", 256), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256), ("GE", 0)],
+            &[("FM", 128), ("FN", 64), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 128), ("GE", 0)],
         ],
     },
     // VK_NV_cooperative_matrix2's probe of the convolution, for `bench kernels` and
@@ -384,7 +385,7 @@ pub const COOPERATIVE_KERNELS: &[KernelSpec] = &[
     // units of UW = 8 input channels; GE = 0 (gemm_common.wgsl's parameters, conv2d's).
     KernelSpec {
         name: "conv_cm2",
-        files: &["gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "conv_cm2.wgsl"],
+        files: &["gemm_common.wgsl", "cm2_store.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "conv_cm2.wgsl"],
         params: &[
             &[("FM", 16), ("FN", 16), ("FK", 16), ("SG", 8), ("WS", 0), ("WG", 8), ("UW", 8), ("GE", 0)],
             &[("FM", 128), ("FN", 128), ("FK", 32), ("SG", 32), ("WS", 1), ("WG", 256), ("UW", 8), ("GE", 0)],

@@ -8,19 +8,13 @@
 // through the extension's tensor addressing instead, which no driver here offers to test); the
 // next step's units are read into registers while the matrices work on this one. B's FK×FN slice
 // (the OHWI weight, [Cout][K]) is one block and loads straight from device memory, the driver
-// staging it as gemm_cm2.wgsl's operands are. The epilogue of conv2d's other kernels (alpha, the
-// bias, a fused residual, ReLU) runs on the accumulator by the extension's per-element operation,
-// which its conversion then rounds to f16 for the store. WS = 1 gives the matrices workgroup scope,
-// shared by WG invocations (NVIDIA's drivers); WS = 0 subgroup scope on a workgroup of one
-// subgroup (Mesa 26.1's lavapipe, for CI). Operands are f16, the input (a_conv_v4.wgsl) and the
-// weight read as their bits; M, Cout and K are multiples of FM, FN and FK and Cin of UW: the
-// runtime refuses the rest.
+// staging it as gemm_cm2.wgsl's operands are; cm2_store.wgsl finishes and stores the tile.
+// WS = 1 gives the matrices workgroup scope, shared by WG invocations (NVIDIA's drivers); WS = 0
+// subgroup scope on a workgroup of one subgroup (Mesa 26.1's lavapipe, for CI). Operands are f16,
+// the input (a_conv_v4.wgsl) and the weight read as their bits; M, Cout and K are multiples of
+// FM, FN and FK and Cin of UW: the runtime refuses the rest.
 const GB: u32 = 4u; // gemm_common.wgsl's GEGLU blocks: unused (GE = 0)
 @group(0) @binding(1) var<storage, read> b: array<f32>;
-@group(0) @binding(2) var<storage, read> bias: array<f16>;
-@group(0) @binding(3) var<storage, read_write> out: array<f16>;
-
-alias FH = coop_mat8x8<f16, C>; // the accumulator rounded for the store
 
 const UK: u32 = FK / UW; // units along a row of the A tile
 const STEP: u32 = WG / UK; // tile rows between an invocation's units
@@ -37,35 +31,6 @@ fn fetch(rows: ptr<function, array<RowCtx, PA>>, units: ptr<function, array<Word
     // #unroll I FM*FK/UW/WG
     (*units)[I] = bitcast<Words>(select(Unit(), a_unit((*rows)[I], kc), a_unit_inside((*rows)[I], kc)));
     // #end
-}
-
-// Element (row, col) of the tile at (row0, col0) as conv2d's other kernels store it
-// (gemm_store4.wgsl): alpha times the sum, then the bias and what the output holds (a fused
-// residual) where the flags ask, then ReLU.
-fn finish(row: u32, col: u32, sum: f32, row0: u32, col0: u32) -> f32 {
-    let n = col0 + col;
-    var v = p.g.alpha * sum;
-    if (p.g.flags & FLAG_BIAS) != 0u {
-        v += f32(bias[n]);
-    }
-    if (p.g.flags & FLAG_ACCUMULATE) != 0u {
-        v += f32(out[(row0 + row) * p.g.ldc + n]);
-    }
-    if (p.g.flags & FLAG_RELU) != 0u {
-        v = max(v, 0.0);
-    }
-    return v;
-}
-
-// Placeholders of the extension's operations (spirv_rewrite.rs replaces their calls; their
-// bodies only give naga a result of the right type).
-fn nv_each_at(m: FC, f: f32, row0: u32, col0: u32) -> FC {
-    return m;
-}
-
-fn nv_convert(m: FC) -> FH {
-    var converted: FH;
-    return converted;
 }
 
 @compute @workgroup_size(WG)
@@ -100,12 +65,5 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) t
         acc = coopMultiplyAdd(fa, fb, acc);
         workgroupBarrier();
     }
-    acc = nv_each_at(acc, finish(0u, 0u, 0.0, 0u, 0u), row0, col0);
-    // Every residual read before any store: the operation and the store may spread the
-    // elements over the invocations differently.
-    storageBarrier();
-    let rounded = nv_convert(acc);
-    let ldc = p.g.ldc;
-    let ot = row0 * ldc + col0;
-    coopStoreT(rounded, &out[ot], ldc);
+    store_tile(acc, row0 * p.g.ldc + col0, col0);
 }

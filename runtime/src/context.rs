@@ -97,6 +97,8 @@ pub(crate) struct Shared {
     pub(crate) matrix_tile: Mutex<crate::MatrixTile>,
     /// See [`Context::attention_kernel`].
     pub(crate) attention_kernel: Mutex<crate::ProbeChoice>,
+    /// See [`Context::linear_kernel`].
+    pub(crate) linear_kernel: Mutex<crate::ProbeChoice>,
     /// See [`Context::conv_kernel`].
     pub(crate) conv_kernel: Mutex<crate::ProbeChoice>,
     pub(crate) binding_limit: AtomicU64,
@@ -303,6 +305,7 @@ impl Context {
         let gemm_family = info.gemm_family(gpu_paths);
         let matrix_tile = crate::MatrixTile::from_env()?;
         let attention_kernel = crate::ProbeChoice::attention_from_env()?;
+        let linear_kernel = crate::ProbeChoice::linear_from_env()?;
         let conv_kernel = crate::ProbeChoice::conv_from_env()?;
         let env = |name: &str| std::env::var(name).ok();
         let submit_budget = SubmitBudget::for_device(&info, &env)?;
@@ -333,6 +336,7 @@ impl Context {
             gemm_family: Mutex::new(gemm_family),
             matrix_tile: Mutex::new(matrix_tile),
             attention_kernel: Mutex::new(attention_kernel),
+            linear_kernel: Mutex::new(linear_kernel),
             conv_kernel: Mutex::new(conv_kernel),
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
             allocation_limit: AtomicU64::new(info.max_allocation),

@@ -37,6 +37,16 @@ impl Context {
         *self.shared.attention_kernel.lock().unwrap() = kernel;
     }
 
+    /// The linear layers' product kernel where the context has a choice: `VKDIFF_LINEAR`, or what
+    /// [`Context::set_linear_kernel`] set.
+    pub fn linear_kernel(&self) -> crate::ProbeChoice {
+        *self.shared.linear_kernel.lock().unwrap()
+    }
+
+    pub fn set_linear_kernel(&self, kernel: crate::ProbeChoice) {
+        *self.shared.linear_kernel.lock().unwrap() = kernel;
+    }
+
     /// The convolution kernel where the context has a choice: `VKDIFF_CONV`, or what
     /// [`Context::set_conv_kernel`] set.
     pub fn conv_kernel(&self) -> crate::ProbeChoice {

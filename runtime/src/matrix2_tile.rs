@@ -32,8 +32,7 @@ impl Matrix2Probe {
     /// `DeviceInfo::cooperative_matrix2` names them).
     pub fn features(self) -> &'static [&'static str] {
         match self {
-            Matrix2Probe::Linear => &[],
-            Matrix2Probe::Conv => &["conversions", "per-element operations"],
+            Matrix2Probe::Linear | Matrix2Probe::Conv => &["conversions", "per-element operations"],
             Matrix2Probe::Attention => &["reductions", "conversions", "per-element operations"],
         }
     }
@@ -173,11 +172,15 @@ mod tests {
         let [linear, attention] = [Matrix2Probe::Linear, Matrix2Probe::Attention].map(built);
         let subgroup = linear.iter().find(|t| !t.workgroup_scope()).copied().unwrap();
         let workgroup = linear.iter().find(|t| t.workgroup_scope()).copied().unwrap();
-        assert_eq!(features(&[subgroup]), ["flexible dimensions"]);
-        assert_eq!(features(&[subgroup, workgroup]), ["flexible dimensions", "workgroup scope"]);
+        let epilogue = ["conversions", "per-element operations"];
+        assert_eq!(features(&[subgroup]), [&["flexible dimensions"][..], &epilogue].concat());
+        assert_eq!(
+            features(&[subgroup, workgroup]),
+            [&["flexible dimensions", "workgroup scope"][..], &epilogue].concat()
+        );
         let twin = attention.iter().find(|t| !t.workgroup_scope()).copied().unwrap();
         let all = ["flexible dimensions", "reductions", "conversions", "per-element operations"];
-        assert_eq!(features(&[subgroup, twin, twin]), all, "each feature once");
+        assert_eq!(features(&[twin, subgroup, twin]), all, "each feature once");
     }
 
     #[test]
@@ -187,46 +190,44 @@ mod tests {
         lavapipe.cooperative_features = true;
         lavapipe.subgroup_size = 8;
         lavapipe.flexible_shapes = vec![granularity(8, true, 0)];
-        let tiles = offered(&lavapipe);
-        assert!(!tiles.is_empty() && tiles.iter().all(|t| !t.workgroup_scope() && t.lanes == 8), "{tiles:?}");
+        assert!(offered(&lavapipe).is_empty(), "every probe needs the extension's operations");
         let probes = |tiles: &[Matrix2Tile]| {
             [Matrix2Probe::Linear, Matrix2Probe::Conv, Matrix2Probe::Attention]
                 .map(|p| tiles.iter().any(|t| t.probe == p))
         };
-        assert_eq!(probes(&tiles), [true, false, false], "the others need operations: {tiles:?}");
         // With the reductions, conversions and per-element operations it reports, all three.
         lavapipe.cooperative_matrix2 =
             vec!["flexible dimensions", "reductions", "conversions", "per-element operations"];
-        assert_eq!(probes(&offered(&lavapipe)), [true; 3]);
-        let attention: Vec<_> = offered(&lavapipe).into_iter().filter(|t| t.probe == Matrix2Probe::Attention).collect();
+        let tiles = offered(&lavapipe);
+        assert!(tiles.iter().all(|t| !t.workgroup_scope() && t.lanes == 8), "{tiles:?}");
+        assert_eq!(probes(&tiles), [true; 3]);
+        let attention: Vec<_> = tiles.into_iter().filter(|t| t.probe == Matrix2Probe::Attention).collect();
         assert_eq!(attention.len(), 1, "{attention:?}");
         assert_eq!((attention[0].m, attention[0].n, attention[0].k, attention[0].lanes), (8, 32, 64, 8));
+        lavapipe.cooperative_matrix2.remove(1);
+        assert_eq!(probes(&offered(&lavapipe)), [true, true, false], "attention needs the reductions");
         lavapipe.cooperative_matrix2.pop();
-        assert_eq!(probes(&offered(&lavapipe)), [true, false, false], "per-element operations unreported");
-        // A driver of workgroup scope at 256 invocations in multiples of 16, 32 lanes.
+        assert!(offered(&lavapipe).is_empty(), "per-element operations unreported");
+        // A driver of workgroup scope at 256 invocations in multiples of 16, 32 lanes, with the
+        // operations the linear and convolution probes use.
         let mut nvidia = device(1, DeviceKind::Discrete, true);
         nvidia.cooperative_features = true;
-        nvidia.cooperative_matrix2 = vec!["workgroup scope", "flexible dimensions"];
+        let scope = ["workgroup scope", "flexible dimensions"];
+        nvidia.cooperative_matrix2 = [&scope[..], Matrix2Probe::Conv.features()].concat();
         nvidia.flexible_shapes = vec![granularity(16, false, 256)];
         let tiles = offered(&nvidia);
         assert!(tiles.iter().any(|t| (t.m, t.n, t.k) == (128, 128, 32)), "{tiles:?}");
-        assert_eq!(probes(&tiles), [true, false, false], "{tiles:?}");
+        assert_eq!(probes(&tiles), [true, true, false], "{tiles:?}");
         assert!(tiles.iter().all(|t| t.workgroup_scope() && t.invocations == 256), "{tiles:?}");
-        // At 128 invocations, the tile built for them.
+        // At 128 invocations, the tiles built for them; the convolution's gathers its A step in
+        // 128 rows of 32 + 8 halves.
         nvidia.flexible_shapes = vec![granularity(16, false, 128)];
         let tiles = offered(&nvidia);
         assert!(!tiles.is_empty() && tiles.iter().all(|t| t.invocations == 128), "{tiles:?}");
-        assert!(tiles.iter().all(|t| t.probe == Matrix2Probe::Linear), "{tiles:?}");
-        nvidia.cooperative_matrix2.extend(Matrix2Probe::Conv.features());
-        // The convolution's gathered A step: 128 rows of 32 + 8 halves.
-        let conv: Vec<_> = offered(&nvidia)
-            .into_iter()
-            .filter(|t| t.probe == Matrix2Probe::Conv)
-            .map(|t| (t.n, t.workgroup_bytes()))
-            .collect();
+        let conv: Vec<_> =
+            tiles.iter().filter(|t| t.probe == Matrix2Probe::Conv).map(|t| (t.n, t.workgroup_bytes())).collect();
         assert_eq!(conv, [(64, 10240)]);
-        nvidia.cooperative_matrix2.truncate(2);
-        nvidia.cooperative_matrix2.extend(Matrix2Probe::Attention.features());
+        nvidia.cooperative_matrix2.push("reductions");
         let attention = |info: &DeviceInfo| offered(info).into_iter().filter(|t| t.probe == Matrix2Probe::Attention);
         nvidia.max_shared_memory = 49152; // NVIDIA's 48 KiB
         assert_eq!(attention(&nvidia).count(), 2, "both attention tiles of 128 invocations");
@@ -234,13 +235,14 @@ mod tests {
         nvidia.max_shared_memory = 32768;
         let fitting: Vec<_> = attention(&nvidia).map(|t| (t.m, t.n, t.workgroup_bytes())).collect();
         assert_eq!(fitting, [(64, 32, 26628)]);
-        nvidia.cooperative_matrix2.truncate(2);
         // The scope unreported, a workgroup size no tile is built for, or no matrix units: none.
-        nvidia.cooperative_matrix2 = vec!["flexible dimensions"];
+        nvidia.cooperative_matrix2.retain(|f| *f != "workgroup scope");
         assert!(offered(&nvidia).is_empty());
-        nvidia.cooperative_matrix2 = vec!["workgroup scope", "flexible dimensions"];
+        nvidia.cooperative_matrix2.push("workgroup scope");
         nvidia.flexible_shapes = vec![granularity(16, false, 512)];
         assert!(offered(&nvidia).is_empty());
+        lavapipe.cooperative_matrix2.push("per-element operations");
+        assert!(!offered(&lavapipe).is_empty());
         lavapipe.cooperative_features = false;
         assert!(offered(&lavapipe).is_empty());
     }

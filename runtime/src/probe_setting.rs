@@ -1,5 +1,6 @@
-//! `VKDIFF_ATTENTION` and `VKDIFF_CONV`: whether attention and the convolution take
-//! `VK_NV_cooperative_matrix2`'s probes where the device runs them.
+//! `VKDIFF_ATTENTION`, `VKDIFF_LINEAR` and `VKDIFF_CONV`: whether attention, the linear layers'
+//! products and the convolution take `VK_NV_cooperative_matrix2`'s probes where the device runs
+//! them.
 
 use crate::error::{Error, Result};
 
@@ -8,7 +9,8 @@ pub enum ProbeChoice {
     /// Unset or `auto`: the kernel `ops` picks for the device and the shape.
     Auto,
     /// `cm2`: the probe (`ops::attention_cm2`, its softmax on the extension's reductions, for f16
-    /// heads of up to 64; `ops::conv2d_cm2` for f16 convolutions on its tiles) wherever the device
+    /// heads of up to 64; `ops::linear_cm2` and `ops::conv2d_cm2` for f16 products and
+    /// convolutions on their tiles) wherever the device
     /// runs one of its tiles and the shape fits it, else as `auto`: whole networks timed and
     /// tested with it.
     Matrix2,
@@ -18,6 +20,11 @@ impl ProbeChoice {
     /// `VKDIFF_ATTENTION`.
     pub fn attention_from_env() -> Result<ProbeChoice> {
         ProbeChoice::from_env("VKDIFF_ATTENTION", "attention")
+    }
+
+    /// `VKDIFF_LINEAR`.
+    pub fn linear_from_env() -> Result<ProbeChoice> {
+        ProbeChoice::from_env("VKDIFF_LINEAR", "linear layers")
     }
 
     /// `VKDIFF_CONV`.

@@ -1,8 +1,8 @@
 //! What a test asserts of the kernels that ran (`Context::run_listing`, `Recording::variants`):
 //! the family its context takes for the products, with, on the matrix units, the fragment shape
 //! the device runs (`VKDIFF_FRAGMENT`'s where asked) and the workgroup tile the context asks
-//! for (`VKDIFF_MATRIX_TILE`), or VK_NV_cooperative_matrix2's convolution where `VKDIFF_CONV=cm2`
-//! asks for it; and attention on the matrix units where the CI pass of a driver with them says it
+//! for (`VKDIFF_MATRIX_TILE`), or VK_NV_cooperative_matrix2's linear product and convolution where
+//! `VKDIFF_LINEAR=cm2` and `VKDIFF_CONV=cm2` ask for them; and attention on the matrix units where the CI pass of a driver with them says it
 //! must, or on VK_NV_cooperative_matrix2's probe where `VKDIFF_ATTENTION=cm2` asks for it. A
 //! regressed selection then fails the test instead of passing on another kernel.
 
@@ -28,10 +28,16 @@ fn probe_asked(setting: ProbeChoice, variable: &str) -> bool {
     setting == ProbeChoice::Matrix2 || std::env::var(variable).is_ok_and(|v| v.trim().eq_ignore_ascii_case("cm2"))
 }
 
-/// Whether `ctx` takes the convolution's probe for f16 convolutions its tiles fit.
-fn conv_probe_due(ctx: &Context, dtype: Dtype) -> bool {
-    let offered = ctx.info().matrix2_tiles().iter().any(|t| t.probe == Matrix2Probe::Conv);
-    probe_asked(ctx.conv_kernel(), "VKDIFF_CONV") && offered && dtype == Dtype::F16
+/// The probe kernels `ctx` takes for f16 products its tiles fit (`gemm_cm2`, `conv_cm2`), as
+/// `VKDIFF_LINEAR` and `VKDIFF_CONV` ask for them.
+fn product_probes_due(ctx: &Context, dtype: Dtype) -> Vec<&'static str> {
+    let offered = |probe| ctx.info().matrix2_tiles().iter().any(|t| t.probe == probe);
+    let asked = [
+        ("gemm_cm2", Matrix2Probe::Linear, probe_asked(ctx.linear_kernel(), "VKDIFF_LINEAR")),
+        ("conv_cm2", Matrix2Probe::Conv, probe_asked(ctx.conv_kernel(), "VKDIFF_CONV")),
+    ];
+    let due = asked.into_iter().filter(|&(_, probe, asked)| asked && offered(probe) && dtype == Dtype::F16);
+    due.map(|(kernel, ..)| kernel).collect()
 }
 
 fn names(variants: &[&Variant]) -> Vec<String> {
@@ -53,8 +59,8 @@ fn due_family(ctx: &Context, dtype: Dtype) -> &'static str {
 }
 
 /// Asserts that every product (GEMM or convolution) in `variants` ran on the family `ctx` takes
-/// for `dtype`, or a convolution on VK_NV_cooperative_matrix2's probe where `VKDIFF_CONV=cm2`
-/// asks for it; with `fallback`, a shape the family cannot take (off the vec4 grid) may run on the
+/// for `dtype`, or on VK_NV_cooperative_matrix2's probes where `VKDIFF_LINEAR=cm2` or
+/// `VKDIFF_CONV=cm2` asks for them; with `fallback`, a shape the family cannot take (off the vec4 grid) may run on the
 /// tiled kernels instead. Returns the products' variants.
 pub fn assert_product_family<'a>(
     ctx: &Context,
@@ -68,10 +74,10 @@ pub fn assert_product_family<'a>(
     assert!(!products.is_empty(), "{what}: no product kernel ran: {:?}", names(variants));
     let fragment = ctx.info().cooperative_variant();
     let expected = due_family(ctx, dtype);
-    let conv_probe = conv_probe_due(ctx, dtype);
+    let probes = product_probes_due(ctx, dtype);
     for v in &products {
-        if v.kernel == "conv_cm2" {
-            assert!(conv_probe, "{what}: conv_cm2 ran where VKDIFF_CONV=cm2 did not ask for it");
+        if v.kernel.ends_with("_cm2") {
+            assert!(probes.contains(&v.kernel), "{what}: {} ran unasked (VKDIFF_LINEAR, VKDIFF_CONV)", v.kernel);
             continue;
         }
         let family = family_of(v.kernel);
@@ -91,7 +97,7 @@ pub fn assert_product_family<'a>(
         }
     }
     if expected == "_coop" && expect_cooperative() && !fallback {
-        let on_units = |v: &&Variant| v.kernel.ends_with("_coop") || v.kernel == "conv_cm2";
+        let on_units = |v: &&Variant| v.kernel.ends_with("_coop") || v.kernel.ends_with("_cm2");
         assert!(products.iter().all(on_units), "{what}: {:?}", names(&products));
     }
     products
@@ -127,20 +133,26 @@ pub fn assert_attention_kernel(ctx: &Context, dtype: Dtype, head_dim: usize, ker
 
 /// Asserts the products and attention of a whole network's recordings (`listing_variants`):
 /// every product on the family `ctx` takes for `dtype` or, for a layer off the vec4 grid, the
-/// tiled kernels, and at least one on that family; where `VKDIFF_CONV=cm2` asks for
-/// VK_NV_cooperative_matrix2's convolution and the network has any, at least one on it; attention, where the
+/// tiled kernels, and at least one on that family or, where `VKDIFF_LINEAR=cm2` or
+/// `VKDIFF_CONV=cm2` asks for VK_NV_cooperative_matrix2's probes, on them; where the network has
+/// convolutions, at least one product on each probe asked for; attention, where the
 /// network has any, as [`assert_attention_kernel`] says for heads of up to `head_dim`.
 pub fn assert_network_kernels(ctx: &Context, dtype: Dtype, variants: &[&Variant], head_dim: usize, what: &str) {
     let products = assert_product_family(ctx, dtype, variants, what, true);
     let due = due_family(ctx, dtype);
+    let probes = product_probes_due(ctx, dtype);
     assert!(
-        products.iter().any(|v| family_of(v.kernel) == Some(due)),
+        products.iter().any(|v| family_of(v.kernel) == Some(due) || probes.contains(&v.kernel)),
         "{what}: no product ran on {due}: {:?}",
         names(&products)
     );
     let kernels: Vec<&str> = variants.iter().map(|v| v.kernel).collect();
-    if conv_probe_due(ctx, dtype) && kernels.iter().any(|k| k.starts_with("conv_")) {
-        assert!(kernels.contains(&"conv_cm2"), "{what}: VKDIFF_CONV=cm2, the convolutions ran {kernels:?}");
+    // Only networks with convolutions are held to the linear probe too: their linear layers over
+    // pixels have rows the tiles fit, where a text encoder's 77 tokens fit none.
+    if kernels.iter().any(|k| k.starts_with("conv_")) {
+        for probe in probes {
+            assert!(kernels.contains(&probe), "{what}: {probe} asked for, the products ran {kernels:?}");
+        }
     }
     // Networks without attention (the small ControlNet) have no choice of it to assert.
     if kernels.iter().any(|k| k.starts_with("attention")) {

@@ -12,7 +12,7 @@ type Record = fn(&mut Recorder, &[Tensor]) -> vkdiff_runtime::Result<()>;
 
 /// The linear probe on built tile I: `Case::record` is a plain function, so one is made per tile.
 fn record_linear<const I: usize>(rec: &mut Recorder, t: &[Tensor]) -> vkdiff_runtime::Result<()> {
-    ops::linear_cm2(rec, &t[0], &t[1], &t[2], &built_matrix2_tiles(Matrix2Probe::Linear)[I])
+    ops::linear_cm2(rec, [&t[0], &t[1], &t[2]], None, &built_matrix2_tiles(Matrix2Probe::Linear)[I])
 }
 
 /// The convolution probe on built tile I: a 3×3 convolution with its bias, stride 1, padding 1,
@@ -67,7 +67,7 @@ pub(super) fn cases(
                 tensors: vec![
                     rand_tensor(ctx, &[m, k], Dtype::F16, 31)?,
                     rand_tensor(ctx, &[n, k], Dtype::F16, 32)?,
-                    ctx.zeros(&[m, n], Dtype::F32)?,
+                    ctx.zeros(&[m, n], Dtype::F16)?,
                 ],
                 record: LINEAR[i],
             });

@@ -186,25 +186,22 @@ fn matmul_whole(
             format!("matmul: bias {:?} for N = {}", bias.shape(), s.n)
         })?;
     }
-    let flags = bias.is_some() as u32 | (s.accumulate as u32) << 1;
-    let common = [
-        u(s.m),
-        u(s.n),
-        u(s.k),
-        u(s.ldb),
-        u(s.ldc),
-        u(s.b_batch),
-        u(s.c_batch),
-        flags,
-        f(s.alpha),
-        u(s.lda),
-        u(s.a_batch),
-    ];
+    let common = push_constants(s, bias.is_some());
     // Without a bias the kernel never reads binding 2; C stands in for it.
     let bias = bias.unwrap_or(c);
+    if let Some(tile) = super::linear_cm2::chosen_tile(rec.context(), s, dtype) {
+        return super::linear_cm2::record(rec, [a, b, bias], c, s, &common, &tile);
+    }
     let shape = GemmShape { m: s.m, n: s.n, k: s.k, batch: s.batch, vec4: s.fits_vec4(), vec8: s.fits_vec8() };
     let kernels = (GemmKernels::MATMUL, dtype, &[("BT", s.b_transposed as u32), ("GE", s.geglu as u32)][..]);
     dispatch_gemm_family(rec, kernels, &shape, &[a, b, bias], c, &common)
+}
+
+/// The push constants of the product `s`: gemm_common.wgsl's GemmParams, then
+/// a_matrix_rows.wgsl's AParams.
+pub(super) fn push_constants(s: &Matmul, bias: bool) -> [u32; 11] {
+    let flags = bias as u32 | (s.accumulate as u32) << 1;
+    [u(s.m), u(s.n), u(s.k), u(s.ldb), u(s.ldc), u(s.b_batch), u(s.c_batch), flags, f(s.alpha), u(s.lda), u(s.a_batch)]
 }
 
 /// What the GEMM-family dispatch needs to know of a matrix product or implicit-GEMM convolution.
