@@ -88,10 +88,11 @@ fn workgroup_barriers(words: &[u32]) -> Result<Vec<u32>, String> {
         let is = |i: &&&[u32]| i[0] & 0xffff == OP_CONSTANT && Some(i[1]) == uint && i.len() == 4 && i[3] == value;
         insts.iter().find(is).map(|i| i[2])
     };
+    let (device, workgroup) = (constant(DEVICE), constant(WORKGROUP));
     let mut out = words[..5].to_vec();
     for inst in insts.iter() {
-        if inst[0] & 0xffff == OP_CONTROL_BARRIER && Some(inst[2]) == constant(DEVICE) {
-            let workgroup = constant(WORKGROUP).ok_or("a device-scope barrier and no Workgroup scope constant")?;
+        if inst[0] & 0xffff == OP_CONTROL_BARRIER && Some(inst[2]) == device {
+            let workgroup = workgroup.ok_or("a device-scope barrier and no Workgroup scope constant")?;
             out.extend([inst[0], inst[1], workgroup, inst[3]]);
             continue;
         }

@@ -2,7 +2,8 @@
 // the epilogue of the other GEMM kernels (gemm_store4.wgsl: alpha, the bias, a fused residual,
 // ReLU) on the whole accumulator by the extension's per-element operation, then its conversion to
 // f16 and one matrix store. The applied function reads the bias and the residual at its element's
-// row and column.
+// row and column. GE = 0: the plain product.
+const GB: u32 = 4u; // gemm_common.wgsl's GEGLU blocks: unused
 @group(0) @binding(2) var<storage, read> bias: array<f16>;
 @group(0) @binding(3) var<storage, read_write> out: array<f16>;
 

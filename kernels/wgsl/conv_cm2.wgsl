@@ -13,7 +13,6 @@
 // subgroup scope on a workgroup of one subgroup (Mesa 26.1's lavapipe, for CI). Operands are f16,
 // the input (a_conv_v4.wgsl) and the weight read as their bits; M, Cout and K are multiples of
 // FM, FN and FK and Cin of UW: the runtime refuses the rest.
-const GB: u32 = 4u; // gemm_common.wgsl's GEGLU blocks: unused (GE = 0)
 @group(0) @binding(1) var<storage, read> b: array<f32>;
 
 const UK: u32 = FK / UW; // units along a row of the A tile

@@ -12,8 +12,6 @@
 // into C (f16) as gemm_store4.wgsl would. M, N and K are multiples of FM, FN and FK, every stride
 // of 8 values (the 16-byte rows matrix loads need): the runtime refuses other shapes. GE = 0
 // (gemm_common.wgsl's parameters, the matrix products').
-const GB: u32 = 4u; // gemm_common.wgsl's GEGLU blocks: unused (GE = 0)
-
 // As a_matrix_rows.wgsl's.
 struct AParams {
     lda: u32,

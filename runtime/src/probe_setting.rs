@@ -10,9 +10,8 @@ pub enum ProbeChoice {
     Auto,
     /// `cm2`: the probe (`ops::attention_cm2`, its softmax on the extension's reductions, for f16
     /// heads of up to 64; `ops::linear_cm2` and `ops::conv2d_cm2` for f16 products and
-    /// convolutions on their tiles) wherever the device
-    /// runs one of its tiles and the shape fits it, else as `auto`: whole networks timed and
-    /// tested with it.
+    /// convolutions on their tiles) wherever the device runs one of its tiles and the shape fits
+    /// it, else as `auto`: whole networks timed and tested with it.
     Matrix2,
 }
 

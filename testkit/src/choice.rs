@@ -1,10 +1,11 @@
 //! What a test asserts of the kernels that ran (`Context::run_listing`, `Recording::variants`):
 //! the family its context takes for the products, with, on the matrix units, the fragment shape
 //! the device runs (`VKDIFF_FRAGMENT`'s where asked) and the workgroup tile the context asks
-//! for (`VKDIFF_MATRIX_TILE`), or VK_NV_cooperative_matrix2's linear product and convolution where
-//! `VKDIFF_LINEAR=cm2` and `VKDIFF_CONV=cm2` ask for them; and attention on the matrix units where the CI pass of a driver with them says it
-//! must, or on VK_NV_cooperative_matrix2's probe where `VKDIFF_ATTENTION=cm2` asks for it. A
-//! regressed selection then fails the test instead of passing on another kernel.
+//! for (`VKDIFF_MATRIX_TILE`), or VK_NV_cooperative_matrix2's linear product and convolution
+//! where `VKDIFF_LINEAR=cm2` and `VKDIFF_CONV=cm2` ask for them; and attention on the matrix
+//! units where the CI pass of a driver with them says it must, or on VK_NV_cooperative_matrix2's
+//! probe where `VKDIFF_ATTENTION=cm2` asks for it. A regressed selection then fails the test
+//! instead of passing on another kernel.
 
 use vkdiff_runtime::{Context, Dtype, GemmFamily, Matrix2Probe, ProbeChoice, Variant};
 
@@ -22,7 +23,7 @@ fn asked_fragment() -> Option<[u32; 3]> {
 }
 
 /// Whether the context takes VK_NV_cooperative_matrix2's probe for `op` where it fits: its
-/// setting, or `variable` (`VKDIFF_ATTENTION`, `VKDIFF_CONV`) read here too, so that a runtime
+/// setting, or `variable` (`VKDIFF_ATTENTION`, `VKDIFF_LINEAR`, `VKDIFF_CONV`) read here too, so that a runtime
 /// that ignored it fails.
 fn probe_asked(setting: ProbeChoice, variable: &str) -> bool {
     setting == ProbeChoice::Matrix2 || std::env::var(variable).is_ok_and(|v| v.trim().eq_ignore_ascii_case("cm2"))
@@ -60,8 +61,8 @@ fn due_family(ctx: &Context, dtype: Dtype) -> &'static str {
 
 /// Asserts that every product (GEMM or convolution) in `variants` ran on the family `ctx` takes
 /// for `dtype`, or on VK_NV_cooperative_matrix2's probes where `VKDIFF_LINEAR=cm2` or
-/// `VKDIFF_CONV=cm2` asks for them; with `fallback`, a shape the family cannot take (off the vec4 grid) may run on the
-/// tiled kernels instead. Returns the products' variants.
+/// `VKDIFF_CONV=cm2` asks for them; with `fallback`, a shape the family cannot take (off the
+/// vec4 grid) may run on the tiled kernels instead. Returns the products' variants.
 pub fn assert_product_family<'a>(
     ctx: &Context,
     dtype: Dtype,

@@ -5,7 +5,7 @@
 
 use super::attention::{checked_dtype, push_constants, vec4_aligned, AttentionLayout};
 use super::bands::fit;
-use super::linear_cm2::ensure_offered;
+use super::matrix2_probes::{asked_tile, ensure_offered};
 use super::{kernel, u};
 use crate::context::Context;
 use crate::error::{ensure, Result};
@@ -54,9 +54,5 @@ pub(super) fn record(
 /// The attention tile `ops::attention` takes for f16 heads of `head_dim` where the context asks
 /// for this probe (`VKDIFF_ATTENTION=cm2`): the first the device runs that holds them.
 pub(super) fn chosen_tile(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<Matrix2Tile> {
-    if ctx.attention_kernel() != crate::ProbeChoice::Matrix2 || dtype != Dtype::F16 {
-        return None;
-    }
-    let fits = |t: &Matrix2Tile| t.probe == Matrix2Probe::Attention && head_dim <= t.k as usize;
-    ctx.info().matrix2_tiles().into_iter().find(fits)
+    asked_tile(ctx, ctx.attention_kernel(), dtype, Matrix2Probe::Attention, |t| head_dim <= t.k as usize)
 }

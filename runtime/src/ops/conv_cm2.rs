@@ -4,7 +4,7 @@
 
 use super::bands::fit;
 use super::conv::{checked, ConvParams, ConvProduct};
-use super::linear_cm2::ensure_offered;
+use super::matrix2_probes::{asked_tile, ensure_offered};
 use super::{kernel, u};
 use crate::context::Context;
 use crate::error::{ensure, Result};
@@ -70,8 +70,5 @@ pub(super) fn record(
 /// The convolution tile `ops::conv2d` takes for `c` where the context asks for this probe
 /// (`VKDIFF_CONV=cm2`): the first the device runs that takes it.
 pub(super) fn chosen_tile(ctx: &Context, c: &ConvProduct) -> Option<Matrix2Tile> {
-    if ctx.conv_kernel() != crate::ProbeChoice::Matrix2 || c.dtype != Dtype::F16 {
-        return None;
-    }
-    ctx.info().matrix2_tiles().into_iter().find(|t| t.probe == Matrix2Probe::Conv && fits(c, t))
+    asked_tile(ctx, ctx.conv_kernel(), c.dtype, Matrix2Probe::Conv, |t| fits(c, t))
 }

@@ -3,6 +3,7 @@
 //! `VKDIFF_LINEAR=cm2` asks.
 
 use super::gemm::{push_constants, Matmul};
+use super::matrix2_probes::{asked_tile, ensure_offered};
 use super::{kernel, u};
 use crate::context::Context;
 use crate::error::{ensure, Error, Result};
@@ -72,20 +73,5 @@ pub(super) fn record(
 /// The linear tile `ops::matmul` takes for `s` where the context asks for this probe
 /// (`VKDIFF_LINEAR=cm2`): the first the device runs that takes it.
 pub(super) fn chosen_tile(ctx: &Context, s: &Matmul, dtype: Dtype) -> Option<Matrix2Tile> {
-    if ctx.linear_kernel() != crate::ProbeChoice::Matrix2 || dtype != Dtype::F16 {
-        return None;
-    }
-    ctx.info().matrix2_tiles().into_iter().find(|t| t.probe == Matrix2Probe::Linear && fits(s, t))
-}
-
-/// An error unless `tile` is one of `probe`'s that the context's device runs.
-pub(super) fn ensure_offered(ctx: &Context, op: &str, probe: Matrix2Probe, tile: &Matrix2Tile) -> Result<()> {
-    match tile.probe == probe && ctx.info().matrix2_tiles().contains(tile) {
-        true => Ok(()),
-        false => Err(Error::Shape(format!(
-            "{op}: device `{}` does not run the VK_NV_cooperative_matrix2 tile {}",
-            ctx.info().name,
-            tile.label()
-        ))),
-    }
+    asked_tile(ctx, ctx.linear_kernel(), dtype, Matrix2Probe::Linear, |t| fits(s, t))
 }

@@ -14,6 +14,7 @@ mod copy_heads;
 mod elementwise;
 mod gemm;
 mod linear_cm2;
+mod matrix2_probes;
 mod norm;
 mod pool;
 
