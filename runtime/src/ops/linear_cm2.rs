@@ -2,6 +2,7 @@
 //! which `bench kernels` times beside the matrix-unit GEMM; networks take it only where
 //! `VKDIFF_LINEAR=cm2` asks.
 
+use super::bands::fit;
 use super::gemm::{push_constants, Matmul};
 use super::matrix2_probes::{asked_tile, ensure_offered};
 use super::{kernel, u};
@@ -13,7 +14,8 @@ use crate::tensor::{Dtype, Tensor};
 
 /// Records `out` [M, N] = `a` [M, K] · `w` [N, K]ᵀ (+ bias), as `ops::linear` does, on `tile`, one
 /// of the device's linear tiles (`DeviceInfo::matrix2_tiles`): f16 tensors, M, N and K multiples
-/// of the tile's m, n and k, K of 8.
+/// of the tile's m, n and k, K of 8, every tensor within the binding limit (`ops::matmul` bands
+/// larger products).
 pub fn linear_cm2(
     rec: &mut Recorder,
     [a, w, out]: [&Tensor; 3],
@@ -42,6 +44,8 @@ pub fn linear_cm2(
     })?;
     let s = Matmul::dense(m, n, k, true);
     ensure(fits(&s, tile), || format!("linear_cm2: {m}×{n}×{k} is not a multiple of the tile {}", tile.label()))?;
+    let operands: Vec<&Tensor> = [a, w, out].into_iter().chain(bias).collect();
+    ensure(fit(&ctx, &operands), || "linear_cm2: a tensor is past the binding limit".to_string())?;
     record(rec, [a, w, bias.unwrap_or(out)], out, &s, &push_constants(&s, bias.is_some()), tile)
 }
 

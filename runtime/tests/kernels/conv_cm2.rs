@@ -78,6 +78,9 @@ fn conv2d_cm2_matches_the_reference_on_every_tile_the_device_runs() {
         assert!(err.contains("does not run the VK_NV_cooperative_matrix2 tile"), "{err}");
         return;
     }
+    // A context whose binding limit no tensor below fits.
+    let limited = private_ctx();
+    limited.set_binding_limit(256);
     for tile in tiles {
         let (m, n, k) = (tile.m as usize, tile.n as usize, tile.k as usize);
         let vae = Padding { top: 0, left: 0, bottom: 1, right: 1 };
@@ -106,6 +109,9 @@ fn conv2d_cm2_matches_the_reference_on_every_tile_the_device_runs() {
         }
         let err = refusal(&ctx, &tile, &case(1, [1, m], [k, n], [1, 1], 1, same(0)), Dtype::F32);
         assert!(err.contains("must be f16"), "{err}");
+        // So is a tensor past the binding limit (`ops::conv2d` bands such convolutions first).
+        let err = refusal(&limited, &tile, &case(1, [1, m], [k, n], [1, 1], 1, same(0)), Dtype::F16);
+        assert!(err.contains("past the binding limit"), "{err}");
     }
 }
 

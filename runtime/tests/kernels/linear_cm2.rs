@@ -76,6 +76,9 @@ fn linear_cm2_multiplies_on_every_tile_the_device_runs() {
         assert!(err.contains("does not run the VK_NV_cooperative_matrix2 tile"), "{err}");
         return;
     }
+    // A context whose binding limit no tensor below fits.
+    let limited = private_ctx();
+    limited.set_binding_limit(256);
     for tile in tiles {
         let (m, n, k) = (2 * tile.m as usize, 3 * tile.n as usize, 4 * tile.k as usize);
         check(&ctx, &tile, &Matmul::dense(m, n, k, true), true, 17);
@@ -91,6 +94,11 @@ fn linear_cm2_multiplies_on_every_tile_the_device_runs() {
         let w = ctx.zeros(&[n, k], Dtype::F16).unwrap();
         let err = linear_cm2(&mut rec, [&a, &w, &f32_out], None, &tile).unwrap_err().to_string();
         assert!(err.contains("must be f16"), "{err}");
+        // So is a tensor past the binding limit (`ops::matmul` bands such products first).
+        let [a, w, out] = [[m, k], [n, k], [m, n]].map(|shape| limited.zeros(&shape, Dtype::F16).unwrap());
+        let mut rec = Recorder::new(&limited, false).unwrap();
+        let err = linear_cm2(&mut rec, [&a, &w, &out], None, &tile).unwrap_err().to_string();
+        assert!(err.contains("past the binding limit"), "{err}");
     }
 }
 
