@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Once;
 
 /// `path` relative to the repository root: the one the tests were built in, or `VKDIFF_REPO`
-/// (tools/gpu-check.sh runs test binaries built elsewhere against a copy of the repository).
+/// (tools/gpu-check.sh runs test binaries built elsewhere against the fixtures its kit carries).
 pub fn repo(path: &str) -> PathBuf {
     let root = std::env::var_os("VKDIFF_REPO")
         .map(PathBuf::from)
