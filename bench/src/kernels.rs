@@ -30,12 +30,15 @@ enum Work {
     Bytes(f64),
 }
 
+/// M, N and K of a product held against the CPU's.
+type GemmShape = (usize, usize, usize);
+
 struct Case {
     name: &'static str,
     shape: String,
     work: Work,
     /// The GEMM shape to hold against the CPU, if any.
-    gemm: Option<(usize, usize, usize)>,
+    gemm: Option<GemmShape>,
     /// Whether it runs on the GEMM/convolution family (timed on each family the device has).
     on_gemm_family: bool,
     tensors: Vec<Tensor>,
@@ -195,45 +198,14 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             "kernel", "dtype", "GEMM kernels", "shape", "ms", "GFLOP/s", "GB/s", "of matrix peak"
         );
     }
-    let default_family = ctx.gemm_family();
-    let default_tile = ctx.matrix_tile();
+    let mut failed = Vec::new();
     for dtype in dtypes {
-        for case in cases(&ctx, dtype)? {
-            if args.filter.as_ref().is_some_and(|f| !case.name.contains(f.as_str())) {
-                continue;
-            }
-            // Products run on each family the device has, the matrix units in both workgroup
-            // tiles where both are built, so one run compares them.
-            let four = MatrixTile::Four;
-            let families = match (case.on_gemm_family, default_family) {
-                (false, _) => vec![(None, default_tile)],
-                (true, GemmFamily::Cooperative | GemmFamily::Tiled)
-                    if dtype == Dtype::F16 && peaks::has_matrix_units(&ctx) =>
-                {
-                    let units = Some(GemmFamily::Cooperative);
-                    let eight = ctx.info().cooperative_variant().is_some_and(|f| eight_subgroups_built(&f));
-                    let mut runs = vec![(units, four)];
-                    runs.extend(eight.then_some((units, MatrixTile::Eight)));
-                    runs.push((Some(GemmFamily::Tiled), four));
-                    runs
-                }
-                (true, family) => vec![(Some(family), default_tile)],
-            };
-            for (family, tile) in families {
-                ctx.set_gemm_family(family.unwrap_or(default_family));
-                ctx.set_matrix_tile(tile);
-                let row = time_row(&ctx, &case, dtype, family.is_some(), args.samples)?;
-                if !args.common.json {
-                    print_row(&row);
-                }
-                if let Some(g) = case.gemm {
-                    gemm_shapes.push(g);
-                }
-                rows.push((row, case.gemm));
-            }
-            ctx.set_gemm_family(default_family);
-            ctx.set_matrix_tile(default_tile);
-        }
+        let cases = cases(&ctx, dtype)?.into_iter();
+        let chosen = cases.filter(|c| args.filter.as_ref().is_none_or(|f| c.name.contains(f.as_str())));
+        let timed = time_cases(&ctx, dtype, chosen, args.samples, !args.common.json);
+        gemm_shapes.extend(timed.rows.iter().filter_map(|(_, g)| *g));
+        rows.extend(timed.rows);
+        failed.extend(timed.failed);
     }
     gemm_shapes.dedup();
     let cpu: Result<Vec<CpuGemm>, String> = if args.common.no_cpu_reference || gemm_shapes.is_empty() {
@@ -258,13 +230,14 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
                 "kept": t.keeps_matrix_units(),
             })),
             "kernels": rows.iter().map(|(r, _)| r).collect::<Vec<_>>(),
+            "failed": failed,
             "cpu_reference": cpu
                 .as_ref()
                 .map(|c| serde_json::to_value(c).unwrap())
                 .unwrap_or_else(|e| serde_json::Value::String(e.clone())),
         });
         println!("{}", serde_json::to_string_pretty(&out)?);
-        return Ok(());
+        return rows_failed(&failed);
     }
     match cpu {
         Ok(cpu) if !cpu.is_empty() => {
@@ -287,5 +260,104 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
         Ok(_) => {}
         Err(e) => println!("\nCPU reference not measured: {e} (needs numpy in $VKDIFF_REFERENCE_PYTHON, else python3)"),
     }
-    Ok(())
+    rows_failed(&failed)
+}
+
+/// The error that ends a run in which rows failed, once every other row is printed.
+fn rows_failed(failed: &[String]) -> Result<()> {
+    match failed {
+        [] => Ok(()),
+        _ => anyhow::bail!("{} of the rows failed: {}", failed.len(), failed.join("; ")),
+    }
+}
+
+/// What `time_cases` measured: each row with the GEMM shape to hold against the CPU, and a line
+/// for each row that failed.
+struct Timed {
+    rows: Vec<(Row, Option<GemmShape>)>,
+    failed: Vec<String>,
+}
+
+/// Times each case, products on each family the device has (the matrix units in both workgroup
+/// tiles where both are built, so one run compares them), printing each row as it comes where
+/// `print`. A row that fails (a driver that refuses a kernel no GPU has run) is one line naming
+/// it, and the rest still run; the context's family and tile are left as found.
+fn time_cases(ctx: &Context, dtype: Dtype, cases: impl Iterator<Item = Case>, samples: usize, print: bool) -> Timed {
+    let default_family = ctx.gemm_family();
+    let default_tile = ctx.matrix_tile();
+    let mut timed = Timed { rows: Vec::new(), failed: Vec::new() };
+    for case in cases {
+        let four = MatrixTile::Four;
+        let families = match (case.on_gemm_family, default_family) {
+            (false, _) => vec![(None, default_tile)],
+            (true, GemmFamily::Cooperative | GemmFamily::Tiled)
+                if dtype == Dtype::F16 && peaks::has_matrix_units(ctx) =>
+            {
+                let units = Some(GemmFamily::Cooperative);
+                let eight = ctx.info().cooperative_variant().is_some_and(|f| eight_subgroups_built(&f));
+                let mut runs = vec![(units, four)];
+                runs.extend(eight.then_some((units, MatrixTile::Eight)));
+                runs.push((Some(GemmFamily::Tiled), four));
+                runs
+            }
+            (true, family) => vec![(Some(family), default_tile)],
+        };
+        for (family, tile) in families {
+            ctx.set_gemm_family(family.unwrap_or(default_family));
+            ctx.set_matrix_tile(tile);
+            match time_row(ctx, &case, dtype, family.is_some(), samples) {
+                Ok(row) => {
+                    if print {
+                        print_row(&row);
+                    }
+                    timed.rows.push((row, case.gemm));
+                }
+                Err(e) => {
+                    let what = format!("{} {} ({})", case.name, case.shape, dtype_name(dtype));
+                    if print {
+                        println!("{what:<60} failed: {e:#}");
+                    }
+                    timed.failed.push(format!("{what}: {e:#}"));
+                }
+            }
+        }
+        ctx.set_gemm_family(default_family);
+        ctx.set_matrix_tile(default_tile);
+    }
+    timed
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vkdiff_runtime::ops::{unary, UnaryOp};
+
+    fn silu(ctx: &Context, record: fn(&mut Recorder, &[Tensor]) -> vkdiff_runtime::Result<()>) -> Case {
+        Case {
+            name: "silu",
+            shape: "4096".into(),
+            work: Work::Bytes(2.0 * 4096.0 * 4.0),
+            gemm: None,
+            on_gemm_family: false,
+            tensors: vec![rand_tensor(ctx, &[4096], Dtype::F32, 1).unwrap(), ctx.zeros(&[4096], Dtype::F32).unwrap()],
+            record,
+        }
+    }
+
+    #[test]
+    fn a_failing_row_is_named_and_the_rest_still_run() {
+        let ctx = vkdiff_testkit::ctx();
+        let refused: fn(&mut Recorder, &[Tensor]) -> vkdiff_runtime::Result<()> =
+            |_, _| Err(vkdiff_runtime::Error::Shape("planted: the driver refused the kernel".into()));
+        let works: fn(&mut Recorder, &[Tensor]) -> vkdiff_runtime::Result<()> =
+            |rec, t| unary(rec, UnaryOp::Silu, &t[0], &t[1], 1.0);
+        let cases = [silu(&ctx, refused), silu(&ctx, works)];
+        let timed = time_cases(&ctx, Dtype::F32, cases.into_iter(), 1, false);
+        assert_eq!(timed.failed, ["silu 4096 (f32): planted: the driver refused the kernel"]);
+        assert_eq!(timed.rows.len(), 1, "the row after the failure still runs");
+        assert!(timed.rows[0].0.gbps.is_some_and(|g| g > 0.0));
+        let err = rows_failed(&timed.failed).unwrap_err().to_string();
+        assert_eq!(err, "1 of the rows failed: silu 4096 (f32): planted: the driver refused the kernel");
+        assert!(rows_failed(&[]).is_ok());
+    }
 }
