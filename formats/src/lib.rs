@@ -5,6 +5,7 @@
 
 pub mod atomic;
 mod error;
+mod float8;
 pub mod image;
 mod safetensors;
 mod stored_zip;

@@ -2,6 +2,7 @@
 //! each tensor's dtype, shape and byte range, then the data.
 
 use crate::error::{Error, Result};
+use crate::float8::{e4m3fn_to_f32, e5m2_to_f32};
 use half::{bf16, f16};
 use memmap2::Mmap;
 use serde_json::Value;
@@ -15,6 +16,10 @@ pub enum SourceDtype {
     F32,
     F16,
     BF16,
+    /// torch's `float8_e4m3fn`.
+    F8E4M3,
+    /// torch's `float8_e5m2`.
+    F8E5M2,
     Other(&'static str),
 }
 
@@ -25,6 +30,8 @@ impl SourceDtype {
             "F32" => (SourceDtype::F32, Some(4)),
             "F16" => (SourceDtype::F16, Some(2)),
             "BF16" => (SourceDtype::BF16, Some(2)),
+            "F8_E4M3" => (SourceDtype::F8E4M3, Some(1)),
+            "F8_E5M2" => (SourceDtype::F8E5M2, Some(1)),
             "F64" => (SourceDtype::Other("F64"), Some(8)),
             "I64" => (SourceDtype::Other("I64"), Some(8)),
             "I32" => (SourceDtype::Other("I32"), Some(4)),
@@ -147,7 +154,10 @@ impl SafeTensors {
             .get(name)
             .ok_or_else(|| Error::Tensor(format!("tensor `{name}` is missing from {}", self.path.display())))?;
         let values = decode(entry.dtype, self.bytes(entry)).ok_or_else(|| {
-            Error::Tensor(format!("tensor `{name}` in {} is not F32, F16 or BF16", self.path.display()))
+            Error::Tensor(format!(
+                "tensor `{name}` in {} is not F32, F16, BF16 or F8 (E4M3, E5M2)",
+                self.path.display()
+            ))
         })?;
         Ok((entry.shape.clone(), values))
     }
@@ -159,6 +169,8 @@ pub fn decode(dtype: SourceDtype, bytes: &[u8]) -> Option<Vec<f32>> {
         SourceDtype::F32 => bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
         SourceDtype::F16 => bytes.chunks_exact(2).map(|c| f16::from_le_bytes([c[0], c[1]]).to_f32()).collect(),
         SourceDtype::BF16 => bytes.chunks_exact(2).map(|c| bf16::from_le_bytes([c[0], c[1]]).to_f32()).collect(),
+        SourceDtype::F8E4M3 => bytes.iter().map(|&b| e4m3fn_to_f32(b)).collect(),
+        SourceDtype::F8E5M2 => bytes.iter().map(|&b| e5m2_to_f32(b)).collect(),
         SourceDtype::Other(_) => return None,
     })
 }

@@ -238,7 +238,15 @@ impl Checkpoint {
         }
         if let SourceDtype::Other(what) = entry.dtype {
             return Err(Error::Checkpoint(format!(
-                "tensor `{}` in {} is {what}; vkdiff reads F32, F16 and BF16",
+                "tensor `{}` in {} is {what}; vkdiff reads F32, F16, BF16 and F8 (E4M3, E5M2)",
+                at.name,
+                file.path.display()
+            )));
+        }
+        if let Some(scale) = fp8_scale(index, &at.name, entry.dtype) {
+            return Err(Error::Checkpoint(format!(
+                "tensor `{}` in {} is fp8 scaled by `{scale}` (ComfyUI's scaled fp8); vkdiff reads fp8 weights stored \
+                 unscaled only: use the checkpoint's fp16 or bf16 release",
                 at.name,
                 file.path.display()
             )));
@@ -286,6 +294,16 @@ impl Checkpoint {
     fn upload(&self, shape: &[usize], data: &[f32], at: Placement) -> Result<Tensor> {
         Ok(self.ctx.upload_to(at, shape, self.dtype, data)?)
     }
+}
+
+/// The scale an fp8 weight `name` is stored with, where the file has one beside it (ComfyUI's
+/// scaled fp8 writes `….scale_weight`, its newer quantized format `….weight_scale`): read
+/// unscaled, such weights would be silently wrong.
+fn fp8_scale(index: &HashMap<String, usize>, name: &str, dtype: SourceDtype) -> Option<String> {
+    let stem = name.strip_suffix("weight")?;
+    let scales = [format!("{stem}scale_weight"), format!("{stem}weight_scale")];
+    matches!(dtype, SourceDtype::F8E4M3 | SourceDtype::F8E5M2)
+        .then(|| scales.into_iter().find(|s| index.contains_key(s)))?
 }
 
 /// A checkpoint seen from one module: names are relative to its prefix.

@@ -5,6 +5,7 @@ mod conditioning;
 mod controlnet;
 mod errors;
 mod forward;
+mod fp8;
 mod inception;
 mod ip_adapter;
 mod malformed;
