@@ -300,10 +300,11 @@ impl Checkpoint {
 /// scaled fp8 writes `….scale_weight`, its newer quantized format `….weight_scale`): read
 /// unscaled, such weights would be silently wrong.
 fn fp8_scale(index: &HashMap<String, usize>, name: &str, dtype: SourceDtype) -> Option<String> {
+    if !matches!(dtype, SourceDtype::F8E4M3 | SourceDtype::F8E5M2) {
+        return None;
+    }
     let stem = name.strip_suffix("weight")?;
-    let scales = [format!("{stem}scale_weight"), format!("{stem}weight_scale")];
-    matches!(dtype, SourceDtype::F8E4M3 | SourceDtype::F8E5M2)
-        .then(|| scales.into_iter().find(|s| index.contains_key(s)))?
+    [format!("{stem}scale_weight"), format!("{stem}weight_scale")].into_iter().find(|s| index.contains_key(s))
 }
 
 /// A checkpoint seen from one module: names are relative to its prefix.
