@@ -69,6 +69,64 @@ fn usage_and_bad_input_exit_2() {
     assert!(!out.exists());
 }
 
+/// The tiny pipeline with one UNet weight stored as ComfyUI's scaled fp8 writes it: the weight in
+/// F8_E4M3 (zeros) and an f32 `….scale_weight` beside it; every other part linked from the fixture.
+fn scaled_fp8_pipeline(dir: &Path) -> PathBuf {
+    let source = fixture("pipeline/tiny-sdxl");
+    let model = dir.join("tiny-sdxl-scaled-fp8");
+    std::fs::create_dir_all(model.join("unet")).unwrap();
+    for part in std::fs::read_dir(&source).unwrap().map(|e| e.unwrap().file_name()) {
+        if part != "unet" {
+            std::os::unix::fs::symlink(source.join(&part), model.join(&part)).unwrap();
+        }
+    }
+    std::fs::copy(source.join("unet/config.json"), model.join("unet/config.json")).unwrap();
+    let weights = std::fs::read(source.join("unet/diffusion_pytorch_model.safetensors")).unwrap();
+    let n = u64::from_le_bytes(weights[..8].try_into().unwrap()) as usize;
+    let header: serde_json::Map<String, serde_json::Value> = serde_json::from_slice(&weights[8..8 + n]).unwrap();
+    let data = &weights[8 + n..];
+    let (weight, scale) = ("conv_in.weight", "conv_in.scale_weight");
+    let mut tensors: Vec<(String, String, Vec<u64>, Vec<u8>)> = Vec::new();
+    for (name, entry) in header.iter().filter(|(name, _)| *name != "__metadata__") {
+        let shape: Vec<u64> = entry["shape"].as_array().unwrap().iter().map(|d| d.as_u64().unwrap()).collect();
+        let [start, end] = [0, 1].map(|i| entry["data_offsets"][i].as_u64().unwrap() as usize);
+        let (dtype, bytes) = match name == weight {
+            true => ("F8_E4M3".to_string(), vec![0u8; shape.iter().product::<u64>() as usize]),
+            false => (entry["dtype"].as_str().unwrap().to_string(), data[start..end].to_vec()),
+        };
+        tensors.push((name.clone(), dtype, shape, bytes));
+    }
+    tensors.push((scale.into(), "F32".into(), vec![], 1f32.to_le_bytes().to_vec()));
+    let (mut out_header, mut out_data) = (serde_json::Map::new(), Vec::new());
+    for (name, dtype, shape, bytes) in tensors {
+        let at = out_data.len();
+        out_data.extend(bytes);
+        let offsets = [at, out_data.len()];
+        out_header.insert(name, serde_json::json!({"dtype": dtype, "shape": shape, "data_offsets": offsets}));
+    }
+    let header = serde_json::to_vec(&out_header).unwrap();
+    let mut file = (header.len() as u64).to_le_bytes().to_vec();
+    file.extend(header);
+    file.extend(out_data);
+    std::fs::write(model.join("unet/diffusion_pytorch_model.safetensors"), file).unwrap();
+    model
+}
+
+#[test]
+fn a_scaled_fp8_weight_exits_2_naming_it_and_writes_nothing() {
+    let dir = scratch("exit-2-scaled-fp8");
+    let out = dir.join("x.png");
+    let mut args = gen(&out, &[]);
+    args[2] = scaled_fp8_pipeline(&dir).display().to_string();
+    let (code, line) = failure(&strs(&args), &[]);
+    let named = "tensor `conv_in.weight`";
+    assert!(
+        code == 2 && line.contains(named) && line.contains("fp8 scaled by `conv_in.scale_weight`"),
+        "{code}: {line}"
+    );
+    assert!(!out.exists());
+}
+
 #[test]
 fn device_failures_exit_3() {
     let dir = scratch("exit-3");
