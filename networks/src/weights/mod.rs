@@ -3,12 +3,13 @@
 
 mod checkpoint;
 mod config_file;
+mod diffusers_files;
 mod original_names;
 mod parameters;
 
-pub(crate) use checkpoint::component_folder;
 pub(crate) use checkpoint::transpose;
 pub use checkpoint::{Checkpoint, Weights};
 pub(crate) use config_file::read_config;
+pub(crate) use diffusers_files::component_folder;
 pub use original_names::{Inner, OriginalNames, StoredAs};
 pub use parameters::{ParamLayout, Parameter, Parameters};
