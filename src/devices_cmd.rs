@@ -172,6 +172,7 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
     vkdiff_runtime::ProbeChoice::attention_from_env()?;
     vkdiff_runtime::ProbeChoice::linear_from_env()?;
     vkdiff_runtime::ProbeChoice::conv_from_env()?;
+    vkdiff_runtime::tuning_from_env()?;
     if args.compile {
         let request = crate::devices_compile::CompileRequest {
             choice: args.device.choice(),

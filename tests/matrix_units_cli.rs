@@ -19,6 +19,7 @@ fn matrix_unit_settings_that_name_nothing_are_refused() {
         ("VKDIFF_ATTENTION", "flash", "VKDIFF_ATTENTION=flash: use cm2"),
         ("VKDIFF_CONV", "winograd", "VKDIFF_CONV=winograd: use cm2"),
         ("VKDIFF_LINEAR", "fast", "VKDIFF_LINEAR=fast: use cm2"),
+        ("VKDIFF_TUNE", "fast", "VKDIFF_TUNE=fast: use 1"),
     ];
     for (variable, value, says) in settings {
         for args in [&["devices"][..], &gen] {

@@ -8,7 +8,9 @@
 #      probes) held to f64 on this driver first, since the time of a wrong kernel says nothing;
 #   3. the SDXL UNet at 1024², batch 2, beside diffusers on CUDA in the same call (where torch
 #      sees the GPU), on the tile `auto` takes;
-#   4. the UNet with the matrix units' two workgroup tiles (VKDIFF_MATRIX_TILE=8, 4), to decide
+#   4. the UNet with VKDIFF_TUNE=1 (each shape's kernels timed and the fastest taken: the table
+#      of which tile or probe wins where), with the matrix units' two workgroup tiles
+#      (VKDIFF_MATRIX_TILE=8, 4), to decide
 #      which `auto` takes, and with VKDIFF_ATTENTION=cm2, VKDIFF_LINEAR=cm2 and VKDIFF_CONV=cm2
 #      where the driver runs those probes' tiles;
 #   5. the SDXL products (`bench kernels`: the linear, convolution and attention rows on both
@@ -69,6 +71,8 @@ unet() { # the output's name, the environment, then bench unet's further argumen
     step 90 sh -c "$env '$vkdiff' bench unet --size 1024 --samples 3 --profile $* >'$out/unet-$name.txt'"
 }
 if [ "$reference" = cuda ]; then unet auto "" --reference-device cuda; else unet auto "" --no-cpu-reference; fi
+# Every shape's kernels timed against each other (its table lists each shape's candidates).
+unet tuned "VKDIFF_TUNE=1" --no-cpu-reference
 for tile in 8 4; do unet "tile-$tile" "VKDIFF_MATRIX_TILE=$tile" --no-cpu-reference; done
 # VK_NV_cooperative_matrix2's attention, its linear product, then its convolution, each where
 # the driver runs one of that probe's tiles.

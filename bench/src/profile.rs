@@ -39,3 +39,39 @@ pub(crate) fn lines(profile: &[KernelTime]) -> String {
         })
         .collect()
 }
+
+/// One shape as `VKDIFF_TUNE=1` found it: each candidate's kernels and fastest milliseconds
+/// (null where it failed, disagreed or was not timed, its note in `kernels`), and which it took.
+#[derive(serde::Serialize)]
+pub(crate) struct TunedRow {
+    op: String,
+    candidates: Vec<(String, Option<f64>)>,
+    chosen: usize,
+}
+
+/// What the context's tuning chose, shape by shape (empty where it did not tune).
+pub(crate) fn tuned(ctx: &vkdiff_runtime::Context) -> Vec<TunedRow> {
+    let row = |s: vkdiff_runtime::TunedShape| TunedRow {
+        op: s.op,
+        candidates: s.timed.into_iter().map(|(k, ms)| (k, Some(ms).filter(|ms| ms.is_finite()))).collect(),
+        chosen: s.chosen,
+    };
+    ctx.tuned_shapes().into_iter().map(row).collect()
+}
+
+/// The tuned shapes as indented lines, the chosen candidate marked with `*`.
+pub(crate) fn tuned_lines(rows: &[TunedRow]) -> String {
+    let mut out = String::new();
+    if !rows.is_empty() {
+        out += &format!("\n  VKDIFF_TUNE: {} shapes had kernels to choose between", rows.len());
+    }
+    for row in rows {
+        out += &format!("\n  {}", row.op);
+        for (i, (kernels, ms)) in row.candidates.iter().enumerate() {
+            let mark = if i == row.chosen { '*' } else { ' ' };
+            let ms = ms.map_or("—".to_string(), |ms| format!("{ms:.3} ms"));
+            out += &format!("\n    {mark} {ms:>11}  {kernels}");
+        }
+    }
+    out
+}

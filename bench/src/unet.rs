@@ -4,7 +4,7 @@
 
 use crate::kernels::{dtype_name, rand_tensor};
 use crate::peaks;
-use crate::profile::{self, by_kernel, KernelTime};
+use crate::profile::{self, by_kernel, KernelTime, TunedRow};
 use anyhow::{Context as _, Result};
 use std::time::{Duration, Instant};
 use vkdiff_args::Precision;
@@ -78,6 +78,8 @@ struct Row {
     ratio_to_reference: Option<f64>,
     /// With `--profile`: device time per kernel, largest first.
     profile: Vec<KernelTime>,
+    /// With `VKDIFF_TUNE=1`: each shape's candidates and the one it took.
+    tuned: Vec<TunedRow>,
 }
 
 pub fn run(args: &UnetArgs) -> Result<()> {
@@ -124,6 +126,7 @@ pub fn run(args: &UnetArgs) -> Result<()> {
                 row.ratio_to_reference.map_or("-".into(), |r| format!("{r:.2}×")),
             ) + &row.matrix_unit_trial.as_ref().map_or(String::new(), |t| format!("\n  matrix-unit trial: {t}"))
                 + &profile::lines(&row.profile)
+                + &profile::tuned_lines(&row.tuned)
         })?;
     }
     Ok(())
@@ -165,6 +168,7 @@ fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> R
         reference: String::new(),
         ratio_to_reference: None,
         profile,
+        tuned: profile::tuned(&ctx),
     })
 }
 

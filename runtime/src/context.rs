@@ -14,6 +14,7 @@ use crate::recorder::Timing;
 use crate::submit_budget::SubmitBudget;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+use std::collections::HashMap;
 use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -101,6 +102,10 @@ pub(crate) struct Shared {
     pub(crate) linear_kernel: Mutex<crate::ProbeChoice>,
     /// See [`Context::conv_kernel`].
     pub(crate) conv_kernel: Mutex<crate::ProbeChoice>,
+    /// See [`Context::tuning`].
+    pub(crate) tuning: AtomicBool,
+    /// What tuning found, by each op's key (see [`crate::kernel_tuning`]).
+    pub(crate) tuned: Mutex<HashMap<String, crate::TunedShape>>,
     pub(crate) binding_limit: AtomicU64,
     /// The largest buffer one allocation may hold (`maxMemoryAllocationSize`).
     pub(crate) allocation_limit: AtomicU64,
@@ -190,8 +195,11 @@ impl Context {
     pub fn new(choice: &DeviceChoice) -> Result<Context> {
         let vulkan = crate::instance::shared()?;
         let (device, pd, info, queue_family) = Self::open(&vulkan, choice, false)?;
+        let tuning = crate::kernel_tuning::tuning_from_env()?;
         let ctx = Self::finish(vulkan, device, pd, info, queue_family, false)?;
         ctx.try_matrix_units();
+        // After the trial, whose product is timed as it is.
+        ctx.set_tuning(tuning)?;
         Ok(ctx)
     }
 
@@ -338,6 +346,8 @@ impl Context {
             attention_kernel: Mutex::new(attention_kernel),
             linear_kernel: Mutex::new(linear_kernel),
             conv_kernel: Mutex::new(conv_kernel),
+            tuning: AtomicBool::new(false),
+            tuned: Mutex::new(HashMap::new()),
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
             allocation_limit: AtomicU64::new(info.max_allocation),
             workgroup_limit: Mutex::new(info.max_workgroup_count),

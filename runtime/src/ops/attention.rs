@@ -6,6 +6,7 @@ use super::copy_heads::{copy_heads, HeadSpan};
 use super::{f, same_dtype, u};
 use crate::context::{Context, GemmFamily};
 use crate::error::{ensure, Error, Result};
+use crate::kernel_tuning::{pick, KernelPick, Tunable};
 use crate::recorder::Recorder;
 use crate::tensor::Dtype;
 use crate::tensor::Tensor;
@@ -86,9 +87,30 @@ pub fn attention(
     if !vec4_aligned(l) {
         return padded_attention(rec, [q, k, v], out, l, scale);
     }
-    // Checked above: the layout, the binding limit and the vec4 grid; `chosen_tile` takes f16
-    // heads the tile holds.
-    if let Some(tile) = super::attention_cm2::chosen_tile(rec.context(), dtype, l.head_dim) {
+    let record = |rec: &mut Recorder, pick: KernelPick, reads: &[&Tensor], out: &Tensor| {
+        attention_checked(rec, pick.probe, [reads[0], reads[1], reads[2]], out, l, scale)
+    };
+    let describe = || Tunable {
+        key: format!("attention {l:?} {dtype:?} {scale}"),
+        op: format!("attention {}×{} tokens, {} heads × {} {dtype:?}", l.q_tokens, l.kv_tokens, l.heads, l.head_dim),
+        tiles: false,
+    };
+    let pick = pick(rec, (&[q, k, v], out), rec.context().attention_kernel(), describe, &record)?;
+    record(rec, pick, &[q, k, v], out)
+}
+
+/// [`attention`] once its layout, the binding limit and the vec4 grid are checked: on `probe`'s
+/// tile where it asks for one that holds the (f16) heads, else the device's family.
+fn attention_checked(
+    rec: &mut Recorder,
+    probe: crate::ProbeChoice,
+    [q, k, v]: [&Tensor; 3],
+    out: &Tensor,
+    l: &AttentionLayout,
+    scale: f32,
+) -> Result<()> {
+    let dtype = out.dtype();
+    if let Some(tile) = super::attention_cm2::chosen_tile(rec.context(), probe, dtype, l.head_dim) {
         return super::attention_cm2::record(rec, [q, k, v], out, l, scale, &tile);
     }
     let ctx = rec.context().clone();

@@ -10,6 +10,7 @@ use super::{kernel, u};
 use crate::context::Context;
 use crate::error::{ensure, Result};
 use crate::matrix2_tile::{Matrix2Probe, Matrix2Tile};
+use crate::probe_setting::ProbeChoice;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -51,8 +52,9 @@ pub(super) fn record(
     rec.dispatch(&probe, &[q, k, v], &[out], &push_constants(l, scale), groups)
 }
 
-/// The attention tile `ops::attention` takes for f16 heads of `head_dim` where the context asks
-/// for this probe (`VKDIFF_ATTENTION=cm2`): the first the device runs that holds them.
-pub(super) fn chosen_tile(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<Matrix2Tile> {
-    asked_tile(ctx, ctx.attention_kernel(), dtype, Matrix2Probe::Attention, |t| head_dim <= t.k as usize)
+/// The attention tile `ops::attention` takes for f16 heads of `head_dim` where `choice` asks
+/// for this probe (`VKDIFF_ATTENTION=cm2`, or the tuner): the first the device runs that holds
+/// them.
+pub(super) fn chosen_tile(ctx: &Context, choice: ProbeChoice, dtype: Dtype, head_dim: usize) -> Option<Matrix2Tile> {
+    asked_tile(ctx, choice, dtype, Matrix2Probe::Attention, |t| head_dim <= t.k as usize)
 }

@@ -5,6 +5,7 @@ use super::conv_padded::conv2d_padded;
 use super::gemm::{dispatch_gemm_family, GemmKernels, GemmShape};
 use super::{f, same_dtype, u};
 use crate::error::{ensure, Result};
+use crate::kernel_tuning::{pick, KernelPick, Tunable};
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -113,15 +114,33 @@ fn conv2d_whole(
     p: &ConvParams,
 ) -> Result<()> {
     let c = checked(rec, "conv2d", [x, w, out], bias, p)?;
-    // Without a bias the kernel never reads binding 2; the output stands in for it.
-    let operands = [x, w, bias.unwrap_or(out)];
-    if let Some(tile) = super::conv_cm2::chosen_tile(rec.context(), &c) {
-        return super::conv_cm2::record(rec, operands, out, &c, &tile);
-    }
-    let (m, n, k, cin) = (c.m, c.n, c.k, c.cin);
-    let shape = GemmShape { m, n, k, batch: 1, vec4: cin % 4 == 0 && n % 4 == 0, vec8: cin % 8 == 0 && n % 4 == 0 };
-    let kernels = GemmKernels { subgroup: "conv_sg", tiled_v4: "conv_tiled_v4", tiled: None, cooperative: "conv_coop" };
-    dispatch_gemm_family(rec, (kernels, c.dtype, &[]), &shape, &operands, out, &c.push)
+    let record = |rec: &mut Recorder, pick: KernelPick, reads: &[&Tensor], out: &Tensor| {
+        // Without a bias the kernel never reads binding 2; the output stands in for it.
+        let operands = [reads[0], reads[1], reads.get(2).copied().unwrap_or(out)];
+        if let Some(tile) = super::conv_cm2::chosen_tile(rec.context(), pick.probe, &c) {
+            return super::conv_cm2::record(rec, operands, out, &c, &tile);
+        }
+        let (m, n, k, cin) = (c.m, c.n, c.k, c.cin);
+        let shape = GemmShape { m, n, k, batch: 1, vec4: cin % 4 == 0 && n % 4 == 0, vec8: cin % 8 == 0 && n % 4 == 0 };
+        let kernels =
+            GemmKernels { subgroup: "conv_sg", tiled_v4: "conv_tiled_v4", tiled: None, cooperative: "conv_coop" };
+        dispatch_gemm_family(rec, (kernels, c.dtype, &[]), pick.tile, &shape, &operands, out, &c.push)
+    };
+    let reads: Vec<&Tensor> = [x, w].into_iter().chain(bias).collect();
+    let describe = || {
+        let (xs, ws) = (x.shape(), w.shape());
+        let stride = if p.stride > 1 { format!(", stride {}", p.stride) } else { String::new() };
+        let extras = [(bias.is_some(), " + bias"), (p.accumulate, " + residual"), (p.relu, ", ReLU")];
+        let extras: String = extras.iter().filter(|(on, _)| *on).map(|(_, what)| *what).collect();
+        let (kernel, input) = (format!("{}×{}", ws[1], ws[2]), format!("{}×{}×{}", xs[1], xs[2], xs[3]));
+        Tunable {
+            key: format!("conv2d {:?} {:?}", c.push, c.dtype),
+            op: format!("conv2d {kernel} {input} → {}{stride}{extras} {:?}", ws[0], c.dtype),
+            tiles: true,
+        }
+    };
+    let pick = pick(rec, (&reads, out), rec.context().conv_kernel(), describe, &record)?;
+    record(rec, pick, &reads, out)
 }
 
 /// A convolution as its kernels take it: the product's M (output pixels), N (output channels)

@@ -9,6 +9,7 @@ use super::{kernel, u};
 use crate::context::Context;
 use crate::error::{ensure, Result};
 use crate::matrix2_tile::{Matrix2Probe, Matrix2Tile};
+use crate::probe_setting::ProbeChoice;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -67,8 +68,8 @@ pub(super) fn record(
     rec.dispatch(&probe, &operands, &[out], &c.push, groups)
 }
 
-/// The convolution tile `ops::conv2d` takes for `c` where the context asks for this probe
-/// (`VKDIFF_CONV=cm2`): the first the device runs that takes it.
-pub(super) fn chosen_tile(ctx: &Context, c: &ConvProduct) -> Option<Matrix2Tile> {
-    asked_tile(ctx, ctx.conv_kernel(), c.dtype, Matrix2Probe::Conv, |t| fits(c, t))
+/// The convolution tile `ops::conv2d` takes for `c` where `choice` asks for this probe
+/// (`VKDIFF_CONV=cm2`, or the tuner): the first the device runs that takes it.
+pub(super) fn chosen_tile(ctx: &Context, choice: ProbeChoice, c: &ConvProduct) -> Option<Matrix2Tile> {
+    asked_tile(ctx, choice, c.dtype, Matrix2Probe::Conv, |t| fits(c, t))
 }

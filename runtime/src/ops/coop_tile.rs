@@ -5,6 +5,7 @@
 use super::gemm::GemmShape;
 use crate::context::Context;
 use crate::device::DeviceKind;
+use crate::matrix_tile::MatrixTile;
 use crate::matrix_units::Fragment;
 use crate::tensor::Dtype;
 
@@ -28,8 +29,8 @@ impl CoopTile {
     }
 }
 
-/// The cooperative kernels' tile for a product: eight subgroups of 4×2 fragments where the
-/// context asks for them ([`crate::MatrixTile`]) and such a variant is built; else four of 4×4
+/// The cooperative kernels' tile for a product: eight subgroups of 4×2 fragments where
+/// `setting` asks for them ([`crate::MatrixTile`]: the context's, or the tuner's) and such a variant is built; else four of 4×4
 /// fragments (tiles of 8·FM × 8·FN) where such a variant is built, the product still makes 128
 /// such tiles, enough to keep a GPU's 100+ compute units busy, and the accumulators fit a GPU
 /// lane's registers (at most 64 f32 each: 16×16 fragments on 64-lane subgroups); else four of
@@ -38,6 +39,7 @@ impl CoopTile {
 /// (lavapipe's 8×8×8 kernels) have no register file to fill and take both sizes.
 pub(super) fn cooperative_tile(
     ctx: &Context,
+    setting: MatrixTile,
     s: &GemmShape,
     f: &Fragment,
     kernel: &str,
@@ -49,7 +51,7 @@ pub(super) fn cooperative_tile(
         vkdiff_kernels::find(kernel, Dtype::F16, &want).is_some()
     };
     let eight = CoopTile { across: 4, rows: 4, cols: 2 };
-    if ctx.matrix_tile().eight_subgroups() && built(eight) {
+    if setting.eight_subgroups() && built(eight) {
         return eight;
     }
     let large = CoopTile { across: 2, rows: 4, cols: 4 };

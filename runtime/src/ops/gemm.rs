@@ -6,6 +6,8 @@ use crate::arena::Arena;
 use crate::context::GemmFamily;
 use crate::device::DeviceInfo;
 use crate::error::{ensure, Error, Result};
+use crate::kernel_tuning::{pick, KernelPick, Tunable};
+use crate::matrix_tile::MatrixTile;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -187,14 +189,29 @@ fn matmul_whole(
         })?;
     }
     let common = push_constants(s, bias.is_some());
-    // Without a bias the kernel never reads binding 2; C stands in for it.
-    let bias = bias.unwrap_or(c);
-    if let Some(tile) = super::linear_cm2::chosen_tile(rec.context(), s, dtype) {
-        return super::linear_cm2::record(rec, [a, b, bias], c, s, &common, &tile);
-    }
-    let shape = GemmShape { m: s.m, n: s.n, k: s.k, batch: s.batch, vec4: s.fits_vec4(), vec8: s.fits_vec8() };
-    let kernels = (GemmKernels::MATMUL, dtype, &[("BT", s.b_transposed as u32), ("GE", s.geglu as u32)][..]);
-    dispatch_gemm_family(rec, kernels, &shape, &[a, b, bias], c, &common)
+    let record = |rec: &mut Recorder, pick: KernelPick, reads: &[&Tensor], c: &Tensor| {
+        // Without a bias the kernel never reads binding 2; C stands in for it.
+        let operands = [reads[0], reads[1], reads.get(2).copied().unwrap_or(c)];
+        if let Some(tile) = super::linear_cm2::chosen_tile(rec.context(), pick.probe, s, dtype) {
+            return super::linear_cm2::record(rec, operands, c, s, &common, &tile);
+        }
+        let shape = GemmShape { m: s.m, n: s.n, k: s.k, batch: s.batch, vec4: s.fits_vec4(), vec8: s.fits_vec8() };
+        let kernels = (GemmKernels::MATMUL, dtype, &[("BT", s.b_transposed as u32), ("GE", s.geglu as u32)][..]);
+        dispatch_gemm_family(rec, kernels, pick.tile, &shape, &operands, c, &common)
+    };
+    let reads: Vec<&Tensor> = [a, b].into_iter().chain(bias).collect();
+    let describe = || {
+        let dense = s.lda == s.k && s.ldc == s.c_cols() && s.ldb == if s.b_transposed { s.k } else { s.n };
+        let extras = [(bias.is_some(), " + bias"), (s.accumulate, " + C"), (s.geglu, ", GEGLU"), (!dense, ", strided")];
+        let extras: String = extras.iter().filter(|(on, _)| *on).map(|(_, what)| *what).collect();
+        let op = match (s.batch, s.b_transposed) {
+            (1, true) => format!("linear {}×{}×{}{extras} {dtype:?}", s.m, s.n, s.k),
+            _ => format!("matmul {} × {}×{}×{}{extras} {dtype:?}", s.batch, s.m, s.n, s.k),
+        };
+        Tunable { key: format!("matmul {s:?} {dtype:?} bias {}", bias.is_some()), op, tiles: true }
+    };
+    let pick = pick(rec, (&reads, c), rec.context().linear_kernel(), describe, &record)?;
+    record(rec, pick, &reads, c)
 }
 
 /// The push constants of the product `s`: gemm_common.wgsl's GemmParams, then
@@ -236,14 +253,15 @@ impl GemmKernels {
     };
 }
 
-/// Records a GEMM-shaped kernel: the cooperative variant where the context uses the matrix units,
-/// the storage is f16 and the shape fits vec4 loads (in units of 8 where it fits those); the subgroup variant where the device prefers it and the shape
-/// fits, with more rows per workgroup for taller products; else the tiled one, in vec4 units
+/// Records a GEMM-shaped kernel: the cooperative variant (its tile as `tile` asks) where the
+/// context uses the matrix units, the storage is f16 and the shape fits vec4 loads (in units of
+/// 8 where it fits those); the subgroup variant where the device prefers it and the shape fits, with more rows per workgroup for taller products; else the tiled one, in vec4 units
 /// where the shape fits them and GEGLU is not fused. `params` are the variant parameters all
 /// share; bindings are `reads` then `out`.
 pub(super) fn dispatch_gemm_family(
     rec: &mut Recorder,
     (names, dtype, params): (GemmKernels, Dtype, &[(&str, u32)]),
+    tile: MatrixTile,
     s: &GemmShape,
     reads: &[&Tensor],
     out: &Tensor,
@@ -255,7 +273,7 @@ pub(super) fn dispatch_gemm_family(
     let cooperative =
         ctx.info().cooperative_variant().filter(|_| family == GemmFamily::Cooperative && dtype == Dtype::F16 && s.vec4);
     if let Some(fragment) = cooperative {
-        let tile = super::coop_tile::cooperative_tile(&ctx, s, &fragment, names.cooperative, params);
+        let tile = super::coop_tile::cooperative_tile(&ctx, tile, s, &fragment, names.cooperative, params);
         let unit = if s.vec8 { 8 } else { 4 };
         let want: Vec<(&str, u32)> = fragment
             .params()

@@ -9,6 +9,7 @@ use super::{kernel, u};
 use crate::context::Context;
 use crate::error::{ensure, Error, Result};
 use crate::matrix2_tile::{Matrix2Probe, Matrix2Tile};
+use crate::probe_setting::ProbeChoice;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -74,8 +75,8 @@ pub(super) fn record(
     rec.dispatch(&probe, &operands, &[c], push, groups)
 }
 
-/// The linear tile `ops::matmul` takes for `s` where the context asks for this probe
-/// (`VKDIFF_LINEAR=cm2`): the first the device runs that takes it.
-pub(super) fn chosen_tile(ctx: &Context, s: &Matmul, dtype: Dtype) -> Option<Matrix2Tile> {
-    asked_tile(ctx, ctx.linear_kernel(), dtype, Matrix2Probe::Linear, |t| fits(s, t))
+/// The linear tile `ops::matmul` takes for `s` where `choice` asks for this probe
+/// (`VKDIFF_LINEAR=cm2`, or the tuner): the first the device runs that takes it.
+pub(super) fn chosen_tile(ctx: &Context, choice: ProbeChoice, s: &Matmul, dtype: Dtype) -> Option<Matrix2Tile> {
+    asked_tile(ctx, choice, dtype, Matrix2Probe::Linear, |t| fits(s, t))
 }

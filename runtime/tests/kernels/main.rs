@@ -14,3 +14,4 @@ mod matrix_unit_trial;
 mod norm;
 mod pool;
 mod runtime;
+mod tuning;
