@@ -174,6 +174,9 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
             closing += &format!("; the whole set: about {} on disk", size(bytes));
         }
         eprintln!("{closing}");
+        if let Some(line) = ctx.as_ref().and_then(|c| c.tuning_summary()) {
+            eprintln!("{line}");
+        }
     }
     match job.finish()? {
         Finish::Merged(merged) => print_merged(out, &merged),

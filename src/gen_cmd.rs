@@ -101,6 +101,9 @@ pub fn run(args: &GenArgs) -> Result<()> {
         t.vae.as_secs_f64(),
         ctx.peak_bytes() >> 20
     );
+    if let Some(line) = ctx.tuning_summary() {
+        eprintln!("{line}");
+    }
     eprintln!("wrote {}", args.out.display());
     Ok(())
 }

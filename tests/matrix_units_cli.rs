@@ -56,3 +56,18 @@ fn the_matrix_units_are_tried_as_vkdiff_starts_where_a_variant_fits() {
     let family = if kept { "GEMM kernels: Cooperative" } else { "GEMM kernels: Tiled" };
     assert!(header.contains(family), "{header}");
 }
+
+#[test]
+fn a_tuned_generation_says_what_tuning_did() {
+    let out = scratch("tuned-gen").join("x.png");
+    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pipeline/tiny-sdxl");
+    let size = ["--width", "64", "--height", "64"];
+    let gen =
+        ["gen", "--model", model.to_str().unwrap(), "--prompt", "x", "--steps", "1", "--out", out.to_str().unwrap()];
+    let run = command().args(gen).args(size).env("VKDIFF_TUNE", "1").output().unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    let line = stderr.lines().find(|l| l.starts_with("VKDIFF_TUNE: ")).unwrap_or_else(|| panic!("{stderr}"));
+    assert!(line.contains("shapes had kernels to choose between") && line.ends_with(" s"), "{line}");
+    assert!(out.exists());
+}

@@ -106,6 +106,8 @@ pub(crate) struct Shared {
     pub(crate) tuning: AtomicBool,
     /// What tuning found, by each op's key (see [`crate::kernel_tuning`]).
     pub(crate) tuned: Mutex<HashMap<String, crate::TunedShape>>,
+    /// Time spent tuning, in nanoseconds (see [`Context::tuning_summary`]).
+    pub(crate) tuning_nanos: AtomicU64,
     pub(crate) binding_limit: AtomicU64,
     /// The largest buffer one allocation may hold (`maxMemoryAllocationSize`).
     pub(crate) allocation_limit: AtomicU64,
@@ -348,6 +350,7 @@ impl Context {
             conv_kernel: Mutex::new(conv_kernel),
             tuning: AtomicBool::new(false),
             tuned: Mutex::new(HashMap::new()),
+            tuning_nanos: AtomicU64::new(0),
             binding_limit: AtomicU64::new(info.max_storage_buffer_range),
             allocation_limit: AtomicU64::new(info.max_allocation),
             workgroup_limit: Mutex::new(info.max_workgroup_count),

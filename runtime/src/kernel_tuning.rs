@@ -111,7 +111,9 @@ pub(crate) fn pick(
     if let Some(found) = ctx.shared.tuned.lock().unwrap().get(&key) {
         return Ok(found.pick);
     }
+    let started = std::time::Instant::now();
     let tuned = tune(ctx, &op, settings, (inputs, out), record);
+    ctx.shared.tuning_nanos.fetch_add(started.elapsed().as_nanos() as u64, Ordering::SeqCst);
     let pick = tuned.pick;
     ctx.shared.tuned.lock().unwrap().insert(key, tuned);
     Ok(pick)
@@ -284,6 +286,21 @@ impl Context {
         }
         self.shared.tuning.store(on, Ordering::SeqCst);
         Ok(())
+    }
+
+    /// One line on what tuning did, where this context tuned: the shapes timed, how many took
+    /// another kernel than the settings', and the seconds it cost.
+    pub fn tuning_summary(&self) -> Option<String> {
+        let shapes = self.tuned_shapes();
+        let seconds = self.shared.tuning_nanos.load(Ordering::SeqCst) as f64 / 1e9;
+        let moved = shapes.iter().filter(|s| s.chosen != 0).count();
+        self.tuning().then(|| {
+            format!(
+                "VKDIFF_TUNE: {} shapes had kernels to choose between; {moved} took another than the default, \
+                 timed in {seconds:.1} s",
+                shapes.len()
+            )
+        })
     }
 
     /// Every shape this context has tuned that had kernels to choose between (or that tuning

@@ -113,4 +113,8 @@ fn tuning_times_each_shapes_kernels_once_and_takes_the_one_it_reports() {
         attend,
         case("attention 64×64 tokens", qkv, &[1, 64, 128], false, Context::set_attention_kernel),
     );
+    let summary = tuned.tuning_summary().unwrap();
+    let shapes = format!("VKDIFF_TUNE: {} shapes had kernels to choose between; ", tuned.tuned_shapes().len());
+    assert!(summary.starts_with(&shapes), "{summary}");
+    assert_eq!(plain.tuning_summary(), None);
 }
