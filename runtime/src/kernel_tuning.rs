@@ -2,8 +2,8 @@
 //! `torch.backends.cudnn.benchmark` chooses cuDNN's. The first time a context records a matrix
 //! product, a convolution or an attention of a shape, each kernel the device runs for it (the
 //! matrix units' four- and eight-subgroup tiles, `VK_NV_cooperative_matrix2`'s probes) is
-//! recorded on the op's own inputs into a scratch output and timed by the device's timestamps;
-//! the shape takes the fastest from then on, in this context. Off by default: which family wins
+//! recorded on scratch tensors of the op's shapes and timed by the device's timestamps; the
+//! shape takes the fastest that agrees with the default from then on, in this context. Off by default: which family wins
 //! where is what a lent GPU measures with it, and the winners become the defaults.
 
 use crate::context::Context;
@@ -19,7 +19,7 @@ use std::sync::atomic::Ordering;
 const REPEATS: usize = 3;
 /// How much faster another kernel must run than the one the settings pick to displace it, so
 /// that a near tie keeps one choice from run to run (and the images their bits).
-pub const MARGIN: f64 = 1.05;
+const MARGIN: f64 = 1.05;
 /// How a shape that could not be tuned (scratch memory, its settings' kernels failing) is noted.
 const NOT_TUNED: &str = "not tuned";
 
@@ -35,7 +35,7 @@ pub struct KernelPick {
 /// several dispatches) with its fastest device time, and the one the shape takes.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TunedShape {
-    /// The op and its shape, as people read it ("linear 4096×640×640 f16").
+    /// The op and its shape, as people read it ("linear 4096×640×640 + bias F16").
     pub op: String,
     /// Each candidate's kernels (variant labels, `+` between dispatches) and milliseconds.
     pub timed: Vec<(String, f64)>,
@@ -98,25 +98,25 @@ pub(crate) fn pick(
     probe: ProbeChoice,
     describe: impl FnOnce() -> Tunable,
     record: RecordWith,
-) -> Result<KernelPick> {
+) -> KernelPick {
     let ctx = rec.context();
     let settings = KernelPick { tile: ctx.matrix_tile(), probe };
     // Every kernel a setting adds (the matrix units' tiles, the probes) is f16's.
     if !ctx.tuning() || out.dtype() != Dtype::F16 {
-        return Ok(settings);
+        return settings;
     }
     let op = describe();
     // Tests and benchmarks switch a context's family; a shape is timed again on each.
     let key = format!("{} on {:?}", op.key, ctx.gemm_family());
     if let Some(found) = ctx.shared.tuned.lock().unwrap().get(&key) {
-        return Ok(found.pick);
+        return found.pick;
     }
     let started = std::time::Instant::now();
     let tuned = tune(ctx, &op, settings, (inputs, out), record);
     ctx.shared.tuning_nanos.fetch_add(started.elapsed().as_nanos() as u64, Ordering::SeqCst);
     let pick = tuned.pick;
     ctx.shared.tuned.lock().unwrap().insert(key, tuned);
-    Ok(pick)
+    pick
 }
 
 /// The picks the settings leave open, theirs first: both tiles where the tile is `auto` and
@@ -214,7 +214,7 @@ fn record_candidate(
 
 /// Each candidate's kernels and fastest time (NaN where there is one: nothing to choose) with
 /// its pick; a candidate past the first that fails to run, or whose output differs from the
-/// first's by more than the matrix units' trial allows, goes to `notes` instead.
+/// first's (the settings' own) by more than the matrix units' trial allows, goes to `notes`.
 fn time_candidates(found: Vec<Candidate>, notes: &mut Vec<Timed>) -> Result<Vec<(Timed, KernelPick)>> {
     if let [only] = &found[..] {
         return Ok(vec![((only.kernels.clone(), f64::NAN), only.pick)]);
@@ -235,7 +235,10 @@ fn time_candidates(found: Vec<Candidate>, notes: &mut Vec<Timed>) -> Result<Vec<
         if difference <= AGREEMENT {
             kept.push(((c.kernels, ms), c.pick));
         } else {
-            notes.push((format!("{}: differs from the first by {difference:.2e} of its size", c.kernels), f64::NAN));
+            notes.push((
+                format!("{}: differs from the default kernel's by {difference:.2e} of its size", c.kernels),
+                f64::NAN,
+            ));
         }
         first.get_or_insert(values);
     }

@@ -95,7 +95,7 @@ pub fn attention(
         op: format!("attention {}×{} tokens, {} heads × {} {dtype:?}", l.q_tokens, l.kv_tokens, l.heads, l.head_dim),
         tiles: false,
     };
-    let pick = pick(rec, (&[q, k, v], out), rec.context().attention_kernel(), describe, &record)?;
+    let pick = pick(rec, (&[q, k, v], out), rec.context().attention_kernel(), describe, &record);
     record(rec, pick, &[q, k, v], out)
 }
 
