@@ -30,7 +30,10 @@ struct Case {
 /// Every distinct kernel list `op` records under the settings tuning may choose between, on
 /// `plain` (which does not tune; its settings are left as found).
 fn reachable(plain: &Context, op: Op, (inputs, out): (&[Tensor], &Tensor), case: &Case) -> BTreeSet<String> {
-    let tiles: &[MatrixTile] = if case.tiles { &[MatrixTile::Auto, MatrixTile::Eight] } else { &[MatrixTile::Auto] };
+    // A tile set by VKDIFF_MATRIX_TILE is the tuner's too.
+    let set = plain.matrix_tile();
+    let open = case.tiles && set == MatrixTile::Auto;
+    let tiles: &[MatrixTile] = if open { &[MatrixTile::Auto, MatrixTile::Eight] } else { &[set] };
     let mut found = BTreeSet::new();
     for &tile in tiles {
         for choice in [ProbeChoice::Auto, ProbeChoice::Matrix2] {
@@ -39,7 +42,7 @@ fn reachable(plain: &Context, op: Op, (inputs, out): (&[Tensor], &Tensor), case:
             found.insert(kernels_of(plain, op, inputs, out));
         }
     }
-    plain.set_matrix_tile(MatrixTile::Auto);
+    plain.set_matrix_tile(set);
     (case.probe)(plain, ProbeChoice::Auto);
     found
 }
