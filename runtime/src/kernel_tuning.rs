@@ -65,6 +65,11 @@ pub(crate) struct Tunable {
     pub tiles: bool,
 }
 
+/// The parts of a shape's readable name that are on: `(on, text)` pairs joined in order.
+pub(crate) fn name_parts(parts: &[(bool, &str)]) -> String {
+    parts.iter().filter(|(on, _)| *on).map(|(_, text)| *text).collect()
+}
+
 /// Records one op with a pick, its inputs (in the order the op listed them) and its output:
 /// the op's own, or the tuner's scratch tensors of the same shapes.
 pub(crate) type RecordWith<'a> = &'a dyn Fn(&mut Recorder, KernelPick, &[&Tensor], &Tensor) -> Result<()>;

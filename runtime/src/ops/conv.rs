@@ -5,7 +5,7 @@ use super::conv_padded::conv2d_padded;
 use super::gemm::{dispatch_gemm_family, GemmKernels, GemmShape};
 use super::{f, same_dtype, u};
 use crate::error::{ensure, Result};
-use crate::kernel_tuning::{pick, KernelPick, Tunable};
+use crate::kernel_tuning::{name_parts, pick, KernelPick, Tunable};
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -130,8 +130,7 @@ fn conv2d_whole(
     let describe = || {
         let (xs, ws) = (x.shape(), w.shape());
         let stride = if p.stride > 1 { format!(", stride {}", p.stride) } else { String::new() };
-        let extras = [(bias.is_some(), " + bias"), (p.accumulate, " + residual"), (p.relu, ", ReLU")];
-        let extras: String = extras.iter().filter(|(on, _)| *on).map(|(_, what)| *what).collect();
+        let extras = name_parts(&[(bias.is_some(), " + bias"), (p.accumulate, " + residual"), (p.relu, ", ReLU")]);
         let (kernel, input) = (format!("{}×{}", ws[1], ws[2]), format!("{}×{}×{}", xs[1], xs[2], xs[3]));
         Tunable {
             key: format!("conv2d {:?} {:?}", c.push, c.dtype),

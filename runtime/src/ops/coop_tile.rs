@@ -30,9 +30,9 @@ impl CoopTile {
 }
 
 /// The cooperative kernels' tile for a product: eight subgroups of 4×2 fragments where
-/// `setting` asks for them ([`crate::MatrixTile`]: the context's, or the tuner's) and such a variant is built; else four of 4×4
-/// fragments (tiles of 8·FM × 8·FN) where such a variant is built, the product still makes 128
-/// such tiles, enough to keep a GPU's 100+ compute units busy, and the accumulators fit a GPU
+/// `setting` asks for them ([`crate::MatrixTile`]: the context's, or the tuner's) and such a
+/// variant is built; else four of 4×4 fragments (tiles of 8·FM × 8·FN) where such a variant is
+/// built, the product still makes 128 such tiles, enough to keep a GPU's 100+ compute units busy, and the accumulators fit a GPU
 /// lane's registers (at most 64 f32 each: 16×16 fragments on 64-lane subgroups); else four of
 /// 2×2. At 32 lanes 4×4 fragments take 128 registers a lane for the sums alone, and NVIDIA's
 /// compiler then spilled (H200: 255 registers, the products 1.5× slower than 2×2). CPU devices

@@ -6,7 +6,7 @@ use crate::arena::Arena;
 use crate::context::GemmFamily;
 use crate::device::DeviceInfo;
 use crate::error::{ensure, Error, Result};
-use crate::kernel_tuning::{pick, KernelPick, Tunable};
+use crate::kernel_tuning::{name_parts, pick, KernelPick, Tunable};
 use crate::matrix_tile::MatrixTile;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
@@ -202,8 +202,12 @@ fn matmul_whole(
     let reads: Vec<&Tensor> = [a, b].into_iter().chain(bias).collect();
     let describe = || {
         let dense = s.lda == s.k && s.ldc == s.c_cols() && s.ldb == if s.b_transposed { s.k } else { s.n };
-        let extras = [(bias.is_some(), " + bias"), (s.accumulate, " + C"), (s.geglu, ", GEGLU"), (!dense, ", strided")];
-        let extras: String = extras.iter().filter(|(on, _)| *on).map(|(_, what)| *what).collect();
+        let extras = name_parts(&[
+            (bias.is_some(), " + bias"),
+            (s.accumulate, " + C"),
+            (s.geglu, ", GEGLU"),
+            (!dense, ", strided"),
+        ]);
         let op = match (s.batch, s.b_transposed) {
             (1, true) => format!("linear {}×{}×{}{extras} {dtype:?}", s.m, s.n, s.k),
             _ => format!("matmul {} × {}×{}×{}{extras} {dtype:?}", s.batch, s.m, s.n, s.k),
