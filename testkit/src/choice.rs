@@ -14,6 +14,12 @@ pub fn expect_cooperative() -> bool {
     std::env::var("VKDIFF_EXPECT_COOPERATIVE").is_ok_and(|v| v == "1")
 }
 
+/// Whether the CI pass runs on a driver that lists matrix units vkdiff must not choose
+/// (`VKDIFF_EXPECT_COOPERATIVE=0`: Mesa 26.1's lavapipe at 16 lanes, which crashed running them).
+pub fn expect_cooperative_refused() -> bool {
+    std::env::var("VKDIFF_EXPECT_COOPERATIVE").is_ok_and(|v| v == "0")
+}
+
 /// `VKDIFF_FRAGMENT=MxNxK` as the CI passes for Intel's shapes set it, read here apart from the
 /// runtime's own parser, so that a runtime that ignored it fails.
 fn asked_fragment() -> Option<[u32; 3]> {

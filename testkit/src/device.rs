@@ -1,6 +1,6 @@
 //! The device tests run on: lavapipe in CI, whatever `Context::new` picks elsewhere.
 
-use crate::choice::expect_cooperative;
+use crate::choice::{expect_cooperative, expect_cooperative_refused};
 use std::sync::OnceLock;
 use vkdiff_runtime::{Context, GemmFamily, MatrixTile};
 
@@ -42,7 +42,9 @@ pub fn private_ctx() -> Context {
 
 /// A private context with a fixed GEMM family, so tests of both families can run in parallel.
 /// Under `VKDIFF_EXPECT_COOPERATIVE=1` (the CI pass on a driver with matrix units) a device
-/// whose units fit no cooperative variant fails the test instead of testing the tiled kernels twice.
+/// whose units fit no cooperative variant fails the test instead of testing the tiled kernels twice;
+/// under `=0` (a driver whose listed units vkdiff must not choose) one that lists none, or whose
+/// units vkdiff chose, fails it.
 pub fn ctx_with(family: GemmFamily) -> Context {
     let c = open();
     if family == GemmFamily::Cooperative && expect_cooperative() {
@@ -52,6 +54,16 @@ pub fn ctx_with(family: GemmFamily) -> Context {
             "VKDIFF_EXPECT_COOPERATIVE=1, but no cooperative variant fits `{}`: {:?}",
             info.name,
             info.matrix_shapes
+        );
+    }
+    if family == GemmFamily::Cooperative && expect_cooperative_refused() {
+        let info = c.info();
+        assert!(
+            !info.matrix_shapes.is_empty() && info.cooperative_variant().is_none(),
+            "VKDIFF_EXPECT_COOPERATIVE=0: `{}` should list matrix units and vkdiff choose none of them: {:?}, chosen {:?}",
+            info.name,
+            info.matrix_shapes,
+            info.cooperative_variant()
         );
     }
     c.set_gemm_family(family);
