@@ -211,7 +211,8 @@ fn compile(
     let mut caps = valid::Capabilities::IMMEDIATES
         | valid::Capabilities::SHADER_FLOAT16
         | valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32
-        | valid::Capabilities::SUBGROUP;
+        | valid::Capabilities::SUBGROUP
+        | valid::Capabilities::SUBGROUP_BARRIER;
     caps.set(valid::Capabilities::COOPERATIVE_MATRIX, cooperative);
     let info = valid::Validator::new(valid::ValidationFlags::all(), caps)
         .subgroup_stages(valid::ShaderStages::COMPUTE)

@@ -71,29 +71,42 @@ fn shape_fragments(words: &[u32], products: &Products, scope: u32) -> Result<Vec
     Ok(out)
 }
 
-/// `words` with every `OpControlBarrier` of Device memory scope given Workgroup memory scope.
-/// naga writes WGSL's `storageBarrier()` with Device scope, which under the Vulkan memory model
-/// (that naga's cooperative SPIR-V declares) needs the VulkanMemoryModelDeviceScope capability;
-/// the matrix-unit kernels order storage accesses among a workgroup's invocations only, which
-/// Workgroup scope says.
+/// `words` with each `OpControlBarrier` given the scopes and semantics the matrix-unit kernels
+/// mean by it under the Vulkan memory model (which naga's cooperative SPIR-V declares):
+/// - Device memory scope becomes Workgroup. naga writes WGSL's `storageBarrier()` with Device
+///   scope, which needs the VulkanMemoryModelDeviceScope capability; these kernels order storage
+///   accesses among a workgroup's invocations only, which Workgroup scope says.
+/// - A barrier of Subgroup execution scope (WGSL's `subgroupBarrier()`) orders workgroup memory,
+///   as GLSL's `subgroupMemoryBarrierShared(); subgroupBarrier();` does. naga gives it the
+///   SubgroupMemory semantics only, which Vulkan ignores, so the lanes of a subgroup would not see
+///   each other's writes to the subgroup's own rows of a tile (a matrix store then per-lane loads).
 fn workgroup_barriers(words: &[u32]) -> Result<Vec<u32>, String> {
     const OP_TYPE_INT: u32 = 21;
     const OP_CONSTANT: u32 = 43;
     const OP_CONTROL_BARRIER: u32 = 224;
     const DEVICE: u32 = 1; // Scope
     const WORKGROUP: u32 = 2;
+    const SUBGROUP: u32 = 3;
+    const ORDERS_WORKGROUP_MEMORY: u32 = 0x8 | 0x100; // AcquireRelease | WorkgroupMemory
     let insts = instructions(words)?;
     let uint = insts.iter().find(|i| i[0] & 0xffff == OP_TYPE_INT && i[2..] == [32, 0]).map(|i| i[1]);
     let constant = |value: u32| {
         let is = |i: &&&[u32]| i[0] & 0xffff == OP_CONSTANT && Some(i[1]) == uint && i.len() == 4 && i[3] == value;
         insts.iter().find(is).map(|i| i[2])
     };
-    let (device, workgroup) = (constant(DEVICE), constant(WORKGROUP));
+    let (device, workgroup, subgroup) = (constant(DEVICE), constant(WORKGROUP), constant(SUBGROUP));
     let mut out = words[..5].to_vec();
     for inst in insts.iter() {
         if inst[0] & 0xffff == OP_CONTROL_BARRIER && Some(inst[2]) == device {
             let workgroup = workgroup.ok_or("a device-scope barrier and no Workgroup scope constant")?;
             out.extend([inst[0], inst[1], workgroup, inst[3]]);
+            continue;
+        }
+        if inst[0] & 0xffff == OP_CONTROL_BARRIER && Some(inst[1]) == subgroup {
+            // naga declares this constant for every workgroupBarrier(); a kernel with a subgroup
+            // barrier and none has no workgroup memory to order.
+            let orders = constant(ORDERS_WORKGROUP_MEMORY).ok_or("a subgroup barrier and no workgroup barrier's semantics")?;
+            out.extend([inst[0], inst[1], inst[2], orders]);
             continue;
         }
         out.extend_from_slice(inst);

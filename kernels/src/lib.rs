@@ -227,16 +227,26 @@ mod compile_tests {
     }
 
     #[test]
-    fn storage_barriers_take_workgroup_scope_in_cooperative_kernels() {
+    fn cooperative_kernels_barriers_take_the_scopes_and_semantics_they_mean() {
         let body = "@group(0) @binding(0) var<storage, read_write> w: array<f32>;\n\
-            @compute @workgroup_size(SG)\nfn main() {\n    let a = coopLoadT<FC>(&w[0], 8u);\n    \
-            storageBarrier();\n    coopStoreT(a, &w[0], 8u);\n}\n";
+            var<workgroup> t: array<f32, 64>;\n@compute @workgroup_size(SG)\nfn main() {\n    \
+            let a = coopLoadT<FC>(&w[0], 8u);\n    storageBarrier();\n    coopStoreT(a, &t[0], 8u);\n    \
+            subgroupBarrier();\n    w[1] = t[2];\n    workgroupBarrier();\n    w[2] = t[3];\n}\n";
         let words = compile_placeholders(body, &[("FM", 8), ("FN", 8), ("FK", 8), ("SG", 8)]).unwrap();
         let insts = instructions(&words).unwrap();
         let value = |id: u32| insts.iter().find(|i| i[0] & 0xffff == 43 && i[2] == id).map(|i| i[3]);
         let barriers: Vec<_> =
-            insts.iter().filter(|i| i[0] & 0xffff == 224).map(|i| (value(i[1]), value(i[2]))).collect();
-        assert_eq!(barriers, [(Some(2), Some(2))], "one barrier, of Workgroup execution and memory scope");
+            insts.iter().filter(|i| i[0] & 0xffff == 224).map(|i| (value(i[1]), value(i[2]), value(i[3]))).collect();
+        let (workgroup, subgroup, orders_workgroup_memory) = (Some(2), Some(3), Some(0x108));
+        assert_eq!(
+            barriers,
+            [
+                (workgroup, workgroup, Some(0x48)), // storage: AcquireRelease | UniformMemory
+                (subgroup, subgroup, orders_workgroup_memory),
+                (workgroup, workgroup, orders_workgroup_memory),
+            ],
+            "storageBarrier at Workgroup memory scope, subgroupBarrier ordering workgroup memory"
+        );
     }
 
     /// Whether `words` hold a composite of 32-bit all-ones constants: naga's loop-bounding

@@ -124,7 +124,8 @@ fn main(
             coopStoreT(sf, &scratch[st], LS / 4u);
         }
         // #end
-        workgroupBarrier();
+        // The scores are this subgroup's rows, read by its own lanes only.
+        subgroupBarrier();
         // The softmax of this subgroup's rows, RPP rows at a time. Only a chunk past the keys'
         // end or under a causal mask masks scores: each select is one more instruction a step.
         let masked = (j0 + KC > p.nk) | (p.causal != 0u);
@@ -174,7 +175,7 @@ fn main(
         coopStoreT(acc[B], &scratch[ot], LS / 4u);
     }
     // #end
-    workgroupBarrier();
+    subgroupBarrier();
     for (var i = lane; i < FM * SLOTS; i += SG) {
         let r = mine + i / SLOTS;
         let s = i % SLOTS;
@@ -221,7 +222,8 @@ fn chunk_softmax(row: u32, row0: u32, j0: u32, part: u32, masked: bool) -> bool 
     return (now != old) & (old != NEG);
 }
 
-// Multiplies each of this subgroup's output rows by its row_scale, through its scratch rows.
+// Multiplies each of this subgroup's output rows by its row_scale, through its scratch rows
+// (its own: subgroup barriers suffice).
 fn rescale(acc: ptr<function, array<FC, NB>>, mine: u32, lane: u32) {
     // #unroll B DH/FN
     {
@@ -229,12 +231,12 @@ fn rescale(acc: ptr<function, array<FC, NB>>, mine: u32, lane: u32) {
         coopStoreT((*acc)[B], &scratch[ot], LS / 4u);
     }
     // #end
-    workgroupBarrier();
+    subgroupBarrier();
     for (var i = lane; i < FM * SLOTS; i += SG) {
         let r = mine + i / SLOTS;
         scratch[r * (LS / 4u) + i % SLOTS] *= row_scale[r];
     }
-    workgroupBarrier();
+    subgroupBarrier();
     // #unroll B DH/FN
     {
         let ot = mine * (LS / 4u) + B * FN / 4u;

@@ -182,14 +182,15 @@ fn main(
         }
         workgroupBarrier();
     }
-    // One fragment at a time through this subgroup's scratch; every subgroup takes the same
-    // number of steps, so the workgroup barriers between them are uniform.
+    // One fragment at a time through this subgroup's scratch, which no other subgroup touches:
+    // subgroup barriers (the build makes them order workgroup memory) let each subgroup store
+    // its tile without waiting for the others at every fragment.
     let own = sid * FM * LDS / 4u;
     // #unroll I WM
     // #unroll J WN
     {
         coopStoreT(acc[WN * I + J], &scratch[own], LDS / 4u);
-        workgroupBarrier();
+        subgroupBarrier();
         if GE == 1u {
             for (var e = lane; e < FM * FN / 8u; e += SG) {
                 let r = e / (FN / 8u);
@@ -204,7 +205,7 @@ fn main(
                 store4(batch, row0 + sm + I * FM + r, col0 + sn + J * FN + 4u * (e % (FN / 4u)), sum);
             }
         }
-        workgroupBarrier();
+        subgroupBarrier();
     }
     // #end
     // #end
