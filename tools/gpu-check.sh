@@ -9,12 +9,12 @@
 #   3. the SDXL UNet at 1024², batch 2, beside diffusers on CUDA in the same call (where torch
 #      sees the GPU), on the tile `auto` takes;
 #   4. the UNet with VKDIFF_TUNE=1 (each shape's kernels timed and the fastest taken: the table
-#      of which tile or probe wins where), with the matrix units' two workgroup tiles
-#      (VKDIFF_MATRIX_TILE=8, 4), to decide
+#      of which tile or probe wins where), with each of the matrix units' eight-subgroup tiles
+#      (VKDIFF_MATRIX_TILE=8, 128x64, 64x128; `auto` is four subgroups), to decide
 #      which `auto` takes, and with VKDIFF_ATTENTION=cm2, VKDIFF_LINEAR=cm2 and VKDIFF_CONV=cm2
 #      where the driver runs those probes' tiles;
-#   5. the SDXL products (`bench kernels`: the linear, convolution and attention rows on both
-#      tiles and on the probes' tiles) against the matrix units' ceiling;
+#   5. the SDXL products (`bench kernels`: the linear, convolution and attention rows on every
+#      tile and on the probes' tiles) against the matrix units' ceiling;
 #   6. the UNet network tests against diffusers (the kit's UNet fixtures);
 #   7. `vkdiff bench report` (the full suite: the paper's image first), the peer where the kit
 #      has it (KIT_PEER=1), `vkdiff devices --compile` and the paper's ablation, where time is left.
@@ -73,7 +73,7 @@ unet() { # the output's name, the environment, then bench unet's further argumen
 if [ "$reference" = cuda ]; then unet auto "" --reference-device cuda; else unet auto "" --no-cpu-reference; fi
 # Every shape's kernels timed against each other (its table lists each shape's candidates).
 unet tuned "VKDIFF_TUNE=1" --no-cpu-reference
-for tile in 8 4; do unet "tile-$tile" "VKDIFF_MATRIX_TILE=$tile" --no-cpu-reference; done
+for tile in 8 128x64 64x128; do unet "tile-$tile" "VKDIFF_MATRIX_TILE=$tile" --no-cpu-reference; done
 # VK_NV_cooperative_matrix2's attention, its linear product, then its convolution, each where
 # the driver runs one of that probe's tiles.
 for probe in 'ATTENTION:attention [0-9]* rows' 'LINEAR:linear [0-9]*×' 'CONV:convolution [0-9]* pixels'; do

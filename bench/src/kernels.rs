@@ -4,7 +4,7 @@ use crate::cpu_reference::{self, CpuGemm};
 use crate::peaks;
 use anyhow::Result;
 use std::time::{Duration, Instant};
-use vkdiff_runtime::{eight_subgroups_built, Context, Dtype, GemmFamily, MatrixTile, Recorder, Tensor};
+use vkdiff_runtime::{Context, Dtype, GemmFamily, MatrixTile, Recorder, Tensor};
 
 mod cases;
 mod matrix2;
@@ -164,7 +164,7 @@ fn time_row(ctx: &Context, case: &Case, dtype: Dtype, product: bool, samples: us
 fn print_row(row: &Row) {
     let show = |x: Option<f64>| x.map_or(String::from("-"), |v| format!("{v:.1}"));
     println!(
-        "{:<26} {:<5} {:<28} {:<32} {:>10.3} {:>9} {:>8} {:>10}",
+        "{:<26} {:<5} {:<32} {:<32} {:>10.3} {:>9} {:>8} {:>10}",
         row.kernel,
         row.dtype,
         row.family.as_deref().unwrap_or("-"),
@@ -194,7 +194,7 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             println!("matrix-unit trial: {trial}");
         }
         println!(
-            "{:<26} {:<5} {:<28} {:<32} {:>10} {:>9} {:>8} {:>10}",
+            "{:<26} {:<5} {:<32} {:<32} {:>10} {:>9} {:>8} {:>10}",
             "kernel", "dtype", "GEMM kernels", "shape", "ms", "GFLOP/s", "GB/s", "of matrix peak"
         );
     }
@@ -278,8 +278,8 @@ struct Timed {
     failed: Vec<String>,
 }
 
-/// Times each case, products on each family the device has (the matrix units in both workgroup
-/// tiles where both are built, so one run compares them), printing each row as it comes where
+/// Times each case, products on each family the device has (the matrix units in each workgroup
+/// tile built for the device's fragment, so one run compares them), printing each row as it comes where
 /// `print`. A row that fails (a driver that refuses a kernel no GPU has run) is one line naming
 /// it, and the rest still run; the context's family and tile are left as found.
 fn time_cases(ctx: &Context, dtype: Dtype, cases: impl Iterator<Item = Case>, samples: usize, print: bool) -> Timed {
@@ -294,9 +294,10 @@ fn time_cases(ctx: &Context, dtype: Dtype, cases: impl Iterator<Item = Case>, sa
                 if dtype == Dtype::F16 && peaks::has_matrix_units(ctx) =>
             {
                 let units = Some(GemmFamily::Cooperative);
-                let eight = ctx.info().cooperative_variant().is_some_and(|f| eight_subgroups_built(&f));
+                let fragment = ctx.info().cooperative_variant();
+                let built = |tile: &MatrixTile| fragment.is_some_and(|f| tile.built_for(&f));
                 let mut runs = vec![(units, four)];
-                runs.extend(eight.then_some((units, MatrixTile::Eight)));
+                runs.extend(MatrixTile::EIGHT_SUBGROUPS.iter().filter(|t| built(t)).map(|&t| (units, t)));
                 runs.push((Some(GemmFamily::Tiled), four));
                 runs
             }

@@ -1,6 +1,6 @@
 //! Arithmetic peaks of known GPUs, to give a measured rate as a share of what the device can do.
 
-use vkdiff_runtime::{Context, DeviceKind, Dtype, GemmFamily};
+use vkdiff_runtime::{Context, DeviceKind, Dtype, GemmFamily, MatrixTile};
 
 /// Dense peaks in TFLOP/s from the vendors' datasheets (boost clock, without sparsity): f16 on
 /// the matrix units with f32 accumulation, and f32 on the SIMT cores. Matched by a substring of
@@ -40,8 +40,13 @@ pub(crate) fn share_label(ctx: &Context, flops_per_s: f64) -> String {
 pub(crate) fn family_label(ctx: &Context, dtype: Dtype) -> String {
     match (ctx.gemm_family(), ctx.info().cooperative_variant()) {
         (GemmFamily::Cooperative, Some(f)) if dtype == Dtype::F16 => {
-            let eight = ctx.matrix_tile().eight_subgroups() && vkdiff_runtime::eight_subgroups_built(&f);
-            format!("matrix units {}{}", f.shape(), if eight { ", 8 SG" } else { "" })
+            let tile = ctx.matrix_tile();
+            let eight = match tile {
+                _ if !tile.built_for(&f) => String::new(),
+                MatrixTile::Eight => ", 8 SG".into(),
+                _ => format!(", 8 SG {}", tile.name()),
+            };
+            format!("matrix units {}{eight}", f.shape())
         }
         (GemmFamily::Subgroup, _) => "subgroup-register".into(),
         _ => "tiled".into(),

@@ -1,10 +1,12 @@
 // GEMM core on the device's matrix units (VK_KHR_cooperative_matrix): f16 operands, f32
-// accumulation. A workgroup is 2·GN subgroups of SG lanes in a 2×GN grid, each computing WM×WN
+// accumulation. A workgroup is GM·GN subgroups of SG lanes in a GM×GN grid, each computing WM×WN
 // fragments of FM×FN (A fragments FM×FK, B fragments FK×FN: the prelude's FA, FB, FC types), so
-// a workgroup's tile is BM×BN with BM = 2·WM·FM and BN = GN·WN·FN, over K-steps of BK = KS·FK:
-// 4 subgroups of 2×2 (or 4×4) fragments, or 8 of 4×2 fragments with K-steps of two (the tiles
-// of NVIDIA's own sample and ggml: 128×128 at 16×16×16, each staged byte feeding twice the
-// products of a 64×64 tile, with the sums in 64 registers a lane).
+// a workgroup's tile is BM×BN with BM = GM·WM·FM and BN = GN·WN·FN, over K-steps of BK = KS·FK:
+// 2×2 subgroups of 2×2 (or 4×4) fragments, or 8 subgroups with K-steps of two: 2×4 of 4×2
+// fragments (the tiles of NVIDIA's own sample and ggml: 128×128 at 16×16×16, each staged byte
+// feeding twice the products of a 64×64 tile, with the sums in 64 registers a lane), or 4×2 or
+// 2×4 of 2×2 (128×64 and 64×128: a third more products a staged byte than 64×64, in its
+// registers a lane).
 // Operands are aligned to units of UW = 4 or 8 values (the runtime takes 8 where sizes and
 // strides allow, and sends shapes off the vec4 grid to the tiled kernel): each invocation
 // stages units of UW f16 along K (A, and B stored N×K) or along N (B stored K×N), one 8- or
@@ -22,8 +24,8 @@
 // loads need), padded off a power of two against bank conflicts. Each fragment leaves through a
 // small per-subgroup scratch, four columns at a time, so the epilogue and the edge masks are
 // those of the vec4 subgroup kernel (gemm_store4.wgsl).
-const NS: u32 = 2u * GN; // subgroups
-const BM: u32 = 2u * WM * FM;
+const NS: u32 = GM * GN; // subgroups
+const BM: u32 = GM * WM * FM;
 const BN: u32 = GN * WN * FN;
 const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): 4 values, then their 4 gates
 const BK: u32 = KS * FK;
@@ -35,7 +37,7 @@ const LDS: u32 = FN + 4u; // a subgroup's f32 scratch [FM][LDS]
 // the tile rows between an invocation's units (WG is a multiple of UK in every variant).
 const UK: u32 = BK / UW;
 const PA: u32 = BM * BK / (UW * WG); // WM·FM·FK·KS/GN/SG/UW
-const PB: u32 = BN * BK / (UW * WG); // WN·FN·FK·KS/SG/2/UW
+const PB: u32 = BN * BK / (UW * WG); // WN·FN·FK·KS/SG/GM/UW
 const STEP: u32 = WG / UK;
 // B stored K×N: units along a tile row of N.
 const UN: u32 = BN / UW;
@@ -72,7 +74,7 @@ fn fetch(
     (*ra)[I] = a_unit((*rows)[I], kc);
     (*ia)[I] = a_unit_inside((*rows)[I], kc);
     // #end
-    // #unroll I WN*FN*FK*KS/SG/2/UW
+    // #unroll I WN*FN*FK*KS/SG/GM/UW
     {
         let kn = b_at(I, k0, t, col0);
         (*rb)[I] = b_unit(boff, kn.x, kn.y);
@@ -104,7 +106,7 @@ fn stage(
     // #unroll I WM*FM*FK*KS/GN/SG/UW
     a_tile[(tr + STEP * I) * (LDA / UW) + tu] = staged((*ra)[I], (*ia)[I] & in_k);
     // #end
-    // #unroll I WN*FN*FK*KS/SG/2/UW
+    // #unroll I WN*FN*FK*KS/SG/GM/UW
     {
         let kn = b_at(I, k0, t, col0);
         let unit = staged((*rb)[I], !tail | b_unit_inside(kn.x, kn.y));

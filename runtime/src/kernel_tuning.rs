@@ -124,11 +124,12 @@ pub(crate) fn pick(
     pick
 }
 
-/// The picks the settings leave open, theirs first: both tiles where the tile is `auto` and
-/// applies, the probe or not where its setting is `auto`.
+/// The picks the settings leave open, theirs first: the four-subgroup tile and each
+/// eight-subgroup one where the tile is `auto` and applies, the probe or not where its setting
+/// is `auto`.
 fn candidates(op: &Tunable, settings: KernelPick) -> Vec<KernelPick> {
     let tiles = match (op.tiles, settings.tile) {
-        (true, MatrixTile::Auto) => vec![MatrixTile::Auto, MatrixTile::Eight],
+        (true, MatrixTile::Auto) => [MatrixTile::Auto].into_iter().chain(MatrixTile::EIGHT_SUBGROUPS).collect(),
         (_, tile) => vec![tile],
     };
     let probes = match settings.probe {
@@ -339,15 +340,12 @@ mod tests {
         let op = |tiles| Tunable { key: String::new(), op: String::new(), tiles };
         let pick = |tile, probe| KernelPick { tile, probe };
         let auto = pick(MatrixTile::Auto, ProbeChoice::Auto);
-        assert_eq!(
-            candidates(&op(true), auto),
-            [
-                auto,
-                pick(MatrixTile::Eight, ProbeChoice::Auto),
-                pick(MatrixTile::Auto, ProbeChoice::Matrix2),
-                pick(MatrixTile::Eight, ProbeChoice::Matrix2)
-            ]
-        );
+        let tiles = [MatrixTile::Auto, MatrixTile::Eight, MatrixTile::EightTall, MatrixTile::EightWide];
+        let both: Vec<KernelPick> = [ProbeChoice::Auto, ProbeChoice::Matrix2]
+            .into_iter()
+            .flat_map(|probe| tiles.map(|tile| pick(tile, probe)))
+            .collect();
+        assert_eq!(candidates(&op(true), auto), both);
         assert_eq!(candidates(&op(false), auto), [auto, pick(MatrixTile::Auto, ProbeChoice::Matrix2)], "attention");
         let fixed = pick(MatrixTile::Four, ProbeChoice::Matrix2);
         assert_eq!(candidates(&op(true), fixed), [fixed], "both set");

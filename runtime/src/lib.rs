@@ -46,7 +46,7 @@ pub use kernel_census::{selectable_variants, CompiledKernel};
 pub use kernel_tuning::{tuning_from_env, TunedShape};
 pub use listing::listing_variants;
 pub use matrix2_tile::{built as built_matrix2_tiles, Matrix2Probe, Matrix2Tile};
-pub use matrix_tile::{eight_subgroups_built, MatrixTile};
+pub use matrix_tile::{MatrixTile, SubgroupGrid};
 pub use matrix_unit_trial::{run_trial, run_trial_timed_by, CooperativeSetting, MatrixUnitTrial, TrialClock};
 pub use matrix_units::{built_cooperative_variants, requested_fragment, Fragment, MatrixShape};
 pub use memory::Placement;

@@ -3,8 +3,9 @@
 use crate::error::{Error, Result};
 use crate::matrix_units::Fragment;
 
-/// How many subgroups share a workgroup's tile in `gemm_coop` and `conv_coop`
-/// (kernels/src/spec.rs).
+/// How many subgroups share a workgroup's tile in `gemm_coop` and `conv_coop`, and in what grid
+/// (kernels/src/spec.rs). The eight-subgroup tiles are named by their size at 16×16×16
+/// fragments (half each side at lavapipe's 8×8×8).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MatrixTile {
     /// Unset or `auto`: the tiles measured fastest so far, four subgroups (2×2 or 4×4
@@ -12,12 +13,25 @@ pub enum MatrixTile {
     Auto,
     /// `4`: four subgroups in a 2×2 grid, as `auto` chooses their fragments.
     Four,
-    /// `8`: eight subgroups in a 2×4 grid of 4×2 fragments, K-steps of two fragments (128×128 at
-    /// 16×16×16), where such a variant is built for the device's fragment (else as `4`).
+    /// `8` or `128x128`: eight subgroups in a 2×4 grid of 4×2 fragments, K-steps of two
+    /// fragments, where such a variant is built for the device's fragment (else as `4`).
     Eight,
+    /// `128x64`: eight subgroups in a 4×2 grid of 2×2 fragments (the tile that divides SDXL's 320
+    /// channels), K-steps of two, where built (else as `4`).
+    EightTall,
+    /// `64x128`: eight subgroups in a 2×4 grid of 2×2 fragments, K-steps of two, where built
+    /// (else as `4`).
+    EightWide,
 }
 
+/// An eight-subgroup tile's grid of subgroups and fragments a subgroup: GM, GN, WM and WN in
+/// kernels/src/spec.rs.
+pub type SubgroupGrid = [(&'static str, u32); 4];
+
 impl MatrixTile {
+    /// The eight-subgroup tiles, as the tuner tries them.
+    pub const EIGHT_SUBGROUPS: [MatrixTile; 3] = [MatrixTile::Eight, MatrixTile::EightTall, MatrixTile::EightWide];
+
     pub fn from_env() -> Result<MatrixTile> {
         match std::env::var("VKDIFF_MATRIX_TILE") {
             Err(_) => Ok(MatrixTile::Auto),
@@ -29,24 +43,50 @@ impl MatrixTile {
         match value.trim().to_ascii_lowercase().as_str() {
             "auto" | "" => Ok(MatrixTile::Auto),
             "4" => Ok(MatrixTile::Four),
-            "8" => Ok(MatrixTile::Eight),
+            "8" | "128x128" => Ok(MatrixTile::Eight),
+            "128x64" => Ok(MatrixTile::EightTall),
+            "64x128" => Ok(MatrixTile::EightWide),
             _ => Err(Error::BadSetting(format!(
-                "VKDIFF_MATRIX_TILE={value}: use 4 (four subgroups a workgroup), 8 (eight, 128×128 tiles of \
-                 16×16×16 fragments) or auto (the default)"
+                "VKDIFF_MATRIX_TILE={value}: use 4 (four subgroups a workgroup), 8 or 128x128 (eight, 128×128 tiles of \
+                 16×16×16 fragments), 128x64, 64x128 (eight, those tiles) or auto (the default)"
             ))),
         }
     }
 
-    /// Whether products take the eight-subgroup tiles where one is built.
-    pub fn eight_subgroups(self) -> bool {
-        self == MatrixTile::Eight
+    /// The grid of an eight-subgroup tile; None for the four-subgroup settings.
+    pub fn eight_subgroup_grid(self) -> Option<SubgroupGrid> {
+        let grid = |gm, gn, wm, wn| Some([("GM", gm), ("GN", gn), ("WM", wm), ("WN", wn)]);
+        match self {
+            MatrixTile::Auto | MatrixTile::Four => None,
+            MatrixTile::Eight => grid(2, 4, 4, 2),
+            MatrixTile::EightTall => grid(4, 2, 2, 2),
+            MatrixTile::EightWide => grid(2, 4, 2, 2),
+        }
     }
-}
 
-/// Whether eight-subgroup variants are built for fragment `f` (all but AMD's 64 lanes).
-pub fn eight_subgroups_built(f: &Fragment) -> bool {
-    let want: Vec<(&str, u32)> = f.params().into_iter().chain([("GN", 4)]).collect();
-    vkdiff_kernels::find("gemm_coop", vkdiff_kernels::Dtype::F16, &want).is_some()
+    /// How `VKDIFF_MATRIX_TILE` spells this setting.
+    pub fn name(self) -> &'static str {
+        match self {
+            MatrixTile::Auto => "auto",
+            MatrixTile::Four => "4",
+            MatrixTile::Eight => "8",
+            MatrixTile::EightTall => "128x64",
+            MatrixTile::EightWide => "64x128",
+        }
+    }
+
+    /// Whether products take an eight-subgroup tile where one is built.
+    pub fn eight_subgroups(self) -> bool {
+        self.eight_subgroup_grid().is_some()
+    }
+
+    /// Whether this setting's eight-subgroup tile is built for fragment `f`.
+    pub fn built_for(self, f: &Fragment) -> bool {
+        self.eight_subgroup_grid().is_some_and(|grid| {
+            let want: Vec<(&str, u32)> = f.params().into_iter().chain(grid).collect();
+            vkdiff_kernels::find("gemm_coop", vkdiff_kernels::Dtype::F16, &want).is_some()
+        })
+    }
 }
 
 #[cfg(test)]
@@ -55,16 +95,39 @@ mod tests {
 
     #[test]
     fn the_setting_names_subgroups_a_workgroup() {
-        for (value, tile) in
-            [("", MatrixTile::Auto), ("AUTO", MatrixTile::Auto), (" 4", MatrixTile::Four), ("8", MatrixTile::Eight)]
-        {
+        for (value, tile) in [
+            ("", MatrixTile::Auto),
+            ("AUTO", MatrixTile::Auto),
+            (" 4", MatrixTile::Four),
+            ("8", MatrixTile::Eight),
+            ("128X128", MatrixTile::Eight),
+            ("128x64", MatrixTile::EightTall),
+            ("64x128", MatrixTile::EightWide),
+        ] {
             assert_eq!(MatrixTile::parse(value).unwrap(), tile, "{value:?}");
+            assert_eq!(MatrixTile::parse(tile.name()).unwrap(), tile, "{tile:?}");
         }
         assert!(MatrixTile::Eight.eight_subgroups() && !MatrixTile::Auto.eight_subgroups());
         let fragment = |m, n, k, lanes| Fragment { m, n, k, lanes, flexible: false };
-        assert!(eight_subgroups_built(&fragment(16, 16, 16, 32)) && eight_subgroups_built(&fragment(8, 8, 8, 8)));
-        assert!(!eight_subgroups_built(&fragment(16, 16, 16, 64)), "AMD's 64 lanes reach 128×128 with four");
+        let (nvidia, lavapipe, amd) = (fragment(16, 16, 16, 32), fragment(8, 8, 8, 8), fragment(16, 16, 16, 64));
+        for tile in MatrixTile::EIGHT_SUBGROUPS {
+            assert!(tile.built_for(&nvidia) && tile.built_for(&lavapipe), "{tile:?}");
+            assert!(!tile.built_for(&amd), "{tile:?}: AMD's 64 lanes reach 128×128 with four");
+        }
+        assert!(!MatrixTile::EightTall.built_for(&fragment(8, 16, 16, 16)), "128×64 for NVIDIA's and lavapipe's only");
+        assert!(MatrixTile::Eight.built_for(&fragment(8, 16, 16, 16)), "128×128 for Intel's too");
         let err = MatrixTile::parse("128").unwrap_err().to_string();
         assert!(err.starts_with("VKDIFF_MATRIX_TILE=128: use 4"), "{err}");
+    }
+
+    #[test]
+    fn eight_subgroup_grids_hold_eight_subgroups_of_the_sizes_they_are_named_by() {
+        for (tile, size) in
+            [(MatrixTile::Eight, (128, 128)), (MatrixTile::EightTall, (128, 64)), (MatrixTile::EightWide, (64, 128))]
+        {
+            let [(_, gm), (_, gn), (_, wm), (_, wn)] = tile.eight_subgroup_grid().unwrap();
+            assert_eq!((gm * gn, (gm * wm * 16, gn * wn * 16)), (8, size), "{tile:?}");
+        }
+        assert_eq!(MatrixTile::Four.eight_subgroup_grid(), None);
     }
 }

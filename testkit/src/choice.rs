@@ -97,10 +97,18 @@ pub fn assert_product_family<'a>(
             if let Some(asked) = asked_fragment() {
                 assert_eq!(shape, asked.map(Some), "{what}: {} in VKDIFF_FRAGMENT's shape", v.kernel);
             }
-            let eight = vkdiff_kernels::find(v.kernel, Dtype::F16, &[f.params().as_slice(), &[("GN", 4)]].concat());
-            let subgroups = 2 * v.param("GN").unwrap_or(0);
-            let due = if ctx.matrix_tile().eight_subgroups() && eight.is_some() { 8 } else { 4 };
-            assert_eq!(subgroups, due, "{what}: {} in workgroups of {due} subgroups", v.kernel);
+            // The setting's eight-subgroup grid where this kernel has it built, else four subgroups.
+            let grid = ctx.matrix_tile().eight_subgroup_grid();
+            let built =
+                grid.filter(|g| vkdiff_kernels::find(v.kernel, Dtype::F16, &[&f.params()[..], g].concat()).is_some());
+            let ran = |name| v.param(name).unwrap_or(0);
+            match built {
+                Some(grid) => {
+                    let want = grid.map(|(name, value)| (name, Some(value)));
+                    assert_eq!(grid.map(|(name, _)| (name, v.param(name))), want, "{what}: {} in its tile", v.kernel);
+                }
+                None => assert_eq!(ran("GM") * ran("GN"), 4, "{what}: {} in workgroups of 4 subgroups", v.kernel),
+            }
         }
     }
     if expected == "_coop" && expect_cooperative() && !fallback {

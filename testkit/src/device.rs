@@ -84,6 +84,21 @@ pub fn cooperative_ctxs() -> Vec<Context> {
     vec![first, second]
 }
 
+/// A matrix-unit context on each of `tiles`, where the device has a matrix-unit variant: the
+/// tiles [`cooperative_ctxs`] leaves to tests of their own (choice.rs asserts that a product ran
+/// in the tile where it is built for the device's fragment, in four subgroups elsewhere).
+pub fn cooperative_ctxs_on(tiles: &[MatrixTile]) -> Vec<Context> {
+    tiles
+        .iter()
+        .map_while(|&tile| {
+            let ctx = ctx_with(GemmFamily::Cooperative);
+            ctx.info().cooperative_variant()?;
+            ctx.set_matrix_tile(tile);
+            Some(ctx)
+        })
+        .collect()
+}
+
 /// A new context; under `VKDIFF_EXPECT_COOPERATIVE=1` a matrix-unit trial that dropped the units
 /// fails the test, which would otherwise test the tiled kernels where the units were meant.
 fn open() -> Context {

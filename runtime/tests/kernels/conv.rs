@@ -172,6 +172,38 @@ fn conv3x3_stride2_vae_padding() {
     all(Case { b: 1, h: 8, w: 8, cin: 12, cout: 8, k: [3, 3], stride: 2, pad, accumulate: false, relu: false }, 23);
 }
 
+/// The eight-subgroup tiles of 2×2-fragment subgroups (128×64 and 64×128 at 16×16×16), which
+/// [`cooperative_ctxs`] leaves out: padding, stride 2, the VAE's one-sided padding, a residual
+/// with ReLU over pixels and channels off the tiles' multiples, and K-steps across taps.
+#[test]
+fn conv_eight_subgroup_tiles_of_two_by_two_fragments() {
+    use vkdiff_runtime::MatrixTile;
+    let same = Padding::same(1);
+    let vae = Padding { top: 0, left: 0, bottom: 1, right: 1 };
+    let case = |b, h, w, cin, cout, stride, pad, residual| Case {
+        b,
+        h,
+        w,
+        cin,
+        cout,
+        k: [3, 3],
+        stride,
+        pad,
+        accumulate: residual,
+        relu: residual,
+    };
+    for ctx in cooperative_ctxs_on(&[MatrixTile::EightTall, MatrixTile::EightWide]) {
+        for (c, seed) in [
+            (case(2, 9, 7, 16, 24, 1, same, true), 21),
+            (case(1, 10, 12, 8, 36, 2, same, false), 22),
+            (case(1, 8, 8, 12, 8, 2, vae, false), 23),
+            (case(1, 13, 11, 40, 72, 1, same, true), 24),
+        ] {
+            check_on(&ctx, Dtype::F16, &c, seed);
+        }
+    }
+}
+
 #[test]
 fn conv_large_products_take_the_large_tiles() {
     // 66·66 = 4356 output pixels × 132 channels: over 128 tiles of 64 (lavapipe's 8×8 fragments);

@@ -110,6 +110,26 @@ fn square_and_rectangular() {
     both(Matmul::dense(33, 200, 516, true), true, 3);
 }
 
+/// The eight-subgroup tiles of 2×2-fragment subgroups (128×64 and 64×128 at 16×16×16), which
+/// [`cooperative_ctxs`] leaves out: M, N and K off their multiples (a last, partial K-step after
+/// full ones), B stored either way, batches with strides, alpha and a residual, and GEGLU's
+/// fused projection; each asserted to run in its tile where it is built for the device's fragment.
+#[test]
+fn eight_subgroup_tiles_of_two_by_two_fragments() {
+    use vkdiff_runtime::MatrixTile;
+    for ctx in cooperative_ctxs_on(&[MatrixTile::EightTall, MatrixTile::EightWide]) {
+        for (s, bias, seed) in [
+            (Matmul::dense(130, 72, 36, false), true, 2),
+            (Matmul::dense(33, 200, 516, true), true, 3),
+            (Matmul::dense(150, 136, 136, true), false, 4),
+            (batched_strided(), true, 6),
+        ] {
+            check_on(&ctx, Dtype::F16, &s, bias, seed);
+        }
+        check_linear_geglu(&ctx, Dtype::F16, (130, 24, 6 * GEGLU_COLUMNS), true, 20);
+    }
+}
+
 #[test]
 fn tall_shapes_take_the_large_row_tiles() {
     // M ≥ 256 and ≥ 1024 select the 32- and 64-row subgroup variants for products of at least
@@ -157,11 +177,12 @@ fn large_products_take_the_large_tiles() {
     let ran = both(Matmul::dense(1030, 2052, 36, true), false, 16);
     // K = 36 is no multiple of 8: the matrix units read it in units of 4.
     assert!(params_of(&ran, GemmFamily::Cooperative, "gemm_coop", "UW").iter().all(|&uw| uw == 4));
-    // In workgroups of four subgroups (GN = 2).
+    // In workgroups of four subgroups (2×2).
+    let four = |v: &&&Variant| v.kernel == "gemm_coop" && [v.param("GM"), v.param("GN")] == [Some(2); 2];
     let coop: Vec<(Option<u32>, Option<u32>)> = ran
         .iter()
         .filter(|(f, _, _)| *f == GemmFamily::Cooperative)
-        .flat_map(|(_, _, v)| v.iter().filter(|v| v.kernel == "gemm_coop" && v.param("GN") == Some(2)))
+        .flat_map(|(_, _, v)| v.iter().filter(four))
         .map(|v| (v.param("WM"), v.param("WN")))
         .collect();
     if ctx().info().cooperative_variant().is_some_and(|f| f.lanes != 32 && f.m == f.n && f.n == f.k) {
@@ -179,8 +200,9 @@ fn shapes_off_the_vec4_grid() {
     both(Matmul::dense(5, 3, 7, true), false, 5);
 }
 
-#[test]
-fn batched_strided_alpha_accumulate() {
+/// Three products whose A and C rows and batches are strided, scaled by alpha and added to
+/// what C holds.
+fn batched_strided() -> Matmul {
     let mut s = Matmul::dense(40, 24, 32, false);
     s.batch = 3;
     s.lda = 36;
@@ -190,6 +212,12 @@ fn batched_strided_alpha_accumulate() {
     s.c_batch = 40 * 28 + 8;
     s.alpha = 0.37;
     s.accumulate = true;
+    s
+}
+
+#[test]
+fn batched_strided_alpha_accumulate() {
+    let mut s = batched_strided();
     both(s.clone(), true, 6);
     s.b_transposed = true;
     s.ldb = 32;

@@ -33,7 +33,8 @@ fn reachable(plain: &Context, op: Op, (inputs, out): (&[Tensor], &Tensor), case:
     // A tile set by VKDIFF_MATRIX_TILE is the tuner's too.
     let set = plain.matrix_tile();
     let open = case.tiles && set == MatrixTile::Auto;
-    let tiles: &[MatrixTile] = if open { &[MatrixTile::Auto, MatrixTile::Eight] } else { &[set] };
+    let every = [MatrixTile::Auto, MatrixTile::Eight, MatrixTile::EightTall, MatrixTile::EightWide];
+    let tiles: &[MatrixTile] = if open { &every } else { &[set] };
     let mut found = BTreeSet::new();
     for &tile in tiles {
         for choice in [ProbeChoice::Auto, ProbeChoice::Matrix2] {
