@@ -9,12 +9,13 @@
 #   3. the SDXL UNet at 1024², batch 2, beside diffusers on CUDA in the same call (where torch
 #      sees the GPU), on the tile `auto` takes;
 #   4. the UNet with VKDIFF_TUNE=1 (each shape's kernels timed and the fastest taken: the table
-#      of which tile or probe wins where), with each of the matrix units' eight-subgroup tiles
-#      (VKDIFF_MATRIX_TILE=8, 128x64, 64x128; `auto` is four subgroups), to decide
-#      which `auto` takes, and with VKDIFF_ATTENTION=cm2, VKDIFF_LINEAR=cm2 and VKDIFF_CONV=cm2
-#      where the driver runs those probes' tiles;
+#      of which tile or probe wins where);
 #   5. the SDXL products (`bench kernels`: the linear, convolution and attention rows on every
-#      tile and on the probes' tiles) against the matrix units' ceiling;
+#      tile and on the probes' tiles) and the matrix units' ceiling they are held against;
+#   5b. the UNet on each of the matrix units' eight-subgroup tiles (VKDIFF_MATRIX_TILE=8,
+#      128x64, 64x128; `auto` is four subgroups), to decide which `auto` takes, and with
+#      VKDIFF_ATTENTION=cm2, VKDIFF_LINEAR=cm2 and VKDIFF_CONV=cm2 where the driver runs those
+#      probes' tiles (after the rows: each whole UNet is a minute, the rows hold every family);
 #   6. the UNet network tests against diffusers (the kit's UNet fixtures);
 #   7. `vkdiff bench report` (the full suite: the paper's image first), the peer where the kit
 #      has it (KIT_PEER=1), `vkdiff devices --compile` and the paper's ablation, where time is left.
@@ -73,6 +74,11 @@ unet() { # the output's name, the environment, then bench unet's further argumen
 if [ "$reference" = cuda ]; then unet auto "" --reference-device cuda; else unet auto "" --no-cpu-reference; fi
 # Every shape's kernels timed against each other (its table lists each shape's candidates).
 unet tuned "VKDIFF_TUNE=1" --no-cpu-reference
+# The convolution rows are four shapes on every family and probe tile: more time.
+for filter in linear:90 conv2d:120 attention:90 ceiling:30; do
+    step "${filter#*:}" sh -c "'$vkdiff' bench kernels --no-cpu-reference --filter ${filter%:*} \
+        >'$out/kernels-${filter%:*}.txt'"
+done
 for tile in 8 128x64 64x128; do unet "tile-$tile" "VKDIFF_MATRIX_TILE=$tile" --no-cpu-reference; done
 # VK_NV_cooperative_matrix2's attention, its linear product, then its convolution, each where
 # the driver runs one of that probe's tiles.
@@ -81,11 +87,6 @@ for probe in 'ATTENTION:attention [0-9]* rows' 'LINEAR:linear [0-9]*×' 'CONV:co
     if grep -q "${probe#*:}" "$out/devices.json" 2>/dev/null; then
         unet "${name,,}-cm2" "VKDIFF_$name=cm2" --no-cpu-reference
     fi
-done
-# The convolution rows are four shapes on every family and probe tile: more time.
-for filter in linear:90 conv2d:120 attention:90; do
-    step "${filter#*:}" sh -c "'$vkdiff' bench kernels --no-cpu-reference --filter ${filter%:*} \
-        >'$out/kernels-${filter%:*}.txt'"
 done
 step 90 env VKDIFF_EXPECT_COOPERATIVE=1 VKDIFF_REPO="$work/repo" "$work/networks-test" --test-threads 4 forward
 step 220 "$vkdiff" bench report --only image,unet,vae,kernels --reference-device "$reference" \
