@@ -71,3 +71,39 @@ fn a_tuned_generation_says_what_tuning_did() {
     assert!(line.contains("shapes had kernels to choose between") && line.ends_with(" s"), "{line}");
     assert!(out.exists());
 }
+
+/// `VKDIFF_MATRIX_TILE` asking for a tile the device's fragment has none of says so in one line
+/// and runs on four subgroups: on Mesa 26.1, 128×64 is built for its 8×8×8 fragments but not
+/// for Intel's 8×16×16, which its flexible dimensions take where `VKDIFF_FRAGMENT` asks.
+#[test]
+fn a_tile_not_built_for_the_fragment_is_named() {
+    let run = |fragment: Option<&str>| {
+        let mut cmd = command();
+        cmd.args(["bench", "kernels", "--filter", "no such kernel", "--no-cpu-reference"])
+            .env("VKDIFF_GPU_PATHS", "1")
+            .env("VKDIFF_COOPERATIVE", "1")
+            .env("VKDIFF_MATRIX_TILE", "128x64");
+        match fragment {
+            Some(shape) => cmd.env("VKDIFF_FRAGMENT", shape),
+            None => cmd.env_remove("VKDIFF_FRAGMENT"),
+        };
+        let out = cmd.output().unwrap();
+        assert!(out.status.success(), "{fragment:?}: {}", String::from_utf8_lossy(&out.stderr));
+        let note =
+            String::from_utf8_lossy(&out.stderr).lines().find(|l| l.contains("VKDIFF_MATRIX_TILE=")).map(String::from);
+        (note, String::from_utf8(out.stdout).unwrap())
+    };
+    let (note, header) = run(None);
+    assert_eq!(note, None, "the device's own fragment: {header}");
+    if !header.contains("GEMM kernels: Cooperative") {
+        return; // no matrix units (Mesa 22.3): no fragment to ask for
+    }
+    let (note, header) = run(Some("8x16x16"));
+    let note = note.unwrap_or_else(|| panic!("no line names the tile:\n{header}"));
+    assert!(
+        note.starts_with("vkdiff: VKDIFF_MATRIX_TILE=128x64: no such tile is built for")
+            && note.contains("8×16×16 fragments at 8 lanes (`")
+            && note.ends_with("`); its matrix units keep four subgroups a workgroup"),
+        "{note}"
+    );
+}

@@ -89,6 +89,20 @@ impl MatrixTile {
     }
 }
 
+/// The line a run prints where `tile` asks for an eight-subgroup tile that is not built for the
+/// fragment its matrix units take (`fragment`; None where its products do not run on them): its
+/// products then take four subgroups, as they would unasked.
+pub(crate) fn unbuilt_tile_note(tile: MatrixTile, device: &str, fragment: Option<Fragment>) -> Option<String> {
+    let f = fragment.filter(|f| tile.eight_subgroups() && !tile.built_for(f))?;
+    Some(format!(
+        "VKDIFF_MATRIX_TILE={}: no such tile is built for {} fragments at {} lanes (`{device}`); its matrix units \
+         keep four subgroups a workgroup",
+        tile.name(),
+        f.shape(),
+        f.lanes
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -118,6 +132,22 @@ mod tests {
         assert!(MatrixTile::Eight.built_for(&fragment(8, 16, 16, 16)), "128×128 for Intel's too");
         let err = MatrixTile::parse("128").unwrap_err().to_string();
         assert!(err.starts_with("VKDIFF_MATRIX_TILE=128: use 4"), "{err}");
+    }
+
+    #[test]
+    fn an_eight_subgroup_tile_not_built_for_the_fragment_is_named() {
+        let fragment = |m, n, k, lanes| Some(Fragment { m, n, k, lanes, flexible: false });
+        let intel = fragment(8, 16, 16, 16);
+        let note = unbuilt_tile_note(MatrixTile::EightTall, "Arc", intel).unwrap();
+        assert_eq!(
+            note,
+            "VKDIFF_MATRIX_TILE=128x64: no such tile is built for 8×16×16 fragments at 16 lanes (`Arc`); its matrix \
+             units keep four subgroups a workgroup"
+        );
+        assert_eq!(unbuilt_tile_note(MatrixTile::Eight, "Arc", intel), None, "128×128 is built for Intel's");
+        assert_eq!(unbuilt_tile_note(MatrixTile::EightTall, "H200", fragment(16, 16, 16, 32)), None);
+        assert_eq!(unbuilt_tile_note(MatrixTile::Auto, "Arc", intel), None);
+        assert_eq!(unbuilt_tile_note(MatrixTile::EightTall, "llvmpipe", None), None, "no matrix units");
     }
 
     #[test]
