@@ -1,9 +1,10 @@
-//! Compiles every kernel variant listed in `src/spec.rs` from WGSL to SPIR-V with naga, validating
+//! Compiles every kernel variant listed in `src/spec.rs` and `src/spec_cooperative.rs` from WGSL to SPIR-V with naga, validating
 //! each one; a broken kernel fails the build with the WGSL file and line.
 
 use std::{env, fmt::Write as _, fs, path::Path, process::exit};
 
 include!("src/spec.rs");
+include!("src/spec_cooperative.rs");
 include!("compile.rs");
 
 fn fail(message: &str) -> ! {
@@ -27,6 +28,7 @@ fn read_files(spec: &KernelSpec) -> Vec<(String, String)> {
 
 fn main() {
     println!("cargo::rerun-if-changed=src/spec.rs");
+    println!("cargo::rerun-if-changed=src/spec_cooperative.rs");
     println!("cargo::rerun-if-changed=compile.rs");
     println!("cargo::rerun-if-changed=spirv_rewrite.rs");
     println!("cargo::rerun-if-changed=wgsl");

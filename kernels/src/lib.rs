@@ -2,6 +2,7 @@
 //! embedded here as SPIR-V, one blob per variant (storage dtype × compile-time parameters).
 
 include!("spec.rs");
+include!("spec_cooperative.rs");
 
 /// One compiled variant of a kernel.
 pub struct Variant {

@@ -313,11 +313,7 @@ impl Context {
         .map_err(|e| Error::Memory(e.to_string()))?;
         let gpu_paths = gpu_paths_requested();
         let gemm_family = info.gemm_family(gpu_paths);
-        let matrix_tile = crate::MatrixTile::from_env()?;
-        let units = (gemm_family == GemmFamily::Cooperative).then(|| info.cooperative_variant()).flatten();
-        if let Some(note) = crate::matrix_tile::unbuilt_tile_note(matrix_tile, &info.name, units) {
-            eprintln!("vkdiff: {note}");
-        }
+        let matrix_tile = crate::matrix_tile::for_device(&info, gemm_family)?;
         let attention_kernel = crate::ProbeChoice::attention_from_env()?;
         let linear_kernel = crate::ProbeChoice::linear_from_env()?;
         let conv_kernel = crate::ProbeChoice::conv_from_env()?;

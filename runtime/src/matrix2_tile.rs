@@ -108,7 +108,7 @@ impl Matrix2Tile {
     }
 }
 
-/// Every tile built of `probe` (kernels/src/spec.rs).
+/// Every tile built of `probe` (kernels/src/spec_cooperative.rs).
 pub fn built(probe: Matrix2Probe) -> Vec<Matrix2Tile> {
     vkdiff_kernels::variants(probe.kernel(), Dtype::F16)
         .map(|v| {

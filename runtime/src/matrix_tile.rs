@@ -1,10 +1,12 @@
 //! `VKDIFF_MATRIX_TILE`: the workgroup tile of the matrix-unit GEMM and convolution.
 
+use crate::context::GemmFamily;
+use crate::device::DeviceInfo;
 use crate::error::{Error, Result};
 use crate::matrix_units::Fragment;
 
 /// How many subgroups share a workgroup's tile in `gemm_coop` and `conv_coop`, and in what grid
-/// (kernels/src/spec.rs). The eight-subgroup tiles are named by their size at 16×16×16
+/// (kernels/src/spec_cooperative.rs). The eight-subgroup tiles are named by their size at 16×16×16
 /// fragments (half each side at lavapipe's 8×8×8).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MatrixTile {
@@ -25,7 +27,7 @@ pub enum MatrixTile {
 }
 
 /// An eight-subgroup tile's grid of subgroups and fragments a subgroup: GM, GN, WM and WN in
-/// kernels/src/spec.rs.
+/// kernels/src/spec_cooperative.rs.
 pub type SubgroupGrid = [(&'static str, u32); 4];
 
 impl MatrixTile {
@@ -87,6 +89,17 @@ impl MatrixTile {
             vkdiff_kernels::find("gemm_coop", vkdiff_kernels::Dtype::F16, &want).is_some()
         })
     }
+}
+
+/// `VKDIFF_MATRIX_TILE` for a context on `info` whose products take `family`; where it asks for
+/// an eight-subgroup tile that its matrix units' fragment has none of, one line says so.
+pub(crate) fn for_device(info: &DeviceInfo, family: GemmFamily) -> Result<MatrixTile> {
+    let tile = MatrixTile::from_env()?;
+    let units = (family == GemmFamily::Cooperative).then(|| info.cooperative_variant()).flatten();
+    if let Some(note) = unbuilt_tile_note(tile, &info.name, units) {
+        eprintln!("vkdiff: {note}");
+    }
+    Ok(tile)
 }
 
 /// The line a run prints where `tile` asks for an eight-subgroup tile that is not built for the

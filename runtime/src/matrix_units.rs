@@ -1,5 +1,5 @@
 //! The device's matrix units as `VK_KHR_cooperative_matrix` lists them, and which cooperative
-//! kernel variant (kernels/src/spec.rs) fits them.
+//! kernel variant (kernels/src/spec_cooperative.rs) fits them.
 
 use crate::error::{Error, Result};
 use ash::vk;
@@ -131,7 +131,7 @@ impl Fragment {
 /// (M, N, K) of a fragment.
 type Shape = (u32, u32, u32);
 
-/// The cooperative variants built (kernels/src/spec.rs): fragment shape (M, N, K) and the
+/// The cooperative variants built (kernels/src/spec_cooperative.rs): fragment shape (M, N, K) and the
 /// subgroup widths each is built for, in order of preference. 16×16×16 is NVIDIA's and AMD's,
 /// 8×16×16 Intel Xe2's (16 lanes), 8×8×16 Intel Xe-HPG's (8 lanes), 8×8×8 lavapipe's. 8×16×16 at
 /// 8 lanes is the instantiation lavapipe proves (through flexible dimensions) for Xe2's. 8-wide

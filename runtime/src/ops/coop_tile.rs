@@ -10,7 +10,7 @@ use crate::matrix_units::Fragment;
 use crate::tensor::Dtype;
 
 /// A matrix-unit workgroup's tile: a `down`×`across` grid of subgroups, each `rows`×`cols`
-/// fragments (GM, GN, WM and WN in kernels/src/spec.rs).
+/// fragments (GM, GN, WM and WN in kernels/src/spec_cooperative.rs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) struct CoopTile {
     down: u32,
