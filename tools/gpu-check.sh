@@ -8,6 +8,8 @@
 #      probes) held to f64 on this driver first, since the time of a wrong kernel says nothing;
 #   3. the SDXL UNet at 1024², batch 2, beside diffusers on CUDA in the same call (where torch
 #      sees the GPU), on the tile `auto` takes;
+#   3b. the same UNet on the kit's baseline build (the last one a GPU timed), where it has one:
+#      every kernel change since, as one ratio from one machine;
 #   4. the UNet with VKDIFF_TUNE=1 (each shape's kernels timed and the fastest taken: the table
 #      of which tile or probe wins where);
 #   5. the SDXL products (`bench kernels`: the linear, convolution and attention rows on every
@@ -50,7 +52,9 @@ if ! ldconfig -p | grep -q 'libGLX.so.0' || ! ldconfig -p | grep -q 'libvulkan.s
     for deb in "$kit"/*.deb; do dpkg -x "$deb" /; done
     ldconfig
 fi
-for f in vkdiff kernels-test networks-test; do xz -d -c "$kit/$f.xz" >"$work/$f" && chmod +x "$work/$f"; done
+for f in vkdiff vkdiff-baseline kernels-test networks-test; do
+    [ -f "$kit/$f.xz" ] && xz -d -c "$kit/$f.xz" >"$work/$f" && chmod +x "$work/$f"
+done
 mkdir -p "$work/repo" && tar -xf "$kit/unet-fixtures.tar" -C "$work/repo"
 reference=none
 if python3 -c 'import torch; assert torch.cuda.is_available()' 2>/dev/null; then
@@ -69,9 +73,12 @@ step 90 env VKDIFF_EXPECT_COOPERATIVE=1 "$work/kernels-test" --test-threads 4
 unet() { # the output's name, the environment, then bench unet's further arguments
     local name=$1 env=$2
     shift 2
-    step 90 sh -c "$env '$vkdiff' bench unet --size 1024 --samples 3 --profile $* >'$out/unet-$name.txt'"
+    step 90 sh -c "$env '${bin:-$vkdiff}' bench unet --size 1024 --samples 3 --profile $* >'$out/unet-$name.txt'"
 }
 if [ "$reference" = cuda ]; then unet auto "" --reference-device cuda; else unet auto "" --no-cpu-reference; fi
+if [ -x "$work/vkdiff-baseline" ]; then
+    bin=$work/vkdiff-baseline unet "baseline-$(cat "$kit/baseline-commit")" "" --no-cpu-reference
+fi
 # Every shape's kernels timed against each other (its table lists each shape's candidates).
 unet tuned "VKDIFF_TUNE=1" --no-cpu-reference
 # The convolution rows are four shapes on every family and probe tile: more time.
