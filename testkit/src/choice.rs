@@ -97,10 +97,13 @@ pub fn assert_product_family<'a>(
             if let Some(asked) = asked_fragment() {
                 assert_eq!(shape, asked.map(Some), "{what}: {} in VKDIFF_FRAGMENT's shape", v.kernel);
             }
-            // The setting's eight-subgroup grid where this kernel has it built, else four subgroups.
+            // The setting's eight-subgroup grid where this kernel has it built in the unit it ran
+            // in, else four subgroups.
             let grid = ctx.matrix_tile().eight_subgroup_grid();
-            let built =
-                grid.filter(|g| vkdiff_kernels::find(v.kernel, Dtype::F16, &[&f.params()[..], g].concat()).is_some());
+            let unit = [("UW", v.param("UW").expect("a matrix-unit kernel's unit"))];
+            let built = grid.filter(|g| {
+                vkdiff_kernels::find(v.kernel, Dtype::F16, &[&f.params()[..], g, &unit].concat()).is_some()
+            });
             let ran = |name| v.param(name).unwrap_or(0);
             match built {
                 Some(grid) => {

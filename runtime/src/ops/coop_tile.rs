@@ -31,7 +31,8 @@ impl CoopTile {
 }
 
 /// The cooperative kernels' tile for a product: the eight-subgroup tile `setting` asks for
-/// ([`crate::MatrixTile`]: the context's, or the tuner's) where such a variant is built; else four
+/// ([`crate::MatrixTile`]: the context's, or the tuner's) where a variant of it is built with
+/// `params` (the variant parameters besides the tile's: B's layout, GEGLU, the unit); else four
 /// subgroups of 4×4 fragments (tiles of 8·FM × 8·FN) where such a variant is built, the product
 /// still makes 128 such tiles, enough to keep a GPU's 100+ compute units busy, and the accumulators fit a GPU
 /// lane's registers (at most 64 f32 each: 16×16 fragments on 64-lane subgroups); else four of

@@ -277,15 +277,10 @@ pub(super) fn dispatch_gemm_family(
     let cooperative =
         ctx.info().cooperative_variant().filter(|_| family == GemmFamily::Cooperative && dtype == Dtype::F16 && s.vec4);
     if let Some(fragment) = cooperative {
-        let tile = super::coop_tile::cooperative_tile(&ctx, tile, s, &fragment, names.cooperative, params);
         let unit = if s.vec8 { 8 } else { 4 };
-        let want: Vec<(&str, u32)> = fragment
-            .params()
-            .into_iter()
-            .chain(tile.params())
-            .chain([("UW", unit)])
-            .chain(params.iter().copied())
-            .collect();
+        let shared: Vec<(&str, u32)> = params.iter().copied().chain([("UW", unit)]).collect();
+        let tile = super::coop_tile::cooperative_tile(&ctx, tile, s, &fragment, names.cooperative, &shared);
+        let want: Vec<(&str, u32)> = fragment.params().into_iter().chain(tile.params()).chain(shared).collect();
         let k = kernel(&ctx, names.cooperative, dtype, &want, 4)?;
         let (rows, columns) = tile.size(&fragment);
         return rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(columns)), u(s.m.div_ceil(rows)), u(s.batch)]);
