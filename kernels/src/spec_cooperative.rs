@@ -18,8 +18,9 @@
 /// K-steps of two, in three tiles the runtime chooses where asked (`VKDIFF_MATRIX_TILE`, or
 /// the tuner): 2×4 of 4×2 fragments (128×128 at 16×16×16), built for every shape but AMD's 64
 /// lanes, which reach 128×128 with four subgroups of 4×4, and in units of 8 only (in units of 4
-/// an invocation stages twice the units, and NAK gave those 152–160 registers a lane, past the
-/// 128 that let two such workgroups share an SM; shapes off multiples of 8 keep four subgroups);
+/// an invocation stages twice the units, and NAK gave those up to 152 registers a lane, 160 the
+/// convolution's, past the 128 that let two such workgroups share an SM; shapes off multiples
+/// of 8 keep four subgroups);
 /// and 4×2 or 2×4 of 2×2 fragments (128×64
 /// and 64×128, the registers of the 64×64 tile's subgroups), built for NVIDIA's 16×16×16 at 32
 /// lanes and lavapipe's 8×8×8 twin. KS = fragments per K-step: 4 for products, 2 for convolutions
