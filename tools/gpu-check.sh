@@ -48,7 +48,10 @@ step() {
 }
 
 # The Vulkan loader and the GL dispatch libraries beside NVIDIA's driver, where they are missing.
-if ! ldconfig -p | grep -q 'libGLX.so.0' || ! ldconfig -p | grep -q 'libvulkan.so.1'; then
+# (The cache is searched after it is read: a pipe into grep -q fails under pipefail whenever
+# grep stops reading first.)
+cache=$(ldconfig -p)
+if ! grep -q 'libGLX.so.0' <<<"$cache" || ! grep -q 'libvulkan.so.1' <<<"$cache"; then
     for deb in "$kit"/*.deb; do dpkg -x "$deb" /; done
     ldconfig
 fi
