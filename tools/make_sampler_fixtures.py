@@ -24,9 +24,17 @@ Writes samplers.safetensors (every tensor float32) and samplers.json, which list
       Cases of 2 steps or more have `<case>/add_noise`: img2img's start, a fresh scheduler after
       set_timesteps(steps) and set_begin_index(steps // 2), add_noise(x0, noise, timesteps[begin])
       where g = manual_seed(seed + 1); x0 = randn(shape, generator=g); noise = randn(shape, g).
-      Cases with "error": true are settings vkdiff refuses (no tensors): Karras sigmas for DDIM
-      (unsupported by diffusers) and for Euler-ancestral (diffusers 0.42.1 silently ignores
-      use_karras_sigmas there; checked below), and DDIM with a negative timestep.
+      Cases with "timesteps" call set_timesteps(timesteps=...) (their "steps" is the count); cases
+      with "eta" pass it to TCDScheduler.step as the pipelines do (without it, step's default 0.3).
+      LCM and TCD cases (added 2026-12-04, diffusers 0.42.1, torch 2.15.0, the same 2-core AMD EPYC)
+      cover step counts 1 to 50, custom schedules, v/sample prediction, original_inference_steps,
+      clip_sample and gamma 0 to 1; Euler and DPM++ 2M take custom schedules and prediction "sample"
+      (SDXL-Lightning's one-step UNet).
+      Cases with "error": true are settings vkdiff refuses (no tensors): Karras sigmas for DDIM,
+      LCM and TCD (unsupported by diffusers) and for Euler-ancestral (diffusers 0.42.1 silently
+      ignores use_karras_sigmas there; checked below), DDIM with a negative timestep, custom
+      timesteps where the class takes none, and the schedules diffusers raises on;
+      "diffusers_refuses" says whether diffusers raises too.
 """
 import argparse
 import json
@@ -35,7 +43,7 @@ import pathlib
 import numpy as np
 import torch
 from diffusers import (DDIMScheduler, DPMSolverMultistepScheduler, EulerAncestralDiscreteScheduler,
-                       EulerDiscreteScheduler)
+                       EulerDiscreteScheduler, LCMScheduler, TCDScheduler)
 from safetensors.torch import save_file
 
 # stabilityai/stable-diffusion-xl-base-1.0 scheduler/scheduler_config.json
@@ -48,8 +56,11 @@ SDXL = {
 }
 CLASSES = {
     "euler": EulerDiscreteScheduler, "euler_a": EulerAncestralDiscreteScheduler,
-    "dpmpp_2m": DPMSolverMultistepScheduler, "ddim": DDIMScheduler,
+    "dpmpp_2m": DPMSolverMultistepScheduler, "ddim": DDIMScheduler, "lcm": LCMScheduler, "tcd": TCDScheduler,
 }
+# The few-step recipes' custom schedules (diffusers' `timesteps=`): DMD2's, Hyper-SD's one-step
+# UNet's, and one off the distillation schedule.
+CUSTOM_TIMESTEPS = [[999, 749, 499, 249], [800], [999, 850, 700, 500, 300, 120, 10]]
 RNG_SEEDS = [0, 42, 2**32 + 5, 2**63 + 7, 123456789]
 RNG_SIZES = [1, 3, 15, 16, 17, 33, 100, 1000]
 RNG_SEQUENCES = [(0, [3, 5]), (42, [20, 7]), (7, [3, 5, 16, 1])]
@@ -63,16 +74,22 @@ def model(x_in, t):
 def sampler_cases():
     cases = []
 
-    def add(name, kind, karras=False, steps=7, error=False, **overrides):
+    def add(name, kind, karras=False, steps=7, error=False, timesteps=None, eta=None, **overrides):
         config = dict(SDXL)
         for key, value in overrides.items():
             if value is None:
                 config.pop(key, None)
             else:
                 config[key] = value
-        cases.append(dict(name=name, kind=kind, karras=karras, steps=steps, config=config, error=error))
+        case = dict(name=name, kind=kind, karras=karras, steps=len(timesteps) if timesteps else steps,
+                    config=config, error=error)
+        if timesteps is not None:
+            case["timesteps"] = timesteps
+        if eta is not None:
+            case["eta"] = eta
+        cases.append(case)
 
-    for kind in CLASSES:
+    for kind in ["euler", "euler_a", "dpmpp_2m", "ddim"]:
         for karras in [False, True]:
             if karras and kind in ("euler_a", "ddim"):
                 add(f"{kind}/karras", kind, karras=True, error=True)
@@ -81,7 +98,7 @@ def sampler_cases():
                 for steps in [1, 4, 7, 30]:
                     name = f"{kind}/{'karras' if karras else 'plain'}/{spacing}/{steps}"
                     add(name, kind, karras, steps, timestep_spacing=spacing)
-    for kind in CLASSES:
+    for kind in ["euler", "euler_a", "dpmpp_2m", "ddim"]:
         add(f"{kind}/v_prediction", kind, prediction_type="v_prediction")
         add(f"{kind}/linear_betas", kind, beta_schedule="linear", beta_start=0.0001, beta_end=0.02,
             timestep_spacing="linspace", steps_offset=0)
@@ -99,13 +116,71 @@ def sampler_cases():
         euler_at_final=True)
     # DDIMScheduler's own defaults: clip_sample and set_alpha_to_one both true.
     add("ddim/class_defaults", "ddim", clip_sample=None, set_alpha_to_one=None)
+    # Added 2026-12-04, after the first cases so that those keep their seeds.
+    for kind in ["lcm", "tcd"]:
+        # Their schedules ignore timestep_spacing: one spacing suffices.
+        for steps in [1, 2, 4, 7, 8, 50]:
+            add(f"{kind}/{steps}", kind, steps=steps)
+        for timesteps in CUSTOM_TIMESTEPS:
+            add(f"{kind}/custom/{len(timesteps)}", kind, timesteps=timesteps)
+        add(f"{kind}/v_prediction", kind, prediction_type="v_prediction")
+        add(f"{kind}/sample", kind, prediction_type="sample")
+        add(f"{kind}/original_inference_steps_20", kind, steps=4, original_inference_steps=20)
+        add(f"{kind}/class_defaults", kind, set_alpha_to_one=None, steps_offset=None, timestep_spacing=None)
+        add(f"{kind}/too_many_steps", kind, steps=51, error=True)
+        add(f"{kind}/karras", kind, karras=True, error=True)
+    add("lcm/clip_sample", "lcm", clip_sample=True, clip_sample_range=0.5)
+    for eta in [0.0, 0.5, 1.0]:
+        add(f"tcd/eta_{eta}", "tcd", steps=4, eta=eta)
+        add(f"tcd/custom/eta_{eta}", "tcd", timesteps=CUSTOM_TIMESTEPS[0], eta=eta)
+    add("tcd/eta_1.5", "tcd", eta=1.5, error=True)
+    for kind in ["euler", "dpmpp_2m"]:
+        for timesteps in CUSTOM_TIMESTEPS:
+            for spacing in ["leading", "trailing"]:  # the spacing still sets Euler's init_noise_sigma
+                add(f"{kind}/custom/{len(timesteps)}/{spacing}", kind, timesteps=timesteps, timestep_spacing=spacing)
+        add(f"{kind}/custom/karras", kind, karras=True, timesteps=CUSTOM_TIMESTEPS[0], error=True)
+        add(f"{kind}/sample/trailing", kind, steps=4, prediction_type="sample", timestep_spacing="trailing")
+    add("euler/sample/trailing/1", "euler", steps=1, prediction_type="sample", timestep_spacing="trailing")
+    add("ddim/sample/trailing", "ddim", steps=4, prediction_type="sample", timestep_spacing="trailing")
+    for kind in ["euler_a", "ddim"]:
+        add(f"{kind}/custom", kind, timesteps=CUSTOM_TIMESTEPS[0], error=True)
+    add("euler_a/sample", "euler_a", prediction_type="sample", error=True)
+    add("euler/custom/ascending", "euler", timesteps=[249, 499], error=True)
+    add("lcm/custom/past_training", "lcm", timesteps=[1000, 500], error=True)
+
     return cases
+
+
+def set_timesteps(sched, case):
+    if "timesteps" in case:
+        sched.set_timesteps(timesteps=case["timesteps"])
+    else:
+        sched.set_timesteps(case["steps"])
+
+
+def step_kwargs(case):
+    """TCD's gamma as the pipelines pass it (`eta`); TCDScheduler.step's own default is 0.3."""
+    return {"eta": case["eta"]} if "eta" in case else {}
+
+
+def check_refused(case):
+    """The cases marked as errors that diffusers itself refuses do raise there."""
+    sched = CLASSES[case["kind"]].from_config(case["config"], use_karras_sigmas=case["karras"])
+    try:
+        set_timesteps(sched, case)
+        if case["kind"] == "euler_a":  # prediction_type="sample": raised at the first step
+            sched.step(torch.zeros(SHAPE), sched.timesteps[0], torch.zeros(SHAPE))
+        if "eta" in case:
+            sched.step(torch.zeros(SHAPE), sched.timesteps[0], torch.zeros(SHAPE), eta=case["eta"])
+    except (ValueError, TypeError, NotImplementedError, AssertionError):
+        return True
+    return False
 
 
 def run_case(case, seed, tensors):
     cls = CLASSES[case["kind"]]
     sched = cls.from_config(case["config"], use_karras_sigmas=case["karras"])
-    sched.set_timesteps(case["steps"])
+    set_timesteps(sched, case)
     name = case["name"]
     tensors[f"{name}/timesteps"] = sched.timesteps.to(torch.float32)
     if hasattr(sched, "sigmas"):
@@ -118,7 +193,7 @@ def run_case(case, seed, tensors):
         x_in = sched.scale_model_input(latents, t)
         eps = model(x_in, t)
         assert eps.dtype == torch.float32
-        latents = sched.step(eps, t, latents, generator=g).prev_sample
+        latents = sched.step(eps, t, latents, generator=g, **step_kwargs(case)).prev_sample
         per_step.append(latents)
     tensors[f"{name}/final"] = latents.contiguous()
     if case["steps"] == 7:
@@ -127,7 +202,7 @@ def run_case(case, seed, tensors):
     # get_timesteps sets it, noising x0 to that step's timestep.
     if case["steps"] >= 2:
         start = sched.__class__.from_config(case["config"], use_karras_sigmas=case["karras"])
-        start.set_timesteps(case["steps"])
+        set_timesteps(start, case)
         begin = case["steps"] // 2
         if hasattr(start, "set_begin_index"):  # DDIM noises by the timestep alone
             start.set_begin_index(begin)
@@ -167,6 +242,8 @@ def main():
         case["seed"] = seed
         if not case["error"]:
             run_case(case, seed, tensors)
+        else:
+            case["diffusers_refuses"] = check_refused(case)
         listing["samplers"].append(case)
     save_file(tensors, str(out / "samplers.safetensors"))
     (out / "samplers.json").write_text(json.dumps(listing, indent=1) + "\n")

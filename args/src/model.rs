@@ -6,8 +6,8 @@ use crate::scene::ControlMode;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 use vkdiff_pipeline::{
-    ControlNetSettings, IpAdapterSettings, IpMode, IpScale, LoraSetting, ModelSettings, PromptSyntax, SamplerKind,
-    Sampling, SizeConditioning, VaeTilingSetting,
+    ControlNetSettings, IpAdapterSettings, IpMode, IpScale, LoraSetting, ModelSettings, PredictionType, PromptSyntax,
+    SamplerKind, Sampling, ScheduleOptions, SizeConditioning, TimestepSpacing, VaeTilingSetting,
 };
 use vkdiff_runtime::Dtype;
 
@@ -203,18 +203,35 @@ pub struct SamplingArgs {
     /// Without it, the negative conditioning is zeros (diffusers' SDXL default).
     #[arg(long)]
     pub negative_prompt: Option<String>,
-    /// Denoising steps (with img2img, of the full schedule, as diffusers counts them).
-    #[arg(long, default_value_t = 30)]
-    steps: usize,
+    /// Denoising steps (with img2img, of the full schedule, as diffusers counts them) [default: 30,
+    /// or the count of --timesteps].
+    #[arg(long, conflicts_with = "timesteps")]
+    steps: Option<usize>,
     /// Classifier-free guidance scale; 1 or less runs without the negative pass.
     #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
     cfg: f32,
-    /// euler, euler_a, dpmpp_2m or ddim.
+    /// euler, euler_a, dpmpp_2m, ddim, lcm (LCM-LoRA, DMD2) or tcd (TCD, Hyper-SD), as diffusers'
+    /// EulerDiscrete, EulerAncestralDiscrete, DPMSolverMultistep, DDIM, LCM and TCD schedulers.
     #[arg(long, default_value = "euler")]
     sampler: SamplerKind,
     /// Noise levels: the model's scheduler_config.json as it is, or Karras et al.'s (euler, dpmpp_2m).
     #[arg(long, value_enum, default_value_t = Schedule::Default)]
     scheduler: Schedule,
+    /// leading, linspace or trailing, in place of the model's scheduler_config.json (SDXL base:
+    /// leading). Lightning, Hyper-SD and Turbo want trailing. lcm and tcd have none.
+    #[arg(long, value_name = "SPACING")]
+    timestep_spacing: Option<TimestepSpacing>,
+    /// The schedule itself, as diffusers' `timesteps=`: descending training timesteps, such as
+    /// DMD2's 999,749,499,249 (euler, dpmpp_2m, lcm, tcd); the step count is theirs.
+    #[arg(long, value_delimiter = ',', value_name = "T,T,...")]
+    timesteps: Vec<u32>,
+    /// epsilon, v_prediction or sample, in place of the model's scheduler_config.json
+    /// (SDXL-Lightning's one-step x0 UNet: sample).
+    #[arg(long, value_name = "TYPE")]
+    prediction_type: Option<PredictionType>,
+    /// tcd's gamma, the stochastic share of each step, in [0, 1] [default: 0.3].
+    #[arg(long)]
+    eta: Option<f64>,
     /// Noise generator: torch-cpu reproduces torch.randn on a CPU generator bit for bit.
     #[arg(long, default_value = vkdiff_pipeline::RNG, value_parser = [vkdiff_pipeline::RNG])]
     rng: String,
@@ -254,6 +271,9 @@ fn parse_top_left(text: &str) -> Result<(usize, usize), String> {
     Ok((top.trim().parse().map_err(|_| bad())?, left.trim().parse().map_err(|_| bad())?))
 }
 
+/// The paper's step count.
+const DEFAULT_STEPS: usize = 30;
+
 impl SamplingArgs {
     pub fn sampling(&self, width: usize, height: usize) -> Sampling {
         let size_conditioning = SizeConditioning {
@@ -261,11 +281,18 @@ impl SamplingArgs {
             crop_top_left: self.crops_coords_top_left,
             target: self.target_size,
         };
+        let schedule = ScheduleOptions {
+            karras: self.scheduler == Schedule::Karras,
+            spacing: self.timestep_spacing,
+            prediction: self.prediction_type,
+            timesteps: (!self.timesteps.is_empty()).then(|| self.timesteps.clone()),
+            eta: self.eta,
+        };
         Sampling {
-            steps: self.steps,
+            steps: if self.timesteps.is_empty() { self.steps.unwrap_or(DEFAULT_STEPS) } else { self.timesteps.len() },
             guidance_scale: self.cfg,
             sampler: self.sampler,
-            karras: self.scheduler == Schedule::Karras,
+            schedule,
             width,
             height,
             size_conditioning,

@@ -225,7 +225,7 @@ pub(crate) fn paper_set(
         steps,
         guidance_scale: 5.0,
         sampler: SamplerKind::Euler,
-        karras: false,
+        schedule: Default::default(),
         width: size,
         height: size,
         size_conditioning: Default::default(),

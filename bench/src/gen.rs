@@ -113,7 +113,7 @@ pub(super) fn bench_job(size: usize, steps: usize) -> TextToImage {
             steps,
             guidance_scale: 5.0,
             sampler: SamplerKind::Euler,
-            karras: false,
+            schedule: Default::default(),
             width: size,
             height: size,
             size_conditioning: Default::default(),

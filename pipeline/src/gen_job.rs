@@ -5,6 +5,7 @@
 
 use crate::error::{Error, Result};
 use crate::files::{png_bytes, write_atomic_all};
+use crate::schedulers::SchedulerConfig;
 use crate::sdxl::{check_control_shape, Sdxl, Timings, WorkflowModels};
 use crate::settings::{GenSettings, GuideInputs};
 use std::path::{Path, PathBuf};
@@ -77,7 +78,7 @@ impl GenJob {
         sampling.height = height.unwrap_or(default_h);
         sampling.strength = settings.init_image.as_ref().map(|_| strength.unwrap_or(DEFAULT_STRENGTH));
         let sampling = &settings.job.sampling;
-        sampling.check()?;
+        sampling.check(&SchedulerConfig::of_model(&settings.models.model)?)?;
         for prompt in std::iter::once(&settings.job.prompt).chain(&settings.job.negative_prompt) {
             sampling.prompt_syntax.check(prompt)?;
         }

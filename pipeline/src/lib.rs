@@ -16,7 +16,10 @@ mod tokenizer;
 pub use error::{Error, Result};
 pub use gen_job::{GenEvent, GenJob, GenRequest};
 pub use rng::TorchCpuRng;
-pub use schedulers::{Sampler, SamplerKind, SchedulerConfig, SDXL_SCHEDULER_CONFIG};
+pub use schedulers::{
+    PredictionType, Sampler, SamplerKind, ScheduleOptions, SchedulerConfig, TimestepSpacing, SDXL_SCHEDULER_CONFIG,
+    TCD_DEFAULT_ETA,
+};
 pub use sdxl::{
     check_control_shape, BatchOutput, Conditioning, ControlGuide, ControlNetUse, Denoised, Denoiser, Generated, Guides,
     ImageGuide, InitLatents, IpAdapterUse, ItemInputs, Sdxl, StyleModels, Timings, VaePlan, WorkflowModels,

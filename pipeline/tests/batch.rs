@@ -60,7 +60,7 @@ fn alone_and_together(
         steps: if binding_limit.is_some() { 1 } else { 3 },
         guidance_scale: 6.0,
         sampler: SamplerKind::EulerAncestral,
-        karras: false,
+        schedule: Default::default(),
         width: size.0,
         height: size.1,
         size_conditioning: Default::default(),

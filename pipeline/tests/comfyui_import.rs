@@ -7,7 +7,9 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use vkdiff_pipeline::files::png_bytes;
 use vkdiff_pipeline::images::ControlDepth;
-use vkdiff_pipeline::{ControlNetSettings, GenSettings, LoraSetting, ModelSettings, RgbImage, Sampling, TextToImage};
+use vkdiff_pipeline::{
+    ControlNetSettings, GenSettings, LoraSetting, ModelSettings, RgbImage, Sampling, ScheduleOptions, TextToImage,
+};
 use vkdiff_runtime::Dtype;
 
 /// ComfyUI's KSampler sampler names (comfy/samplers.py, KSAMPLER_NAMES and the extra ones).
@@ -135,7 +137,7 @@ fn settings(prompt: &str, negative: Option<&str>, sampler: &str, karras: bool) -
                 steps: 30,
                 guidance_scale: 5.5,
                 sampler: sampler.parse().unwrap(),
-                karras,
+                schedule: ScheduleOptions { karras, ..Default::default() },
                 width: 1000,
                 height: 768,
                 size_conditioning: Default::default(),

@@ -3,14 +3,15 @@
 
 use serde_json::Value;
 use vkdiff_formats::SafeTensors;
-use vkdiff_pipeline::{Error, Sampler, SamplerKind, SchedulerConfig, TorchCpuRng};
+use vkdiff_pipeline::{Error, Sampler, SamplerKind, ScheduleOptions, SchedulerConfig, TorchCpuRng};
 
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/pipeline/samplers");
 
 /// Largest relative L2 error allowed between a loop's latents and diffusers' (after every step where
-/// recorded, and at the end). Measured worst: euler 4.6e-8, euler_a 4.4e-8, dpmpp_2m 2.7e-7, ddim
-/// 1.1e-7; most cases are bit-exact, the rest differ through torch's (MKL's) sqrt, ln and exp, which
-/// are off by one ulp in a fraction of a percent of cases, and numpy's float32 log.
+/// recorded, and at the end). Measured worst: euler 5.2e-8, euler_a 4.4e-8, dpmpp_2m 2.7e-7, ddim
+/// 1.1e-7, lcm 3.6e-7, tcd 7.0e-7; most cases are bit-exact, the rest differ through torch's (MKL's)
+/// sqrt, ln and exp, which are off by one ulp in a fraction of a percent of cases, and numpy's
+/// float32 log.
 const LOOP_TOLERANCE: f64 = 1e-6;
 
 fn fixtures() -> (SafeTensors, Value) {
@@ -57,7 +58,13 @@ fn consecutive_randn_calls_continue_torchs_stream() {
 fn sampler(case: &Value) -> Result<Sampler, Error> {
     let kind: SamplerKind = case["kind"].as_str().unwrap().parse().unwrap();
     let config = SchedulerConfig::from_json(&case["config"].to_string()).unwrap();
-    Sampler::new(kind, &config, case["karras"].as_bool().unwrap(), case["steps"].as_u64().unwrap() as usize)
+    let options = ScheduleOptions {
+        karras: case["karras"].as_bool().unwrap(),
+        timesteps: case["timesteps"].as_array().map(|t| t.iter().map(|t| t.as_u64().unwrap() as u32).collect()),
+        eta: case["eta"].as_f64(),
+        ..Default::default()
+    };
+    Sampler::new(kind, &config, case["steps"].as_u64().unwrap() as usize, &options)
 }
 
 fn cases(listing: &Value, errors: bool) -> impl Iterator<Item = &Value> {
@@ -173,7 +180,8 @@ fn refused_settings_are_one_line_errors() {
     for (kind, edit, key) in [
         (SamplerKind::Euler, r#"{"beta_schedule": "squaredcos_cap_v2"}"#, "beta_schedule"),
         (SamplerKind::Euler, r#"{"rescale_betas_zero_snr": true}"#, "rescale_betas_zero_snr"),
-        (SamplerKind::Ddim, r#"{"prediction_type": "sample"}"#, "prediction_type"),
+        (SamplerKind::EulerAncestral, r#"{"prediction_type": "sample"}"#, "prediction_type"),
+        (SamplerKind::Ddim, r#"{"prediction_type": "flow_prediction"}"#, "prediction_type"),
         (SamplerKind::EulerAncestral, r#"{"timestep_spacing": "uniform"}"#, "timestep_spacing"),
         (SamplerKind::Euler, r#"{"interpolation_type": "log_linear"}"#, "interpolation_type"),
         (SamplerKind::DpmSolver2M, r#"{"algorithm_type": "sde-dpmsolver++"}"#, "algorithm_type"),
@@ -181,17 +189,18 @@ fn refused_settings_are_one_line_errors() {
         (SamplerKind::Ddim, r#"{"thresholding": true}"#, "thresholding"),
         (SamplerKind::Euler, r#"{"steps_offset": "one"}"#, "steps_offset"),
     ] {
-        let message = match Sampler::new(kind, &sdxl(edit), false, 10) {
+        let message = match Sampler::new(kind, &sdxl(edit), 10, &ScheduleOptions::default()) {
             Err(Error::Config(message)) => message,
             other => panic!("{edit}: {:?}", other.err()),
         };
         assert!(message.contains(key) && !message.contains('\n'), "{edit}: {message}");
     }
     let sdxl_base = SchedulerConfig::sdxl_base();
-    assert!(Sampler::new(SamplerKind::Euler, &sdxl_base, false, 0).is_err());
+    let plain = ScheduleOptions::default();
+    assert!(Sampler::new(SamplerKind::Euler, &sdxl_base, 0, &plain).is_err());
     // Leading spacing past 1000 steps repeats the first timestep; diffusers would run off its schedule.
     for (kind, steps) in [(SamplerKind::Euler, 1001), (SamplerKind::DpmSolver2M, 1000), (SamplerKind::Ddim, 1001)] {
-        assert!(matches!(Sampler::new(kind, &sdxl_base, false, steps), Err(Error::Config(_))), "{kind} {steps}");
+        assert!(matches!(Sampler::new(kind, &sdxl_base, steps, &plain), Err(Error::Config(_))), "{kind} {steps}");
     }
     let message = "heun".parse::<SamplerKind>().unwrap_err().to_string();
     assert!(message.contains("euler, euler_a, dpmpp_2m, ddim"), "{message}");
@@ -199,7 +208,8 @@ fn refused_settings_are_one_line_errors() {
 
 #[test]
 fn sdxl_base_config_gives_the_documented_schedule() {
-    let sampler = Sampler::new(SamplerKind::Euler, &SchedulerConfig::sdxl_base(), false, 30).unwrap();
+    let sampler =
+        Sampler::new(SamplerKind::Euler, &SchedulerConfig::sdxl_base(), 30, &ScheduleOptions::default()).unwrap();
     assert_eq!(&sampler.timesteps()[..3], [958.0, 925.0, 892.0]);
     assert_eq!(sampler.timesteps()[29], 1.0);
     assert!((sampler.init_noise_sigma() - 11.5203).abs() < 1e-4);

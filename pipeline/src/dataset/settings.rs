@@ -5,12 +5,13 @@
 
 use super::sources::SceneSource;
 use crate::error::{Error, Result};
+use crate::schedulers::SchedulerConfig;
 use crate::sdxl::Sdxl;
 use crate::settings::ip_scale::IpScale;
 use crate::settings::models::recorded_path;
 use crate::settings::prompt_syntax::PromptSyntax;
 use crate::settings::sampling::{Sampling, SizeConditioning};
-use crate::settings::{control_depth_name, precision_name, schedule_name, ModelSettings, RNG};
+use crate::settings::{control_depth_name, precision_name, schedule_name, schedule_records, ModelSettings, RNG};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 use vkdiff_render::control::ControlDepth;
@@ -240,6 +241,7 @@ impl DatasetSettings {
             "rng": RNG,
             "lora": m.lora_flags(),
         }));
+        map.extend(schedule_records(s).into_iter().map(|(k, v)| (k.to_string(), v)));
         let c = &s.size_conditioning;
         let size = |s: Option<(usize, usize)>| s.map(|(w, h)| format!("{w}x{h}"));
         if s.prompt_syntax == PromptSyntax::Weighted {
@@ -321,7 +323,7 @@ fn check_diffusion(
         return Err(Error::Setting(Message::setting("ip_set").then(": a set names no image")));
     }
     models.check()?;
-    sampling.check()?;
+    sampling.check(&SchedulerConfig::of_model(&models.model)?)?;
     for prompt in prompts.iter().chain(negative_prompt) {
         sampling.prompt_syntax.check(prompt)?;
     }

@@ -39,19 +39,69 @@ pub struct SchedulerConfig {
     keys: Map<String, Value>,
 }
 
-/// What the network predicts.
+/// What the network predicts (`prediction_type`): the noise, the velocity, or the clean sample
+/// (SDXL-Lightning's one-step UNet).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) enum Prediction {
+pub enum PredictionType {
     Epsilon,
     V,
+    Sample,
 }
 
-/// How inference timesteps are spread over the training ones (Table 2 of arXiv 2305.08891).
+const PREDICTIONS: [(&str, PredictionType); 3] =
+    [("epsilon", PredictionType::Epsilon), ("v_prediction", PredictionType::V), ("sample", PredictionType::Sample)];
+
+/// How inference timesteps are spread over the training ones (`timestep_spacing`; Table 2 of
+/// arXiv 2305.08891).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub(super) enum Spacing {
+pub enum TimestepSpacing {
     Leading,
     Trailing,
     Linspace,
+}
+
+const SPACINGS: [(&str, TimestepSpacing); 3] = [
+    ("leading", TimestepSpacing::Leading),
+    ("trailing", TimestepSpacing::Trailing),
+    ("linspace", TimestepSpacing::Linspace),
+];
+
+/// `name` among `table`'s, or an error listing them.
+fn named<T: Copy>(table: &[(&str, T)], what: &str, name: &str) -> Result<T> {
+    table.iter().find(|(n, _)| *n == name).map(|&(_, v)| v).ok_or_else(|| {
+        let valid: Vec<&str> = table.iter().map(|(n, _)| *n).collect();
+        Error::Config(format!("unknown {what} `{name}` (valid: {})", valid.join(", ")))
+    })
+}
+
+fn name_of<T: PartialEq>(table: &[(&'static str, T)], value: &T) -> &'static str {
+    table.iter().find(|(_, v)| v == value).map_or("?", |(n, _)| n)
+}
+
+impl std::str::FromStr for TimestepSpacing {
+    type Err = Error;
+    fn from_str(name: &str) -> Result<TimestepSpacing> {
+        named(&SPACINGS, "timestep spacing", name)
+    }
+}
+
+impl std::fmt::Display for TimestepSpacing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(name_of(&SPACINGS, self))
+    }
+}
+
+impl std::str::FromStr for PredictionType {
+    type Err = Error;
+    fn from_str(name: &str) -> Result<PredictionType> {
+        named(&PREDICTIONS, "prediction type", name)
+    }
+}
+
+impl std::fmt::Display for PredictionType {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(name_of(&PREDICTIONS, self))
+    }
 }
 
 impl SchedulerConfig {
@@ -115,20 +165,32 @@ impl SchedulerConfig {
         self.integer("steps_offset", 0)
     }
 
-    pub(super) fn spacing(&self, default: &str) -> Result<Spacing> {
-        match self.text("timestep_spacing", default)? {
-            "leading" => Ok(Spacing::Leading),
-            "trailing" => Ok(Spacing::Trailing),
-            "linspace" => Ok(Spacing::Linspace),
-            _ => Err(self.unsupported("timestep_spacing", "(use \"leading\", \"trailing\" or \"linspace\")")),
-        }
+    pub(super) fn spacing(&self, default: &str) -> Result<TimestepSpacing> {
+        self.text("timestep_spacing", default)?
+            .parse()
+            .map_err(|_| self.unsupported("timestep_spacing", "(use \"leading\", \"trailing\" or \"linspace\")"))
     }
 
-    pub(super) fn prediction(&self) -> Result<Prediction> {
-        match self.text("prediction_type", "epsilon")? {
-            "epsilon" => Ok(Prediction::Epsilon),
-            "v_prediction" => Ok(Prediction::V),
-            _ => Err(self.unsupported("prediction_type", "(use \"epsilon\" or \"v_prediction\")")),
+    pub(super) fn prediction(&self) -> Result<PredictionType> {
+        self.text("prediction_type", "epsilon")?
+            .parse()
+            .map_err(|_| self.unsupported("prediction_type", "(use \"epsilon\", \"v_prediction\" or \"sample\")"))
+    }
+
+    /// This config with `key` set, as diffusers' `from_config(config, key=value)`: a flag given in
+    /// place of the model's setting.
+    pub fn with(&self, key: &str, value: &str) -> SchedulerConfig {
+        let mut keys = self.keys.clone();
+        keys.insert(key.into(), Value::String(value.into()));
+        SchedulerConfig { source: format!("{} with {key} \"{value}\"", self.source), keys }
+    }
+
+    /// The config of the model at `path`: a diffusers folder's `scheduler/scheduler_config.json`,
+    /// else SDXL base's (a single file carries none).
+    pub fn of_model(path: &Path) -> Result<SchedulerConfig> {
+        match Some(path.join("scheduler/scheduler_config.json")).filter(|p| path.is_dir() && p.is_file()) {
+            Some(p) => SchedulerConfig::load(&p),
+            None => Ok(SchedulerConfig::sdxl_base()),
         }
     }
 

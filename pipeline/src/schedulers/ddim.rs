@@ -1,8 +1,8 @@
 //! diffusers `DDIMScheduler` with η = 0: x₀ and ε from the model output, then
 //! x_prev = √ᾱ_prev·x₀ + √(1 − ᾱ_prev)·ε, on the variance-preserving latent.
 
-use super::config::{Prediction, SchedulerConfig, Spacing};
-use super::{numpy_linspace, spaced_timesteps, Solver};
+use super::config::{PredictionType, SchedulerConfig, TimestepSpacing};
+use super::{numpy_linspace, spaced_timesteps, vp_add_noise, vp_prediction, Solver};
 use crate::rng::TorchCpuRng;
 use crate::{Error, Result};
 use serde_json::Value;
@@ -14,7 +14,7 @@ pub(super) struct Ddim {
     final_alpha_cumprod: f32,
     /// `num_train_timesteps // steps`: how far back "previous" is, whatever the spacing.
     stride: i64,
-    prediction: Prediction,
+    prediction: PredictionType,
     /// x₀ is clamped to ±this (`clip_sample`).
     clip: Option<f32>,
 }
@@ -29,7 +29,7 @@ impl Ddim {
             return Err(Error::Config(format!("ddim: {steps} steps exceed the {train} training timesteps")));
         }
         let timesteps: Vec<f64> = match config.spacing("leading")? {
-            Spacing::Linspace => {
+            TimestepSpacing::Linspace => {
                 numpy_linspace(0.0, (train - 1) as f64, steps).iter().rev().map(|t| t.round_ties_even()).collect()
             }
             spacing => spaced_timesteps(spacing, steps, train, config.steps_offset()?),
@@ -67,9 +67,7 @@ impl Solver for Ddim {
     }
 
     fn add_noise(&self, step: usize, x0: &[f32], noise: &[f32]) -> Vec<f32> {
-        let alpha = self.alphas_cumprod[self.timesteps[step] as usize];
-        let (a, b) = (alpha.powf(0.5), (1.0 - alpha).powf(0.5));
-        x0.iter().zip(noise).map(|(x, n)| a * x + b * n).collect()
+        vp_add_noise(self.alphas_cumprod[self.timesteps[step] as usize], x0, noise)
     }
 
     fn init_noise_sigma(&self) -> f32 {
@@ -89,10 +87,7 @@ impl Solver for Ddim {
         // η = 0, so the direction term keeps all of 1 − ᾱ_prev.
         let (sqrt_alpha_prev, direction) = (alpha_prev.sqrt(), (1.0 - alpha_prev).sqrt());
         for (x, &e) in x.iter_mut().zip(eps) {
-            let (x0, eps) = match self.prediction {
-                Prediction::Epsilon => ((*x - sqrt_beta * e) / sqrt_alpha, e),
-                Prediction::V => (sqrt_alpha * *x - sqrt_beta * e, sqrt_alpha * e + sqrt_beta * *x),
-            };
+            let (x0, eps) = vp_prediction(self.prediction, sqrt_alpha, sqrt_beta, *x, e);
             let x0 = self.clip.map_or(x0, |r| x0.max(-r).min(r));
             *x = sqrt_alpha_prev * x0 + direction * eps;
         }

@@ -2,7 +2,7 @@
 //! It works on the variance-preserving latent (no input scaling, unit initial noise) and steps in
 //! λ = ln(α/σ_vp), first-order on the first step and, under `lower_order_final`, on the last.
 
-use super::config::{Prediction, SchedulerConfig, Spacing};
+use super::config::{PredictionType, SchedulerConfig, TimestepSpacing};
 use super::{interp, karras_sigmas, log_sigmas, numpy_linspace, sigma_to_t, trailing_timesteps, train_sigmas, Solver};
 use crate::rng::TorchCpuRng;
 use crate::Result;
@@ -11,7 +11,7 @@ use serde_json::Value;
 pub(super) struct DpmSolverMultistep {
     timesteps: Vec<f32>,
     sigmas: Vec<f32>,
-    prediction: Prediction,
+    prediction: PredictionType,
     /// Whether the last step is first-order (`lower_order_final`, `euler_at_final`, a final σ of 0).
     first_order_final: bool,
     /// x₀ predicted at the previous step.
@@ -19,7 +19,13 @@ pub(super) struct DpmSolverMultistep {
 }
 
 impl DpmSolverMultistep {
-    pub(super) fn new(config: &SchedulerConfig, karras: bool, steps: usize) -> Result<DpmSolverMultistep> {
+    /// `custom`: `set_timesteps(timesteps=…)`'s schedule in place of the spaced one.
+    pub(super) fn new(
+        config: &SchedulerConfig,
+        karras: bool,
+        steps: usize,
+        custom: Option<&[u32]>,
+    ) -> Result<DpmSolverMultistep> {
         // "deis" and the other solver types are remapped by diffusers itself.
         config.only("algorithm_type", &["dpmsolver++".into(), "deis".into()])?;
         config.only("solver_type", &["midpoint".into(), "logrho".into(), "bh1".into(), "bh2".into()])?;
@@ -45,7 +51,10 @@ impl DpmSolverMultistep {
             let logs = log_sigmas(&train);
             (sigmas.iter().map(|&s| sigma_to_t(s, &logs).round_ties_even() as f32).collect(), sigmas)
         } else {
-            let timesteps = dpm_timesteps(spacing, steps, train.len(), config.steps_offset()?);
+            let timesteps = match custom {
+                Some(custom) => custom.iter().map(|&t| t as f32).collect(),
+                None => dpm_timesteps(spacing, steps, train.len(), config.steps_offset()?),
+            };
             let sigmas = timesteps.iter().map(|&t| interp(f64::from(t), &train)).collect();
             (timesteps, sigmas)
         };
@@ -59,16 +68,16 @@ impl DpmSolverMultistep {
 }
 
 /// DPM-Solver's own spacings: leading and linspace split the range into `steps + 1` parts.
-fn dpm_timesteps(spacing: Spacing, steps: usize, train: usize, offset: u64) -> Vec<f32> {
+fn dpm_timesteps(spacing: TimestepSpacing, steps: usize, train: usize, offset: u64) -> Vec<f32> {
     let timesteps: Vec<f64> = match spacing {
-        Spacing::Leading => {
+        TimestepSpacing::Leading => {
             let ratio = (train / (steps + 1)) as f64;
             (1..=steps).rev().map(|k| k as f64 * ratio + offset as f64).collect()
         }
-        Spacing::Linspace => {
+        TimestepSpacing::Linspace => {
             numpy_linspace(0.0, (train - 1) as f64, steps + 1)[1..].iter().rev().map(|t| t.round_ties_even()).collect()
         }
-        Spacing::Trailing => trailing_timesteps(train, steps),
+        TimestepSpacing::Trailing => trailing_timesteps(train, steps),
     };
     timesteps.iter().map(|&t| t as f32).collect()
 }
@@ -104,8 +113,9 @@ impl Solver for DpmSolverMultistep {
     fn step(&mut self, step: usize, eps: &[f32], x: &mut [f32], _rng: &mut TorchCpuRng) {
         let (alpha_s0, sigma_s0) = alpha_sigma(self.sigmas[step]);
         let x0: Vec<f32> = match self.prediction {
-            Prediction::Epsilon => x.iter().zip(eps).map(|(x, e)| (x - sigma_s0 * e) / alpha_s0).collect(),
-            Prediction::V => x.iter().zip(eps).map(|(x, e)| alpha_s0 * x - sigma_s0 * e).collect(),
+            PredictionType::Epsilon => x.iter().zip(eps).map(|(x, e)| (x - sigma_s0 * e) / alpha_s0).collect(),
+            PredictionType::V => x.iter().zip(eps).map(|(x, e)| alpha_s0 * x - sigma_s0 * e).collect(),
+            PredictionType::Sample => eps.to_vec(),
         };
         let (alpha_t, sigma_t) = alpha_sigma(self.sigmas[step + 1]);
         // λ = +∞ at a final σ of 0, where the update reduces to x = x₀.

@@ -3,7 +3,7 @@
 //! scale σ_up, drawn at every step, the last one, where σ_up = 0, included): one σ schedule, two
 //! steps.
 
-use super::config::{Prediction, SchedulerConfig, Spacing};
+use super::config::{PredictionType, SchedulerConfig, TimestepSpacing};
 use super::{
     add_sigma_noise, denoised, euler_init_noise_sigma, interp, karras_sigmas, log_sigmas, scale_by_sigma, sigma_to_t,
     spaced_timesteps, train_sigmas, Solver,
@@ -15,23 +15,29 @@ pub(super) struct EulerDiscrete {
     timesteps: Vec<f32>,
     sigmas: Vec<f32>,
     init_noise_sigma: f32,
-    prediction: Prediction,
+    prediction: PredictionType,
     /// Euler-ancestral's step.
     ancestral: bool,
 }
 
 impl EulerDiscrete {
-    pub(super) fn new(config: &SchedulerConfig, karras: bool, steps: usize) -> Result<EulerDiscrete> {
+    /// `custom`: `set_timesteps(timesteps=…)`'s schedule in place of the spaced one.
+    pub(super) fn new(
+        config: &SchedulerConfig,
+        karras: bool,
+        steps: usize,
+        custom: Option<&[u32]>,
+    ) -> Result<EulerDiscrete> {
         config.only("interpolation_type", &["linear".into()])?;
         config.only("use_exponential_sigmas", &[false.into()])?;
         config.only("use_beta_sigmas", &[false.into()])?;
         let prediction = config.prediction()?;
-        if prediction == Prediction::V {
+        if prediction == PredictionType::V {
             // Continuous timesteps change what the UNet is fed only for v-prediction.
             config.only("timestep_type", &["discrete".into()])?;
         }
         let spacing = config.spacing("linspace")?;
-        let (timesteps, sigmas) = sigma_schedule(config, spacing, steps, karras, config.final_sigma_is_min()?)?;
+        let (timesteps, sigmas) = sigma_schedule(config, spacing, steps, custom, karras, config.final_sigma_is_min()?)?;
         let init_noise_sigma = euler_init_noise_sigma(&sigmas, spacing);
         Ok(EulerDiscrete { timesteps, sigmas, init_noise_sigma, prediction, ancestral: false })
     }
@@ -40,7 +46,7 @@ impl EulerDiscrete {
     pub(super) fn ancestral(config: &SchedulerConfig, steps: usize) -> Result<EulerDiscrete> {
         let prediction = config.prediction()?;
         let spacing = config.spacing("linspace")?;
-        let (timesteps, sigmas) = sigma_schedule(config, spacing, steps, false, false)?;
+        let (timesteps, sigmas) = sigma_schedule(config, spacing, steps, None, false, false)?;
         let init_noise_sigma = euler_init_noise_sigma(&sigmas, spacing);
         Ok(EulerDiscrete { timesteps, sigmas, init_noise_sigma, prediction, ancestral: true })
     }
@@ -49,14 +55,19 @@ impl EulerDiscrete {
 /// The timesteps and σ's (with the final one appended) of `EulerDiscreteScheduler.set_timesteps`.
 fn sigma_schedule(
     config: &SchedulerConfig,
-    spacing: Spacing,
+    spacing: TimestepSpacing,
     steps: usize,
+    custom: Option<&[u32]>,
     karras: bool,
     final_sigma_min: bool,
 ) -> Result<(Vec<f32>, Vec<f32>)> {
     let train = train_sigmas(&config.alphas_cumprod()?);
-    let mut timesteps: Vec<f32> =
-        spaced_timesteps(spacing, steps, train.len(), config.steps_offset()?).iter().map(|&t| t as f32).collect();
+    let mut timesteps: Vec<f32> = match custom {
+        Some(custom) => custom.iter().map(|&t| t as f32).collect(),
+        None => {
+            spaced_timesteps(spacing, steps, train.len(), config.steps_offset()?).iter().map(|&t| t as f32).collect()
+        }
+    };
     // σ linearly interpolated in t (numpy, float64) at the float32 timesteps.
     let mut sigmas: Vec<f64> = timesteps.iter().map(|&t| interp(f64::from(t), &train)).collect();
     if karras {

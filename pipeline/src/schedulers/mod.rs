@@ -6,32 +6,38 @@
 //! per-step update in float32 with the same operation order.
 
 mod config;
+mod consistency;
 mod ddim;
 mod dpmsolver_multistep;
 mod euler_discrete;
+mod lcm;
+mod tcd;
 
-pub use config::{SchedulerConfig, SDXL_SCHEDULER_CONFIG};
+pub use config::{PredictionType, SchedulerConfig, TimestepSpacing, SDXL_SCHEDULER_CONFIG};
 
 use crate::rng::TorchCpuRng;
 use crate::{Error, Result};
-use config::{Prediction, Spacing};
 use std::fmt;
 use std::str::FromStr;
 
-/// The samplers vkdiff offers, named `euler`, `euler_a`, `dpmpp_2m` and `ddim`.
+/// The samplers vkdiff offers, named `euler`, `euler_a`, `dpmpp_2m`, `ddim`, `lcm` and `tcd`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SamplerKind {
     Euler,
     EulerAncestral,
     DpmSolver2M,
     Ddim,
+    Lcm,
+    Tcd,
 }
 
-const NAMES: [(&str, SamplerKind); 4] = [
+const NAMES: [(&str, SamplerKind); 6] = [
     ("euler", SamplerKind::Euler),
     ("euler_a", SamplerKind::EulerAncestral),
     ("dpmpp_2m", SamplerKind::DpmSolver2M),
     ("ddim", SamplerKind::Ddim),
+    ("lcm", SamplerKind::Lcm),
+    ("tcd", SamplerKind::Tcd),
 ];
 
 impl FromStr for SamplerKind {
@@ -48,6 +54,50 @@ impl fmt::Display for SamplerKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(NAMES.iter().find(|(_, k)| k == self).map_or("?", |(n, _)| n))
     }
+}
+
+impl SamplerKind {
+    /// diffusers' class for this sampler.
+    pub fn diffusers_class(self) -> &'static str {
+        match self {
+            SamplerKind::Euler => "EulerDiscreteScheduler",
+            SamplerKind::EulerAncestral => "EulerAncestralDiscreteScheduler",
+            SamplerKind::DpmSolver2M => "DPMSolverMultistepScheduler",
+            SamplerKind::Ddim => "DDIMScheduler",
+            SamplerKind::Lcm => "LCMScheduler",
+            SamplerKind::Tcd => "TCDScheduler",
+        }
+    }
+
+    /// Whether its diffusers class takes `set_timesteps(timesteps=…)`.
+    fn takes_timesteps(self) -> bool {
+        !matches!(self, SamplerKind::EulerAncestral | SamplerKind::Ddim)
+    }
+
+    /// Whether its schedule reads `timestep_spacing` (LCM and TCD pick from their distillation
+    /// schedule instead).
+    fn reads_spacing(self) -> bool {
+        !matches!(self, SamplerKind::Lcm | SamplerKind::Tcd)
+    }
+}
+
+/// TCD's γ when none is given (`TCDScheduler.step`'s default).
+pub const TCD_DEFAULT_ETA: f64 = 0.3;
+
+/// What a run sets beside the sampler and its step count: diffusers' `from_config(config, …)`
+/// overrides, `use_karras_sigmas`, `set_timesteps(timesteps=…)` and `step(eta=…)`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ScheduleOptions {
+    /// Karras et al.'s noise levels (euler, dpmpp_2m).
+    pub karras: bool,
+    /// `timestep_spacing` in place of the model config's.
+    pub spacing: Option<TimestepSpacing>,
+    /// `prediction_type` in place of the model config's.
+    pub prediction: Option<PredictionType>,
+    /// The schedule itself, strictly descending training timesteps; the step count is its length.
+    pub timesteps: Option<Vec<u32>>,
+    /// TCD's γ, in [0, 1] (None: [`TCD_DEFAULT_ETA`]).
+    pub eta: Option<f64>,
 }
 
 /// What each diffusers scheduler class provides.
@@ -67,23 +117,49 @@ pub struct Sampler {
 }
 
 impl Sampler {
-    /// What diffusers gives for `XScheduler.from_config(config, use_karras_sigmas=karras)` then
-    /// `set_timesteps(steps)`, X = EulerDiscreteScheduler / EulerAncestralDiscreteScheduler /
-    /// DPMSolverMultistepScheduler (dpmsolver++, order 2, midpoint, lower_order_final) / DDIMScheduler.
+    /// What diffusers gives for `XScheduler.from_config(config, use_karras_sigmas=karras, …overrides)`
+    /// then `set_timesteps(steps)` (or `set_timesteps(timesteps=…)`), X = EulerDiscreteScheduler /
+    /// EulerAncestralDiscreteScheduler / DPMSolverMultistepScheduler (dpmsolver++, order 2,
+    /// midpoint, lower_order_final) / DDIMScheduler / LCMScheduler / TCDScheduler.
     /// Like diffusers, trailing spacing can yield one timestep more than `steps` (61 steps → 62).
-    pub fn new(kind: SamplerKind, config: &SchedulerConfig, karras: bool, steps: usize) -> Result<Sampler> {
+    pub fn new(
+        kind: SamplerKind,
+        config: &SchedulerConfig,
+        steps: usize,
+        options: &ScheduleOptions,
+    ) -> Result<Sampler> {
+        let config = &options_config(kind, config, options)?;
+        let custom = options.timesteps.as_deref();
+        let steps = custom.map_or(steps, <[u32]>::len);
         if steps == 0 {
             return Err(Error::Config(format!("{kind} needs at least 1 step")));
         }
-        if karras && matches!(kind, SamplerKind::EulerAncestral | SamplerKind::Ddim) {
-            // diffusers' DDIM has no Karras option, and its Euler-ancestral silently ignores it.
+        if let Some(timesteps) = custom {
+            check_custom_timesteps(kind, config, timesteps, options.karras)?;
+        }
+        if options.karras && !matches!(kind, SamplerKind::Euler | SamplerKind::DpmSolver2M) {
+            // diffusers' DDIM, LCM and TCD have no Karras option, and its Euler-ancestral silently ignores it.
             return Err(Error::Config(format!("Karras sigmas are not available with {kind} (use euler or dpmpp_2m)")));
         }
+        match options.eta {
+            Some(eta) if kind != SamplerKind::Tcd => {
+                return Err(Error::Config(format!("eta {eta} is TCD's gamma; {kind} takes none (use --sampler tcd)")))
+            }
+            Some(eta) if !(0.0..=1.0).contains(&eta) => {
+                return Err(Error::Config(format!("tcd: eta (gamma) {eta} must lie in [0, 1]")))
+            }
+            _ => {}
+        }
+        let karras = options.karras;
         let solver: Box<dyn Solver> = match kind {
-            SamplerKind::Euler => Box::new(euler_discrete::EulerDiscrete::new(config, karras, steps)?),
+            SamplerKind::Euler => Box::new(euler_discrete::EulerDiscrete::new(config, karras, steps, custom)?),
             SamplerKind::EulerAncestral => Box::new(euler_discrete::EulerDiscrete::ancestral(config, steps)?),
-            SamplerKind::DpmSolver2M => Box::new(dpmsolver_multistep::DpmSolverMultistep::new(config, karras, steps)?),
+            SamplerKind::DpmSolver2M => {
+                Box::new(dpmsolver_multistep::DpmSolverMultistep::new(config, karras, steps, custom)?)
+            }
             SamplerKind::Ddim => Box::new(ddim::Ddim::new(config, steps)?),
+            SamplerKind::Lcm => Box::new(lcm::Lcm::new(config, steps, custom)?),
+            SamplerKind::Tcd => Box::new(tcd::Tcd::new(config, steps, custom, options.eta.unwrap_or(TCD_DEFAULT_ETA))?),
         };
         // diffusers starts at the second occurrence of a repeated first timestep and then runs
         // past the end of its schedule.
@@ -96,7 +172,6 @@ impl Sampler {
         }
         Ok(Sampler { solver })
     }
-
     /// The value the UNet receives at each step (diffusers' timesteps, as float32).
     pub fn timesteps(&self) -> &[f32] {
         self.solver.timesteps()
@@ -135,15 +210,64 @@ impl Sampler {
     }
 }
 
+/// The model's config with the run's overrides, refusing those the sampler's diffusers class
+/// ignores or cannot run.
+fn options_config(kind: SamplerKind, config: &SchedulerConfig, options: &ScheduleOptions) -> Result<SchedulerConfig> {
+    let mut config = config.clone();
+    if let Some(spacing) = options.spacing {
+        if !kind.reads_spacing() {
+            return Err(Error::Config(format!(
+                "{kind} has no timestep spacing: {} picks its timesteps from its distillation schedule \
+                    (original_inference_steps); give the timesteps themselves instead",
+                kind.diffusers_class()
+            )));
+        }
+        config = config.with("timestep_spacing", &spacing.to_string());
+    }
+    if let Some(prediction) = options.prediction {
+        config = config.with("prediction_type", &prediction.to_string());
+    }
+    if kind == SamplerKind::EulerAncestral && config.prediction()? == PredictionType::Sample {
+        // diffusers raises NotImplementedError there.
+        return Err(config.unsupported("prediction_type", "with euler_a (use euler)"));
+    }
+    Ok(config)
+}
+
+/// diffusers' checks of `set_timesteps(timesteps=…)`: a class that takes them, no Karras σ's, strictly
+/// descending training timesteps.
+fn check_custom_timesteps(kind: SamplerKind, config: &SchedulerConfig, timesteps: &[u32], karras: bool) -> Result<()> {
+    if !kind.takes_timesteps() {
+        return Err(Error::Config(format!(
+            "{kind} takes no custom timesteps ({} has none; use euler, dpmpp_2m, lcm or tcd)",
+            kind.diffusers_class()
+        )));
+    }
+    if karras {
+        return Err(Error::Config("custom timesteps cannot be combined with Karras sigmas".into()));
+    }
+    if timesteps.windows(2).any(|w| w[1] >= w[0]) {
+        return Err(Error::Config(format!("timesteps {timesteps:?} must be strictly descending")));
+    }
+    let train = config.train_timesteps()?;
+    match timesteps.first() {
+        Some(&first) if first as usize >= train => Err(Error::Config(format!(
+            "timestep {first} is past the model's {train} training timesteps (0 to {})",
+            train - 1
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// Euler-family timesteps (`EulerDiscreteScheduler.set_timesteps`), in float64 before their cast.
-fn spaced_timesteps(spacing: Spacing, steps: usize, train: usize, offset: u64) -> Vec<f64> {
+fn spaced_timesteps(spacing: TimestepSpacing, steps: usize, train: usize, offset: u64) -> Vec<f64> {
     match spacing {
-        Spacing::Leading => {
+        TimestepSpacing::Leading => {
             let ratio = (train / steps) as f64;
             (0..steps).rev().map(|k| k as f64 * ratio + offset as f64).collect()
         }
-        Spacing::Trailing => trailing_timesteps(train, steps),
-        Spacing::Linspace => numpy_linspace(0.0, (train - 1) as f64, steps).into_iter().rev().collect(),
+        TimestepSpacing::Trailing => trailing_timesteps(train, steps),
+        TimestepSpacing::Linspace => numpy_linspace(0.0, (train - 1) as f64, steps).into_iter().rev().collect(),
     }
 }
 
@@ -231,14 +355,31 @@ fn sigma_to_t(sigma: f64, log_sigmas: &[f32]) -> f64 {
 }
 
 /// x₀ predicted at noise level σ on a variance-exploding latent (Euler family).
-fn denoised(prediction: Prediction, sigma: f32, x: f32, eps: f32) -> f32 {
+fn denoised(prediction: PredictionType, sigma: f32, x: f32, eps: f32) -> f32 {
     match prediction {
-        Prediction::Epsilon => x - sigma * eps,
-        Prediction::V => {
+        PredictionType::Epsilon => x - sigma * eps,
+        PredictionType::Sample => eps,
+        PredictionType::V => {
             let c_out = -sigma / (sigma * sigma + 1.0).sqrt();
             eps * c_out + x / (sigma * sigma + 1.0)
         }
     }
+}
+
+/// x₀ and ε from the model output `out` on the variance-preserving latent `x`, given √ᾱ and
+/// √(1 − ᾱ), in the float32 operation order of diffusers' DDIM, LCM and TCD.
+fn vp_prediction(prediction: PredictionType, sqrt_alpha: f32, sqrt_beta: f32, x: f32, out: f32) -> (f32, f32) {
+    match prediction {
+        PredictionType::Epsilon => ((x - sqrt_beta * out) / sqrt_alpha, out),
+        PredictionType::V => (sqrt_alpha * x - sqrt_beta * out, sqrt_alpha * out + sqrt_beta * x),
+        PredictionType::Sample => (out, (x - sqrt_alpha * out) / sqrt_beta),
+    }
+}
+
+/// The variance-preserving `add_noise`: √ᾱ·x₀ + √(1 − ᾱ)·noise.
+fn vp_add_noise(alpha_cumprod: f32, x0: &[f32], noise: &[f32]) -> Vec<f32> {
+    let (a, b) = (alpha_cumprod.sqrt(), (1.0 - alpha_cumprod).sqrt());
+    x0.iter().zip(noise).map(|(x, n)| a * x + b * n).collect()
 }
 
 /// `x / √(σ² + 1)`, the Euler family's model input.
@@ -248,11 +389,11 @@ fn scale_by_sigma(x: &[f32], sigma: f32) -> Vec<f32> {
 }
 
 /// `init_noise_sigma` of the Euler family: σ_max, or √(σ_max² + 1) for leading spacing.
-fn euler_init_noise_sigma(sigmas: &[f32], spacing: Spacing) -> f32 {
+fn euler_init_noise_sigma(sigmas: &[f32], spacing: TimestepSpacing) -> f32 {
     let max = sigmas.iter().copied().fold(f32::MIN, f32::max);
     match spacing {
-        Spacing::Leading => (max * max + 1.0).sqrt(),
-        Spacing::Trailing | Spacing::Linspace => max,
+        TimestepSpacing::Leading => (max * max + 1.0).sqrt(),
+        TimestepSpacing::Trailing | TimestepSpacing::Linspace => max,
     }
 }
 

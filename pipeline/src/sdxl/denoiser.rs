@@ -6,7 +6,6 @@
 
 use crate::error::{finite, Error, Result};
 use crate::rng::TorchCpuRng;
-use crate::schedulers::Sampler;
 use crate::sdxl::controlnet_guide::{ControlNetUse, ControlRun, SharedInputs};
 use crate::sdxl::prompt_encoding::Conditioning;
 use crate::sdxl::InitLatents;
@@ -152,8 +151,7 @@ impl<'m> Denoiser<'m> {
         let mut rngs = Vec::with_capacity(items.len());
         let mut latents = Vec::with_capacity(items.len());
         for item in items {
-            let sampler =
-                Sampler::new(self.sampling.sampler, &self.model.scheduler, self.sampling.karras, self.sampling.steps)?;
+            let sampler = self.sampling.sampler(&self.model.scheduler)?;
             let mut rng = TorchCpuRng::new(item.seed);
             latents.push(match (item.init, self.sampling.strength) {
                 (None, None) => {

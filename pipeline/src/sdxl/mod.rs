@@ -96,10 +96,7 @@ impl Sdxl {
             Some(file) => flagged("vae", file, AutoencoderKl::load_sdxl(ctx, file, dtype))?,
             None => AutoencoderKl::load_sdxl(ctx, path, dtype)?,
         };
-        let scheduler = match folder.map(|d| d.join("scheduler/scheduler_config.json")).filter(|p| p.is_file()) {
-            Some(p) => SchedulerConfig::load(&p)?,
-            None => SchedulerConfig::sdxl_base(),
-        };
+        let scheduler = SchedulerConfig::of_model(path)?;
         let force_zeros_for_empty_prompt = match folder.map(|d| d.join("model_index.json")).filter(|p| p.is_file()) {
             Some(p) => read_force_zeros(&p)?,
             None => true,

@@ -147,7 +147,7 @@ impl Sdxl {
 
     /// Sizes and guidance that this model can sample, checked before any work.
     pub fn check_sampling(&self, sampling: &Sampling) -> Result<()> {
-        sampling.check()?;
+        sampling.check(&self.scheduler)?;
         sampling.check_size(self.pixel_multiple())
     }
 

@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::images::{load_control_image, read_image};
 use crate::schedulers::SamplerKind;
 use crate::settings::models::{flagged, recorded_path, ModelSettings};
-use crate::settings::names::{control_depth_name, precision_name, schedule_name, RNG};
+use crate::settings::names::{control_depth_name, precision_name, schedule_name, schedule_records, RNG};
 use crate::settings::prompt_syntax::PromptSyntax;
 use crate::settings::sampling::{SizeConditioning, TextToImage};
 use crate::RgbImage;
@@ -47,6 +47,8 @@ fn a1111_sampler(kind: SamplerKind) -> &'static str {
         SamplerKind::EulerAncestral => "Euler a",
         SamplerKind::DpmSolver2M => "DPM++ 2M",
         SamplerKind::Ddim => "DDIM",
+        SamplerKind::Lcm => "LCM",
+        SamplerKind::Tcd => "TCD",
     }
 }
 
@@ -87,6 +89,8 @@ impl GenSettings {
             ("model".into(), recorded_path(&m.model)),
             ("software".into(), format!("vkdiff {}", vkdiff_setting::version())),
         ]);
+        let as_text = |v: serde_json::Value| v.as_str().map_or_else(|| v.to_string(), String::from);
+        text.extend(schedule_records(s).into_iter().map(|(k, v)| (k.replace('-', "_"), as_text(v))));
         if let Some(n) = &job.negative_prompt {
             text.insert("negative_prompt".into(), n.clone());
         }
@@ -133,7 +137,7 @@ impl GenSettings {
     fn a1111_parameters(&self) -> String {
         let (job, s, m) = (&self.job, &self.job.sampling, &self.models);
         let loras: String = m.loras.iter().map(|l| format!(" <lora:{}:{}>", model_name(&l.path), l.strength)).collect();
-        let schedule = if s.karras { " Karras" } else { "" };
+        let schedule = if s.schedule.karras { " Karras" } else { "" };
         let mut pairs = vec![
             format!("Steps: {}", s.steps),
             format!("Sampler: {}{schedule}", a1111_sampler(s.sampler)),

@@ -15,7 +15,7 @@ pub use ip_scale::{IpBlock, IpMode, IpScale};
 pub use models::check_control_settings;
 pub(crate) use models::flagged;
 pub use models::{ControlNetSettings, IpAdapterSettings, LoraSetting, ModelSettings};
-pub use names::{control_depth_name, precision_name, schedule_name, RNG};
+pub use names::{control_depth_name, precision_name, schedule_name, schedule_records, RNG};
 pub use prompt_syntax::{parse_attention, PromptSyntax};
 pub use sampling::{Sampling, SizeConditioning, TextToImage};
 pub use vae_tiling::VaeTilingSetting;

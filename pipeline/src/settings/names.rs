@@ -1,6 +1,8 @@
 //! The names settings are recorded under, in `dataset.json` and the PNG text.
 
+use crate::schedulers::{SamplerKind, TCD_DEFAULT_ETA};
 use crate::settings::sampling::Sampling;
+use serde_json::Value;
 use vkdiff_render::control::ControlDepth;
 use vkdiff_runtime::Dtype;
 
@@ -22,9 +24,30 @@ pub fn control_depth_name(mode: ControlDepth) -> &'static str {
 }
 
 pub fn schedule_name(sampling: &Sampling) -> &'static str {
-    if sampling.karras {
+    if sampling.schedule.karras {
         "karras"
     } else {
         "default"
     }
+}
+
+/// The schedule options a run set beside the sampler, under their flags' names, as text: the
+/// spacing and prediction type given in place of the model's, custom timesteps, and TCD's γ
+/// (always, since it shapes every TCD image).
+pub fn schedule_records(sampling: &Sampling) -> Vec<(&'static str, Value)> {
+    let o = &sampling.schedule;
+    let mut records = Vec::new();
+    if let Some(spacing) = o.spacing {
+        records.push(("timestep-spacing", spacing.to_string().into()));
+    }
+    if let Some(prediction) = o.prediction {
+        records.push(("prediction-type", prediction.to_string().into()));
+    }
+    if let Some(timesteps) = &o.timesteps {
+        records.push(("timesteps", timesteps.iter().map(u32::to_string).collect::<Vec<_>>().join(",").into()));
+    }
+    if sampling.sampler == SamplerKind::Tcd {
+        records.push(("eta", o.eta.unwrap_or(TCD_DEFAULT_ETA).into()));
+    }
+    records
 }

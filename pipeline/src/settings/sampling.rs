@@ -2,17 +2,19 @@
 //! conditioning, and one image's prompt and seed; each checked once, before any work.
 
 use crate::error::{Error, Result};
-use crate::schedulers::{Sampler, SamplerKind, SchedulerConfig};
+use crate::schedulers::{Sampler, SamplerKind, ScheduleOptions, SchedulerConfig};
 use crate::settings::prompt_syntax::PromptSyntax;
 use vkdiff_setting::Message;
 
 /// How every image of a run is sampled: the settings a batch shares.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sampling {
+    /// Denoising steps; with custom timesteps, their count.
     pub steps: usize,
     pub guidance_scale: f32,
     pub sampler: SamplerKind,
-    pub karras: bool,
+    /// Karras σ's, spacing, prediction type, custom timesteps, TCD's γ.
+    pub schedule: ScheduleOptions,
     pub width: usize,
     pub height: usize,
     pub size_conditioning: SizeConditioning,
@@ -48,16 +50,24 @@ impl Sampling {
         self.guidance_scale > 1.0
     }
 
-    /// What is wrong whatever the model: the guidance scale, the step count, a noise schedule
-    /// the sampler does not have, a strength that leaves no step.
-    pub fn check(&self) -> Result<()> {
+    /// What is wrong with the model's scheduler `config`: the guidance scale, the step count, a
+    /// noise schedule or option the sampler does not have, a strength that leaves no step.
+    pub fn check(&self, config: &SchedulerConfig) -> Result<()> {
         if !self.guidance_scale.is_finite() {
             return Err(Error::Setting(
                 Message::setting("guidance_scale").then(format!(" {} is not a number", self.guidance_scale)),
             ));
         }
-        Sampler::new(self.sampler, &SchedulerConfig::sdxl_base(), self.karras, self.steps)?;
+        if let Some(timesteps) = &self.schedule.timesteps {
+            assert_eq!(timesteps.len(), self.steps, "the front end counts the steps of custom timesteps");
+        }
+        self.sampler(config)?;
         self.first_step().map(|_| ())
+    }
+
+    /// A fresh sampler for one image, on the model's scheduler `config`.
+    pub fn sampler(&self, config: &SchedulerConfig) -> Result<Sampler> {
+        Sampler::new(self.sampler, config, self.steps, &self.schedule)
     }
 
     /// The step img2img starts at (diffusers' `get_timesteps`: the last ⌊steps · strength⌋ steps
@@ -121,7 +131,7 @@ mod tests {
             steps: 4,
             guidance_scale: 5.0,
             sampler: SamplerKind::Euler,
-            karras: false,
+            schedule: ScheduleOptions::default(),
             width: 64,
             height: 64,
             size_conditioning: SizeConditioning::default(),
@@ -133,7 +143,7 @@ mod tests {
     /// Refusals name settings as data; without a front end's names they read as the fields.
     #[test]
     fn refusals_carry_the_settings_they_name() {
-        let named = |s: Sampling| match s.check() {
+        let named = |s: Sampling| match s.check(&SchedulerConfig::sdxl_base()) {
             Err(Error::Setting(m)) => (m.settings().map(String::from).collect::<Vec<_>>(), m.to_string()),
             other => panic!("{other:?}"),
         };
@@ -142,6 +152,6 @@ mod tests {
         let (names, text) = named(Sampling { strength: Some(0.2), ..sampling() });
         assert_eq!(names, ["steps", "strength"], "{text}");
         assert!(text.ends_with("runs none of them; raise steps or strength"), "{text}");
-        assert!(sampling().check().is_ok());
+        assert!(sampling().check(&SchedulerConfig::sdxl_base()).is_ok());
     }
 }

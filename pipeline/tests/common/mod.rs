@@ -2,7 +2,7 @@
 
 use serde_json::Value;
 use std::sync::OnceLock;
-use vkdiff_pipeline::{PromptSyntax, Sampling, SizeConditioning, TextToImage};
+use vkdiff_pipeline::{PromptSyntax, Sampling, ScheduleOptions, SizeConditioning, TextToImage};
 use vkdiff_runtime::Context;
 
 pub fn ctx() -> Context {
@@ -18,6 +18,17 @@ pub fn ctx() -> Context {
     .clone()
 }
 
+/// A recorded case's schedule options (absent keys: the model's settings).
+fn schedule(case: &Value) -> ScheduleOptions {
+    ScheduleOptions {
+        karras: case["karras"].as_bool().unwrap_or(false),
+        spacing: case["timestep_spacing"].as_str().map(|s| s.parse().unwrap()),
+        prediction: case["prediction_type"].as_str().map(|s| s.parse().unwrap()),
+        timesteps: case["timesteps"].as_array().map(|t| t.iter().map(|t| t.as_u64().unwrap() as u32).collect()),
+        eta: case["eta"].as_f64(),
+    }
+}
+
 /// A recorded case's settings (`karras` absent means false).
 pub fn job(case: &Value) -> TextToImage {
     TextToImage {
@@ -28,7 +39,7 @@ pub fn job(case: &Value) -> TextToImage {
             steps: case["steps"].as_u64().unwrap() as usize,
             guidance_scale: case["guidance_scale"].as_f64().unwrap() as f32,
             sampler: case["sampler"].as_str().unwrap().parse().unwrap(),
-            karras: case["karras"].as_bool().unwrap_or(false),
+            schedule: schedule(case),
             width: case["width"].as_u64().unwrap() as usize,
             height: case["height"].as_u64().unwrap() as usize,
             size_conditioning: SizeConditioning {

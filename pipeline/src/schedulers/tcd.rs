@@ -1,0 +1,65 @@
+//! diffusers' `TCDScheduler` (Trajectory Consistency Distillation): at each step the model's x₀
+//! and ε land on the intermediate timestep s = ⌊(1 − γ)·t_prev⌋, and, with γ > 0 and except at
+//! the last step, that sample is noised forward from s to t_prev.
+
+use super::config::SchedulerConfig;
+use super::consistency::ConsistencySchedule;
+use super::{vp_add_noise, vp_prediction, Solver};
+use crate::rng::TorchCpuRng;
+use crate::Result;
+
+pub(super) struct Tcd {
+    schedule: ConsistencySchedule,
+    /// γ, the share of each step taken stochastically.
+    eta: f64,
+}
+
+impl Tcd {
+    pub(super) fn new(config: &SchedulerConfig, steps: usize, custom: Option<&[u32]>, eta: f64) -> Result<Tcd> {
+        Ok(Tcd { schedule: ConsistencySchedule::new(config, "tcd", steps, custom)?, eta })
+    }
+}
+
+impl Solver for Tcd {
+    fn timesteps(&self) -> &[f32] {
+        &self.schedule.unet_timesteps
+    }
+
+    fn sigmas(&self) -> Option<&[f32]> {
+        None
+    }
+
+    fn init_noise_sigma(&self) -> f32 {
+        1.0
+    }
+
+    fn scale_model_input(&self, _step: usize, x: &[f32]) -> Vec<f32> {
+        x.to_vec()
+    }
+
+    fn add_noise(&self, step: usize, x0: &[f32], noise: &[f32]) -> Vec<f32> {
+        vp_add_noise(self.schedule.alpha(step), x0, noise)
+    }
+
+    fn step(&mut self, step: usize, out: &[f32], x: &mut [f32], rng: &mut TorchCpuRng) {
+        let s = &self.schedule;
+        let prev = s.timesteps.get(step + 1).copied().unwrap_or(0);
+        // torch: a float32 (1 − γ) times the integer timestep, floored.
+        let timestep_s = ((1.0 - self.eta) as f32 * prev as f32).floor() as usize;
+        let alpha = s.alpha(step);
+        let (alpha_prev, alpha_s) = (s.alphas_cumprod[prev], s.alphas_cumprod[timestep_s]);
+        let (sqrt_alpha, sqrt_beta) = (alpha.sqrt(), (1.0 - alpha).sqrt());
+        let (sqrt_alpha_s, sqrt_beta_s) = (alpha_s.sqrt(), (1.0 - alpha_s).sqrt());
+        for (x, &o) in x.iter_mut().zip(out) {
+            let (x0, eps) = vp_prediction(s.prediction, sqrt_alpha, sqrt_beta, *x, o);
+            *x = sqrt_alpha_s * x0 + sqrt_beta_s * eps;
+        }
+        if self.eta > 0.0 && !s.is_last(step) {
+            let ratio = alpha_prev / alpha_s;
+            let (a, b) = (ratio.sqrt(), (1.0 - ratio).sqrt());
+            for (x, n) in x.iter_mut().zip(rng.randn(out.len())) {
+                *x = a * *x + b * n;
+            }
+        }
+    }
+}
