@@ -70,6 +70,12 @@ pub struct ModelArgs {
     /// as madebyollin/sdxl-vae-fp16-fix, whose config lets it decode in f16.
     #[arg(long, value_name = "DIR|FILE|ID")]
     vae: Option<PathBuf>,
+    /// A UNet in place of the model's, as diffusers' `unet=`: SDXL-Lightning's
+    /// sdxl_lightning_Nstep_unet.safetensors, DMD2's dmd2_sdxl_4step_unet_fp16.bin; one file of the
+    /// model's UNet architecture (diffusers or original names; .safetensors, or a torch .bin/.pth),
+    /// a diffusers UNet folder, or a Hugging Face id (ORG/NAME/FILE).
+    #[arg(long, value_name = "DIR|FILE|ID")]
+    unet: Option<PathBuf>,
     /// f16: f16 storage, f32 arithmetic, the matrix units where the GPU has them; f32 throughout
     /// (slower; for reference checks). A VAE whose config forces upcasting decodes in f32 either way.
     #[arg(long, value_enum, default_value_t = Precision::F16)]
@@ -146,6 +152,7 @@ impl ModelArgs {
         [
             ("model", self.model.is_some()),
             ("vae", self.vae.is_some()),
+            ("unet", self.unet.is_some()),
             ("controlnet", self.controlnet.is_some()),
             ("ip_adapter", self.ip_adapter.is_some()),
             ("lora", !self.lora.is_empty()),
@@ -188,6 +195,7 @@ impl ModelArgs {
         Ok(ModelSettings {
             model,
             vae: self.vae.as_ref().map(|v| resolve("vae", v, Wants::Either)).transpose()?,
+            unet: self.unet.as_ref().map(|u| resolve("unet", u, Wants::Either)).transpose()?,
             precision: self.precision.dtype(),
             controlnet,
             ip_adapter,

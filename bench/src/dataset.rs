@@ -190,6 +190,7 @@ pub(crate) fn model_settings(precision: Dtype, lora_strengths: &[f32]) -> ModelS
     ModelSettings {
         model: "random-sdxl-base".into(),
         vae: None,
+        unet: None,
         precision,
         controlnet: Some(ControlNetSettings {
             model: "random-controlnet-depth".into(),

@@ -51,10 +51,26 @@ pub struct Entry {
     end: usize,
 }
 
+/// A file's bytes: mapped from disk, or held (a checkpoint of another format converted in memory).
+enum Bytes {
+    Mapped(Mmap),
+    Owned(Vec<u8>),
+}
+
+impl std::ops::Deref for Bytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            Bytes::Mapped(m) => m,
+            Bytes::Owned(v) => v,
+        }
+    }
+}
+
 /// One open safetensors file.
 pub struct SafeTensors {
     pub path: PathBuf,
-    map: Mmap,
+    map: Bytes,
     data_start: usize,
     pub entries: BTreeMap<String, Entry>,
     /// The header's `__metadata__` strings (other values are left out).
@@ -67,10 +83,20 @@ impl SafeTensors {
     /// without overlap, so a truncated download or a forged header is caught here, naming the
     /// tensor.
     pub fn open(path: &Path) -> Result<SafeTensors> {
-        let bad = |why: String| Error::Format { path: path.to_path_buf(), why };
         let file = File::open(path).map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
         // SAFETY: the file is only read; a concurrent writer would be the user's error, as with any mmap reader.
         let map = unsafe { Mmap::map(&file) }.map_err(|e| Error::Io { path: path.to_path_buf(), source: e })?;
+        SafeTensors::parse(path, Bytes::Mapped(map))
+    }
+
+    /// A safetensors file's `bytes` held in memory, checked as [`SafeTensors::open`] checks a
+    /// file; `path` names it in errors.
+    pub fn from_bytes(path: &Path, bytes: Vec<u8>) -> Result<SafeTensors> {
+        SafeTensors::parse(path, Bytes::Owned(bytes))
+    }
+
+    fn parse(path: &Path, map: Bytes) -> Result<SafeTensors> {
+        let bad = |why: String| Error::Format { path: path.to_path_buf(), why };
         if map.len() < 8 {
             return Err(bad(format!("{} bytes is too short for a safetensors file", map.len())));
         }
@@ -192,8 +218,8 @@ pub fn write_f32(path: &Path, tensors: &[(&str, &[usize], &[f32])], metadata: &B
 
 /// The bytes of a safetensors file of f32 tensors with string metadata.
 pub fn f32_file_bytes(tensors: &[(&str, &[usize], &[f32])], metadata: &BTreeMap<String, String>) -> Vec<u8> {
-    let shapes: Vec<(&str, &[usize])> = tensors.iter().map(|(n, s, _)| (*n, *s)).collect();
-    let mut bytes = header_bytes(&shapes, "F32", metadata);
+    let shapes: Vec<(&str, &str, &[usize])> = tensors.iter().map(|(n, s, _)| (*n, "F32", *s)).collect();
+    let mut bytes = header_bytes(&shapes, metadata);
     for (_, _, data) in tensors {
         bytes.extend(data.iter().flat_map(|v| v.to_le_bytes()));
     }
@@ -209,7 +235,8 @@ pub fn write_f16_streamed(
     values: &mut dyn FnMut(usize) -> Vec<f32>,
 ) -> Result<()> {
     crate::atomic::write_atomic_with(path, &mut |out| {
-        out.write_all(&header_bytes(shapes, "F16", metadata))?;
+        let typed: Vec<(&str, &str, &[usize])> = shapes.iter().map(|(n, s)| (*n, "F16", *s)).collect();
+        out.write_all(&header_bytes(&typed, metadata))?;
         for (i, (name, shape)) in shapes.iter().enumerate() {
             let data = values(i);
             assert_eq!(data.len(), shape.iter().product::<usize>(), "values of {name}");
@@ -220,17 +247,27 @@ pub fn write_f16_streamed(
     })
 }
 
-/// The length-prefixed JSON header of tensors of `shapes` stored as `dtype` (F32 or F16), in
-/// order, with string metadata, padded with spaces so the data starts 8-byte aligned as the
-/// format's writers align it.
-fn header_bytes(shapes: &[(&str, &[usize])], dtype: &str, metadata: &BTreeMap<String, String>) -> Vec<u8> {
-    let size = if dtype == "F16" { 2 } else { 4 };
+/// The bytes of a safetensors file of tensors (name, dtype as the header names it, shape, their
+/// little-endian bytes), in order.
+pub fn file_bytes(tensors: &[(&str, &str, &[usize], &[u8])]) -> Vec<u8> {
+    let shapes: Vec<(&str, &str, &[usize])> = tensors.iter().map(|(n, d, s, _)| (*n, *d, *s)).collect();
+    let mut bytes = header_bytes(&shapes, &BTreeMap::new());
+    for (_, _, _, data) in tensors {
+        bytes.extend_from_slice(data);
+    }
+    bytes
+}
+
+/// The length-prefixed JSON header of tensors (name, dtype, shape), in order, with string
+/// metadata, padded with spaces so the data starts 8-byte aligned as the format's writers align it.
+fn header_bytes(tensors: &[(&str, &str, &[usize])], metadata: &BTreeMap<String, String>) -> Vec<u8> {
     let mut header = serde_json::Map::new();
     if !metadata.is_empty() {
         header.insert("__metadata__".into(), serde_json::to_value(metadata).expect("strings serialise"));
     }
     let mut offset = 0;
-    for (name, shape) in shapes {
+    for (name, dtype, shape) in tensors {
+        let size = SourceDtype::parse(dtype).1.expect("a dtype of fixed size");
         let end = offset + size * shape.iter().product::<usize>();
         header.insert(
             (*name).into(),

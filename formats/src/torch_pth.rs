@@ -4,6 +4,7 @@
 //! state dict), e.g. torch-fidelity's InceptionV3 weights, without running any pickled code.
 
 use crate::error::{Error, Result};
+use crate::safetensors::SafeTensors;
 use crate::stored_zip::{le, zip_entries};
 use crate::torch_pickle::{self, Id, Obj, Pickle};
 use half::{bf16, f16};
@@ -104,6 +105,29 @@ impl TorchPth {
     /// Shape of a tensor if present.
     pub fn shape(&self, name: &str) -> Option<Vec<usize>> {
         self.tensors.get(name).map(|t| t.shape.clone())
+    }
+
+    /// The checkpoint as an in-memory safetensors file: every floating-point tensor contiguous, in
+    /// its own dtype (F64 narrowed to F32); integer and boolean tensors (buffers, step counters)
+    /// are left out.
+    pub fn to_safetensors(&self) -> Result<SafeTensors> {
+        let mut stored: Vec<(&str, &str, Vec<usize>, Vec<u8>)> = Vec::new();
+        for (name, t) in &self.tensors {
+            let (shape, values) = match t.dtype {
+                Dtype::Other(..) => continue,
+                _ => self.values(name)?,
+            };
+            // Widened exactly by `values`, so narrowed back exactly.
+            let (dtype, bytes): (&str, Vec<u8>) = match t.dtype {
+                Dtype::F16 => ("F16", values.iter().flat_map(|&v| f16::from_f32(v).to_le_bytes()).collect()),
+                Dtype::BF16 => ("BF16", values.iter().flat_map(|&v| bf16::from_f32(v).to_le_bytes()).collect()),
+                _ => ("F32", values.iter().flat_map(|v| v.to_le_bytes()).collect()),
+            };
+            stored.push((name, dtype, shape, bytes));
+        }
+        let tensors: Vec<(&str, &str, &[usize], &[u8])> =
+            stored.iter().map(|(n, d, s, b)| (*n, *d, s.as_slice(), b.as_slice())).collect();
+        SafeTensors::from_bytes(&self.path, crate::safetensors::file_bytes(&tensors))
     }
 
     /// A tensor's values as f32 in row-major (C-contiguous) order of its shape, honouring the

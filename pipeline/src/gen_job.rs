@@ -82,7 +82,7 @@ impl GenJob {
         for prompt in std::iter::once(&settings.job.prompt).chain(&settings.job.negative_prompt) {
             sampling.prompt_syntax.check(prompt)?;
         }
-        let multiple = Sdxl::probe_pixel_multiple(&settings.models.model, settings.models.vae.as_deref())?;
+        let multiple = Sdxl::probe_pixel_multiple(&settings.models.model, settings.models.swaps())?;
         sampling.check_size(multiple)?;
         if let Some(control) = &inputs.control {
             check_control_shape(control, sampling.width, sampling.height, multiple)?;

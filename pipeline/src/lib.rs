@@ -22,7 +22,7 @@ pub use schedulers::{
 };
 pub use sdxl::{
     check_control_shape, BatchOutput, Conditioning, ControlGuide, ControlNetUse, Denoised, Denoiser, Generated, Guides,
-    ImageGuide, InitLatents, IpAdapterUse, ItemInputs, Sdxl, StyleModels, Timings, VaePlan, WorkflowModels,
+    ImageGuide, InitLatents, IpAdapterUse, ItemInputs, Sdxl, StyleModels, Swaps, Timings, VaePlan, WorkflowModels,
 };
 pub use settings::{
     check_control_settings, control_depth_name, parse_attention, precision_name, read_images, ControlNetSettings,

@@ -16,6 +16,7 @@ fn settings(precision: Dtype) -> ModelSettings {
     ModelSettings {
         model: fixture("pipeline/tiny-sdxl"),
         vae: None,
+        unet: None,
         precision,
         controlnet: Some(ControlNetSettings {
             model: fixture("workflow/controlnet"),

@@ -114,6 +114,7 @@ fn settings(prompt: &str, negative: Option<&str>, sampler: &str, karras: bool) -
         models: ModelSettings {
             model: "/models/stable-diffusion-xl-base-1.0".into(),
             vae: None,
+            unet: None,
             precision: Dtype::F16,
             controlnet: Some(ControlNetSettings {
                 model: "/models/controlnet-depth-sdxl-1.0".into(),
@@ -196,9 +197,14 @@ fn comfyui_imports_the_parameters_with_our_settings() {
 
 #[test]
 fn a_missing_negative_prompt_still_imports_and_every_sampler_keeps_its_a1111_name() {
-    for (sampler, a1111, comfy) in
-        [("euler", "Euler", Some("euler")), ("ddim", "DDIM", Some("ddim")), ("euler_a", "Euler a", None)]
-    {
+    for (sampler, a1111, comfy) in [
+        ("euler", "Euler", Some("euler")),
+        ("ddim", "DDIM", Some("ddim")),
+        ("euler_a", "Euler a", None),
+        ("lcm", "LCM", Some("lcm")),
+        // Forge's name; ComfyUI's KSampler has no TCD and keeps its default.
+        ("tcd", "TCD", None),
+    ] {
         let png = written(&settings("a forest floor", None, sampler, false));
         let chunks = text_chunks(&png);
         let parameters = &chunks.iter().find(|c| c.keyword == "parameters").unwrap().text;

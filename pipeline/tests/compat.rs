@@ -7,12 +7,12 @@
 
 mod common;
 
-use common::{ctx, job, psnr, relative_l2};
+use common::{ctx, job, psnr, relative_l2, CaseInputs};
 use serde_json::Value;
 use vkdiff_formats::SafeTensors;
-use vkdiff_networks::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter};
+use vkdiff_networks::{ClipVisionModelWithProjection, IpAdapter};
 use vkdiff_pipeline::images::{read_image, ClipPreprocess};
-use vkdiff_pipeline::{parse_attention, ControlGuide, Guides, ImageGuide, IpScale, Sdxl};
+use vkdiff_pipeline::{parse_attention, ImageGuide, IpScale, Sdxl};
 use vkdiff_runtime::Dtype;
 use vkdiff_testkit::fixture;
 
@@ -116,30 +116,8 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
                 })
             }
         };
-        let init = case["init"].as_str().map(|f| read_image(&fixture(&format!("compat/{f}"))).unwrap());
-        let (net, control_image);
-        let control = match &case["control"] {
-            Value::Null => None,
-            c => {
-                net = ControlNetModel::load(
-                    &ctx,
-                    &fixture(&format!("workflow/{}", c["model"].as_str().unwrap())),
-                    sdxl.unet_config(),
-                    dtype,
-                )
-                .unwrap();
-                control_image = read_image(&fixture(&format!("workflow/{}", c["image"].as_str().unwrap()))).unwrap();
-                let (start, end) = (c["start"].as_f64().unwrap(), c["end"].as_f64().unwrap());
-                Some(ControlGuide {
-                    net: &net,
-                    image: &control_image,
-                    scale: c["scale"].as_f64().unwrap() as f32,
-                    start,
-                    end,
-                })
-            }
-        };
-        let guides = Guides { control, image, init: init.as_ref() };
+        let inputs = CaseInputs::load(&sdxl, &case, "compat", dtype);
+        let guides = inputs.guides(image);
         let out = sdxl.text_to_image(&job(&case), &guides, &mut |_, _| {}).unwrap();
         let (_, latents) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
         let (_, pixels) = records.values(case["tensors"]["image_u8"].as_str().unwrap()).unwrap();

@@ -7,7 +7,7 @@ mod common;
 use common::{ctx, job, relative_l2};
 use serde_json::Value;
 use vkdiff_formats::SafeTensors;
-use vkdiff_pipeline::{Guides, Sdxl};
+use vkdiff_pipeline::{Guides, Sdxl, Swaps};
 use vkdiff_runtime::Dtype;
 use vkdiff_testkit::fixture;
 
@@ -87,7 +87,7 @@ fn a_swapped_vae_matches_diffusers() {
     ];
     for (path, dtype, tol, min_psnr) in runs {
         let model = fixture("pipeline").join("tiny-sdxl");
-        let sdxl = Sdxl::load_with_vae(&ctx(), &model, Some(&path), dtype, &mut |_| {}).unwrap();
+        let sdxl = Sdxl::load_with(&ctx(), &model, Swaps { vae: Some(&path), unet: None }, dtype, &mut |_| {}).unwrap();
         assert_eq!(
             sdxl.vae_dtype(),
             dtype,
@@ -109,7 +109,8 @@ fn a_swapped_vae_matches_diffusers() {
     let alone = vkdiff_testkit::scratch("vae-alone").join("vae.safetensors");
     std::fs::copy(vae.join("sdxl_vae.safetensors"), &alone).unwrap();
     let model = fixture("pipeline").join("tiny-sdxl");
-    let sdxl = Sdxl::load_with_vae(&ctx(), &model, Some(&alone), Dtype::F16, &mut |_| {}).unwrap();
+    let sdxl =
+        Sdxl::load_with(&ctx(), &model, Swaps { vae: Some(&alone), unet: None }, Dtype::F16, &mut |_| {}).unwrap();
     assert_eq!(sdxl.vae_dtype(), Dtype::F32);
 }
 

@@ -7,7 +7,7 @@ use crate::unet::single_file::{infer_unet_config, unet_names};
 use crate::weights::{component_folder, Checkpoint};
 use std::collections::HashMap;
 use std::path::Path;
-use vkdiff_formats::SafeTensors;
+use vkdiff_formats::{SafeTensors, TorchPth};
 use vkdiff_runtime::{Context, Dtype};
 
 /// Prefix of the UNet's tensors in an original (sgm / ComfyUI / A1111) single-file checkpoint.
@@ -25,6 +25,72 @@ pub fn unet_checkpoint(ctx: &Context, path: &Path, dtype: Dtype) -> Result<(UNet
     let file = SafeTensors::open(path)?;
     let config = single_file_unet_config(&file)?;
     single_file_unet(ctx, file, config, dtype)
+}
+
+/// A UNet swapped in for a model's (SDXL-Lightning's, DMD2's): a diffusers UNet folder (or model
+/// folder) with its own config, or one file of weights for the architecture of `base`, as
+/// diffusers' `UNet2DConditionModel.from_config(base).load_state_dict(file)`, stored under
+/// diffusers' names or the original ones (with or without `model.diffusion_model.`), as
+/// safetensors or a torch `.bin`/`.pth`/`.pt`/`.ckpt` state dict.
+pub fn swapped_unet_checkpoint(
+    ctx: &Context,
+    path: &Path,
+    base: &UNetConfig,
+    dtype: Dtype,
+) -> Result<(UNetConfig, Checkpoint)> {
+    if path.is_dir() {
+        return unet_checkpoint(ctx, path, dtype);
+    }
+    let file = open_weights(path)?;
+    let config = base.clone();
+    match unet_file_layout(&file) {
+        Some(UNetLayout::Diffusers) => Ok((config, Checkpoint::diffusers_file(ctx, file, dtype))),
+        Some(UNetLayout::Original { prefix }) => {
+            let names = unet_names(&config)?;
+            Ok((config, Checkpoint::single_file_part(ctx, file, prefix, Some(names), dtype)))
+        }
+        None => Err(Error::Checkpoint(format!(
+            "{}: no UNet tensors (diffusers' `down_blocks.*` or the original `input_blocks.*`, with or without \
+                `{SINGLE_FILE_UNET}`)",
+            path.display()
+        ))),
+    }
+}
+
+/// The UNet config a swapped UNet at `path` runs with: its folder's, else `base`.
+pub fn swapped_unet_config(path: &Path, base: &UNetConfig) -> Result<UNetConfig> {
+    if path.is_dir() {
+        return read_unet_config(path);
+    }
+    Ok(base.clone())
+}
+
+/// A weights file: safetensors, or a torch pickle converted in memory.
+fn open_weights(path: &Path) -> Result<SafeTensors> {
+    let pickled = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| ["bin", "pth", "pt", "ckpt"].contains(&e.to_ascii_lowercase().as_str()));
+    Ok(if pickled { TorchPth::open(path)?.to_safetensors()? } else { SafeTensors::open(path)? })
+}
+
+enum UNetLayout {
+    Diffusers,
+    Original { prefix: &'static str },
+}
+
+/// How a UNet file names its tensors, from the names of its input convolution.
+fn unet_file_layout(file: &SafeTensors) -> Option<UNetLayout> {
+    let has = |name: &str| file.entries.contains_key(name);
+    if has("conv_in.weight") {
+        Some(UNetLayout::Diffusers)
+    } else if has(&format!("{SINGLE_FILE_UNET}input_blocks.0.0.weight")) {
+        Some(UNetLayout::Original { prefix: SINGLE_FILE_UNET })
+    } else if has("input_blocks.0.0.weight") {
+        Some(UNetLayout::Original { prefix: "" })
+    } else {
+        None
+    }
 }
 
 /// The config of the UNet at `path` (as [`unet_checkpoint`] reads it), without its weights.

@@ -51,6 +51,12 @@ impl Checkpoint {
         Ok(Checkpoint::from_files(ctx, dtype, files, "", None, format!("{} (diffusers layout)", folder.display())))
     }
 
+    /// One file of a component's weights stored under diffusers' names (SDXL-Lightning's UNet).
+    pub(crate) fn diffusers_file(ctx: &Context, file: SafeTensors, dtype: Dtype) -> Checkpoint {
+        let describe = format!("{} (diffusers layout)", file.path.display());
+        Checkpoint::from_files(ctx, dtype, vec![file], "", None, describe)
+    }
+
     /// The tensors under `prefix` of an original single-file checkpoint, renamed by `names`.
     pub(crate) fn single_file_part(
         ctx: &Context,

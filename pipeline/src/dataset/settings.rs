@@ -99,7 +99,7 @@ impl DatasetSettings {
             Some(models) => {
                 let every_scene_has_one = (0..count).all(|k| source.prompt(k).is_some());
                 check_diffusion(models, &prompts, every_scene_has_one, &negative_prompt, &sampling, &ip_sets)?;
-                Sdxl::probe_pixel_multiple(&models.model, models.vae.as_deref())? as u32
+                Sdxl::probe_pixel_multiple(&models.model, models.swaps())? as u32
             }
             None => {
                 check_render_only(&prompts, &negative_prompt, &sampling, &ip_sets)?;
@@ -252,6 +252,9 @@ impl DatasetSettings {
         }
         if let Some(vae) = &m.vae {
             map.insert("vae".into(), json!(recorded_path(vae)));
+        }
+        if let Some(unet) = &m.unet {
+            map.insert("unet".into(), json!(recorded_path(unet)));
         }
         if *c != SizeConditioning::default() {
             map.extend(object(json!({

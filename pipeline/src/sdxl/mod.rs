@@ -30,10 +30,18 @@ use std::path::Path;
 use vkdiff_formats::Error as FileError;
 use vkdiff_lora::{Component, LoraFile, LoraMerger, Summary, Targets};
 use vkdiff_networks::{
-    read_unet_config, unet_checkpoint, AutoencoderKl, Checkpoint, ClipTextModel, TextEncoderSlot, UNet, UNetConfig,
-    VaeConfig, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG,
+    read_unet_config, swapped_unet_checkpoint, swapped_unet_config, unet_checkpoint, AutoencoderKl, Checkpoint,
+    ClipTextModel, TextEncoderSlot, UNet, UNetConfig, VaeConfig, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG,
 };
 use vkdiff_runtime::{Context, Dtype};
+
+/// Components taken from elsewhere than the model folder or file: `--vae` (a folder, or a file
+/// in either layout) and `--unet` (a folder, or a file of the model's UNet architecture).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Swaps<'a> {
+    pub vae: Option<&'a Path>,
+    pub unet: Option<&'a Path>,
+}
 
 pub struct Sdxl {
     pub(crate) ctx: Context,
@@ -60,15 +68,14 @@ pub struct Sdxl {
 impl Sdxl {
     /// Loads every component, reporting each by name to `progress` before it loads.
     pub fn load(ctx: &Context, path: &Path, dtype: Dtype, progress: &mut dyn FnMut(&str)) -> Result<Sdxl> {
-        Sdxl::load_with_vae(ctx, path, None, dtype, progress)
+        Sdxl::load_with(ctx, path, Swaps::default(), dtype, progress)
     }
 
-    /// [`Sdxl::load`] with the VAE taken from `vae` (`--vae`: a folder, or a file in either
-    /// layout) instead of the model's.
-    pub fn load_with_vae(
+    /// [`Sdxl::load`] with the components `swaps` names taken from there instead of the model.
+    pub fn load_with(
         ctx: &Context,
         path: &Path,
-        vae: Option<&Path>,
+        swaps: Swaps,
         dtype: Dtype,
         progress: &mut dyn FnMut(&str),
     ) -> Result<Sdxl> {
@@ -89,10 +96,19 @@ impl Sdxl {
             ClipTextModel::load_sdxl(ctx, path, TextEncoderSlot::BigG, dtype)?,
         ];
         progress("UNet");
-        let (unet_config, ckpt) = unet_checkpoint(ctx, path, dtype)?;
-        let unet = UNet::load(&unet_config, &ckpt)?;
+        let (unet_config, ckpt) = match swaps.unet {
+            Some(unet) => {
+                let base = read_unet_config(path)?;
+                flagged("unet", unet, swapped_unet_checkpoint(ctx, unet, &base, dtype))?
+            }
+            None => unet_checkpoint(ctx, path, dtype)?,
+        };
+        let unet = match swaps.unet {
+            Some(file) => flagged("unet", file, UNet::load(&unet_config, &ckpt))?,
+            None => UNet::load(&unet_config, &ckpt)?,
+        };
         progress("VAE");
-        let vae = match vae {
+        let vae = match swaps.vae {
             Some(file) => flagged("vae", file, AutoencoderKl::load_sdxl(ctx, file, dtype))?,
             None => AutoencoderKl::load_sdxl(ctx, path, dtype)?,
         };
@@ -200,12 +216,16 @@ impl Sdxl {
 
     /// [`Sdxl::pixel_multiple`] of the model at `path`, read from its configs or tensor shapes
     /// without loading any weight (to check sizes before the long load).
-    pub fn probe_pixel_multiple(path: &Path, vae: Option<&Path>) -> Result<usize> {
+    pub fn probe_pixel_multiple(path: &Path, swaps: Swaps) -> Result<usize> {
         if !path.exists() {
             return Err(Error::Config(format!("{}: no such model folder or file", path.display())));
         }
         let unet = read_unet_config(path)?;
-        let vae = match vae {
+        let unet = match swaps.unet {
+            Some(file) => flagged("unet", file, swapped_unet_config(file, &unet))?,
+            None => unet,
+        };
+        let vae = match swaps.vae {
             Some(file) => flagged("vae", file, AutoencoderKl::sdxl_config(file))?,
             None => AutoencoderKl::sdxl_config(path)?,
         };

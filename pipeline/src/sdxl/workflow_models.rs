@@ -35,9 +35,9 @@ impl WorkflowModels {
     /// what each LoRA touched.
     pub fn load(ctx: &Context, settings: &ModelSettings, log: &mut dyn FnMut(&str)) -> Result<WorkflowModels> {
         let dtype = settings.precision;
-        let vae = settings.vae.as_deref();
-        let mut sdxl =
-            Sdxl::load_with_vae(ctx, &settings.model, vae, dtype, &mut |part| log(&format!("loading {part}")))?;
+        let mut sdxl = Sdxl::load_with(ctx, &settings.model, settings.swaps(), dtype, &mut |part| {
+            log(&format!("loading {part}"))
+        })?;
         let controlnet = match &settings.controlnet {
             Some(c) => {
                 log(&format!("loading ControlNet {}", c.model.display()));

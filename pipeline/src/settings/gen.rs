@@ -128,6 +128,9 @@ impl GenSettings {
         if let Some(vae) = &m.vae {
             text.insert("vae".into(), recorded_path(vae));
         }
+        if let Some(unet) = &m.unet {
+            text.insert("unet".into(), recorded_path(unet));
+        }
         text
     }
 
@@ -150,6 +153,9 @@ impl GenSettings {
         ];
         if let Some(vae) = &m.vae {
             pairs.push(format!("VAE: {}", quoted(&model_name(vae))));
+        }
+        if let Some(unet) = &m.unet {
+            pairs.push(format!("UNet: {}", quoted(&model_name(unet))));
         }
         if let Some(strength) = s.strength {
             pairs.push(format!("Denoising strength: {strength}"));

@@ -2,6 +2,7 @@
 //! LoRAs merged into it; checked before anything loads.
 
 use crate::error::{Error, Result};
+use crate::sdxl::Swaps;
 use crate::settings::ip_scale::IpScale;
 use crate::settings::VaeTilingSetting;
 use std::path::{Path, PathBuf};
@@ -43,6 +44,8 @@ pub struct ModelSettings {
     pub model: PathBuf,
     /// A VAE in place of the model's (`--vae`): a diffusers folder or a single file.
     pub vae: Option<PathBuf>,
+    /// A UNet in place of the model's (`--unet`): a diffusers folder or a file of its weights.
+    pub unet: Option<PathBuf>,
     pub precision: Dtype,
     pub controlnet: Option<ControlNetSettings>,
     pub ip_adapter: Option<IpAdapterSettings>,
@@ -67,6 +70,11 @@ pub fn recorded_path(path: &Path) -> String {
 }
 
 impl ModelSettings {
+    /// The components taken from elsewhere than the model.
+    pub fn swaps(&self) -> Swaps<'_> {
+        Swaps { vae: self.vae.as_deref(), unet: self.unet.as_deref() }
+    }
+
     /// The LoRAs as `--lora` takes them, FILE:STRENGTH.
     pub fn lora_flags(&self) -> Vec<String> {
         self.loras.iter().map(|l| format!("{}:{}", recorded_path(&l.path), l.strength)).collect()
@@ -109,6 +117,16 @@ impl ModelSettings {
         if let Some(vae) = &self.vae {
             flagged("vae", vae, vkdiff_networks::AutoencoderKl::sdxl_config(vae))?;
         }
+        if let Some(unet) = &self.unet {
+            let header = if unet.is_dir() {
+                vkdiff_networks::read_unet_config(unet).map(drop)
+            } else if unet.extension().is_some_and(|e| e == "safetensors") {
+                SafeTensors::open(unet).map(drop).map_err(Into::into)
+            } else {
+                Ok(())
+            };
+            flagged("unet", unet, header)?;
+        }
         if let Some(ip) = &self.ip_adapter {
             flagged("image_encoder", &ip.encoder, ClipVisionConfig::from_file(&ip.encoder.join("config.json")))?;
             if ip.adapter.extension().is_some_and(|e| e == "safetensors") {
@@ -122,6 +140,7 @@ impl ModelSettings {
     fn files(&self) -> Vec<(&Path, &'static str)> {
         let mut files = vec![(self.model.as_path(), "model")];
         files.extend(self.vae.iter().map(|v| (v.as_path(), "vae")));
+        files.extend(self.unet.iter().map(|u| (u.as_path(), "unet")));
         files.extend(self.controlnet.iter().map(|c| (c.model.as_path(), "controlnet")));
         if let Some(ip) = &self.ip_adapter {
             files.extend([(ip.adapter.as_path(), "ip_adapter"), (ip.encoder.as_path(), "image_encoder")]);

@@ -2,8 +2,14 @@
 
 use serde_json::Value;
 use std::sync::OnceLock;
-use vkdiff_pipeline::{PromptSyntax, Sampling, ScheduleOptions, SizeConditioning, TextToImage};
-use vkdiff_runtime::Context;
+use vkdiff_networks::ControlNetModel;
+use vkdiff_pipeline::images::read_image;
+use vkdiff_pipeline::{
+    ControlGuide, Guides, ImageGuide, PromptSyntax, RgbImage, Sampling, ScheduleOptions, Sdxl, SizeConditioning,
+    TextToImage,
+};
+use vkdiff_runtime::{Context, Dtype};
+use vkdiff_testkit::fixture;
 
 pub fn ctx() -> Context {
     static CTX: OnceLock<Context> = OnceLock::new();
@@ -77,5 +83,44 @@ pub fn psnr(got: &[u8], want: &[f32]) -> f64 {
         f64::INFINITY
     } else {
         10.0 * (255.0f64 * 255.0 / mse).log10()
+    }
+}
+
+/// A recorded case's ControlNet (of tests/fixtures/workflow) with its image and settings, and its
+/// init image (in `init_dir` under tests/fixtures), loaded for `sdxl`.
+#[allow(dead_code)] // not every test binary runs whole cases
+pub struct CaseInputs {
+    control: Option<(ControlNetModel, RgbImage, f32, f64, f64)>,
+    init: Option<RgbImage>,
+}
+
+#[allow(dead_code)]
+impl CaseInputs {
+    pub fn load(sdxl: &Sdxl, case: &Value, init_dir: &str, dtype: Dtype) -> CaseInputs {
+        let workflow = |key: &Value| fixture(&format!("workflow/{}", key.as_str().unwrap()));
+        let control = match &case["control"] {
+            Value::Null => None,
+            c => Some((
+                ControlNetModel::load(&ctx(), &workflow(&c["model"]), sdxl.unet_config(), dtype).unwrap(),
+                read_image(&workflow(&c["image"])).unwrap(),
+                c["scale"].as_f64().unwrap() as f32,
+                c["start"].as_f64().unwrap(),
+                c["end"].as_f64().unwrap(),
+            )),
+        };
+        let init = case["init"].as_str().map(|f| read_image(&fixture(&format!("{init_dir}/{f}"))).unwrap());
+        CaseInputs { control, init }
+    }
+
+    /// The case's guides, with the IP-Adapter's `image` guide where it has one.
+    pub fn guides<'a>(&'a self, image: Option<ImageGuide<'a>>) -> Guides<'a> {
+        let control = self.control.as_ref().map(|(net, image, scale, start, end)| ControlGuide {
+            net,
+            image,
+            scale: *scale,
+            start: *start,
+            end: *end,
+        });
+        Guides { control, image, init: self.init.as_ref() }
     }
 }

@@ -1,0 +1,71 @@
+//! The few-step recipes against diffusers on the tiny SDXL (tools/make_few_step_fixtures.py):
+//! every sampler under its recipe (SDXL-Lightning, Hyper-SD, LCM, TCD, Turbo, DMD2) alone, with
+//! the depth ControlNet over the few steps, and from an init image on a trailing schedule; and a
+//! UNet swapped in from a file in each stored layout (diffusers' names, the original ones, a
+//! torch `.bin`).
+
+mod common;
+
+use common::{ctx, job, psnr, relative_l2, CaseInputs};
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use vkdiff_formats::SafeTensors;
+use vkdiff_pipeline::{SchedulerConfig, Sdxl, Swaps};
+use vkdiff_runtime::Dtype;
+use vkdiff_testkit::fixture;
+
+fn cases() -> Vec<Value> {
+    let records: Value =
+        serde_json::from_str(&std::fs::read_to_string(fixture("few_step/records.json")).unwrap()).unwrap();
+    records["cases"].as_array().unwrap().clone()
+}
+
+#[test]
+fn every_recipe_schedules_the_timesteps_diffusers_runs() {
+    let config = SchedulerConfig::of_model(&fixture("pipeline/tiny-sdxl")).unwrap();
+    let cases = cases();
+    assert!(cases.len() >= 20, "{} cases", cases.len());
+    for case in &cases {
+        let sampler = job(case).sampling.sampler(&config).unwrap();
+        let want: Vec<f32> =
+            case["diffusers_timesteps"].as_array().unwrap().iter().map(|t| t.as_f64().unwrap() as f32).collect();
+        assert_eq!(sampler.timesteps(), want, "{}", case["name"]);
+    }
+}
+
+/// Every case on the tiny SDXL in `dtype`, the models loaded once per UNet file: latents within
+/// `tol` (relative L2) of diffusers', images at `min_psnr` or better.
+fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
+    let records = SafeTensors::open(&fixture("few_step/records.safetensors")).unwrap();
+    let mut by_unet: BTreeMap<Option<String>, Vec<Value>> = BTreeMap::new();
+    for case in cases() {
+        by_unet.entry(case["unet"].as_str().map(String::from)).or_default().push(case);
+    }
+    for (unet, cases) in by_unet {
+        let unet: Option<PathBuf> = unet.map(|f| fixture(&format!("few_step/{f}")));
+        let swaps = Swaps { vae: None, unet: unet.as_deref() };
+        let sdxl = Sdxl::load_with(&ctx(), &fixture("pipeline/tiny-sdxl"), swaps, dtype, &mut |_| {}).unwrap();
+        for case in cases {
+            let name = case["name"].as_str().unwrap();
+            let inputs = CaseInputs::load(&sdxl, &case, "compat", dtype);
+            let out = sdxl.text_to_image(&job(&case), &inputs.guides(None), &mut |_, _| {}).unwrap();
+            let (_, latents) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
+            let (_, pixels) = records.values(case["tensors"]["image_u8"].as_str().unwrap()).unwrap();
+            let (rel, p) = (relative_l2(&out.latents, &latents), psnr(&out.image.pixels, &pixels));
+            eprintln!("{dtype:?} {name}: latents rel L2 {rel:.2e}, image PSNR {p:.1} dB");
+            assert!(rel <= tol, "{dtype:?} case {name}: latents relative L2 error {rel:.2e} > {tol:.0e}");
+            assert!(p >= min_psnr, "{dtype:?} case {name}: image PSNR {p:.1} dB < {min_psnr} dB");
+        }
+    }
+}
+
+#[test]
+fn few_step_recipes_and_swapped_unets_match_diffusers_in_f32() {
+    check(Dtype::F32, 1e-5, 50.0);
+}
+
+#[test]
+fn few_step_recipes_and_swapped_unets_match_diffusers_in_f16() {
+    check(Dtype::F16, 2e-2, 30.0);
+}
