@@ -13,7 +13,7 @@ use vkdiff_pipeline::dataset::{
     Merged, Progress as Event, RenderedScenes, Report, RunOptions, SceneSource, ShardRequest, VersionChange,
     DEFAULT_FAR,
 };
-use vkdiff_pipeline::Sampling;
+use vkdiff_pipeline::{recipe_warnings, Sampling};
 
 /// Render scenes and make each into photoreal images with exact masks: one folder with the
 /// images, their depth, control images and instance masks, and COCO annotations. Resumable and
@@ -130,6 +130,11 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         keep_text_encoders: false,
     };
     let mut job = DatasetJob::new(settings(args)?, out, shard, options, &|k| std::env::var(k).ok())?;
+    if let Some(models) = &job.settings().models {
+        for warning in recipe_warnings(models, &job.settings().sampling)? {
+            eprintln!("{warning}");
+        }
+    }
     for why in job.redo() {
         eprintln!("making again: {why}");
     }

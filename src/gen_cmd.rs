@@ -5,7 +5,7 @@ use clap::Args;
 use std::path::PathBuf;
 use vkdiff_args::Progress;
 use vkdiff_args::{ModelArgs, SamplingArgs};
-use vkdiff_pipeline::{GenEvent, GenJob, GenRequest, GenSettings, TextToImage};
+use vkdiff_pipeline::{recipe_warnings, GenEvent, GenJob, GenRequest, GenSettings, TextToImage};
 
 /// Text-to-image with an SDXL model (diffusers folder or single .safetensors file).
 #[derive(Args, Debug)]
@@ -75,6 +75,9 @@ pub fn run(args: &GenArgs) -> Result<()> {
         latents_out: args.latents_out.clone(),
         replace: args.force,
     })?;
+    for warning in recipe_warnings(&job.settings().models, &job.settings().job.sampling)? {
+        eprintln!("{warning}");
+    }
     let ctx = crate::open_device(&args.model.device)?;
     // The bar starts once the models are loaded, so its rate is the denoiser's.
     let mut progress = None;

@@ -6,6 +6,8 @@
 mod cli;
 #[path = "dataset_cli/deploy.rs"]
 mod deploy;
+#[path = "dataset_cli/few_step.rs"]
+mod few_step;
 #[path = "dataset_cli/refusals.rs"]
 mod refusals;
 #[path = "dataset_cli/runs.rs"]

@@ -165,13 +165,13 @@ impl SchedulerConfig {
         self.integer("steps_offset", 0)
     }
 
-    pub(super) fn spacing(&self, default: &str) -> Result<TimestepSpacing> {
+    pub(crate) fn spacing(&self, default: &str) -> Result<TimestepSpacing> {
         self.text("timestep_spacing", default)?
             .parse()
             .map_err(|_| self.unsupported("timestep_spacing", "(use \"leading\", \"trailing\" or \"linspace\")"))
     }
 
-    pub(super) fn prediction(&self) -> Result<PredictionType> {
+    pub(crate) fn prediction(&self) -> Result<PredictionType> {
         self.text("prediction_type", "epsilon")?
             .parse()
             .map_err(|_| self.unsupported("prediction_type", "(use \"epsilon\", \"v_prediction\" or \"sample\")"))

@@ -76,7 +76,7 @@ impl SamplerKind {
 
     /// Whether its schedule reads `timestep_spacing` (LCM and TCD pick from their distillation
     /// schedule instead).
-    fn reads_spacing(self) -> bool {
+    pub(crate) fn reads_spacing(self) -> bool {
         !matches!(self, SamplerKind::Lcm | SamplerKind::Tcd)
     }
 }
