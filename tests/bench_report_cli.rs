@@ -72,8 +72,8 @@ fn a_report_names_its_machine_and_times_each_figure() {
     let figures = report["figures"].as_array().unwrap();
     let ids: Vec<&str> = figures.iter().map(|f| f["id"].as_str().unwrap()).collect();
     // The tiny VAE's config forces f32: it has no f16 row.
-    assert_eq!(ids, ["image", "unet.f16", "vae.f32"]);
-    for f in figures {
+    assert_eq!(ids, ["image", "image_4_steps", "unet.f16", "vae.f32"]);
+    for f in figures.iter().filter(|f| f["id"] != "image_4_steps") {
         let runs = &f["runs"];
         assert_eq!(runs["count"], 1, "{f}");
         assert!(
@@ -91,6 +91,13 @@ fn a_report_names_its_machine_and_times_each_figure() {
     let median = image["runs"]["median"].as_f64().unwrap();
     assert!((per_image - median).abs() <= 1e-6 * median, "{parts:?} against {median}");
     assert_eq!(image["note"], "2 of the 30 steps timed, the others counted at their rate");
+    // Lightning's 4 steps without guidance beside it, measured against it in the same run.
+    let few = &figures[1];
+    assert_eq!(few["note"], "2 of the 4 steps timed, the others counted at their rate");
+    assert_eq!(few["reference"]["value"], image["runs"]["median"], "{few}");
+    assert_eq!(few["reference"]["what"], "the paper's 30-step image, this run");
+    let ratio = median / few["runs"]["median"].as_f64().unwrap();
+    assert!(ratio > 1.0 && table.contains(few["label"].as_str().unwrap()), "{ratio}: {table}");
     assert!(table.contains("| figure | vkdiff (median) |") && table.contains("Reproduce by: `"), "{table}");
 }
 
@@ -132,7 +139,7 @@ fn reports_compare_as_markdown_and_as_a_page_with_charts() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let markdown = String::from_utf8(out.stdout).unwrap();
     let rows: Vec<&str> = markdown.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| figure")).collect();
-    assert_eq!(rows.len(), 3, "{markdown}");
+    assert_eq!(rows.len(), 4, "{markdown}");
     // The second column holds each value beside its speed relative to the first report.
     let (ra, rb) = (read_json(Path::new(a)), read_json(Path::new(b)));
     for (row, (fa, fb)) in

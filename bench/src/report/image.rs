@@ -9,7 +9,9 @@ use crate::random_models::style_images;
 use anyhow::Result;
 use std::time::Duration;
 use vkdiff_lora::LoraFile;
-use vkdiff_pipeline::{ControlNetSettings, IpAdapterSettings, ModelSettings, RgbImage, WorkflowModels};
+use vkdiff_pipeline::{
+    ControlNetSettings, IpAdapterSettings, ModelSettings, RgbImage, TimestepSpacing, WorkflowModels,
+};
 use vkdiff_runtime::Context;
 
 /// The workflow loaded once, with its LoRAs' files kept so that the ablation can merge subsets.
@@ -55,13 +57,45 @@ struct ImageRun {
     parts: Vec<(String, f64)>,
 }
 
-fn image_run(models: &mut WorkflowModels, plan: &Plan, styles: &[Vec<RgbImage>]) -> Result<ImageRun> {
-    let settings = paper_set(plan.image_size, 1, 1, plan.steps_timed, &models.settings);
+/// How a figure's image is sampled: the paper's steps with guidance, or SDXL-Lightning's recipe
+/// (Euler on trailing timesteps, no guidance: one UNet row a step).
+#[derive(Clone, Copy)]
+struct Steps {
+    total: usize,
+    timed: usize,
+    lightning: bool,
+}
+
+impl Steps {
+    fn paper(plan: &Plan) -> Steps {
+        Steps { total: plan.steps, timed: plan.steps_timed, lightning: false }
+    }
+
+    fn lightning(plan: &Plan) -> Steps {
+        Steps { total: FEW_STEPS, timed: FEW_STEPS.min(plan.steps_timed), lightning: true }
+    }
+
+    fn note(&self) -> Option<String> {
+        (self.timed < self.total)
+            .then(|| format!("{} of the {} steps timed, the others counted at their rate", self.timed, self.total))
+    }
+}
+
+/// The few-step row's steps, and its id.
+const FEW_STEPS: usize = 4;
+pub const FEW_STEP_ID: &str = "image_4_steps";
+
+fn image_run(models: &mut WorkflowModels, plan: &Plan, steps: Steps, styles: &[Vec<RgbImage>]) -> Result<ImageRun> {
+    let mut settings = paper_set(plan.image_size, 1, 1, steps.timed, &models.settings);
+    if steps.lightning {
+        settings.sampling.guidance_scale = 0.0;
+        settings.sampling.schedule.spacing = Some(TimestepSpacing::Trailing);
+    }
     let (report, wall) = make_set(models, &settings, styles, 1, true)?;
     let t = &report.times;
     let secs = Duration::as_secs_f64;
-    let step = secs(&t.denoise) / plan.steps_timed as f64;
-    let denoise = step * plan.steps as f64;
+    let step = secs(&t.denoise) / steps.timed as f64;
+    let denoise = step * steps.total as f64;
     let per_image = secs(&wall) - secs(&t.setup) + denoise - secs(&t.denoise);
     let named = [("scene", secs(&t.scene)), ("guides", secs(&t.guides)), ("denoise", denoise), ("VAE", secs(&t.vae))];
     let mut parts: Vec<(String, f64)> = named.iter().map(|(n, v)| (n.to_string(), *v)).collect();
@@ -72,28 +106,33 @@ fn image_run(models: &mut WorkflowModels, plan: &Plan, styles: &[Vec<RgbImage>])
 }
 
 /// `plan.runs` images after a warm-up image: the figure.
-fn image_figure(models: &mut WorkflowModels, plan: &Plan, ctx: &Context, id: &str, label: String) -> Result<Figure> {
+fn image_figure(
+    models: &mut WorkflowModels,
+    plan: &Plan,
+    steps: Steps,
+    ctx: &Context,
+    id: &str,
+    label: String,
+) -> Result<Figure> {
     let styles = if models.style.is_some() { vec![style_images().to_vec()] } else { Vec::new() };
     ctx.reset_peak();
-    let first = if plan.warm_up { Some(image_run(models, plan, &styles)?.whole) } else { None };
-    let runs: Vec<ImageRun> = (0..plan.runs).map(|_| image_run(models, plan, &styles)).collect::<Result<_>>()?;
+    let first = if plan.warm_up { Some(image_run(models, plan, steps, &styles)?.whole) } else { None };
+    let runs: Vec<ImageRun> = (0..plan.runs).map(|_| image_run(models, plan, steps, &styles)).collect::<Result<_>>()?;
     let values: Vec<f64> = runs.iter().map(|r| r.per_image).collect();
     let stats = Runs::of(&values).expect("at least one run");
     // The stages of the run nearest the median.
     let middle =
         runs.iter().min_by(|a, b| (a.per_image - stats.median).abs().total_cmp(&(b.per_image - stats.median).abs()));
-    let note = (plan.steps_timed < plan.steps)
-        .then(|| format!("{} of the {} steps timed, the others counted at their rate", plan.steps_timed, plan.steps));
     Ok(Figure {
         id: id.into(),
-        group: if id == "image" { "image".into() } else { "ablation".into() },
+        group: if id == "image" || id == FEW_STEP_ID { "image".into() } else { "ablation".into() },
         label,
         unit: "s".into(),
         higher_is_better: false,
         first_run: first.or(runs.first().map(|r| r.whole)),
         peak_mib: Some(ctx.peak_bytes() as f64 / (1 << 20) as f64),
         parts: middle.map(|r| r.parts.clone()).unwrap_or_default(),
-        note,
+        note: steps.note(),
         peak_share: None,
         runs: stats,
         reference: Reference::Missing { why: String::new() },
@@ -120,7 +159,18 @@ fn describe(models: &WorkflowModels) -> String {
 pub fn paper_image(workflow: &mut Workflow, plan: &Plan, ctx: &Context) -> Result<Figure> {
     let label =
         format!("the paper's image, {}², {} steps: {}", plan.image_size, plan.steps, describe(&workflow.models));
-    image_figure(&mut workflow.models, plan, ctx, "image", label)
+    image_figure(&mut workflow.models, plan, Steps::paper(plan), ctx, "image", label)
+}
+
+/// The paper's image under SDXL-Lightning's 4-step recipe (Euler, trailing timesteps, guidance
+/// 0): what a distilled UNet or LoRA of the same architecture makes of the same workflow.
+pub fn few_step_image(workflow: &mut Workflow, plan: &Plan, ctx: &Context) -> Result<Figure> {
+    let label = format!(
+        "the paper's image, {}², {FEW_STEPS} steps (Lightning's recipe: Euler, trailing, no guidance): {}",
+        plan.image_size,
+        describe(&workflow.models)
+    );
+    image_figure(&mut workflow.models, plan, Steps::lightning(plan), ctx, FEW_STEP_ID, label)
 }
 
 /// One row of the paper's ablation (its Table 4): which parts of the workflow run.
@@ -173,7 +223,7 @@ pub fn ablation(workflow: &mut Workflow, plan: &Plan, ctx: &Context) -> Result<V
         workflow.merge(&v.loras)?;
         eprintln!("report: ablation {}", v.name);
         let label = format!("ablation {}: {}", v.name, describe(&workflow.models));
-        let figure = image_figure(&mut workflow.models, plan, ctx, v.id, label);
+        let figure = image_figure(&mut workflow.models, plan, Steps::paper(plan), ctx, v.id, label);
         let m = &mut workflow.models;
         if v.controlnet {
             controlnet = (m.controlnet.take(), m.settings.controlnet.take());

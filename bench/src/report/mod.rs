@@ -261,7 +261,10 @@ fn image_jobs(
     let mut images = Vec::new();
     if wants(args, Group::Image) {
         eprintln!("report: the paper's image");
-        images.push(image::paper_image(&mut workflow, plan, ctx)?);
+        let paper = image::paper_image(&mut workflow, plan, ctx)?;
+        eprintln!("report: the paper's image at 4 steps (Lightning's recipe)");
+        let few = image::few_step_image(&mut workflow, plan, ctx)?;
+        images.extend([paper, few]);
     }
     if wants(args, Group::Ablation) {
         images.extend(image::ablation(&mut workflow, plan, ctx)?);
@@ -269,19 +272,26 @@ fn image_jobs(
     let ip_adapter = workflow.models.style.is_some();
     let configs =
         networks::workflow_configs(user.map(|u| u.model.as_path()), user.map(|u| u.controlnet.as_deref()), ip_adapter);
+    let thirty = images.iter().find(|f| f.id == "image").map(|f| f.runs.median);
     Ok(images
         .into_iter()
         .map(|figure| {
-            let job = match &configs {
-                Some(configs) if figure.id == "image" => networks::Job::Workflow {
+            let job = match (&configs, thirty) {
+                (_, Some(thirty)) if figure.id == image::FEW_STEP_ID => networks::Job::Measured(Reference::Measured {
+                    value: thirty,
+                    what: format!("the paper's {}-step image, this run", plan.steps),
+                }),
+                (Some(configs), _) if figure.id == "image" => networks::Job::Workflow {
                     configs: configs.clone(),
                     size: plan.image_size,
                     steps_timed: plan.steps_timed,
                     steps: plan.steps,
                     dtype: plan.dtype,
                 },
-                Some(_) => networks::Job::None("diffusers' pipeline runs beside the whole workflow only".into()),
-                None => networks::Job::None("diffusers' pipeline needs diffusers folders (with a ControlNet)".into()),
+                (Some(_), _) => networks::Job::None("diffusers' pipeline runs beside the whole workflow only".into()),
+                (None, _) => {
+                    networks::Job::None("diffusers' pipeline needs diffusers folders (with a ControlNet)".into())
+                }
             };
             (figure, job)
         })

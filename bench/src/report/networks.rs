@@ -37,6 +37,8 @@ pub enum Job {
         id: &'static str,
         dtype: Dtype,
     },
+    /// A reference vkdiff measured itself in this run (the 4-step image's: the 30-step one).
+    Measured(Reference),
     /// stable-diffusion.cpp on the same device, from the file vkdiff timed (see `peer.rs`).
     Peer {
         file: super::peer::PeerFile,
@@ -223,6 +225,7 @@ pub fn references(plan: &Plan, jobs: Vec<(Figure, Job)>) -> Vec<Figure> {
             figure.reference = match (device, job) {
                 // The peer runs on vkdiff's own Vulkan device, whatever device diffusers takes.
                 (_, Job::Peer { file, size, steps }) => super::peer::sdcpp(&file, size, steps, plan.peer_timeout),
+                (_, Job::Measured(reference)) => reference,
                 (None, _) => Reference::Missing { why: "not asked for (--reference-device none)".into() },
                 (_, Job::None(why)) => Reference::Missing { why },
                 (Some(d), Job::Workflow { configs, size, steps_timed, steps, dtype }) => {
