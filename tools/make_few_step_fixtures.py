@@ -8,6 +8,16 @@ tests/fixtures/compat:
     `pipe(num_inference_steps=N)` or `pipe(timesteps=[...])`, `eta=` for TCD, guidance 0, 1 or above):
     text-to-image alone, through StableDiffusionXLControlNetPipeline (with control_guidance_start/end that
     cut the few steps), and through StableDiffusionXLImg2ImgPipeline (strength over the trailing schedule);
+  - the distillation LoRAs in the layout their published files use (key names, dtypes and header read from the
+    files' sizes, DMD2's extract_lora_module.py and third-party key dumps; see DISTILLATION_LORAS): kohya names over
+    diffusers module paths (`lora_unet_<path>.lora_down.weight`, `.lora_up.weight`, a 0-dim `.alpha`) on every
+    attention projection, feed-forward, proj_in/out, resnet conv1/conv2/conv_shortcut/time_emb_proj and
+    down/upsampler conv of the UNet, no text encoder; alpha 8 (DMD2's and Lightning's; the rank here is 16 where
+    theirs is 64); float16 with no metadata (Lightning, DMD2, LCM, TCD) or float32 under {"format": "pt"}
+    (Hyper-SD). Each is checked wrapped by diffusers' load_lora_weights on every module with scale alpha/r, and
+    fuse_lora's weights recorded for four modules (records.json "loras", read as tests/fixtures/workflow's); each
+    also runs its recipe through the pipeline, DMD2's beside the workflow's two style LoRAs
+    (load_lora_weights per adapter, set_adapters with their strengths);
   - a UNet swapped in as Lightning's and DMD2's model cards do it (`UNet2DConditionModel.from_config(base unet
     config)`, `load_state_dict(file)`, the pipeline built with `unet=`): a tiny "distilled" UNet of the base's
     architecture with its weights re-drawn, stored in the diffusers layout (unet-diffusers.safetensors, as
@@ -52,6 +62,24 @@ SCHEDULERS = dict(euler=EulerDiscreteScheduler, euler_a=EulerAncestralDiscreteSc
 PROMPT = "a red barn in a green field"
 CONTROL = dict(model="controlnet", image="control.png", scale=0.8)
 UNET_FILES = ["unet-diffusers.safetensors", "unet-original.safetensors", "unet-diffusers.bin"]
+# (file under --out, tensor dtype, safetensors metadata) as each distillation publishes its LoRA.
+DISTILLATION_LORAS = [
+    ("sdxl_lightning_4step_lora.safetensors", torch.float16, None),
+    ("Hyper-SDXL-8steps-CFG-lora.safetensors", torch.float32, {"format": "pt"}),
+    ("lcm-lora-sdxl/pytorch_lora_weights.safetensors", torch.float16, None),
+    ("TCD-SDXL-LoRA/pytorch_lora_weights.safetensors", torch.float16, None),
+    ("dmd2_sdxl_4step_lora_fp16.safetensors", torch.float16, None),
+]
+LORA_RANK, LORA_ALPHA = 16, 8.0
+# The modules every distillation LoRA targets, as module path suffixes (788 of them in SDXL).
+LORA_TARGETS = ("attn1.to_q", "attn1.to_k", "attn1.to_v", "attn1.to_out.0", "attn2.to_q", "attn2.to_k", "attn2.to_v",
+                "attn2.to_out.0", "ff.net.0.proj", "ff.net.2", "proj_in", "proj_out", "time_emb_proj", "conv1", "conv2",
+                "conv_shortcut", "downsamplers.0.conv", "upsamplers.0.conv")
+# fuse_lora's weights recorded for these (a linear, a 3×3 conv, a 1×1 conv, the time projection).
+LORA_RECORDS = [("unet", "down_blocks.1.attentions.0.transformer_blocks.0.attn2.to_k"),
+                ("unet", "mid_block.resnets.0.conv1"), ("unet", "up_blocks.0.resnets.0.conv_shortcut"),
+                ("unet", "up_blocks.1.resnets.1.time_emb_proj")]
+STYLE_LORAS = [("workflow/lora-kohya-ldm.safetensors", 0.8), ("workflow/lora-peft.safetensors", 0.5)]
 
 
 def case(name, sampler, guidance, seed, steps=None, **settings):
@@ -97,6 +125,16 @@ CASES = [
       for f in UNET_FILES],
     case("unet_dmd2_control", "lcm", 0.0, 22, timesteps=[999, 749, 499, 249], unet=UNET_FILES[0],
          control=dict(CONTROL, start=0.0, end=1.0)),
+    # Each distillation LoRA under its recipe; DMD2's beside the style LoRAs, with the ControlNet.
+    case("lora_lightning", "euler", 0.0, 23, 4, timestep_spacing="trailing",
+         loras=[("few_step/" + DISTILLATION_LORAS[0][0], 1.0)]),
+    case("lora_hyper_cfg", "ddim", 5.0, 24, 8, timestep_spacing="trailing",
+         loras=[("few_step/" + DISTILLATION_LORAS[1][0], 1.0)]),
+    case("lora_lcm", "lcm", 1.0, 25, 4, loras=[("few_step/" + DISTILLATION_LORAS[2][0], 1.0)]),
+    case("lora_tcd", "tcd", 0.0, 26, 4, eta=0.3, loras=[("few_step/" + DISTILLATION_LORAS[3][0], 1.0)]),
+    case("lora_dmd2_styles_control", "lcm", 0.0, 27, timesteps=[999, 749, 499, 249],
+         loras=[("few_step/" + DISTILLATION_LORAS[4][0], 1.0), *STYLE_LORAS],
+         control=dict(CONTROL, start=0.0, end=1.0)),
 ]
 
 
@@ -135,6 +173,43 @@ def load_swapped_unet(base_folder, out, name):
     return unet.eval()
 
 
+def distillation_lora(pipe, stem):
+    """Every target module of the UNet: kohya names over diffusers paths, rank LORA_RANK, alpha LORA_ALPHA."""
+    gen = wf.gen_for(stem)
+    state, spec = {}, []
+    for path, m in pipe.unet.named_modules():
+        if not path.endswith(LORA_TARGETS) or not hasattr(m, "weight"):
+            continue
+        key = "lora_unet_" + path.replace(".", "_")
+        w = wf.base_weight(pipe, "unet", path)
+        down, up = wf.lora_pair(gen, w, LORA_RANK, LORA_ALPHA / LORA_RANK)
+        state |= {f"{key}.lora_down.weight": down, f"{key}.lora_up.weight": up, f"{key}.alpha": torch.tensor(LORA_ALPHA)}
+        spec.append(dict(key=key, component="unet", module=path, rank=LORA_RANK, alpha=LORA_ALPHA,
+                         scale=LORA_ALPHA / LORA_RANK, down=list(down.shape), up=list(up.shape)))
+    return state, spec
+
+
+def write_loras(base_folder, out, tensors):
+    """The distillation LoRAs, each held to diffusers' load_lora_weights and fuse_lora."""
+    records = {}
+    for name, dtype, metadata in DISTILLATION_LORAS:
+        pipe = wf.load_base(base_folder)
+        state, spec = distillation_lora(pipe, name)
+        path = out / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        save_file({k: v.to(dtype).contiguous() for k, v in state.items()}, path, metadata=metadata)
+        n = wf.check_lora(pipe, path, spec, "check")
+        pipe.unload_lora_weights()
+        stem = name.replace("/", "_").removesuffix(".safetensors")
+        wf.FUSE_RECORDS[stem] = LORA_RECORDS
+        fused, worst = wf.lora_fuse_records(pipe, path, spec, "check", tensors, stem)
+        print(f"{name}: {len(state)} tensors, {n} modules applied by diffusers with scale alpha/r; fuse_lora matches "
+              f"W + s(alpha/r)BA to {worst:.1e}")
+        records[stem] = dict(file=name, tensors=len(state), modules=spec, metadata=metadata,
+                             fused_strength=wf.FUSE_STRENGTH, fused_records=fused)
+    return records
+
+
 def pipeline(c, base_folder, workflow, out):
     base = wf.load_base(base_folder)
     parts = dict(base.components)
@@ -148,6 +223,11 @@ def pipeline(c, base_folder, workflow, out):
         pipe = StableDiffusionXLImg2ImgPipeline(**parts, add_watermarker=False)
     else:
         pipe = StableDiffusionXLPipeline(**parts, add_watermarker=False)
+    if "loras" in c:
+        names = [f"l{i}" for i in range(len(c["loras"]))]
+        for name, (file, _) in zip(names, c["loras"]):
+            pipe.load_lora_weights(str(out.parent / file), adapter_name=name)
+        pipe.set_adapters(names, adapter_weights=[s for _, s in c["loras"]])
     overrides = {k: c[k] for k in ("timestep_spacing", "prediction_type") if k in c}
     pipe.scheduler = SCHEDULERS[c["sampler"]].from_config(base.scheduler.config, **overrides)
     pipe.set_progress_bar_config(disable=True)
@@ -189,6 +269,7 @@ def main():
     torch.set_num_threads(2)
     write_unet_files(distilled_unet(base_folder), out)
     tensors, cases = {}, []
+    loras = write_loras(base_folder, out, tensors)
     for c in CASES:
         latents, image, timesteps = run_case(c, base_folder, workflow, compat, out)
         wf.check_sane(c["name"], latents)
@@ -207,10 +288,12 @@ def main():
         description=f"diffusers (float32, CPU) on the tiny SDXL of {base_folder}; written by "
                     "tools/make_few_step_fixtures.py. Cases follow tests/fixtures/compat/records.json's conventions, "
                     "with the schedule options under vkdiff's names (timestep_spacing, prediction_type, timesteps, "
-                    "eta) and `unet` the file swapped in; diffusers_timesteps are the scheduler's after the run.",
+                    "eta), `unet` the file swapped in and `loras` [file under tests/fixtures, strength]; "
+                    "diffusers_timesteps are the scheduler's after the run. `loras` lists the distillation LoRAs as "
+                    "tests/fixtures/workflow/records.json lists its LoRAs.",
         versions=dict(torch=torch.__version__, diffusers=diffusers.__version__, transformers=transformers.__version__,
                       safetensors=safetensors.__version__),
-        cases=cases)
+        cases=cases, loras=loras)
     (out / "records.json").write_text(json.dumps(meta, indent=1) + "\n")
     print("wrote", out)
 

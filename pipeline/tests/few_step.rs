@@ -2,7 +2,8 @@
 //! every sampler under its recipe (SDXL-Lightning, Hyper-SD, LCM, TCD, Turbo, DMD2) alone, with
 //! the depth ControlNet over the few steps, and from an init image on a trailing schedule; and a
 //! UNet swapped in from a file in each stored layout (diffusers' names, the original ones, a
-//! torch `.bin`).
+//! torch `.bin`); and each distillation LoRA in its published layout, DMD2's merged beside the
+//! workflow's two style LoRAs.
 
 mod common;
 
@@ -11,6 +12,7 @@ use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use vkdiff_formats::SafeTensors;
+use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::{SchedulerConfig, Sdxl, Swaps};
 use vkdiff_runtime::Dtype;
 use vkdiff_testkit::fixture;
@@ -34,6 +36,21 @@ fn every_recipe_schedules_the_timesteps_diffusers_runs() {
     }
 }
 
+/// Merges the case's LoRAs (files under tests/fixtures, with their strengths), replacing the
+/// previous case's; none restores the weights.
+fn merge_loras(sdxl: &mut Sdxl, case: &Value) {
+    let files: Vec<(LoraFile, f32)> = case["loras"]
+        .as_array()
+        .map(|l| {
+            l.iter()
+                .map(|l| (LoraFile::open(&fixture(l[0].as_str().unwrap())).unwrap(), l[1].as_f64().unwrap() as f32))
+                .collect()
+        })
+        .unwrap_or_default();
+    let refs: Vec<(&LoraFile, f32)> = files.iter().map(|(f, s)| (f, *s)).collect();
+    sdxl.set_loras(&refs).unwrap();
+}
+
 /// Every case on the tiny SDXL in `dtype`, the models loaded once per UNet file: latents within
 /// `tol` (relative L2) of diffusers', images at `min_psnr` or better.
 fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
@@ -45,9 +62,10 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
     for (unet, cases) in by_unet {
         let unet: Option<PathBuf> = unet.map(|f| fixture(&format!("few_step/{f}")));
         let swaps = Swaps { vae: None, unet: unet.as_deref() };
-        let sdxl = Sdxl::load_with(&ctx(), &fixture("pipeline/tiny-sdxl"), swaps, dtype, &mut |_| {}).unwrap();
+        let mut sdxl = Sdxl::load_with(&ctx(), &fixture("pipeline/tiny-sdxl"), swaps, dtype, &mut |_| {}).unwrap();
         for case in cases {
             let name = case["name"].as_str().unwrap();
+            merge_loras(&mut sdxl, &case);
             let inputs = CaseInputs::load(&sdxl, &case, "compat", dtype);
             let out = sdxl.text_to_image(&job(&case), &inputs.guides(None), &mut |_, _| {}).unwrap();
             let (_, latents) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();

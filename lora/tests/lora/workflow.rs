@@ -33,6 +33,13 @@ fn diffusers_fixtures_match_fuse_lora() {
     check_fused("tests/fixtures/workflow", 3);
 }
 
+/// SDXL-Lightning's, Hyper-SD's, LCM's, TCD's and DMD2's LoRAs in their published layouts
+/// (tools/make_few_step_fixtures.py).
+#[test]
+fn distillation_loras_match_fuse_lora() {
+    check_fused("tests/fixtures/few_step", 5);
+}
+
 #[test]
 fn a_peft_lora_saved_under_transformers_5_matches_fuse_lora() {
     check_fused("tests/fixtures/compat", 1);
