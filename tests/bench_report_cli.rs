@@ -10,11 +10,13 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use vkdiff_testkit::fixture;
 
-/// The tiny workflow's flags: SDXL, its depth ControlNet, an IP-Adapter and a LoRA.
+/// The tiny workflow's flags: SDXL with a UNet swapped in (a distilled UNet's file), its depth
+/// ControlNet, an IP-Adapter and a LoRA.
 fn model_flags() -> Vec<String> {
     let f = |p: &str| fixture(p).display().to_string();
     [
         ("--model", f("pipeline/tiny-sdxl")),
+        ("--unet", f("few_step/unet-diffusers.safetensors")),
         ("--controlnet", f("workflow/controlnet")),
         ("--ip-adapter", f("workflow/ip-adapter_tiny.safetensors")),
         ("--image-encoder", f("workflow/image_encoder")),
@@ -67,6 +69,7 @@ fn a_report_names_its_machine_and_times_each_figure() {
     for key in ["vendor", "driver", "vulkan", "kernels_f16", "kernels_f32", "cpu", "os", "vkdiff", "command", "date"] {
         assert!(system[key].as_str().is_some_and(|v| !v.is_empty()), "system.{key}: {system}");
     }
+    assert!(system["command"].as_str().unwrap().contains("--unet"), "{system}");
     let version = String::from_utf8(vkdiff(&["--version"]).stdout).unwrap();
     assert!(version.contains(system["vkdiff"].as_str().unwrap()), "{version} against {system}");
     let figures = report["figures"].as_array().unwrap();

@@ -125,6 +125,12 @@ fn reference() -> &'static Path {
     })
 }
 
+/// How many images of the set at `dir` are finished (their records written).
+fn finished_images(dir: &Path) -> usize {
+    std::fs::read_dir(dir.join("records"))
+        .map_or(0, |d| d.flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')).count())
+}
+
 /// Every file below `dir` (hidden ones too), by relative path.
 fn tree(dir: &Path) -> BTreeMap<String, Vec<u8>> {
     fn walk(root: &Path, dir: &Path, out: &mut BTreeMap<String, Vec<u8>>) {

@@ -25,9 +25,9 @@ pub use sdxl::{
     ImageGuide, InitLatents, IpAdapterUse, ItemInputs, Sdxl, StyleModels, Swaps, Timings, VaePlan, WorkflowModels,
 };
 pub use settings::{
-    check_control_settings, control_depth_name, parse_attention, precision_name, read_images, recipe_of,
-    recipe_warnings, ControlNetSettings, GenSettings, GuideInputs, IpAdapterSettings, IpBlock, IpMode, IpScale,
-    LoraSetting, ModelSettings, PromptSyntax, Recipe, Sampling, SizeConditioning, TextToImage, VaeTilingSetting, RNG,
+    check_control_settings, control_depth_name, parse_attention, precision_name, read_images, recipe_warnings,
+    ControlNetSettings, GenSettings, GuideInputs, IpAdapterSettings, IpBlock, IpMode, IpScale, LoraSetting,
+    ModelSettings, PromptSyntax, Sampling, SizeConditioning, TextToImage, VaeTilingSetting, RNG,
 };
 pub use tokenizer::ClipTokenizer;
 pub use vkdiff_formats::RgbImage;

@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{ctx, job, psnr, relative_l2, CaseInputs};
+use common::{assert_case_output, ctx, job, relative_l2, CaseInputs};
 use serde_json::Value;
 use vkdiff_formats::SafeTensors;
 use vkdiff_networks::{ClipVisionModelWithProjection, IpAdapter};
@@ -88,7 +88,6 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
     let encoder = ClipVisionModelWithProjection::load_folder(&ctx, &fixture("workflow/image_encoder"), dtype).unwrap();
     let preprocess = ClipPreprocess::square(encoder.config().image_size);
     for case in cases() {
-        let name = case["name"].as_str().unwrap();
         let (adapter, images, scale);
         let image = match &case["ip"] {
             Value::Null => None,
@@ -119,12 +118,7 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
         let inputs = CaseInputs::load(&sdxl, &case, "compat", dtype);
         let guides = inputs.guides(image);
         let out = sdxl.text_to_image(&job(&case), &guides, &mut |_, _| {}).unwrap();
-        let (_, latents) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
-        let (_, pixels) = records.values(case["tensors"]["image_u8"].as_str().unwrap()).unwrap();
-        let (rel, p) = (relative_l2(&out.latents, &latents), psnr(&out.image.pixels, &pixels));
-        eprintln!("{dtype:?} {name}: latents rel L2 {rel:.2e}, image PSNR {p:.1} dB");
-        assert!(rel <= tol, "{dtype:?} case {name}: latents relative L2 error {rel:.2e} > {tol:.0e}");
-        assert!(p >= min_psnr, "{dtype:?} case {name}: image PSNR {p:.1} dB < {min_psnr} dB");
+        assert_case_output(&out, &case, &records, dtype, (tol, min_psnr));
     }
 }
 

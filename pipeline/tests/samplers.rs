@@ -214,3 +214,33 @@ fn sdxl_base_config_gives_the_documented_schedule() {
     assert_eq!(sampler.timesteps()[29], 1.0);
     assert!((sampler.init_noise_sigma() - 11.5203).abs() < 1e-4);
 }
+
+/// stabilityai/sdxl-turbo's `scheduler/scheduler_config.json`: its trailing spacing is the
+/// schedule with no flag, and `--timestep-spacing` overrides it.
+#[test]
+fn a_model_folder_whose_config_says_trailing_runs_trailing() {
+    let folder = std::env::temp_dir().join(format!("vkdiff-turbo-config-{}", std::process::id()));
+    std::fs::create_dir_all(folder.join("scheduler")).unwrap();
+    std::fs::write(
+        folder.join("scheduler/scheduler_config.json"),
+        r#"{"_class_name": "EulerAncestralDiscreteScheduler", "_diffusers_version": "0.24.0.dev0", "beta_end": 0.012,
+            "beta_schedule": "scaled_linear", "beta_start": 0.00085, "clip_sample": false, "interpolation_type": "linear",
+            "num_train_timesteps": 1000, "prediction_type": "epsilon", "sample_max_value": 1.0, "set_alpha_to_one": false,
+            "skip_prk_steps": true, "steps_offset": 1, "timestep_spacing": "trailing", "trained_betas": null,
+            "use_karras_sigmas": false}"#,
+    )
+    .unwrap();
+    let config = SchedulerConfig::of_model(&folder).unwrap();
+    let timesteps = |options: &ScheduleOptions| {
+        [SamplerKind::Euler, SamplerKind::EulerAncestral]
+            .map(|kind| Sampler::new(kind, &config, 4, options).unwrap().timesteps().to_vec())
+    };
+    assert_eq!(timesteps(&ScheduleOptions::default()), [[999.0, 749.0, 499.0, 249.0]; 2]);
+    let leading = ScheduleOptions { spacing: Some("leading".parse().unwrap()), ..Default::default() };
+    assert_eq!(timesteps(&leading), [[751.0, 501.0, 251.0, 1.0]; 2]);
+    // A single file carries no scheduler config: SDXL base's (leading).
+    let base = SchedulerConfig::of_model(&folder.join("no-such-file.safetensors")).unwrap();
+    let sampler = Sampler::new(SamplerKind::Euler, &base, 4, &ScheduleOptions::default()).unwrap();
+    assert_eq!(sampler.timesteps(), [751.0, 501.0, 251.0, 1.0]);
+    std::fs::remove_dir_all(&folder).unwrap();
+}

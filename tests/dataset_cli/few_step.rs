@@ -40,11 +40,7 @@ fn a_lightning_set_stopped_and_resumed_is_the_one_run() {
     let dir = root.join("set");
     let mut child =
         vk().args(lightning_flags(&dir, &unet)).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
-    let records = dir.join("records");
-    let count = || {
-        std::fs::read_dir(&records)
-            .map_or(0, |d| d.flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')).count())
-    };
+    let count = || finished_images(&dir);
     while count() < 1 && child.try_wait().unwrap().is_none() {
         std::thread::sleep(std::time::Duration::from_millis(10));
     }

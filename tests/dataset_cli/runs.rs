@@ -83,11 +83,7 @@ fn two_shards_and_a_merge_give_the_one_run() {
 fn a_killed_run_resumes_to_the_same_folder() {
     let dir = scratch("dataset-kill").join("set");
     let mut child = vk().args(dataset_flags(&dir)).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
-    let records = dir.join("records");
-    let count = || {
-        std::fs::read_dir(&records)
-            .map_or(0, |d| d.flatten().filter(|e| !e.file_name().to_string_lossy().starts_with('.')).count())
-    };
+    let count = || finished_images(&dir);
     while count() < 2 && child.try_wait().unwrap().is_none() {
         std::thread::sleep(std::time::Duration::from_millis(10));
     }

@@ -253,5 +253,12 @@ pub fn user_settings(plan: &Plan, guides: &super::UserModels) -> ModelSettings {
         }
         _ => None,
     };
-    ModelSettings { model: guides.model.clone(), controlnet, ip_adapter, loras: guides.loras.clone(), ..paper }
+    ModelSettings {
+        model: guides.model.clone(),
+        unet: guides.unet.clone(),
+        controlnet,
+        ip_adapter,
+        loras: guides.loras.clone(),
+        ..paper
+    }
 }

@@ -86,6 +86,10 @@ pub struct ReportArgs {
     /// A depth ControlNet for --model.
     #[arg(long, requires = "model", value_name = "DIR|FILE|ID")]
     controlnet: Option<PathBuf>,
+    /// A UNet in --model's place for the image rows (a distilled UNet such as SDXL-Lightning's:
+    /// the same architecture, so the UNet rows time the model's own).
+    #[arg(long, requires = "model", value_name = "DIR|FILE|ID")]
+    unet: Option<PathBuf>,
     /// An IP-Adapter for --model (with --image-encoder).
     #[arg(long, requires_all = ["model", "image_encoder"], value_name = "FILE|ID")]
     ip_adapter: Option<PathBuf>,
@@ -105,6 +109,7 @@ pub struct ReportArgs {
 /// The models a user gave, resolved.
 pub struct UserModels {
     pub model: PathBuf,
+    pub unet: Option<PathBuf>,
     pub controlnet: Option<PathBuf>,
     pub ip_adapter: Option<PathBuf>,
     pub image_encoder: Option<PathBuf>,
@@ -237,6 +242,7 @@ fn resolve_user(args: &ReportArgs) -> Result<Option<UserModels>> {
     let optional = |flag: &str, p: &Option<PathBuf>, wants| p.as_ref().map(|p| resolve(flag, p, wants)).transpose();
     Ok(Some(UserModels {
         model: resolve("--model", model, Wants::Either)?,
+        unet: optional("--unet", &args.unet, Wants::Either)?,
         controlnet: optional("--controlnet", &args.controlnet, Wants::Either)?,
         ip_adapter: optional("--ip-adapter", &args.ip_adapter, Wants::File)?,
         image_encoder: optional("--image-encoder", &args.image_encoder, Wants::Folder)?,

@@ -1,15 +1,14 @@
-//! diffusers' `LCMScheduler`: at each step the consistency function's x₀ (the model's x₀ blended
-//! with the latent by the boundary-condition scalings c_skip and c_out), then, except at the
-//! last step, that x₀ noised afresh to the next timestep.
+//! diffusers' `LCMScheduler` step: the consistency function's x₀ (the model's x₀ blended with the
+//! latent by the boundary-condition scalings c_skip and c_out), then, except at the last step,
+//! that x₀ noised afresh to the next timestep.
 
 use super::config::SchedulerConfig;
 use super::consistency::ConsistencySchedule;
-use super::{vp_add_noise, vp_prediction, Solver};
+use super::vp_prediction;
 use crate::rng::TorchCpuRng;
 use crate::Result;
 
-pub(super) struct Lcm {
-    schedule: ConsistencySchedule,
+pub(super) struct LcmStep {
     /// x₀ is clamped to ±this (`clip_sample`).
     clip: Option<f32>,
     timestep_scaling: f32,
@@ -18,16 +17,15 @@ pub(super) struct Lcm {
 /// LCM's σ_data.
 const SIGMA_DATA: f32 = 0.5;
 
-impl Lcm {
-    pub(super) fn new(config: &SchedulerConfig, steps: usize, custom: Option<&[u32]>) -> Result<Lcm> {
-        let schedule = ConsistencySchedule::new(config, "lcm", steps, custom)?;
+impl LcmStep {
+    pub(super) fn new(config: &SchedulerConfig) -> Result<LcmStep> {
         let clip = config
             .flag("clip_sample", false)?
             .then(|| config.number("clip_sample_range", 1.0))
             .transpose()?
             .map(|r| r as f32);
         let timestep_scaling = config.number("timestep_scaling", 10.0)? as f32;
-        Ok(Lcm { schedule, clip, timestep_scaling })
+        Ok(LcmStep { clip, timestep_scaling })
     }
 
     /// `get_scalings_for_boundary_condition_discrete`: (c_skip, c_out) at training timestep `t`.
@@ -37,34 +35,9 @@ impl Lcm {
         let denominator = scaled * scaled + d2;
         (d2 / denominator, scaled / denominator.sqrt())
     }
-}
 
-impl Solver for Lcm {
-    fn timesteps(&self) -> &[f32] {
-        &self.schedule.unet_timesteps
-    }
-
-    fn sigmas(&self) -> Option<&[f32]> {
-        None
-    }
-
-    fn init_noise_sigma(&self) -> f32 {
-        1.0
-    }
-
-    fn scale_model_input(&self, _step: usize, x: &[f32]) -> Vec<f32> {
-        x.to_vec()
-    }
-
-    fn add_noise(&self, step: usize, x0: &[f32], noise: &[f32]) -> Vec<f32> {
-        vp_add_noise(self.schedule.alpha(step), x0, noise)
-    }
-
-    fn step(&mut self, step: usize, out: &[f32], x: &mut [f32], rng: &mut TorchCpuRng) {
-        let s = &self.schedule;
+    pub(super) fn step(&self, s: &ConsistencySchedule, step: usize, out: &[f32], x: &mut [f32], rng: &mut TorchCpuRng) {
         let alpha = s.alpha(step);
-        // At the last step the "previous" timestep is the current one; no noise uses it.
-        let alpha_prev = s.alpha((step + 1).min(s.timesteps.len() - 1));
         let (sqrt_alpha, sqrt_beta) = (alpha.sqrt(), (1.0 - alpha).sqrt());
         let (c_skip, c_out) = self.scalings(s.timesteps[step]);
         let denoised: Vec<f32> = x
@@ -80,6 +53,7 @@ impl Solver for Lcm {
             x.copy_from_slice(&denoised);
             return;
         }
+        let alpha_prev = s.alpha(step + 1);
         let (a, b) = (alpha_prev.sqrt(), (1.0 - alpha_prev).sqrt());
         for ((x, d), n) in x.iter_mut().zip(denoised).zip(rng.randn(out.len())) {
             *x = a * d + b * n;

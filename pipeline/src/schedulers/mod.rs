@@ -17,8 +17,11 @@ pub use config::{PredictionType, SchedulerConfig, TimestepSpacing, SDXL_SCHEDULE
 
 use crate::rng::TorchCpuRng;
 use crate::{Error, Result};
+use consistency::{Consistency, ConsistencyStep};
+use lcm::LcmStep;
 use std::fmt;
 use std::str::FromStr;
+use tcd::TcdStep;
 
 /// The samplers vkdiff offers, named `euler`, `euler_a`, `dpmpp_2m`, `ddim`, `lcm` and `tcd`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -158,8 +161,13 @@ impl Sampler {
                 Box::new(dpmsolver_multistep::DpmSolverMultistep::new(config, karras, steps, custom)?)
             }
             SamplerKind::Ddim => Box::new(ddim::Ddim::new(config, steps)?),
-            SamplerKind::Lcm => Box::new(lcm::Lcm::new(config, steps, custom)?),
-            SamplerKind::Tcd => Box::new(tcd::Tcd::new(config, steps, custom, options.eta.unwrap_or(TCD_DEFAULT_ETA))?),
+            SamplerKind::Lcm => {
+                Box::new(Consistency::new(config, steps, custom, ConsistencyStep::Lcm(LcmStep::new(config)?))?)
+            }
+            SamplerKind::Tcd => {
+                let eta = options.eta.unwrap_or(TCD_DEFAULT_ETA);
+                Box::new(Consistency::new(config, steps, custom, ConsistencyStep::Tcd(TcdStep { eta }))?)
+            }
         };
         // diffusers starts at the second occurrence of a repeated first timestep and then runs
         // past the end of its schedule.

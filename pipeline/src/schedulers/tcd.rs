@@ -1,48 +1,18 @@
-//! diffusers' `TCDScheduler` (Trajectory Consistency Distillation): at each step the model's x₀
-//! and ε land on the intermediate timestep s = ⌊(1 − γ)·t_prev⌋, and, with γ > 0 and except at
-//! the last step, that sample is noised forward from s to t_prev.
+//! diffusers' `TCDScheduler` step (Trajectory Consistency Distillation): the model's x₀ and ε
+//! land on the intermediate timestep s = ⌊(1 − γ)·t_prev⌋, and, with γ > 0 and except at the
+//! last step, that sample is noised forward from s to t_prev.
 
-use super::config::SchedulerConfig;
 use super::consistency::ConsistencySchedule;
-use super::{vp_add_noise, vp_prediction, Solver};
+use super::vp_prediction;
 use crate::rng::TorchCpuRng;
-use crate::Result;
 
-pub(super) struct Tcd {
-    schedule: ConsistencySchedule,
+pub(super) struct TcdStep {
     /// γ, the share of each step taken stochastically.
-    eta: f64,
+    pub eta: f64,
 }
 
-impl Tcd {
-    pub(super) fn new(config: &SchedulerConfig, steps: usize, custom: Option<&[u32]>, eta: f64) -> Result<Tcd> {
-        Ok(Tcd { schedule: ConsistencySchedule::new(config, "tcd", steps, custom)?, eta })
-    }
-}
-
-impl Solver for Tcd {
-    fn timesteps(&self) -> &[f32] {
-        &self.schedule.unet_timesteps
-    }
-
-    fn sigmas(&self) -> Option<&[f32]> {
-        None
-    }
-
-    fn init_noise_sigma(&self) -> f32 {
-        1.0
-    }
-
-    fn scale_model_input(&self, _step: usize, x: &[f32]) -> Vec<f32> {
-        x.to_vec()
-    }
-
-    fn add_noise(&self, step: usize, x0: &[f32], noise: &[f32]) -> Vec<f32> {
-        vp_add_noise(self.schedule.alpha(step), x0, noise)
-    }
-
-    fn step(&mut self, step: usize, out: &[f32], x: &mut [f32], rng: &mut TorchCpuRng) {
-        let s = &self.schedule;
+impl TcdStep {
+    pub(super) fn step(&self, s: &ConsistencySchedule, step: usize, out: &[f32], x: &mut [f32], rng: &mut TorchCpuRng) {
         let prev = s.timesteps.get(step + 1).copied().unwrap_or(0);
         // torch: a float32 (1 − γ) times the integer timestep, floored.
         let timestep_s = ((1.0 - self.eta) as f32 * prev as f32).floor() as usize;

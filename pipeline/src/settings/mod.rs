@@ -18,6 +18,6 @@ pub(crate) use models::flagged;
 pub use models::{ControlNetSettings, IpAdapterSettings, LoraSetting, ModelSettings};
 pub use names::{control_depth_name, precision_name, schedule_name, schedule_records, RNG};
 pub use prompt_syntax::{parse_attention, PromptSyntax};
-pub use recipes::{recipe_of, recipe_warnings, Recipe};
+pub use recipes::recipe_warnings;
 pub use sampling::{Sampling, SizeConditioning, TextToImage};
 pub use vae_tiling::VaeTilingSetting;

@@ -2,11 +2,12 @@
 
 use serde_json::Value;
 use std::sync::OnceLock;
+use vkdiff_formats::SafeTensors;
 use vkdiff_networks::ControlNetModel;
 use vkdiff_pipeline::images::read_image;
 use vkdiff_pipeline::{
-    ControlGuide, Guides, ImageGuide, PromptSyntax, RgbImage, Sampling, ScheduleOptions, Sdxl, SizeConditioning,
-    TextToImage,
+    ControlGuide, Generated, Guides, ImageGuide, PromptSyntax, RgbImage, Sampling, ScheduleOptions, Sdxl,
+    SizeConditioning, TextToImage,
 };
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_testkit::fixture;
@@ -123,4 +124,23 @@ impl CaseInputs {
         });
         Guides { control, image, init: self.init.as_ref() }
     }
+}
+
+/// A generation's latents within `tol` (relative L2) of the case's recorded ones, and its 8-bit
+/// image at `min_psnr` dB or better against the recorded image; both printed.
+#[allow(dead_code)] // not every test binary runs whole cases
+pub fn assert_case_output(
+    out: &Generated,
+    case: &Value,
+    records: &SafeTensors,
+    dtype: Dtype,
+    (tol, min_psnr): (f64, f64),
+) {
+    let name = case["name"].as_str().unwrap();
+    let (_, latents) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
+    let (_, pixels) = records.values(case["tensors"]["image_u8"].as_str().unwrap()).unwrap();
+    let (rel, p) = (relative_l2(&out.latents, &latents), psnr(&out.image.pixels, &pixels));
+    eprintln!("{dtype:?} {name}: latents rel L2 {rel:.2e}, image PSNR {p:.1} dB");
+    assert!(rel <= tol, "{dtype:?} case {name}: latents relative L2 error {rel:.2e} > {tol:.0e}");
+    assert!(p >= min_psnr, "{dtype:?} case {name}: image PSNR {p:.1} dB < {min_psnr} dB");
 }
