@@ -19,7 +19,8 @@
 #      VKDIFF_ATTENTION=cm2, VKDIFF_LINEAR=cm2 and VKDIFF_CONV=cm2 where the driver runs those
 #      probes' tiles (after the rows: each whole UNet is a minute, the rows hold every family);
 #   6. the UNet network tests against diffusers (the kit's UNet fixtures);
-#   7. `vkdiff bench report` (the full suite: the paper's image first), the peer where the kit
+#   7. `vkdiff bench report` (the full suite: the paper's image first, then at 4 steps under Lightning's
+#      recipe, the ratio images per hour gain), the peer where the kit
 #      has it (KIT_PEER=1), `vkdiff devices --compile` and the paper's ablation, where time is left.
 # KIT is what tools/gpu-kit.sh made on a build machine; nothing here reads the repository.
 #   OUT=/some/folder tools/gpu-check.sh [KIT]     (default KIT: .gpu-kit)
