@@ -247,3 +247,46 @@ fn a_set_begun_by_another_version_is_refused_unless_allowed() {
     let out = run(&resume, &[]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
 }
+
+/// The few-step settings a sampler cannot run, and a swapped UNet that is none: one line naming
+/// what is wrong, exit code 2, before any model loads.
+#[test]
+fn few_step_settings_a_sampler_lacks_exit_2_before_loading() {
+    let dir = scratch("few-step-refusals");
+    let out = dir.join("x.png");
+    let lora = fixture("workflow/lora-peft.safetensors");
+    let missing = dir.join("missing_unet.safetensors");
+    let cases: [(&[&str], &str); 8] = [
+        (&["--sampler", "lcm", "--timestep-spacing", "trailing"], "lcm has no timestep spacing"),
+        (&["--sampler", "euler_a", "--timesteps", "999,499"], "euler_a takes no custom timesteps"),
+        (&["--timesteps", "499,999"], "must be strictly descending"),
+        (&["--eta", "0.5"], "eta 0.5 is TCD's gamma; euler takes none"),
+        (&["--sampler", "tcd", "--eta", "2"], "must lie in [0, 1]"),
+        (&["--sampler", "euler_a", "--prediction-type", "sample"], "prediction_type \"sample\""),
+        (&["--unet", lora.to_str().unwrap()], "--unet"),
+        (&["--unet", missing.to_str().unwrap()], "--unet"),
+    ];
+    for (more, want) in cases {
+        let mut args = gen(&out, more);
+        if more.contains(&"--timesteps") {
+            // The given timesteps count the steps.
+            let at = args.iter().position(|a| a == "--steps").unwrap();
+            args.drain(at..at + 2);
+        }
+        let (code, line) = failure(&strs(&args), &[]);
+        assert!(code == 2 && line.contains(want), "{more:?}: {code}: {line}");
+        let stderr = String::from_utf8_lossy(&run(&strs(&args), &[]).stderr).into_owned();
+        assert!(!stderr.contains("loading"), "{more:?} loaded a model before refusing: {stderr}");
+    }
+    // LCM's timesteps come from its 50-step distillation schedule; --steps counts the given ones.
+    let args = gen(&out, &["--sampler", "lcm"]);
+    let mut args = strs(&args);
+    let steps = args.iter().position(|a| *a == "--steps").unwrap();
+    args[steps + 1] = "60";
+    let (code, line) = failure(&args, &[]);
+    assert!(code == 2 && line.contains("60 steps exceed original_inference_steps 50"), "{code}: {line}");
+    args.extend(["--timesteps", "999,499"]);
+    let (code, line) = failure(&args, &[]);
+    assert!(code == 2 && line.contains("--timesteps"), "{code}: {line}");
+    assert!(!out.exists());
+}

@@ -275,7 +275,9 @@ def main():
         wf.check_sane(c["name"], latents)
         p = f"gen.{c['name']}."
         tensors[p + "latents"], tensors[p + "image_u8"] = latents.contiguous(), image.contiguous()
-        cases.append(dict(c, negative_prompt=None, diffusers_timesteps=timesteps,
+        # `timesteps` in the records of tests/fixtures/pipeline is diffusers' output: the input is named apart.
+        entry = {("custom_timesteps" if k == "timesteps" else k): v for k, v in c.items()}
+        cases.append(dict(entry, negative_prompt=None, diffusers_timesteps=timesteps,
                           tensors=dict(latents=p + "latents", image_u8=p + "image_u8")))
         print(f"{c['name']:28s} timesteps {timesteps}; latents std {latents.std():.3f} mean {latents.mean():+.3f}")
     swapped = [tensors[f"gen.{c['name']}.latents"] for c in cases if c["name"].startswith("unet_") and
@@ -287,8 +289,8 @@ def main():
     meta = dict(
         description=f"diffusers (float32, CPU) on the tiny SDXL of {base_folder}; written by "
                     "tools/make_few_step_fixtures.py. Cases follow tests/fixtures/compat/records.json's conventions, "
-                    "with the schedule options under vkdiff's names (timestep_spacing, prediction_type, timesteps, "
-                    "eta), `unet` the file swapped in and `loras` [file under tests/fixtures, strength]; "
+                    "with the schedule options under vkdiff's names (timestep_spacing, prediction_type, "
+                    "custom_timesteps for --timesteps, eta), `unet` the file swapped in and `loras` [file under tests/fixtures, strength]; "
                     "diffusers_timesteps are the scheduler's after the run. `loras` lists the distillation LoRAs as "
                     "tests/fixtures/workflow/records.json lists its LoRAs.",
         versions=dict(torch=torch.__version__, diffusers=diffusers.__version__, transformers=transformers.__version__,

@@ -27,8 +27,8 @@ pub use layers::nn::Linear;
 pub use layers::{nchw_to_nhwc, nhwc_to_nchw};
 pub use random_single_file::{write_random_single_file, SdxlConfigs, RANDOM_SEEDS};
 pub use unet::{
-    read_unet_config, single_file_unet_checkpoint, swapped_unet_checkpoint, swapped_unet_config, unet_checkpoint,
-    unet_names, ControlResiduals, UNet, UNetConfig, UNetInputs, UNetPass, SDXL_BASE_CONFIG,
+    check_swapped_unet, read_unet_config, single_file_unet_checkpoint, swapped_unet_checkpoint, swapped_unet_config,
+    unet_checkpoint, unet_names, ControlResiduals, UNet, UNetConfig, UNetInputs, UNetPass, SDXL_BASE_CONFIG,
 };
 pub use vae::{AutoencoderKl, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
 pub use weights::{Checkpoint, Inner, OriginalNames, ParamLayout, Parameter, Parameters, StoredAs, Weights};

@@ -43,17 +43,24 @@ pub fn swapped_unet_checkpoint(
     }
     let file = open_weights(path)?;
     let config = base.clone();
-    match unet_file_layout(&file) {
-        Some(UNetLayout::Diffusers) => Ok((config, Checkpoint::diffusers_file(ctx, file, dtype))),
-        Some(UNetLayout::Original { prefix }) => {
+    match unet_file_layout(&file)? {
+        UNetLayout::Diffusers => Ok((config, Checkpoint::diffusers_file(ctx, file, dtype))),
+        UNetLayout::Original { prefix } => {
             let names = unet_names(&config)?;
             Ok((config, Checkpoint::single_file_part(ctx, file, prefix, Some(names), dtype)))
         }
-        None => Err(Error::Checkpoint(format!(
-            "{}: no UNet tensors (diffusers' `down_blocks.*` or the original `input_blocks.*`, with or without \
-                `{SINGLE_FILE_UNET}`)",
-            path.display()
-        ))),
+    }
+}
+
+/// What can be checked of a swapped UNet without reading its weights: a folder's config, a
+/// safetensors file's header and layout (a torch pickle is read whole, so only as it loads).
+pub fn check_swapped_unet(path: &Path) -> Result<()> {
+    if path.is_dir() {
+        return read_unet_config(path).map(drop);
+    }
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("safetensors") => unet_file_layout(&SafeTensors::open(path)?).map(drop),
+        _ => Ok(()),
     }
 }
 
@@ -80,16 +87,20 @@ enum UNetLayout {
 }
 
 /// How a UNet file names its tensors, from the names of its input convolution.
-fn unet_file_layout(file: &SafeTensors) -> Option<UNetLayout> {
+fn unet_file_layout(file: &SafeTensors) -> Result<UNetLayout> {
     let has = |name: &str| file.entries.contains_key(name);
     if has("conv_in.weight") {
-        Some(UNetLayout::Diffusers)
+        Ok(UNetLayout::Diffusers)
     } else if has(&format!("{SINGLE_FILE_UNET}input_blocks.0.0.weight")) {
-        Some(UNetLayout::Original { prefix: SINGLE_FILE_UNET })
+        Ok(UNetLayout::Original { prefix: SINGLE_FILE_UNET })
     } else if has("input_blocks.0.0.weight") {
-        Some(UNetLayout::Original { prefix: "" })
+        Ok(UNetLayout::Original { prefix: "" })
     } else {
-        None
+        Err(Error::Checkpoint(format!(
+            "{}: no UNet here (no `conv_in.weight` of diffusers' names, nor `input_blocks.0.0.weight` of the original \
+                ones, with or without `{SINGLE_FILE_UNET}`)",
+            file.path.display()
+        )))
     }
 }
 

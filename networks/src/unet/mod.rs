@@ -11,7 +11,8 @@ pub(crate) mod unet_2d_condition;
 
 pub use config::{UNetConfig, SDXL_BASE_CONFIG};
 pub use load::{
-    read_unet_config, single_file_unet_checkpoint, swapped_unet_checkpoint, swapped_unet_config, unet_checkpoint,
+    check_swapped_unet, read_unet_config, single_file_unet_checkpoint, swapped_unet_checkpoint, swapped_unet_config,
+    unet_checkpoint,
 };
 pub use single_file::unet_names;
 pub use unet_2d_condition::{ControlResiduals, UNet, UNetInputs, UNetPass};

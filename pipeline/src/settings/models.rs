@@ -118,14 +118,7 @@ impl ModelSettings {
             flagged("vae", vae, vkdiff_networks::AutoencoderKl::sdxl_config(vae))?;
         }
         if let Some(unet) = &self.unet {
-            let header = if unet.is_dir() {
-                vkdiff_networks::read_unet_config(unet).map(drop)
-            } else if unet.extension().is_some_and(|e| e == "safetensors") {
-                SafeTensors::open(unet).map(drop).map_err(Into::into)
-            } else {
-                Ok(())
-            };
-            flagged("unet", unet, header)?;
+            flagged("unet", unet, vkdiff_networks::check_swapped_unet(unet))?;
         }
         if let Some(ip) = &self.ip_adapter {
             flagged("image_encoder", &ip.encoder, ClipVisionConfig::from_file(&ip.encoder.join("config.json")))?;

@@ -49,7 +49,7 @@ pub fn recipe_of(path: &Path) -> Option<Recipe> {
         Recipe { name: "Hyper-SD (CFG-preserving)", samplers: &[SamplerKind::Ddim], cfg: (5.0, 8.0), ..HYPER }
     } else if has("hyper-sdxl") {
         HYPER
-    } else if has("lcm-lora-sdxl") || has("lcm-sdxl") {
+    } else if has("lcm-lora-sdxl") {
         Recipe { cfg: (1.0, 2.0), ..recipe("LCM-LoRA", &[SamplerKind::Lcm], None) }
     } else if has("tcd-sdxl") {
         recipe("TCD", &[SamplerKind::Tcd], None)

@@ -58,8 +58,16 @@ impl Sampling {
                 Message::setting("guidance_scale").then(format!(" {} is not a number", self.guidance_scale)),
             ));
         }
-        if let Some(timesteps) = &self.schedule.timesteps {
-            assert_eq!(timesteps.len(), self.steps, "the front end counts the steps of custom timesteps");
+        match &self.schedule.timesteps {
+            Some(timesteps) if timesteps.len() != self.steps => {
+                return Err(Error::Setting(
+                    Message::setting("steps")
+                        .then(format!(" {} with {} ", self.steps, timesteps.len()))
+                        .and("timesteps")
+                        .then(": give one or the other"),
+                ))
+            }
+            _ => {}
         }
         self.sampler(config)?;
         self.first_step().map(|_| ())

@@ -31,7 +31,7 @@ fn schedule(case: &Value) -> ScheduleOptions {
         karras: case["karras"].as_bool().unwrap_or(false),
         spacing: case["timestep_spacing"].as_str().map(|s| s.parse().unwrap()),
         prediction: case["prediction_type"].as_str().map(|s| s.parse().unwrap()),
-        timesteps: case["timesteps"].as_array().map(|t| t.iter().map(|t| t.as_u64().unwrap() as u32).collect()),
+        timesteps: case["custom_timesteps"].as_array().map(|t| t.iter().map(|t| t.as_u64().unwrap() as u32).collect()),
         eta: case["eta"].as_f64(),
     }
 }
