@@ -44,10 +44,15 @@ pub fn schedule_records(sampling: &Sampling) -> Vec<(&'static str, Value)> {
         records.push(("prediction-type", prediction.to_string().into()));
     }
     if let Some(timesteps) = &o.timesteps {
-        records.push(("timesteps", timesteps.iter().map(u32::to_string).collect::<Vec<_>>().join(",").into()));
+        records.push(("timesteps", timesteps_text(timesteps).into()));
     }
     if sampling.sampler == SamplerKind::Tcd {
         records.push(("eta", o.eta.unwrap_or(TCD_DEFAULT_ETA).into()));
     }
     records
+}
+
+/// Timesteps as `--timesteps` takes them: `999,749,499,249`.
+pub(crate) fn timesteps_text(timesteps: &[u32]) -> String {
+    timesteps.iter().map(u32::to_string).collect::<Vec<_>>().join(",")
 }

@@ -5,6 +5,7 @@
 
 use crate::schedulers::{PredictionType, SamplerKind, SchedulerConfig, TimestepSpacing};
 use crate::settings::models::{recorded_path, ModelSettings};
+use crate::settings::names::timesteps_text;
 use crate::settings::sampling::Sampling;
 use crate::Result;
 use std::path::Path;
@@ -70,10 +71,7 @@ impl Recipe {
         let names: Vec<String> = self.samplers.iter().map(|s| s.to_string()).collect();
         let mut flags = vec![format!("--sampler {}", names.join("|"))];
         flags.extend(self.spacing.map(|s| format!("--timestep-spacing {s}")));
-        flags.extend(
-            self.timesteps
-                .map(|t| format!("--timesteps {}", t.iter().map(u32::to_string).collect::<Vec<_>>().join(","))),
-        );
+        flags.extend(self.timesteps.map(|t| format!("--timesteps {}", timesteps_text(t))));
         if self.prediction != PredictionType::Epsilon {
             flags.push(format!("--prediction-type {}", self.prediction));
         }
@@ -102,7 +100,7 @@ impl Recipe {
         if let (Some(want), got) = (self.timesteps, o.timesteps.as_deref()) {
             if got != Some(want) {
                 out.push(match got {
-                    Some(t) => format!("--timesteps {t:?}"),
+                    Some(t) => format!("--timesteps {}", timesteps_text(t)),
                     None => format!("--steps {}", sampling.steps),
                 });
             }
