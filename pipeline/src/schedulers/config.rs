@@ -66,15 +66,16 @@ const SPACINGS: [(&str, TimestepSpacing); 3] = [
     ("linspace", TimestepSpacing::Linspace),
 ];
 
-/// `name` among `table`'s, or an error listing them.
-fn named<T: Copy>(table: &[(&str, T)], what: &str, name: &str) -> Result<T> {
+/// `name` among `table`'s (the names of a setting's values), or an error listing them.
+pub(super) fn named<T: Copy>(table: &[(&str, T)], what: &str, name: &str) -> Result<T> {
     table.iter().find(|(n, _)| *n == name).map(|&(_, v)| v).ok_or_else(|| {
         let valid: Vec<&str> = table.iter().map(|(n, _)| *n).collect();
         Error::Config(format!("unknown {what} `{name}` (valid: {})", valid.join(", ")))
     })
 }
 
-fn name_of<T: PartialEq>(table: &[(&'static str, T)], value: &T) -> &'static str {
+/// `value`'s name in `table`.
+pub(super) fn name_of<T: PartialEq>(table: &[(&'static str, T)], value: &T) -> &'static str {
     table.iter().find(|(_, v)| v == value).map_or("?", |(n, _)| n)
 }
 

@@ -46,16 +46,13 @@ const NAMES: [(&str, SamplerKind); 6] = [
 impl FromStr for SamplerKind {
     type Err = Error;
     fn from_str(name: &str) -> Result<SamplerKind> {
-        NAMES.iter().find(|(n, _)| *n == name).map(|&(_, kind)| kind).ok_or_else(|| {
-            let valid: Vec<&str> = NAMES.iter().map(|(n, _)| *n).collect();
-            Error::Config(format!("unknown sampler `{name}` (valid: {})", valid.join(", ")))
-        })
+        config::named(&NAMES, "sampler", name)
     }
 }
 
 impl fmt::Display for SamplerKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(NAMES.iter().find(|(_, k)| k == self).map_or("?", |(n, _)| n))
+        f.write_str(config::name_of(&NAMES, self))
     }
 }
 
