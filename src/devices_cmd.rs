@@ -2,8 +2,8 @@
 
 use anyhow::Result;
 use vkdiff_runtime::{
-    built_cooperative_variants, choose, gpu_paths_requested, list_devices, requested_fragment, CooperativeSetting,
-    DeviceInfo, GemmFamily, COOPERATIVE_MATRIX2_FEATURES,
+    built_cooperative_variants, choose, list_devices, DeviceInfo, Environment, KernelPlan, Settings,
+    COOPERATIVE_MATRIX2_FEATURES,
 };
 
 #[derive(clap::Args)]
@@ -29,7 +29,7 @@ fn mib(bytes: u64) -> String {
     format!("{} MiB", bytes >> 20)
 }
 
-fn describe(d: &DeviceInfo, chosen: bool) -> String {
+fn describe(d: &DeviceInfo, chosen: bool, settings: &Settings) -> String {
     let yes = |b: bool| if b { "yes" } else { "no" };
     let sizes = match d.subgroup_size_range {
         Some((lo, hi)) => format!("{} (pinnable {lo}..={hi})", d.subgroup_size),
@@ -40,50 +40,9 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
         None if chosen => "selected (default)".into(),
         None => format!("usable (--device {})", d.index),
     };
-    let gpu_paths = gpu_paths_requested();
-    let gemm = match (d.gemm_family(gpu_paths), d.gemm_subgroup_width(), d.cooperative_variant()) {
-        (GemmFamily::Subgroup, Some(lanes), _) => format!("subgroup-register, {lanes} lanes (CPU)"),
-        (GemmFamily::Cooperative, _, Some(f)) => {
-            let tried = match CooperativeSetting::from_env() {
-                Ok(CooperativeSetting::Trial) => {
-                    ", unless a product timed on them as vkdiff starts differs from the tiled kernels' or takes over \
-                     1.25× their time"
-                }
-                _ => "",
-            };
-            format!(
-                "matrix units, {} f16→f32 fragments, {} lanes{tried} (f32 products: shared-memory tiles)",
-                f.shape(),
-                f.lanes
-            )
-        }
-        _ => "shared-memory tiles (GPU)".into(),
-    };
-    let tiles = if d.holds_tiled_attention() { "register-blocked tiles for heads up to 64, else " } else { "" };
-    let flash = if d.subgroup_attention(gpu_paths) {
-        "subgroup-register (CPU)".to_string()
-    } else if d.gemm_family(gpu_paths) == GemmFamily::Cooperative {
-        format!("matrix units for f16 heads up to 64, else {tiles}query rows per invocation (GPU)")
-    } else {
-        format!("{tiles}query rows per invocation (GPU)")
-    };
-    let attention = format!(
-        "{flash}; heads over 128 (the VAE's): products around a row softmax, f16 heads widened to f32 for them"
-    );
-    let wider = if d.lavapipe_mesa.is_some() && vkdiff_runtime::wider_lavapipe_vectors_available() {
-        " (this CPU has AVX-512: LP_NATIVE_VECTOR_WIDTH=512 runs 16-lane kernels, which compile 2–3× slower and ran \
-            the UNet 1.04× faster on an AMD EPYC, 4.9× slower on an Intel Xeon)"
-    } else {
-        ""
-    };
-    let compile = match (d.lavapipe_mesa, d.quick_compile(gpu_paths)) {
-        (Some(_), true) => ", kernels compiled at first use, small products on the quickly compiled variants",
-        (Some(_), false) => ", kernels compiled at first use",
-        (None, _) => "",
-    };
-    let paths = if gpu_paths { " (VKDIFF_GPU_PATHS=1: device memory through staging, GPU kernels)" } else { "" };
+    let plan = KernelPlan::for_device(d, settings).to_string().replace('\n', "\n      ");
     [
-        format!("[{}] {}{wider} — {}", d.index, d.name, verdict),
+        format!("[{}] {} — {}", d.index, d.name, verdict),
         format!(
             "    kind: {}, Vulkan {}.{}.{}, driver: {}",
             d.kind.label(),
@@ -113,10 +72,11 @@ fn describe(d: &DeviceInfo, chosen: bool) -> String {
             d.max_shared_memory / 1024
         ),
         format!(
-            "    vkdiff uses: storage {}, GEMM/conv kernels: {gemm}, attention: {attention}, timestamps: {}{compile}{paths}",
+            "    vkdiff uses: storage {}, timestamps: {}",
             if d.supports_f16() { "f16 and f32" } else { "f32 only" },
             yes(d.timestamps())
         ),
+        format!("      {plan}"),
     ]
     .join("\n")
 }
@@ -165,32 +125,28 @@ fn matrix2_features(d: &DeviceInfo) -> String {
 }
 
 pub fn run(args: &DevicesArgs) -> Result<()> {
-    // A malformed request would otherwise show as the device's default choice.
-    requested_fragment()?;
-    CooperativeSetting::from_env()?;
-    vkdiff_runtime::MatrixTile::from_env()?;
-    vkdiff_runtime::ProbeChoice::attention_from_env()?;
-    vkdiff_runtime::ProbeChoice::linear_from_env()?;
-    vkdiff_runtime::ProbeChoice::conv_from_env()?;
-    vkdiff_runtime::tuning_from_env()?;
+    // A malformed setting would otherwise show as the device's default choice.
+    let env = Environment::of_process();
+    let settings = Settings::from_environment(&env)?;
+    let choice = args.device.choice(&env)?;
     if args.compile {
         let request = crate::devices_compile::CompileRequest {
-            choice: args.device.choice(),
+            choice,
+            settings,
             kernels: &args.kernel,
             no_spills: args.no_spills,
             json: args.json,
         };
         return crate::devices_compile::run(&request);
     }
-    let devices = list_devices()?;
-    let chosen = choose(&devices, &Default::default()).ok();
+    let devices = list_devices(&settings, &env)?;
+    let chosen = choose(&devices, &choice).ok();
     if args.json {
-        let gpu_paths = gpu_paths_requested();
-        // The Vulkan instance is created at this version (VKDIFF_VULKAN_API caps it).
-        let (major, minor) = vkdiff_runtime::api_limit()?;
+        let (major, minor) = settings.vulkan_api;
         let list: Vec<_> = devices
             .iter()
             .map(|d| {
+                let plan = KernelPlan::for_device(d, &settings);
                 serde_json::json!({
                     "index": d.index, "name": d.name, "kind": d.kind.label(), "driver": d.driver,
                     "vulkan": format!("{}.{}.{}", d.api_version.0, d.api_version.1, d.api_version.2),
@@ -203,8 +159,10 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
                     "cooperative_variant": d.cooperative_variant().map(|f| serde_json::json!({
                         "m": f.m, "n": f.n, "k": f.k, "lanes": f.lanes, "flexible_dimensions": f.flexible })), "device_memory_bytes": d.device_local_bytes,
                     "max_storage_buffer_range": d.max_storage_buffer_range, "usable": d.unsupported_reason().is_none(),
-                    "unusable_reason": d.unsupported_reason(), "selected": chosen == Some(d.index), "quick_compile": d.quick_compile(gpu_paths),
+                    "unusable_reason": d.unsupported_reason(), "selected": chosen == Some(d.index), "quick_compile": plan.quick_compile,
                     "uuid": d.uuid_text(), "pci": d.pci.map(|p| p.to_string()),
+                    "kernels": { "gemm": format!("{:?}", plan.gemm).to_lowercase(), "matrix_unit_trial": plan.trial,
+                        "matrix_tile": plan.tile.name(), "subgroup_attention": plan.subgroup_attention, "plan": plan.to_string() },
                 })
             })
             .collect();
@@ -215,9 +173,8 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
         return Err(vkdiff_runtime::Error::NoDevice.into());
     }
     for d in &devices {
-        println!("{}", describe(d, chosen == Some(d.index)));
+        println!("{}", describe(d, chosen == Some(d.index), &settings));
     }
-    let icds = vkdiff_runtime::loader_icds(&|name| std::env::var(name).ok());
-    println!("Vulkan driver manifests the loader reads: {}", icds.join(", "));
+    println!("Vulkan driver manifests the loader reads: {}", vkdiff_runtime::loader_icds(&env).join(", "));
     Ok(())
 }

@@ -3,13 +3,14 @@
 
 use anyhow::{bail, Result};
 use vkdiff_runtime::{
-    describe_statistics, gpu_paths_requested, selectable_variants, variant_label, CompiledKernel, Context,
-    DeviceChoice, StatisticValue,
+    describe_statistics, selectable_variants, variant_label, CompiledKernel, Context, DeviceChoice, Settings,
+    StatisticValue,
 };
 
 /// What `--compile` was asked for.
 pub struct CompileRequest<'a> {
     pub choice: DeviceChoice,
+    pub settings: Settings,
     /// Only these kernels (by name); all where empty.
     pub kernels: &'a [String],
     /// Fail where a variant spills registers to memory.
@@ -18,9 +19,9 @@ pub struct CompileRequest<'a> {
 }
 
 pub fn run(request: &CompileRequest) -> Result<()> {
-    let ctx = Context::for_census(&request.choice)?;
+    let ctx = Context::for_census(&request.choice, request.settings)?;
     let info = ctx.info();
-    let mut variants = selectable_variants(info, gpu_paths_requested());
+    let mut variants = selectable_variants(info, &request.settings);
     let known: Vec<&str> = variants.iter().map(|v| v.kernel).collect();
     if let Some(unknown) = request.kernels.iter().find(|k| !known.contains(&k.as_str())) {
         return Err(vkdiff_args::Usage(format!(

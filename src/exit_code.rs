@@ -96,6 +96,7 @@ fn device(e: &DeviceError) -> i32 {
     match e {
         // What the user named or set wrongly.
         E::BadDeviceIndex { .. } | E::BadDeviceSpec(_) | E::NoSuchDevice { .. } | E::BadSetting(_) => USAGE,
+        E::BadVariable(_) => USAGE,
         E::NoValidationLayer => USAGE,
         // The node's device: none, not visible, lost, hung, refused, out of memory, failing.
         E::NoLoader(_) | E::NoDevice | E::NoDriver(_) | E::NotVisible(_) | E::NoGpu(_) | E::Unsupported { .. } => {

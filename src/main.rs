@@ -59,6 +59,13 @@ fn main() {
     unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
     vkdiff_setting::install_version(env!("VKDIFF_VERSION"));
     let cli = parse();
+    // Every VKDIFF_* setting is checked before any work, whether or not the command opens a device.
+    let env = vkdiff_runtime::Environment::of_process();
+    let settings = vkdiff_runtime::Settings::from_environment(&env);
+    if let Err(e) = settings.and(vkdiff_runtime::DeviceChoice::from_environment(None, false, &env)) {
+        eprintln!("error: {e}");
+        std::process::exit(exit_code::USAGE);
+    }
     // The libraries name settings as data; errors here name them by this command's flags.
     let names = if matches!(cli.command, Command::Dataset(_)) { vkdiff_args::dataset_flag } else { vkdiff_args::flag };
     vkdiff_setting::name_settings_with(names);
@@ -97,13 +104,12 @@ fn parse() -> Cli {
 /// a cold shader cache can take minutes before the first image. A CPU device taken for want of
 /// a GPU says so, with the drivers the loader found.
 fn open_device(args: &vkdiff_args::DeviceArgs) -> vkdiff_runtime::Result<vkdiff_runtime::Context> {
-    let ctx = vkdiff_runtime::Context::new(&args.choice())?;
+    let env = vkdiff_runtime::Environment::of_process();
+    let choice = args.choice(&env)?;
+    let ctx = vkdiff_runtime::Context::new(&choice, vkdiff_runtime::Settings::from_environment(&env)?)?;
     let info = ctx.info();
-    let fallback = info.kind == vkdiff_runtime::DeviceKind::Cpu
-        && args.device.is_none()
-        && std::env::var_os("VKDIFF_DEVICE").is_none();
-    if fallback {
-        let icds = vkdiff_runtime::loader_icds(&|name| std::env::var(name).ok()).join(", ");
+    if info.kind == vkdiff_runtime::DeviceKind::Cpu && choice.device.is_none() {
+        let icds = vkdiff_runtime::loader_icds(&env).join(", ");
         eprintln!(
             "device: {} — the CPU, no GPU's Vulkan driver was found (driver manifests: {icds}); --require-gpu \
             refuses to run so",

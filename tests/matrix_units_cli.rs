@@ -1,34 +1,11 @@
-//! Where the matrix units run: `VKDIFF_COOPERATIVE` and the trial each run makes as it starts;
-//! the refusal of settings that name nothing.
+//! Where the matrix units run: `VKDIFF_COOPERATIVE` and the trial each run makes as it starts
+//! (tests/settings_cli.rs holds the refusal of values no setting takes).
 //! On a driver without matrix units (Mesa 22.3 lavapipe) no trial runs; CI's Mesa 26.1 pass
 //! runs these tests where one does.
 
 mod cli;
 
-use cli::{command, error_line_with, scratch};
-
-#[test]
-fn matrix_unit_settings_that_name_nothing_are_refused() {
-    let out = scratch("cooperative-setting").join("x.png");
-    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/pipeline/tiny-sdxl");
-    let gen =
-        ["gen", "--model", model.to_str().unwrap(), "--prompt", "x", "--steps", "1", "--out", out.to_str().unwrap()];
-    let settings = [
-        ("VKDIFF_COOPERATIVE", "sometimes", "VKDIFF_COOPERATIVE=sometimes: use 1"),
-        ("VKDIFF_MATRIX_TILE", "128", "VKDIFF_MATRIX_TILE=128: use 4"),
-        ("VKDIFF_ATTENTION", "flash", "VKDIFF_ATTENTION=flash: use cm2"),
-        ("VKDIFF_CONV", "winograd", "VKDIFF_CONV=winograd: use cm2"),
-        ("VKDIFF_LINEAR", "fast", "VKDIFF_LINEAR=fast: use cm2"),
-        ("VKDIFF_TUNE", "fast", "VKDIFF_TUNE=fast: use 1"),
-    ];
-    for (variable, value, says) in settings {
-        for args in [&["devices"][..], &gen] {
-            let line = error_line_with(args, &[(variable, value)]);
-            assert!(line.contains(says), "{args:?}: {line}");
-        }
-    }
-    assert!(!out.exists());
-}
+use cli::{command, scratch};
 
 /// stdout of `vkdiff` on the GPU paths with `VKDIFF_COOPERATIVE` unset, so the trial decides.
 fn on_gpu_paths(args: &[&str]) -> String {

@@ -1,6 +1,6 @@
 //! Which Vulkan device a command runs on.
 
-use vkdiff_runtime::{DeviceChoice, DeviceSpec};
+use vkdiff_runtime::{Context, DeviceChoice, DeviceSpec, Environment, Settings};
 
 /// `--device` and `--require-gpu`, shared by every command that opens a device.
 #[derive(clap::Args, Debug, Clone, Default)]
@@ -17,7 +17,15 @@ pub struct DeviceArgs {
 }
 
 impl DeviceArgs {
-    pub fn choice(&self) -> DeviceChoice {
-        DeviceChoice { device: self.device.clone(), require_gpu: self.require_gpu }
+    /// The device these flags choose, else `env`'s `VKDIFF_DEVICE`, with its scheduler's variables.
+    pub fn choice(&self, env: &Environment) -> vkdiff_runtime::Result<DeviceChoice> {
+        DeviceChoice::from_environment(self.device.clone(), self.require_gpu, env)
+    }
+
+    /// Opens the device these flags and this process's environment choose, run as its
+    /// `VKDIFF_*` settings say: the edge where a command that runs on a device reads them.
+    pub fn open(&self) -> vkdiff_runtime::Result<Context> {
+        let env = Environment::of_process();
+        Context::new(&self.choice(&env)?, Settings::from_environment(&env)?)
     }
 }

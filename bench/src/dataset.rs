@@ -13,8 +13,8 @@ use vkdiff_pipeline::dataset::{
 };
 use vkdiff_pipeline::images::{ClipPreprocess, ControlDepth};
 use vkdiff_pipeline::{
-    ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, SamplerKind, Sampling, Sdxl,
-    StyleModels, TextToImage, WorkflowModels,
+    ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, Sdxl, StyleModels, TextToImage,
+    WorkflowModels,
 };
 use vkdiff_render::scene::SceneConfig;
 use vkdiff_runtime::{Context, Dtype};
@@ -52,7 +52,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     })?;
     vkdiff_args::ensure_usage(args.batch > 0, || "--batch must be at least 1".into())?;
     let dtype = args.precision.dtype();
-    let ctx = Context::new(&args.device.choice())?;
+    let ctx = args.device.open()?;
     let RandomWorkflow { mut models, load: load_once, .. } = random_workflow(&ctx, dtype, args.lora_rank)?;
     let dataset = paper_set(args.size, args.scenes, 3, args.steps, &models.settings);
     let styles = vec![style_images().to_vec()];
@@ -222,17 +222,7 @@ pub(crate) fn paper_set(
     models: &ModelSettings,
 ) -> DatasetSettings {
     let scale = |v: usize| (v * size / 1024) as u32;
-    let sampling = Sampling {
-        steps,
-        guidance_scale: 5.0,
-        sampler: SamplerKind::Euler,
-        schedule: Default::default(),
-        width: size,
-        height: size,
-        size_conditioning: Default::default(),
-        strength: None,
-        prompt_syntax: Default::default(),
-    };
+    let sampling = crate::gen::bench_sampling(size, steps);
     DatasetSettings {
         seed: 0,
         count: scenes,

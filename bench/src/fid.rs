@@ -79,7 +79,7 @@ fn bench(args: &FidArgs, dir: &Path) -> Result<Row> {
     let weights = dir.join("inception-random.safetensors");
     write_safetensors_f32(&weights, &RandomInception::new().tensors(), &Default::default())?;
     let mut row = {
-        let ctx = vkdiff_runtime::Context::new(&args.common.device.choice())?;
+        let ctx = args.common.device.open()?;
         let start = Instant::now();
         let extractor = FeatureExtractor::new(&ctx, &weights, args.precision.dtype(), args.batch)?;
         let load_s = start.elapsed().as_secs_f64();

@@ -6,7 +6,7 @@ use anyhow::Result;
 use std::time::Instant;
 use vkdiff_networks::{SDXL_BASE_CONFIG, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
 use vkdiff_pipeline::{ClipTokenizer, Guides, SamplerKind, Sampling, Sdxl, TextToImage};
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_runtime::Dtype;
 
 const REFERENCE: &str = include_str!("../../tools/gen_cpu_reference.py");
 
@@ -75,7 +75,7 @@ pub fn run(args: &GenArgs) -> Result<()> {
 
 /// Our run; the device and every buffer are released before the reference runs.
 fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
-    let ctx = Context::new(&args.common.device.choice())?;
+    let ctx = args.common.device.open()?;
     let start = Instant::now();
     let model = Sdxl::random_sdxl_base(&ctx, dtype)?;
     let load_s = start.elapsed().as_secs_f64();
@@ -109,17 +109,23 @@ pub(super) fn bench_job(size: usize, steps: usize) -> TextToImage {
         prompt: "white button mushrooms on brown compost, top-down photo".into(),
         negative_prompt: None,
         seed: 0,
-        sampling: Sampling {
-            steps,
-            guidance_scale: 5.0,
-            sampler: SamplerKind::Euler,
-            schedule: Default::default(),
-            width: size,
-            height: size,
-            size_conditioning: Default::default(),
-            strength: None,
-            prompt_syntax: Default::default(),
-        },
+        sampling: bench_sampling(size, steps),
+    }
+}
+
+/// The benchmarks' sampling: Euler, guidance 5, `steps` steps, `size`² (`bench gen` and the
+/// dataset benchmarks alike).
+pub(super) fn bench_sampling(size: usize, steps: usize) -> Sampling {
+    Sampling {
+        steps,
+        guidance_scale: 5.0,
+        sampler: SamplerKind::Euler,
+        schedule: Default::default(),
+        width: size,
+        height: size,
+        size_conditioning: Default::default(),
+        strength: None,
+        prompt_syntax: Default::default(),
     }
 }
 

@@ -177,7 +177,7 @@ fn print_row(row: &Row) {
 }
 
 pub fn run(args: &KernelsArgs) -> Result<()> {
-    let ctx = Context::new(&args.common.device.choice())?;
+    let ctx = args.common.device.open()?;
     let info = ctx.info().clone();
     let dtypes: Vec<Dtype> = if info.supports_f16() { vec![Dtype::F32, Dtype::F16] } else { vec![Dtype::F32] };
     let mut rows = Vec::new();
@@ -188,7 +188,7 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
             info.name,
             info.kind.label(),
             info.driver,
-            ctx.gemm_family()
+            ctx.choices().gemm_family
         );
         if let Some(trial) = peaks::trial_label(&ctx) {
             println!("matrix-unit trial: {trial}");
@@ -224,7 +224,7 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
     if args.common.json {
         let out = serde_json::json!({
             "device": info.name, "driver": info.driver, "kind": info.kind.label(),
-            "gemm_family": format!("{:?}", ctx.gemm_family()),
+            "gemm_family": format!("{:?}", ctx.choices().gemm_family),
             "matrix_unit_trial": ctx.matrix_unit_trial().map(|t| serde_json::json!({
                 "cooperative_ms": t.cooperative_ms, "tiled_ms": t.tiled_ms, "difference": t.difference,
                 "kept": t.keeps_matrix_units(),
@@ -283,8 +283,8 @@ struct Timed {
 /// `print`. A row that fails (a driver that refuses a kernel no GPU has run) is one line naming
 /// it, and the rest still run; the context's family and tile are left as found.
 fn time_cases(ctx: &Context, dtype: Dtype, cases: impl Iterator<Item = Case>, samples: usize, print: bool) -> Timed {
-    let default_family = ctx.gemm_family();
-    let default_tile = ctx.matrix_tile();
+    let default_family = ctx.choices().gemm_family;
+    let default_tile = ctx.choices().matrix_tile;
     let mut timed = Timed { rows: Vec::new(), failed: Vec::new() };
     for case in cases {
         let four = MatrixTile::Four;
@@ -304,8 +304,8 @@ fn time_cases(ctx: &Context, dtype: Dtype, cases: impl Iterator<Item = Case>, sa
             (true, family) => vec![(Some(family), default_tile)],
         };
         for (family, tile) in families {
-            ctx.set_gemm_family(family.unwrap_or(default_family));
-            ctx.set_matrix_tile(tile);
+            ctx.choose(|c| c.gemm_family = family.unwrap_or(default_family));
+            ctx.choose(|c| c.matrix_tile = tile);
             match time_row(ctx, &case, dtype, family.is_some(), samples) {
                 Ok(row) => {
                     if print {
@@ -322,8 +322,8 @@ fn time_cases(ctx: &Context, dtype: Dtype, cases: impl Iterator<Item = Case>, sa
                 }
             }
         }
-        ctx.set_gemm_family(default_family);
-        ctx.set_matrix_tile(default_tile);
+        ctx.choose(|c| c.gemm_family = default_family);
+        ctx.choose(|c| c.matrix_tile = default_tile);
     }
     timed
 }

@@ -6,7 +6,6 @@ use anyhow::Result;
 use std::time::Instant;
 use vkdiff_lora::{LoraFile, LoraMerger, Targets};
 use vkdiff_networks::{Checkpoint, UNet, UNetConfig};
-use vkdiff_runtime::Context;
 
 const REFERENCE: &str = include_str!("../../tools/lora_merge_cpu_reference.py");
 
@@ -27,7 +26,7 @@ pub struct LoraArgs {
 
 pub fn run(args: &LoraArgs) -> Result<()> {
     let dtype = args.precision.dtype();
-    let ctx = Context::new(&args.device.choice())?;
+    let ctx = args.device.open()?;
     let unet = UNet::load(&UNetConfig::sdxl_base(), &Checkpoint::random(&ctx, dtype, 0))?;
     let shapes = transformer_linears(&unet);
     let path = std::env::temp_dir().join(format!("vkdiff-bench-lora-{}.safetensors", std::process::id()));

@@ -38,9 +38,9 @@ pub(crate) fn share_label(ctx: &Context, flops_per_s: f64) -> String {
 
 /// The GEMM/convolution kernels a product in `dtype` runs on with the context's family now.
 pub(crate) fn family_label(ctx: &Context, dtype: Dtype) -> String {
-    match (ctx.gemm_family(), ctx.info().cooperative_variant()) {
+    match (ctx.choices().gemm_family, ctx.info().cooperative_variant()) {
         (GemmFamily::Cooperative, Some(f)) if dtype == Dtype::F16 => {
-            let tile = ctx.matrix_tile();
+            let tile = ctx.choices().matrix_tile;
             let eight = match tile {
                 _ if !tile.built_for(&f) => String::new(),
                 MatrixTile::Eight => ", 8 SG".into(),
@@ -61,5 +61,5 @@ pub(crate) fn trial_label(ctx: &Context) -> Option<String> {
 /// Whether the device has matrix units vkdiff's kernels fit and `VKDIFF_COOPERATIVE=0` leaves
 /// them on, whether or not the trial kept them: benchmarks time them either way.
 pub(crate) fn has_matrix_units(ctx: &Context) -> bool {
-    ctx.info().gemm_family(ctx.gpu_paths()) == GemmFamily::Cooperative
+    ctx.plan().fragment.is_some()
 }

@@ -134,7 +134,7 @@ pub fn run(args: &UnetArgs) -> Result<()> {
 
 /// Our evaluation; the device and every buffer are released before the reference runs.
 fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> Result<Row> {
-    let ctx = Context::new(&args.common.device.choice())?;
+    let ctx = args.common.device.open()?;
     let start = Instant::now();
     let ckpt = Checkpoint::random(&ctx, dtype, 0);
     let unet = UNet::load(config, &ckpt)?;

@@ -13,7 +13,7 @@ use anyhow::{Context as _, Result};
 use std::time::Instant;
 use vkdiff_args::Precision;
 use vkdiff_networks::{AutoencoderKl, Checkpoint, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
-use vkdiff_runtime::{Context, Dtype, HostStats};
+use vkdiff_runtime::{Dtype, HostStats};
 
 #[derive(clap::Args)]
 pub struct VaeArgs {
@@ -236,7 +236,7 @@ pub fn run(args: &VaeArgs) -> Result<()> {
 /// vkdiff's decodes (of the VAE at `path`, else random weights of `config`); the device and
 /// every buffer are released before a reference runs.
 fn measure(args: &VaeArgs, config: &str, path: Option<&std::path::Path>) -> Result<Row> {
-    let ctx = Context::new(&args.device.choice())?;
+    let ctx = args.device.open()?;
     let config: VaeConfig = serde_json::from_str(config)?;
     let vae = match path {
         Some(path) => AutoencoderKl::load_sdxl(&ctx, path, args.precision.dtype())?,

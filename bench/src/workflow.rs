@@ -38,7 +38,7 @@ pub struct WorkflowArgs {
 
 pub fn run(args: &WorkflowArgs) -> Result<()> {
     let dtype = args.precision.dtype();
-    let ctx = Context::new(&args.device.choice())?;
+    let ctx = args.device.open()?;
     let start = Instant::now();
     let mut model = Sdxl::random_sdxl_base(&ctx, dtype)?;
     let RandomGuides { controlnet, encoder, adapter, loras } =

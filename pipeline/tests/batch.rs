@@ -104,7 +104,7 @@ fn alone_and_together(
         },
     ];
     if let Some(limit) = binding_limit {
-        ctx.set_binding_limit(limit);
+        ctx.choose(|c| c.binding_limit = limit);
     }
     let record = |batch| {
         Denoiser::record(sdxl, &sampling, models.control_use(), models.ip_use(1), batch, texts[0].tokens).unwrap()
@@ -116,14 +116,14 @@ fn alone_and_together(
         .collect();
     drop(one);
     if split == Split::Submissions {
-        ctx.set_submit_budget(SubmitBudget { flops: 0.0, dispatches: 1, ..ctx.submit_budget() });
+        ctx.choose(|c| c.submit_budget = SubmitBudget { flops: 0.0, dispatches: 1, ..ctx.choices().submit_budget });
     }
     let together = record(3).run(&items, &mut |_, _| {}).unwrap().latents;
     (alone, together)
 }
 
 fn check(precision: Dtype, size: (usize, usize), split: Split) {
-    let ctx = Context::new(&Default::default())
+    let ctx = Context::new(&Default::default(), vkdiff_testkit::settings())
         .unwrap_or_else(|e| panic!("these tests need a Vulkan device and found none usable: {e}"));
     let (alone, together) = alone_and_together(&ctx, precision, size, split);
     for (k, (a, t)) in alone.iter().zip(&together).enumerate() {

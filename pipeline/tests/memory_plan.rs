@@ -17,7 +17,8 @@ fn mem_available() -> u64 {
 
 #[test]
 fn a_cpu_device_plans_the_full_size_vae_with_the_hosts_memory() {
-    let ctx = Context::new(&Default::default()).expect("a Vulkan device (apt-get install mesa-vulkan-drivers)");
+    let ctx = Context::new(&Default::default(), vkdiff_testkit::settings())
+        .expect("a Vulkan device (apt-get install mesa-vulkan-drivers)");
     assert_eq!(ctx.info().kind, DeviceKind::Cpu, "these tests run on lavapipe");
     let room = ctx.memory_room();
     assert_eq!(room.source, HOST_MEMORY);

@@ -117,7 +117,7 @@ fn a_swapped_vae_matches_diffusers() {
 #[test]
 fn released_text_encoders_free_their_memory_and_later_prompts_fail_clearly() {
     // A private context: its live bytes are this test's alone.
-    let ctx = vkdiff_runtime::Context::new(&Default::default()).unwrap();
+    let ctx = vkdiff_runtime::Context::new(&Default::default(), vkdiff_testkit::settings()).unwrap();
     let load = || Sdxl::load(&ctx, &fixture("pipeline").join("tiny-sdxl"), Dtype::F32, &mut |_| {}).unwrap();
     let case = &cases()[1];
     let mut sdxl = load();

@@ -1,12 +1,44 @@
 //! Physical-device discovery: what each Vulkan device offers vkdiff (`DeviceInfo`).
 
-use crate::device_choice::PciAddress;
 use crate::error::{Result, VkContext};
-use crate::flexible_dimensions::{self, CooperativeMatrix2Features};
-use crate::matrix2_tile::{self, Matrix2Tile};
-use crate::matrix_units::{self, Fragment, MatrixShape};
+use crate::kernel_choice::flexible_dimensions::{self, CooperativeMatrix2Features};
+use crate::kernel_choice::matrix_units::{self, Fragment, MatrixShape};
+use crate::settings::Settings;
 use ash::vk;
 use std::ffi::CStr;
+use std::fmt;
+use vkdiff_setting::Environment;
+
+/// A PCI address, domain:bus:device.function (`VK_EXT_pci_bus_info`; `nvidia-smi` and `lspci -D`
+/// print it so).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct PciAddress {
+    pub domain: u32,
+    pub bus: u32,
+    pub device: u32,
+    pub function: u32,
+}
+
+impl fmt::Display for PciAddress {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{:04x}:{:02x}:{:02x}.{:x}", self.domain, self.bus, self.device, self.function)
+    }
+}
+
+impl PciAddress {
+    /// `0000:65:00.0`, or `65:00.0` in domain 0.
+    pub(crate) fn parse(s: &str) -> Option<PciAddress> {
+        let (head, function) = s.rsplit_once('.')?;
+        let parts: Vec<&str> = head.split(':').collect();
+        let (domain, bus, device) = match parts[..] {
+            [domain, bus, device] => (domain, bus, device),
+            [bus, device] => ("0", bus, device),
+            _ => return None,
+        };
+        let hex = |t: &str| u32::from_str_radix(t, 16).ok();
+        Some(PciAddress { domain: hex(domain)?, bus: hex(bus)?, device: hex(device)?, function: hex(function)? })
+    }
+}
 
 /// What kind of device this is, in the order vkdiff prefers them.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -164,12 +196,6 @@ impl DeviceInfo {
         matrix_units::pick(&self.matrix_shapes, &self.flexible_shapes, pinnable, self.fragment_request)
     }
 
-    /// The tiles of `VK_NV_cooperative_matrix2`'s probes (`ops::linear_cm2`, `ops::conv2d_cm2`,
-    /// `ops::attention_cm2`) this device runs.
-    pub fn matrix2_tiles(&self) -> Vec<Matrix2Tile> {
-        matrix2_tile::offered(self)
-    }
-
     /// Whether a kernel written for a subgroup of exactly `size` lanes can be pinned to it.
     pub fn can_use_subgroup(&self, size: u32) -> bool {
         match self.subgroup_size_range {
@@ -196,6 +222,7 @@ pub(crate) fn describe(
     instance: &ash::Instance,
     pd: vk::PhysicalDevice,
     (index, api): (usize, (u32, u32)),
+    fragment_request: Option<(u32, u32, u32)>,
 ) -> DeviceInfo {
     // SAFETY: pd comes from this instance.
     let reported = unsafe { instance.get_physical_device_properties(pd) }.api_version;
@@ -305,7 +332,7 @@ pub(crate) fn describe(
         subgroup_arithmetic: subgroup.supported_stages.contains(compute)
             && ops.contains(vk::SubgroupFeatureFlags::ARITHMETIC),
         matrix_shapes: if cooperative_extension { matrix_units::query(entry, instance, pd) } else { Vec::new() },
-        fragment_request: matrix_units::requested_fragment().ok().flatten(),
+        fragment_request,
         cooperative_matrix2: if cooperative2_extension { cooperative2.reported() } else { Vec::new() },
         flexible_shapes: if cooperative2.flexible_dimensions() {
             flexible_dimensions::query(entry, instance, pd)
@@ -344,12 +371,22 @@ fn compute_family(families: &[vk::QueueFamilyProperties]) -> Option<u32> {
     dedicated.or_else(|| families.iter().position(|f| compute(&f))).map(|i| i as u32)
 }
 
-/// Every Vulkan device on this machine, described.
-pub fn list_devices() -> Result<Vec<DeviceInfo>> {
-    let vulkan = crate::instance::shared()?;
+/// Every Vulkan device on this machine, described under `settings`; `env` says where the loader
+/// looked for drivers.
+pub fn list_devices(settings: &Settings, env: &Environment) -> Result<Vec<DeviceInfo>> {
+    let vulkan = crate::instance::shared(settings, &|| searched_drivers(env))?;
     // SAFETY: the instance lives as long as the process.
     let pds = unsafe { vulkan.raw.enumerate_physical_devices() }.vk("vkEnumeratePhysicalDevices")?;
-    Ok(pds.iter().enumerate().map(|(i, &pd)| describe(&vulkan.entry, &vulkan.raw, pd, (i, vulkan.api))).collect())
+    let describe = |(i, &pd)| describe(&vulkan.entry, &vulkan.raw, pd, (i, vulkan.api), settings.fragment);
+    Ok(pds.iter().enumerate().map(describe).collect())
+}
+
+/// Where the loader looked for drivers, for the error that found none.
+pub(crate) fn searched_drivers(env: &Environment) -> String {
+    match env.get("VK_DRIVER_FILES").or_else(|| env.get("VK_ICD_FILENAMES")) {
+        Some(list) => format!("VK_DRIVER_FILES={list}"),
+        None => "no driver manifest in the loader's icd.d folders (/usr/share/vulkan/icd.d and the like)".into(),
+    }
 }
 
 /// Mesa's (major, minor) from lavapipe's driver info ("Mesa 25.0.7-2~bpo12+1 (LLVM 15.0.6)"):

@@ -2,30 +2,14 @@
 //! scheduler gave it (`CUDA_VISIBLE_DEVICES`, `ROCR_VISIBLE_DEVICES`, `SLURM_LOCALID`), else the
 //! best one; and, with `require_gpu`, never the CPU.
 
-use crate::device::{DeviceInfo, DeviceKind};
+use crate::device::{DeviceInfo, DeviceKind, PciAddress};
 use crate::error::{Error, Result};
 use std::fmt;
 use std::str::FromStr;
-use vkdiff_setting::Message;
+use vkdiff_setting::{Environment, Message};
 
 const NVIDIA: u32 = 0x10de;
 const AMD: u32 = 0x1002;
-
-/// A PCI address, domain:bus:device.function (`VK_EXT_pci_bus_info`; `nvidia-smi` and `lspci -D`
-/// print it so).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub struct PciAddress {
-    pub domain: u32,
-    pub bus: u32,
-    pub device: u32,
-    pub function: u32,
-}
-
-impl fmt::Display for PciAddress {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{:04x}:{:02x}:{:02x}.{:x}", self.domain, self.bus, self.device, self.function)
-    }
-}
 
 /// How a user names a device: its index in `vkdiff devices`, its UUID (as `vkdiff devices` and
 /// `nvidia-smi -L` print it, with or without `GPU-`, or a unique prefix of 8 or more digits), or
@@ -50,7 +34,7 @@ impl FromStr for DeviceSpec {
             return s.parse().map(DeviceSpec::Index).map_err(|_| bad());
         }
         if s.contains(':') {
-            return parse_pci(s).map(DeviceSpec::Pci).ok_or_else(bad);
+            return PciAddress::parse(s).map(DeviceSpec::Pci).ok_or_else(bad);
         }
         let hex: String = s.strip_prefix("GPU-").unwrap_or(s).chars().filter(|&c| c != '-').collect();
         if (8..=32).contains(&hex.len()) && hex.chars().all(|c| c.is_ascii_hexdigit()) {
@@ -70,52 +54,54 @@ impl fmt::Display for DeviceSpec {
     }
 }
 
-fn parse_pci(s: &str) -> Option<PciAddress> {
-    let (head, function) = s.rsplit_once('.')?;
-    let parts: Vec<&str> = head.split(':').collect();
-    let (domain, bus, device) = match parts[..] {
-        [domain, bus, device] => (domain, bus, device),
-        [bus, device] => ("0", bus, device),
-        _ => return None,
-    };
-    let hex = |t: &str| u32::from_str_radix(t, 16).ok();
-    Some(PciAddress { domain: hex(domain)?, bus: hex(bus)?, device: hex(device)?, function: hex(function)? })
-}
-
 /// What the user asked for: a device (`--device`, else `VKDIFF_DEVICE`, else the scheduler's
 /// variables, else the best device), and whether a CPU device is refused (`--require-gpu`, or
 /// `VKDIFF_REQUIRE_GPU=1`).
 #[derive(Clone, Debug, Default)]
 pub struct DeviceChoice {
     pub device: Option<DeviceSpec>,
+    /// Whether `VKDIFF_DEVICE` named [`DeviceChoice::device`] (else the flag did).
+    pub named_by_variable: bool,
     pub require_gpu: bool,
+    /// The environment the edge read: the scheduler's variables (`CUDA_VISIBLE_DEVICES`,
+    /// `SLURM_LOCALID`, …) and the Vulkan loader's (`VK_DRIVER_FILES`, the XDG folders).
+    pub environment: Environment,
 }
 
 impl DeviceChoice {
     /// The device `index` (tests and benchmarks that name one).
     pub fn index(index: usize) -> DeviceChoice {
-        DeviceChoice { device: Some(DeviceSpec::Index(index)), require_gpu: false }
+        DeviceChoice { device: Some(DeviceSpec::Index(index)), ..DeviceChoice::default() }
+    }
+
+    /// `device` and `require_gpu` as the flags give them, else as `VKDIFF_DEVICE` and
+    /// `VKDIFF_REQUIRE_GPU` in `env` do, with `env` for the scheduler and the loader.
+    pub fn from_environment(device: Option<DeviceSpec>, require_gpu: bool, env: &Environment) -> Result<DeviceChoice> {
+        let named = "an index, a UUID or a PCI address as `vkdiff devices` prints them";
+        let variable = match device {
+            Some(_) => None,
+            None => env.parse("VKDIFF_DEVICE", named, |v| v.parse::<DeviceSpec>().ok()).map_err(Error::BadVariable)?,
+        };
+        let required = env.switch("VKDIFF_REQUIRE_GPU").map_err(Error::BadVariable)?;
+        Ok(DeviceChoice {
+            named_by_variable: variable.is_some(),
+            device: device.or(variable),
+            require_gpu: require_gpu || required.unwrap_or(false),
+            environment: env.clone(),
+        })
     }
 }
 
-/// Which device of `devices` to use for `choice`, reading the environment through `env` (the
-/// process's own in [`choose`]; tests give theirs).
-pub fn choose_with(
-    devices: &[DeviceInfo],
-    choice: &DeviceChoice,
-    env: &dyn Fn(&str) -> Option<String>,
-) -> Result<usize> {
+/// Which device of `devices` to use for `choice`.
+pub fn choose(devices: &[DeviceInfo], choice: &DeviceChoice) -> Result<usize> {
     if devices.is_empty() {
         return Err(Error::NoDevice);
     }
-    let var = |name: &str| env(name).filter(|v| !v.trim().is_empty());
-    let index = match (&choice.device, var("VKDIFF_DEVICE")) {
-        (Some(spec), _) => Some(find(devices, spec, Message::setting("device"))?),
-        (None, Some(text)) => {
-            let spec: DeviceSpec = text.parse().map_err(|e| Error::BadDeviceSpec(format!("VKDIFF_DEVICE: {e}")))?;
-            Some(find(devices, &spec, Message::text("VKDIFF_DEVICE"))?)
-        }
-        (None, None) => scheduled(devices, env)?,
+    let env = &choice.environment;
+    let index = match &choice.device {
+        Some(spec) if choice.named_by_variable => Some(find(devices, spec, Message::text("VKDIFF_DEVICE"))?),
+        Some(spec) => Some(find(devices, spec, Message::setting("device"))?),
+        None => scheduled(devices, env)?,
     };
     let index = match index {
         Some(index) => {
@@ -127,8 +113,7 @@ pub fn choose_with(
         }
         None => best(devices)?,
     };
-    let require_gpu = choice.require_gpu || var("VKDIFF_REQUIRE_GPU").is_some_and(|v| v == "1");
-    if require_gpu && devices[index].kind == DeviceKind::Cpu {
+    if choice.require_gpu && devices[index].kind == DeviceKind::Cpu {
         return Err(Error::NoGpu(format!(
             "the device chosen, `{}`, is a CPU (Vulkan driver manifests found: {}); install the GPU's Vulkan \
             driver, or in a container expose it (NVIDIA: NVIDIA_DRIVER_CAPABILITIES must include graphics)",
@@ -137,11 +122,6 @@ pub fn choose_with(
         )));
     }
     Ok(index)
-}
-
-/// [`choose_with`] on this process's environment.
-pub fn choose(devices: &[DeviceInfo], choice: &DeviceChoice) -> Result<usize> {
-    choose_with(devices, choice, &|name| std::env::var(name).ok())
 }
 
 /// The usable device of the preferred kind (discrete, integrated, virtual, CPU), first by index.
@@ -186,14 +166,14 @@ fn find(devices: &[DeviceInfo], spec: &DeviceSpec, requested_by: Message) -> Res
 /// the one at `SLURM_LOCALID`. An empty list (or "-1") gives it none of that vendor's GPUs.
 /// Without a list, `SLURM_LOCALID` picks among the usable devices of the preferred kind, so a
 /// node's tasks spread over its GPUs. Vulkan drivers read none of these variables.
-fn scheduled(devices: &[DeviceInfo], env: &dyn Fn(&str) -> Option<String>) -> Result<Option<usize>> {
+fn scheduled(devices: &[DeviceInfo], env: &Environment) -> Result<Option<usize>> {
     let listed = [("CUDA_VISIBLE_DEVICES", NVIDIA), ("ROCR_VISIBLE_DEVICES", AMD), ("HIP_VISIBLE_DEVICES", AMD)]
         .into_iter()
-        .find_map(|(name, vendor)| env(name).map(|value| (name, vendor, value)));
-    let local = env("SLURM_LOCALID").and_then(|v| v.trim().parse::<usize>().ok()).unwrap_or(0);
+        .find_map(|(name, vendor)| env.raw(name).map(|value| (name, vendor, value)));
+    let local = env.get("SLURM_LOCALID").and_then(|v| v.parse::<usize>().ok()).unwrap_or(0);
     let mut hidden_vendor = None;
     if let Some((name, vendor, value)) = listed {
-        let owned = visible(devices, (name, vendor, &value), env)?;
+        let owned = visible(devices, (name, vendor, value), env)?;
         if !owned.is_empty() {
             return Ok(Some(owned[local % owned.len()]));
         }
@@ -206,11 +186,7 @@ fn scheduled(devices: &[DeviceInfo], env: &dyn Fn(&str) -> Option<String>) -> Re
 }
 
 /// The devices a `*_VISIBLE_DEVICES` list names, in its order.
-fn visible(
-    devices: &[DeviceInfo],
-    (name, vendor, value): (&str, u32, &str),
-    env: &dyn Fn(&str) -> Option<String>,
-) -> Result<Vec<usize>> {
+fn visible(devices: &[DeviceInfo], (name, vendor, value): (&str, u32, &str), env: &Environment) -> Result<Vec<usize>> {
     let ours = by_pci(devices.iter().filter(|d| d.vendor_id == vendor));
     let brand = if vendor == NVIDIA { "NVIDIA" } else { "AMD" };
     let unmatched = |entry: &str| {
@@ -251,17 +227,17 @@ fn by_pci<'a>(devices: impl Iterator<Item = &'a DeviceInfo>) -> Vec<usize> {
 
 /// The driver manifests (ICDs) the Vulkan loader would read: `VK_DRIVER_FILES` or
 /// `VK_ICD_FILENAMES` where set, else the `vulkan/icd.d` folders of the XDG search paths.
-pub fn loader_icds(env: &dyn Fn(&str) -> Option<String>) -> Vec<String> {
-    let named = env("VK_DRIVER_FILES").or_else(|| env("VK_ICD_FILENAMES")).filter(|v| !v.is_empty());
+pub fn loader_icds(env: &Environment) -> Vec<String> {
+    let named = env.get("VK_DRIVER_FILES").or_else(|| env.get("VK_ICD_FILENAMES"));
     let folders: Vec<std::path::PathBuf> = match &named {
         Some(list) => list.split(':').filter(|p| !p.is_empty()).map(Into::into).collect(),
         None => {
-            let home = env("HOME").map(|h| format!("{h}/.local/share")).unwrap_or_default();
+            let home = env.get("HOME").map(|h| format!("{h}/.local/share")).unwrap_or_default();
             let bases = [
-                env("XDG_CONFIG_DIRS").unwrap_or_else(|| "/etc/xdg".into()),
+                env.get("XDG_CONFIG_DIRS").unwrap_or("/etc/xdg").to_string(),
                 "/etc".into(),
-                env("XDG_DATA_HOME").unwrap_or(home),
-                env("XDG_DATA_DIRS").unwrap_or_else(|| "/usr/local/share:/usr/share".into()),
+                env.get("XDG_DATA_HOME").map_or(home, str::to_string),
+                env.get("XDG_DATA_DIRS").unwrap_or("/usr/local/share:/usr/share").to_string(),
             ];
             bases
                 .iter()

@@ -1,4 +1,4 @@
-use crate::submit_budget::DEFAULT_SUBMIT_GFLOP;
+use crate::settings::DEFAULT_SUBMIT_GFLOP;
 use ash::vk;
 use vkdiff_setting::Message;
 
@@ -44,6 +44,9 @@ pub enum Error {
     SubmitTimeout { seconds: f64 },
     #[error("{0}")]
     BadSetting(String),
+    /// A `VKDIFF_*` variable's value that its setting does not take.
+    #[error(transparent)]
+    BadVariable(vkdiff_setting::BadVariable),
     #[error("device memory: {0}")]
     Memory(String),
     #[error("VKDIFF_VALIDATE=1 needs the Khronos validation layer (Debian: apt-get install vulkan-validationlayers)")]

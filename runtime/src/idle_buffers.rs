@@ -7,7 +7,6 @@
 //! so the cache never holds more memory than running without it did at its peak (`memory.rs`);
 //! `VKDIFF_BUFFER_CACHE=0` gives every buffer back as its tensors go.
 
-use crate::error::{Error, Result};
 use ash::vk;
 use gpu_allocator::vulkan::Allocation;
 use std::collections::VecDeque;
@@ -24,19 +23,6 @@ pub(crate) struct IdleBuffers {
     /// Oldest first.
     entries: VecDeque<Idle>,
     bytes: u64,
-}
-
-/// `VKDIFF_BUFFER_CACHE`: whether freed device buffers are kept for reuse (the default).
-pub(crate) fn cache_setting(value: Option<&str>) -> Result<bool> {
-    match value.map(|v| v.trim().to_ascii_lowercase()).as_deref() {
-        None | Some("" | "1" | "true" | "yes" | "on") => Ok(true),
-        Some("0" | "false" | "no" | "off") => Ok(false),
-        Some(_) => Err(Error::BadSetting(format!(
-            "VKDIFF_BUFFER_CACHE={}: use 1 (keep freed device buffers for reuse, the default) or 0 (give each \
-             back to the driver at once)",
-            value.unwrap_or_default()
-        ))),
-    }
 }
 
 impl IdleBuffers {
@@ -111,16 +97,5 @@ mod tests {
         assert_eq!(cache.bytes(), 800);
         assert_eq!(sizes(&cache.evict_to(0)), [300, 500]);
         assert_eq!(cache.bytes(), 0);
-    }
-
-    #[test]
-    fn the_setting_switches_reuse() {
-        assert!(cache_setting(None).unwrap());
-        assert!(cache_setting(Some("on")).unwrap());
-        for off in ["0", "off", "False", " no "] {
-            assert!(!cache_setting(Some(off)).unwrap(), "{off}");
-        }
-        let err = cache_setting(Some("sometimes")).unwrap_err().to_string();
-        assert!(err.starts_with("VKDIFF_BUFFER_CACHE=sometimes: use 1"), "{err}");
     }
 }

@@ -3,17 +3,17 @@
 //! context, NVIDIA's driver (580.159, on an H200) failed the 31st context opened after the one
 //! before had closed: vkCreateInstance found "no Vulkan driver" (the loader unloads the driver
 //! with the last instance). One instance per (API version, validation) asked for, since both are
-//! read from the environment when it is made ([`api_limit`], `VKDIFF_VALIDATE`).
+//! fixed when it is made ([`crate::Settings::vulkan_api`], [`crate::Settings::validate`]).
 
 use crate::error::{Error, Result, VkContext};
-use crate::validation;
+use crate::settings::Settings;
 use ash::vk;
 use std::sync::{Arc, Mutex};
 
 pub(crate) struct Instance {
     pub(crate) entry: ash::Entry,
     pub(crate) raw: ash::Instance,
-    /// The Vulkan version asked for (see [`api_limit`]).
+    /// The Vulkan version asked for.
     pub(crate) api: (u32, u32),
     validated: bool,
     messenger: Option<ash::vk::DebugUtilsMessengerEXT>,
@@ -46,20 +46,21 @@ pub fn release_idle_instances() {
 
 static OPEN: Mutex<Vec<Arc<Instance>>> = Mutex::new(Vec::new());
 
-/// The instance for the API version and validation the environment asks for, created on first use.
-pub(crate) fn shared() -> Result<Arc<Instance>> {
-    open_instance(api_limit()?, validation::requested())
+/// The instance for the API version and validation `settings` ask for, created on first use.
+/// `drivers` names where the loader looked for drivers, for the error that finds none.
+pub(crate) fn shared(settings: &Settings, drivers: &dyn Fn() -> String) -> Result<Arc<Instance>> {
+    open_instance((settings.vulkan_api, settings.validate), drivers)
 }
 
-fn open_instance(api: (u32, u32), validated: bool) -> Result<Arc<Instance>> {
+fn open_instance((api, validated): ((u32, u32), bool), drivers: &dyn Fn() -> String) -> Result<Arc<Instance>> {
     let mut open = OPEN.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
     if let Some(found) = open.iter().find(|i| i.api == api && i.validated == validated) {
         return Ok(found.clone());
     }
     // SAFETY: loading the system Vulkan loader; its symbols follow the Vulkan ABI.
     let entry = unsafe { ash::Entry::load() }.map_err(|e| Error::NoLoader(e.to_string()))?;
-    let (raw, messenger) = create_instance(&entry, api).map_err(|e| match e {
-        Error::Vulkan { result: ash::vk::Result::ERROR_INCOMPATIBLE_DRIVER, .. } => Error::NoDriver(searched()),
+    let (raw, messenger) = create_instance(&entry, api, validated).map_err(|e| match e {
+        Error::Vulkan { result: ash::vk::Result::ERROR_INCOMPATIBLE_DRIVER, .. } => Error::NoDriver(drivers()),
         e => e,
     })?;
     let made = Arc::new(Instance { entry, raw, api, validated, messenger });
@@ -67,31 +68,13 @@ fn open_instance(api: (u32, u32), validated: bool) -> Result<Arc<Instance>> {
     Ok(made)
 }
 
-/// Where the loader looked for drivers, for the error that found none.
-fn searched() -> String {
-    let env = |k: &str| std::env::var(k).ok();
-    match env("VK_DRIVER_FILES").or_else(|| env("VK_ICD_FILENAMES")).filter(|v| !v.is_empty()) {
-        Some(list) => format!("VK_DRIVER_FILES={list}"),
-        None => "no driver manifest in the loader's icd.d folders (/usr/share/vulkan/icd.d and the like)".into(),
-    }
-}
-
-/// The newest Vulkan version vkdiff asks for: 1.3, or 1.2 under `VKDIFF_VULKAN_API=1.2`, which
-/// runs the 1.2 paths (extensions where 1.3 has core features) on a 1.3 driver.
-pub fn api_limit() -> Result<(u32, u32)> {
-    match std::env::var("VKDIFF_VULKAN_API").as_deref() {
-        Err(_) | Ok("") | Ok("1.3") => Ok((1, 3)),
-        Ok("1.2") => Ok((1, 2)),
-        Ok(other) => Err(Error::BadSetting(format!("VKDIFF_VULKAN_API={other}: vkdiff runs Vulkan 1.2 or 1.3"))),
-    }
-}
-
-/// vkdiff's instance for Vulkan up to `api` (major, minor), validated under `VKDIFF_VALIDATE=1`.
+/// vkdiff's instance for Vulkan up to `api` (major, minor), validated where `validated`.
 /// Where the loader offers `VK_KHR_portability_enumeration`, portability devices (MoltenVK) are
 /// listed too.
 pub(crate) fn create_instance(
     entry: &ash::Entry,
     api: (u32, u32),
+    validated: bool,
 ) -> Result<(ash::Instance, Option<vk::DebugUtilsMessengerEXT>)> {
     let app = vk::ApplicationInfo::default()
         .application_name(c"vkdiff")
@@ -107,13 +90,13 @@ pub(crate) fn create_instance(
         extensions.push(portability.as_ptr());
         info = info.flags(vk::InstanceCreateFlags::ENUMERATE_PORTABILITY_KHR);
     }
-    crate::validation::create_instance(entry, info, extensions)
+    crate::validation::create_instance(entry, info, extensions, validated)
 }
 
 #[cfg(test)]
 mod tests {
     use super::{open_instance, release_idle_instances};
-    use crate::validation;
+    use crate::settings::tests::process_settings;
     use crate::Context;
     use std::sync::{Arc, Mutex};
 
@@ -123,10 +106,10 @@ mod tests {
     #[test]
     fn the_instance_outlives_its_contexts_and_serves_the_next() {
         let _watching = WATCHING.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-        let first = Context::new(&Default::default()).unwrap();
+        let first = Context::new(&Default::default(), process_settings()).unwrap();
         let held = Arc::downgrade(&first.shared.vulkan);
         drop(first);
-        let next = Context::new(&Default::default()).unwrap();
+        let next = Context::new(&Default::default(), process_settings()).unwrap();
         let kept = held.upgrade().expect("the instance was destroyed with its last context");
         assert!(Arc::ptr_eq(&kept, &next.shared.vulkan), "the next context made an instance of its own");
     }
@@ -134,15 +117,16 @@ mod tests {
     #[test]
     fn idle_instances_are_released_and_the_next_is_made_anew() {
         let _watching = WATCHING.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-        // Vulkan 1.1, which no context asks for (`api_limit`): no other test holds this one.
-        let held = open_instance((1, 1), validation::requested()).unwrap();
+        // Vulkan 1.1, which no context asks for: no other test holds this one.
+        let validated = process_settings().validate;
+        let held = open_instance(((1, 1), validated), &String::new).unwrap();
         let watched = Arc::downgrade(&held);
         release_idle_instances();
         assert!(watched.upgrade().is_some(), "an instance still held was destroyed");
         drop(held);
         release_idle_instances();
         assert!(watched.upgrade().is_none(), "the idle instance was kept");
-        let next = open_instance((1, 1), validation::requested()).unwrap();
+        let next = open_instance(((1, 1), validated), &String::new).unwrap();
         // SAFETY: the instance is alive while `next` is.
         let devices = unsafe { next.raw.enumerate_physical_devices() }.unwrap();
         assert!(!devices.is_empty(), "the new instance finds no device");

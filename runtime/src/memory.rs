@@ -7,6 +7,7 @@ use crate::idle_buffers::Idle;
 use ash::vk;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
+use std::mem::ManuallyDrop;
 use std::sync::atomic::Ordering;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -57,7 +58,7 @@ impl Buffer {
     pub(crate) fn new(shared: &Arc<Shared>, size: u64, use_: BufferUse, name: &str) -> Result<Arc<Buffer>> {
         // Whole words: fills (vkCmdFillBuffer) and vec4 kernels then cover an odd-length f16 tensor.
         let size = size.max(4).next_multiple_of(4);
-        let limit = shared.allocation_limit.load(Ordering::SeqCst);
+        let limit = shared.choices.lock().unwrap().allocation_limit;
         if limit > 0 && size > limit {
             return Err(Error::Memory(format!(
                 "`{name}` needs one {} MiB buffer, past this device's {} MiB maxMemoryAllocationSize; a smaller \
@@ -132,7 +133,7 @@ impl Buffer {
     /// Runs `f` on the buffer's host mapping, if the memory is host-visible (always on lavapipe)
     /// and, under `VKDIFF_GPU_PATHS=1`, not device-only memory (which then goes through staging).
     pub(crate) fn with_mapped<R>(&self, f: impl FnOnce(&mut [u8]) -> R) -> Option<R> {
-        if self.placement == Some(Placement::Device) && self.shared.gpu_paths.load(Ordering::SeqCst) {
+        if self.placement == Some(Placement::Device) && self.shared.choices.lock().unwrap().gpu_paths {
             return None;
         }
         let mut guard = self.allocation.lock().unwrap();
@@ -224,6 +225,22 @@ fn free(shared: &Shared, buffers: Vec<Idle>) {
         unsafe { shared.device.destroy_buffer(idle.raw, None) };
     }
     shared.host_stats.lock().unwrap().allocation_seconds += start.elapsed().as_secs_f64();
+}
+
+impl Drop for Shared {
+    fn drop(&mut self) {
+        if self.hung.load(Ordering::SeqCst) {
+            return; // the device may still run work on these objects; the process ends anyway
+        }
+        // SAFETY: every buffer and recording holds an Arc<Shared>, so none is alive any more.
+        unsafe {
+            let _ = self.device.device_wait_idle();
+            release_idle(self);
+            self.pipelines.destroy(&self.device);
+            ManuallyDrop::drop(&mut self.allocator);
+            self.device.destroy_device(None);
+        }
+    }
 }
 
 #[cfg(test)]

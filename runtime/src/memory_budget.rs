@@ -1,4 +1,5 @@
-//! How much device memory this process may still take: `VKDIFF_MEMORY_BUDGET` where set (and
+//! How much device memory this process may still take: `VKDIFF_MEMORY_BUDGET`
+//! ([`crate::Settings::memory_budget`]) where set (and
 //! then enforced: an allocation past it fails); on a CPU device (lavapipe), whose memory is the
 //! host's whatever heap it reports (Mesa 22.3: 2 GiB), the host memory still available (and the
 //! cgroup's limit, in a container); else `VK_EXT_memory_budget`'s heap budget less the heap's
@@ -6,7 +7,6 @@
 
 use crate::context::{Context, Shared};
 use crate::device::DeviceKind;
-use crate::error::{Error, Result};
 use ash::vk;
 use std::sync::atomic::Ordering;
 
@@ -18,27 +18,6 @@ pub struct MemoryRoom {
     /// The whole budget they are part of.
     pub budget: u64,
     pub source: &'static str,
-}
-
-/// `VKDIFF_MEMORY_BUDGET`: bytes, or a number with K, M, G (powers of 1024; `GiB`, `GB` read
-/// the same).
-pub(crate) fn budget_override(env: &dyn Fn(&str) -> Option<String>) -> Result<Option<u64>> {
-    let Some(text) = env("VKDIFF_MEMORY_BUDGET").filter(|v| !v.trim().is_empty()) else { return Ok(None) };
-    let bad =
-        || Error::BadSetting(format!("VKDIFF_MEMORY_BUDGET={text}: expected bytes, or a size such as 8G or 512M"));
-    let t = text.trim().trim_end_matches(['B', 'b']).trim_end_matches(['i', 'I']);
-    let (number, scale) = match t.chars().last().map(|c| c.to_ascii_uppercase()) {
-        Some('K') => (&t[..t.len() - 1], 1u64 << 10),
-        Some('M') => (&t[..t.len() - 1], 1 << 20),
-        Some('G') => (&t[..t.len() - 1], 1 << 30),
-        Some('T') => (&t[..t.len() - 1], 1 << 40),
-        _ => (t, 1),
-    };
-    let value: f64 = number.trim().parse().map_err(|_| bad())?;
-    if !value.is_finite() || value <= 0.0 {
-        return Err(bad());
-    }
-    Ok(Some((value * scale as f64) as u64))
 }
 
 impl Context {
@@ -107,7 +86,7 @@ fn device_heap(shared: &Shared) -> Option<(u64, u64)> {
 
 #[cfg(test)]
 mod tests {
-    use super::{budget_override, host_memory};
+    use super::host_memory;
 
     #[test]
     fn host_memory_is_meminfos_within_the_cgroups_limit() {
@@ -127,19 +106,5 @@ mod tests {
         // No limit set.
         assert_eq!(host_memory(&files(Some(("max\n", "2147483648\n")))), Some((24_576_000 * 1024, 20_480_000 * 1024)));
         assert_eq!(host_memory(&|_| None), None);
-    }
-
-    #[test]
-    fn reads_sizes_with_units() {
-        let read = |v: &str| budget_override(&|_| Some(v.to_string()));
-        assert_eq!(read("8G").unwrap(), Some(8 << 30));
-        assert_eq!(read("8GiB").unwrap(), Some(8 << 30));
-        assert_eq!(read("512M").unwrap(), Some(512 << 20));
-        assert_eq!(read("1.5g").unwrap(), Some(3 << 29));
-        assert_eq!(read("4096").unwrap(), Some(4096));
-        assert_eq!(read("").unwrap(), None);
-        for bad in ["lots", "-1G", "0", "G"] {
-            assert!(read(bad).unwrap_err().to_string().starts_with(&format!("VKDIFF_MEMORY_BUDGET={bad}:")), "{bad}");
-        }
     }
 }

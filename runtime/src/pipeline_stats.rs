@@ -3,17 +3,12 @@
 //! how many workgroups share a compute unit; RADV and NVK: registers, spills, instruction counts;
 //! lavapipe offers none). `VKDIFF_PIPELINE_STATS=1` prints one line on stderr per kernel variant
 //! as it is compiled, a tuning aid that changes nothing else; `vkdiff devices --compile` reads
-//! them for every variant (`crate::kernel_census`). Values are printed as the driver reports them:
+//! them for every variant (`crate::kernel_choice::census`). Values are printed as the driver reports them:
 //! NVIDIA's 580 driver sets bit 36 in "Local Memory Size" (2^36 plus the bytes a lane spills).
 
 use ash::vk;
 use std::ffi::CStr;
 use vkdiff_kernels::Variant;
-
-/// Whether the environment asks for the statistics.
-pub(crate) fn requested() -> bool {
-    std::env::var("VKDIFF_PIPELINE_STATS").is_ok_and(|v| v == "1")
-}
 
 /// One executable's statistics, as (name, value) in the driver's order.
 pub type Statistics = Vec<(String, StatisticValue)>;

@@ -20,13 +20,6 @@ const MAX_BINDINGS: u32 = 8;
 /// Timestamp queries per pool (two a dispatch); [`Recording`] reads them back in pools of these.
 pub(crate) const QUERIES_PER_POOL: u32 = 512;
 
-/// Time one dispatch took on the device.
-#[derive(Clone, Debug)]
-pub struct Timing {
-    pub kernel: &'static str,
-    pub nanos: f64,
-}
-
 /// Command buffer under construction. [`Recorder::finish`] turns it into a replayable
 /// [`Recording`].
 pub struct Recorder {
@@ -117,7 +110,7 @@ impl Recorder {
                 read: HashSet::new(),
                 profile,
                 flops: 0.0,
-                budget: ctx.submit_budget(),
+                budget: ctx.choices().submit_budget,
                 chunk_flops: 0.0,
                 chunk_dispatches: 0,
                 started: Instant::now(),
@@ -187,7 +180,7 @@ impl Recorder {
         ensure(push.len() * 4 <= PUSH_BYTES as usize, || {
             format!("kernel `{}`: push constants too large", kernel.name)
         })?;
-        let limit = self.ctx.binding_limit();
+        let limit = self.ctx.choices().binding_limit;
         for t in reads.iter().chain(writes) {
             ensure(t.bytes() <= limit, || {
                 format!(
@@ -276,7 +269,7 @@ impl Recorder {
     ///
     /// SAFETY: the command buffer must be recording with a pipeline and its bindings bound.
     unsafe fn dispatch_split(&self, groups: [u32; 3]) {
-        let limit = self.ctx.workgroup_limit();
+        let limit = self.ctx.choices().workgroup_limit;
         let device = &self.ctx.shared.device;
         if groups.iter().zip(limit).all(|(&g, l)| g <= l) {
             return device.cmd_dispatch(self.cmd, groups[0], groups[1], groups[2]);

@@ -3,8 +3,9 @@
 
 use crate::context::Context;
 use crate::error::{Result, VkContext};
-use crate::recorder::{Recorder, Resources, Timing, QUERIES_PER_POOL};
+use crate::recorder::{Recorder, Resources, QUERIES_PER_POOL};
 use crate::submit::submit_groups_and_wait;
+use crate::timing::Timing;
 use ash::vk;
 use std::sync::atomic::Ordering;
 use std::sync::Mutex;
@@ -47,7 +48,7 @@ impl Recording {
     /// one before (the first: from its submission) to its own end, as the host saw them.
     pub fn run_submissions(&self) -> Result<Vec<std::time::Duration>> {
         self.tell_compiles();
-        let budget = self.ctx.submit_budget();
+        let budget = self.ctx.choices().submit_budget;
         let mut merged = self.merged.lock().unwrap();
         let sizes = merged.clone().unwrap_or_else(|| vec![1; self.res.chunks.len()]);
         let mut rest = &self.res.chunks[..];

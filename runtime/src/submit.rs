@@ -81,7 +81,7 @@ pub(crate) fn submit_and_wait(ctx: &Context, cmd: vk::CommandBuffer) -> Result<(
 /// submission): queued back to back, about each submission's run time.
 pub(crate) fn submit_groups_and_wait(ctx: &Context, groups: &[&[vk::CommandBuffer]]) -> Result<Vec<Duration>> {
     let device = &ctx.shared.device;
-    let timeout = ctx.submit_budget().timeout;
+    let timeout = ctx.choices().submit_budget.timeout;
     let mut fences = Vec::with_capacity(groups.len());
     let mut times = Vec::with_capacity(groups.len());
     // SAFETY: each chunk is fully recorded; the queue is externally synchronised by its mutex;

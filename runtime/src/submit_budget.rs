@@ -6,13 +6,9 @@
 //! H100, SDXL's UNet at 1024²: 181 ms an evaluation in 103 submissions, 161 ms in 5).
 
 use crate::device::{DeviceInfo, DeviceKind};
-use crate::error::{Error, Result};
+use crate::settings::Settings;
 use std::time::Duration;
 
-/// GFLOP per submission: about 40 ms on a mid-range GPU (an RTX 3060 at the 2.5 TFLOP/s vkdiff's
-/// tiled f32 kernels reach on a 13 TFLOP/s card, estimated from the H200's 20 % of fp32 peak),
-/// 0.2 s on an entry card at 0.6 TFLOP/s; attention, at about 40 % of the GEMM rate, 2.5× that.
-pub const DEFAULT_SUBMIT_GFLOP: f64 = 100.0;
 /// Dispatches per submission, whatever their arithmetic: element-wise work and norms count no
 /// FLOPs, and an SDXL evaluation has about 4,500 dispatches.
 pub const DISPATCHES_PER_SUBMIT: u32 = 256;
@@ -30,34 +26,19 @@ pub struct SubmitBudget {
     pub merge: Duration,
 }
 
-/// The default [`SubmitBudget::merge`]: a twentieth of Windows' TDR, so a device twice as slow
-/// as when it was timed stays far from it, yet few enough submissions that their cost vanishes.
-pub const DEFAULT_MERGE_SECONDS: f64 = 0.1;
-
 impl SubmitBudget {
-    /// The defaults for `info`, overridden by `VKDIFF_SUBMIT_GFLOP`, `VKDIFF_SUBMIT_TIMEOUT`
-    /// (seconds) and `VKDIFF_SUBMIT_MERGE` (seconds, 0 for none). A CPU device (lavapipe, about 10–70 GFLOP/s) waits 10 minutes per submission, a
-    /// GPU one minute: both far past a healthy chunk, so only a hang ends a run.
-    pub fn for_device(info: &DeviceInfo, env: &dyn Fn(&str) -> Option<String>) -> Result<SubmitBudget> {
+    /// The budget for `info` under `settings` (`VKDIFF_SUBMIT_GFLOP`, `VKDIFF_SUBMIT_TIMEOUT`,
+    /// `VKDIFF_SUBMIT_MERGE`). Unless set, a CPU device (lavapipe, about 10–70 GFLOP/s) waits 10
+    /// minutes per submission, a GPU one minute: both far past a healthy chunk, so only a hang
+    /// ends a run.
+    pub fn for_device(info: &DeviceInfo, settings: &Settings) -> SubmitBudget {
         let seconds = if info.kind == DeviceKind::Cpu { 600.0 } else { 60.0 };
-        let number = |name: &str, default: f64, zero: bool| -> Result<f64> {
-            let expected = if zero { "zero or a positive number" } else { "a positive number" };
-            match env(name).filter(|v| !v.trim().is_empty()) {
-                None => Ok(default),
-                Some(text) => text
-                    .trim()
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite() && (*v > 0.0 || zero && *v == 0.0))
-                    .ok_or_else(|| Error::BadSetting(format!("{name}={text}: expected {expected}"))),
-            }
-        };
-        Ok(SubmitBudget {
-            flops: number("VKDIFF_SUBMIT_GFLOP", DEFAULT_SUBMIT_GFLOP, false)? * 1e9,
+        SubmitBudget {
+            flops: settings.submit_gflop * 1e9,
             dispatches: DISPATCHES_PER_SUBMIT,
-            timeout: Duration::from_secs_f64(number("VKDIFF_SUBMIT_TIMEOUT", seconds, false)?),
-            merge: Duration::from_secs_f64(number("VKDIFF_SUBMIT_MERGE", DEFAULT_MERGE_SECONDS, true)?),
-        })
+            timeout: Duration::from_secs_f64(settings.submit_timeout.unwrap_or(seconds)),
+            merge: Duration::from_secs_f64(settings.submit_merge),
+        }
     }
 
     /// How many consecutive chunks each submission holds, given each chunk's run time alone:
@@ -89,30 +70,14 @@ mod tests {
     #[test]
     fn defaults_and_overrides() {
         let gpu = device(0, DeviceKind::Discrete, true);
-        let none = |_: &str| None;
-        let budget = SubmitBudget::for_device(&gpu, &none).unwrap();
+        let budget = SubmitBudget::for_device(&gpu, &Settings::default());
         assert_eq!((budget.flops, budget.dispatches, budget.timeout), (1e11, 256, Duration::from_secs(60)));
         assert_eq!(budget.merge, Duration::from_millis(100));
         let cpu = device(0, DeviceKind::Cpu, true);
-        assert_eq!(SubmitBudget::for_device(&cpu, &none).unwrap().timeout, Duration::from_secs(600));
-        let set = |name: &str| match name {
-            "VKDIFF_SUBMIT_GFLOP" => Some("2.5".to_string()),
-            "VKDIFF_SUBMIT_TIMEOUT" => Some("0.5".to_string()),
-            "VKDIFF_SUBMIT_MERGE" => Some("0".to_string()),
-            _ => None,
-        };
-        let budget = SubmitBudget::for_device(&gpu, &set).unwrap();
+        assert_eq!(SubmitBudget::for_device(&cpu, &Settings::default()).timeout, Duration::from_secs(600));
+        let set = Settings { submit_gflop: 2.5, submit_timeout: Some(0.5), submit_merge: 0.0, ..Settings::default() };
+        let budget = SubmitBudget::for_device(&gpu, &set);
         assert_eq!((budget.flops, budget.timeout, budget.merge), (2.5e9, Duration::from_millis(500), Duration::ZERO));
-        for bad in ["0", "-1", "fast", "inf"] {
-            let env = |name: &str| (name == "VKDIFF_SUBMIT_GFLOP").then(|| bad.to_string());
-            let err = SubmitBudget::for_device(&gpu, &env).unwrap_err().to_string();
-            assert_eq!(err, format!("VKDIFF_SUBMIT_GFLOP={bad}: expected a positive number"));
-        }
-        for bad in ["-0.1", "soon", "NaN"] {
-            let env = |name: &str| (name == "VKDIFF_SUBMIT_MERGE").then(|| bad.to_string());
-            let err = SubmitBudget::for_device(&gpu, &env).unwrap_err().to_string();
-            assert_eq!(err, format!("VKDIFF_SUBMIT_MERGE={bad}: expected zero or a positive number"));
-        }
     }
 
     #[test]

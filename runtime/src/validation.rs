@@ -1,4 +1,4 @@
-//! `VKDIFF_VALIDATE=1`: every instance vkdiff creates runs the Khronos validation layer with
+//! `VKDIFF_VALIDATE=1` ([`crate::Settings::validate`]): every instance vkdiff creates runs the Khronos validation layer with
 //! synchronization validation. A message is printed and the process aborts, so no test and no
 //! run passes with one (lavapipe forgives what real drivers need not).
 
@@ -8,20 +8,16 @@ use std::ffi::{c_char, c_void, CStr};
 
 const LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 
-/// Whether `VKDIFF_VALIDATE=1` asks for validation.
-pub(crate) fn requested() -> bool {
-    std::env::var("VKDIFF_VALIDATE").is_ok_and(|v| v == "1")
-}
-
-/// Creates the instance `info` describes with `extensions`, validated when asked for, with the
+/// Creates the instance `info` describes with `extensions`, validated where `validated`, with the
 /// debug messenger that prints the layer's messages (destroyed with the instance,
 /// [`crate::instance`]).
 pub(crate) fn create_instance(
     entry: &ash::Entry,
     info: vk::InstanceCreateInfo,
     mut extensions: Vec<*const c_char>,
+    validated: bool,
 ) -> Result<(ash::Instance, Option<vk::DebugUtilsMessengerEXT>)> {
-    if !requested() {
+    if !validated {
         let info = info.enabled_extension_names(&extensions);
         // SAFETY: the create info and everything it points to outlive the call.
         return Ok((unsafe { entry.create_instance(&info, None) }.vk("vkCreateInstance")?, None));

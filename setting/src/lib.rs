@@ -1,12 +1,15 @@
-//! Messages about settings, with every setting they name kept as data.
+//! Messages about settings, with every setting they name kept as data, and the environment
+//! variables settings are read from, parsed by one grammar.
 //!
 //! The libraries name a setting by its field in their settings types (`guidance_scale`,
 //! `crop_size`); a front end that calls them something else (the command line's `--cfg`,
 //! `--crop-size`) installs its names once with [`name_settings_with`], and every message then
 //! reads in its words. Without a front end's names a message prints the field names.
 
+mod environment;
 mod version;
 
+pub use environment::{BadVariable, Environment, SWITCH_VALUES};
 pub use version::{install_version, version};
 
 use std::fmt;

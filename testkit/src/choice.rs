@@ -7,23 +7,29 @@
 //! probe where `VKDIFF_ATTENTION=cm2` asks for it. A regressed selection then fails the test
 //! instead of passing on another kernel.
 
+use crate::device::environment;
 use vkdiff_runtime::{Context, Dtype, GemmFamily, Matrix2Probe, ProbeChoice, Variant};
 
 /// Whether the CI pass runs on a driver whose matrix units must be used.
 pub fn expect_cooperative() -> bool {
-    std::env::var("VKDIFF_EXPECT_COOPERATIVE").is_ok_and(|v| v == "1")
+    expected_cooperative() == Some(true)
 }
 
 /// Whether the CI pass runs on a driver that lists matrix units vkdiff must not choose
 /// (`VKDIFF_EXPECT_COOPERATIVE=0`: Mesa 26.1's lavapipe at 16 lanes, which crashed running them).
 pub fn expect_cooperative_refused() -> bool {
-    std::env::var("VKDIFF_EXPECT_COOPERATIVE").is_ok_and(|v| v == "0")
+    expected_cooperative() == Some(false)
+}
+
+/// `VKDIFF_EXPECT_COOPERATIVE`, a switch.
+fn expected_cooperative() -> Option<bool> {
+    environment().switch("VKDIFF_EXPECT_COOPERATIVE").unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// `VKDIFF_FRAGMENT=MxNxK` as the CI passes for Intel's shapes set it, read here apart from the
 /// runtime's own parser, so that a runtime that ignored it fails.
 fn asked_fragment() -> Option<[u32; 3]> {
-    let text = std::env::var("VKDIFF_FRAGMENT").ok().filter(|t| !t.is_empty())?;
+    let text = environment().get("VKDIFF_FRAGMENT")?;
     let sides: Vec<u32> = text.split('x').map(|n| n.parse().expect("VKDIFF_FRAGMENT as MxNxK")).collect();
     Some(sides.try_into().expect("VKDIFF_FRAGMENT as MxNxK"))
 }
@@ -32,7 +38,7 @@ fn asked_fragment() -> Option<[u32; 3]> {
 /// setting, or `variable` (`VKDIFF_ATTENTION`, `VKDIFF_LINEAR`, `VKDIFF_CONV`) read here too, so that a runtime
 /// that ignored it fails.
 fn probe_asked(setting: ProbeChoice, variable: &str) -> bool {
-    setting == ProbeChoice::Matrix2 || std::env::var(variable).is_ok_and(|v| v.trim().eq_ignore_ascii_case("cm2"))
+    setting == ProbeChoice::Matrix2 || environment().get(variable).is_some_and(|v| v.eq_ignore_ascii_case("cm2"))
 }
 
 /// The probe kernels `ctx` takes for f16 products its tiles fit (`gemm_cm2`, `conv_cm2`), as
@@ -40,8 +46,8 @@ fn probe_asked(setting: ProbeChoice, variable: &str) -> bool {
 fn product_probes_due(ctx: &Context, dtype: Dtype) -> Vec<&'static str> {
     let offered = |probe| ctx.info().matrix2_tiles().iter().any(|t| t.probe == probe);
     let asked = [
-        ("gemm_cm2", Matrix2Probe::Linear, probe_asked(ctx.linear_kernel(), "VKDIFF_LINEAR")),
-        ("conv_cm2", Matrix2Probe::Conv, probe_asked(ctx.conv_kernel(), "VKDIFF_CONV")),
+        ("gemm_cm2", Matrix2Probe::Linear, probe_asked(ctx.choices().linear, "VKDIFF_LINEAR")),
+        ("conv_cm2", Matrix2Probe::Conv, probe_asked(ctx.choices().conv, "VKDIFF_CONV")),
     ];
     let due = asked.into_iter().filter(|&(_, probe, asked)| asked && offered(probe) && dtype == Dtype::F16);
     due.map(|(kernel, ..)| kernel).collect()
@@ -58,7 +64,7 @@ fn family_of(kernel: &str) -> Option<&'static str> {
 
 /// The product family `ctx` takes for `dtype`: `_coop`, `_sg` or `_tiled`.
 fn due_family(ctx: &Context, dtype: Dtype) -> &'static str {
-    match (ctx.gemm_family(), dtype, ctx.info().cooperative_variant()) {
+    match (ctx.choices().gemm_family, dtype, ctx.info().cooperative_variant()) {
         (GemmFamily::Cooperative, Dtype::F16, Some(_)) => "_coop",
         (GemmFamily::Subgroup, _, _) => "_sg",
         _ => "_tiled",
@@ -89,7 +95,7 @@ pub fn assert_product_family<'a>(
         }
         let family = family_of(v.kernel);
         let allowed = family == Some(expected) || fallback && family == Some("_tiled");
-        assert!(allowed, "{what}: {:?} ran {} where {expected} was due", ctx.gemm_family(), v.kernel);
+        assert!(allowed, "{what}: {:?} ran {} where {expected} was due", ctx.choices().gemm_family, v.kernel);
         if family == Some("_coop") {
             let f = fragment.expect("a matrix-unit kernel on a device with a fragment");
             let shape = [v.param("FM"), v.param("FN"), v.param("FK")];
@@ -99,7 +105,7 @@ pub fn assert_product_family<'a>(
             }
             // The setting's eight-subgroup grid where this kernel has it built in the unit it ran
             // in, else four subgroups.
-            let grid = ctx.matrix_tile().eight_subgroup_grid();
+            let grid = ctx.choices().matrix_tile.eight_subgroup_grid();
             let unit = [("UW", v.param("UW").expect("a matrix-unit kernel's unit"))];
             let built = grid.filter(|g| {
                 vkdiff_kernels::find(v.kernel, Dtype::F16, &[&f.params()[..], g, &unit].concat()).is_some()
@@ -127,7 +133,7 @@ pub fn assert_product_family<'a>(
 /// for such heads on GPU paths without them (f32, or no units). Contexts that take the quickly
 /// compiled kernels run `attention_wg` instead.
 pub fn assert_attention_kernel(ctx: &Context, dtype: Dtype, head_dim: usize, kernels: &[&str], what: &str) {
-    let asked = probe_asked(ctx.attention_kernel(), "VKDIFF_ATTENTION");
+    let asked = probe_asked(ctx.choices().attention, "VKDIFF_ATTENTION");
     let matrix2 = ctx.info().matrix2_tiles().iter().any(|t| t.probe == Matrix2Probe::Attention);
     if asked && matrix2 && dtype == Dtype::F16 && head_dim <= 64 {
         assert!(
@@ -136,10 +142,10 @@ pub fn assert_attention_kernel(ctx: &Context, dtype: Dtype, head_dim: usize, ker
         );
         return;
     }
-    if !ctx.gpu_paths() || ctx.quick_compile() || head_dim > 64 {
+    if !ctx.choices().gpu_paths || ctx.choices().quick_compile || head_dim > 64 {
         return;
     }
-    let units = ctx.gemm_family() == GemmFamily::Cooperative && ctx.info().cooperative_variant().is_some();
+    let units = ctx.choices().gemm_family == GemmFamily::Cooperative && ctx.info().cooperative_variant().is_some();
     if units && dtype == Dtype::F16 {
         if expect_cooperative() {
             assert!(kernels.contains(&"attention_coop"), "{what}: f16 heads of {head_dim} ran {kernels:?}");

@@ -2,7 +2,19 @@
 
 use crate::choice::{expect_cooperative, expect_cooperative_refused};
 use std::sync::OnceLock;
-use vkdiff_runtime::{Context, GemmFamily, MatrixTile};
+use vkdiff_runtime::{Context, DeviceChoice, Environment, GemmFamily, MatrixTile, Settings};
+
+/// The environment the tests run in (the CI's passes set `VKDIFF_*` variables), read once at
+/// this test edge as the command line reads it at its own.
+pub fn environment() -> &'static Environment {
+    static ENV: OnceLock<Environment> = OnceLock::new();
+    ENV.get_or_init(Environment::of_process)
+}
+
+/// The settings [`environment`] gives; a malformed one fails the test that asks.
+pub fn settings() -> Settings {
+    Settings::from_environment(environment()).unwrap_or_else(|e| panic!("{e}"))
+}
 
 /// The Vulkan device the tests share. No device is a failure, not a skip.
 pub fn ctx() -> Context {
@@ -21,7 +33,7 @@ pub fn gpu_ctx() -> Context {
 /// after Mesa 22 does by default ([`Context::quick_compile`]), so every driver tests them.
 pub fn quick_ctx() -> Context {
     static CTX: OnceLock<Context> = OnceLock::new();
-    configured(&CTX, |c| c.set_quick_compile(true))
+    configured(&CTX, |c| c.choose(|choices| choices.quick_compile = true))
 }
 
 /// The context in `cell`, opened and configured by `setup` on first use.
@@ -66,7 +78,7 @@ pub fn ctx_with(family: GemmFamily) -> Context {
             info.cooperative_variant()
         );
     }
-    c.set_gemm_family(family);
+    c.choose(|choices| choices.gemm_family = family);
     c
 }
 
@@ -78,9 +90,9 @@ pub fn cooperative_ctxs() -> Vec<Context> {
     if first.info().cooperative_variant().is_none() {
         return vec![first];
     }
-    let other = if first.matrix_tile().eight_subgroups() { MatrixTile::Four } else { MatrixTile::Eight };
+    let other = if first.choices().matrix_tile.eight_subgroups() { MatrixTile::Four } else { MatrixTile::Eight };
     let second = ctx_with(GemmFamily::Cooperative);
-    second.set_matrix_tile(other);
+    second.choose(|c| c.matrix_tile = other);
     vec![first, second]
 }
 
@@ -93,7 +105,7 @@ pub fn cooperative_ctxs_on(tiles: &[MatrixTile]) -> Vec<Context> {
         .map_while(|&tile| {
             let ctx = ctx_with(GemmFamily::Cooperative);
             ctx.info().cooperative_variant()?;
-            ctx.set_matrix_tile(tile);
+            ctx.choose(|c| c.matrix_tile = tile);
             Some(ctx)
         })
         .collect()
@@ -102,7 +114,8 @@ pub fn cooperative_ctxs_on(tiles: &[MatrixTile]) -> Vec<Context> {
 /// A new context; under `VKDIFF_EXPECT_COOPERATIVE=1` a matrix-unit trial that dropped the units
 /// fails the test, which would otherwise test the tiled kernels where the units were meant.
 fn open() -> Context {
-    let c = Context::new(&Default::default()).unwrap_or_else(|e| {
+    let opened = DeviceChoice::from_environment(None, false, environment()).and_then(|d| Context::new(&d, settings()));
+    let c = opened.unwrap_or_else(|e| {
         panic!(
             "vkdiff's tests need a Vulkan device and found none usable: {e}\n(on Debian: apt-get install -y \
             mesa-vulkan-drivers libvulkan1)"

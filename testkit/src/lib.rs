@@ -9,5 +9,7 @@ mod paths;
 
 pub use choice::{assert_attention_kernel, assert_network_kernels, assert_product_family, expect_cooperative};
 pub use compare::{assert_close, assert_within, random, storage_rtol, stored, DTYPES};
-pub use device::{cooperative_ctxs, cooperative_ctxs_on, ctx, ctx_with, gpu_ctx, private_ctx, quick_ctx};
+pub use device::{
+    cooperative_ctxs, cooperative_ctxs_on, ctx, ctx_with, environment, gpu_ctx, private_ctx, quick_ctx, settings,
+};
 pub use paths::{fixture, repo, scratch};

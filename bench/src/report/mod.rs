@@ -191,7 +191,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     }
     let user = resolve_user(args)?;
     let plan = Plan::of(args);
-    let ctx = Context::new(&args.device.choice())?;
+    let ctx = args.device.open()?;
     let system = System::of(&ctx);
     eprintln!("report: {} on {} ({})", plan.suite(args), system.device, system.driver);
     let mut jobs: Vec<(Figure, networks::Job)> = Vec::new();

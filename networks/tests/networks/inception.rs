@@ -20,7 +20,7 @@ fn images(folder: &str) -> (Vec<vkdiff_formats::RgbImage>, Vec<f32>) {
     let (shape, mut want) =
         SafeTensors::open(&fixture("fid").join("features.safetensors")).unwrap().values(folder).unwrap();
     assert_eq!(shape, [files.len(), INCEPTION_FEATURES]);
-    if vkdiff_runtime::gpu_paths_requested() {
+    if vkdiff_testkit::settings().gpu_paths {
         let first = files.len() - 1;
         files.drain(..first);
         want.drain(..first * INCEPTION_FEATURES);

@@ -99,10 +99,10 @@ fn vae_decode_in_bands_equals_the_whole_decode() {
     // bands; the result must be the same image, not a tiled approximation.
     let rec = records();
     let latent = rec.values("vae.latent").unwrap();
-    let ctx: Context = ctx_with(ctx().gemm_family());
+    let ctx: Context = ctx_with(ctx().choices().gemm_family);
     let vae = AutoencoderKl::load_sdxl(&ctx, &layouts()[0], Dtype::F32).unwrap();
     let whole = decode(&vae, &latent);
-    ctx.set_binding_limit(160 << 10);
+    ctx.choose(|c| c.binding_limit = 160 << 10);
     let banded = decode(&vae, &latent);
     let (rel, worst) = errors(&banded, &whole);
     assert!(rel <= 1e-6 && worst <= 1e-5, "banded decode differs: relative L2 {rel:.2e}, worst {worst:.2e} of RMS");

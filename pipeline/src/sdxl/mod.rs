@@ -117,7 +117,24 @@ impl Sdxl {
             Some(p) => read_force_zeros(&p)?,
             None => true,
         };
-        let model = Sdxl {
+        let model = Sdxl::assemble(ctx, dtype, tokenizers, text_encoders, (unet_config, unet), vae, scheduler);
+        let model = Sdxl { force_zeros_for_empty_prompt, ..model };
+        model.check_widths()?;
+        Ok(model)
+    }
+
+    /// A model of these parts, no LoRA merged and no VAE plan yet; no negative prompt encodes
+    /// as zeros, as SDXL base's model_index.json says.
+    fn assemble(
+        ctx: &Context,
+        dtype: Dtype,
+        tokenizers: [ClipTokenizer; 2],
+        text_encoders: [ClipTextModel; 2],
+        (unet_config, unet): (UNetConfig, UNet),
+        vae: AutoencoderKl,
+        scheduler: SchedulerConfig,
+    ) -> Sdxl {
+        Sdxl {
             ctx: ctx.clone(),
             dtype,
             tokenizers,
@@ -127,12 +144,10 @@ impl Sdxl {
             unet,
             vae,
             scheduler,
-            force_zeros_for_empty_prompt,
+            force_zeros_for_empty_prompt: true,
             loras: LoraMerger::new(),
             vae_plan: None,
-        };
-        model.check_widths()?;
-        Ok(model)
+        }
     }
 
     /// SDXL base's architecture with random weights (benchmarks: real sizes, no download), the
@@ -155,20 +170,7 @@ impl Sdxl {
         let vae = AutoencoderKl::load(ctx, vae_config, &Checkpoint::random(ctx, vae_dtype, SEEDS.vae))?;
         let tokenizers = [ClipTokenizer::builtin("<|endoftext|>")?, ClipTokenizer::builtin("!")?];
         let scheduler = SchedulerConfig::sdxl_base();
-        Ok(Sdxl {
-            ctx: ctx.clone(),
-            dtype,
-            tokenizers,
-            text_widths: text_widths(&text_encoders),
-            text_encoders: Some(text_encoders),
-            unet_config,
-            unet,
-            vae,
-            scheduler,
-            force_zeros_for_empty_prompt: true,
-            loras: LoraMerger::new(),
-            vae_plan: None,
-        })
+        Ok(Sdxl::assemble(ctx, dtype, tokenizers, text_encoders, (unet_config, unet), vae, scheduler))
     }
 
     /// The text encoders' widths must be what the UNet was trained on.

@@ -15,7 +15,7 @@ use vkdiff_testkit::fixture;
 pub fn ctx() -> Context {
     static CTX: OnceLock<Context> = OnceLock::new();
     CTX.get_or_init(|| {
-        Context::new(&Default::default()).unwrap_or_else(|e| {
+        Context::new(&Default::default(), vkdiff_testkit::settings()).unwrap_or_else(|e| {
             panic!(
                 "pipeline tests need a Vulkan device and found none usable: \
             {e}\n(on Debian: apt-get install -y mesa-vulkan-drivers libvulkan1)"

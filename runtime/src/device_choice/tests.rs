@@ -1,14 +1,14 @@
 use super::*;
 use crate::device::tests::device;
-use std::collections::HashMap;
 
-fn env_of(pairs: &[(&str, &str)]) -> impl Fn(&str) -> Option<String> {
-    let map: HashMap<String, String> = pairs.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
-    move |name: &str| map.get(name).cloned()
+fn env_of(pairs: &[(&str, &str)]) -> Environment {
+    Environment::from_pairs(pairs.iter().copied())
 }
 
+/// `choice`'s flags with `env` as the edge reads them, then the device chosen.
 fn pick(devices: &[DeviceInfo], choice: &DeviceChoice, env: &[(&str, &str)]) -> Result<usize> {
-    choose_with(devices, choice, &env_of(env))
+    let choice = DeviceChoice::from_environment(choice.device.clone(), choice.require_gpu, &env_of(env))?;
+    choose(devices, &choice)
 }
 
 /// A node with lavapipe first and two NVIDIA GPUs enumerated against their PCI order.
@@ -79,7 +79,7 @@ fn a_device_without_what_the_kernels_declare_is_refused_by_name() {
 #[test]
 fn finds_devices_by_uuid_and_pci_address() {
     let devs = node();
-    let by = |spec: &str| DeviceChoice { device: Some(spec.parse().unwrap()), require_gpu: false };
+    let by = |spec: &str| DeviceChoice { device: Some(spec.parse().unwrap()), ..DeviceChoice::default() };
     assert_eq!(pick(&devs, &by("GPU-6f3c1e2a-0011-2233-4455-66778899aabb"), &[]).unwrap(), 1);
     assert_eq!(pick(&devs, &by("6f3c1e2a"), &[]).unwrap(), 1);
     assert_eq!(pick(&devs, &by("0000:41:00.0"), &[]).unwrap(), 2);
@@ -90,7 +90,7 @@ fn finds_devices_by_uuid_and_pci_address() {
     assert_eq!(pick(&devs, &DeviceChoice::default(), &[("VKDIFF_DEVICE", "41:00.0")]).unwrap(), 2);
     assert_eq!(pick(&devs, &DeviceChoice::index(0), &[("VKDIFF_DEVICE", "41:00.0")]).unwrap(), 0);
     let err = pick(&devs, &DeviceChoice::default(), &[("VKDIFF_DEVICE", "first")]).unwrap_err().to_string();
-    assert!(err.starts_with("VKDIFF_DEVICE: `first` names no device"), "{err}");
+    assert_eq!(err, "VKDIFF_DEVICE=first: expected an index, a UUID or a PCI address as `vkdiff devices` prints them");
 }
 
 #[test]
@@ -127,15 +127,19 @@ fn takes_the_gpu_the_scheduler_gave_the_process() {
 #[test]
 fn require_gpu_refuses_the_cpu_and_names_the_drivers_found() {
     let devs = node();
-    let required = DeviceChoice { device: None, require_gpu: true };
+    let required = DeviceChoice { require_gpu: true, ..DeviceChoice::default() };
     assert_eq!(pick(&devs, &required, &[]).unwrap(), 2);
     let env = [("VK_DRIVER_FILES", "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json")];
     let err = pick(&devs[..1], &required, &env).unwrap_err().to_string();
     assert!(err.contains("`llvmpipe`, is a CPU") && err.contains("found: lvp_icd.x86_64.json"), "{err}");
-    let asked_cpu = DeviceChoice { device: Some(DeviceSpec::Index(0)), require_gpu: true };
+    let asked_cpu = DeviceChoice { require_gpu: true, ..DeviceChoice::index(0) };
     assert!(matches!(pick(&devs, &asked_cpu, &[]), Err(Error::NoGpu(_))));
-    let by_env = [("VKDIFF_REQUIRE_GPU", "1")];
-    assert!(matches!(pick(&devs[..1], &DeviceChoice::default(), &by_env), Err(Error::NoGpu(_))));
+    for on in ["1", "yes", "true", "on"] {
+        let by_env = [("VKDIFF_REQUIRE_GPU", on)];
+        assert!(matches!(pick(&devs[..1], &DeviceChoice::default(), &by_env), Err(Error::NoGpu(_))), "{on}");
+    }
+    let err = pick(&devs, &DeviceChoice::default(), &[("VKDIFF_REQUIRE_GPU", "2")]).unwrap_err().to_string();
+    assert!(err.starts_with("VKDIFF_REQUIRE_GPU=2: expected 1 or 0"), "{err}");
 }
 
 #[test]

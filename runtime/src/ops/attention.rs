@@ -4,9 +4,11 @@ use super::attention_products::{attention_by_products, rows_per_chunk};
 use super::bands::{bands, elem, fit, span_view};
 use super::copy_heads::{copy_heads, HeadSpan};
 use super::{f, same_dtype, u};
-use crate::context::{Context, GemmFamily};
+use crate::context::Context;
 use crate::error::{ensure, Error, Result};
-use crate::kernel_tuning::{pick, KernelPick, Tunable};
+use crate::kernel_choice::plan::GemmFamily;
+use crate::kernel_choice::tuned::KernelPick;
+use crate::kernel_choice::tuning::{pick, Tunable};
 use crate::recorder::Recorder;
 use crate::tensor::Dtype;
 use crate::tensor::Tensor;
@@ -95,7 +97,7 @@ pub fn attention(
         op: format!("attention {}×{} tokens, {} heads × {} {dtype:?}", l.q_tokens, l.kv_tokens, l.heads, l.head_dim),
         tiles: false,
     };
-    let pick = pick(rec, (&[q, k, v], out), rec.context().attention_kernel(), describe, &record);
+    let pick = pick(rec, (&[q, k, v], out), rec.context().choices().attention, describe, &record);
     record(rec, pick, &[q, k, v], out)
 }
 
@@ -118,7 +120,7 @@ fn attention_checked(
     // With quick compiles, narrow attention (tiny models) takes attention_wg, which Mesa 25's
     // JIT compiles in about a second, against 12–16 s for the subgroup variants and 34–94 s for
     // attention_rows (measured).
-    let quick = ctx.quick_compile() && l.heads * l.head_dim < SMALL_CHANNELS;
+    let quick = ctx.choices().quick_compile && l.heads * l.head_dim < SMALL_CHANNELS;
     let found = cooperative_variant(&ctx, dtype, l.head_dim)
         .or_else(|| subgroup_variant(&ctx, dtype, slots).filter(|_| !quick))
         .or_else(|| tiled_variant(&ctx, dtype, l.head_dim).filter(|_| !quick))
@@ -210,7 +212,7 @@ const ROWS_PER_WORKGROUP: u32 = 64;
 /// memory holds the variant's.
 fn cooperative_variant(ctx: &Context, dtype: Dtype, head_dim: usize) -> Option<&'static vkdiff_kernels::Variant> {
     let fragment = ctx.info().cooperative_variant()?;
-    if ctx.gemm_family() != GemmFamily::Cooperative || dtype != Dtype::F16 || head_dim > 64 {
+    if ctx.choices().gemm_family != GemmFamily::Cooperative || dtype != Dtype::F16 || head_dim > 64 {
         return None;
     }
     let want: Vec<(&str, u32)> = fragment.params().into_iter().chain([("DH", 64)]).collect();
@@ -252,7 +254,7 @@ fn rows_variant(dtype: Dtype, slots: u32) -> Option<&'static vkdiff_kernels::Var
 /// its native width first, with the fewest slots per lane; none where the device takes no
 /// subgroup attention ([`crate::DeviceInfo::subgroup_attention`]) or no width fits.
 fn subgroup_variant(ctx: &Context, dtype: Dtype, slots: u32) -> Option<&'static vkdiff_kernels::Variant> {
-    if !ctx.info().subgroup_attention(ctx.gpu_paths()) {
+    if !ctx.info().subgroup_attention(ctx.choices().gpu_paths) {
         return None;
     }
     let native = ctx.info().subgroup_size;
@@ -308,9 +310,12 @@ fn attention_by_heads(
     let ctx = rec.context().clone();
     let padded = l.head_dim.next_multiple_of(4);
     let head_bytes = l.q_tokens.max(l.kv_tokens) * padded * elem(q);
-    let per = (ctx.binding_limit() as usize / head_bytes).min(l.heads);
+    let per = (ctx.choices().binding_limit as usize / head_bytes).min(l.heads);
     ensure(per > 0, || {
-        format!("attention: one head of {head_bytes} bytes does not fit the {} byte binding limit", ctx.binding_limit())
+        format!(
+            "attention: one head of {head_bytes} bytes does not fit the {} byte binding limit",
+            ctx.choices().binding_limit
+        )
     })?;
     for heads in bands(l.heads, per) {
         let n = heads.len();

@@ -33,7 +33,7 @@ pub(super) fn rows_per_chunk(rec: &Recorder, dtype: Dtype, l: &AttentionLayout) 
         return None;
     }
     let step = ctx.info().binding_alignment() as usize / 4;
-    let limit = ctx.binding_limit() as usize;
+    let limit = ctx.choices().binding_limit as usize;
     let fits = |ld: usize| 4 * span(l.kv_tokens, ld, d) <= limit;
     // The row strides of Q and the output that a chunk's f32 rows have.
     let ld = if dtype == Dtype::F32 {

@@ -10,7 +10,7 @@ use std::ops::Range;
 
 /// Whether every tensor fits in one binding.
 pub(super) fn fit(ctx: &Context, tensors: &[&Tensor]) -> bool {
-    tensors.iter().all(|t| t.bytes() <= ctx.binding_limit())
+    tensors.iter().all(|t| t.bytes() <= ctx.choices().binding_limit)
 }
 
 /// Rows `rows` of a tensor seen as [rows_total, row_len] (row_len = elements per row), as a view
@@ -37,9 +37,9 @@ pub(super) fn rows_per_band(
     multiple: usize,
 ) -> Result<usize> {
     let widest = row_bytes.iter().copied().max().unwrap_or(1).max(1);
-    let fit = (ctx.binding_limit() as usize / widest).saturating_sub(halo);
+    let fit = (ctx.choices().binding_limit as usize / widest).saturating_sub(halo);
     ensure(fit > 0, || {
-        format!("{what}: one row of {widest} bytes does not fit the {} byte binding limit", ctx.binding_limit())
+        format!("{what}: one row of {widest} bytes does not fit the {} byte binding limit", ctx.choices().binding_limit)
     })?;
     let align = ctx.info().binding_alignment() as usize;
     let aligned = row_bytes.iter().fold(1, |step, &b| lcm(step, align / gcd(align, b.max(1))));

@@ -3,7 +3,7 @@
 
 use super::{kernel, u};
 use crate::error::{ensure, Error, Result};
-use crate::matrix_units::Fragment;
+use crate::kernel_choice::matrix_units::Fragment;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 

@@ -5,7 +5,8 @@ use super::conv_padded::conv2d_padded;
 use super::gemm::{dispatch_gemm_family, GemmKernels, GemmShape};
 use super::{f, same_dtype, u};
 use crate::error::{ensure, Result};
-use crate::kernel_tuning::{name_parts, pick, KernelPick, Tunable};
+use crate::kernel_choice::tuned::KernelPick;
+use crate::kernel_choice::tuning::{name_parts, pick, Tunable};
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -138,7 +139,7 @@ fn conv2d_whole(
             tiles: true,
         }
     };
-    let pick = pick(rec, (&reads, out), rec.context().conv_kernel(), describe, &record);
+    let pick = pick(rec, (&reads, out), rec.context().choices().conv, describe, &record);
     record(rec, pick, &reads, out)
 }
 

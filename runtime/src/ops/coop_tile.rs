@@ -5,8 +5,8 @@
 use super::gemm::GemmShape;
 use crate::context::Context;
 use crate::device::DeviceKind;
-use crate::matrix_tile::MatrixTile;
-use crate::matrix_units::Fragment;
+use crate::kernel_choice::matrix_tile::MatrixTile;
+use crate::kernel_choice::matrix_units::Fragment;
 use crate::tensor::Dtype;
 
 /// A matrix-unit workgroup's tile: a `down`×`across` grid of subgroups, each `rows`×`cols`

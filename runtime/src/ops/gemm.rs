@@ -3,11 +3,12 @@
 use super::bands::{bands, elem, fit, row_view, rows_per_band, span_view};
 use super::{f, kernel, same_dtype, u};
 use crate::arena::Arena;
-use crate::context::GemmFamily;
 use crate::device::DeviceInfo;
 use crate::error::{ensure, Error, Result};
-use crate::kernel_tuning::{name_parts, pick, KernelPick, Tunable};
-use crate::matrix_tile::MatrixTile;
+use crate::kernel_choice::matrix_tile::MatrixTile;
+use crate::kernel_choice::plan::GemmFamily;
+use crate::kernel_choice::tuned::KernelPick;
+use crate::kernel_choice::tuning::{name_parts, pick, Tunable};
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 
@@ -214,7 +215,7 @@ fn matmul_whole(
         };
         Tunable { key: format!("matmul {s:?} {dtype:?} bias {}", bias.is_some()), op, tiles: true }
     };
-    let pick = pick(rec, (&reads, c), rec.context().linear_kernel(), describe, &record);
+    let pick = pick(rec, (&reads, c), rec.context().choices().linear, describe, &record);
     record(rec, pick, &reads, c)
 }
 
@@ -273,7 +274,7 @@ pub(super) fn dispatch_gemm_family(
 ) -> Result<()> {
     let ctx = rec.context().clone();
     rec.count_flops(2.0 * (s.batch * s.m) as f64 * (s.n * s.k) as f64);
-    let family = ctx.gemm_family();
+    let family = ctx.choices().gemm_family;
     let cooperative =
         ctx.info().cooperative_variant().filter(|_| family == GemmFamily::Cooperative && dtype == Dtype::F16 && s.vec4);
     if let Some(fragment) = cooperative {
@@ -287,7 +288,7 @@ pub(super) fn dispatch_gemm_family(
     }
     let width = ctx.info().gemm_subgroup_width().filter(|_| family == GemmFamily::Subgroup && s.vec4);
     if let Some(sg) = width {
-        let tm = subgroup_rows(s, sg, ctx.quick_compile());
+        let tm = subgroup_rows(s, sg, ctx.choices().quick_compile);
         let want: Vec<(&str, u32)> = [("SG", sg), ("TM", tm)].into_iter().chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.subgroup, dtype, &want, 4)?;
         let columns = u(s.n.div_ceil(8 * sg as usize));
@@ -393,9 +394,9 @@ pub fn linear_geglu(
         format!("linear_geglu: output {:?} is not {m}×{}", out.shape(), n / 2)
     })?;
     let ctx = rec.context();
-    let fuse = ctx.gemm_family() == GemmFamily::Subgroup
+    let fuse = ctx.choices().gemm_family == GemmFamily::Subgroup
         && n.is_multiple_of(GEGLU_COLUMNS)
-        && !ctx.quick_compile()
+        && !ctx.choices().quick_compile
         && !small(m, n, k);
     if !fuse {
         let projected = scratch.tensor(&[m, n], x.dtype())?;

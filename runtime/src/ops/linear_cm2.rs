@@ -8,8 +8,8 @@ use super::matrix2_probes::{asked_tile, ensure_offered};
 use super::{kernel, u};
 use crate::context::Context;
 use crate::error::{ensure, Error, Result};
-use crate::matrix2_tile::{Matrix2Probe, Matrix2Tile};
-use crate::probe_setting::ProbeChoice;
+use crate::kernel_choice::matrix2_tile::{Matrix2Probe, Matrix2Tile};
+use crate::kernel_choice::probe::ProbeChoice;
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
 

@@ -3,8 +3,8 @@
 
 use crate::context::Context;
 use crate::error::{Error, Result};
-use crate::matrix2_tile::{Matrix2Probe, Matrix2Tile};
-use crate::probe_setting::ProbeChoice;
+use crate::kernel_choice::matrix2_tile::{Matrix2Probe, Matrix2Tile};
+use crate::kernel_choice::probe::ProbeChoice;
 use crate::tensor::Dtype;
 
 /// An error unless `tile` is one of `probe`'s that the context's device runs.

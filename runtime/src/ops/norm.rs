@@ -54,7 +54,7 @@ const GROUP_NORM_APPLY: [(&str, usize); 3] =
 /// batch or the binding limit, so an image's result is the same bits in any batch.
 fn gpu_band(ctx: &Context, groups: usize, hw: usize) -> Option<usize> {
     let parts = 1024usize.div_ceil(groups).min(hw / 64);
-    let gpu = ctx.gpu_paths() || ctx.info().kind != DeviceKind::Cpu;
+    let gpu = ctx.choices().gpu_paths || ctx.info().kind != DeviceKind::Cpu;
     (gpu && parts > 1).then(|| hw.div_ceil(parts))
 }
 

@@ -86,7 +86,7 @@ fn check_with_key_gain(
     };
     let what = format!(
         "attention (GPU paths: {}) {dtype:?} b{} h{} d{} {}x{}",
-        ctx.gpu_paths(),
+        ctx.choices().gpu_paths,
         l.batch,
         l.heads,
         l.head_dim,
@@ -210,9 +210,9 @@ fn head_sizes_and_strides_off_the_vec4_grid() {
 /// A fresh context on the device's paths or the GPU paths, with bindings of at most `limit`
 /// bytes, so that wide heads run in several chunks of query rows.
 fn limited_ctx(gpu_paths: bool, limit: u64) -> Context {
-    let c = ctx_with(ctx().gemm_family());
+    let c = ctx_with(ctx().choices().gemm_family);
     c.set_gpu_paths(gpu_paths);
-    c.set_binding_limit(limit);
+    c.choose(|c| c.binding_limit = limit);
     c
 }
 

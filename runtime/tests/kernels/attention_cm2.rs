@@ -121,7 +121,7 @@ fn attention_takes_the_probe_where_the_context_asks_for_it() {
     let out = ctx.zeros(&[2, 37, 128], Dtype::F16).unwrap();
     let want = reference(&q, &k, &v, &l, 0.125);
     for kernel in [ProbeChoice::Matrix2, ProbeChoice::Auto] {
-        ctx.set_attention_kernel(kernel);
+        ctx.choose(|c| c.attention = kernel);
         let mut rec = Recorder::new(&ctx, true).unwrap();
         attention(&mut rec, &tq, &tk, &tv, &out, &l, 0.125).unwrap();
         let ran: Vec<&str> = rec.finish().unwrap().run_profiled().unwrap().iter().map(|t| t.kernel).collect();

@@ -19,7 +19,7 @@ fn whole_and_banded(
     out: &[usize],
     op: impl Fn(&mut Recorder, &[Tensor], &Tensor) -> vkdiff_runtime::Result<()>,
 ) -> (Vec<f32>, Vec<f32>) {
-    whole_and_limited(dtype, shapes, out, &op, |ctx| ctx.set_binding_limit(LIMIT))
+    whole_and_limited(dtype, shapes, out, &op, |ctx| ctx.choose(|c| c.binding_limit = LIMIT))
 }
 
 /// Runs `op` once on a fresh context and once after `limit` lowered one of its limits.
@@ -30,7 +30,7 @@ fn whole_and_limited(
     op: Op,
     limit: impl Fn(&Context),
 ) -> (Vec<f32>, Vec<f32>) {
-    let ctx = ctx_with(ctx().gemm_family());
+    let ctx = ctx_with(ctx().choices().gemm_family);
     let inputs: Vec<Tensor> = shapes
         .iter()
         .enumerate()
@@ -44,8 +44,9 @@ fn whole_and_limited(
     let whole = run(&ctx);
     limit(&ctx);
     let out_bytes = out.iter().product::<usize>() as u64 * inputs[0].bytes() / inputs[0].numel() as u64;
-    let passed = out_bytes > ctx.binding_limit() || inputs.iter().any(|t| t.bytes() > ctx.binding_limit());
-    assert!(passed || ctx.workgroup_limit() != ctx.info().max_workgroup_count, "the test must pass a limit");
+    let passed =
+        out_bytes > ctx.choices().binding_limit || inputs.iter().any(|t| t.bytes() > ctx.choices().binding_limit);
+    assert!(passed || ctx.choices().workgroup_limit != ctx.info().max_workgroup_count, "the test must pass a limit");
     (whole, run(&ctx))
 }
 
@@ -180,7 +181,7 @@ fn attention_past_the_limit_runs_per_batch_or_per_head_group() {
             let limit = if limit == 0 { one_batch + 256 } else { limit };
             let op = fused_attention(heads, d, n, causal);
             let (whole, banded) = whole_and_limited(dtype, &[&[2, n, 3 * heads * d]], &[2, n, heads * d], &op, |ctx| {
-                ctx.set_binding_limit(limit)
+                ctx.choose(|c| c.binding_limit = limit)
             });
             assert_same(&format!("attention limit {limit} h{heads} d{d} {dtype:?}"), &whole, &banded);
         }
@@ -189,7 +190,7 @@ fn attention_past_the_limit_runs_per_batch_or_per_head_group() {
 
 #[test]
 fn grids_past_the_workgroup_count_limit_run_as_based_dispatches() {
-    let few = |ctx: &Context| ctx.set_workgroup_limit([3, 2, 1]);
+    let few = |ctx: &Context| ctx.choose(|c| c.workgroup_limit = [3, 2, 1]);
     for dtype in DTYPES {
         let spec = Matmul::dense(300, 200, 16, true);
         let op = |rec: &mut Recorder, t: &[Tensor], o: &Tensor| matmul(rec, &t[0], &t[1], None, o, &spec);

@@ -38,7 +38,7 @@ fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static 
 /// Runs the convolution on `ctx` against the reference, asserts the family it ran on, and
 /// returns the product's variants.
 fn check_on(ctx: &Context, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static Variant> {
-    let family = (ctx.gemm_family(), if ctx.quick_compile() { "quick" } else { "" });
+    let family = (ctx.choices().gemm_family, if ctx.choices().quick_compile { "quick" } else { "" });
     let ([kh, kw], [ho, wo]) = (c.k, c.out_size());
     let x = stored(&random(c.b * c.h * c.w * c.cin, seed), dtype);
     // Weights come as PyTorch stores them and are re-laid out, as the loaders will do.
@@ -288,7 +288,7 @@ fn conv_quick_compiles_take_the_eight_row_tiles() {
     for dtype in DTYPES {
         let ctx = quick_ctx();
         let ran = check_on(&ctx, dtype, &case, 29);
-        if ctx.gemm_family() == GemmFamily::Subgroup {
+        if ctx.choices().gemm_family == GemmFamily::Subgroup {
             assert!(ran.iter().all(|v| v.param("TM") == Some(8)), "the quick 8-row variants");
         }
     }

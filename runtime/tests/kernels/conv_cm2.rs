@@ -80,7 +80,7 @@ fn conv2d_cm2_matches_the_reference_on_every_tile_the_device_runs() {
     }
     // A context whose binding limit no tensor below fits.
     let limited = private_ctx();
-    limited.set_binding_limit(256);
+    limited.choose(|c| c.binding_limit = 256);
     for tile in tiles {
         let (m, n, k) = (tile.m as usize, tile.n as usize, tile.k as usize);
         let vae = Padding { top: 0, left: 0, bottom: 1, right: 1 };
@@ -138,7 +138,7 @@ fn conv2d_takes_the_probe_where_the_context_asks_and_the_tile_fits() {
         let (want, mag) = reference(&c, &x, &w_oihw, &bias, &prior);
         let params = ConvParams { stride: c.stride, pad: c.pad, accumulate: c.accumulate, relu: c.relu };
         for kernel in [ProbeChoice::Matrix2, ProbeChoice::Auto] {
-            ctx.set_conv_kernel(kernel);
+            ctx.choose(|c| c.conv = kernel);
             let out = ctx.upload(&[c.b, ho, wo, c.cout], Dtype::F16, &prior).unwrap();
             let ran = ctx.run_listing(|rec| conv2d(rec, &tx, &tw, Some(&tb), &out, &params)).unwrap();
             let ran: Vec<&str> = ran.iter().map(|v| v.kernel).collect();

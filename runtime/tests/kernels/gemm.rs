@@ -47,7 +47,7 @@ fn check(family: GemmFamily, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u6
 /// Runs the product on `ctx` against the reference, asserts the family it ran on (a shape off
 /// the vec4 grid may fall back to the tiled kernel), and returns the product's variants.
 fn check_on(ctx: &Context, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64) -> Vec<&'static Variant> {
-    let family = (ctx.gemm_family(), if ctx.quick_compile() { "quick" } else { "" });
+    let family = (ctx.choices().gemm_family, if ctx.choices().quick_compile { "quick" } else { "" });
     let (b_rows, b_cols) = if s.b_transposed { (s.n, s.k) } else { (s.k, s.n) };
     let a_len = (s.batch - 1) * s.a_batch + (s.m - 1) * s.lda + s.k;
     let b_len = (s.batch - 1) * s.b_batch + (b_rows - 1) * s.ldb + b_cols;
@@ -155,7 +155,7 @@ fn quick_compiles_take_the_eight_row_tiles() {
     ] {
         for dtype in DTYPES {
             let ran = check_on(&ctx, dtype, &s, true, seed);
-            if ctx.gemm_family() == GemmFamily::Subgroup {
+            if ctx.choices().gemm_family == GemmFamily::Subgroup {
                 let rows: Vec<Option<u32>> = ran.iter().map(|v| v.param("TM")).collect();
                 assert!(rows.iter().all(|&r| r == Some(8)), "{s:?}: the quick 8-row variants, not {rows:?}");
             }
@@ -289,8 +289,8 @@ fn check_linear_geglu(ctx: &Context, dtype: Dtype, (rows, k, n): (usize, usize, 
     assert_within(
         &format!(
             "linear_geglu {:?} quick={} fused={fused} {dtype:?} {rows}×{k}→{n}",
-            ctx.gemm_family(),
-            ctx.quick_compile()
+            ctx.choices().gemm_family,
+            ctx.choices().quick_compile
         ),
         &out.download().unwrap(),
         &want,
@@ -315,7 +315,7 @@ fn linear_geglu_fused_into_the_product() {
     let mut contexts = vec![ctx_with(GemmFamily::Subgroup), ctx_with(GemmFamily::Tiled)];
     contexts.extend(cooperative_ctxs());
     for (ctx, quick) in contexts.iter().flat_map(|ctx| [(ctx, false), (ctx, true)]) {
-        ctx.set_quick_compile(quick);
+        ctx.choose(|c| c.quick_compile = quick);
         for dtype in DTYPES {
             for (i, shape) in [
                 (37, 40, 2 * c),

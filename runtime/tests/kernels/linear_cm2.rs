@@ -78,7 +78,7 @@ fn linear_cm2_multiplies_on_every_tile_the_device_runs() {
     }
     // A context whose binding limit no tensor below fits.
     let limited = private_ctx();
-    limited.set_binding_limit(256);
+    limited.choose(|c| c.binding_limit = 256);
     for tile in tiles {
         let (m, n, k) = (2 * tile.m as usize, 3 * tile.n as usize, 4 * tile.k as usize);
         check(&ctx, &tile, &Matmul::dense(m, n, k, true), true, 17);
@@ -115,7 +115,7 @@ fn matmul_takes_the_probe_where_the_context_asks_and_the_tile_fits() {
     let off = Matmul::dense(m, n + 8, k, true);
     for (s, fits) in [(batched, true), (off, false)] {
         for kernel in [ProbeChoice::Matrix2, ProbeChoice::Auto] {
-            ctx.set_linear_kernel(kernel);
+            ctx.choose(|c| c.linear = kernel);
             let ran = check(&ctx, &tile, &s, false, 61);
             let due = offered.is_some() && fits && kernel == ProbeChoice::Matrix2;
             assert_eq!(ran.contains(&"gemm_cm2"), due, "{kernel:?}, {}×{}×{}: {ran:?}", s.m, s.n, s.k);

@@ -20,7 +20,7 @@ fn the_matrix_unit_trial_runs_both_families_and_they_agree() {
         assert!(trial.cooperative_ms > 0.0 && trial.tiled_ms > 0.0, "{clock:?}: {trial:?}");
         // Both sum in f32 and round to f16: a garbled fragment would miss by the results' size.
         assert!(trial.difference < 2e-3, "{clock:?}: {trial:?}");
-        assert_eq!(ctx.gemm_family(), GemmFamily::Cooperative, "the trial leaves the family as it found it");
+        assert_eq!(ctx.choices().gemm_family, GemmFamily::Cooperative, "the trial leaves the family as it found it");
     }
 }
 
@@ -30,7 +30,7 @@ fn the_matrix_unit_trial_runs_both_families_and_they_agree() {
 #[test]
 fn a_fresh_context_ran_its_trial_and_holds_nothing() {
     let ctx = private_ctx();
-    let trial_due = ctx.gpu_paths()
+    let trial_due = ctx.choices().gpu_paths
         && ctx.info().cooperative_variant().is_some()
         && std::env::var("VKDIFF_COOPERATIVE").map_or(true, |v| v.is_empty() || v == "auto");
     if trial_due {

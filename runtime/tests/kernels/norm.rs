@@ -39,7 +39,7 @@ fn check_group_norm(b: usize, hw: usize, c: usize, groups: usize, silu: bool, se
             }
         }
         assert_close(
-            &format!("group_norm {dtype:?} silu={silu} gpu_paths={}", ctx.gpu_paths()),
+            &format!("group_norm {dtype:?} silu={silu} gpu_paths={}", ctx.choices().gpu_paths),
             &out.download().unwrap(),
             &want,
             ATOL,

@@ -76,7 +76,7 @@ fn pools_one_image_at_a_time_past_the_binding_limit() {
     let x = random(shape.iter().product(), 76);
     let tx = ctx.upload(&shape, vkdiff_runtime::Dtype::F32, &x).unwrap();
     let out = ctx.zeros(&shape, vkdiff_runtime::Dtype::F32).unwrap();
-    ctx.set_binding_limit(16 * 16 * 16 * 4);
+    ctx.choose(|c| c.binding_limit = 16 * 16 * 16 * 4);
     ctx.run(|rec| pool2d(rec, &tx, &out, &pool)).unwrap();
     assert_close("banded max pool", &out.download().unwrap(), &pool_ref(&x, shape, &pool), 0.0, 0.0);
 }
@@ -178,6 +178,6 @@ fn branches_written_into_channel_slices() {
 fn channel_slices_in_bands_past_the_binding_limit() {
     let ctx = ctx_with(vkdiff_runtime::GemmFamily::Subgroup);
     // 8 pixels of the 24-channel output per binding in f16, 4 in f32: the 30 pixels go in bands.
-    ctx.set_binding_limit(8 * 24 * 2);
+    ctx.choose(|c| c.binding_limit = 8 * 24 * 2);
     check_channel_slices(&ctx, "banded channel slices");
 }

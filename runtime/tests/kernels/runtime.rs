@@ -60,7 +60,7 @@ fn profiling_times_every_dispatch() {
 #[test]
 fn profiled_collects_the_runs_of_every_recording_made_inside() {
     // A private context: profiling is a context-wide switch.
-    let ctx = ctx_with(ctx().gemm_family());
+    let ctx = ctx_with(ctx().choices().gemm_family);
     let x = ctx.upload(&[4096], Dtype::F32, &random(4096, 75)).unwrap();
     let silu = |rec: &mut Recorder| ops::unary(rec, UnaryOp::Silu, &x, &x, 0.0);
     let twice = |rec: &mut Recorder| silu(rec).and_then(|()| ops::add(rec, &x, &x, &x));
@@ -77,7 +77,7 @@ fn profiled_collects_the_runs_of_every_recording_made_inside() {
 #[test]
 fn memory_accounting_tracks_live_and_peak() {
     // A private context: other tests allocate concurrently on the shared one.
-    let ctx = Context::new(&Default::default()).unwrap();
+    let ctx = Context::new(&Default::default(), vkdiff_testkit::settings()).unwrap();
     let before = ctx.live_bytes();
     let t = ctx.zeros(&[1 << 20], Dtype::F32).unwrap();
     let h = ctx.zeros(&[1 << 20], Dtype::F16).unwrap();
@@ -133,8 +133,10 @@ fn odd_length_f16_tensors_are_filled_and_copied_whole() {
 
 #[test]
 fn bad_device_index_is_one_clear_error() {
-    let err =
-        Context::new(&vkdiff_runtime::DeviceChoice::index(99)).err().expect("device 99 should not exist").to_string();
+    let err = Context::new(&vkdiff_runtime::DeviceChoice::index(99), vkdiff_testkit::settings())
+        .err()
+        .expect("device 99 should not exist")
+        .to_string();
     assert!(err.contains("device 99") && err.contains("vkdiff devices"), "{err}");
 }
 
@@ -142,7 +144,7 @@ fn bad_device_index_is_one_clear_error() {
 fn arena_reuses_a_dropped_buffer_within_one_recording() {
     // x → a = 2x (arena) → y = a + 1·a … then a is dropped, b takes its buffer and is written
     // while the recording still has to order it after a's last read (a WAR hazard).
-    let ctx = Context::new(&Default::default()).unwrap();
+    let ctx = Context::new(&Default::default(), vkdiff_testkit::settings()).unwrap();
     let x: Vec<f32> = (0..1000).map(|i| i as f32).collect();
     let tx = ctx.upload(&[1000], Dtype::F32, &x).unwrap();
     let ty = ctx.zeros(&[1000], Dtype::F32).unwrap();
@@ -169,7 +171,7 @@ fn arena_reuses_a_dropped_buffer_within_one_recording() {
 fn a_later_recording_reuses_the_buffers_of_a_dropped_one() {
     // The same forward recorded twice, as an image's VAE decode is: the second takes the
     // first's buffers, which still hold its values, and computes as if they were new.
-    let ctx = Context::new(&Default::default()).unwrap();
+    let ctx = Context::new(&Default::default(), vkdiff_testkit::settings()).unwrap();
     let x: Vec<f32> = (0..3000).map(|i| i as f32).collect();
     let tx = ctx.upload(&[3000], Dtype::F32, &x).unwrap();
     let forward = |scale: f32| {
@@ -200,8 +202,8 @@ fn a_later_recording_reuses_the_buffers_of_a_dropped_one() {
 
 #[test]
 fn a_buffer_past_the_allocation_limit_is_refused_by_name() {
-    let ctx = Context::new(&Default::default()).unwrap();
-    ctx.set_allocation_limit(1 << 20);
+    let ctx = Context::new(&Default::default(), vkdiff_testkit::settings()).unwrap();
+    ctx.choose(|c| c.allocation_limit = 1 << 20);
     let Err(err) = ctx.zeros(&[1 << 19], Dtype::F32) else { panic!("a 2 MiB tensor past a 1 MiB limit") };
     let err = err.to_string();
     assert!(err.contains("one 2 MiB buffer") && err.contains("1 MiB maxMemoryAllocationSize"), "{err}");
@@ -218,9 +220,9 @@ struct Chain {
 
 /// Runs `chain` twice under `budget` on a fresh context.
 fn chain_under(budget: Option<SubmitBudget>) -> Chain {
-    let ctx = Context::new(&Default::default()).unwrap();
+    let ctx = Context::new(&Default::default(), vkdiff_testkit::settings()).unwrap();
     if let Some(budget) = budget {
-        ctx.set_submit_budget(budget);
+        ctx.choose(|c| c.submit_budget = budget);
     }
     let (m, k, n) = (64, 96, 80);
     let a = ctx.upload(&[m, k], Dtype::F32, &random(m * k, 81)).unwrap();
@@ -276,7 +278,7 @@ fn a_wait_past_the_timeout_is_one_clear_error() {
     // (lavapipe, every CI pass) only: on an H100 (2026-11-26) 8 products of 256³ and 16 of 512³
     // had finished before the wait began, and 16 of 2048³, left running past the test, cost the
     // other tests' devices in the process (vkQueueSubmit: device lost).
-    let ctx = Context::new(&Default::default()).unwrap();
+    let ctx = Context::new(&Default::default(), vkdiff_testkit::settings()).unwrap();
     if ctx.info().kind != DeviceKind::Cpu {
         eprintln!("a_wait_past_the_timeout_is_one_clear_error: held on CPU devices only");
         return;
@@ -285,7 +287,9 @@ fn a_wait_past_the_timeout_is_one_clear_error() {
     let a = ctx.upload(&[n, n], Dtype::F32, &random(n * n, 83)).unwrap();
     let y = ctx.zeros(&[n, n], Dtype::F32).unwrap();
     // After the uploads, which on the GPU paths are submissions too.
-    ctx.set_submit_budget(SubmitBudget { timeout: std::time::Duration::ZERO, ..ctx.submit_budget() });
+    ctx.choose(|c| {
+        c.submit_budget = SubmitBudget { timeout: std::time::Duration::ZERO, ..ctx.choices().submit_budget }
+    });
     let err = ctx
         .run(|rec| {
             for _ in 0..8 {

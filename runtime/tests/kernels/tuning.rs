@@ -5,7 +5,7 @@
 
 use std::collections::BTreeSet;
 use vkdiff_runtime::ops::{attention, conv2d, linear, AttentionLayout, ConvParams};
-use vkdiff_runtime::{variant_label, Context, Dtype, MatrixTile, ProbeChoice, Recorder, Tensor};
+use vkdiff_runtime::{variant_label, Choices, Context, Dtype, MatrixTile, ProbeChoice, Recorder, Tensor};
 use vkdiff_testkit::*;
 
 /// The op under test on its inputs and output.
@@ -24,27 +24,27 @@ struct Case {
     inputs: Vec<Vec<usize>>,
     out: Vec<usize>,
     tiles: bool,
-    probe: fn(&Context, ProbeChoice),
+    probe: fn(&mut Choices, ProbeChoice),
 }
 
 /// Every distinct kernel list `op` records under the settings tuning may choose between, on
 /// `plain` (which does not tune; its settings are left as found).
 fn reachable(plain: &Context, op: Op, (inputs, out): (&[Tensor], &Tensor), case: &Case) -> BTreeSet<String> {
     // A tile set by VKDIFF_MATRIX_TILE is the tuner's too.
-    let set = plain.matrix_tile();
+    let set = plain.choices().matrix_tile;
     let open = case.tiles && set == MatrixTile::Auto;
     let every = [MatrixTile::Auto, MatrixTile::Eight, MatrixTile::EightTall, MatrixTile::EightWide];
     let tiles: &[MatrixTile] = if open { &every } else { &[set] };
     let mut found = BTreeSet::new();
     for &tile in tiles {
         for choice in [ProbeChoice::Auto, ProbeChoice::Matrix2] {
-            plain.set_matrix_tile(tile);
-            (case.probe)(plain, choice);
+            plain.choose(|c| c.matrix_tile = tile);
+            plain.choose(|c| (case.probe)(c, choice));
             found.insert(kernels_of(plain, op, inputs, out));
         }
     }
-    plain.set_matrix_tile(set);
-    (case.probe)(plain, ProbeChoice::Auto);
+    plain.choose(|c| c.matrix_tile = set);
+    plain.choose(|c| (case.probe)(c, ProbeChoice::Auto));
     found
 }
 
@@ -97,26 +97,18 @@ fn tuning_times_each_shapes_kernels_once_and_takes_the_one_it_reports() {
         &tuned,
         &plain,
         lin,
-        case("linear 64×64×64", &[&[64, 64], &[64, 64], &[64]], &[64, 64], true, Context::set_linear_kernel),
+        case("linear 64×64×64", &[&[64, 64], &[64, 64], &[64]], &[64, 64], true, |c, p| c.linear = p),
     );
     let conv: Op = &|rec, t, out| conv2d(rec, &t[0], &t[1], None, out, &ConvParams::new(1, 1));
-    let conv_case = case(
-        "conv2d 3×3 8×8×32 → 32",
-        &[&[1, 8, 8, 32], &[32, 3, 3, 32]],
-        &[1, 8, 8, 32],
-        true,
-        Context::set_conv_kernel,
-    );
+    let conv_case =
+        case("conv2d 3×3 8×8×32 → 32", &[&[1, 8, 8, 32], &[32, 3, 3, 32]], &[1, 8, 8, 32], true, |c, p| {
+            c.conv = p
+        });
     check(&tuned, &plain, conv, conv_case);
     let l = AttentionLayout::dense(1, 2, 64, 64, 64);
     let attend: Op = &|rec, t, out| attention(rec, &t[0], &t[1], &t[2], out, &l, 0.125);
     let qkv: &[&[usize]] = &[&[1, 64, 128], &[1, 64, 128], &[1, 64, 128]];
-    check(
-        &tuned,
-        &plain,
-        attend,
-        case("attention 64×64 tokens", qkv, &[1, 64, 128], false, Context::set_attention_kernel),
-    );
+    check(&tuned, &plain, attend, case("attention 64×64 tokens", qkv, &[1, 64, 128], false, |c, p| c.attention = p));
     let summary = tuned.tuning_summary().unwrap();
     let shapes = format!("VKDIFF_TUNE: {} shapes had kernels to choose between; ", tuned.tuned_shapes().len());
     assert!(summary.starts_with(&shapes), "{summary}");

@@ -8,9 +8,10 @@
 
 use crate::context::Context;
 use crate::error::{Error, Result};
-use crate::matrix_tile::MatrixTile;
-use crate::matrix_unit_trial::{relative_difference, AGREEMENT};
-use crate::probe_setting::ProbeChoice;
+use crate::kernel_choice::matrix_tile::MatrixTile;
+use crate::kernel_choice::probe::ProbeChoice;
+use crate::kernel_choice::trial::{relative_difference, AGREEMENT};
+use crate::kernel_choice::tuned::{KernelPick, TunedShape, NOT_TUNED};
 use crate::recorder::Recorder;
 use crate::tensor::{uniform_values, Dtype, Tensor};
 use std::sync::atomic::Ordering;
@@ -20,43 +21,6 @@ const REPEATS: usize = 3;
 /// How much faster another kernel must run than the one the settings pick to displace it, so
 /// that a near tie keeps one choice from run to run (and the images their bits).
 const MARGIN: f64 = 1.05;
-/// How a shape that could not be tuned (scratch memory, its settings' kernels failing) is noted.
-const NOT_TUNED: &str = "not tuned";
-
-/// The settings an op's kernel is chosen by: the matrix units' tile and whether it takes its
-/// `VK_NV_cooperative_matrix2` probe.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct KernelPick {
-    pub tile: MatrixTile,
-    pub probe: ProbeChoice,
-}
-
-/// One shape as tuning found it: every distinct kernel (or kernel sequence, where the op is
-/// several dispatches) with its fastest device time, and the one the shape takes.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TunedShape {
-    /// The op and its shape, as people read it ("linear 4096×640×640 + bias F16").
-    pub op: String,
-    /// Each candidate's kernels (variant labels, `+` between dispatches) and milliseconds.
-    pub timed: Vec<(String, f64)>,
-    pub chosen: usize,
-    pick: KernelPick,
-}
-
-impl TunedShape {
-    /// Whether the shape had kernels to choose between, or could not be tuned: one kernel alone
-    /// is not worth a line.
-    fn reported(&self) -> bool {
-        self.timed.len() > 1 || self.timed[0].0.starts_with(NOT_TUNED)
-    }
-
-    /// The chosen candidate's kernels and milliseconds.
-    pub fn winner(&self) -> (&str, f64) {
-        let (kernels, ms) = &self.timed[self.chosen];
-        (kernels, *ms)
-    }
-}
-
 /// What an op offers the tuner: a key naming everything its kernel choice and speed depend on,
 /// its readable name, and whether the matrix units' tile applies to it.
 pub(crate) struct Tunable {
@@ -74,25 +38,6 @@ pub(crate) fn name_parts(parts: &[(bool, &str)]) -> String {
 /// the op's own, or the tuner's scratch tensors of the same shapes.
 pub(crate) type RecordWith<'a> = &'a dyn Fn(&mut Recorder, KernelPick, &[&Tensor], &Tensor) -> Result<()>;
 
-/// `VKDIFF_TUNE`: 1 (or true, yes, on) times the kernels per shape; 0 or unset does not.
-pub fn tuning_from_env() -> Result<bool> {
-    match std::env::var("VKDIFF_TUNE") {
-        Err(_) => Ok(false),
-        Ok(value) => parse_tuning(&value),
-    }
-}
-
-fn parse_tuning(value: &str) -> Result<bool> {
-    match value.trim().to_ascii_lowercase().as_str() {
-        "1" | "true" | "yes" | "on" => Ok(true),
-        "0" | "false" | "no" | "off" | "" => Ok(false),
-        _ => Err(Error::BadSetting(format!(
-            "VKDIFF_TUNE={value}: use 1 (time each shape's kernels on the device and take the fastest) or 0 (the \
-             default: the kernels the settings pick)"
-        ))),
-    }
-}
-
 /// The pick an op records with where its settings are `probe` (and the context's tile): those
 /// settings, or, with tuning on, the fastest of the distinct kernels the settings left open that
 /// agree with theirs, timed now where this context has not timed the shape before. `inputs` are
@@ -105,14 +50,14 @@ pub(crate) fn pick(
     record: RecordWith,
 ) -> KernelPick {
     let ctx = rec.context();
-    let settings = KernelPick { tile: ctx.matrix_tile(), probe };
+    let settings = KernelPick { tile: ctx.choices().matrix_tile, probe };
     // Every kernel a setting adds (the matrix units' tiles, the probes) is f16's.
     if !ctx.tuning() || out.dtype() != Dtype::F16 {
         return settings;
     }
     let op = describe();
     // Tests and benchmarks switch a context's family; a shape is timed again on each.
-    let key = format!("{} on {:?}", op.key, ctx.gemm_family());
+    let key = format!("{} on {:?}", op.key, ctx.choices().gemm_family);
     if let Some(found) = ctx.shared.tuned.lock().unwrap().get(&key) {
         return found.pick;
     }
@@ -325,15 +270,6 @@ impl Context {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_setting_takes_the_spellings_of_a_switch() {
-        for (value, on) in [("1", true), ("ON", true), (" yes", true), ("0", false), ("off", false), ("", false)] {
-            assert_eq!(parse_tuning(value).unwrap(), on, "{value:?}");
-        }
-        let err = parse_tuning("fast").unwrap_err().to_string();
-        assert!(err.contains("VKDIFF_TUNE=fast: use 1 (time each shape's kernels"), "{err}");
-    }
 
     #[test]
     fn only_what_the_settings_leave_open_is_tried_theirs_first() {

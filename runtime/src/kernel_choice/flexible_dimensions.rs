@@ -2,7 +2,7 @@
 //! struct and the query of the granularities, which let a device take fragment shapes it does
 //! not list (`VKDIFF_FRAGMENT`; Mesa 26.1 lavapipe runs Intel's shapes this way in CI).
 
-use crate::matrix_units::{component, MatrixShape};
+use crate::kernel_choice::matrix_units::{component, MatrixShape};
 use ash::vk;
 
 /// `VkPhysicalDeviceCooperativeMatrix2FeaturesNV` (`VK_NV_cooperative_matrix2`, newer than

@@ -125,7 +125,7 @@ pub(crate) fn offered(info: &DeviceInfo) -> Vec<Matrix2Tile> {
     let reported = |feature: &&str| info.cooperative_matrix2.contains(feature);
     let workgroup_scope = reported(&"workgroup scope");
     let runs = |t: &Matrix2Tile| {
-        let divide = |s: &crate::matrix_units::MatrixShape| match t.workgroup_scope() {
+        let divide = |s: &crate::kernel_choice::matrix_units::MatrixShape| match t.workgroup_scope() {
             true => t.products().into_iter().all(|p| s.divides_for_workgroup(p, t.invocations)),
             false => t.products().into_iter().all(|(m, n, k)| s.divides(m, n, k)),
         };
@@ -155,11 +155,19 @@ pub(crate) fn features(tiles: &[Matrix2Tile]) -> Vec<&'static str> {
     features
 }
 
+impl DeviceInfo {
+    /// The tiles of `VK_NV_cooperative_matrix2`'s probes (`ops::linear_cm2`, `ops::conv2d_cm2`,
+    /// `ops::attention_cm2`) this device runs.
+    pub fn matrix2_tiles(&self) -> Vec<Matrix2Tile> {
+        offered(self)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::device::{tests::device, DeviceKind};
-    use crate::matrix_units::MatrixShape;
+    use crate::kernel_choice::matrix_units::MatrixShape;
 
     fn granularity(g: u32, subgroup_scope: bool, workgroup_invocations: u32) -> MatrixShape {
         let types = ["f16", "f16", "f32", "f32"];

@@ -4,9 +4,10 @@
 //! README's demo 1.4× (Mesa 22.3) to 3× (Mesa 25) slower from a cold shader cache on that EPYC,
 //! as the 16-lane kernels take 2–3× longer to compile (BENCHMARKS.md).
 
-/// Whether to point the user at the wider vectors: the CPU has AVX-512 and no width is set.
-pub fn wider_lavapipe_vectors_available() -> bool {
-    std::env::var_os("LP_NATIVE_VECTOR_WIDTH").is_none() && avx512()
+/// Whether to point the user at the wider vectors: the CPU has AVX-512 and `settings` say no
+/// width is chosen.
+pub(crate) fn wider_lavapipe_vectors_available(settings: &crate::Settings) -> bool {
+    !settings.lavapipe_width_chosen && avx512()
 }
 
 fn avx512() -> bool {

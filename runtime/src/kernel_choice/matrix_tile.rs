@@ -1,9 +1,6 @@
-//! `VKDIFF_MATRIX_TILE`: the workgroup tile of the matrix-unit GEMM and convolution.
+//! `VKDIFF_MATRIX_TILE` ([`crate::Settings::matrix_tile`]): the workgroup tile of the matrix-unit GEMM and convolution.
 
-use crate::context::GemmFamily;
-use crate::device::DeviceInfo;
-use crate::error::{Error, Result};
-use crate::matrix_units::Fragment;
+use crate::kernel_choice::matrix_units::Fragment;
 
 /// How many subgroups share a workgroup's tile in `gemm_coop` and `conv_coop`, and in what grid
 /// (kernels/src/spec_cooperative.rs). The eight-subgroup tiles are named by their size at 16×16×16
@@ -34,24 +31,19 @@ impl MatrixTile {
     /// The eight-subgroup tiles, as the tuner tries them.
     pub const EIGHT_SUBGROUPS: [MatrixTile; 3] = [MatrixTile::Eight, MatrixTile::EightTall, MatrixTile::EightWide];
 
-    pub fn from_env() -> Result<MatrixTile> {
-        match std::env::var("VKDIFF_MATRIX_TILE") {
-            Err(_) => Ok(MatrixTile::Auto),
-            Ok(value) => MatrixTile::parse(&value),
-        }
-    }
+    /// What `VKDIFF_MATRIX_TILE` takes.
+    pub const VALUES: &'static str = "4 (four subgroups a workgroup), 8 or 128x128 (eight, 128×128 tiles of 16×16×16 \
+                                      fragments), 128x64, 64x128 (eight, those tiles) or auto (the default)";
 
-    pub fn parse(value: &str) -> Result<MatrixTile> {
+    /// A tile as [`MatrixTile::name`] spells it (any case, `128x128` for `8`); None for anything else.
+    pub fn parse(value: &str) -> Option<MatrixTile> {
         match value.trim().to_ascii_lowercase().as_str() {
-            "auto" | "" => Ok(MatrixTile::Auto),
-            "4" => Ok(MatrixTile::Four),
-            "8" | "128x128" => Ok(MatrixTile::Eight),
-            "128x64" => Ok(MatrixTile::EightTall),
-            "64x128" => Ok(MatrixTile::EightWide),
-            _ => Err(Error::BadSetting(format!(
-                "VKDIFF_MATRIX_TILE={value}: use 4 (four subgroups a workgroup), 8 or 128x128 (eight, 128×128 tiles of \
-                 16×16×16 fragments), 128x64, 64x128 (eight, those tiles) or auto (the default)"
-            ))),
+            "auto" | "" => Some(MatrixTile::Auto),
+            "4" => Some(MatrixTile::Four),
+            "8" | "128x128" => Some(MatrixTile::Eight),
+            "128x64" => Some(MatrixTile::EightTall),
+            "64x128" => Some(MatrixTile::EightWide),
+            _ => None,
         }
     }
 
@@ -91,17 +83,6 @@ impl MatrixTile {
     }
 }
 
-/// `VKDIFF_MATRIX_TILE` for a context on `info` whose products take `family`; where it asks for
-/// an eight-subgroup tile that its matrix units' fragment has none of, one line says so.
-pub(crate) fn for_device(info: &DeviceInfo, family: GemmFamily) -> Result<MatrixTile> {
-    let tile = MatrixTile::from_env()?;
-    let units = (family == GemmFamily::Cooperative).then(|| info.cooperative_variant()).flatten();
-    if let Some(note) = unbuilt_tile_note(tile, &info.name, units) {
-        eprintln!("vkdiff: {note}");
-    }
-    Ok(tile)
-}
-
 /// The line a run prints where `tile` asks for an eight-subgroup tile that is not built for the
 /// fragment its matrix units take (`fragment`; None where its products do not run on them): its
 /// products then take four subgroups, as they would unasked.
@@ -131,8 +112,8 @@ mod tests {
             ("128x64", MatrixTile::EightTall),
             ("64x128", MatrixTile::EightWide),
         ] {
-            assert_eq!(MatrixTile::parse(value).unwrap(), tile, "{value:?}");
-            assert_eq!(MatrixTile::parse(tile.name()).unwrap(), tile, "{tile:?}");
+            assert_eq!(MatrixTile::parse(value), Some(tile), "{value:?}");
+            assert_eq!(MatrixTile::parse(tile.name()), Some(tile), "{tile:?}");
         }
         assert!(MatrixTile::Eight.eight_subgroups() && !MatrixTile::Auto.eight_subgroups());
         let fragment = |m, n, k, lanes| Fragment { m, n, k, lanes, flexible: false };
@@ -143,8 +124,7 @@ mod tests {
         }
         assert!(!MatrixTile::EightTall.built_for(&fragment(8, 16, 16, 16)), "128×64 for NVIDIA's and lavapipe's only");
         assert!(MatrixTile::Eight.built_for(&fragment(8, 16, 16, 16)), "128×128 for Intel's too");
-        let err = MatrixTile::parse("128").unwrap_err().to_string();
-        assert!(err.starts_with("VKDIFF_MATRIX_TILE=128: use 4"), "{err}");
+        assert_eq!(MatrixTile::parse("128"), None);
     }
 
     #[test]

@@ -8,9 +8,10 @@
 use crate::context::Context;
 use crate::device::{DeviceInfo, DeviceKind};
 use crate::error::Result;
+use crate::kernel_choice::plan::KernelPlan;
 use crate::pipeline::create_kernel;
 use crate::pipeline_stats::{memory_spills, Statistics};
-use crate::GemmFamily;
+use crate::settings::Settings;
 use std::time::Instant;
 use vkdiff_kernels::{Dtype, Variant, VARIANTS};
 
@@ -40,11 +41,9 @@ impl CompiledKernel {
 /// `VKDIFF_GPU_PATHS`) the subgroup-register variants of its width, and on GPUs the matrix-unit
 /// variants of the fragment and width it takes; and the `VK_NV_cooperative_matrix2` probe's
 /// tiles the device runs (`bench kernels` takes them).
-pub fn selectable_variants(info: &DeviceInfo, gpu_paths: bool) -> Vec<&'static Variant> {
-    let fragment = match info.gemm_family(gpu_paths) {
-        GemmFamily::Cooperative => info.cooperative_variant(),
-        _ => None,
-    };
+pub fn selectable_variants(info: &DeviceInfo, settings: &Settings) -> Vec<&'static Variant> {
+    let gpu_paths = settings.gpu_paths;
+    let fragment = KernelPlan::for_device(info, settings).fragment;
     let subgroup_width = (!gpu_paths && info.kind == DeviceKind::Cpu).then_some(info.subgroup_size);
     let matrix2_tiles = info.matrix2_tiles();
     VARIANTS
@@ -101,7 +100,7 @@ mod tests {
     #[test]
     fn a_cpu_device_takes_its_width_and_no_matrix_units() {
         let info = DeviceInfo { subgroup_size: 8, ..device(0, DeviceKind::Cpu, true) };
-        let picked = names(&selectable_variants(&info, false));
+        let picked = names(&selectable_variants(&info, &Settings::default()));
         assert!(picked.iter().any(|n| n.starts_with("gemm_sg F32 SG=8 ")));
         assert!(!picked.iter().any(|n| n.contains(" SG=4 ") || n.contains(" SG=16 ")), "{picked:?}");
         assert!(!picked.iter().any(|n| n.contains("_coop")));
@@ -110,12 +109,12 @@ mod tests {
 
     #[test]
     fn a_gpu_takes_no_subgroup_register_variant() {
-        let picked = names(&selectable_variants(&gpu(), false));
+        let picked = names(&selectable_variants(&gpu(), &Settings::default()));
         assert!(!picked.iter().any(|n| n.contains(" SG=")), "{picked:?}");
         assert!(picked.iter().any(|n| n.starts_with("attention_rows ")));
         assert!(picked.iter().any(|n| n.starts_with("geglu_v4 F16")));
         let no_f16 = DeviceInfo { shader_f16: false, ..gpu() };
-        assert!(!names(&selectable_variants(&no_f16, false)).iter().any(|n| n.contains(" F16")));
+        assert!(!names(&selectable_variants(&no_f16, &Settings::default())).iter().any(|n| n.contains(" F16")));
     }
 
     #[test]
@@ -134,7 +133,7 @@ mod tests {
             subgroup_size_range: Some((32, 64)),
             ..gpu()
         };
-        let picked = names(&selectable_variants(&info, false));
+        let picked = names(&selectable_variants(&info, &Settings::default()));
         let coop: Vec<&String> = picked.iter().filter(|n| n.contains("_coop") || n.contains("coop_")).collect();
         assert!(!coop.is_empty());
         assert!(coop.iter().all(|n| n.contains(" FM=16 FN=16 FK=16 SG=32")), "{coop:?}");
@@ -158,7 +157,7 @@ mod tests {
             ],
             ..info
         };
-        let with_probe = names(&selectable_variants(&cm2, false));
+        let with_probe = names(&selectable_variants(&cm2, &Settings::default()));
         let probe: Vec<&String> = with_probe.iter().filter(|n| n.contains("_cm2")).collect();
         assert!(probe.iter().all(|n| n.contains(" WS=1 WG=256")), "{probe:?}");
         for kernel in ["gemm_cm2", "conv_cm2"] {

@@ -1,0 +1,242 @@
+//! Which kernels a context on a device starts with, and why: decided here once, from what the
+//! device reports and the [`Settings`]. [`crate::Context::new`] starts from it and `vkdiff
+//! devices` prints it, so what the command says is what a run does.
+
+use crate::device::{DeviceInfo, DeviceKind};
+use crate::kernel_choice::matrix_tile::{unbuilt_tile_note, MatrixTile};
+use crate::kernel_choice::matrix_units::{built_cooperative_variants, Fragment};
+use crate::kernel_choice::probe::ProbeChoice;
+use crate::settings::{CooperativeSetting, Settings};
+use std::fmt;
+
+/// Which family of GEMM/convolution kernels a context uses (see kernels/src/spec.rs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GemmFamily {
+    /// One subgroup per workgroup, A shared by shuffles: fast where loads are scalarised (CPUs).
+    Subgroup,
+    /// Shared-memory tiles: the GPU kernel, and the fallback for shapes `Subgroup` cannot take.
+    Tiled,
+    /// The device's matrix units (`VK_KHR_cooperative_matrix`) for f16 products; f32 products,
+    /// and devices whose units fit no variant, take `Tiled`.
+    Cooperative,
+}
+
+/// How much faster the tiled kernels must be to displace the matrix units, so that a device
+/// near a tie keeps one choice from run to run (and its images their bits).
+pub const MARGIN: f64 = 1.25;
+
+/// The kernels a context on one device starts with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KernelPlan {
+    /// Whether the device runs as a discrete GPU would (`VKDIFF_GPU_PATHS`).
+    pub gpu_paths: bool,
+    pub gemm: GemmFamily,
+    /// The subgroup-register kernels' width, where `gemm` is [`GemmFamily::Subgroup`].
+    pub subgroup_width: Option<u32>,
+    /// The matrix units' fragment, where `gemm` is [`GemmFamily::Cooperative`].
+    pub fragment: Option<Fragment>,
+    /// Why `gemm` is not the matrix units on a device that lists some.
+    pub no_units: Option<String>,
+    /// Whether a product is timed on the matrix units and on the tiled kernels as a context
+    /// starts, and the units kept only where both agree and the tiled kernels are not
+    /// [`MARGIN`] faster.
+    pub trial: bool,
+    pub tile: MatrixTile,
+    /// Where `tile` asks for an eight-subgroup tile not built for the fragment.
+    pub tile_note: Option<String>,
+    /// Attention on the subgroup-register kernels (CPU devices) rather than the GPU's.
+    pub subgroup_attention: bool,
+    /// Whether the device's workgroup memory holds the register-blocked attention tiles.
+    pub tiled_attention: bool,
+    /// VK_NV_cooperative_matrix2's probes for attention, the linear layers and the convolution.
+    pub probes: [ProbeChoice; 3],
+    /// Small products on the quickly compiled variants.
+    pub quick_compile: bool,
+    /// Whether the kernels are compiled at their first dispatch (lavapipe).
+    pub compiled_at_first_use: bool,
+    /// Each shape's kernels timed and the fastest taken (`VKDIFF_TUNE`).
+    pub tune: bool,
+    /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen).
+    pub wider_vectors: bool,
+}
+
+impl KernelPlan {
+    /// The plan for a context on `info` under `settings`.
+    pub fn for_device(info: &DeviceInfo, settings: &Settings) -> KernelPlan {
+        let gpu_paths = settings.gpu_paths;
+        let cpu = !gpu_paths && info.kind == DeviceKind::Cpu;
+        let units = info.cooperative_variant();
+        let allowed = settings.cooperative != CooperativeSetting::Never;
+        let subgroup_width = cpu.then(|| info.gemm_subgroup_width()).flatten();
+        let gemm = if subgroup_width.is_some() {
+            GemmFamily::Subgroup
+        } else if !cpu && units.is_some() && allowed {
+            GemmFamily::Cooperative
+        } else {
+            GemmFamily::Tiled
+        };
+        let fragment = units.filter(|_| gemm == GemmFamily::Cooperative);
+        let no_units = match (&info.matrix_shapes[..], units) {
+            ([], _) => None,
+            (_, None) if !info.cooperative_features => {
+                Some("no cooperativeMatrix or vulkanMemoryModel feature".to_string())
+            }
+            (_, None) => Some(format!(
+                "no vkdiff variant fits them (f16·f16+f32 at subgroup scope, {})",
+                built_cooperative_variants()
+            )),
+            (_, Some(_)) if cpu => Some("a CPU device takes the subgroup-register kernels".into()),
+            (_, Some(_)) if !allowed => Some("VKDIFF_COOPERATIVE=0".into()),
+            (_, Some(_)) => None,
+        };
+        KernelPlan {
+            gpu_paths,
+            gemm,
+            subgroup_width,
+            fragment,
+            no_units,
+            trial: fragment.is_some() && settings.cooperative == CooperativeSetting::Trial,
+            tile: settings.matrix_tile,
+            tile_note: unbuilt_tile_note(settings.matrix_tile, &info.name, fragment),
+            subgroup_attention: info.subgroup_attention(gpu_paths),
+            tiled_attention: info.holds_tiled_attention(),
+            probes: [settings.attention, settings.linear, settings.conv],
+            quick_compile: !gpu_paths
+                && settings.quick_compile.unwrap_or(info.lavapipe_mesa.is_some_and(|(major, _)| major > 22)),
+            compiled_at_first_use: info.lavapipe_mesa.is_some(),
+            tune: settings.tune,
+            wider_vectors: info.lavapipe_mesa.is_some()
+                && crate::kernel_choice::cpu_vectors::wider_lavapipe_vectors_available(settings),
+        }
+    }
+
+    /// The GEMM and convolution kernels, in words.
+    fn products(&self) -> String {
+        match (self.gemm, self.fragment) {
+            (GemmFamily::Subgroup, _) => {
+                format!("subgroup-register, {} lanes (CPU)", self.subgroup_width.unwrap_or_default())
+            }
+            (GemmFamily::Cooperative, Some(f)) => {
+                let trial = match self.trial {
+                    true => format!(
+                        ", unless a product timed on them as vkdiff starts differs from the tiled kernels' or takes \
+                         over {MARGIN}× their time"
+                    ),
+                    false => String::new(),
+                };
+                let tile = match self.tile {
+                    MatrixTile::Auto => String::new(),
+                    tile => format!(", VKDIFF_MATRIX_TILE={}", tile.name()),
+                };
+                format!(
+                    "matrix units, {} f16→f32 fragments, {} lanes{}{trial}{tile} (f32 products: shared-memory tiles)",
+                    f.shape(),
+                    f.lanes,
+                    if f.flexible { " through flexible dimensions" } else { "" }
+                )
+            }
+            _ => "shared-memory tiles (GPU)".into(),
+        }
+    }
+
+    /// The attention kernels, in words.
+    fn attention(&self) -> String {
+        let tiles = if self.tiled_attention { "register-blocked tiles for heads up to 64, else " } else { "" };
+        let flash = if self.subgroup_attention {
+            "subgroup-register (CPU)".to_string()
+        } else if self.gemm == GemmFamily::Cooperative {
+            format!("matrix units for f16 heads up to 64, else {tiles}query rows per invocation (GPU)")
+        } else {
+            format!("{tiles}query rows per invocation (GPU)")
+        };
+        format!("{flash}; heads over 128 (the VAE's): products around a row softmax, f16 heads widened to f32 for them")
+    }
+}
+
+impl fmt::Display for KernelPlan {
+    /// One line per part: `GEMM/conv kernels: …`, `attention: …`, then the notes that apply.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "GEMM/conv kernels: {}", self.products())?;
+        if let Some(why) = &self.no_units {
+            write!(f, " (not the matrix units: {why})")?;
+        }
+        write!(f, "\nattention: {}", self.attention())?;
+        let probes: Vec<&str> = ["VKDIFF_ATTENTION", "VKDIFF_LINEAR", "VKDIFF_CONV"]
+            .iter()
+            .zip(self.probes)
+            .filter(|(_, p)| *p == ProbeChoice::Matrix2)
+            .map(|(name, _)| *name)
+            .collect();
+        if !probes.is_empty() {
+            write!(f, "\nVK_NV_cooperative_matrix2's probes where they fit: {}=cm2", probes.join("=cm2, "))?;
+        }
+        if self.compiled_at_first_use {
+            let quick = if self.quick_compile { ", small products on the quickly compiled variants" } else { "" };
+            write!(f, "\nkernels compiled at first use{quick}")?;
+        }
+        if self.tune {
+            write!(f, "\nVKDIFF_TUNE=1: each shape's kernels timed on the device, the fastest taken")?;
+        }
+        if self.gpu_paths {
+            write!(f, "\nVKDIFF_GPU_PATHS=1: device memory through staging, GPU kernels")?;
+        }
+        if let Some(note) = &self.tile_note {
+            write!(f, "\n{note}")?;
+        }
+        if self.wider_vectors {
+            write!(
+                f,
+                "\nthis CPU has AVX-512: LP_NATIVE_VECTOR_WIDTH=512 gives lavapipe 16-lane kernels (BENCHMARKS.md \
+                 compares the widths)"
+            )?;
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::device::tests::device;
+    use crate::kernel_choice::matrix_units::MatrixShape;
+
+    /// An NVIDIA-like GPU whose matrix units take vkdiff's 16×16×16 variant at 32 lanes.
+    fn gpu_with_units() -> DeviceInfo {
+        let mut d = device(0, DeviceKind::Discrete, true);
+        let types = ["f16", "f16", "f32", "f32"];
+        d.matrix_shapes =
+            vec![MatrixShape { m: 16, n: 16, k: 16, types, subgroup_scope: true, workgroup_invocations: 0 }];
+        d.cooperative_features = true;
+        d.subgroup_size = 32;
+        d
+    }
+
+    #[test]
+    fn a_gpu_with_units_tries_them_unless_the_settings_say_otherwise() {
+        let d = gpu_with_units();
+        let plan = KernelPlan::for_device(&d, &Settings::default());
+        assert_eq!((plan.gemm, plan.trial, plan.no_units.as_deref()), (GemmFamily::Cooperative, true, None));
+        assert!(plan.to_string().contains("matrix units, 16×16×16 f16→f32 fragments, 32 lanes, unless"), "{plan}");
+        let always = Settings { cooperative: CooperativeSetting::Always, ..Settings::default() };
+        assert!(!KernelPlan::for_device(&d, &always).trial);
+        let never = Settings { cooperative: CooperativeSetting::Never, ..Settings::default() };
+        let plan = KernelPlan::for_device(&d, &never);
+        assert_eq!((plan.gemm, plan.fragment), (GemmFamily::Tiled, None));
+        assert!(plan.to_string().contains("shared-memory tiles (GPU) (not the matrix units: VKDIFF_COOPERATIVE=0)"));
+    }
+
+    #[test]
+    fn a_cpu_takes_the_subgroup_kernels_and_its_gpu_paths_the_gpus() {
+        let mut d = device(0, DeviceKind::Cpu, true);
+        d.subgroup_size = 8;
+        d.lavapipe_mesa = Some((25, 0));
+        let plan = KernelPlan::for_device(&d, &Settings::default());
+        assert_eq!((plan.gemm, plan.subgroup_width, plan.subgroup_attention), (GemmFamily::Subgroup, Some(8), true));
+        assert!(plan.quick_compile, "lavapipe after Mesa 22 compiles slowly");
+        let slow = Settings { quick_compile: Some(false), ..Settings::default() };
+        assert!(!KernelPlan::for_device(&d, &slow).quick_compile);
+        let gpu = KernelPlan::for_device(&d, &Settings { gpu_paths: true, ..Settings::default() });
+        assert_eq!((gpu.gemm, gpu.subgroup_attention, gpu.quick_compile), (GemmFamily::Tiled, false, false));
+        assert!(gpu.to_string().contains("VKDIFF_GPU_PATHS=1"), "{gpu}");
+    }
+}
