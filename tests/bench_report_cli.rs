@@ -1,6 +1,7 @@
 //! `vkdiff bench report` and `bench compare` as a user runs them: two reports of the tiny models
 //! (the small suite at 128², on lavapipe at two vector widths), their JSON and table, compared
-//! as Markdown and as a page headless Chromium shows; bad input refused in one line.
+//! as Markdown and as a page headless Chromium shows; reports 100× apart drawn on a log scale;
+//! bad input refused in one line.
 
 mod cli;
 
@@ -153,11 +154,65 @@ fn reports_compare_as_markdown_and_as_a_page_with_charts() {
     }
     assert!(markdown.contains("- A: llvmpipe") && markdown.contains("128 bits") && markdown.contains("256 bits"));
     let html = std::fs::read_to_string(&page).unwrap();
-    assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 3, "a chart per group");
+    assert_eq!(html.matches("<svg ").count(), 3, "a chart per group");
+    assert_bars_show(&page);
+}
+
+/// Both reports' bars show on `page` as headless Chromium draws it: A's colour and B's.
+fn assert_bars_show(page: &Path) {
     let shot = screenshot(&chromium(), &format!("file://{}", page.display()), &page.with_extension("png"));
     assert_eq!(shot[0], [255, 255, 255], "the screenshot is not the page");
-    let bars = shot.iter().filter(|p| **p == [70, 110, 170]).count();
-    assert!(bars > 5000, "only {bars} pixels of bars: the charts did not render");
+    for colour in [[70, 110, 170], [210, 105, 30]] {
+        let bars = shot.iter().filter(|p| **p == colour).count();
+        assert!(bars > 2000, "only {bars} pixels of bars in {colour:?}: the charts did not render");
+    }
+}
+
+/// The widths of the bars of report `letter` in `svg`, in order.
+fn bar_widths(svg: &str, letter: char) -> Vec<f64> {
+    let marker = format!("<rect class=\"bar\" data-report=\"{letter}\"");
+    let width = |l: &str| l.split(" width=\"").nth(1).and_then(|w| w.split('"').next()?.parse().ok()).unwrap();
+    svg.lines().filter(|l| l.starts_with(&marker)).map(width).collect()
+}
+
+#[test]
+fn reports_a_hundred_times_apart_both_show_on_a_log_scale() {
+    let [(a, _), _] = reports();
+    let dir = scratch("bench-compare-100x");
+    let mut slow = read_json(a);
+    for figure in slow["figures"].as_array_mut().unwrap() {
+        for key in ["median", "min", "max"] {
+            figure["runs"][key] = (figure["runs"][key].as_f64().unwrap() * 100.0).into();
+        }
+    }
+    let slow_path = dir.join("slow.json");
+    std::fs::write(&slow_path, slow.to_string()).unwrap();
+    let page = dir.join("compare.html");
+    let out = vkdiff(&[
+        "bench",
+        "compare",
+        a.to_str().unwrap(),
+        slow_path.to_str().unwrap(),
+        "--html",
+        page.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let html = std::fs::read_to_string(&page).unwrap();
+    // The image group's chart: the 30- and 4-step images, each with A at 1× and B at 0.01×.
+    let svg = &html[html.find("<svg ").unwrap()..html.find("</svg>").unwrap()];
+    for text in
+        [">0.001×</text>", ">0.01×</text>", ">1×</text>", ">speed relative to A (log scale; right is faster)</text>"]
+    {
+        assert!(svg.contains(text), "{text} in {svg}");
+    }
+    assert_eq!((svg.matches(">1.00× · ").count(), svg.matches(">0.0100× · ").count()), (2, 2), "{svg}");
+    // On the log scale A spans three decades and B one: B's bars a third of A's, not a hundredth.
+    let (widths_a, widths_b) = (bar_widths(svg, 'A'), bar_widths(svg, 'B'));
+    assert_eq!((widths_a.len(), widths_b.len()), (2, 2), "{svg}");
+    for (wa, wb) in widths_a.iter().zip(&widths_b) {
+        assert!((wa / wb - 3.0).abs() < 0.01, "{wa} against {wb}");
+    }
+    assert_bars_show(&page);
 }
 
 #[test]
