@@ -277,7 +277,7 @@ fn closing_line(report: &Report, elapsed: Duration, peak: Option<u64>) -> String
         s(t.setup),
         report.recordings,
         s(t.guides),
-        s(t.denoise),
+        s(t.denoise()),
         s(t.vae),
         s(t.write),
         s(t.waiting),

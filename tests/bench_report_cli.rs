@@ -1,6 +1,8 @@
 //! `vkdiff bench report` and `bench compare` as a user runs them: two reports of the tiny models
-//! (the small suite at 128², on lavapipe at two vector widths), their JSON and table, compared
-//! as Markdown and as a page headless Chromium shows; bad input refused in one line.
+//! (the small suite at 128², on lavapipe at two vector widths, the second beside references that
+//! answer: a stub Python printing fixed JSON), their JSON and table, compared as Markdown and as a
+//! page headless Chromium shows; reports 100× apart drawn on a log scale; bad input refused in one
+//! line.
 
 mod cli;
 
@@ -9,6 +11,42 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 use vkdiff_testkit::fixture;
+
+/// A stand-in for `$VKDIFF_REFERENCE_PYTHON`, run as `STUB -c SCRIPT ARGS…`: it knows each reference
+/// by the usage line its script carries, checks the arguments the quick suite gives it (the
+/// image's: 128², 2 steps timed, 1 run, no warm-up image, as vkdiff's quick suite makes none;
+/// a model's config, first, is not checked), and prints fixed JSON.
+fn stub_python() -> PathBuf {
+    let path = scratch("bench-report-stub").join("python");
+    let diffusers = r#""torch": "9.1", "diffusers": "9.2", "where": "stub CPU float32""#;
+    let script = format!(
+        r#"#!/bin/sh
+cat > /dev/null
+script=$2
+shift 2
+case "$script" in
+  *"Usage: workflow_reference.py"*) want="128 2 1 0"
+    answer='{{"images": [{{"seconds": 7.0, "steps": [4.0, 1.5]}}], {diffusers}}}' ;;
+  *"Usage: unet_reference.py"*) shift; want="16 16 2 1"
+    answer='{{"ms": 240.0, "times_ms": [240.0], "peak_mib": 1.0, {diffusers}}}' ;;
+  *"Usage: vae_reference.py"*) shift; want="128 1 cpu f32"
+    answer='{{"seconds": 0.5, "times": [0.5], "peak_mib": 1.0, {diffusers}}}' ;;
+  *"Usage: kernels_reference.py"*) want="1"
+    answer='{{"linear": [0.5], "conv": [0.25], "attention": [0.125], "torch": "9.1", "where": "stub CPU"}}' ;;
+  *"sdcpp_reference.py MODEL"*) shift; want="64 2"
+    answer='{{"load_s": 4.2, "steps": [9.0, 3.0], "total_s": 12.5, "what": "stub sd.cpp"}}' ;;
+  *) echo "stub: no such reference" >&2; exit 2 ;;
+esac
+[ "$*" = "$want" ] || {{ echo "stub: arguments $*, not $want" >&2; exit 2; }}
+echo "$answer"
+"#
+    );
+    std::fs::write(&path, script).unwrap();
+    let mut permissions = std::fs::metadata(&path).unwrap().permissions();
+    std::os::unix::fs::PermissionsExt::set_mode(&mut permissions, 0o755);
+    std::fs::set_permissions(&path, permissions).unwrap();
+    path
+}
 
 /// The tiny workflow's flags: SDXL with a UNet swapped in (a distilled UNet's file), its depth
 /// ControlNet, an IP-Adapter and a LoRA.
@@ -27,28 +65,32 @@ fn model_flags() -> Vec<String> {
     .collect()
 }
 
-/// A report of the image, UNet and VAE at 128² at lavapipe's `bits`-bit vectors: its JSON file
-/// and its table.
-fn report(dir: &Path, bits: &str) -> (PathBuf, String) {
+/// A report of the image, UNet and VAE at 128² at lavapipe's `bits`-bit vectors, beside the
+/// references `python` runs (none without it): its JSON file and its table.
+fn report(dir: &Path, bits: &str, python: Option<&Path>) -> (PathBuf, String) {
     let out = dir.join(format!("report-{bits}.json"));
-    let mut args: Vec<String> = "bench report --quick --size 128 --only image,unet,vae --reference-device none"
-        .split(' ')
-        .map(String::from)
-        .collect();
+    let reference = if python.is_some() { "cpu" } else { "none" };
+    let mut args: Vec<String> =
+        format!("bench report --quick --size 128 --only image,unet,vae --reference-device {reference}")
+            .split(' ')
+            .map(String::from)
+            .collect();
     args.extend(model_flags());
     args.extend(["--out".into(), out.display().to_string()]);
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
-    let result = vkdiff_with(&args, &[("LP_NATIVE_VECTOR_WIDTH", bits)]);
+    let mut env = vec![("LP_NATIVE_VECTOR_WIDTH", bits)];
+    env.extend(python.map(|p| ("VKDIFF_REFERENCE_PYTHON", p.to_str().unwrap())));
+    let result = vkdiff_with(&args, &env);
     assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
     (out, String::from_utf8(result.stdout).unwrap())
 }
 
-/// The two reports, made once.
+/// The two reports, made once: the first without references, the second beside the stub's.
 fn reports() -> &'static [(PathBuf, String); 2] {
     static REPORTS: OnceLock<[(PathBuf, String); 2]> = OnceLock::new();
     REPORTS.get_or_init(|| {
         let dir = scratch("bench-report");
-        [report(&dir, "128"), report(&dir, "256")]
+        [report(&dir, "128", None), report(&dir, "256", Some(&stub_python()))]
     })
 }
 
@@ -86,17 +128,31 @@ fn a_report_names_its_machine_and_times_each_figure() {
         assert_eq!(f["reference"]["why"], "not asked for (--reference-device none)");
         assert!(table.contains(f["label"].as_str().unwrap()), "{table}");
     }
-    // The image's stages add up to it (the set's once-per-set setup beside them), with the
-    // steps not timed counted at the timed ones' rate.
+    // The image's stages, each timed: those on the loop's own thread fit in the image (the scene
+    // and the writing have threads of their own); nothing is the image less the others.
     let image = &figures[0];
     let parts: Vec<(String, f64)> = serde_json::from_value(image["parts"].clone()).unwrap();
-    let per_image: f64 = parts.iter().filter(|(n, _)| !n.starts_with("once per set")).map(|(_, v)| v).sum();
+    let names: Vec<&str> = parts.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "scene (its own thread)",
+            "guides",
+            "denoise",
+            "VAE",
+            "writing (its own thread)",
+            "once per set (prompt, styles, recording)"
+        ]
+    );
+    assert!(parts.iter().all(|(_, v)| *v > 0.0), "{parts:?}");
+    let on_the_loop: f64 = parts[1..4].iter().map(|(_, v)| v).sum();
     let median = image["runs"]["median"].as_f64().unwrap();
-    assert!((per_image - median).abs() <= 1e-6 * median, "{parts:?} against {median}");
-    assert_eq!(image["note"], "2 of the 30 steps timed, the others counted at their rate");
+    assert!(on_the_loop <= median, "{parts:?} against {median}");
+    let rule = "counted at the median of the timed steps after the first";
+    assert_eq!(image["note"], format!("2 of the 30 steps timed, the others {rule}"));
     // Lightning's 4 steps without guidance beside it, measured against it in the same run.
     let few = &figures[1];
-    assert_eq!(few["note"], "2 of the 4 steps timed, the others counted at their rate");
+    assert_eq!(few["note"], format!("2 of the 4 steps timed, the others {rule}"));
     assert_eq!(few["reference"]["value"], image["runs"]["median"], "{few}");
     assert_eq!(few["reference"]["what"], "the paper's 30-step image, this run");
     let ratio = median / few["runs"]["median"].as_f64().unwrap();
@@ -123,14 +179,70 @@ fn the_peer_times_vkdiff_from_one_file_and_says_why_sd_cpp_did_not_run() {
         (peer["id"].as_str(), peer["group"].as_str(), peer["unit"].as_str()),
         (Some("peer.sdcpp"), Some("peer"), Some("s"))
     );
-    assert_eq!(peer["runs"]["count"], 2, "the suite's two timed steps");
+    assert_eq!(peer["runs"]["count"], 1, "the suite's two timed steps, the first left out");
     assert!(peer["runs"]["median"].as_f64().unwrap() > 0.0, "{peer}");
     let why = peer["reference"]["why"].as_str().unwrap();
     assert!(
-        why.starts_with("stable-diffusion.cpp (tools/sdcpp_reference.py, cyllama-vulkan): /nonexistent/python3"),
+        why.starts_with("stable-diffusion.cpp (cyllama-vulkan): tools/sdcpp_reference.py: /nonexistent/python3"),
         "{why}"
     );
     assert!(model.exists(), "the user's file stays");
+}
+
+/// `figure` in `unit` beside the reference value `value` and `what` ran it, and the speed-up its
+/// table row ends with (above 1: vkdiff faster).
+fn assert_reference(table: &str, figure: &Value, unit: &str, value: f64, what: &str) {
+    assert_eq!(figure["unit"], unit, "{figure}");
+    assert_eq!(
+        (figure["reference"]["value"].as_f64(), figure["reference"]["what"].as_str()),
+        (Some(value), Some(what))
+    );
+    let median = figure["runs"]["median"].as_f64().unwrap();
+    let speedup = if figure["higher_is_better"] == true { median / value } else { value / median };
+    let label = figure["label"].as_str().unwrap();
+    let row = table.lines().find(|l| l.starts_with(&format!("| {label} |"))).unwrap_or_else(|| panic!("{table}"));
+    assert!(row.ends_with(&format!("| {speedup:.2}× |")), "{row}: {speedup:.2}×");
+}
+
+#[test]
+fn diffusers_beside_the_image_unet_and_vae_gives_each_its_speed_up() {
+    let (path, table) = &reports()[1];
+    let report = read_json(path);
+    let figures = report["figures"].as_array().unwrap();
+    let ids: Vec<&str> = figures.iter().map(|f| f["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, ["image", "image_4_steps", "unet.f16", "vae.f32"]);
+    let diffusers = "stub CPU float32, torch 9.1 / diffusers 9.2";
+    // The stub's image ran 2 steps in 7 s: the 28 others at the second step's 1.5 s (the timed
+    // steps' mean, the first included, would make it 84 s).
+    assert_reference(table, &figures[0], "s", 7.0 + 28.0 * 1.5, diffusers);
+    let thirty = figures[0]["runs"]["median"].as_f64().unwrap();
+    assert_reference(table, &figures[1], "s", thirty, "the paper's 30-step image, this run");
+    assert_reference(table, &figures[2], "ms", 240.0, diffusers);
+    assert_reference(table, &figures[3], "s", 0.5, diffusers);
+    assert!(table.contains("| 49.0 s (stub CPU float32, torch 9.1 / diffusers 9.2) |"), "{table}");
+}
+
+#[test]
+fn torch_kernels_and_sd_cpp_beside_vkdiff_give_rates_by_product_and_a_step() {
+    let out = scratch("bench-report-kernels").join("kernels.json");
+    let model = fixture("pipeline/tiny-sdxl.safetensors");
+    let stub = stub_python();
+    let args = ["bench", "report", "--quick", "--size", "64", "--only", "kernels,peer", "--reference-device", "cpu"];
+    let args: Vec<&str> =
+        args.into_iter().chain(["--model", model.to_str().unwrap(), "--out", out.to_str().unwrap()]).collect();
+    let result = vkdiff_with(&args, &[("VKDIFF_REFERENCE_PYTHON", stub.to_str().unwrap())]);
+    assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+    let table = String::from_utf8(result.stdout).unwrap();
+    let report = read_json(&out);
+    let figures = report["figures"].as_array().unwrap();
+    let ids: Vec<&str> = figures.iter().map(|f| f["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, ["kernels.linear", "kernels.conv", "kernels.attention", "peer.sdcpp"]);
+    for (figure, rate) in figures.iter().zip([0.5, 0.25, 0.125]) {
+        assert_eq!(figure["higher_is_better"], true, "{figure}");
+        assert_reference(&table, figure, "TFLOP/s", rate, "torch 9.1, stub CPU");
+    }
+    // sd.cpp's steps of 9 and 3 s: its step is the second (their median with the first is 6 s).
+    assert_reference(&table, &figures[3], "s", 3.0, "stub sd.cpp, loaded in 4 s");
 }
 
 #[test]
@@ -153,11 +265,65 @@ fn reports_compare_as_markdown_and_as_a_page_with_charts() {
     }
     assert!(markdown.contains("- A: llvmpipe") && markdown.contains("128 bits") && markdown.contains("256 bits"));
     let html = std::fs::read_to_string(&page).unwrap();
-    assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 3, "a chart per group");
+    assert_eq!(html.matches("<svg ").count(), 3, "a chart per group");
+    assert_bars_show(&page);
+}
+
+/// Both reports' bars show on `page` as headless Chromium draws it: A's colour and B's.
+fn assert_bars_show(page: &Path) {
     let shot = screenshot(&chromium(), &format!("file://{}", page.display()), &page.with_extension("png"));
     assert_eq!(shot[0], [255, 255, 255], "the screenshot is not the page");
-    let bars = shot.iter().filter(|p| **p == [70, 110, 170]).count();
-    assert!(bars > 5000, "only {bars} pixels of bars: the charts did not render");
+    for colour in [[70, 110, 170], [210, 105, 30]] {
+        let bars = shot.iter().filter(|p| **p == colour).count();
+        assert!(bars > 2000, "only {bars} pixels of bars in {colour:?}: the charts did not render");
+    }
+}
+
+/// The widths of the bars of report `letter` in `svg`, in order.
+fn bar_widths(svg: &str, letter: char) -> Vec<f64> {
+    let marker = format!("<rect class=\"bar\" data-report=\"{letter}\"");
+    let width = |l: &str| l.split(" width=\"").nth(1).and_then(|w| w.split('"').next()?.parse().ok()).unwrap();
+    svg.lines().filter(|l| l.starts_with(&marker)).map(width).collect()
+}
+
+#[test]
+fn reports_a_hundred_times_apart_both_show_on_a_log_scale() {
+    let [(a, _), _] = reports();
+    let dir = scratch("bench-compare-100x");
+    let mut slow = read_json(a);
+    for figure in slow["figures"].as_array_mut().unwrap() {
+        for key in ["median", "min", "max"] {
+            figure["runs"][key] = (figure["runs"][key].as_f64().unwrap() * 100.0).into();
+        }
+    }
+    let slow_path = dir.join("slow.json");
+    std::fs::write(&slow_path, slow.to_string()).unwrap();
+    let page = dir.join("compare.html");
+    let out = vkdiff(&[
+        "bench",
+        "compare",
+        a.to_str().unwrap(),
+        slow_path.to_str().unwrap(),
+        "--html",
+        page.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let html = std::fs::read_to_string(&page).unwrap();
+    // The image group's chart: the 30- and 4-step images, each with A at 1× and B at 0.01×.
+    let svg = &html[html.find("<svg ").unwrap()..html.find("</svg>").unwrap()];
+    for text in
+        [">0.001×</text>", ">0.01×</text>", ">1×</text>", ">speed relative to A (log scale; right is faster)</text>"]
+    {
+        assert!(svg.contains(text), "{text} in {svg}");
+    }
+    assert_eq!((svg.matches(">1.00× · ").count(), svg.matches(">0.0100× · ").count()), (2, 2), "{svg}");
+    // On the log scale A spans three decades and B one: B's bars a third of A's, not a hundredth.
+    let (widths_a, widths_b) = (bar_widths(svg, 'A'), bar_widths(svg, 'B'));
+    assert_eq!((widths_a.len(), widths_b.len()), (2, 2), "{svg}");
+    for (wa, wb) in widths_a.iter().zip(&widths_b) {
+        assert!((wa / wb - 3.0).abs() < 0.01, "{wa} against {wb}");
+    }
+    assert_bars_show(&page);
 }
 
 #[test]

@@ -6,7 +6,8 @@ sd.cpp detects as SDXL). `vkdiff bench report` runs it after releasing the devic
     python tools/sdcpp_reference.py MODEL.safetensors SIZE STEPS
 
 Prints one JSON object: load_s (the model onto the device), steps (seconds of each sampling
-step, as sd.cpp's own progress line gives them), total_s, and what ran. `GGML_VK_VISIBLE_DEVICES` picks
+step, as sd.cpp's own progress line gives them; vkdiff takes their median after the first, its
+one step rule), total_s, and what ran. `GGML_VK_VISIBLE_DEVICES` picks
 the device (0 where unset, which also lets ggml take a CPU device such as lavapipe).
 
 Last run with: cyllama-vulkan 0.2.18, Python 3.11, on Mesa 22.3's lavapipe (2026-12-01): loaded in

@@ -5,16 +5,18 @@ random weights of the real architectures (the configs vkdiff passes on standard 
 guidance 5, decoded by the VAE to a PIL image. Seconds per image as a set pays them after its
 first: the prompts and the style images are encoded once per set (their embeddings are given,
 as vkdiff's set encodes them once), and LoRAs fused into the weights cost nothing per image (not
-loaded). With STEPS_TIMED below STEPS, the steps not run are counted at the timed steps' median
-rate, as vkdiff's quick suite counts its own. Prints one JSON line.
+loaded). Each image's seconds and each of its STEPS_TIMED steps' seconds are printed as measured:
+vkdiff counts the suite's steps that did not run by its one rule (the median of the timed steps
+after the first), the rule its own images are counted by. With WARM_UP 1 an untimed image comes
+first, as vkdiff's full suite makes one (its quick suite makes none, and passes 0). Prints one
+JSON line: {"images": [{"seconds": S, "steps": [S, ...]}, ...], "torch", "diffusers", "where"}.
 
 Standard input: {"unet": {...}, "controlnet": {...}, "vae": {...}, "scheduler": {...},
                  "ip_adapter": true}   (false: no IP-Adapter, as the workflow timed has none)
 Setup: pip install torch diffusers transformers   (vkdiff runs it with $VKDIFF_REFERENCE_PYTHON)
-Usage: workflow_reference.py SIZE STEPS_TIMED STEPS RUNS [cpu | cuda f16 | cuda f32]
+Usage: workflow_reference.py SIZE STEPS_TIMED RUNS WARM_UP [cpu | cuda f16 | cuda f32]
 """
 import json
-import statistics
 import sys
 import time
 
@@ -62,7 +64,7 @@ def with_ip_adapter(unet, image_embed_dim=1024, tokens=4, scale=0.6):
 
 
 def main():
-    size, steps_timed, steps, runs = (int(a) for a in sys.argv[1:5])
+    size, steps_timed, runs, warm_up = (int(a) for a in sys.argv[1:5])
     device = sys.argv[5] if len(sys.argv) > 5 else "cpu"
     dtype = torch.float16 if device == "cuda" and sys.argv[6:7] == ["f16"] else torch.float32
     configs = json.load(sys.stdin)
@@ -104,17 +106,16 @@ def main():
         pipe(image=depth, num_inference_steps=steps_timed, guidance_scale=5.0, controlnet_conditioning_scale=0.5,
              height=size, width=size, callback_on_step_end=mark, **embeds)
         sync()
-        total = time.perf_counter() - start
-        # Between step ends only: the first step's interval holds the call's preparation too.
-        step = statistics.median([b - a for a, b in zip(marks[1:], marks[2:])] or [marks[1] - marks[0]])
-        return total + (steps - steps_timed) * step
+        # Between step ends; the first from the call's start, so it holds the call's preparation.
+        return dict(seconds=time.perf_counter() - start, steps=[b - a for a, b in zip(marks, marks[1:])])
 
     with torch.inference_mode():
-        image()  # the first image picks kernels and grows the allocator
-        times = [image() for _ in range(runs)]
+        if warm_up:
+            image()  # picks kernels and grows the allocator
+        images = [image() for _ in range(runs)]
     name = str(dtype).removeprefix("torch.")
     where = f"{torch.cuda.get_device_name()} {name}" if device == "cuda" else f"CPU {name}, {torch.get_num_threads()} threads"
-    print(json.dumps(dict(times=times, torch=torch.__version__, diffusers=diffusers.__version__, where=where)))
+    print(json.dumps(dict(images=images, torch=torch.__version__, diffusers=diffusers.__version__, where=where)))
 
 
 if __name__ == "__main__":

@@ -2,6 +2,8 @@
 //! the CPU's practical GEMM peak (numpy → OpenBLAS, float32, `tools/cpu_gemm_peak.py`) and the
 //! diffusers / torch-fidelity / torch scripts of the other benchmarks.
 
+use serde::de::DeserializeOwned;
+use serde::Deserialize;
 use std::io::Write;
 use std::process::{Command, Stdio};
 
@@ -19,7 +21,40 @@ fn reference_python() -> (String, Command) {
     (python, command)
 }
 
-const SCRIPT: &str = include_str!("../../tools/cpu_gemm_peak.py");
+/// A reference script carried in the binary, with its path in the repository: every error about
+/// what it printed names it.
+#[derive(Clone, Copy)]
+pub struct Script {
+    pub path: &'static str,
+    pub text: &'static str,
+}
+
+/// The script `tools/FILE`, carried in the binary.
+macro_rules! script {
+    ($file:literal) => {
+        crate::cpu_reference::Script {
+            path: concat!("tools/", $file),
+            text: include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../tools/", $file)),
+        }
+    };
+}
+pub(crate) use script;
+
+const GEMM_PEAK: Script = script!("cpu_gemm_peak.py");
+
+/// One measured shape, as `tools/cpu_gemm_peak.py` prints it (one JSON object a line).
+#[derive(serde::Deserialize)]
+struct GemmLine {
+    m: usize,
+    n: usize,
+    k: usize,
+    gflops: f64,
+    numpy: String,
+    blas: String,
+    /// Null without threadpoolctl, but always printed.
+    #[serde(deserialize_with = "Option::deserialize")]
+    kernel: Option<String>,
+}
 
 /// One measured shape.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -36,100 +71,133 @@ pub struct CpuGemm {
 /// GFLOP/s for each (M, N, K), or why it could not be measured (no python3 or numpy).
 pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String> {
     let args: Vec<String> = shapes.iter().flat_map(|&(m, n, k)| [m, n, k]).map(|x| x.to_string()).collect();
-    run_script(SCRIPT, args, None, None)?
+    run_script(GEMM_PEAK, args, None, None)?
         .lines()
         .map(|line| {
-            let v: serde_json::Value = serde_json::from_str(line).map_err(|e| e.to_string())?;
-            let get = |k: &str| v[k].as_u64().unwrap_or(0) as usize;
+            let g: GemmLine = parse(GEMM_PEAK, line)?;
             Ok(CpuGemm {
-                m: get("m"),
-                n: get("n"),
-                k: get("k"),
-                gflops: v["gflops"].as_f64().unwrap_or(0.0),
-                library: format!(
-                    "numpy {} / {}",
-                    v["numpy"].as_str().unwrap_or("?"),
-                    v["blas"].as_str().unwrap_or("?")
-                ),
-                kernel: v["kernel"].as_str().unwrap_or("unknown (pip install threadpoolctl to see it)").to_string(),
+                m: g.m,
+                n: g.n,
+                k: g.k,
+                gflops: g.gflops,
+                library: format!("numpy {} / {}", g.numpy, g.blas),
+                kernel: g.kernel.unwrap_or_else(|| "unknown (pip install threadpoolctl to see it)".into()),
             })
         })
         .collect()
 }
 
+/// One line a script printed, read as `T`: a field missing or of the wrong type is an error that
+/// names it and the script.
+fn parse<T: DeserializeOwned>(script: Script, line: &str) -> Result<T, String> {
+    serde_json::from_str(line).map_err(|e| format!("{} printed JSON vkdiff cannot read: {e}", script.path))
+}
+
 /// Runs `script` with `$VKDIFF_REFERENCE_PYTHON` (else python3), `args` and, if given, `input` on
-/// its standard input; its standard output, or why it could not run (the last line of its errors).
-/// The Vulkan instances no context holds are destroyed first: a CPU driver may keep the device's
-/// memory until then, which a CPU reference needs (`vkdiff_runtime::release_idle_instances`).
+/// its standard input; its standard output, or why it could not run (the script's path, then the
+/// last line of its errors). The Vulkan instances no context holds are destroyed first: a CPU
+/// driver may keep the device's memory until then, which a CPU reference needs
+/// (`vkdiff_runtime::release_idle_instances`).
 fn run_script<S: AsRef<std::ffi::OsStr>>(
-    script: &str,
+    script: Script,
     args: impl IntoIterator<Item = S>,
     input: Option<&str>,
     timeout: Option<std::time::Duration>,
 ) -> Result<String, String> {
     vkdiff_runtime::release_idle_instances();
     let (python, mut command) = reference_python();
-    command.arg("-c").arg(script).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
-    let mut child = command.spawn().map_err(|e| format!("{python} not runnable ({e})"))?;
+    let failed = |why: String| format!("{}: {why}", script.path);
+    command.arg("-c").arg(script.text).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    let mut child = command.spawn().map_err(|e| failed(format!("{python} not runnable ({e})")))?;
     let mut stdin = child.stdin.take().expect("piped");
     if let Some(input) = input {
-        stdin.write_all(input.as_bytes()).map_err(|e| format!("{python}: {e}"))?;
+        stdin.write_all(input.as_bytes()).map_err(|e| failed(format!("{python}: {e}")))?;
     }
     drop(stdin);
     let pid = child.id();
     let (sender, finished) = std::sync::mpsc::channel();
     std::thread::spawn(move || sender.send(child.wait_with_output()));
     let out = match timeout.map_or_else(|| finished.recv().ok(), |t| finished.recv_timeout(t).ok()) {
-        Some(out) => out.map_err(|e| format!("{python}: {e}"))?,
+        Some(out) => out.map_err(|e| failed(format!("{python}: {e}")))?,
         None => {
             let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
             let seconds = timeout.map_or(0, |t| t.as_secs());
-            return Err(format!("did not finish in {seconds} s and was stopped"));
+            return Err(failed(format!("did not finish in {seconds} s and was stopped")));
         }
     };
     if let Some(signal) = std::os::unix::process::ExitStatusExt::signal(&out.status) {
         let name = if signal == 11 { " (a segmentation fault)" } else { "" };
-        return Err(format!("{python} ended by signal {signal}{name}"));
+        return Err(failed(format!("{python} ended by signal {signal}{name}")));
     }
     if !out.status.success() {
         let err = String::from_utf8_lossy(&out.stderr);
-        return Err(format!("{python}: {}", err.lines().last().unwrap_or("failed")));
+        return Err(failed(format!("{python}: {}", err.lines().last().unwrap_or("failed"))));
     }
     Ok(String::from_utf8_lossy(&out.stdout).into_owned())
 }
 
-/// Runs a reference script (see `run_script`) and reads the JSON line it prints last.
-pub fn run_python_reference<S: AsRef<std::ffi::OsStr>>(
-    script: &str,
+/// Runs a reference script (see `run_script`) and reads the JSON line it prints last as `T`.
+pub fn run_python_reference<T: DeserializeOwned, S: AsRef<std::ffi::OsStr>>(
+    script: Script,
     args: impl IntoIterator<Item = S>,
     input: Option<&str>,
-) -> Result<serde_json::Value, String> {
+) -> Result<T, String> {
     run_python_reference_within(script, args, input, None)
 }
 
 /// [`run_python_reference`], stopped past `timeout` (a reference that may hang on a device).
-pub fn run_python_reference_within<S: AsRef<std::ffi::OsStr>>(
-    script: &str,
+pub fn run_python_reference_within<T: DeserializeOwned, S: AsRef<std::ffi::OsStr>>(
+    script: Script,
     args: impl IntoIterator<Item = S>,
     input: Option<&str>,
     timeout: Option<std::time::Duration>,
-) -> Result<serde_json::Value, String> {
+) -> Result<T, String> {
     let out = run_script(script, args, input, timeout)?;
-    serde_json::from_str(out.lines().last().unwrap_or("")).map_err(|e| format!("reference output is not JSON: {e}"))
+    parse(script, out.lines().last().unwrap_or(""))
 }
 
-/// What ran a diffusers reference, from the fields its script prints.
-pub fn label(v: &serde_json::Value) -> String {
-    format!(
-        "{}, torch {} / diffusers {}",
-        v["where"].as_str().unwrap_or("?"),
-        v["torch"].as_str().unwrap_or("?"),
-        v["diffusers"].as_str().unwrap_or("?"),
-    )
+/// Where a diffusers reference ran and with what, as its script prints them.
+#[derive(Clone, Debug, Deserialize, serde::Serialize)]
+pub struct DiffusersRun {
+    #[serde(rename = "where")]
+    pub place: String,
+    pub torch: String,
+    pub diffusers: String,
+}
+
+impl DiffusersRun {
+    pub fn label(&self) -> String {
+        format!("{}, torch {} / diffusers {}", self.place, self.torch, self.diffusers)
+    }
 }
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
+    #[derive(Debug, Deserialize)]
+    struct Peer {
+        load_s: f64,
+    }
+
+    #[test]
+    fn a_missing_field_names_itself_and_the_script() {
+        let sdcpp = Script { path: "tools/sdcpp_reference.py", text: "" };
+        let why = parse::<Peer>(sdcpp, r#"{"steps": [1.0]}"#).unwrap_err();
+        assert!(why.starts_with("tools/sdcpp_reference.py printed JSON") && why.contains("`load_s`"), "{why}");
+        let why = parse::<Peer>(sdcpp, r#"{"load_s": "4"}"#).unwrap_err();
+        assert!(why.contains("invalid type: string"), "{why}");
+        assert_eq!(parse::<Peer>(sdcpp, r#"{"load_s": 4.5, "more": 1}"#).unwrap().load_s, 4.5);
+        let gemm = r#"{"m": 1, "n": 2, "k": 3, "gflops": 9.5, "numpy": "2.3", "blas": "openblas"}"#;
+        let why = parse::<GemmLine>(GEMM_PEAK, gemm).err().unwrap();
+        assert!(
+            why.contains("tools/cpu_gemm_peak.py") && why.contains("`kernel`"),
+            "null is allowed, absent is not: {why}"
+        );
+        let line: GemmLine = parse(GEMM_PEAK, &gemm.replace('}', r#", "kernel": null}"#)).unwrap();
+        assert_eq!((line.k, line.kernel), (3, None));
+    }
+
     #[test]
     fn references_run_without_the_variables_that_slow_openblas() {
         let (_, command) = super::reference_python();

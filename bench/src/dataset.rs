@@ -74,10 +74,10 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     let images = report.made;
     let per = |d: Duration| d.as_secs_f64() / images.max(1) as f64;
     let t = &report.times;
-    let step = per(t.denoise) / args.steps as f64;
+    let step = per(t.denoise()) / args.steps as f64;
     // Steady state: what each further image costs besides its steps (the setup is paid once per
     // prompt, style set and batch shape, however many images follow).
-    let overhead = per(wall - t.setup - t.denoise);
+    let overhead = per(wall - t.setup - t.denoise());
     let at = args.production_steps as f64;
     let single_steps: f64 = single.timings.steps.iter().map(Duration::as_secs_f64).sum();
     let gen_image = load_once.as_secs_f64() + single_wall.as_secs_f64() - single_steps + at * step;
@@ -99,10 +99,10 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         t.setup.as_secs_f64(),
         per(wall - t.setup),
         per(t.guides),
-        per(t.denoise),
+        per(t.denoise()),
         step,
         per(t.vae),
-        per(wall - t.setup - t.guides - t.denoise - t.vae),
+        per(wall - t.setup - t.guides - t.denoise() - t.vae),
         per(t.scene),
         per(t.write),
         per(t.waiting),

@@ -11,7 +11,7 @@ use vkdiff_formats::write_safetensors_f32;
 use vkdiff_networks::RandomInception;
 use vkdiff_pipeline::RgbImage;
 
-const REFERENCE: &str = include_str!("../../tools/fid_cpu_reference.py");
+const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("fid_cpu_reference.py");
 
 #[derive(clap::Args)]
 pub struct FidArgs {
@@ -146,19 +146,20 @@ fn write_images(dir: &Path, n: usize, size: usize) -> Result<Vec<PathBuf>> {
 
 /// torch-fidelity on the CPU: images per second and what ran it.
 fn reference(weights: &Path, dir: &Path, batch: usize) -> std::result::Result<(f64, String), String> {
-    let v = crate::cpu_reference::run_python_reference(
+    let out: FeatureRate = crate::cpu_reference::run_python_reference(
         REFERENCE,
         [weights.as_os_str(), dir.as_os_str(), batch.to_string().as_ref()],
         None,
     )?;
-    let rate = v["images_per_s"].as_f64().ok_or("no images_per_s")?;
-    Ok((
-        rate,
-        format!(
-            "torch {} / torch-fidelity {}, {} threads",
-            v["torch"].as_str().unwrap_or("?"),
-            v["torch_fidelity"].as_str().unwrap_or("?"),
-            v["threads"]
-        ),
-    ))
+    let what = format!("torch {} / torch-fidelity {}, {} threads", out.torch, out.torch_fidelity, out.threads);
+    Ok((out.images_per_s, what))
+}
+
+/// What `tools/fid_cpu_reference.py` prints (and more, unread).
+#[derive(serde::Deserialize)]
+struct FeatureRate {
+    images_per_s: f64,
+    torch: String,
+    torch_fidelity: String,
+    threads: usize,
 }

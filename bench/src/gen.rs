@@ -2,13 +2,14 @@
 //! weights (text encoders, UNet, VAE), timed by stage on the device, beside diffusers'
 //! StableDiffusionXLPipeline on this machine's CPU in the same run.
 
+use crate::step_rate::steps_after_first;
 use anyhow::Result;
 use std::time::Instant;
 use vkdiff_networks::{SDXL_BASE_CONFIG, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
 use vkdiff_pipeline::{ClipTokenizer, Guides, SamplerKind, Sampling, Sdxl, TextToImage};
 use vkdiff_runtime::Dtype;
 
-const REFERENCE: &str = include_str!("../../tools/gen_cpu_reference.py");
+const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("gen_cpu_reference.py");
 
 #[derive(clap::Args)]
 pub struct GenArgs {
@@ -48,8 +49,8 @@ pub fn run(args: &GenArgs) -> Result<()> {
         let mut row = measure(args, dtype, size)?;
         if !args.common.no_cpu_reference {
             let r = reference(size, args.steps);
-            row.step_ratio_to_cpu = r.as_ref().ok().and_then(|v| v["step_s"].as_f64()).map(|cpu| cpu / row.step_s);
-            row.cpu_reference = Some(r.unwrap_or_else(|why| serde_json::json!({ "unavailable": why })));
+            row.step_ratio_to_cpu = r.as_ref().ok().map(|(cpu, _)| cpu / row.step_s);
+            row.cpu_reference = Some(r.map_or_else(|why| serde_json::json!({ "unavailable": why }), |(_, v)| v));
         }
         args.common.print(&row, |row| {
             format!(
@@ -86,7 +87,7 @@ fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
         model.text_to_image(&job, &Guides::default(), &mut |done, total| eprintln!("{size}²: step {done}/{total}"))?;
     let total_s = start.elapsed().as_secs_f64();
     let t = &out.timings;
-    let steps: f64 = t.steps.iter().map(|d| d.as_secs_f64()).sum();
+    let steps: Vec<f64> = t.steps.iter().map(|d| d.as_secs_f64()).collect();
     Ok(Row {
         device: ctx.info().name.clone(),
         size,
@@ -95,7 +96,7 @@ fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
         load_s,
         text_s: t.text_encoding.as_secs_f64(),
         record_s: t.record.as_secs_f64(),
-        step_s: steps / t.steps.len().max(1) as f64,
+        step_s: steps_after_first(&steps).map_err(anyhow::Error::msg)?.median,
         vae_s: t.vae.as_secs_f64(),
         total_s,
         peak_mib: ctx.peak_bytes() as f64 / (1 << 20) as f64,
@@ -129,7 +130,20 @@ pub(super) fn bench_sampling(size: usize, steps: usize) -> Sampling {
     }
 }
 
-fn reference(size: usize, steps: usize) -> std::result::Result<serde_json::Value, String> {
+/// What `tools/gen_cpu_reference.py` prints: each stage's seconds and each step's.
+#[derive(serde::Deserialize, serde::Serialize)]
+struct GenTimes {
+    text_s: f64,
+    steps: Vec<f64>,
+    vae_s: f64,
+    peak_mib: f64,
+    torch: String,
+    diffusers: String,
+    threads: usize,
+}
+
+/// diffusers' step time (by the one step rule) and all it printed, as the row shows it.
+fn reference(size: usize, steps: usize) -> std::result::Result<(f64, serde_json::Value), String> {
     // The reference's tokenizers read vkdiff's built-in vocabulary, written where it can find it.
     let tokenizers = std::env::temp_dir().join(format!("vkdiff-bench-gen-tokenizers-{}", std::process::id()));
     let written =
@@ -137,12 +151,14 @@ fn reference(size: usize, steps: usize) -> std::result::Result<serde_json::Value
     let result = written.map_err(|e| e.to_string()).and_then(|()| {
         let configs = [SDXL_BASE_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_BIGG_CONFIG, SDXL_VAE_CONFIG].map(String::from);
         let tokenizers = tokenizers.display().to_string();
-        crate::cpu_reference::run_python_reference(
+        crate::cpu_reference::run_python_reference::<GenTimes, _>(
             REFERENCE,
             configs.into_iter().chain([tokenizers, size.to_string(), steps.to_string()]),
             None,
         )
     });
     let _ = std::fs::remove_dir_all(&tokenizers);
-    result
+    let out = result?;
+    let step_s = steps_after_first(&out.steps).map_err(|why| format!("{}: {why}", REFERENCE.path))?.median;
+    Ok((step_s, serde_json::to_value(&out).map_err(|e| e.to_string())?))
 }

@@ -15,6 +15,7 @@ mod profile;
 mod random_models;
 pub mod report;
 mod scene;
+mod step_rate;
 mod unet;
 mod vae;
 mod workflow;

@@ -7,7 +7,7 @@ use std::time::Instant;
 use vkdiff_lora::{LoraFile, LoraMerger, Targets};
 use vkdiff_networks::{Checkpoint, UNet, UNetConfig};
 
-const REFERENCE: &str = include_str!("../../tools/lora_merge_cpu_reference.py");
+const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("lora_merge_cpu_reference.py");
 
 #[derive(clap::Args)]
 pub struct LoraArgs {
@@ -102,6 +102,13 @@ pub(super) fn write_lora(path: &std::path::Path, shapes: &[(String, [usize; 2])]
 
 fn reference(shapes: &[(String, [usize; 2])], rank: usize) -> std::result::Result<f64, String> {
     let job = serde_json::json!({ "rank": rank, "shapes": shapes.iter().map(|(_, s)| s).collect::<Vec<_>>() });
-    let v = crate::cpu_reference::run_python_reference(REFERENCE, [] as [&str; 0], Some(&job.to_string()))?;
-    v["merge_s"].as_f64().ok_or_else(|| "no merge_s in the reference output".into())
+    let out: MergeTime =
+        crate::cpu_reference::run_python_reference(REFERENCE, [] as [&str; 0], Some(&job.to_string()))?;
+    Ok(out.merge_s)
+}
+
+/// What `tools/lora_merge_cpu_reference.py` prints (and more, unread).
+#[derive(serde::Deserialize)]
+struct MergeTime {
+    merge_s: f64,
 }

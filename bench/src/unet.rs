@@ -5,13 +5,13 @@
 use crate::kernels::{dtype_name, rand_tensor};
 use crate::peaks;
 use crate::profile::{self, by_kernel, KernelTime, TunedRow};
-use anyhow::{Context as _, Result};
+use anyhow::Result;
 use std::time::{Duration, Instant};
 use vkdiff_args::Precision;
 use vkdiff_networks::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
 use vkdiff_runtime::{Context, Dtype, Tensor};
 
-const REFERENCE: &str = include_str!("../../tools/unet_reference.py");
+const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("unet_reference.py");
 
 /// Where diffusers runs beside us.
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -284,15 +284,18 @@ pub(crate) fn diffusers_unet(
     if let Some(dtype) = cuda {
         script_args.extend(["cuda".to_string(), dtype_name(dtype).to_string()]);
     }
-    let v = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
-    let ms = v["ms"].as_f64().context("no ms").map_err(|e| e.to_string())?;
-    let times_ms = v["times_ms"].as_array().map_or(vec![ms], |t| t.iter().filter_map(|x| x.as_f64()).collect());
-    Ok(Reference {
-        ms,
-        times_ms,
-        peak_mib: v["peak_mib"].as_f64().unwrap_or(0.0),
-        what: crate::cpu_reference::label(&v),
-    })
+    let out: UnetTimes = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
+    Ok(Reference { ms: out.ms, times_ms: out.times_ms, peak_mib: out.peak_mib, what: out.run.label() })
+}
+
+/// What `tools/unet_reference.py` prints.
+#[derive(serde::Deserialize)]
+struct UnetTimes {
+    ms: f64,
+    times_ms: Vec<f64>,
+    peak_mib: f64,
+    #[serde(flatten)]
+    run: crate::cpu_reference::DiffusersRun,
 }
 
 /// "71.5 TFLOP/s", or "38 GFLOP/s" below one TFLOP/s (CPU devices would read "0.0 TFLOP/s").

@@ -9,7 +9,7 @@
 use crate::kernels::dtype_name;
 use crate::profile::{self, by_kernel, KernelTime};
 use crate::unet::ReferenceDevice;
-use anyhow::{Context as _, Result};
+use anyhow::Result;
 use std::time::Instant;
 use vkdiff_args::Precision;
 use vkdiff_networks::{AutoencoderKl, Checkpoint, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
@@ -126,7 +126,7 @@ impl Reference {
     }
 }
 
-const REFERENCE: &str = include_str!("../../tools/vae_reference.py");
+const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("vae_reference.py");
 
 fn reference(config: &str, args: &VaeArgs, device: ReferenceDevice) -> std::result::Result<Reference, String> {
     diffusers_vae(config, args.size, args.samples as usize, device, args.precision.dtype())
@@ -146,18 +146,25 @@ pub(crate) fn diffusers_vae(
         ReferenceDevice::Cuda => "cuda",
     };
     let script_args = [config, &size.to_string(), &samples.to_string(), device, dtype_name(dtype)].map(str::to_string);
-    let v = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
-    let field = |name: &str| v[name].as_f64();
-    let seconds = field("seconds").context("no seconds").map_err(|e| e.to_string())?;
-    let times = v["times"].as_array().map_or(vec![seconds], |t| t.iter().filter_map(|x| x.as_f64()).collect());
-    let what = crate::cpu_reference::label(&v);
+    let out: VaeTimes = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
     Ok(Reference {
-        seconds,
-        times,
-        seconds_tf32: field("seconds_tf32"),
-        peak_mib: field("peak_mib").unwrap_or(0.0),
-        what,
+        seconds: out.seconds,
+        times: out.times,
+        seconds_tf32: out.seconds_tf32,
+        peak_mib: out.peak_mib,
+        what: out.run.label(),
     })
+}
+
+/// What `tools/vae_reference.py` prints; `seconds_tf32` only for float32 on CUDA.
+#[derive(serde::Deserialize)]
+struct VaeTimes {
+    seconds: f64,
+    times: Vec<f64>,
+    seconds_tf32: Option<f64>,
+    peak_mib: f64,
+    #[serde(flatten)]
+    run: crate::cpu_reference::DiffusersRun,
 }
 
 /// The latents a `size`² decode starts from: a fixed pattern, the same in every run.

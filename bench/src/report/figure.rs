@@ -14,11 +14,12 @@ pub struct Runs {
 }
 
 impl Runs {
+    /// None for no values, or any that is not a finite number (never dropped quietly).
     pub fn of(values: &[f64]) -> Option<Runs> {
-        let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
-        if v.is_empty() {
+        if values.is_empty() || !values.iter().all(|x| x.is_finite()) {
             return None;
         }
+        let mut v = values.to_vec();
         v.sort_by(f64::total_cmp);
         let n = v.len();
         let median = if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 };
@@ -121,6 +122,7 @@ mod tests {
         assert_eq!(Runs::of(&[4.0, 1.0, 2.0, 3.0]).unwrap().median, 2.5);
         assert!((r.spread() - 1.0).abs() < 1e-12);
         assert_eq!(Runs::of(&[f64::NAN]), None);
+        assert_eq!(Runs::of(&[1.0, f64::INFINITY]), None);
     }
 
     #[test]

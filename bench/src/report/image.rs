@@ -6,9 +6,11 @@ use super::figure::{Figure, Reference, Runs};
 use super::Plan;
 use crate::dataset::{make_set, model_settings, paper_set, random_workflow};
 use crate::random_models::style_images;
+use crate::step_rate::with_untimed_steps;
 use anyhow::Result;
 use std::time::Duration;
 use vkdiff_lora::LoraFile;
+use vkdiff_pipeline::dataset::StageTimes;
 use vkdiff_pipeline::{
     ControlNetSettings, IpAdapterSettings, ModelSettings, RgbImage, TimestepSpacing, WorkflowModels,
 };
@@ -48,13 +50,38 @@ impl Workflow {
 }
 
 /// One image made as a set of one: its wall time, its set's once-per-set setup, its stages.
+#[derive(Debug, PartialEq)]
 struct ImageRun {
     /// What a further image of a set costs: the wall time without the set's setup, with the
-    /// steps not timed added at the timed steps' rate.
+    /// steps not timed added at the step rate.
     per_image: f64,
     /// What the set of one cost, its setup included (steps counted the same way).
     whole: f64,
+    /// Each stage as it was timed (the steps not run at the step rate): the scene and the
+    /// writing run on threads of their own beside the denoiser, so the stages need not add up
+    /// to the image, and nothing is left to be "the rest" by subtraction.
     parts: Vec<(String, f64)>,
+}
+
+impl ImageRun {
+    /// From a set of one's wall time and its stages, with the steps up to `total_steps` not run
+    /// counted at the step rate (`step_rate`).
+    fn of(wall: Duration, t: &StageTimes, total_steps: usize) -> Result<ImageRun> {
+        let secs = Duration::as_secs_f64;
+        let steps: Vec<f64> = t.steps.iter().map(secs).collect();
+        let ran = secs(&wall) - secs(&t.setup);
+        let per_image = with_untimed_steps(ran, &steps, total_steps).map_err(anyhow::Error::msg)?;
+        let parts = [
+            ("scene (its own thread)", secs(&t.scene)),
+            ("guides", secs(&t.guides)),
+            ("denoise", secs(&t.denoise()) + per_image - ran),
+            ("VAE", secs(&t.vae)),
+            ("writing (its own thread)", secs(&t.write)),
+            ("once per set (prompt, styles, recording)", secs(&t.setup)),
+        ];
+        let parts = parts.into_iter().map(|(name, v)| (name.to_string(), v)).collect();
+        Ok(ImageRun { per_image, whole: per_image + secs(&t.setup), parts })
+    }
 }
 
 /// How a figure's image is sampled: the paper's steps with guidance, or SDXL-Lightning's recipe
@@ -76,8 +103,12 @@ impl Steps {
     }
 
     fn note(&self) -> Option<String> {
-        (self.timed < self.total)
-            .then(|| format!("{} of the {} steps timed, the others counted at their rate", self.timed, self.total))
+        (self.timed < self.total).then(|| {
+            format!(
+                "{} of the {} steps timed, the others counted at the median of the timed steps after the first",
+                self.timed, self.total
+            )
+        })
     }
 }
 
@@ -92,17 +123,7 @@ fn image_run(models: &mut WorkflowModels, plan: &Plan, steps: Steps, styles: &[V
         settings.sampling.schedule.spacing = Some(TimestepSpacing::Trailing);
     }
     let (report, wall) = make_set(models, &settings, styles, 1, true)?;
-    let t = &report.times;
-    let secs = Duration::as_secs_f64;
-    let step = secs(&t.denoise) / steps.timed as f64;
-    let denoise = step * steps.total as f64;
-    let per_image = secs(&wall) - secs(&t.setup) + denoise - secs(&t.denoise);
-    let named = [("scene", secs(&t.scene)), ("guides", secs(&t.guides)), ("denoise", denoise), ("VAE", secs(&t.vae))];
-    let mut parts: Vec<(String, f64)> = named.iter().map(|(n, v)| (n.to_string(), *v)).collect();
-    let counted: f64 = named.iter().map(|(_, v)| v).sum();
-    parts.push(("writing and the rest".into(), (per_image - counted).max(0.0)));
-    parts.push(("once per set (prompt, styles, recording)".into(), secs(&t.setup)));
-    Ok(ImageRun { per_image, whole: per_image + secs(&t.setup), parts })
+    ImageRun::of(wall, &report.times, steps.total)
 }
 
 /// `plan.runs` images after a warm-up image: the figure.
@@ -260,5 +281,37 @@ pub fn user_settings(plan: &Plan, guides: &super::UserModels) -> ModelSettings {
         ip_adapter,
         loras: guides.loras.clone(),
         ..paper
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_image_is_its_measured_stages_with_the_untimed_steps_at_the_step_rate() {
+        let s = Duration::from_secs_f64;
+        let times = StageTimes {
+            scene: s(1.0),
+            setup: s(2.0),
+            guides: s(0.5),
+            steps: vec![s(4.0), s(1.5)],
+            vae: s(3.0),
+            write: s(0.25),
+            waiting: s(1.0),
+        };
+        // 18 s ran beside the setup; 28 steps more at the second step's 1.5 s.
+        let run = ImageRun::of(s(20.0), &times, 30).unwrap();
+        let parts = [
+            ("scene (its own thread)", 1.0),
+            ("guides", 0.5),
+            ("denoise", 5.5 + 28.0 * 1.5),
+            ("VAE", 3.0),
+            ("writing (its own thread)", 0.25),
+            ("once per set (prompt, styles, recording)", 2.0),
+        ];
+        let parts = parts.map(|(n, v)| (n.to_string(), v)).to_vec();
+        assert_eq!(run, ImageRun { per_image: 18.0 + 42.0, whole: 62.0, parts });
+        assert!(ImageRun::of(s(20.0), &StageTimes { steps: vec![s(4.0)], ..times }, 30).is_err());
     }
 }

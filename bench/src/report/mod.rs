@@ -7,6 +7,7 @@ mod figure;
 mod image;
 mod networks;
 mod peer;
+mod references;
 mod system;
 mod table;
 
@@ -56,9 +57,10 @@ pub enum ReferenceChoice {
 pub struct ReportArgs {
     #[command(flatten)]
     device: vkdiff_args::DeviceArgs,
-    /// The small suite: 512² images with 2 of their 30 steps timed (the rest counted at their
-    /// rate), the UNet and VAE at 512² in f16, one timed run of each after its warm-up; for CPU
-    /// devices and a first look. Reports of the two suites do not compare.
+    /// The small suite: 512² images with 2 of their 30 steps timed (the rest counted at the
+    /// median of the timed steps after the first), the UNet and VAE at 512² in f16, one timed run
+    /// of each, no warm-up image on either side; for CPU devices and a first look. Reports of the
+    /// two suites do not compare.
     #[arg(long)]
     quick: bool,
     /// Where the reference beside each figure runs (diffusers for the networks, numpy for the
@@ -126,8 +128,9 @@ pub struct Plan {
     pub steps_timed: usize,
     pub network_size: usize,
     pub runs: usize,
-    /// Whether each figure runs once untimed first (the quick suite's first timed run is its
-    /// warm-up: on CPU devices the kernels compile as they are recorded, not as they first run).
+    /// Whether each figure runs once untimed first, and the paper's image's reference with it
+    /// (the quick suite warms up neither side: on CPU devices vkdiff's kernels compile as they
+    /// are recorded, which the set's setup holds, not as they first run).
     pub warm_up: bool,
     pub reference: ReferenceChoice,
     pub peer_timeout: std::time::Duration,
@@ -225,7 +228,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     // vkdiff's own figures first, in case the references do not finish (a lent GPU's minutes).
     report.figures = jobs.iter().map(|(f, _)| f.clone()).collect();
     write(args, &report)?;
-    report.figures = networks::references(&plan, jobs);
+    report.figures = references::references(&plan, jobs);
     print!("{}", table::markdown(&report));
     write(args, &report)?;
     if let Some(out) = &args.out {
@@ -293,6 +296,7 @@ fn image_jobs(
                     steps_timed: plan.steps_timed,
                     steps: plan.steps,
                     dtype: plan.dtype,
+                    warm_up: plan.warm_up,
                 },
                 (Some(_), _) => networks::Job::None("diffusers' pipeline runs beside the whole workflow only".into()),
                 (None, _) => {

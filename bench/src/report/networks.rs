@@ -1,12 +1,12 @@
 //! The report's network and kernel figures: SDXL's UNet and VAE (`bench unet`'s and `bench vae`'s
-//! measurements, run the report's way), the headline products, and the references beside them,
-//! run once the device has let its memory go.
+//! measurements, run the report's way), the headline products, and the reference job each waits
+//! for (`references.rs` runs them once the device has let its memory go).
 
 use super::figure::{Figure, Reference, Runs};
-use super::{Plan, ReferenceChoice};
+use super::Plan;
 use crate::kernels::{dtype_name, headline};
-use crate::unet::{diffusers_unet, time_unet, RandomInputs, ReferenceDevice};
-use crate::vae::{diffusers_vae, time_whole_decode};
+use crate::unet::{time_unet, RandomInputs};
+use crate::vae::time_whole_decode;
 use anyhow::Result;
 use std::path::Path;
 use vkdiff_networks::{AutoencoderKl, Checkpoint, UNet, UNetConfig, SDXL_BASE_CONFIG, SDXL_VAE_CONFIG};
@@ -14,13 +14,15 @@ use vkdiff_runtime::{Context, Dtype};
 
 /// The reference a figure waits for, run after the device is released.
 pub enum Job {
-    /// diffusers' ControlNet + IP-Adapter pipeline; `configs` its models' configs as JSON.
+    /// diffusers' ControlNet + IP-Adapter pipeline; `configs` its models' configs as JSON;
+    /// `warm_up` whether it makes an untimed image first, as vkdiff did.
     Workflow {
         configs: String,
         size: usize,
         steps_timed: usize,
         steps: usize,
         dtype: Dtype,
+        warm_up: bool,
     },
     Unet {
         config: String,
@@ -47,9 +49,6 @@ pub enum Job {
     },
     None(String),
 }
-
-const KERNELS_REFERENCE: &str = include_str!("../../../tools/kernels_reference.py");
-const WORKFLOW_REFERENCE: &str = include_str!("../../../tools/workflow_reference.py");
 
 /// The configs diffusers' pipeline is built from: SDXL base's with its depth ControlNet, or those
 /// of a user's diffusers folders (None for single files or without a ControlNet); `user` is the
@@ -209,78 +208,4 @@ pub fn kernels(ctx: &Context, plan: &Plan) -> Result<Vec<(Figure, Job)>> {
             (figure, Job::Kernel { id: h.id, dtype })
         })
         .collect())
-}
-
-/// Runs each figure's reference (the device released: a CPU reference needs the memory) and
-/// writes it into the figure.
-pub fn references(plan: &Plan, jobs: Vec<(Figure, Job)>) -> Vec<Figure> {
-    let device = match plan.reference {
-        ReferenceChoice::None => None,
-        ReferenceChoice::Cpu => Some(ReferenceDevice::Cpu),
-        ReferenceChoice::Cuda => Some(ReferenceDevice::Cuda),
-    };
-    let mut kernels: Option<Result<serde_json::Value, String>> = None;
-    jobs.into_iter()
-        .map(|(mut figure, job)| {
-            figure.reference = match (device, job) {
-                // The peer runs on vkdiff's own Vulkan device, whatever device diffusers takes.
-                (_, Job::Peer { file, size, steps }) => super::peer::sdcpp(&file, size, steps, plan.peer_timeout),
-                (_, Job::Measured(reference)) => reference,
-                (None, _) => Reference::Missing { why: "not asked for (--reference-device none)".into() },
-                (_, Job::None(why)) => Reference::Missing { why },
-                (Some(d), Job::Workflow { configs, size, steps_timed, steps, dtype }) => {
-                    eprintln!("report: diffusers' pipeline for {}", figure.label);
-                    let mut args = [size, steps_timed, steps, plan.runs].map(|n| n.to_string()).to_vec();
-                    if d == ReferenceDevice::Cuda {
-                        args.extend(["cuda".into(), dtype_name(dtype).into()]);
-                    }
-                    let run = crate::cpu_reference::run_python_reference(WORKFLOW_REFERENCE, args, Some(&configs));
-                    measured(run.map(|v| {
-                        let times =
-                            v["times"].as_array().map_or(vec![], |a| a.iter().filter_map(|x| x.as_f64()).collect());
-                        (times, crate::cpu_reference::label(&v))
-                    }))
-                }
-                (Some(d), Job::Unet { config, latent, batch, dtype }) => {
-                    eprintln!("report: diffusers' UNet for {}", figure.label);
-                    let cuda = (d == ReferenceDevice::Cuda).then_some(dtype);
-                    measured(diffusers_unet(&config, latent, batch, plan.runs, cuda).map(|r| (r.times_ms, r.what)))
-                }
-                (Some(d), Job::Vae { config, size, dtype }) => {
-                    eprintln!("report: diffusers' VAE for {}", figure.label);
-                    let dtype = if d == ReferenceDevice::Cpu { Dtype::F32 } else { dtype };
-                    measured(diffusers_vae(&config, size, plan.runs, d, dtype).map(|r| (r.times, r.what)))
-                }
-                (Some(d), Job::Kernel { id, dtype }) => {
-                    let all = kernels.get_or_insert_with(|| {
-                        eprintln!("report: torch's kernels");
-                        let mut args = vec![plan.runs.to_string()];
-                        if d == ReferenceDevice::Cuda {
-                            args.extend(["cuda".into(), dtype_name(dtype).into()]);
-                        }
-                        crate::cpu_reference::run_python_reference(KERNELS_REFERENCE, args, None)
-                    });
-                    measured(all.clone().map(|v| {
-                        let rates = v[id].as_array().map_or(vec![], |a| a.iter().filter_map(|x| x.as_f64()).collect());
-                        let what = format!(
-                            "torch {}, {}",
-                            v["torch"].as_str().unwrap_or("?"),
-                            v["where"].as_str().unwrap_or("?")
-                        );
-                        (rates, what)
-                    }))
-                }
-            };
-            figure
-        })
-        .collect()
-}
-
-/// The median of a reference's runs, or why it could not run.
-fn measured(result: std::result::Result<(Vec<f64>, String), String>) -> Reference {
-    match result.map(|(values, what)| (Runs::of(&values), what)) {
-        Ok((Some(runs), what)) => Reference::Measured { value: runs.median, what },
-        Ok((None, _)) => Reference::Missing { why: "the reference printed no timings".into() },
-        Err(why) => Reference::Missing { why },
-    }
 }

@@ -5,9 +5,11 @@
 //! device is released (tools/sdcpp_reference.py), bounded, since its loader was seen stopping at
 //! its second tensor on lavapipe: a run that does not finish says so instead of a number.
 
-use super::figure::{Figure, Reference, Runs};
+use super::figure::{Figure, Reference};
 use super::networks::Job;
 use super::Plan;
+use crate::cpu_reference::{script, Script};
+use crate::step_rate::steps_after_first;
 use anyhow::Result;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -15,7 +17,16 @@ use vkdiff_networks::{write_random_single_file, SdxlConfigs};
 use vkdiff_pipeline::{Guides, Sdxl};
 use vkdiff_runtime::Context;
 
-const SDCPP_REFERENCE: &str = include_str!("../../../tools/sdcpp_reference.py");
+const SDCPP_REFERENCE: Script = script!("sdcpp_reference.py");
+
+/// What `tools/sdcpp_reference.py` prints: the load, each sampling step as sd.cpp's progress
+/// line gives it, and what ran.
+#[derive(serde::Deserialize)]
+struct SdcppTimes {
+    load_s: f64,
+    steps: Vec<f64>,
+    what: String,
+}
 
 /// The file both read; `written` is this run's folder that holds it, which the peer's job removes.
 pub struct PeerFile {
@@ -68,7 +79,7 @@ fn write_and_time(ctx: &Context, plan: &Plan, user: Option<&Path>, dir: &Path) -
         label: format!("SDXL text-to-image {size}², a step (batch 2, guidance 5), from one single file"),
         unit: "s".into(),
         higher_is_better: false,
-        runs: Runs::of(&step_s).ok_or_else(|| anyhow::anyhow!("text-to-image ran no step"))?,
+        runs: steps_after_first(&step_s).map_err(anyhow::Error::msg)?,
         first_run: step_s.first().copied(),
         peak_mib: Some(ctx.peak_bytes() as f64 / (1 << 20) as f64),
         parts: vec![
@@ -88,7 +99,8 @@ fn write_and_time(ctx: &Context, plan: &Plan, user: Option<&Path>, dir: &Path) -
     Ok((figure, job))
 }
 
-/// sd.cpp's median step on the same file and device, or why there is none; the file goes.
+/// sd.cpp's step on the same file and device (the median of its steps after the first, as
+/// vkdiff's), or why there is none; the file goes.
 pub fn sdcpp(file: &PeerFile, size: usize, steps: usize, timeout: Duration) -> Reference {
     eprintln!("report: stable-diffusion.cpp's text-to-image from the same file (at most {} s)", timeout.as_secs());
     let args = [file.model.display().to_string(), size.to_string(), steps.to_string()];
@@ -96,24 +108,9 @@ pub fn sdcpp(file: &PeerFile, size: usize, steps: usize, timeout: Duration) -> R
     if let Some(dir) = &file.written {
         let _ = std::fs::remove_dir_all(dir);
     }
-    match run {
-        Ok(v) => {
-            let times: Vec<f64> =
-                v["steps"].as_array().map_or(vec![], |a| a.iter().filter_map(|x| x.as_f64()).collect());
-            match Runs::of(&times) {
-                Some(runs) => Reference::Measured {
-                    value: runs.median,
-                    what: format!(
-                        "{}, loaded in {:.0} s",
-                        v["what"].as_str().unwrap_or("stable-diffusion.cpp"),
-                        v["load_s"].as_f64().unwrap_or(0.0)
-                    ),
-                },
-                None => Reference::Missing { why: "stable-diffusion.cpp reported no step".into() },
-            }
-        }
-        Err(why) => Reference::Missing {
-            why: format!("stable-diffusion.cpp (tools/sdcpp_reference.py, cyllama-vulkan): {why}"),
-        },
-    }
+    let rate = run.and_then(|out: SdcppTimes| {
+        let step = steps_after_first(&out.steps).map_err(|why| format!("{}: {why}", SDCPP_REFERENCE.path))?;
+        Ok(Reference::Measured { value: step.median, what: format!("{}, loaded in {:.0} s", out.what, out.load_s) })
+    });
+    rate.unwrap_or_else(|why| Reference::Missing { why: format!("stable-diffusion.cpp (cyllama-vulkan): {why}") })
 }

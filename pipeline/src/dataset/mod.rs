@@ -19,14 +19,13 @@ mod sources;
 mod stats;
 mod stop;
 
-pub use canvas::{bar_chart, Canvas};
 pub use disk::{parse_size, size, DiskGuard, DEFAULT_MIN_FREE};
 pub use export::{export, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions};
 pub use folder::{Dataset, ImageRecord, Pending, VersionChange, ANNOTATIONS, MANIFEST};
 pub use job::{DatasetEvent, DatasetJob, Finish, ShardRequest};
 pub use merge::{merge, Merged};
 pub use plan::{choose, image_seed, Choice, ImageFiles, Shard};
-pub use preview::{data_uri, escape as html_escape, preview, Preview};
+pub use preview::{escape as html_escape, preview, Preview};
 pub use run::{generate, Progress, Report, RunOptions, StageTimes};
 pub use settings::{read_prompts, Crops, DatasetSettings};
 pub use sources::{RenderedFormat, RenderedScenes, SceneSource, DEFAULT_FAR};

@@ -54,10 +54,18 @@ pub struct StageTimes {
     pub setup: Duration,
     /// Per batch: the ControlNet's images encoded, the inputs written.
     pub guides: Duration,
-    pub denoise: Duration,
+    /// Each denoising step, batch after batch.
+    pub steps: Vec<Duration>,
     pub vae: Duration,
     pub write: Duration,
     pub waiting: Duration,
+}
+
+impl StageTimes {
+    /// All the denoising steps.
+    pub fn denoise(&self) -> Duration {
+        self.steps.iter().sum()
+    }
 }
 
 pub struct Report {
@@ -103,6 +111,7 @@ pub fn generate(
     on_progress: &mut dyn FnMut(Progress),
 ) -> Result<Report> {
     let total = pending.done + pending.images();
+    let start = Instant::now();
     // Every prompt once, first: batches group images by their prompts' token counts.
     let sampling = &settings.sampling;
     let texts = (settings.prompts.iter().enumerate())
@@ -131,7 +140,7 @@ pub fn generate(
         styles,
         texts,
         tokens: HashMap::new(),
-        times: StageTimes::default(),
+        times: StageTimes { setup: start.elapsed(), ..StageTimes::default() },
         denoiser: None,
         recordings: 0,
     };
@@ -300,7 +309,7 @@ impl<'a> Loop<'a> {
         self.times.setup += start.elapsed();
         let out = denoiser.run(&inputs, &mut |step, steps| on_progress(Progress::Step { step, steps }))?;
         self.times.guides += out.prepare;
-        self.times.denoise += out.steps.iter().sum::<Duration>();
+        self.times.steps.extend(&out.steps);
         let shape = denoiser.latent_shape();
         if !self.models.sdxl.decode_fits_now() {
             // The plan counted the weights alone: the recorded passes make room, and are

@@ -1,11 +1,14 @@
 //! `vkdiff bench compare`: reports of one suite side by side (compare-llama-bench's way): a
 //! column per report (device · driver · build), a row per figure, each value beside its speed
-//! relative to the first report; as text, Markdown, or an HTML page with a bar chart per group.
+//! relative to the first report; as text, Markdown, or an HTML page with an SVG chart per group.
+
+mod chart;
 
 use crate::report::{show, Figure, Report};
 use anyhow::{Context as _, Result};
+use chart::{Bar, FigureBars};
 use std::path::PathBuf;
-use vkdiff_pipeline::dataset::{data_uri, html_escape as escape};
+use vkdiff_pipeline::dataset::html_escape as escape;
 
 #[derive(clap::Args)]
 pub struct CompareArgs {
@@ -15,7 +18,8 @@ pub struct CompareArgs {
     /// Print Markdown instead of aligned text.
     #[arg(long)]
     markdown: bool,
-    /// Also write a self-contained HTML page with a chart per group.
+    /// Also write a self-contained HTML page with a chart per group (SVG: speeds relative to the
+    /// first report on a log scale).
     #[arg(long, value_name = "OUT.html")]
     html: Option<PathBuf>,
 }
@@ -120,20 +124,20 @@ pub fn run(args: &CompareArgs) -> Result<()> {
     Ok(())
 }
 
-/// A group's chart: a bar per figure and report, the speed relative to the first report in
-/// percent (100 = the first report's own).
-fn chart(reports: &[Named], ids: &[(String, String, String)], group: &str) -> Vec<u8> {
-    let mut bars = Vec::new();
-    for (n, (id, ..)) in ids.iter().filter(|(_, g, _)| g == group).enumerate() {
-        let Some(base) = figure(&reports[0].report, id) else { continue };
-        for r in reports {
-            if let Some(f) = figure(&r.report, id) {
-                bars.push((format!("{}{}", n + 1, r.letter), (100.0 * relative(f, base)).round() as u64));
-            }
-        }
-    }
-    let title = format!("{} - SPEED, % OF A", group.to_uppercase());
-    vkdiff_pipeline::dataset::bar_chart(&title, "FIGURE AND REPORT", &bars).png()
+/// A group's chart: for each figure a bar per report holding it, its speed relative to the
+/// first report (a figure the first lacks has no bars).
+fn chart(reports: &[Named], ids: &[(String, String, String)], group: &str) -> String {
+    let figures: Vec<FigureBars> = (ids.iter().filter(|(_, g, _)| g == group).enumerate())
+        .filter_map(|(n, (id, _, label))| {
+            let base = figure(&reports[0].report, id)?;
+            let bars = reports.iter().filter_map(|r| {
+                let f = figure(&r.report, id)?;
+                Some(Bar { letter: r.letter, ratio: relative(f, base), value: show(f.runs.median, &f.unit) })
+            });
+            Some(FigureBars { number: n + 1, label: label.clone(), bars: bars.collect() })
+        })
+        .collect();
+    chart::svg(&format!("{group}: speed relative to A"), &figures)
 }
 
 fn page(reports: &[Named], ids: &[(String, String, String)]) -> String {
@@ -174,13 +178,12 @@ fn page(reports: &[Named], ids: &[(String, String, String)]) -> String {
             }
             body += "</tr>\n";
         }
-        let uri = data_uri(&chart(reports, ids, group));
-        body += &format!("</table>\n<img alt=\"{} chart\" src=\"{uri}\">\n", escape(group));
+        body += &format!("</table>\n<figure>\n{}</figure>\n", chart(reports, ids, group));
     }
     format!(
         "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>vkdiff bench compare</title>\n<style>\nbody \
          {{ background: #ffffff; color: #1e1e1e; font-family: sans-serif; margin: 24px; }}\ntable {{ border-collapse: \
-         collapse; margin: 8px 0; }}\ntd, th {{ border: 1px solid #bbb; padding: 3px 8px; text-align: left; }}\nimg {{ \
-         display: block; margin: 8px 0 24px; }}\n</style></head>\n<body>\n{body}</body></html>\n"
+         collapse; margin: 8px 0; }}\ntd, th {{ border: 1px solid #bbb; padding: 3px 8px; text-align: left; }}\nfigure \
+         {{ margin: 8px 0 24px; }}\n</style></head>\n<body>\n{body}</body></html>\n"
     )
 }
