@@ -18,12 +18,19 @@ pub struct GenArgs {
     /// Image sizes in pixels (square).
     #[arg(long, value_delimiter = ',', default_values_t = [512, 1024])]
     size: Vec<usize>,
-    /// Denoising steps.
-    #[arg(long, default_value_t = 4)]
+    /// Denoising steps: at least 2, as a step's time is the median of those after the first.
+    #[arg(long, default_value_t = 4, value_parser = at_least_two_steps)]
     steps: usize,
     /// f16 (f32 arithmetic, matrix units where the GPU has them) or f32.
     #[arg(long, value_enum, default_value_t = vkdiff_args::Precision::F16)]
     precision: vkdiff_args::Precision,
+}
+
+fn at_least_two_steps(text: &str) -> std::result::Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(steps) if steps >= 2 => Ok(steps),
+        _ => Err("at least 2: a step's time is the median of the timed steps after the first".into()),
+    }
 }
 
 #[derive(serde::Serialize, Default)]
