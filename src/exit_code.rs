@@ -27,9 +27,7 @@ fn classify(cause: &(dyn std::error::Error + 'static)) -> Option<i32> {
         return Some(pipeline(e));
     }
     if let Some(e) = cause.downcast_ref::<vkdiff_eval::EvalError>() {
-        return Some(match e {
-            vkdiff_eval::EvalError::Invalid(_) | vkdiff_eval::EvalError::Setting(_) => USAGE,
-        });
+        return Some(eval(e));
     }
     if let Some(e) = cause.downcast_ref::<vkdiff_networks::Error>() {
         return Some(networks(e));
@@ -61,6 +59,30 @@ fn pipeline(e: &vkdiff_pipeline::Error) -> i32 {
         E::Lora(e) => lora(e),
         E::Render(e) => render(e),
         E::Runtime(e) => device(e),
+        E::Scene(e) => scene(e),
+    }
+}
+
+fn scene(e: &vkdiff_pipeline::dataset::SceneError) -> i32 {
+    use vkdiff_pipeline::dataset::SceneError as E;
+    match e {
+        E::Listing(e) | E::Io { source: e, .. } => io(e),
+        E::Invalid(_) => USAGE,
+    }
+}
+
+fn eval(e: &vkdiff_eval::EvalError) -> i32 {
+    use vkdiff_eval::EvalError as E;
+    match e {
+        E::Invalid(_) | E::Setting(_) => USAGE,
+        E::File(e) => file(e),
+        E::Io { source, .. } => io(source),
+        // One image to fix makes the whole run one to fix; else the first image's reason.
+        E::Unreadable { errors, .. } if errors.iter().any(|e| file(e) == USAGE) => USAGE,
+        E::Unreadable { errors, .. } => errors.first().map_or(USAGE, file),
+        E::Network(e) => networks(e),
+        E::NotFinite(_) => OTHER,
+        E::Context { source, .. } => eval(source),
     }
 }
 
@@ -116,12 +138,15 @@ fn file(e: &FileError) -> i32 {
 }
 
 /// A full disk or quota stops a run that resumes once there is room; a file that is missing,
-/// unreadable or in the way is the command's to fix.
+/// unreadable or in the way is the command's to fix, and so is a file larger than the file
+/// system or the job's `ulimit -f` allows (EFBIG, where SIGXFSZ is ignored): no waiting makes
+/// room for it.
 fn io(e: &std::io::Error) -> i32 {
     match e.kind() {
         ErrorKind::StorageFull | ErrorKind::QuotaExceeded => RESUMABLE,
         ErrorKind::Interrupted => RESUMABLE,
-        ErrorKind::NotFound
+        ErrorKind::FileTooLarge
+        | ErrorKind::NotFound
         | ErrorKind::PermissionDenied
         | ErrorKind::AlreadyExists
         | ErrorKind::NotADirectory

@@ -1,14 +1,22 @@
 //! How a run ends, as a scheduler reads it: exit code 2 for usage and bad input, 3 for the
 //! device, 4 for a stop the same command resumes (a signal, a full disk: dataset_disk_cli.rs),
-//! 1 for anything else, each from a real failure of its kind; and a set begun by another
-//! vkdiff version, refused in one line with nothing changed unless `--allow-version-change`.
+//! 1 for anything else, each from a real failure of its kind; every command and `dataset`
+//! subcommand given each class of failure that applies to it, as tables (exit_codes_cli/); and
+//! a set begun by another vkdiff version, refused in one line with nothing changed unless
+//! `--allow-version-change`.
 
 mod cli;
+#[path = "exit_codes_cli/commands.rs"]
+mod commands;
+#[path = "exit_codes_cli/dataset.rs"]
+mod dataset;
+#[path = "exit_codes_cli/harness.rs"]
+mod harness;
 
 use cli::{command, render_set_of, scratch, tree};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Output, Stdio};
+use std::process::{Command, Output, Stdio};
 
 fn fixture(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures").join(name)
@@ -20,12 +28,19 @@ fn run(args: &[&str], env: &[(&str, &str)]) -> Output {
 
 /// The exit code and the one `error:` line of a failed run.
 fn failure(args: &[&str], env: &[(&str, &str)]) -> (i32, String) {
-    let out = run(args, env);
+    failure_of(command().args(args).env("RUST_BACKTRACE", "0").envs(env.iter().copied()))
+}
+
+/// The exit code and the one `error:` line of a failed run of `command`.
+fn failure_of(command: &mut Command) -> (i32, String) {
+    let out = command.output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
-    assert!(errors.len() == 1, "{args:?}: {stderr}");
-    let code =
-        out.status.code().unwrap_or_else(|| panic!("{args:?} ended by {:?}, not an exit code: {stderr}", out.status));
+    assert!(errors.len() == 1, "{command:?}: {stderr}");
+    let code = out
+        .status
+        .code()
+        .unwrap_or_else(|| panic!("{command:?} ended by {:?}, not an exit code: {stderr}", out.status));
     (code, errors[0].to_string())
 }
 

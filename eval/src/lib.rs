@@ -14,15 +14,46 @@ pub use masks::{bbox_iou, foreground_iou, mask_iou, polygon_rle, union};
 pub use summary::{summarize, CategoryScores, Summary, SummaryRequest};
 use vkdiff_setting::Message;
 
-/// What evaluation can fail with, in one line.
+/// What evaluation can fail with, in one line; each kind kept apart, so that a bad input, a
+/// failing device and a full disk stay distinguishable to whoever acts on the error.
 #[derive(Debug, thiserror::Error)]
 pub enum EvalError {
-    /// An input (file, JSON, image) that cannot be evaluated.
+    /// A file that cannot be read, written or parsed: its path and the reason.
+    #[error(transparent)]
+    File(#[from] vkdiff_formats::Error),
+    /// A file or folder that cannot be read or written, named by what the message says of it
+    /// (a setting and its path, or what was being read).
+    #[error("{what}: {source}")]
+    Io { what: Message, source: std::io::Error },
+    /// An input (JSON, annotation, folder of images) that cannot be evaluated.
     #[error("{0}")]
     Invalid(String),
     /// A setting refused, every setting it names kept as data.
     #[error("{0}")]
     Setting(Message),
+    /// Images that cannot be read, each named: a folder is read whole before any is encoded.
+    #[error(
+        "{} of {total} images cannot be read (nothing was encoded): {}",
+        errors.len(),
+        errors.iter().map(ToString::to_string).collect::<Vec<_>>().join("; ")
+    )]
+    Unreadable { errors: Vec<vkdiff_formats::Error>, total: usize },
+    /// Inception's weights or its run on the device.
+    #[error(transparent)]
+    Network(#[from] vkdiff_networks::Error),
+    /// Arithmetic that gave no number (an SVD that did not converge, a distance not finite).
+    #[error("{0}")]
+    NotFinite(String),
+    /// An error prefixed by the file or the work it concerns.
+    #[error("{what}: {source}")]
+    Context { what: String, source: Box<EvalError> },
+}
+
+impl EvalError {
+    /// `self`, prefixed by `what` (a file, a stage).
+    pub fn context(self, what: impl Into<String>) -> EvalError {
+        EvalError::Context { what: what.into(), source: Box::new(self) }
+    }
 }
 
 pub type Result<T> = std::result::Result<T, EvalError>;

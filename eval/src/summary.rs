@@ -9,6 +9,7 @@ use crate::{EvalError, Result};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::Path;
+use vkdiff_setting::Message;
 
 /// What to score and how.
 pub struct SummaryRequest<'a> {
@@ -64,13 +65,13 @@ fn f1(a: f64, b: f64) -> f64 {
 
 fn read_json(path: &Path) -> Result<Value> {
     let text = std::fs::read_to_string(path)
-        .map_err(|e| EvalError::Invalid(format!("cannot read {}: {e}", path.display())))?;
+        .map_err(|source| EvalError::Io { what: Message::text(format!("cannot read {}", path.display())), source })?;
     serde_json::from_str(&text).map_err(|e| EvalError::Invalid(format!("{} is not JSON: {e}", path.display())))
 }
 
 /// `result`'s error prefixed by the file it came from.
 fn in_file<T>(path: &Path, result: Result<T>) -> Result<T> {
-    result.map_err(|e| EvalError::Invalid(format!("{}: {e}", path.display())))
+    result.map_err(|e| e.context(path.display().to_string()))
 }
 
 /// Scores the predictions against the ground truth.

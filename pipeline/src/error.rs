@@ -35,6 +35,8 @@ pub enum Error {
     Render(#[from] vkdiff_render::RenderError),
     #[error(transparent)]
     Runtime(#[from] vkdiff_runtime::Error),
+    #[error(transparent)]
+    Scene(#[from] crate::dataset::SceneError),
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

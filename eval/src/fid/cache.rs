@@ -27,8 +27,9 @@ impl FeatureCache {
     /// The cache of `folder` under `cache_dir` for features made with `fingerprint` (weights and
     /// precision); an unreadable or stale cache file is treated as empty.
     pub fn open(cache_dir: &Path, folder: &Path, fingerprint: &str) -> Result<FeatureCache> {
-        std::fs::create_dir_all(cache_dir).map_err(|e| {
-            EvalError::Setting(Message::setting("cache_dir").then(format!(" {}: {e}", cache_dir.display())))
+        std::fs::create_dir_all(cache_dir).map_err(|source| EvalError::Io {
+            what: Message::setting("cache_dir").then(format!(" {}", cache_dir.display())),
+            source,
         })?;
         let folder = std::fs::canonicalize(folder).unwrap_or_else(|_| folder.to_path_buf());
         let key = fnv1a64(format!("{}\n{fingerprint}", folder.display()).as_bytes());
@@ -85,7 +86,7 @@ impl FeatureCache {
         ]);
         let values = rows.concat();
         write_safetensors_f32(&self.path, &[("features", &[files.len(), INCEPTION_FEATURES], &values)], &metadata)
-            .map_err(|e| EvalError::Invalid(format!("cannot write the feature cache: {e}")))?;
+            .map_err(|e| EvalError::from(e).context("cannot write the feature cache"))?;
         self.loaded_stamps = stamps;
         Ok(())
     }

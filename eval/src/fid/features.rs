@@ -6,7 +6,7 @@ use super::cache::FeatureCache;
 use crate::{EvalError, Result};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
-use vkdiff_formats::{SafeTensors, TorchPth};
+use vkdiff_formats::{Error as FileError, SafeTensors, TorchPth};
 use vkdiff_networks::{InceptionV3, RgbPixels, TensorSource, INCEPTION_FEATURES};
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_setting::Message;
@@ -18,14 +18,13 @@ const EXTENSIONS: [&str; 3] = ["png", "jpg", "jpeg"];
 pub fn open_weights(path: &Path) -> Result<Box<dyn TensorSource>> {
     let mut head = [0u8; 8];
     let read = std::fs::File::open(path).and_then(|mut f| std::io::Read::read(&mut f, &mut head));
-    let n = read.map_err(|e| EvalError::Invalid(format!("{}: {e}", path.display())))?;
-    let err = |e: vkdiff_formats::Error| EvalError::Invalid(e.to_string());
+    let n = read.map_err(|source| FileError::Io { path: path.to_path_buf(), source })?;
     // A zip archive (torch ≥ 1.6) or a pickle (the legacy format) is torch's; anything else is
     // tried as safetensors, whose own checks name what is wrong.
     if head[..n].starts_with(b"PK") || head[..n].starts_with(&[0x80]) {
-        Ok(Box::new(TorchPth::open(path).map_err(err)?))
+        Ok(Box::new(TorchPth::open(path)?))
     } else {
-        Ok(Box::new(SafeTensors::open(path).map_err(err)?))
+        Ok(Box::new(SafeTensors::open(path)?))
     }
 }
 
@@ -37,10 +36,11 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
     } else {
         dir.to_path_buf()
     };
-    let entries = std::fs::read_dir(&dir).map_err(|e| EvalError::Invalid(format!("{}: {e}", dir.display())))?;
+    let unlisted = |source| FileError::Io { path: dir.clone(), source };
+    let entries = std::fs::read_dir(&dir).map_err(unlisted)?;
     let mut files = Vec::new();
     for entry in entries {
-        let path = entry.map_err(|e| EvalError::Invalid(format!("{}: {e}", dir.display())))?.path();
+        let path = entry.map_err(unlisted)?.path();
         let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase());
         if path.is_file() && ext.is_some_and(|e| EXTENSIONS.contains(&e.as_str())) {
             files.push(std::fs::canonicalize(&path).unwrap_or(path));
@@ -51,8 +51,8 @@ pub fn list_images(dir: &Path) -> Result<Vec<PathBuf>> {
 }
 
 /// Images decoded in parallel, as the encoder reads them.
-fn read_images(files: &[&Path]) -> Vec<std::result::Result<vkdiff_formats::RgbImage, String>> {
-    files.par_iter().map(|f| vkdiff_formats::image::read_image(f).map_err(|e| e.to_string())).collect()
+fn read_images(files: &[&Path]) -> Vec<vkdiff_formats::Result<vkdiff_formats::RgbImage>> {
+    files.par_iter().map(|f| vkdiff_formats::image::read_image(f)).collect()
 }
 
 /// Reads every file as the encoder will, before anything is encoded, so that a bad file costs
@@ -68,12 +68,7 @@ pub fn check_images(files: &[&Path], progress: &mut dyn FnMut(usize, usize)) -> 
     if bad.is_empty() {
         return Ok(());
     }
-    Err(EvalError::Invalid(format!(
-        "{} of {} images cannot be read (nothing was encoded): {}",
-        bad.len(),
-        files.len(),
-        bad.join("; ")
-    )))
+    Err(EvalError::Unreadable { errors: bad, total: files.len() })
 }
 
 /// torch-fidelity's InceptionV3 on a device, a batch of images at a time.
@@ -88,7 +83,7 @@ impl FeatureExtractor {
     pub fn new(ctx: &Context, weights: &Path, dtype: Dtype, batch: usize) -> Result<FeatureExtractor> {
         let src = open_weights(weights)?;
         let net = InceptionV3::load(ctx, dtype, src.as_ref())
-            .map_err(|e| EvalError::Invalid(format!("{}: {e}", weights.display())))?;
+            .map_err(|e| EvalError::from(e).context(weights.display().to_string()))?;
         Ok(FeatureExtractor { net, batch: batch.max(1), fingerprint: format!("{} {dtype:?}", file_stamp(weights)?) })
     }
 
@@ -106,13 +101,10 @@ impl FeatureExtractor {
         progress(done, files.len());
         for chunk in missing.chunks(self.batch) {
             let paths: Vec<&Path> = chunk.iter().map(|&i| files[i].as_path()).collect();
-            let images = read_images(&paths)
-                .into_iter()
-                .collect::<std::result::Result<Vec<_>, String>>()
-                .map_err(EvalError::Invalid)?;
+            let images = read_images(&paths).into_iter().collect::<vkdiff_formats::Result<Vec<_>>>()?;
             let pixels: Vec<RgbPixels> =
                 images.iter().map(|m| RgbPixels { data: &m.pixels, width: m.width, height: m.height }).collect();
-            let features = self.net.features(&pixels).map_err(|e| EvalError::Invalid(e.to_string()))?;
+            let features = self.net.features(&pixels)?;
             for (&i, row) in chunk.iter().zip(features.chunks_exact(INCEPTION_FEATURES)) {
                 if row.iter().any(|v| !v.is_finite()) {
                     return Err(EvalError::Setting(
@@ -136,7 +128,7 @@ impl FeatureExtractor {
 
 /// A file's identity for caches: canonical path, size and modification time.
 pub fn file_stamp(path: &Path) -> Result<String> {
-    let meta = std::fs::metadata(path).map_err(|e| EvalError::Invalid(format!("{}: {e}", path.display())))?;
+    let meta = std::fs::metadata(path).map_err(|source| FileError::Io { path: path.to_path_buf(), source })?;
     let modified =
         meta.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok()).map_or(0, |d| d.as_nanos());
     let full = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());

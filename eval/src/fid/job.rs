@@ -160,7 +160,7 @@ impl FidJob {
         // torch-fidelity draws each KID subset from input1 (the generated set) first.
         let kid = kid(&fake_features, &real_features, INCEPTION_FEATURES, &opts)?;
         if !fid_value.is_finite() {
-            return Err(EvalError::Invalid("FID is not finite: the features hold NaN or infinity".into()));
+            return Err(EvalError::NotFinite("FID is not finite: the features hold NaN or infinity".into()));
         }
         Ok(FidOutcome { fid: fid_value, kid, real, fake })
     }

@@ -77,7 +77,7 @@ fn trace_sqrt_product(f1: MatRef<f64>, f2: MatRef<f64>) -> Result<f64> {
     let mut c = Mat::<f64>::zeros(f1.nrows(), f2.nrows());
     matmul(c.as_mut(), Accum::Replace, f1, f2.transpose(), 1.0, get_global_parallelism());
     let s = c.singular_values().map_err(|e| {
-        EvalError::Invalid(format!("FID: the SVD of the cross-covariance factor did not converge ({e:?})"))
+        EvalError::NotFinite(format!("FID: the SVD of the cross-covariance factor did not converge ({e:?})"))
     })?;
     Ok(s.iter().sum())
 }

@@ -42,7 +42,7 @@ struct DepthScale {
 
 /// The categories of a `categories.json` (ids listed once, names given), and its instance map.
 pub fn read_categories(path: &Path) -> Result<(Vec<Category>, BTreeMap<u32, u32>), SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SceneError::file(path, e.to_string()))?;
+    let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
     let file: CategoriesFile = serde_json::from_str(&text)
         .map_err(|e| SceneError::file(path, format!("not JSON of the categories format: {e}")))?;
     let mut ids = BTreeSet::new();
@@ -102,7 +102,7 @@ pub fn read_folder(dir: &Path, default: &Category) -> Result<(RawScene, Vec<Cate
     };
     let prompt_path = dir.join("prompt.txt");
     let prompt = if prompt_path.is_file() {
-        let text = std::fs::read_to_string(&prompt_path).map_err(|e| SceneError::file(&prompt_path, e.to_string()))?;
+        let text = std::fs::read_to_string(&prompt_path).map_err(|e| SceneError::io(&prompt_path, e))?;
         let text = text.trim().to_string();
         if text.is_empty() {
             return Err(SceneError::file(&prompt_path, "empty".into()));

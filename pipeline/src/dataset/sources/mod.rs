@@ -20,26 +20,46 @@ use vkdiff_setting::Message;
 
 pub use folder::is_scene_folder;
 
-/// Why one rendered scene cannot be used (the scan names the scene).
-#[derive(Debug)]
-pub struct SceneError(String);
+/// Why the rendered scenes, or one of them, cannot be used; the scan prefixes the folder and
+/// the scene. A file is named as it is in its scene folder.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The folder of scenes cannot be listed.
+    #[error("{0}")]
+    Listing(std::io::Error),
+    /// A file of the scene that cannot be read.
+    #[error("{name}: {source}")]
+    Io { name: String, source: std::io::Error },
+    /// What the scene holds that cannot be used: a malformed file, sizes or categories that
+    /// disagree.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// A file's name in its scene folder.
+fn name_of(path: &Path) -> String {
+    path.file_name().map_or(path.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
 
 impl SceneError {
     fn new(why: String) -> SceneError {
-        SceneError(why)
+        SceneError::Invalid(why)
     }
 
     /// `why`, about the file `path` of the scene.
     fn file(path: &Path, why: String) -> SceneError {
-        let name = path.file_name().map_or(path.display().to_string(), |n| n.to_string_lossy().into_owned());
-        SceneError(format!("{name}: {why}"))
+        SceneError::Invalid(format!("{}: {why}", name_of(path)))
+    }
+
+    fn io(path: &Path, source: std::io::Error) -> SceneError {
+        SceneError::Io { name: name_of(path), source }
     }
 
     fn from_file(e: vkdiff_formats::Error) -> SceneError {
         match e {
-            vkdiff_formats::Error::Io { path, source } => SceneError::file(&path, source.to_string()),
+            vkdiff_formats::Error::Io { path, source } => SceneError::io(&path, source),
             vkdiff_formats::Error::Format { path, why } => SceneError::file(&path, why),
-            other => SceneError(other.to_string()),
+            vkdiff_formats::Error::Tensor(why) => SceneError::Invalid(why),
         }
     }
 }
@@ -205,13 +225,16 @@ impl RenderedScenes {
     pub fn scan(dir: &Path, default_category: &str, far: f32) -> Result<RenderedScenes> {
         let refuse =
             |why: String| Error::Setting(Message::setting("scenes").then(format!(" {}: {why}", dir.display())));
+        let within = |e: SceneError| {
+            Error::Context(Message::setting("scenes").then(format!(" {}", dir.display())), Box::new(e.into()))
+        };
         if !(far.is_finite() && far > 0.0) {
             return Err(Error::Setting(Message::setting("far").then(format!(" {far} must be a positive number"))));
         }
         if default_category.trim().is_empty() {
             return Err(Error::Setting(Message::setting("category").then(" must name the category")));
         }
-        let entries = std::fs::read_dir(dir).map_err(|e| refuse(e.to_string()))?;
+        let entries = std::fs::read_dir(dir).map_err(|e| within(SceneError::Listing(e)))?;
         let mut paths: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
         paths.sort();
         let hdf5: Vec<PathBuf> =
@@ -235,7 +258,7 @@ impl RenderedScenes {
             Category { id: 1, name: default_category.trim().into(), supercategory: default_category.trim().into() };
         let names = match format {
             RenderedFormat::BlenderProc if dir.join("categories.json").is_file() => {
-                let (categories, _) = folder::read_categories(&dir.join("categories.json")).map_err(|e| refuse(e.0))?;
+                let (categories, _) = folder::read_categories(&dir.join("categories.json")).map_err(within)?;
                 Some(categories)
             }
             _ => None,
@@ -320,7 +343,8 @@ impl RenderedScenes {
     }
 
     fn refusal(&self, scene: &str, e: SceneError) -> Error {
-        Error::Setting(Message::setting("scenes").then(format!(" {}: scene {scene}: {}", self.dir.display(), e.0)))
+        let what = Message::setting("scenes").then(format!(" {}: scene {scene}", self.dir.display()));
+        Error::Context(what, Box::new(e.into()))
     }
 }
 
