@@ -26,6 +26,9 @@ fn classify(cause: &(dyn std::error::Error + 'static)) -> Option<i32> {
     if let Some(e) = cause.downcast_ref::<vkdiff_pipeline::Error>() {
         return Some(pipeline(e));
     }
+    if let Some(e) = cause.downcast_ref::<vkdiff_scenes::Error>() {
+        return Some(scenes(e));
+    }
     if let Some(e) = cause.downcast_ref::<vkdiff_eval::EvalError>() {
         return Some(eval(e));
     }
@@ -59,12 +62,22 @@ fn pipeline(e: &vkdiff_pipeline::Error) -> i32 {
         E::Lora(e) => lora(e),
         E::Render(e) => render(e),
         E::Runtime(e) => device(e),
-        E::Scene(e) => scene(e),
+        E::Scenes(e) => scenes(e),
     }
 }
 
-fn scene(e: &vkdiff_pipeline::dataset::SceneError) -> i32 {
-    use vkdiff_pipeline::dataset::SceneError as E;
+fn scenes(e: &vkdiff_scenes::Error) -> i32 {
+    use vkdiff_scenes::Error as E;
+    match e {
+        E::Setting(_) => USAGE,
+        E::Context(_, inner) => scenes(inner),
+        E::Scene(e) => scene(e),
+        E::Render(e) => render(e),
+    }
+}
+
+fn scene(e: &vkdiff_scenes::SceneError) -> i32 {
+    use vkdiff_scenes::SceneError as E;
     match e {
         E::Listing(e) | E::Io { source: e, .. } => io(e),
         E::Invalid(_) => USAGE,

@@ -36,7 +36,7 @@ pub enum Error {
     #[error(transparent)]
     Runtime(#[from] vkdiff_runtime::Error),
     #[error(transparent)]
-    Scene(#[from] crate::dataset::SceneError),
+    Scenes(#[from] vkdiff_scenes::Error),
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -1,10 +1,12 @@
 //! Image files as 8-bit RGB, exactly as Pillow gives them: PNG through the `png` crate and JPEG
 //! through our own decoder written to libjpeg-turbo's arithmetic.
 
+mod depth_exr;
 mod grey;
 mod jpeg;
 mod read;
 
+pub use depth_exr::read_depth_exr;
 pub use grey::{read_grey_png, GreyImage};
 pub use read::{decode_image, read_control_image, read_image};
 

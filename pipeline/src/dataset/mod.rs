@@ -15,7 +15,6 @@ mod render_only;
 mod run;
 mod scenes;
 mod settings;
-mod sources;
 mod stats;
 mod stop;
 
@@ -28,6 +27,6 @@ pub use plan::{choose, image_seed, Choice, ImageFiles, Shard};
 pub use preview::{escape as html_escape, preview, Preview};
 pub use run::{generate, Progress, Report, RunOptions, StageTimes};
 pub use settings::{read_prompts, Crops, DatasetSettings};
-pub use sources::{RenderedFormat, RenderedScenes, SceneError, SceneSource, DEFAULT_FAR};
 pub use stats::{stats, write_charts};
 pub use stop::{stop_on_signals, stop_requested};
+pub use vkdiff_scenes::{RenderedFormat, RenderedScenes, SceneError, SceneSource, DEFAULT_FAR};

@@ -5,7 +5,6 @@
 
 use super::plan::ImageFiles;
 use super::settings::DatasetSettings;
-use super::sources::SourceFrame;
 use crate::error::{Error, Result};
 use crate::RgbImage;
 use serde_json::{json, Value};
@@ -19,6 +18,7 @@ use vkdiff_render::crops::CropWindow;
 use vkdiff_render::exr::encode_single_channel;
 use vkdiff_render::png_out::{gray16, rgb8};
 use vkdiff_render::preview::shaded_image;
+use vkdiff_scenes::SourceFrame;
 
 /// One image's share of its scene, ready to be denoised and written.
 pub struct SceneImage {

@@ -3,7 +3,6 @@
 //! style-image sets). They are recorded in `dataset.json` under the flag names, so a run with
 //! other settings into the same folder is refused naming the flag.
 
-use super::sources::SceneSource;
 use crate::error::{Error, Result};
 use crate::schedulers::SchedulerConfig;
 use crate::sdxl::Sdxl;
@@ -16,6 +15,7 @@ use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 use vkdiff_render::control::ControlDepth;
 use vkdiff_render::crops::{centered, centered_window, validate_min_fraction, CropWindow};
+use vkdiff_scenes::SceneSource;
 use vkdiff_setting::Message;
 
 /// How each scene's frame is cut into images.

@@ -11,8 +11,9 @@ use std::path::Path;
 
 pub use clip_preprocess::{center_crop, ClipPreprocess, ResizeTo};
 pub use control::{control_size, control_tensor, VAE_SCALE_FACTOR};
-pub use depth_input::{depth_control_image, read_depth_exr};
+pub use depth_input::depth_control_image;
 pub use resample::{resize_pil, resize_torch, Filter};
+pub use vkdiff_formats::image::read_depth_exr;
 pub use vkdiff_formats::image::{decode_image, read_image};
 pub use vkdiff_render::control::ControlDepth;
 

@@ -1,4 +1,4 @@
-//! Where a dataset's scenes come from, behind one interface: the procedural mushroom bed, or
+//! vkdiff's scene sources. Where a dataset's scenes come from, behind one interface: the procedural mushroom bed, or
 //! scenes rendered elsewhere (`--scenes DIR`: scene folders in the format `vkdiff scene` writes,
 //! or BlenderProc's `.hdf5` files). Each gives, for scene k, a [`Frame`] (depth, instance ids,
 //! each instance's category and attributes) and perhaps the renderer's own image; everything
@@ -8,7 +8,6 @@ mod blenderproc;
 mod folder;
 mod labels;
 
-use crate::error::{Error, Result};
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 use std::collections::BTreeMap;
@@ -19,6 +18,24 @@ use vkdiff_render::scene::{Scene, SceneConfig};
 use vkdiff_setting::Message;
 
 pub use folder::is_scene_folder;
+
+/// What reading scenes can fail with: a setting refused, a scene that cannot be used (prefixed
+/// by the folder and the scene), or the procedural bed's own refusal.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A setting refused, every setting it names kept as data.
+    #[error("{0}")]
+    Setting(Message),
+    /// An error prefixed by what it happened to (the setting and its folder, the scene).
+    #[error("{0}: {1}")]
+    Context(Message, Box<Error>),
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Render(#[from] vkdiff_render::RenderError),
+}
+
+pub type Result<T> = std::result::Result<T, Error>;
 
 /// Why the rendered scenes, or one of them, cannot be used; the scan prefixes the folder and
 /// the scene. A file is named as it is in its scene folder.
@@ -284,7 +301,7 @@ impl RenderedScenes {
             })
             .collect();
         // Every scene read in full, in parallel; the first failure in name order is reported.
-        let checked: Vec<std::result::Result<(RenderedScene, Vec<Category>), Error>> = listed
+        let checked: Vec<Result<(RenderedScene, Vec<Category>)>> = listed
             .into_par_iter()
             .map(|mut scene| {
                 let (raw, categories, prompt) = scenes.read(&scene)?;

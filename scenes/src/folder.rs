@@ -11,12 +11,12 @@
 //! prompt.txt       optional: this scene's prompt
 //! ```
 
-use super::labels::RawScene;
-use super::SceneError;
-use crate::images::read_depth_exr;
+use crate::labels::RawScene;
+use crate::SceneError;
 use serde::Deserialize;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
+use vkdiff_formats::image::read_depth_exr;
 use vkdiff_formats::image::{read_grey_png, read_image};
 use vkdiff_render::coco::Category;
 

@@ -2,7 +2,7 @@
 //! instance map whose ids (as the renderer numbered them, with gaps) become 1..K in ascending
 //! order over the instances that show, each with its category.
 
-use super::SceneError;
+use crate::SceneError;
 use serde_json::{Map, Value};
 use std::collections::BTreeMap;
 use vkdiff_render::frame::{Frame, Instance};

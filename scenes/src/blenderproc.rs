@@ -5,8 +5,8 @@
 //! Category 0 is background (BlenderProc's default for the world). Read in Rust (`hdf5-reader`),
 //! with no HDF5 library on the system.
 
-use super::labels::RawScene;
-use super::SceneError;
+use crate::labels::RawScene;
+use crate::SceneError;
 use hdf5_reader::{ByteOrder, Datatype, Hdf5File};
 use serde::Deserialize;
 use serde_json::{json, Map};
