@@ -116,7 +116,7 @@ fn alone_and_together(
         .collect();
     drop(one);
     if split == Split::Submissions {
-        ctx.choose(|c| c.submit_budget = SubmitBudget { flops: 0.0, dispatches: 1, ..ctx.choices().submit_budget });
+        ctx.choose(|c| c.submit_budget = SubmitBudget { flops: 0.0, dispatches: 1, ..c.submit_budget });
     }
     let together = record(3).run(&items, &mut |_, _| {}).unwrap().latents;
     (alone, together)

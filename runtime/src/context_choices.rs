@@ -12,10 +12,11 @@ impl Context {
 
     /// Changes this context's choices for recordings made from now on; limits above the
     /// device's are lowered to them.
+    /// `change` runs on a copy, outside the lock, so it may read the context (its choices too).
     pub fn choose(&self, change: impl FnOnce(&mut Choices)) {
-        let mut choices = self.shared.choices.lock().unwrap();
+        let mut choices = self.choices();
         change(&mut choices);
-        *choices = choices.within(&self.shared.info);
+        *self.shared.choices.lock().unwrap() = choices.within(&self.shared.info);
     }
 
     /// Turns the GPU paths on or off for this context (tests run both on one device), with the

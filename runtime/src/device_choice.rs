@@ -2,8 +2,9 @@
 //! scheduler gave it (`CUDA_VISIBLE_DEVICES`, `ROCR_VISIBLE_DEVICES`, `SLURM_LOCALID`), else the
 //! best one; and, with `require_gpu`, never the CPU.
 
-use crate::device::{DeviceInfo, DeviceKind, PciAddress};
+use crate::device::{DeviceInfo, DeviceKind};
 use crate::error::{Error, Result};
+use crate::pci::PciAddress;
 use std::fmt;
 use std::str::FromStr;
 use vkdiff_setting::{Environment, Message};

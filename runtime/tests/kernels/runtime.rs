@@ -287,9 +287,7 @@ fn a_wait_past_the_timeout_is_one_clear_error() {
     let a = ctx.upload(&[n, n], Dtype::F32, &random(n * n, 83)).unwrap();
     let y = ctx.zeros(&[n, n], Dtype::F32).unwrap();
     // After the uploads, which on the GPU paths are submissions too.
-    ctx.choose(|c| {
-        c.submit_budget = SubmitBudget { timeout: std::time::Duration::ZERO, ..ctx.choices().submit_budget }
-    });
+    ctx.choose(|c| c.submit_budget = SubmitBudget { timeout: std::time::Duration::ZERO, ..c.submit_budget });
     let err = ctx
         .run(|rec| {
             for _ in 0..8 {
