@@ -6,7 +6,8 @@ mask's pixel count), and so is an unmatched detection by its own area (`loadRes`
 when results carry boxes, else the mask's pixel count). So an object of area exactly 1024 is in
 small and medium, one of 9216 in medium and large. The scene puts ground truth and unmatched
 detections exactly on both bounds and one pixel either side; two ground-truth fields say 1024
-and 9216 over masks of 1023 and 9215 pixels. Rectangles, so that a box and its mask agree.
+and 9216 over masks of 1023 and 9215 pixels; a second category has small objects only.
+Rectangles, so that a box and its mask agree.
 """
 import numpy as np
 from pycocotools import mask as mask_utils
@@ -45,6 +46,11 @@ DETECTIONS = [
     (3, 210, 120, 93, 99, 0.25),  # 9207
 ]
 
+# A second category with small objects only: its medium and large precision and recall are
+# undefined (-1), which every mean over categories must leave out.
+STEMS = [(2, 200, 10, 20, 20, 400)]
+STEM_DETECTIONS = [(2, 201, 11, 20, 20, 0.7), (3, 250, 200, 10, 10, 0.5)]
+
 
 def rectangle(x, y, w, h):
     m = np.zeros((H, W), np.uint8, order="F")
@@ -56,16 +62,18 @@ def scene():
     """Ground truth (with masks and boxes), segm-only results and bbox-only results."""
     images = [{"id": i, "height": H, "width": W, "file_name": f"{i}.png"} for i in (1, 2, 3)]
     anns = []
-    for aid, (img, x, y, w, h, area) in enumerate(GROUND_TRUTH, 1):
+    objects = [(1, *o) for o in GROUND_TRUTH] + [(2, *o) for o in STEMS]
+    for aid, (cat, img, x, y, w, h, area) in enumerate(objects, 1):
         rle = rectangle(x, y, w, h)
-        anns.append({"id": aid, "image_id": img, "category_id": 1, "iscrowd": 0, "area": float(area),
+        anns.append({"id": aid, "image_id": img, "category_id": cat, "iscrowd": 0, "area": float(area),
                      "bbox": [float(x), float(y), float(w), float(h)],
                      "segmentation": {"size": [H, W], "counts": rle["counts"].decode()}})
     gt = {"info": {"description": "vkdiff eval fixture: COCO area-range bounds"}, "images": images,
-          "annotations": anns, "categories": [{"id": 1, "name": "cap"}]}
-    segm = [{"image_id": img, "category_id": 1, "score": score,
+          "annotations": anns, "categories": [{"id": 1, "name": "cap"}, {"id": 2, "name": "stem"}]}
+    detections = [(1, *d) for d in DETECTIONS] + [(2, *d) for d in STEM_DETECTIONS]
+    segm = [{"image_id": img, "category_id": cat, "score": score,
              "segmentation": {"size": [H, W], "counts": rectangle(x, y, w, h)["counts"].decode()}}
-            for img, x, y, w, h, score in DETECTIONS]
-    bbox = [{"image_id": img, "category_id": 1, "score": score, "bbox": [float(x), float(y), float(w), float(h)]}
-            for img, x, y, w, h, score in DETECTIONS]
+            for cat, img, x, y, w, h, score in detections]
+    bbox = [{"image_id": img, "category_id": cat, "score": score, "bbox": [float(x), float(y), float(w), float(h)]}
+            for cat, img, x, y, w, h, score in detections]
     return gt, segm, bbox
