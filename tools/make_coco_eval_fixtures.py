@@ -9,12 +9,19 @@ the boxes, since the first result has one) and as Detectron2 scores it (boxes dr
 the masks); `dt_mixed.json` is the same with some masks missing (`loadRes` makes them the box's
 polygon). The segm-only results are also scored as boxes (`loadRes` takes each box from its mask).
 
+A second ground truth, `gt_area_bounds.json`, puts objects and unmatched detections exactly on
+the area ranges' bounds (32², 96²) and beside them (`coco_area_bounds.py`), scored as masks
+(`dt_area_bounds_segm.json`) and as boxes (`dt_area_bounds_bbox.json`). Every run's AP, AP50,
+AP75 and AR at each cap are kept per area range (`per_area`).
+
 Usage: make_coco_eval_fixtures.py OUT_DIR
-  (writes gt.json, dt_segm.json, dt_bbox.json, dt_both.json, dt_mixed.json, expected.json)
+  (writes gt.json, dt_segm.json, dt_bbox.json, dt_both.json, dt_mixed.json, gt_area_bounds.json,
+  dt_area_bounds_segm.json, dt_area_bounds_bbox.json, expected.json)
 Made with pycocotools 2.0.11 and numpy 2.4.6 (Python 3.11); the values of the first three files
 are those pycocotools 2.0.10 gave. The per-category figures were added with pycocotools 2.0.11 and
 numpy 2.4.6 (Python 3.11); the files it writes are byte for byte the earlier ones. So were the
-mIoU and foreground IoU figures (`mask_scores`).
+mIoU and foreground IoU figures (`mask_scores`), and the area-range bounds and `per_area` figures
+(pycocotools 2.0.11, numpy 2.4.6, Python 3.11.7; the earlier files byte for byte the same).
 """
 import contextlib
 import copy
@@ -24,6 +31,7 @@ import json
 import sys
 
 import numpy as np
+from coco_area_bounds import scene as area_bounds_scene
 from pycocotools import mask as mask_utils
 from pycocotools.coco import COCO
 from pycocotools.cocoeval import COCOeval
@@ -106,24 +114,28 @@ results_mixed = [{k: v for k, v in r.items() if not (k == "segmentation" and i %
 results_boxless = [{k: v for k, v in r.items() if k != "bbox"} for r in results_both]
 
 gt = {"info": {"description": "vkdiff eval fixture"}, "images": images, "annotations": anns, "categories": [{"id": 1, "name": "cap"}, {"id": 2, "name": "stem"}]}
+gt_bounds, segm_bounds, bbox_bounds = area_bounds_scene()
 out = sys.argv[1]
-for name, obj in [("gt.json", gt), ("dt_segm.json", results_segm), ("dt_bbox.json", results_bbox), ("dt_both.json", results_both), ("dt_mixed.json", results_mixed)]:
+for name, obj in [("gt.json", gt), ("dt_segm.json", results_segm), ("dt_bbox.json", results_bbox), ("dt_both.json", results_both), ("dt_mixed.json", results_mixed),
+                  ("gt_area_bounds.json", gt_bounds), ("dt_area_bounds_segm.json", segm_bounds), ("dt_area_bounds_bbox.json", bbox_bounds)]:
     with open(f"{out}/{name}", "w") as f:
         json.dump(obj, f)
 
 expected = {"pycocotools": importlib.metadata.version("pycocotools"), "numpy": np.__version__}
 runs = [
-    ("segm", "dt_segm.json", [1, 10, 100], ""),
-    ("bbox", "dt_bbox.json", [1, 10, 100], ""),
-    ("segm", "dt_segm.json", [1, 3, 5], ""),
-    ("segm", "dt_both.json", [1, 10, 100], " both"),
-    ("segm", results_boxless, [1, 10, 100], " both, boxes dropped"),
-    ("segm", "dt_mixed.json", [1, 10, 100], " mixed"),
-    ("bbox", "dt_segm.json", [1, 10, 100], " from masks"),
+    ("segm", "dt_segm.json", [1, 10, 100], "", "gt.json"),
+    ("bbox", "dt_bbox.json", [1, 10, 100], "", "gt.json"),
+    ("segm", "dt_segm.json", [1, 3, 5], "", "gt.json"),
+    ("segm", "dt_both.json", [1, 10, 100], " both", "gt.json"),
+    ("segm", results_boxless, [1, 10, 100], " both, boxes dropped", "gt.json"),
+    ("segm", "dt_mixed.json", [1, 10, 100], " mixed", "gt.json"),
+    ("bbox", "dt_segm.json", [1, 10, 100], " from masks", "gt.json"),
+    ("segm", "dt_area_bounds_segm.json", [1, 10, 100], " area bounds", "gt_area_bounds.json"),
+    ("bbox", "dt_area_bounds_bbox.json", [1, 10, 100], " area bounds", "gt_area_bounds.json"),
 ]
-for iou_type, dt_file, max_dets, label in runs:
+for iou_type, dt_file, max_dets, label, gt_file in runs:
     with contextlib.redirect_stdout(io.StringIO()):
-        coco = COCO(f"{out}/gt.json")
+        coco = COCO(f"{out}/{gt_file}")
         # loadRes fills in area, id and iscrowd on the dicts it is given: give it copies.
         res = coco.loadRes(f"{out}/{dt_file}" if isinstance(dt_file, str) else copy.deepcopy(dt_file))
         e = COCOeval(coco, res, iou_type)
@@ -146,6 +158,13 @@ for iou_type, dt_file, max_dets, label in runs:
     expected[key]["per_category"] = [
         {"id": int(c), "AP": mean(pr[:, :, k, 0, -1]), "AP50": mean(pr[0, :, k, 0, -1]), "AR": mean(rc[:, k, 0, -1])}
         for k, c in enumerate(e.params.catIds)
+    ]
+    # Per area range (e.params.areaRngLbl order), over categories: AP over IoU 0.50:0.95, at
+    # 0.50 and 0.75 (the last cap), and AR at each cap.
+    expected[key]["per_area"] = [
+        {"area": name, "AP": mean(pr[:, :, :, a, -1]), "AP50": mean(pr[0, :, :, a, -1]),
+         "AP75": mean(pr[5, :, :, a, -1]), "AR": [mean(rc[:, :, a, m]) for m in range(len(max_dets))]}
+        for a, name in enumerate(e.params.areaRngLbl)
     ]
 
 # Instance mIoU and foreground IoU, computed apart from COCOeval's IoU code: numpy over the

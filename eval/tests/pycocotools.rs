@@ -1,9 +1,10 @@
 //! `eval/` against pycocotools' COCOeval on fixtures from `tools/make_coco_eval_fixtures.py`
-//! (pycocotools 2.0.10): the twelve statistics to 1e-6, the precision and recall arrays' sums,
-//! and every polygon rasterised pixel for pixel as `frPyObjects` does.
+//! (pycocotools 2.0.10; the area-range bounds 2.0.11): the twelve statistics, per category and
+//! per area range to 1e-6, the precision and recall arrays' sums, and every polygon rasterised
+//! pixel for pixel as `frPyObjects` does.
 
 use serde_json::Value;
-use vkdiff_eval::{evaluate, polygon_rle, union, AreaRule, AreaSource, Dataset, EvalParams, IouType};
+use vkdiff_eval::{evaluate, polygon_rle, union, AreaRule, AreaSource, Dataset, EvalParams, IouType, Stats};
 use vkdiff_render::rle::Rle;
 
 fn fixture(name: &str) -> Value {
@@ -12,13 +13,14 @@ fn fixture(name: &str) -> Value {
 }
 
 fn check(iou_type: IouType, results: &str, max_dets: [usize; 3]) {
-    check_as(iou_type, results, max_dets, AreaRule::LoadRes, "");
+    check_as("gt.json", iou_type, results, max_dets, AreaRule::LoadRes, "");
 }
 
-/// Scores `results` with `rule` and compares to the expected entry `"{iou type} {max_dets}{label}"`.
-fn check_as(iou_type: IouType, results: &str, max_dets: [usize; 3], rule: AreaRule, label: &str) {
+/// Scores `results` against `ground_truth` with `rule` and compares to the expected entry
+/// `"{iou type} {max_dets}{label}"`.
+fn check_as(ground_truth: &str, iou_type: IouType, results: &str, max_dets: [usize; 3], rule: AreaRule, label: &str) {
     let masks = iou_type == IouType::Segm;
-    let mut gt_json = fixture("gt.json");
+    let mut gt_json = fixture(ground_truth);
     // pycocotools 2.0.10's loadRes needs the ground truth's `info`; vkdiff does not.
     gt_json.as_object_mut().unwrap().remove("info");
     let gt = Dataset::ground_truth(&gt_json, masks).unwrap();
@@ -47,6 +49,7 @@ fn check_as(iou_type: IouType, results: &str, max_dets: [usize; 3], rule: AreaRu
             assert!((got - expected).abs() <= 1e-6, "{key}: category {k} {name} = {got}, pycocotools {expected}");
         }
     }
+    check_per_area(&stats, want, &key, max_dets);
     // Instance mIoU over COCOeval's matches, against numpy over pycocotools' decoded masks.
     if key == "segm [1, 10, 100]" {
         let scores = &fixture("expected.json")["mask_scores"]["dt_segm.json"];
@@ -65,6 +68,43 @@ fn check_as(iou_type: IouType, results: &str, max_dets: [usize; 3], rule: AreaRu
     }
 }
 
+/// Per area range, over categories: AP over IoU 0.50:0.95, at 0.50 and at 0.75 (the last cap),
+/// and AR at every cap, against pycocotools' slices of precision and recall.
+fn check_per_area(stats: &Stats, want: &Value, key: &str, max_dets: [usize; 3]) {
+    let [t_n, r_n, k_n, a_n, m_n] = stats.dims;
+    // numpy's mean of the defined (> -1) entries, -1 where none is.
+    let defined_mean = |v: &mut dyn Iterator<Item = f64>| {
+        let (sum, n) = v.filter(|&x| x > -1.0).fold((0.0, 0), |(sum, n), x| (sum + x, n + 1));
+        if n == 0 {
+            -1.0
+        } else {
+            sum / n as f64
+        }
+    };
+    let wanted = want["per_area"].as_array().unwrap();
+    assert_eq!(wanted.len(), a_n, "{key}: area ranges");
+    for (a, w) in wanted.iter().enumerate() {
+        let precision =
+            |t: usize, r: usize, k: usize| stats.precision[(((t * r_n + r) * k_n + k) * a_n + a) * m_n + m_n - 1];
+        let ap = |ts: std::ops::Range<usize>| {
+            defined_mean(&mut ts.flat_map(|t| (0..r_n).flat_map(move |r| (0..k_n).map(move |k| precision(t, r, k)))))
+        };
+        let ar = |m: usize| {
+            defined_mean(
+                &mut (0..t_n).flat_map(|t| (0..k_n).map(move |k| stats.recall[((t * k_n + k) * a_n + a) * m_n + m])),
+            )
+        };
+        let mut figures = vec![("AP".to_string(), ap(0..t_n), &w["AP"]), ("AP50".into(), ap(0..1), &w["AP50"])];
+        figures.push(("AP75".into(), ap(5..6), &w["AP75"]));
+        figures.extend((0..m_n).map(|m| (format!("AR@{}", max_dets[m]), ar(m), &w["AR"][m])));
+        for (name, got, expected) in figures {
+            let expected = expected.as_f64().unwrap();
+            let range = w["area"].as_str().unwrap();
+            assert!((got - expected).abs() <= 1e-6, "{key}: {range} {name} = {got}, pycocotools {expected}");
+        }
+    }
+}
+
 #[test]
 fn segm_statistics_equal_pycocotools() {
     check(IouType::Segm, "dt_segm.json", [1, 10, 100]);
@@ -80,26 +120,35 @@ fn other_detection_caps_equal_pycocotools() {
     check(IouType::Segm, "dt_segm.json", [1, 3, 5]);
 }
 
+/// Objects and unmatched detections exactly on 32² and 96² (and a pixel either side) belong to
+/// both ranges they bound; a ground truth's range is its `area` field, not its mask's pixels.
+#[test]
+fn area_range_bounds_are_closed_as_pycocotools_sets_them() {
+    let bounds = "gt_area_bounds.json";
+    check_as(bounds, IouType::Segm, "dt_area_bounds_segm.json", [1, 10, 100], AreaRule::LoadRes, " area bounds");
+    check_as(bounds, IouType::Bbox, "dt_area_bounds_bbox.json", [1, 10, 100], AreaRule::LoadRes, " area bounds");
+}
+
 #[test]
 fn detector_results_with_boxes_and_masks_take_box_areas_as_load_res_does() {
     let json = fixture("dt_both.json");
     assert_eq!(AreaSource::of_results(&json, AreaRule::LoadRes).unwrap(), AreaSource::Box);
-    check_as(IouType::Segm, "dt_both.json", [1, 10, 100], AreaRule::LoadRes, " both");
+    check_as("gt.json", IouType::Segm, "dt_both.json", [1, 10, 100], AreaRule::LoadRes, " both");
 }
 
 #[test]
 fn area_from_mask_is_detectron2s_rule() {
-    check_as(IouType::Segm, "dt_both.json", [1, 10, 100], AreaRule::Mask, " both, boxes dropped");
+    check_as("gt.json", IouType::Segm, "dt_both.json", [1, 10, 100], AreaRule::Mask, " both, boxes dropped");
 }
 
 #[test]
 fn results_without_a_mask_take_their_box_polygon_as_load_res_does() {
-    check_as(IouType::Segm, "dt_mixed.json", [1, 10, 100], AreaRule::LoadRes, " mixed");
+    check_as("gt.json", IouType::Segm, "dt_mixed.json", [1, 10, 100], AreaRule::LoadRes, " mixed");
 }
 
 #[test]
 fn box_scoring_of_mask_only_results_takes_boxes_from_the_masks() {
-    check_as(IouType::Bbox, "dt_segm.json", [1, 10, 100], AreaRule::LoadRes, " from masks");
+    check_as("gt.json", IouType::Bbox, "dt_segm.json", [1, 10, 100], AreaRule::LoadRes, " from masks");
 }
 
 #[test]

@@ -2,7 +2,8 @@
 //! bit as each does alone, with the whole workflow (ControlNet, IP-Adapter, LoRAs, guidance,
 //! ancestral noise), in f16 and f32, with tensors split into bands past the binding limit, and
 //! with the recording split into one submission per dispatch. A private device context: the
-//! binding limit and the submission budget are changed here.
+//! binding limit and the submission budget are changed here. The dispatches each run makes are
+//! counted: a batch split into bands must run more than one image does, others as many.
 
 use vkdiff_pipeline::images::{read_image, ControlDepth};
 use vkdiff_pipeline::{
@@ -45,13 +46,17 @@ enum Split {
     Submissions,
 }
 
-/// Latents of three images: each alone, then all in one batch, run as `split` says.
-fn alone_and_together(
-    ctx: &Context,
-    precision: Dtype,
-    size: (usize, usize),
-    split: Split,
-) -> (Vec<Vec<f32>>, Vec<Vec<f32>>) {
+/// Three images denoised each alone, then all in one batch.
+struct Runs {
+    alone: Vec<Vec<f32>>,
+    together: Vec<Vec<f32>>,
+    /// Dispatches of the first image's run alone, and of the batch's run.
+    dispatches: (usize, usize),
+}
+
+/// Latents of three images: each alone, then all in one batch, run as `split` says; every
+/// recording timed, so that the dispatches each run makes are counted.
+fn alone_and_together(ctx: &Context, precision: Dtype, size: (usize, usize), split: Split) -> Runs {
     let binding_limit = match split {
         Split::Bands(limit) => Some(limit),
         _ => None,
@@ -109,23 +114,35 @@ fn alone_and_together(
     let record = |batch| {
         Denoiser::record(sdxl, &sampling, models.control_use(), models.ip_use(1), batch, texts[0].tokens).unwrap()
     };
+    ctx.set_profiling(true);
     let one = record(1);
-    let alone = items
+    let (alone, counts): (Vec<Vec<f32>>, Vec<usize>) = items
         .iter()
-        .map(|item| one.run(std::slice::from_ref(item), &mut |_, _| {}).unwrap().latents.remove(0))
-        .collect();
+        .map(|item| {
+            let (mut out, timed) = ctx.profiled(|| one.run(std::slice::from_ref(item), &mut |_, _| {}).unwrap());
+            (out.latents.remove(0), timed.len())
+        })
+        .unzip();
     drop(one);
     if split == Split::Submissions {
         ctx.choose(|c| c.submit_budget = SubmitBudget { flops: 0.0, dispatches: 1, ..c.submit_budget });
     }
-    let together = record(3).run(&items, &mut |_, _| {}).unwrap().latents;
-    (alone, together)
+    ctx.set_profiling(true);
+    let three = record(3);
+    let (together, timed) = ctx.profiled(|| three.run(&items, &mut |_, _| {}).unwrap().latents);
+    Runs { alone, together, dispatches: (counts[0], timed.len()) }
 }
 
 fn check(precision: Dtype, size: (usize, usize), split: Split) {
     let ctx = Context::new(&Default::default(), vkdiff_testkit::settings())
         .unwrap_or_else(|e| panic!("these tests need a Vulkan device and found none usable: {e}"));
-    let (alone, together) = alone_and_together(&ctx, precision, size, split);
+    let Runs { alone, together, dispatches: (one, three) } = alone_and_together(&ctx, precision, size, split);
+    // The batch is one recording of the same layers: as many dispatches as one image, unless
+    // its tensors, three times one image's, were cut into more bands past the binding limit.
+    match split {
+        Split::Bands(limit) => assert!(three > one, "{limit} bytes: the batch ran {three} dispatches, one image {one}"),
+        _ => assert_eq!(three, one, "{split:?}: dispatches of the batch and of one image"),
+    }
     for (k, (a, t)) in alone.iter().zip(&together).enumerate() {
         let differ = a.iter().zip(t).filter(|(x, y)| x.to_bits() != y.to_bits()).count();
         assert_eq!(

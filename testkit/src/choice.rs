@@ -3,12 +3,12 @@
 //! the device runs (`VKDIFF_FRAGMENT`'s where asked) and the workgroup tile the context asks
 //! for (`VKDIFF_MATRIX_TILE`), or VK_NV_cooperative_matrix2's linear product and convolution
 //! where `VKDIFF_LINEAR=cm2` and `VKDIFF_CONV=cm2` ask for them; and attention on the matrix
-//! units where the CI pass of a driver with them says it must, or on VK_NV_cooperative_matrix2's
-//! probe where `VKDIFF_ATTENTION=cm2` asks for it. A regressed selection then fails the test
+//! units (in the products' fragment shape) where the CI pass of a driver with them says it must,
+//! or on VK_NV_cooperative_matrix2's probe where `VKDIFF_ATTENTION=cm2` asks for it. A regressed selection then fails the test
 //! instead of passing on another kernel.
 
 use crate::device::environment;
-use vkdiff_runtime::{Context, Dtype, GemmFamily, Matrix2Probe, ProbeChoice, Variant};
+use vkdiff_runtime::{Context, Dtype, Fragment, GemmFamily, Matrix2Probe, ProbeChoice, Variant};
 
 /// Whether the CI pass runs on a driver whose matrix units must be used.
 pub fn expect_cooperative() -> bool {
@@ -71,6 +71,18 @@ fn due_family(ctx: &Context, dtype: Dtype) -> &'static str {
     }
 }
 
+/// Asserts that a matrix-unit kernel (`_coop`) ran in the fragment shape the device runs, and in
+/// `VKDIFF_FRAGMENT`'s where asked; returns that fragment.
+fn assert_fragment(ctx: &Context, v: &Variant, what: &str) -> Fragment {
+    let f = ctx.info().cooperative_variant().expect("a matrix-unit kernel on a device with a fragment");
+    let shape = [v.param("FM"), v.param("FN"), v.param("FK")];
+    assert_eq!(shape, [Some(f.m), Some(f.n), Some(f.k)], "{what}: {} in the device's fragment", v.kernel);
+    if let Some(asked) = asked_fragment() {
+        assert_eq!(shape, asked.map(Some), "{what}: {} in VKDIFF_FRAGMENT's shape", v.kernel);
+    }
+    f
+}
+
 /// Asserts that every product (GEMM or convolution) in `variants` ran on the family `ctx` takes
 /// for `dtype`, or on VK_NV_cooperative_matrix2's probes where `VKDIFF_LINEAR=cm2` or
 /// `VKDIFF_CONV=cm2` asks for them; with `fallback`, a shape the family cannot take (off the
@@ -85,7 +97,6 @@ pub fn assert_product_family<'a>(
     let products: Vec<&Variant> =
         variants.iter().copied().filter(|v| v.kernel.starts_with("gemm_") || v.kernel.starts_with("conv_")).collect();
     assert!(!products.is_empty(), "{what}: no product kernel ran: {:?}", names(variants));
-    let fragment = ctx.info().cooperative_variant();
     let expected = due_family(ctx, dtype);
     let probes = product_probes_due(ctx, dtype);
     for v in &products {
@@ -97,12 +108,7 @@ pub fn assert_product_family<'a>(
         let allowed = family == Some(expected) || fallback && family == Some("_tiled");
         assert!(allowed, "{what}: {:?} ran {} where {expected} was due", ctx.choices().gemm_family, v.kernel);
         if family == Some("_coop") {
-            let f = fragment.expect("a matrix-unit kernel on a device with a fragment");
-            let shape = [v.param("FM"), v.param("FN"), v.param("FK")];
-            assert_eq!(shape, [Some(f.m), Some(f.n), Some(f.k)], "{what}: {} in the device's fragment", v.kernel);
-            if let Some(asked) = asked_fragment() {
-                assert_eq!(shape, asked.map(Some), "{what}: {} in VKDIFF_FRAGMENT's shape", v.kernel);
-            }
+            let f = assert_fragment(ctx, v, what);
             // The setting's eight-subgroup grid where this kernel has it built in the unit it ran
             // in, else four subgroups.
             let grid = ctx.choices().matrix_tile.eight_subgroup_grid();
@@ -131,8 +137,13 @@ pub fn assert_product_family<'a>(
 /// 64 where `VKDIFF_ATTENTION=cm2` asks for it and the device runs it; on the matrix units for
 /// such heads on a GPU-path context with them, in the CI pass that expects them; `attention_tiled`
 /// for such heads on GPU paths without them (f32, or no units). Contexts that take the quickly
-/// compiled kernels run `attention_wg` instead.
-pub fn assert_attention_kernel(ctx: &Context, dtype: Dtype, head_dim: usize, kernels: &[&str], what: &str) {
+/// compiled kernels run `attention_wg` instead. Attention on the matrix units, wherever it ran,
+/// in the fragment shape the products take.
+pub fn assert_attention_kernel(ctx: &Context, dtype: Dtype, head_dim: usize, variants: &[&Variant], what: &str) {
+    for v in variants.iter().filter(|v| v.kernel == "attention_coop") {
+        assert_fragment(ctx, v, what);
+    }
+    let kernels: Vec<&str> = variants.iter().map(|v| v.kernel).collect();
     let asked = probe_asked(ctx.choices().attention, "VKDIFF_ATTENTION");
     let matrix2 = ctx.info().matrix2_tiles().iter().any(|t| t.probe == Matrix2Probe::Attention);
     if asked && matrix2 && dtype == Dtype::F16 && head_dim <= 64 {
@@ -180,6 +191,6 @@ pub fn assert_network_kernels(ctx: &Context, dtype: Dtype, variants: &[&Variant]
     }
     // Networks without attention (the small ControlNet) have no choice of it to assert.
     if kernels.iter().any(|k| k.starts_with("attention")) {
-        assert_attention_kernel(ctx, dtype, head_dim, &kernels, what);
+        assert_attention_kernel(ctx, dtype, head_dim, variants, what);
     }
 }
