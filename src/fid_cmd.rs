@@ -6,7 +6,7 @@ use anyhow::Result;
 use std::path::{Path, PathBuf};
 use vkdiff_args::Precision;
 use vkdiff_args::Progress;
-use vkdiff_eval::fid::{CacheDir, FidJob, FidRequest, FolderFeatures};
+use vkdiff_eval::fid::{user_cache_base, CacheDir, FidJob, FidRequest, FolderFeatures};
 
 #[derive(clap::Args)]
 pub struct FidArgs {
@@ -48,7 +48,7 @@ pub struct FidArgs {
 pub fn run(args: &FidArgs) -> Result<()> {
     let cache = match (&args.cache_dir, args.cache) {
         (Some(dir), _) => CacheDir::At(dir.clone()),
-        (None, true) => CacheDir::Default,
+        (None, true) => CacheDir::Default { base: user_cache_base(&vkdiff_runtime::Environment::of_process()) },
         (None, false) => CacheDir::Off,
     };
     let job = FidJob::new(FidRequest {

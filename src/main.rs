@@ -59,17 +59,10 @@ fn main() {
     unsafe { libc::signal(libc::SIGPIPE, libc::SIG_DFL) };
     vkdiff_setting::install_version(env!("VKDIFF_VERSION"));
     let cli = parse();
-    // Every VKDIFF_* setting is checked before any work, whether or not the command opens a device.
-    let env = vkdiff_runtime::Environment::of_process();
-    let settings = vkdiff_runtime::Settings::from_environment(&env);
-    if let Err(e) = settings.and(vkdiff_runtime::DeviceChoice::from_environment(None, false, &env)) {
-        eprintln!("error: {e}");
-        std::process::exit(exit_code::USAGE);
-    }
     // The libraries name settings as data; errors here name them by this command's flags.
     let names = if matches!(cli.command, Command::Dataset(_)) { vkdiff_args::dataset_flag } else { vkdiff_args::flag };
     vkdiff_setting::name_settings_with(names);
-    let result = match cli.command {
+    let result = check_environment().map_err(anyhow::Error::from).and_then(|()| match cli.command {
         Command::Scene(args) => scene_cmd::run_scene(args),
         Command::Gen(args) => gen_cmd::run(&args),
         Command::Dataset(args) => dataset_cmd::run(&args),
@@ -77,7 +70,7 @@ fn main() {
         Command::Eval(args) => eval_cmd::run(&args),
         Command::Fid(args) => fid_cmd::run(&args),
         Command::Bench(cmd) => vkdiff_bench::run(cmd),
-    };
+    });
     if let Err(e) = result {
         eprintln!("error: {}", one_line(&e));
         let code = exit_code::of(&e);
@@ -89,6 +82,14 @@ fn main() {
         }
         std::process::exit(code);
     }
+}
+
+/// Every `VKDIFF_*` setting checked before any work, whether or not the command opens a device:
+/// a value one does not take ends the run as any refusal does.
+fn check_environment() -> vkdiff_runtime::Result<()> {
+    let env = vkdiff_runtime::Environment::of_process();
+    vkdiff_runtime::Settings::from_environment(&env)?;
+    vkdiff_runtime::DeviceChoice::from_environment(None, false, &env).map(drop)
 }
 
 /// The command line; `dataset --render-only` needs no `--model`, which every other generating

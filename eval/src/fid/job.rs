@@ -10,7 +10,7 @@ use crate::{EvalError, Result};
 use std::path::{Path, PathBuf};
 use vkdiff_networks::INCEPTION_FEATURES;
 use vkdiff_runtime::{Context, Dtype};
-use vkdiff_setting::Message;
+use vkdiff_setting::{Environment, Message};
 
 /// What to compare and how.
 pub struct FidRequest {
@@ -31,15 +31,20 @@ pub struct FidRequest {
 /// Where features are cached.
 pub enum CacheDir {
     Off,
-    /// `$XDG_CACHE_HOME/vkdiff/fid`, else `~/.cache/vkdiff/fid`.
-    Default,
+    /// `vkdiff/fid` in the user's cache folder, as [`user_cache_base`] found it at the edge.
+    Default {
+        base: Option<PathBuf>,
+    },
     At(PathBuf),
 }
 
-fn default_cache_dir() -> Result<PathBuf> {
-    let base = std::env::var_os("XDG_CACHE_HOME")
-        .map(PathBuf::from)
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")));
+/// The user's cache folder in `env`: `$XDG_CACHE_HOME`, else `~/.cache`; None where neither
+/// variable is set.
+pub fn user_cache_base(env: &Environment) -> Option<PathBuf> {
+    env.raw("XDG_CACHE_HOME").map(PathBuf::from).or_else(|| env.raw("HOME").map(|h| PathBuf::from(h).join(".cache")))
+}
+
+fn default_cache_dir(base: Option<&Path>) -> Result<PathBuf> {
     let base = base.ok_or_else(|| {
         EvalError::Setting(
             Message::setting("cache").then(": neither XDG_CACHE_HOME nor HOME is set; give ").and("cache_dir"),
@@ -110,7 +115,7 @@ impl FidJob {
         let fake = images_of(&request.fake, "fake")?;
         let cache_dir = match &request.cache {
             CacheDir::Off => None,
-            CacheDir::Default => Some(default_cache_dir()?),
+            CacheDir::Default { base } => Some(default_cache_dir(base.as_deref())?),
             CacheDir::At(dir) => Some(dir.clone()),
         };
         let subset_size = request.kid_subset_size.min(real.len()).min(fake.len());
@@ -163,5 +168,22 @@ impl FidJob {
             return Err(EvalError::NotFinite("FID is not finite: the features hold NaN or infinity".into()));
         }
         Ok(FidOutcome { fid: fid_value, kid, real, fake })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_cache_is_under_xdg_cache_home_else_home() {
+        let env = |pairs: &[(&str, &str)]| Environment::from_pairs(pairs.iter().copied());
+        let both = env(&[("XDG_CACHE_HOME", "/x"), ("HOME", "/h")]);
+        assert_eq!(user_cache_base(&both), Some(PathBuf::from("/x")));
+        assert_eq!(user_cache_base(&env(&[("HOME", "/h")])), Some(PathBuf::from("/h/.cache")));
+        assert_eq!(user_cache_base(&env(&[])), None);
+        assert_eq!(default_cache_dir(Some(Path::new("/x"))).unwrap(), PathBuf::from("/x/vkdiff/fid"));
+        let err = default_cache_dir(None).unwrap_err().to_string();
+        assert!(err.contains("neither XDG_CACHE_HOME nor HOME is set"), "{err}");
     }
 }

@@ -9,5 +9,5 @@ pub mod stats;
 
 pub use cache::FeatureCache;
 pub use features::{check_images, file_stamp, list_images, open_weights, FeatureExtractor};
-pub use job::{CacheDir, FidJob, FidOutcome, FidRequest, FolderFeatures};
+pub use job::{user_cache_base, CacheDir, FidJob, FidOutcome, FidRequest, FolderFeatures};
 pub use stats::{fid, kid, Kid, KidOptions};
