@@ -4,14 +4,15 @@
 use anyhow::{Context as _, Result};
 use clap::{Args, Subcommand};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use vkdiff_args::Progress;
 use vkdiff_args::{dataset_flag, CropArgs, SceneSettings};
 use vkdiff_args::{ModelArgs, SamplingArgs};
 use vkdiff_pipeline::dataset::{
     merge, parse_size, read_prompts, size, stop_on_signals, Crops, DatasetEvent, DatasetJob, DatasetSettings, Finish,
-    Merged, Progress as Event, RenderedScenes, Report, RunOptions, SceneSource, ShardRequest, VersionChange,
-    DEFAULT_FAR,
+    Merged, ProceduralBed, Progress as Event, RenderedScenes, Report, RunOptions, SceneSource, ShardRequest,
+    VersionChange, DEFAULT_FAR,
 };
 use vkdiff_pipeline::{recipe_warnings, Sampling};
 
@@ -231,12 +232,12 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
     };
     let crops =
         Crops { count: args.crops.crops, size: args.crops.crop_size, min_fraction: args.crops.crop_min_fraction };
-    let source = match &args.scenes {
+    let source: Arc<dyn SceneSource> = match &args.scenes {
         Some(dir) => {
             eprintln!("reading the scenes in {}", dir.display());
-            SceneSource::Rendered(RenderedScenes::scan(dir, &args.category, args.far)?)
+            Arc::new(RenderedScenes::open(dir, &args.category, args.far)?)
         }
-        None => SceneSource::Procedural(args.scene.config()),
+        None => Arc::new(ProceduralBed::new(args.scene.config())?),
     };
     Ok(DatasetSettings::new(
         args.scene.seed,

@@ -1,11 +1,13 @@
 //! `vkdiff dataset --scenes` refusing what it cannot read, in one line naming it, exit 2, with
-//! nothing written: scene folders missing a file, of mismatched sizes, with an instance without a
-//! category, a category id listed twice or named two ways, an unreadable depth, none at all; and
-//! BlenderProc frames broken one way each (tools/make_scene_fixtures.py writes them with h5py).
+//! nothing written: scene folders missing a file, of mismatched sizes, a category id listed twice
+//! or named two ways, an unreadable depth, none at all; and BlenderProc frames broken one way each
+//! (tools/make_scene_fixtures.py writes them with h5py). What only a scene's pixels show (an
+//! instance without a category) stops the run at that scene, its images before it whole, and the
+//! run resumes once the scene is mended.
 
 mod cli;
 
-use cli::{command, scratch};
+use cli::{command, scratch, tree};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
@@ -64,17 +66,6 @@ fn bad_scenes_are_refused_in_one_line_naming_them() {
                     .unwrap();
             }),
             "scene orchard-b: instances.png: 192×144, the depth is 160×128",
-        ),
-        (
-            "no-category",
-            Box::new(|d: &Path| {
-                let path = d.join("orchard-a/categories.json");
-                let mut c = read_json(&path);
-                let first = c["instances"].as_object().unwrap().keys().next().unwrap().clone();
-                c["instances"].as_object_mut().unwrap().remove(&first);
-                std::fs::write(path, c.to_string()).unwrap();
-            }),
-            "has no category",
         ),
         (
             "twice",
@@ -142,4 +133,41 @@ fn broken_blenderproc_frames_are_refused_in_one_line_naming_them() {
             "{fault}: {line}"
         );
     }
+}
+
+/// orchard-b's categories.json without the category of its first instance.
+fn drop_first_instance(dir: &Path) {
+    let path = dir.join("orchard-b/categories.json");
+    let mut c = read_json(&path);
+    let first = c["instances"].as_object().unwrap().keys().next().unwrap().clone();
+    c["instances"].as_object_mut().unwrap().remove(&first);
+    std::fs::write(path, c.to_string()).unwrap();
+}
+
+#[test]
+fn an_instance_without_a_category_stops_the_run_at_its_scene() {
+    // Listing reads headers and side files only; the instance map is read once, for the images.
+    let dir = changed("no-category", &drop_first_instance);
+    let out_dir = dir.parent().unwrap().join("set");
+    let args = ["dataset", "--render-only", "--scenes", dir.to_str().unwrap(), "--out", out_dir.to_str().unwrap()];
+    let out = command().args(args).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert_eq!(errors.len(), 1, "{stderr}");
+    assert!(errors[0].contains("scene orchard-b") && errors[0].contains("has no category"), "{}", errors[0]);
+    // orchard-a's image is whole; nothing of orchard-b's, and no set-wide annotations yet.
+    let written = tree(&out_dir);
+    for file in ["records/000000.json", "images/000000.png", "masks/000000.png"] {
+        assert!(written.contains_key(file), "{file} missing: {:?}", written.keys());
+    }
+    assert!(written.keys().all(|f| !f.contains("000001") && !f.contains(".tmp")), "{:?}", written.keys());
+    assert!(!written.contains_key("annotations.json"));
+    // Mended, the run resumes into the set one clean run makes.
+    std::fs::copy(scenes("folders").join("orchard-b/categories.json"), dir.join("orchard-b/categories.json")).unwrap();
+    assert!(command().args(args).status().unwrap().success());
+    let clean_dir = dir.parent().unwrap().join("clean");
+    let clean = ["dataset", "--render-only", "--scenes", dir.to_str().unwrap(), "--out", clean_dir.to_str().unwrap()];
+    assert!(command().args(clean).status().unwrap().success());
+    assert!(tree(&out_dir) == tree(&clean_dir), "the resumed set differs from a clean run's");
 }

@@ -6,10 +6,11 @@
 
 use crate::random_models::{gradient_depth, style_images, RandomGuides};
 use anyhow::Result;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::dataset::{
-    generate, Crops, Dataset, DatasetSettings, DiskGuard, Report, RunOptions, SceneSource, Shard,
+    generate, Crops, Dataset, DatasetSettings, DiskGuard, ProceduralBed, Report, RunOptions, Shard,
 };
 use vkdiff_pipeline::images::{ClipPreprocess, ControlDepth};
 use vkdiff_pipeline::{
@@ -226,11 +227,10 @@ pub(crate) fn paper_set(
     DatasetSettings {
         seed: 0,
         count: scenes,
-        source: SceneSource::Procedural(SceneConfig {
-            width: scale(1920),
-            height: scale(1080),
-            ..SceneConfig::default()
-        }),
+        source: Arc::new(
+            ProceduralBed::new(SceneConfig { width: scale(1920), height: scale(1080), ..SceneConfig::default() })
+                .expect("the bench's scene settings are valid"),
+        ),
         crops: Crops { count: crops, size: size as u32, min_fraction: 0.1 },
         control_depth: ControlDepth::Inverse,
         models: Some(models.clone()),

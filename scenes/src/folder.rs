@@ -12,12 +12,12 @@
 //! ```
 
 use crate::labels::RawScene;
+use crate::rendered::{SceneFormat, SceneIndex};
 use crate::SceneError;
 use serde::Deserialize;
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
-use vkdiff_formats::image::read_depth_exr;
-use vkdiff_formats::image::{read_grey_png, read_image};
+use std::path::{Path, PathBuf};
+use vkdiff_formats::image::{depth_exr_size, grey_png_size, image_size, read_depth_exr, read_grey_png, read_image};
 use vkdiff_render::coco::Category;
 
 /// A scene folder is one when it holds a depth file.
@@ -40,8 +40,11 @@ struct DepthScale {
     offset: f64,
 }
 
+/// A `categories.json`'s categories, and its map of instance id → category id.
+type CategoryMap = (Vec<Category>, BTreeMap<u32, u32>);
+
 /// The categories of a `categories.json` (ids listed once, names given), and its instance map.
-pub fn read_categories(path: &Path) -> Result<(Vec<Category>, BTreeMap<u32, u32>), SceneError> {
+pub fn read_categories(path: &Path) -> Result<CategoryMap, SceneError> {
     let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
     let file: CategoriesFile = serde_json::from_str(&text)
         .map_err(|e| SceneError::file(path, format!("not JSON of the categories format: {e}")))?;
@@ -68,67 +71,118 @@ pub fn read_categories(path: &Path) -> Result<(Vec<Category>, BTreeMap<u32, u32>
     Ok((file.categories, instances))
 }
 
-/// Reads the scene folder `dir`. Without categories.json every instance is `default` (id 1).
-pub fn read_folder(dir: &Path, default: &Category) -> Result<(RawScene, Vec<Category>, Option<String>), SceneError> {
-    let (depth, width, height) = read_depth(dir)?;
-    let instances_path = dir.join("instances.png");
-    let grey = read_grey_png(&instances_path).map_err(SceneError::from_file)?;
-    if (grey.width, grey.height) != (width, height) {
-        return Err(SceneError::file(
-            &instances_path,
-            format!("{}×{}, the depth is {width}×{height}", grey.width, grey.height),
-        ));
-    }
-    let labels: Vec<u32> = grey.values.iter().map(|&v| v as u32).collect();
-    let categories_path = dir.join("categories.json");
-    let (categories, category_of) = if categories_path.is_file() {
-        read_categories(&categories_path)?
-    } else {
-        let all: BTreeMap<u32, u32> = labels.iter().filter(|&&l| l != 0).map(|&l| (l, default.id)).collect();
-        (vec![default.clone()], all)
-    };
-    let shaded_path = dir.join("shaded.png");
-    let shaded = if shaded_path.is_file() {
-        let image = read_image(&shaded_path).map_err(SceneError::from_file)?;
-        if (image.width, image.height) != (width, height) {
-            return Err(SceneError::file(
-                &shaded_path,
-                format!("{}×{}, the depth is {width}×{height}", image.width, image.height),
-            ));
-        }
-        Some(image.pixels)
-    } else {
-        None
-    };
-    let prompt_path = dir.join("prompt.txt");
-    let prompt = if prompt_path.is_file() {
-        let text = std::fs::read_to_string(&prompt_path).map_err(|e| SceneError::io(&prompt_path, e))?;
-        let text = text.trim().to_string();
-        if text.is_empty() {
-            return Err(SceneError::file(&prompt_path, "empty".into()));
-        }
-        Some(text)
-    } else {
-        None
-    };
-    let raw = RawScene {
-        width: width as u32,
-        height: height as u32,
-        depth,
-        labels,
-        category_of,
-        attributes: BTreeMap::new(),
-        shaded,
-    };
-    Ok((raw, categories, prompt))
+/// Scene folders: one folder per scene, in name order.
+#[derive(Debug)]
+pub struct SceneFolders {
+    /// The category of every instance of a folder without categories.json (id 1).
+    default: Category,
 }
 
-/// depth.exr, else depth.png scaled by depth.json.
-fn read_depth(dir: &Path) -> Result<(Vec<f32>, usize, usize), SceneError> {
+impl SceneFolders {
+    pub fn new(default_category: &str) -> SceneFolders {
+        let name = default_category.trim().to_string();
+        SceneFolders { default: Category { id: 1, name: name.clone(), supercategory: name } }
+    }
+
+    /// The scene folders among `paths` (hidden ones skipped); None where there is none.
+    pub fn find(paths: &[PathBuf]) -> Option<Vec<PathBuf>> {
+        let folders: Vec<PathBuf> = paths.iter().filter(|p| p.is_dir() && !is_hidden(p)).cloned().collect();
+        folders.iter().any(|f| is_scene_folder(f)).then_some(folders)
+    }
+
+    /// categories.json's categories and instance map, else the default category for every instance.
+    fn categories(&self, dir: &Path) -> Result<Option<CategoryMap>, SceneError> {
+        let path = dir.join("categories.json");
+        path.is_file().then(|| read_categories(&path)).transpose()
+    }
+}
+
+fn is_hidden(path: &Path) -> bool {
+    path.file_name().is_some_and(|n| n.to_string_lossy().starts_with('.'))
+}
+
+impl SceneFormat for SceneFolders {
+    fn name(&self) -> &'static str {
+        "scene folders"
+    }
+
+    fn index(&self, dir: &Path) -> Result<SceneIndex, SceneError> {
+        let (width, height) = depth_size(dir)?;
+        let instances = dir.join("instances.png");
+        let (w, h, _) = grey_png_size(&instances).map_err(SceneError::from_file)?;
+        same_size(&instances, (w, h), (width, height))?;
+        let shaded = dir.join("shaded.png");
+        if shaded.is_file() {
+            same_size(&shaded, image_size(&shaded).map_err(SceneError::from_file)?, (width, height))?;
+        }
+        let categories = match self.categories(dir)? {
+            Some((categories, _)) => categories,
+            None => vec![self.default.clone()],
+        };
+        Ok(SceneIndex { width: width as u32, height: height as u32, prompt: read_prompt(dir)?, categories })
+    }
+
+    fn read(&self, dir: &Path) -> Result<RawScene, SceneError> {
+        let (depth, width, height) = read_depth(dir)?;
+        let instances = dir.join("instances.png");
+        let grey = read_grey_png(&instances).map_err(SceneError::from_file)?;
+        same_size(&instances, (grey.width, grey.height), (width, height))?;
+        let labels: Vec<u32> = grey.values.iter().map(|&v| v as u32).collect();
+        let category_of = match self.categories(dir)? {
+            Some((_, instances)) => instances,
+            None => labels.iter().filter(|&&l| l != 0).map(|&l| (l, self.default.id)).collect(),
+        };
+        let shaded_path = dir.join("shaded.png");
+        let shaded = if shaded_path.is_file() {
+            let image = read_image(&shaded_path).map_err(SceneError::from_file)?;
+            same_size(&shaded_path, (image.width, image.height), (width, height))?;
+            Some(image.pixels)
+        } else {
+            None
+        };
+        let (width, height) = (width as u32, height as u32);
+        Ok(RawScene { width, height, depth, labels, category_of, attributes: BTreeMap::new(), shaded })
+    }
+}
+
+/// Refuses the file `path` of `size` where the depth is `depth`.
+fn same_size(path: &Path, size: (usize, usize), depth: (usize, usize)) -> Result<(), SceneError> {
+    if size == depth {
+        return Ok(());
+    }
+    Err(SceneError::file(path, format!("{}×{}, the depth is {}×{}", size.0, size.1, depth.0, depth.1)))
+}
+
+/// prompt.txt's text, trimmed; an empty one is refused.
+fn read_prompt(dir: &Path) -> Result<Option<String>, SceneError> {
+    let path = dir.join("prompt.txt");
+    if !path.is_file() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&path).map_err(|e| SceneError::io(&path, e))?;
+    let text = text.trim().to_string();
+    if text.is_empty() {
+        return Err(SceneError::file(&path, "empty".into()));
+    }
+    Ok(Some(text))
+}
+
+/// The depth's size from its header: depth.exr, else depth.png with its depth.json checked.
+fn depth_size(dir: &Path) -> Result<(usize, usize), SceneError> {
     let exr = dir.join("depth.exr");
     if exr.is_file() {
-        return read_depth_exr(&exr).map_err(|e| SceneError::new(e.to_string()));
+        return depth_exr_size(&exr).map_err(|e| SceneError::new(e.to_string()));
     }
+    let (png, _) = depth_png(dir)?;
+    let (width, height, bits) = grey_png_size(&png).map_err(SceneError::from_file)?;
+    if bits != 16 {
+        return Err(SceneError::file(&png, "8-bit; depth as PNG is 16-bit grey".into()));
+    }
+    Ok((width, height))
+}
+
+/// depth.png's path and depth.json's scale, checked.
+fn depth_png(dir: &Path) -> Result<(PathBuf, DepthScale), SceneError> {
     let (png, json) = (dir.join("depth.png"), dir.join("depth.json"));
     let text = std::fs::read_to_string(&json).map_err(|_| {
         SceneError::file(&json, "missing: depth.png needs it ({\"scale\": metres per step, \"offset\": 0})".into())
@@ -138,6 +192,16 @@ fn read_depth(dir: &Path) -> Result<(Vec<f32>, usize, usize), SceneError> {
     if !scale.scale.is_finite() || scale.scale <= 0.0 || !scale.offset.is_finite() {
         return Err(SceneError::file(&json, format!("scale {} must be a positive number", scale.scale)));
     }
+    Ok((png, scale))
+}
+
+/// depth.exr, else depth.png scaled by depth.json.
+fn read_depth(dir: &Path) -> Result<(Vec<f32>, usize, usize), SceneError> {
+    let exr = dir.join("depth.exr");
+    if exr.is_file() {
+        return read_depth_exr(&exr).map_err(|e| SceneError::new(e.to_string()));
+    }
+    let (png, scale) = depth_png(dir)?;
     let grey = read_grey_png(&png).map_err(SceneError::from_file)?;
     if grey.bits != 16 {
         return Err(SceneError::file(&png, "8-bit; depth as PNG is 16-bit grey".into()));

@@ -7,7 +7,7 @@ use std::path::Path;
 
 /// The depth channel: `Z`; else one `Depth.Z` or `<layer>.Depth.Z` (Blender's multilayer
 /// files); else `V`; else `R`. Several Depth.Z layers, or none of these, is an error.
-fn pick(names: &[String]) -> std::result::Result<usize, String> {
+pub(super) fn pick(names: &[String]) -> std::result::Result<usize, String> {
     let find = |want: &str| names.iter().position(|n| n == want);
     if let Some(i) = find("Z") {
         return Ok(i);

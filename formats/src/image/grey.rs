@@ -22,13 +22,7 @@ pub fn read_grey_png(path: &Path) -> Result<GreyImage> {
     let mut reader =
         png::Decoder::new(std::io::Cursor::new(bytes)).read_info().map_err(|e| fail(format!("bad PNG: {e}")))?;
     let info = reader.info();
-    let bits = match (info.color_type, info.bit_depth) {
-        (png::ColorType::Grayscale, png::BitDepth::Eight) => 8,
-        (png::ColorType::Grayscale, png::BitDepth::Sixteen) => 16,
-        (color, depth) => {
-            return Err(fail(format!("{color:?} at {depth:?} bits; expected 8- or 16-bit grey (one channel of ids)")))
-        }
-    };
+    let bits = grey_bits(info.color_type, info.bit_depth).map_err(fail)?;
     let (width, height) = (info.width as usize, info.height as usize);
     let mut buf = vec![0; reader.output_buffer_size().ok_or_else(|| fail("too large".into()))?];
     let frame = reader.next_frame(&mut buf).map_err(|e| fail(format!("bad PNG: {e}")))?;
@@ -39,4 +33,13 @@ pub fn read_grey_png(path: &Path) -> Result<GreyImage> {
         rows.flat_map(|row| row[..2 * width].chunks_exact(2).map(|b| u16::from_be_bytes([b[0], b[1]]))).collect()
     };
     Ok(GreyImage { width, height, bits, values })
+}
+
+/// 8 or 16 for grey PNGs; anything else is not a map of values.
+pub(super) fn grey_bits(color: png::ColorType, depth: png::BitDepth) -> std::result::Result<u8, String> {
+    match (color, depth) {
+        (png::ColorType::Grayscale, png::BitDepth::Eight) => Ok(8),
+        (png::ColorType::Grayscale, png::BitDepth::Sixteen) => Ok(16),
+        (color, depth) => Err(format!("{color:?} at {depth:?} bits; expected 8- or 16-bit grey (one channel of ids)")),
+    }
 }

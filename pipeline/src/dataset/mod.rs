@@ -29,4 +29,4 @@ pub use run::{generate, Progress, Report, RunOptions, StageTimes};
 pub use settings::{read_prompts, Crops, DatasetSettings};
 pub use stats::{stats, write_charts};
 pub use stop::{stop_on_signals, stop_requested};
-pub use vkdiff_scenes::{RenderedFormat, RenderedScenes, SceneError, SceneSource, DEFAULT_FAR};
+pub use vkdiff_scenes::{ProceduralBed, RenderedScenes, SceneError, SceneSource, DEFAULT_FAR};

@@ -158,7 +158,7 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
                 index,
                 scene,
                 scene_seed: seed,
-                scene_name: settings.source.scene_name(scene).map(String::from),
+                scene_name: settings.source.scene(scene).name.map(String::from),
                 crop: cropped.then_some(k),
                 window: json!({"offset_px": [window.x0, window.y0], "size_px": [window.width, window.height]}),
                 camera,

@@ -13,6 +13,7 @@ use crate::settings::sampling::{Sampling, SizeConditioning};
 use crate::settings::{control_depth_name, precision_name, schedule_name, schedule_records, ModelSettings, RNG};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use vkdiff_render::control::ControlDepth;
 use vkdiff_render::crops::{centered, centered_window, validate_min_fraction, CropWindow};
 use vkdiff_scenes::SceneSource;
@@ -34,7 +35,7 @@ pub struct DatasetSettings {
     pub seed: u64,
     /// Scenes.
     pub count: u64,
-    pub source: SceneSource,
+    pub source: Arc<dyn SceneSource>,
     pub crops: Crops,
     pub control_depth: ControlDepth,
     /// The diffusion models; None for a render-only set, whose images are the shaded renders.
@@ -60,7 +61,7 @@ impl DatasetSettings {
     pub fn new(
         seed: u64,
         count: Option<u64>,
-        source: SceneSource,
+        source: Arc<dyn SceneSource>,
         crops: Crops,
         control_depth: ControlDepth,
         models: Option<ModelSettings>,
@@ -69,9 +70,6 @@ impl DatasetSettings {
         mut sampling: Sampling,
         ip_sets: Vec<Vec<PathBuf>>,
     ) -> Result<DatasetSettings> {
-        if let SceneSource::Procedural(scene) = &source {
-            scene.validate()?;
-        }
         validate_min_fraction(crops.min_fraction)?;
         let count = match (source.available(), count) {
             (None, count) => count.unwrap_or(1),
@@ -94,10 +92,10 @@ impl DatasetSettings {
                     .then(format!(" {seed}")),
             ));
         }
-        let scene_prompts = distinct((0..count).filter_map(|k| source.prompt(k)));
+        let scene_prompts = distinct((0..count).filter_map(|k| source.scene(k).prompt));
         let multiple = match &models {
             Some(models) => {
-                let every_scene_has_one = (0..count).all(|k| source.prompt(k).is_some());
+                let every_scene_has_one = (0..count).all(|k| source.scene(k).prompt.is_some());
                 check_diffusion(models, &prompts, every_scene_has_one, &negative_prompt, &sampling, &ip_sets)?;
                 Sdxl::probe_pixel_multiple(&models.model, models.swaps())? as u32
             }
@@ -108,9 +106,10 @@ impl DatasetSettings {
         };
         let (width, height) = if crops.count > 0 {
             for k in 0..count {
-                let (w, h) = source.frame_size(k);
+                let scene = source.scene(k);
+                let (w, h) = (scene.width, scene.height);
                 if crops.size == 0 || crops.size > w.min(h) {
-                    let of = source.scene_name(k).map_or(String::new(), |n| format!(" of scene {n}"));
+                    let of = scene.name.map_or(String::new(), |n| format!(" of scene {n}"));
                     return Err(Error::Setting(Message::setting("crop_size").then(format!(
                         " {} must lie in [1, {}] to fit the {w}×{h} frame{of}",
                         crops.size,
@@ -127,15 +126,18 @@ impl DatasetSettings {
             (crops.size, crops.size)
         } else {
             // Whole frames make images of one size: every frame must have the first one's.
-            let first = source.frame_size(0);
-            if let Some(k) = (0..count).find(|&k| source.frame_size(k) != first) {
-                let (w, h) = source.frame_size(k);
+            let size = |k: u64| (source.scene(k).width, source.scene(k).height);
+            let first = size(0);
+            if let Some(k) = (0..count).find(|&k| size(k) != first) {
+                let (scene, first_scene) = (source.scene(k), source.scene(0));
                 return Err(Error::Setting(
                     Message::setting("scenes")
                         .then(format!(
-                            ": scene {} is {w}×{h}, scene {} {}×{}; frames of several sizes need ",
-                            source.scene_name(k).unwrap_or("?"),
-                            source.scene_name(0).unwrap_or("?"),
+                            ": scene {} is {}×{}, scene {} {}×{}; frames of several sizes need ",
+                            scene.name.unwrap_or("?"),
+                            scene.width,
+                            scene.height,
+                            first_scene.name.unwrap_or("?"),
                             first.0,
                             first.1
                         ))
@@ -186,7 +188,8 @@ impl DatasetSettings {
 
     /// The frame windows of scene `scene` (seed `scene_seed`)'s images, in crop order.
     pub fn windows(&self, scene: u64, scene_seed: u64) -> Result<Vec<CropWindow>> {
-        let (width, height) = self.source.frame_size(scene);
+        let info = self.source.scene(scene);
+        let (width, height) = (info.width, info.height);
         if self.crops.count == 0 {
             // The image made from a whole frame: the frame cut to the image size, centred.
             return Ok(vec![centered(width, height, self.sampling.width as u32, self.sampling.height as u32)]);
@@ -197,7 +200,7 @@ impl DatasetSettings {
     /// The prompt (an index into `prompts`) of image `index` of scene `scene`, whose seed is
     /// `seed`: the scene's own, else one of the `--prompt`s drawn from the seed.
     pub fn prompt_of(&self, scene: u64, seed: u64) -> usize {
-        match self.source.prompt(scene) {
+        match self.source.scene(scene).prompt {
             Some(own) => self.prompts.iter().position(|p| p == own).expect("every scene's prompt is listed"),
             None => crate::dataset::choose(seed, crate::dataset::Choice::Prompt, self.user_prompts),
         }
@@ -216,7 +219,7 @@ impl DatasetSettings {
             "image-size": [s.width, s.height],
         });
         let map = v.as_object_mut().expect("an object");
-        map.extend(self.source.to_json());
+        map.extend(self.source.settings());
         match &self.models {
             Some(models) => map.extend(self.diffusion_json(models)),
             None => {

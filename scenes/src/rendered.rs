@@ -1,0 +1,177 @@
+//! Scenes rendered elsewhere (`--scenes DIR`), in any format a [`SceneFormat`] reads: the folder is
+//! listed and every scene checked from its headers and side files (sizes, categories, prompt) before
+//! any work starts; a scene's pixels are read once, when its images are made.
+
+use crate::blenderproc::BlenderProcFrames;
+use crate::folder::SceneFolders;
+use crate::labels::RawScene;
+use crate::{Error, Result, SceneError, SceneInfo, SceneSource, SourceFrame};
+use rayon::prelude::*;
+use serde_json::{json, Map, Value};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use vkdiff_render::coco::Category;
+use vkdiff_setting::Message;
+
+/// One way scenes are stored: which files of a folder are its scenes, what each says of itself
+/// before its pixels are read, and its pixels.
+pub(crate) trait SceneFormat: Send + Sync + std::fmt::Debug {
+    /// The format's name in dataset.json.
+    fn name(&self) -> &'static str;
+
+    /// What a scene's headers and side files say: its size, prompt and categories.
+    fn index(&self, path: &Path) -> std::result::Result<SceneIndex, SceneError>;
+
+    /// The scene's pixels.
+    fn read(&self, path: &Path) -> std::result::Result<RawScene, SceneError>;
+}
+
+/// A scene as its headers and side files describe it.
+pub(crate) struct SceneIndex {
+    pub width: u32,
+    pub height: u32,
+    pub prompt: Option<String>,
+    /// The categories the scene names (a scene folder's categories.json, BlenderProc's category
+    /// ids with their names).
+    pub categories: Vec<Category>,
+}
+
+/// One listed scene.
+#[derive(Clone, Debug)]
+struct ListedScene {
+    /// The folder's or file's name.
+    name: String,
+    path: PathBuf,
+    width: u32,
+    height: u32,
+    prompt: Option<String>,
+}
+
+/// Scenes rendered elsewhere, every one of them listed and checked.
+#[derive(Debug)]
+pub struct RenderedScenes {
+    dir: PathBuf,
+    format: Box<dyn SceneFormat>,
+    scenes: Vec<ListedScene>,
+    /// Every category the scenes use, by id.
+    categories: Vec<Category>,
+    far: f32,
+}
+
+impl RenderedScenes {
+    /// Finds the scenes under `dir` (BlenderProc `.hdf5` files, else scene folders), in their
+    /// order, and checks each from its headers and side files: a missing or unreadable file,
+    /// sizes that differ, a category listed twice or named two ways is refused in one line naming
+    /// the scene. `default_category` names the instances of scene folders without
+    /// categories.json; depth at or past `far` is background.
+    pub fn open(dir: &Path, default_category: &str, far: f32) -> Result<RenderedScenes> {
+        if !(far.is_finite() && far > 0.0) {
+            return Err(Error::Setting(Message::setting("far").then(format!(" {far} must be a positive number"))));
+        }
+        if default_category.trim().is_empty() {
+            return Err(Error::Setting(Message::setting("category").then(" must name the category")));
+        }
+        let refuse = |why: String| Error::Setting(scenes_setting(dir).then(format!(": {why}")));
+        let entries = std::fs::read_dir(dir).map_err(|e| within(dir, SceneError::Listing(e)))?;
+        let mut paths: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
+        paths.sort();
+        let (format, found): (Box<dyn SceneFormat>, Vec<PathBuf>) = if let Some(found) = BlenderProcFrames::find(&paths)
+        {
+            (Box::new(BlenderProcFrames::new(dir).map_err(|e| within(dir, e))?), found)
+        } else if let Some(found) = SceneFolders::find(&paths) {
+            (Box::new(SceneFolders::new(default_category)), found)
+        } else {
+            return Err(refuse(
+                "holds no scene folders (each with depth.exr or depth.png and instances.png) and no BlenderProc .hdf5 \
+                 files"
+                    .into(),
+            ));
+        };
+        let mut scenes =
+            RenderedScenes { dir: dir.to_path_buf(), format, scenes: Vec::new(), categories: Vec::new(), far };
+        // Every scene's headers read in parallel; the first failure in order is reported.
+        let indexed: Vec<Result<(ListedScene, Vec<Category>)>> = found
+            .into_par_iter()
+            .map(|path| {
+                let name = path.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned());
+                let index = scenes.format.index(&path).map_err(|e| scenes.refusal(&name, e))?;
+                let SceneIndex { width, height, prompt, categories } = index;
+                Ok((ListedScene { name, path, width, height, prompt }, categories))
+            })
+            .collect();
+        let mut by_id: BTreeMap<u32, (Category, String)> = BTreeMap::new();
+        for result in indexed {
+            let (scene, categories) = result?;
+            for category in categories {
+                match by_id.get(&category.id) {
+                    Some((known, first)) if known.name != category.name => {
+                        return Err(refuse(format!(
+                            "category id {} is `{}` in {first} and `{}` in {}",
+                            category.id, known.name, category.name, scene.name
+                        )))
+                    }
+                    Some(_) => {}
+                    None => {
+                        by_id.insert(category.id, (category, scene.name.clone()));
+                    }
+                }
+            }
+            scenes.scenes.push(scene);
+        }
+        scenes.categories = by_id.into_values().map(|(c, _)| c).collect();
+        Ok(scenes)
+    }
+
+    fn refusal(&self, scene: &str, e: SceneError) -> Error {
+        let what = scenes_setting(&self.dir).then(format!(": scene {scene}"));
+        Error::Context(what, Box::new(e.into()))
+    }
+}
+
+/// `--scenes DIR`, the start of every refusal of the folder.
+fn scenes_setting(dir: &Path) -> Message {
+    Message::setting("scenes").then(format!(" {}", dir.display()))
+}
+
+fn within(dir: &Path, e: SceneError) -> Error {
+    Error::Context(scenes_setting(dir), Box::new(e.into()))
+}
+
+impl SceneSource for RenderedScenes {
+    fn available(&self) -> Option<u64> {
+        Some(self.scenes.len() as u64)
+    }
+
+    fn scene(&self, k: u64) -> SceneInfo<'_> {
+        let s = &self.scenes[k as usize];
+        SceneInfo { width: s.width, height: s.height, name: Some(&s.name), prompt: s.prompt.as_deref() }
+    }
+
+    fn frame(&self, k: u64, _seed: u64) -> Result<SourceFrame> {
+        let scene = &self.scenes[k as usize];
+        let refuse = |e| self.refusal(&scene.name, e);
+        let raw = self.format.read(&scene.path).map_err(refuse)?;
+        if (raw.width, raw.height) != (scene.width, scene.height) {
+            return Err(refuse(SceneError::new(format!(
+                "{}×{} now, {}×{} when the scenes were listed",
+                raw.width, raw.height, scene.width, scene.height
+            ))));
+        }
+        let (frame, shaded) = raw.into_frame(self.far).map_err(refuse)?;
+        Ok(SourceFrame { frame, shaded })
+    }
+
+    fn categories(&self) -> Vec<Category> {
+        self.categories.clone()
+    }
+
+    fn settings(&self) -> Map<String, Value> {
+        Map::from_iter([
+            ("scenes".to_string(), json!(self.dir.display().to_string())),
+            ("scene-format".to_string(), json!(self.format.name())),
+            ("scene-names".to_string(), json!(self.scenes.iter().map(|s| s.name.as_str()).collect::<Vec<_>>())),
+            ("categories".to_string(), json!(self.categories)),
+            ("far".to_string(), json!(self.far)),
+        ])
+    }
+}
