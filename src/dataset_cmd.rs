@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use vkdiff_args::Progress;
 use vkdiff_args::{dataset_flag, CropArgs, SceneSettings};
 use vkdiff_args::{ModelArgs, SamplingArgs};
-use vkdiff_pipeline::dataset::{
+use vkdiff_dataset::{
     merge, parse_size, read_prompts, size, stop_on_signals, Crops, DatasetEvent, DatasetJob, DatasetSettings, Finish,
     Merged, ProceduralBed, Progress as Event, RenderedScenes, Report, RunOptions, SceneSource, ShardRequest,
     VersionChange, DEFAULT_FAR,

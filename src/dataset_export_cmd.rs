@@ -4,7 +4,7 @@ use anyhow::Result;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 use vkdiff_args::Progress;
-use vkdiff_pipeline::dataset::{export, ExportFormat, ExportOptions, Exported, Split, SplitFractions};
+use vkdiff_dataset::{export, ExportFormat, ExportOptions, Exported, Split, SplitFractions};
 
 /// Write a finished set in a trainer's layout (COCO splits, YOLO, WebDataset, Hugging Face).
 ///

@@ -4,7 +4,7 @@ use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
 use vkdiff_args::Progress;
-use vkdiff_pipeline::dataset::preview;
+use vkdiff_dataset::preview;
 
 /// A page to look at a finished set: images with their instance outlines, and a contact sheet.
 ///

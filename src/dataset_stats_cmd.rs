@@ -4,7 +4,7 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::Value;
 use std::path::PathBuf;
-use vkdiff_pipeline::dataset::{stats, write_charts};
+use vkdiff_dataset::{stats, write_charts};
 
 /// What a finished set holds, in figures and charts.
 ///

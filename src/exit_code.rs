@@ -23,6 +23,9 @@ fn classify(cause: &(dyn std::error::Error + 'static)) -> Option<i32> {
     if cause.is::<vkdiff_args::Usage>() {
         return Some(USAGE);
     }
+    if let Some(e) = cause.downcast_ref::<vkdiff_dataset::Error>() {
+        return Some(dataset(e));
+    }
     if let Some(e) = cause.downcast_ref::<vkdiff_pipeline::Error>() {
         return Some(pipeline(e));
     }
@@ -50,11 +53,23 @@ fn classify(cause: &(dyn std::error::Error + 'static)) -> Option<i32> {
     cause.downcast_ref::<std::io::Error>().map(io)
 }
 
+fn dataset(e: &vkdiff_dataset::Error) -> i32 {
+    use vkdiff_dataset::Error as E;
+    match e {
+        E::Config(_) | E::Setting(_) => USAGE,
+        E::DiskFull(_) | E::Interrupted(_) => RESUMABLE,
+        E::Context(_, inner) => dataset(inner),
+        E::File(e) => file(e),
+        E::Render(e) => render(e),
+        E::Scenes(e) => scenes(e),
+        E::Pipeline(e) => pipeline(e),
+    }
+}
+
 fn pipeline(e: &vkdiff_pipeline::Error) -> i32 {
     use vkdiff_pipeline::Error as E;
     match e {
         E::Config(_) | E::Setting(_) => USAGE,
-        E::DiskFull(_) | E::Interrupted(_) => RESUMABLE,
         E::NotFinite { .. } => OTHER,
         E::Context(_, inner) => pipeline(inner),
         E::File(e) => file(e),
@@ -62,7 +77,6 @@ fn pipeline(e: &vkdiff_pipeline::Error) -> i32 {
         E::Lora(e) => lora(e),
         E::Render(e) => render(e),
         E::Runtime(e) => device(e),
-        E::Scenes(e) => scenes(e),
     }
 }
 

@@ -8,10 +8,8 @@ use crate::random_models::{gradient_depth, style_images, RandomGuides};
 use anyhow::Result;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+use vkdiff_dataset::{generate, Crops, Dataset, DatasetSettings, DiskGuard, ProceduralBed, Report, RunOptions, Shard};
 use vkdiff_lora::LoraFile;
-use vkdiff_pipeline::dataset::{
-    generate, Crops, Dataset, DatasetSettings, DiskGuard, ProceduralBed, Report, RunOptions, Shard,
-};
 use vkdiff_pipeline::images::{ClipPreprocess, ControlDepth};
 use vkdiff_pipeline::{
     ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, Sdxl, StyleModels, TextToImage,
@@ -176,7 +174,7 @@ pub(crate) fn make_set(
         pending,
         &RunOptions { batch, threads: 0, min_free: 0, versions: Default::default(), keep_text_encoders },
         &mut |event| {
-            if let vkdiff_pipeline::dataset::Progress::Images { done, total } = event {
+            if let vkdiff_dataset::Progress::Images { done, total } = event {
                 eprintln!("{done}/{total} images");
             }
         },

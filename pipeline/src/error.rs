@@ -16,12 +16,6 @@ pub enum Error {
         Message::setting("precision")
     )]
     NotFinite { stage: String },
-    /// The disk (or its `--min-free` margin) is full: the same command resumes once there is room.
-    #[error("{0}")]
-    DiskFull(Message),
-    /// A signal asked the run to stop; what was finished stays, and the same command resumes.
-    #[error("{0}")]
-    Interrupted(String),
     /// An error prefixed by what it happened to (a setting and its file).
     #[error("{0}: {1}")]
     Context(Message, Box<Error>),
@@ -35,8 +29,6 @@ pub enum Error {
     Render(#[from] vkdiff_render::RenderError),
     #[error(transparent)]
     Runtime(#[from] vkdiff_runtime::Error),
-    #[error(transparent)]
-    Scenes(#[from] vkdiff_scenes::Error),
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -1,8 +1,7 @@
 //! What drives vkdiff's networks: the CLIP tokenizer, torch-compatible noise, the diffusers
-//! schedulers, image inputs, the settings of a generation, SDXL with its guides and text-to-image,
-//! and `vkdiff dataset`.
+//! schedulers, image inputs, the settings of a generation, SDXL with its guides and text-to-image
+//! (`vkdiff gen`; `vkdiff-dataset` builds the dataset on it).
 
-pub mod dataset;
 mod error;
 pub mod files;
 mod gen_job;
@@ -26,8 +25,9 @@ pub use sdxl::{
 };
 pub use settings::{
     check_control_settings, control_depth_name, parse_attention, precision_name, read_images, recipe_warnings,
-    ControlNetSettings, GenSettings, GuideInputs, IpAdapterSettings, IpBlock, IpMode, IpScale, LoraSetting,
-    ModelSettings, PromptSyntax, Sampling, SizeConditioning, TextToImage, VaeTilingSetting, RNG,
+    recorded_path, schedule_name, schedule_records, ControlNetSettings, GenSettings, GuideInputs, IpAdapterSettings,
+    IpBlock, IpMode, IpScale, LoraSetting, ModelSettings, PromptSyntax, Sampling, SizeConditioning, TextToImage,
+    VaeTilingSetting, RNG,
 };
 pub use tokenizer::ClipTokenizer;
 pub use vkdiff_formats::RgbImage;

@@ -5,8 +5,8 @@
 //! Category 0 is background (BlenderProc's default for the world). Read in Rust (`hdf5-reader`),
 //! with no HDF5 library on the system.
 
+use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::RawScene;
-use crate::rendered::{SceneFormat, SceneIndex};
 use crate::SceneError;
 use hdf5_reader::{ByteOrder, Datatype, Hdf5File};
 use serde::Deserialize;
@@ -33,7 +33,7 @@ pub struct BlenderProcFrames {
 impl BlenderProcFrames {
     pub fn new(dir: &Path) -> Result<BlenderProcFrames, SceneError> {
         let path = dir.join("categories.json");
-        let names = path.is_file().then(|| crate::folder::read_categories(&path).map(|(c, _)| c)).transpose()?;
+        let names = path.is_file().then(|| crate::labels::read_categories(&path).map(|(c, _)| c)).transpose()?;
         Ok(BlenderProcFrames { names })
     }
 

@@ -11,11 +11,11 @@
 //! prompt.txt       optional: this scene's prompt
 //! ```
 
-use crate::labels::RawScene;
-use crate::rendered::{SceneFormat, SceneIndex};
+use crate::format::{SceneFormat, SceneIndex};
+use crate::labels::{read_categories, CategoryMap, RawScene};
 use crate::SceneError;
 use serde::Deserialize;
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::image::{depth_exr_size, grey_png_size, image_size, read_depth_exr, read_grey_png, read_image};
 use vkdiff_render::coco::Category;
@@ -26,49 +26,10 @@ pub fn is_scene_folder(dir: &Path) -> bool {
 }
 
 #[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct CategoriesFile {
-    categories: Vec<Category>,
-    #[serde(default)]
-    instances: BTreeMap<String, u32>,
-}
-
-#[derive(Deserialize)]
 struct DepthScale {
     scale: f64,
     #[serde(default)]
     offset: f64,
-}
-
-/// A `categories.json`'s categories, and its map of instance id → category id.
-type CategoryMap = (Vec<Category>, BTreeMap<u32, u32>);
-
-/// The categories of a `categories.json` (ids listed once, names given), and its instance map.
-pub fn read_categories(path: &Path) -> Result<CategoryMap, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
-    let file: CategoriesFile = serde_json::from_str(&text)
-        .map_err(|e| SceneError::file(path, format!("not JSON of the categories format: {e}")))?;
-    let mut ids = BTreeSet::new();
-    for c in &file.categories {
-        if !ids.insert(c.id) {
-            return Err(SceneError::file(path, format!("category id {} is listed twice", c.id)));
-        }
-        if c.id == 0 || c.name.trim().is_empty() {
-            return Err(SceneError::file(
-                path,
-                format!("category {}: ids start at 1 and every category needs a name", c.id),
-            ));
-        }
-    }
-    let mut instances = BTreeMap::new();
-    for (key, &category) in &file.instances {
-        let id: u32 = key.parse().map_err(|_| SceneError::file(path, format!("instance `{key}` is not a number")))?;
-        if !ids.contains(&category) {
-            return Err(SceneError::file(path, format!("instance {id} has category {category}, which is not listed")));
-        }
-        instances.insert(id, category);
-    }
-    Ok((file.categories, instances))
 }
 
 /// Scene folders: one folder per scene, in name order.
@@ -171,7 +132,7 @@ fn read_prompt(dir: &Path) -> Result<Option<String>, SceneError> {
 fn depth_size(dir: &Path) -> Result<(usize, usize), SceneError> {
     let exr = dir.join("depth.exr");
     if exr.is_file() {
-        return depth_exr_size(&exr).map_err(|e| SceneError::new(e.to_string()));
+        return depth_exr_size(&exr).map_err(SceneError::from_file);
     }
     let (png, _) = depth_png(dir)?;
     let (width, height, bits) = grey_png_size(&png).map_err(SceneError::from_file)?;
@@ -199,7 +160,7 @@ fn depth_png(dir: &Path) -> Result<(PathBuf, DepthScale), SceneError> {
 fn read_depth(dir: &Path) -> Result<(Vec<f32>, usize, usize), SceneError> {
     let exr = dir.join("depth.exr");
     if exr.is_file() {
-        return read_depth_exr(&exr).map_err(|e| SceneError::new(e.to_string()));
+        return read_depth_exr(&exr).map_err(SceneError::from_file);
     }
     let (png, scale) = depth_png(dir)?;
     let grey = read_grey_png(&png).map_err(SceneError::from_file)?;

@@ -1,10 +1,14 @@
 //! What every rendered scene becomes, whatever wrote it: depth with its background at +∞, and an
 //! instance map whose ids (as the renderer numbered them, with gaps) become 1..K in ascending
-//! order over the instances that show, each with its category.
+//! order over the instances that show, each with its category; and the categories.json that
+//! names categories and maps instances to them.
 
 use crate::SceneError;
+use serde::Deserialize;
 use serde_json::{Map, Value};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+use vkdiff_render::coco::Category;
 use vkdiff_render::frame::{Frame, Instance};
 
 /// One scene as read from its files, before it becomes a [`Frame`].
@@ -62,4 +66,43 @@ impl RawScene {
         let frame = Frame { width: self.width, height: self.height, camera: None, depth, ids, instances };
         Ok((frame, self.shaded))
     }
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CategoriesFile {
+    categories: Vec<Category>,
+    #[serde(default)]
+    instances: BTreeMap<String, u32>,
+}
+
+/// A `categories.json`'s categories, and its map of instance id → category id.
+pub type CategoryMap = (Vec<Category>, BTreeMap<u32, u32>);
+
+/// The categories of a `categories.json` (ids listed once, names given), and its instance map.
+pub fn read_categories(path: &Path) -> Result<CategoryMap, SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|e| SceneError::io(path, e))?;
+    let file: CategoriesFile = serde_json::from_str(&text)
+        .map_err(|e| SceneError::file(path, format!("not JSON of the categories format: {e}")))?;
+    let mut ids = BTreeSet::new();
+    for c in &file.categories {
+        if !ids.insert(c.id) {
+            return Err(SceneError::file(path, format!("category id {} is listed twice", c.id)));
+        }
+        if c.id == 0 || c.name.trim().is_empty() {
+            return Err(SceneError::file(
+                path,
+                format!("category {}: ids start at 1 and every category needs a name", c.id),
+            ));
+        }
+    }
+    let mut instances = BTreeMap::new();
+    for (key, &category) in &file.instances {
+        let id: u32 = key.parse().map_err(|_| SceneError::file(path, format!("instance `{key}` is not a number")))?;
+        if !ids.contains(&category) {
+            return Err(SceneError::file(path, format!("instance {id} has category {category}, which is not listed")));
+        }
+        instances.insert(id, category);
+    }
+    Ok((file.categories, instances))
 }

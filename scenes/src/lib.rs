@@ -8,6 +8,7 @@
 
 mod blenderproc;
 mod folder;
+mod format;
 mod labels;
 mod procedural;
 mod rendered;

@@ -4,7 +4,7 @@
 
 use crate::blenderproc::BlenderProcFrames;
 use crate::folder::SceneFolders;
-use crate::labels::RawScene;
+use crate::format::{SceneFormat, SceneIndex};
 use crate::{Error, Result, SceneError, SceneInfo, SceneSource, SourceFrame};
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
@@ -12,29 +12,6 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use vkdiff_render::coco::Category;
 use vkdiff_setting::Message;
-
-/// One way scenes are stored: which files of a folder are its scenes, what each says of itself
-/// before its pixels are read, and its pixels.
-pub(crate) trait SceneFormat: Send + Sync + std::fmt::Debug {
-    /// The format's name in dataset.json.
-    fn name(&self) -> &'static str;
-
-    /// What a scene's headers and side files say: its size, prompt and categories.
-    fn index(&self, path: &Path) -> std::result::Result<SceneIndex, SceneError>;
-
-    /// The scene's pixels.
-    fn read(&self, path: &Path) -> std::result::Result<RawScene, SceneError>;
-}
-
-/// A scene as its headers and side files describe it.
-pub(crate) struct SceneIndex {
-    pub width: u32,
-    pub height: u32,
-    pub prompt: Option<String>,
-    /// The categories the scene names (a scene folder's categories.json, BlenderProc's category
-    /// ids with their names).
-    pub categories: Vec<Category>,
-}
 
 /// One listed scene.
 #[derive(Clone, Debug)]

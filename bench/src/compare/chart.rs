@@ -3,7 +3,7 @@
 //! Every bar starts at the axis's left end, at least a decade below the slowest ratio, so no bar
 //! (the first report's own 1× included) has zero length.
 
-use vkdiff_pipeline::dataset::html_escape as escape;
+use vkdiff_dataset::html_escape as escape;
 
 /// One report's bar: its letter, its speed relative to the first report, and its value as shown.
 pub struct Bar {

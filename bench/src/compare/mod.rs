@@ -8,7 +8,7 @@ use crate::report::{show, Figure, Report};
 use anyhow::{Context as _, Result};
 use chart::{Bar, FigureBars};
 use std::path::PathBuf;
-use vkdiff_pipeline::dataset::html_escape as escape;
+use vkdiff_dataset::html_escape as escape;
 
 #[derive(clap::Args)]
 pub struct CompareArgs {

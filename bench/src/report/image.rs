@@ -9,8 +9,8 @@ use crate::random_models::style_images;
 use crate::step_rate::with_untimed_steps;
 use anyhow::Result;
 use std::time::Duration;
+use vkdiff_dataset::StageTimes;
 use vkdiff_lora::LoraFile;
-use vkdiff_pipeline::dataset::StageTimes;
 use vkdiff_pipeline::{
     ControlNetSettings, IpAdapterSettings, ModelSettings, RgbImage, TimestepSpacing, WorkflowModels,
 };

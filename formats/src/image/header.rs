@@ -24,7 +24,7 @@ pub fn image_size(path: &Path) -> Result<(usize, usize)> {
     let got = read_up_to(&mut reader, &mut magic).map_err(io)?;
     reader.seek(SeekFrom::Start(0)).map_err(io)?;
     if magic.starts_with(b"\x89PNG\r\n\x1a\n") {
-        let reader = png::Decoder::new(reader).read_info().map_err(|e| fail(format!("bad PNG: {e}")))?;
+        let reader = png::Decoder::new(reader).read_info().map_err(|e| png_error(path, e))?;
         Ok((reader.info().width as usize, reader.info().height as usize))
     } else if magic.starts_with(&[0xff, 0xd8]) {
         jpeg_size(reader).map_err(fail)
@@ -32,6 +32,14 @@ pub fn image_size(path: &Path) -> Result<(usize, usize)> {
         Err(fail("empty file".into()))
     } else {
         Err(fail("not a PNG or JPEG file (the formats read as images)".into()))
+    }
+}
+
+/// A PNG header that cannot be read (an I/O error, as a file error) or parsed.
+fn png_error(path: &Path, e: png::DecodingError) -> Error {
+    match e {
+        png::DecodingError::IoError(source) => Error::Io { path: path.to_path_buf(), source },
+        e => Error::Format { path: path.to_path_buf(), why: format!("bad PNG: {e}") },
     }
 }
 
@@ -89,8 +97,7 @@ fn jpeg_size(mut bytes: impl Read) -> std::result::Result<(usize, usize), String
 /// refused as [`super::read_grey_png`] refuses it.
 pub fn grey_png_size(path: &Path) -> Result<(usize, usize, u8)> {
     let fail = format_error(path);
-    let reader =
-        png::Decoder::new(BufReader::new(open(path)?)).read_info().map_err(|e| fail(format!("bad PNG: {e}")))?;
+    let reader = png::Decoder::new(BufReader::new(open(path)?)).read_info().map_err(|e| png_error(path, e))?;
     let info = reader.info();
     let bits = super::grey::grey_bits(info.color_type, info.bit_depth).map_err(fail)?;
     Ok((info.width as usize, info.height as usize, bits))
@@ -100,7 +107,10 @@ pub fn grey_png_size(path: &Path) -> Result<(usize, usize, u8)> {
 /// headers.
 pub fn depth_exr_size(path: &Path) -> Result<(usize, usize)> {
     let fail = format_error(path);
-    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| fail(format!("bad OpenEXR file: {e}")))?;
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| match e {
+        exr::error::Error::Io(source) => Error::Io { path: path.to_path_buf(), source },
+        e => fail(format!("bad OpenEXR file: {e}")),
+    })?;
     let mut names = Vec::new();
     let mut sizes = Vec::new();
     for header in &meta.headers {

@@ -13,8 +13,8 @@ mod vae_tiling;
 
 pub use gen::{read_images, GenSettings, GuideInputs};
 pub use ip_scale::{IpBlock, IpMode, IpScale};
-pub use models::check_control_settings;
 pub(crate) use models::flagged;
+pub use models::{check_control_settings, recorded_path};
 pub use models::{ControlNetSettings, IpAdapterSettings, LoraSetting, ModelSettings};
 pub use names::{control_depth_name, precision_name, schedule_name, schedule_records, RNG};
 pub use prompt_syntax::{parse_attention, PromptSyntax};

@@ -2,8 +2,8 @@
 //! annotations and its split, every file checked to be there before anything is written.
 
 use super::splits::{Split, SplitFractions};
-use crate::dataset::folder::{Dataset, ANNOTATIONS};
 use crate::error::{Error, Result};
+use crate::folder::{Dataset, ANNOTATIONS};
 use serde_json::{json, Value};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};

@@ -4,9 +4,9 @@
 
 use super::folder::{Dataset, VersionChange, ANNOTATIONS};
 use crate::error::{Error, Result};
-use crate::files::write_atomic_with;
 use serde_json::json;
 use std::path::Path;
+use vkdiff_pipeline::files::write_atomic_with;
 
 /// What a merge joined.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -6,11 +6,11 @@
 use super::plan::ImageFiles;
 use super::settings::DatasetSettings;
 use crate::error::{Error, Result};
-use crate::RgbImage;
 use serde_json::{json, Value};
 use std::sync::mpsc::{sync_channel, Receiver};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
+use vkdiff_pipeline::RgbImage;
 use vkdiff_render::coco::{annotations, instance_masks, Annotation};
 use vkdiff_render::control::control_image;
 use vkdiff_render::crops::crop_frame;

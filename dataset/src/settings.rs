@@ -4,16 +4,16 @@
 //! other settings into the same folder is refused naming the flag.
 
 use crate::error::{Error, Result};
-use crate::schedulers::SchedulerConfig;
-use crate::sdxl::Sdxl;
-use crate::settings::ip_scale::IpScale;
-use crate::settings::models::recorded_path;
-use crate::settings::prompt_syntax::PromptSyntax;
-use crate::settings::sampling::{Sampling, SizeConditioning};
-use crate::settings::{control_depth_name, precision_name, schedule_name, schedule_records, ModelSettings, RNG};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use vkdiff_pipeline::recorded_path;
+use vkdiff_pipeline::IpScale;
+use vkdiff_pipeline::PromptSyntax;
+use vkdiff_pipeline::SchedulerConfig;
+use vkdiff_pipeline::Sdxl;
+use vkdiff_pipeline::{control_depth_name, precision_name, schedule_name, schedule_records, ModelSettings, RNG};
+use vkdiff_pipeline::{Sampling, SizeConditioning};
 use vkdiff_render::control::ControlDepth;
 use vkdiff_render::crops::{centered, centered_window, validate_min_fraction, CropWindow};
 use vkdiff_scenes::SceneSource;
@@ -31,7 +31,7 @@ pub struct Crops {
 
 #[derive(Clone, Debug)]
 pub struct DatasetSettings {
-    /// Scene `k` has seed `seed + k`; image `i` has seed [`crate::dataset::image_seed`]`(seed, i)`.
+    /// Scene `k` has seed `seed + k`; image `i` has seed [`crate::image_seed`]`(seed, i)`.
     pub seed: u64,
     /// Scenes.
     pub count: u64,
@@ -202,7 +202,7 @@ impl DatasetSettings {
     pub fn prompt_of(&self, scene: u64, seed: u64) -> usize {
         match self.source.scene(scene).prompt {
             Some(own) => self.prompts.iter().position(|p| p == own).expect("every scene's prompt is listed"),
-            None => crate::dataset::choose(seed, crate::dataset::Choice::Prompt, self.user_prompts),
+            None => crate::choose(seed, crate::Choice::Prompt, self.user_prompts),
         }
     }
 

@@ -7,12 +7,12 @@
 use super::canvas::Canvas;
 use super::export::{FinishedSet, SetImage, SplitFractions};
 use crate::error::{Error, Result};
-use crate::images::{read_depth_exr, read_image};
-use crate::RgbImage;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::atomic::write_atomic;
 use vkdiff_formats::Error as FileError;
+use vkdiff_pipeline::images::{read_depth_exr, read_image};
+use vkdiff_pipeline::RgbImage;
 use vkdiff_render::png_out::rgb8;
 
 /// What a preview wrote.

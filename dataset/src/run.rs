@@ -9,19 +9,19 @@ use super::scenes::{render_scenes, SceneImage};
 use super::settings::DatasetSettings;
 use super::stop::{interrupted, stop_requested};
 use crate::error::{Error, Result};
-use crate::files::png_bytes;
-use crate::sdxl::denoiser::{Denoiser, ItemInputs};
-use crate::sdxl::prompt_encoding::Conditioning;
-use crate::sdxl::WorkflowModels;
-use crate::settings::sampling::TextToImage;
-use crate::settings::GenSettings;
-use crate::RgbImage;
 use serde_json::{json, Value};
 use std::collections::{HashMap, VecDeque};
 use std::path::PathBuf;
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
+use vkdiff_pipeline::files::png_bytes;
+use vkdiff_pipeline::Conditioning;
+use vkdiff_pipeline::GenSettings;
+use vkdiff_pipeline::RgbImage;
+use vkdiff_pipeline::TextToImage;
+use vkdiff_pipeline::WorkflowModels;
+use vkdiff_pipeline::{Denoiser, ItemInputs};
 
 pub struct RunOptions {
     /// Images per UNet pass.
@@ -294,7 +294,7 @@ impl<'a> Loop<'a> {
                     .map(|(image, _)| self.models.sdxl.encode_init(image, sampling.width, sampling.height))
                     .transpose()
             })
-            .collect::<Result<Vec<_>>>()?;
+            .collect::<vkdiff_pipeline::Result<Vec<_>>>()?;
         let inputs: Vec<ItemInputs> = items
             .iter()
             .zip(&inits)

@@ -1,10 +1,13 @@
-//! `vkdiff dataset`: procedural scenes turned into an annotated training set, one folder holding
-//! the generated images, each image's depth, control image and instance mask, and COCO
+//! `vkdiff dataset`, the product: scenes (the procedural bed or scenes rendered elsewhere, from
+//! `vkdiff-scenes`) turned into an annotated training set by `vkdiff-pipeline`'s SDXL, one folder
+//! holding the generated images, each image's depth, control image and instance mask, and COCO
 //! annotations. Resumable image by image, sharded by scene over any number of processes sharing
-//! the folder, and merged into one `annotations.json` at the end.
+//! the folder, and merged into one `annotations.json` at the end; then exported to trainers'
+//! formats, summarised and previewed.
 
 mod canvas;
 mod disk;
+mod error;
 mod export;
 mod folder;
 mod job;
@@ -19,6 +22,7 @@ mod stats;
 mod stop;
 
 pub use disk::{parse_size, size, DiskGuard, DEFAULT_MIN_FREE};
+pub use error::{Error, Result};
 pub use export::{export, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions};
 pub use folder::{Dataset, ImageRecord, Pending, VersionChange, ANNOTATIONS, MANIFEST};
 pub use job::{DatasetEvent, DatasetJob, Finish, ShardRequest};

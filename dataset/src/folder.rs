@@ -6,12 +6,12 @@
 use super::plan::{index_of, ImageFiles, Shard, FOLDERS};
 use super::settings::{first_difference, DatasetSettings};
 use crate::error::{Error, Result};
-use crate::files::{partial_path, write_atomic, PARTIAL};
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::Error as FileError;
+use vkdiff_pipeline::files::{partial_path, write_atomic, PARTIAL};
 use vkdiff_render::coco::{mushroom_category, serialize_sorted, Annotation, Category};
 use vkdiff_setting::{version, Message};
 
@@ -157,7 +157,7 @@ impl Dataset {
         ImageFiles::new(index, self.images)
     }
 
-    /// Images whose record is there (whether whole is for [`crate::dataset::merge`] to check).
+    /// Images whose record is there (whether whole is for [`crate::merge`] to check).
     pub fn recorded(&self) -> u64 {
         (0..self.images).filter(|&i| self.dir.join(self.files(i).record).is_file()).count() as u64
     }

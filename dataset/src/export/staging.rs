@@ -2,11 +2,11 @@
 //! (a killed export leaves only the hidden folder, never an OUT that looks finished).
 
 use crate::error::Result;
-use crate::files::PARTIAL;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::Error as FileError;
+use vkdiff_pipeline::files::PARTIAL;
 
 pub struct Staging {
     root: PathBuf,

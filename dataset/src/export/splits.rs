@@ -2,8 +2,8 @@
 //! splitting them leaks) and that do not move when the set grows: a scene's split is a function
 //! of the export seed and the scene's seed alone.
 
-use crate::dataset::plan::mix;
 use crate::error::{Error, Result};
+use crate::plan::mix;
 use vkdiff_setting::Message;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]

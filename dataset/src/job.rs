@@ -3,19 +3,19 @@
 //! finds every image done (the whole run, or the last shard to finish: shards finishing together
 //! write the same bytes, each file renamed into place whole).
 
-use crate::dataset::disk::{check_margin, size, DiskGuard};
-use crate::dataset::folder::{Dataset, Pending};
-use crate::dataset::merge::{merge, Merged};
-use crate::dataset::plan::Shard;
-use crate::dataset::render_only::write_renders;
-use crate::dataset::run::{generate, Progress, Report, RunOptions};
-use crate::dataset::settings::DatasetSettings;
+use crate::disk::{check_margin, size, DiskGuard};
 use crate::error::{Error, Result};
-use crate::sdxl::WorkflowModels;
-use crate::settings::read_images;
-use crate::RgbImage;
+use crate::folder::{Dataset, Pending};
+use crate::merge::{merge, Merged};
+use crate::plan::Shard;
+use crate::render_only::write_renders;
+use crate::run::{generate, Progress, Report, RunOptions};
+use crate::settings::DatasetSettings;
 use std::path::Path;
 use std::time::{Duration, Instant};
+use vkdiff_pipeline::read_images;
+use vkdiff_pipeline::RgbImage;
+use vkdiff_pipeline::WorkflowModels;
 use vkdiff_runtime::Context;
 use vkdiff_setting::Message;
 
@@ -71,7 +71,8 @@ impl DatasetJob {
         if options.batch == 0 {
             return Err(Error::Setting(Message::setting("batch").then(" must be at least 1")));
         }
-        let styles = settings.ip_sets.iter().map(|set| read_images(set)).collect::<Result<Vec<_>>>()?;
+        let styles =
+            settings.ip_sets.iter().map(|set| read_images(set)).collect::<vkdiff_pipeline::Result<Vec<_>>>()?;
         check_margin(out, options.min_free)?;
         let dataset = Dataset::open(out, &settings, options.versions)?;
         let pending = dataset.pending(shard)?;

@@ -1,0 +1,30 @@
+//! What every way of storing scenes answers: what a scene's headers and side files say, and its
+//! pixels.
+
+use crate::labels::RawScene;
+use crate::SceneError;
+use std::path::Path;
+use vkdiff_render::coco::Category;
+
+/// One way scenes are stored: what each scene says of itself before its pixels are read, and its
+/// pixels. (Each format finds its own scenes in a folder, `find`, before one is made.)
+pub(crate) trait SceneFormat: Send + Sync + std::fmt::Debug {
+    /// The format's name in dataset.json.
+    fn name(&self) -> &'static str;
+
+    /// What a scene's headers and side files say: its size, prompt and categories.
+    fn index(&self, path: &Path) -> Result<SceneIndex, SceneError>;
+
+    /// The scene's pixels.
+    fn read(&self, path: &Path) -> Result<RawScene, SceneError>;
+}
+
+/// A scene as its headers and side files describe it.
+pub(crate) struct SceneIndex {
+    pub width: u32,
+    pub height: u32,
+    pub prompt: Option<String>,
+    /// The categories the scene names (a scene folder's categories.json, BlenderProc's category
+    /// ids with their names).
+    pub categories: Vec<Category>,
+}
