@@ -1,6 +1,12 @@
 //! The depth map as a depth ControlNet expects it: normalised per image over its valid pixels,
 //! near = bright, replicated to three 8-bit channels (diffusers' SDXL depth ControlNet is fed
-//! MiDaS-style relative inverse depth, min–max normalised per image).
+//! MiDaS-style relative inverse depth, min–max normalised per image). The other controls a frame's
+//! labels give exactly: [`edges`], [`segmentation`] and [`normals`].
+
+mod ade20k;
+pub mod edges;
+pub mod normals;
+pub mod segmentation;
 
 use rayon::prelude::*;
 
