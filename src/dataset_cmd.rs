@@ -15,6 +15,8 @@ use vkdiff_dataset::{
     VersionChange, DEFAULT_FAR,
 };
 use vkdiff_pipeline::{recipe_warnings, Sampling};
+use vkdiff_render::control::edges::DEFAULT_DEPTH_JUMP;
+use vkdiff_render::control::ControlKind;
 
 /// Render scenes and make each into photoreal images with exact masks: one folder with the
 /// images, their depth, control images and instance masks, and COCO annotations. Resumable and
@@ -75,6 +77,14 @@ pub struct DatasetArgs {
     /// of 8, as SDXL's.
     #[arg(long)]
     render_only: bool,
+    /// More controls made from each image's labels beside its depth control, comma-separated:
+    /// edges, segmentation, normals (control/NNNNNN.<kind>.png; docs/controls.md).
+    #[arg(long, value_delimiter = ',', value_parser = parse_control)]
+    controls: Vec<ControlKind>,
+    /// With --controls edges or normals: a depth jump larger than this fraction of the nearer
+    /// depth is an edge.
+    #[arg(long, default_value_t = DEFAULT_DEPTH_JUMP)]
+    edge_depth_jump: f32,
     /// Images per UNet pass (2 × batch rows with guidance); results do not depend on it.
     #[arg(long, default_value_t = 1)]
     batch: usize,
@@ -250,7 +260,16 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
         args.sampling.negative_prompt.clone(),
         Sampling { strength: args.init_strength, ..args.sampling.sampling(0, 0) },
         ip_sets,
-    )?)
+    )?
+    .with_controls(&args.controls, args.edge_depth_jump)?)
+}
+
+/// A control's name, as `--controls` takes it.
+fn parse_control(name: &str) -> std::result::Result<ControlKind, String> {
+    ControlKind::parse(name).ok_or_else(|| {
+        let kinds: Vec<&str> = ControlKind::ALL.iter().map(|k| k.name()).collect();
+        format!("expected one of {}", kinds.join(", "))
+    })
 }
 
 /// Per-stage seconds and peak device memory (None: a render-only set, which used no device).

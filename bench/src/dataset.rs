@@ -8,7 +8,9 @@ use crate::random_models::{gradient_depth, style_images, RandomGuides};
 use anyhow::Result;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use vkdiff_dataset::{generate, Crops, Dataset, DatasetSettings, DiskGuard, ProceduralBed, Report, RunOptions, Shard};
+use vkdiff_dataset::{
+    generate, Crops, Dataset, DatasetSettings, DiskGuard, LabelControls, ProceduralBed, Report, RunOptions, Shard,
+};
 use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::images::{ClipPreprocess, ControlDepth};
 use vkdiff_pipeline::{
@@ -231,6 +233,7 @@ pub(crate) fn paper_set(
         ),
         crops: Crops { count: crops, size: size as u32, min_fraction: 0.1 },
         control_depth: ControlDepth::Inverse,
+        controls: LabelControls::default(),
         models: Some(models.clone()),
         prompts: vec!["white button mushrooms on dark black soil compost mycelium".into()],
         user_prompts: 1,

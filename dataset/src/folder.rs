@@ -260,7 +260,7 @@ impl Dataset {
 /// dataset.json for `settings`.
 fn manifest(settings: &DatasetSettings) -> Value {
     let s = settings.to_json();
-    json!({
+    let mut manifest = json!({
         "format": FORMAT,
         "vkdiff": version(),
         "fingerprint": fnv1a(&format!("{FORMAT} {} {s}", version())),
@@ -276,7 +276,12 @@ fn manifest(settings: &DatasetSettings) -> Value {
             "annotations": "annotations.json: COCO instance segmentation of every image, once all are done",
         },
         "settings": s,
-    })
+    });
+    if !settings.controls.kinds.is_empty() {
+        manifest["layout"]["controls"] =
+            json!("control/NNNNNN.<kind>.png: --controls, each computed from the image's labels (docs/controls.md)");
+    }
+    manifest
 }
 
 fn manifest_path(dir: &Path) -> Result<PathBuf> {

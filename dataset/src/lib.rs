@@ -6,6 +6,7 @@
 //! formats, summarised and previewed.
 
 mod canvas;
+mod controls;
 mod disk;
 mod error;
 mod export;
@@ -14,6 +15,7 @@ mod job;
 mod merge;
 mod plan;
 mod preview;
+mod preview_page;
 mod render_only;
 mod run;
 mod scenes;
@@ -21,6 +23,7 @@ mod settings;
 mod stats;
 mod stop;
 
+pub use controls::{control_file, LabelControls};
 pub use disk::{parse_size, size, DiskGuard, DEFAULT_MIN_FREE};
 pub use error::{Error, Result};
 pub use export::{export, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions};

@@ -6,6 +6,7 @@
 
 use super::canvas::Canvas;
 use super::export::{FinishedSet, SetImage, SplitFractions};
+use super::preview_page::page;
 use crate::error::{Error, Result};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -43,6 +44,12 @@ pub fn preview(
     let chosen: Vec<&SetImage> = (0..n).map(|k| &set.images[k * set.images.len() / n]).collect();
     let categories = Categories::of(&set);
     let mut figures = String::new();
+    let mut kinds: Vec<String> = chosen
+        .iter()
+        .flat_map(|image| image.entry["control_files"].as_object().into_iter().flat_map(|m| m.keys().cloned()))
+        .collect();
+    kinds.sort();
+    kinds.dedup();
     let columns = (n as f64).sqrt().ceil().max(1.0) as usize;
     let rows = n.div_ceil(columns);
     // With several categories, a legend row above the thumbnails.
@@ -67,7 +74,7 @@ pub fn preview(
         progress(k + 1, n);
     }
     let title = format!("{} · {} of {} images", dir.display(), n, set.images.len());
-    write_atomic(html, page(&title, &categories.legend_html(), &figures).as_bytes())?;
+    write_atomic(html, page(&title, &categories.legend_html(), &figures, &kinds).as_bytes())?;
     let sheet_path = html.with_extension("png");
     write_atomic(&sheet_path, &sheet.png())?;
     Ok(Preview { html: html.to_path_buf(), sheet: sheet_path, images: n })
@@ -149,6 +156,8 @@ struct Layers {
     depth: Option<RgbImage>,
     control: Option<RgbImage>,
     init: Option<RgbImage>,
+    /// The other controls (`--controls`), by kind.
+    controls: Vec<(String, RgbImage)>,
 }
 
 impl Layers {
@@ -162,10 +171,16 @@ impl Layers {
         };
         let depth = file("depth_file").map(|p| depth_picture(&p)).transpose()?;
         let palette = categories.palette(image);
+        let listed = image.entry["control_files"].as_object().into_iter().flatten();
+        let controls = listed
+            .filter_map(|(kind, file)| Some((kind.clone(), dir.join(file.as_str()?))))
+            .map(|(kind, path)| Ok((kind, read_image(&path)?)))
+            .collect::<Result<_>>()?;
         Ok(Layers {
             depth,
             control: picture("control_file")?,
             init: picture("init_file")?,
+            controls,
             image: image_rgb,
             ids,
             palette,
@@ -187,6 +202,7 @@ impl Layers {
             depth: self.depth.as_ref().map(|d| box_down(d, f)),
             control: self.control.as_ref().map(|c| box_down(c, f)),
             init: self.init.as_ref().map(|i| box_down(i, f)),
+            controls: self.controls.iter().map(|(kind, c)| (kind.clone(), box_down(c, f))).collect(),
         }
     }
 
@@ -343,6 +359,9 @@ fn figure(image: &SetImage, layers: &Layers) -> String {
             html += &base(class, &png(picture));
         }
     }
+    for (kind, picture) in &layers.controls {
+        html += &base(&format!("control-{kind}"), &png(picture));
+    }
     html += &base("outline", &layers.outlines_png());
     let mut caption = format!("#{} · {} instances · scene {}", e["id"], image.annotations.len(), e["scene_seed"]);
     if let Some(seed) = e["seed"].as_u64() {
@@ -359,53 +378,4 @@ fn figure(image: &SetImage, layers: &Layers) -> String {
         escape(&prompt)
     );
     html
-}
-
-fn page(title: &str, legend: &str, figures: &str) -> String {
-    format!(
-        r#"<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>{title}</title>
-<style>
-body {{ background: #181a1b; color: #ddd; font: 14px system-ui, sans-serif; margin: 16px; }}
-header {{ position: sticky; top: 0; background: #181a1b; padding: 8px 0; z-index: 2; }}
-main {{ display: grid; grid-template-columns: repeat(auto-fill, minmax(320px, 1fr)); gap: 16px; }}
-figure {{ margin: 0; }}
-.stack {{ position: relative; }}
-.stack img {{ display: none; width: 100%; image-rendering: pixelated; }}
-.stack img.outline {{ position: absolute; top: 0; left: 0; }}
-body.outlines .stack img.outline {{ display: block; }}
-body[data-layer="image"] img.image, body[data-layer="depth"] img.depth,
-body[data-layer="control"] img.control, body[data-layer="init"] img.init {{ display: block; }}
-figcaption {{ margin-top: 4px; }}
-.prompt {{ color: #999; }}
-label {{ margin-right: 12px; }}
-.legend span {{ margin-right: 14px; }}
-.legend i {{ display: inline-block; width: 12px; height: 12px; margin-right: 4px; vertical-align: -1px; }}
-</style></head>
-<body class="outlines" data-layer="image">
-<header><strong>{title}</strong><br>
-<label><input type="checkbox" id="outlines" checked> instance outlines</label>
-<label><input type="radio" name="layer" value="image" checked> image</label>
-<label><input type="radio" name="layer" value="depth"> depth</label>
-<label><input type="radio" name="layer" value="control"> control</label>
-<label><input type="radio" name="layer" value="init"> init</label>
-{legend}
-</header>
-<main>
-{figures}</main>
-<script>
-// The layer shown: the radio buttons, or the page's #hash (preview.html#depth).
-function show(layer) {{
-  document.body.dataset.layer = layer;
-  for (const r of document.querySelectorAll('input[name=layer]')) r.checked = r.value === layer;
-}}
-for (const r of document.querySelectorAll('input[name=layer]')) r.onchange = () => show(r.value);
-document.getElementById('outlines').onchange = e => document.body.classList.toggle('outlines', e.target.checked);
-const hash = location.hash.slice(1).split(',');
-if (['image', 'depth', 'control', 'init'].includes(hash[0])) show(hash[0]);
-if (hash.includes('nooutlines')) {{ document.body.classList.remove('outlines'); document.getElementById('outlines').checked = false; }}
-</script>
-</body></html>
-"#
-    )
 }

@@ -3,6 +3,7 @@
 //! each into its images (depth, control image, mask, annotations, files encoded), a few scenes
 //! ahead of the denoiser and no more.
 
+use super::controls::control_file;
 use super::plan::ImageFiles;
 use super::settings::DatasetSettings;
 use crate::error::{Error, Result};
@@ -12,7 +13,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use vkdiff_pipeline::RgbImage;
 use vkdiff_render::coco::{annotations, instance_masks, Annotation};
-use vkdiff_render::control::control_image;
+use vkdiff_render::control::{control_image, ControlKind};
 use vkdiff_render::crops::crop_frame;
 use vkdiff_render::crops::CropWindow;
 use vkdiff_render::exr::encode_single_channel;
@@ -36,6 +37,8 @@ pub struct SceneImage {
     pub control: RgbImage,
     pub depth_exr: Vec<u8>,
     pub control_png: Vec<u8>,
+    /// The other controls (`--controls`): kind, file, PNG.
+    pub controls: Vec<(ControlKind, String, Vec<u8>)>,
     pub mask_png: Vec<u8>,
     /// The crop's shaded render, and as a PNG: img2img's start (`--init-strength`), or a
     /// render-only set's image.
@@ -61,6 +64,11 @@ impl SceneImage {
             "camera": self.camera,
         });
         entry["crop"]["index"] = json!(self.crop);
+        if !self.controls.is_empty() {
+            let files: serde_json::Map<String, Value> =
+                self.controls.iter().map(|(kind, file, _)| (kind.name().to_string(), json!(file))).collect();
+            entry["control_files"] = Value::Object(files);
+        }
         if let Some(name) = &self.scene_name {
             entry["scene"] = json!(name);
         }
@@ -75,7 +83,13 @@ impl SceneImage {
 
     /// The files that come from the scene, as (name, bytes), in the order they are written.
     pub fn scene_files<'a>(&'a self, files: &'a ImageFiles) -> Vec<(&'a str, &'a [u8])> {
-        vec![(&files.depth, &self.depth_exr), (&files.control, &self.control_png), (&files.mask, &self.mask_png)]
+        let mut out = vec![
+            (files.depth.as_str(), self.depth_exr.as_slice()),
+            (&files.control, &self.control_png),
+            (&files.mask, &self.mask_png),
+        ];
+        out.extend(self.controls.iter().map(|(_, file, png)| (file.as_str(), png.as_slice())));
+        out
     }
 }
 
@@ -137,6 +151,13 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
             let part = crop_frame(&frame, window, settings.crops.min_fraction);
             let (w, h) = (part.width, part.height);
             let pixels = control_image(&part.depth, settings.control_depth);
+            let depth_control = ImageFiles::new(index, settings.images()).control;
+            let controls = settings
+                .controls
+                .images(&part, (frame.width, frame.height), window)
+                .into_iter()
+                .map(|(kind, rgb)| (kind, control_file(&depth_control, kind), rgb8(w, h, &rgb)))
+                .collect();
             let camera = part.camera.as_ref().map_or(Value::Null, |c| {
                 let c = c.to_json();
                 json!({
@@ -164,6 +185,7 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
                 camera,
                 depth_exr: encode_single_channel(w, h, "Z", &part.depth),
                 control_png: rgb8(w, h, &pixels),
+                controls,
                 mask_png: gray16(w, h, &part.ids),
                 init,
                 annotations: annotations(&part, &instance_masks(&part)),

@@ -3,6 +3,7 @@
 //! style-image sets). They are recorded in `dataset.json` under the flag names, so a run with
 //! other settings into the same folder is refused naming the flag.
 
+use crate::controls::LabelControls;
 use crate::error::{Error, Result};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
@@ -14,7 +15,7 @@ use vkdiff_pipeline::SchedulerConfig;
 use vkdiff_pipeline::Sdxl;
 use vkdiff_pipeline::{control_depth_name, precision_name, schedule_name, schedule_records, ModelSettings, RNG};
 use vkdiff_pipeline::{Sampling, SizeConditioning};
-use vkdiff_render::control::ControlDepth;
+use vkdiff_render::control::{ControlDepth, ControlKind};
 use vkdiff_render::crops::{centered, centered_window, validate_min_fraction, CropWindow};
 use vkdiff_scenes::SceneSource;
 use vkdiff_setting::Message;
@@ -38,6 +39,8 @@ pub struct DatasetSettings {
     pub source: Arc<dyn SceneSource>,
     pub crops: Crops,
     pub control_depth: ControlDepth,
+    /// The controls made beside the depth control (`--controls`).
+    pub controls: LabelControls,
     /// The diffusion models; None for a render-only set, whose images are the shaded renders.
     pub models: Option<ModelSettings>,
     /// The `--prompt`s, one chosen per image from its seed, then every scene's own prompt
@@ -157,6 +160,7 @@ impl DatasetSettings {
             source,
             crops,
             control_depth,
+            controls: LabelControls::default(),
             models,
             prompts,
             user_prompts,
@@ -164,6 +168,13 @@ impl DatasetSettings {
             sampling,
             ip_sets,
         })
+    }
+
+    /// These settings with `kinds` of control made beside the depth control, edges where the depth
+    /// jumps by `depth_jump`.
+    pub fn with_controls(mut self, kinds: &[ControlKind], depth_jump: f32) -> Result<DatasetSettings> {
+        self.controls = LabelControls::new(kinds, depth_jump, &self.source.categories())?;
+        Ok(self)
     }
 
     /// Whether the images are the shaded renders, with no diffusion (`--render-only`).
@@ -220,6 +231,7 @@ impl DatasetSettings {
         });
         let map = v.as_object_mut().expect("an object");
         map.extend(self.source.settings());
+        map.extend(self.controls.to_json());
         match &self.models {
             Some(models) => map.extend(self.diffusion_json(models)),
             None => {

@@ -10,6 +10,34 @@ pub mod segmentation;
 
 use rayon::prelude::*;
 
+/// A control image a frame's labels give.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum ControlKind {
+    Depth,
+    Edges,
+    Segmentation,
+    Normals,
+}
+
+impl ControlKind {
+    pub const ALL: [ControlKind; 4] =
+        [ControlKind::Depth, ControlKind::Edges, ControlKind::Segmentation, ControlKind::Normals];
+
+    /// Its name on the command line, in file names and in dataset.json.
+    pub fn name(self) -> &'static str {
+        match self {
+            ControlKind::Depth => "depth",
+            ControlKind::Edges => "edges",
+            ControlKind::Segmentation => "segmentation",
+            ControlKind::Normals => "normals",
+        }
+    }
+
+    pub fn parse(name: &str) -> Option<ControlKind> {
+        ControlKind::ALL.into_iter().find(|k| k.name() == name.trim())
+    }
+}
+
 /// How depth becomes brightness.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ControlDepth {
