@@ -82,13 +82,15 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     let single_steps: f64 = single.timings.steps.iter().map(Duration::as_secs_f64).sum();
     let gen_image = load_once.as_secs_f64() + single_wall.as_secs_f64() - single_steps + at * step;
     let dataset_image = overhead + at * step;
+    // Each stage as timed: the scene and writing run on threads of their own, so the stages need
+    // not add up to the wall time, and nothing is shown as "the rest" by subtraction.
     println!(
         "{} | dataset, SDXL + depth ControlNet + IP-Adapter (ViT-H, 2 images) + 2 rank-{} LoRAs, {}² crops, {} \
-            images, {} steps, batch {}, {}: once {:.1} s (prompt, styles, recording); per image {:.1} s = guides \
-            {:.2} + denoise {:.1} ({:.1} s/step) + VAE {:.2} + rest {:.2}; beside it per image: scene {:.2}, write \
-            {:.2}, waited {:.2} | at {} steps: {:.2} s/image not denoising = {:.2} % | one gen per image at {} steps: \
-            load + LoRA merge {:.1} s + {:.1} s not denoising + steps = {:.0} s/image, the dataset {:.0} s/image \
-            ({:.2}× faster, {:.0} s saved per image) | peak {} MiB",
+            images, {} steps, batch {}, {}: once {:.1} s (prompt, styles, recording); per image {:.1} s wall; each \
+            stage as timed, per image (they need not add up to it): guides {:.2}, denoise {:.1} ({:.1} s/step), VAE \
+            {:.2}; beside it per image: scene {:.2}, write {:.2}, waited {:.2} | at {} steps: {:.2} s/image not \
+            denoising = {:.2} % | one gen per image at {} steps: load + LoRA merge {:.1} s + {:.1} s not denoising + \
+            steps = {:.0} s/image, the dataset {:.0} s/image ({:.2}× faster, {:.0} s saved per image) | peak {} MiB",
         ctx.info().name,
         args.lora_rank,
         args.size,
@@ -102,7 +104,6 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         per(t.denoise()),
         step,
         per(t.vae),
-        per(wall - t.setup - t.guides - t.denoise() - t.vae),
         per(t.scene),
         per(t.write),
         per(t.waiting),
