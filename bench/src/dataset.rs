@@ -17,7 +17,7 @@ use vkdiff_pipeline::{
     WorkflowModels,
 };
 use vkdiff_render::scene::SceneConfig;
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_runtime::{Context, Dtype, Environment};
 
 #[derive(clap::Args)]
 pub struct DatasetArgs {
@@ -46,13 +46,13 @@ pub struct DatasetArgs {
     production_steps: usize,
 }
 
-pub fn run(args: &DatasetArgs) -> Result<()> {
+pub fn run(args: &DatasetArgs, env: &Environment) -> Result<()> {
     vkdiff_args::ensure_usage(args.size.is_multiple_of(32) && args.size >= 64, || {
         format!("--size {} must be a multiple of 32, at least 64", args.size)
     })?;
     vkdiff_args::ensure_usage(args.batch > 0, || "--batch must be at least 1".into())?;
     let dtype = args.precision.dtype();
-    let ctx = args.device.open()?;
+    let ctx = args.device.open(env)?;
     let RandomWorkflow { mut models, load: load_once, .. } = random_workflow(&ctx, dtype, args.lora_rank)?;
     let dataset = paper_set(args.size, args.scenes, 3, args.steps, &models.settings);
     let styles = vec![style_images().to_vec()];

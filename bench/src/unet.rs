@@ -9,7 +9,7 @@ use anyhow::Result;
 use std::time::{Duration, Instant};
 use vkdiff_args::Precision;
 use vkdiff_networks::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
-use vkdiff_runtime::{Context, Dtype, Tensor};
+use vkdiff_runtime::{Context, Dtype, Environment, Tensor};
 
 const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("unet_reference.py");
 
@@ -82,16 +82,16 @@ struct Row {
     tuned: Vec<TunedRow>,
 }
 
-pub fn run(args: &UnetArgs) -> Result<()> {
+pub fn run(args: &UnetArgs, env: &Environment) -> Result<()> {
     let dtype = args.precision.dtype();
     let config = UNetConfig::sdxl_base();
     for &size in &args.size {
         vkdiff_args::ensure_usage(size % 32 == 0 && size > 0, || {
             format!("--size {size}: SDXL needs a multiple of 32 pixels")
         })?;
-        let mut row = measure(args, &config, dtype, size)?;
+        let mut row = measure(args, env, &config, dtype, size)?;
         if !args.common.no_cpu_reference {
-            match reference(size / 8, args) {
+            match reference(env, size / 8, args) {
                 Ok(r) => {
                     row.ratio_to_reference = Some(r.ms / row.ms);
                     (row.reference_ms, row.reference_peak_mib, row.reference) = (Some(r.ms), Some(r.peak_mib), r.what);
@@ -133,8 +133,8 @@ pub fn run(args: &UnetArgs) -> Result<()> {
 }
 
 /// Our evaluation; the device and every buffer are released before the reference runs.
-fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> Result<Row> {
-    let ctx = args.common.device.open()?;
+fn measure(args: &UnetArgs, env: &Environment, config: &UNetConfig, dtype: Dtype, size: usize) -> Result<Row> {
+    let ctx = args.common.device.open(env)?;
     let start = Instant::now();
     let ckpt = Checkpoint::random(&ctx, dtype, 0);
     let unet = UNet::load(config, &ckpt)?;
@@ -265,14 +265,15 @@ pub(crate) struct Reference {
     pub what: String,
 }
 
-fn reference(latent: usize, args: &UnetArgs) -> std::result::Result<Reference, String> {
+fn reference(env: &Environment, latent: usize, args: &UnetArgs) -> std::result::Result<Reference, String> {
     let cuda = (args.reference_device == ReferenceDevice::Cuda).then(|| args.precision.dtype());
-    diffusers_unet(SDXL_BASE_CONFIG, latent, args.batch, args.samples.max(1), cuda)
+    diffusers_unet(env, SDXL_BASE_CONFIG, latent, args.batch, args.samples.max(1), cuda)
 }
 
 /// diffusers' UNet2DConditionModel of `config` (random weights) on the CPU in f32, or with
 /// `cuda` on the CUDA GPU at that precision, `samples` timed evaluations.
 pub(crate) fn diffusers_unet(
+    env: &Environment,
     config: &str,
     latent: usize,
     batch: usize,
@@ -284,7 +285,7 @@ pub(crate) fn diffusers_unet(
     if let Some(dtype) = cuda {
         script_args.extend(["cuda".to_string(), dtype_name(dtype).to_string()]);
     }
-    let out: UnetTimes = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
+    let out: UnetTimes = crate::cpu_reference::run_python_reference(env, REFERENCE, script_args, None)?;
     Ok(Reference { ms: out.ms, times_ms: out.times_ms, peak_mib: out.peak_mib, what: out.run.label() })
 }
 
