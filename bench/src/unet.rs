@@ -13,6 +13,10 @@ use vkdiff_runtime::{Context, Dtype, Environment, Tensor};
 
 const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("unet_reference.py");
 
+/// One untimed evaluation before the timed ones, on both sides: the best of them is the steady
+/// state's, not the first touch of memory or kernels.
+const WARM_UP: bool = true;
+
 /// Where diffusers runs beside us.
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ReferenceDevice {
@@ -141,7 +145,7 @@ fn measure(args: &UnetArgs, env: &Environment, config: &UNetConfig, dtype: Dtype
     let load_s = start.elapsed().as_secs_f64();
     let weights = ctx.live_bytes();
     let tensors = RandomInputs::new(&ctx, config, dtype, args.batch, size)?;
-    let timed = time_unet(&unet, &tensors.inputs(), false, args.samples.max(1))?;
+    let timed = time_unet(&unet, &tensors.inputs(), WARM_UP, args.samples.max(1))?;
     let best = timed.seconds.iter().copied().fold(f64::INFINITY, f64::min);
     let profile = if args.profile { profile(&ctx, &unet, &tensors.inputs())? } else { Vec::new() };
     let mib = |b: u64| b as f64 / (1 << 20) as f64;
@@ -267,21 +271,23 @@ pub(crate) struct Reference {
 
 fn reference(env: &Environment, latent: usize, args: &UnetArgs) -> std::result::Result<Reference, String> {
     let cuda = (args.reference_device == ReferenceDevice::Cuda).then(|| args.precision.dtype());
-    diffusers_unet(env, SDXL_BASE_CONFIG, latent, args.batch, args.samples.max(1), cuda)
+    diffusers_unet(env, SDXL_BASE_CONFIG, latent, args.batch, args.samples.max(1), WARM_UP, cuda)
 }
 
 /// diffusers' UNet2DConditionModel of `config` (random weights) on the CPU in f32, or with
-/// `cuda` on the CUDA GPU at that precision, `samples` timed evaluations.
+/// `cuda` on the CUDA GPU at that precision, `samples` timed evaluations (after an untimed one
+/// with `warm_up`, on either device, as vkdiff's side did).
 pub(crate) fn diffusers_unet(
     env: &Environment,
     config: &str,
     latent: usize,
     batch: usize,
     samples: usize,
+    warm_up: bool,
     cuda: Option<Dtype>,
 ) -> std::result::Result<Reference, String> {
-    let mut script_args =
-        vec![config.to_string(), latent.to_string(), latent.to_string(), batch.to_string(), samples.to_string()];
+    let mut script_args = [latent, latent, batch, samples, usize::from(warm_up)].map(|n| n.to_string()).to_vec();
+    script_args.insert(0, config.to_string());
     if let Some(dtype) = cuda {
         script_args.extend(["cuda".to_string(), dtype_name(dtype).to_string()]);
     }

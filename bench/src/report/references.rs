@@ -103,10 +103,10 @@ pub fn references(plan: &Plan, jobs: Vec<(Figure, Job)>, env: &Environment) -> V
                         |out: WorkflowTimes| Ok((out.per_image(plan.runs, steps_timed, steps)?, out.run.label())),
                     ))
                 }
-                (Some(d), Job::Unet { config, latent, batch, dtype }) => {
+                (Some(d), Job::Unet { config, latent, batch, dtype, warm_up }) => {
                     eprintln!("report: diffusers' UNet for {}", figure.label);
                     let cuda = (d == ReferenceDevice::Cuda).then_some(dtype);
-                    let timed = diffusers_unet(env, &config, latent, batch, plan.runs, cuda);
+                    let timed = diffusers_unet(env, &config, latent, batch, plan.runs, warm_up, cuda);
                     measured(timed.map(|r| (r.times_ms, r.what)))
                 }
                 (Some(d), Job::Vae { config, size, dtype }) => {
