@@ -142,3 +142,37 @@ fn measured(result: Result<(Vec<f64>, String), String>) -> Reference {
         Err(why) => Reference::Missing { why },
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_headline_product_takes_its_own_rates() {
+        let rates = KernelRates {
+            linear: vec![1.0],
+            conv: vec![2.0, 3.0],
+            attention: vec![4.0],
+            torch: "9.1".into(),
+            place: "stub".into(),
+        };
+        assert_eq!(rates.of("linear"), Ok(vec![1.0]));
+        assert_eq!(rates.of("conv"), Ok(vec![2.0, 3.0]));
+        assert_eq!(rates.of("attention"), Ok(vec![4.0]));
+        let why = rates.of("gemm").unwrap_err();
+        assert!(why.contains("tools/kernels_reference.py") && why.contains("`gemm`"), "{why}");
+    }
+
+    #[test]
+    fn each_reference_image_counts_its_untimed_steps_at_its_step_rate() {
+        let out: WorkflowTimes = serde_json::from_str(
+            r#"{"images": [{"seconds": 7.0, "steps": [4.0, 1.5]}, {"seconds": 6.0, "steps": [3.0, 2.0]}],
+                "torch": "9.1", "diffusers": "9.2", "where": "stub"}"#,
+        )
+        .unwrap();
+        // 28 untimed steps at each image's second step.
+        assert_eq!(out.per_image(2, 2, 30), Ok(vec![7.0 + 28.0 * 1.5, 6.0 + 28.0 * 2.0]));
+        assert!(out.per_image(1, 2, 30).unwrap_err().contains("2 images for 1 runs"));
+        assert!(out.per_image(2, 3, 30).unwrap_err().contains("2 step times for 3 timed steps"));
+    }
+}
