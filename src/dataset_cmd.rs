@@ -120,7 +120,7 @@ enum DatasetCommand {
     Preview(crate::dataset_preview_cmd::PreviewArgs),
 }
 
-pub fn run(args: &DatasetArgs) -> Result<()> {
+pub fn run(args: &DatasetArgs, env: &vkdiff_runtime::Environment) -> Result<()> {
     match &args.command {
         Some(DatasetCommand::Merge { dir, allow_version_change }) => {
             print_merged(dir, &merge(dir, versions(*allow_version_change))?);
@@ -140,7 +140,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
         versions: versions(args.allow_version_change),
         keep_text_encoders: false,
     };
-    let mut job = DatasetJob::new(settings(args)?, out, shard, options, &|k| std::env::var(k).ok())?;
+    let mut job = DatasetJob::new(settings(args, env)?, out, shard, options, &|k| env.raw(k).map(String::from))?;
     if let Some(models) = &job.settings().models {
         for warning in recipe_warnings(models, &job.settings().sampling)? {
             eprintln!("{warning}");
@@ -153,7 +153,7 @@ pub fn run(args: &DatasetArgs) -> Result<()> {
     if job.todo() > 0 {
         // Ctrl-C or a scheduler's SIGTERM: the images in hand are written, then exit code 4.
         stop_on_signals();
-        let ctx = job.needs_device().then(|| crate::open_device(&args.model.device)).transpose()?;
+        let ctx = job.needs_device().then(|| crate::open_device(&args.model.device, env)).transpose()?;
         let done = job.done() as usize;
         let total = done + job.todo() as usize;
         let total_images = job.settings().images() as f64;
@@ -214,7 +214,7 @@ fn print_merged(dir: &Path, merged: &Merged) {
     );
 }
 
-fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
+fn settings(args: &DatasetArgs, env: &vkdiff_runtime::Environment) -> Result<DatasetSettings> {
     let mut prompts = args.prompt.clone();
     if let Some(file) = &args.prompts {
         prompts.extend(read_prompts(file)?);
@@ -238,7 +238,7 @@ fn settings(args: &DatasetArgs) -> Result<DatasetSettings> {
             .into())
         }
         (true, None) => None,
-        (false, _) => Some(args.model.settings()?),
+        (false, _) => Some(args.model.settings(env)?),
     };
     let crops =
         Crops { count: args.crops.crops, size: args.crops.crop_size, min_fraction: args.crops.crop_min_fraction };

@@ -124,11 +124,10 @@ fn matrix2_features(d: &DeviceInfo) -> String {
     format!("; VK_NV_cooperative_matrix2 features: {}{missing}{probe}", d.cooperative_matrix2.join(", "))
 }
 
-pub fn run(args: &DevicesArgs) -> Result<()> {
+pub fn run(args: &DevicesArgs, env: &Environment) -> Result<()> {
     // A malformed setting would otherwise show as the device's default choice.
-    let env = Environment::of_process();
-    let settings = Settings::from_environment(&env)?;
-    let choice = args.device.choice(&env)?;
+    let settings = Settings::from_environment(env)?;
+    let choice = args.device.choice(env)?;
     if args.compile {
         let request = crate::devices_compile::CompileRequest {
             choice,
@@ -139,7 +138,7 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
         };
         return crate::devices_compile::run(&request);
     }
-    let devices = list_devices(&settings, &env)?;
+    let devices = list_devices(&settings, env)?;
     let chosen = choose(&devices, &choice).ok();
     if args.json {
         let (major, minor) = settings.vulkan_api;
@@ -175,6 +174,6 @@ pub fn run(args: &DevicesArgs) -> Result<()> {
     for d in &devices {
         println!("{}", describe(d, chosen == Some(d.index), &settings));
     }
-    println!("Vulkan driver manifests the loader reads: {}", vkdiff_runtime::loader_icds(&env).join(", "));
+    println!("Vulkan driver manifests the loader reads: {}", vkdiff_runtime::loader_icds(env).join(", "));
     Ok(())
 }

@@ -45,16 +45,16 @@ pub struct FidArgs {
     json: bool,
 }
 
-pub fn run(args: &FidArgs) -> Result<()> {
+pub fn run(args: &FidArgs, env: &vkdiff_runtime::Environment) -> Result<()> {
     let cache = match (&args.cache_dir, args.cache) {
         (Some(dir), _) => CacheDir::At(dir.clone()),
-        (None, true) => CacheDir::Default { base: user_cache_base(&vkdiff_runtime::Environment::of_process()) },
+        (None, true) => CacheDir::Default { base: user_cache_base(env) },
         (None, false) => CacheDir::Off,
     };
     let job = FidJob::new(FidRequest {
         real: args.real.clone(),
         fake: args.fake.clone(),
-        inception: vkdiff_args::resolve_model("--inception", &args.inception, vkdiff_args::Wants::File)?,
+        inception: vkdiff_args::resolve_model("--inception", &args.inception, vkdiff_args::Wants::File, env)?,
         dtype: args.precision.dtype(),
         batch: args.batch,
         kid_subsets: args.kid_subsets,
@@ -64,7 +64,7 @@ pub fn run(args: &FidArgs) -> Result<()> {
     if let Some(warning) = job.warning() {
         eprintln!("{warning}");
     }
-    let ctx = crate::open_device(&args.device)?;
+    let ctx = crate::open_device(&args.device, env)?;
     let mut bar: Option<(&str, Progress)> = None;
     let out = job.run(&ctx, &mut |stage, done, total| {
         if bar.as_ref().is_none_or(|(shown, _)| *shown != stage) {

@@ -53,9 +53,9 @@ pub struct GenArgs {
     force: bool,
 }
 
-pub fn run(args: &GenArgs) -> Result<()> {
+pub fn run(args: &GenArgs, env: &vkdiff_runtime::Environment) -> Result<()> {
     let settings = GenSettings {
-        models: args.model.settings()?,
+        models: args.model.settings(env)?,
         job: TextToImage {
             prompt: args.prompt.clone(),
             negative_prompt: args.sampling.negative_prompt.clone(),
@@ -78,7 +78,7 @@ pub fn run(args: &GenArgs) -> Result<()> {
     for warning in recipe_warnings(&job.settings().models, &job.settings().job.sampling)? {
         eprintln!("{warning}");
     }
-    let ctx = crate::open_device(&args.model.device)?;
+    let ctx = crate::open_device(&args.model.device, env)?;
     // The bar starts once the models are loaded, so its rate is the denoiser's.
     let mut progress = None;
     let t = job.run(&ctx, &mut |event| match event {

@@ -62,14 +62,16 @@ fn main() {
     // The libraries name settings as data; errors here name them by this command's flags.
     let names = if matches!(cli.command, Command::Dataset(_)) { vkdiff_args::dataset_flag } else { vkdiff_args::flag };
     vkdiff_setting::name_settings_with(names);
-    let result = check_environment().map_err(anyhow::Error::from).and_then(|()| match cli.command {
+    // The one read of the process's environment: every command is handed this value.
+    let env = vkdiff_runtime::Environment::of_process();
+    let result = check_environment(&env).map_err(anyhow::Error::from).and_then(|()| match cli.command {
         Command::Scene(args) => scene_cmd::run_scene(args),
-        Command::Gen(args) => gen_cmd::run(&args),
-        Command::Dataset(args) => dataset_cmd::run(&args),
-        Command::Devices(args) => devices_cmd::run(&args),
+        Command::Gen(args) => gen_cmd::run(&args, &env),
+        Command::Dataset(args) => dataset_cmd::run(&args, &env),
+        Command::Devices(args) => devices_cmd::run(&args, &env),
         Command::Eval(args) => eval_cmd::run(&args),
-        Command::Fid(args) => fid_cmd::run(&args),
-        Command::Bench(cmd) => vkdiff_bench::run(cmd),
+        Command::Fid(args) => fid_cmd::run(&args, &env),
+        Command::Bench(cmd) => vkdiff_bench::run(cmd, &env),
     });
     if let Err(e) = result {
         eprintln!("error: {}", one_line(&e));
@@ -86,10 +88,9 @@ fn main() {
 
 /// Every `VKDIFF_*` setting checked before any work, whether or not the command opens a device:
 /// a value one does not take ends the run as any refusal does.
-fn check_environment() -> vkdiff_runtime::Result<()> {
-    let env = vkdiff_runtime::Environment::of_process();
-    vkdiff_runtime::Settings::from_environment(&env)?;
-    vkdiff_runtime::DeviceChoice::from_environment(None, false, &env).map(drop)
+fn check_environment(env: &vkdiff_runtime::Environment) -> vkdiff_runtime::Result<()> {
+    vkdiff_runtime::Settings::from_environment(env)?;
+    vkdiff_runtime::DeviceChoice::from_environment(None, false, env).map(drop)
 }
 
 /// The command line; `dataset --render-only` needs no `--model`, which every other generating
@@ -104,13 +105,15 @@ fn parse() -> Cli {
 /// Opens the Vulkan device `args` choose and has it say when lavapipe compiles kernels, which on
 /// a cold shader cache can take minutes before the first image. A CPU device taken for want of
 /// a GPU says so, with the drivers the loader found.
-fn open_device(args: &vkdiff_args::DeviceArgs) -> vkdiff_runtime::Result<vkdiff_runtime::Context> {
-    let env = vkdiff_runtime::Environment::of_process();
-    let choice = args.choice(&env)?;
-    let ctx = vkdiff_runtime::Context::new(&choice, vkdiff_runtime::Settings::from_environment(&env)?)?;
+fn open_device(
+    args: &vkdiff_args::DeviceArgs,
+    env: &vkdiff_runtime::Environment,
+) -> vkdiff_runtime::Result<vkdiff_runtime::Context> {
+    let choice = args.choice(env)?;
+    let ctx = vkdiff_runtime::Context::new(&choice, vkdiff_runtime::Settings::from_environment(env)?)?;
     let info = ctx.info();
     if info.kind == vkdiff_runtime::DeviceKind::Cpu && choice.device.is_none() {
-        let icds = vkdiff_runtime::loader_icds(&env).join(", ");
+        let icds = vkdiff_runtime::loader_icds(env).join(", ");
         eprintln!(
             "device: {} — the CPU, no GPU's Vulkan driver was found (driver manifests: {icds}); --require-gpu \
             refuses to run so",

@@ -14,8 +14,9 @@ use vkdiff_testkit::fixture;
 
 /// A stand-in for `$VKDIFF_REFERENCE_PYTHON`, run as `STUB -c SCRIPT ARGS…`: it knows each reference
 /// by the usage line its script carries, checks the arguments the quick suite gives it (the
-/// image's: 128², 2 steps timed, 1 run, no warm-up image, as vkdiff's quick suite makes none;
-/// a model's config, first, is not checked), and prints fixed JSON.
+/// image's: 128², 2 steps timed, 1 run, no warm-up image, and the UNet's: no warm-up evaluation,
+/// as vkdiff's quick suite makes neither; a model's config, first, is not checked), and prints
+/// fixed JSON.
 fn stub_python() -> PathBuf {
     let path = scratch("bench-report-stub").join("python");
     let diffusers = r#""torch": "9.1", "diffusers": "9.2", "where": "stub CPU float32""#;
@@ -27,7 +28,7 @@ shift 2
 case "$script" in
   *"Usage: workflow_reference.py"*) want="128 2 1 0"
     answer='{{"images": [{{"seconds": 7.0, "steps": [4.0, 1.5]}}], {diffusers}}}' ;;
-  *"Usage: unet_reference.py"*) shift; want="16 16 2 1"
+  *"Usage: unet_reference.py"*) shift; want="16 16 2 1 0"
     answer='{{"ms": 240.0, "times_ms": [240.0], "peak_mib": 1.0, {diffusers}}}' ;;
   *"Usage: vae_reference.py"*) shift; want="128 1 cpu f32"
     answer='{{"seconds": 0.5, "times": [0.5], "peak_mib": 1.0, {diffusers}}}' ;;

@@ -1,7 +1,7 @@
 //! `VKDIFF_*` settings at the edge: each is parsed once, by one grammar, before any work; a value
 //! its setting does not take exits 2 with one line naming the variable and what it takes, for
-//! every command (those that open no device too); a switch takes every spelling of one; and
-//! the runtime itself reads no environment.
+//! every command (those that open no device too); a switch takes every spelling of one; the
+//! runtime itself reads no environment, and no crate below `main` reads the process's.
 
 mod cli;
 
@@ -79,30 +79,61 @@ fn a_switch_takes_every_spelling_and_the_plan_says_what_it_chose() {
     }
 }
 
-#[test]
-fn the_runtime_reads_no_environment() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("runtime/src");
-    let mut readers = Vec::new();
-    let mut stack = vec![root];
+/// The source files under `dir`, without unit-test modules (they read the settings of the
+/// process they run in, as tests do): each file's path and its code before `#[cfg(test)]`.
+fn code_under(dir: &std::path::Path) -> Vec<(std::path::PathBuf, String)> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
     while let Some(dir) = stack.pop() {
         for entry in std::fs::read_dir(&dir).unwrap().flatten() {
             let path = entry.path();
             if path.is_dir() {
                 stack.push(path);
-                continue;
+            } else if path.file_name().is_some_and(|n| n != "tests.rs") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                files.push((path, text.split("#[cfg(test)]").next().unwrap().to_string()));
             }
-            // A unit test module reads the settings of the process it runs in, as tests do.
-            if path.file_name().is_some_and(|n| n == "tests.rs") {
-                continue;
-            }
-            let text = std::fs::read_to_string(&path).unwrap();
-            let code = text.split("#[cfg(test)]").next().unwrap();
-            for reader in ["std::env", "env::var", "vars_os", "of_process", "getenv"] {
-                if code.contains(reader) {
-                    readers.push(format!("{}: {reader}", path.display()));
-                }
+        }
+    }
+    files
+}
+
+#[test]
+fn the_runtime_reads_no_environment() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("runtime/src");
+    let mut readers = Vec::new();
+    for (path, code) in code_under(&root) {
+        for reader in ["std::env", "env::var", "vars_os", "of_process", "getenv"] {
+            if code.contains(reader) {
+                readers.push(format!("{}: {reader}", path.display()));
             }
         }
     }
     assert!(readers.is_empty(), "the runtime reads the environment: {readers:?}");
+}
+
+/// Every crate's code, the command line's included, is handed the environment `main` read once;
+/// `Environment::of_process` itself is the one read.
+#[test]
+fn only_main_reads_the_process_environment() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut crates = vec![root.join("src")];
+    for entry in std::fs::read_dir(root).unwrap().flatten() {
+        // The tests' kit reads the environment the tests run in, as tests do.
+        let product = entry.file_name() != "testkit" && entry.path().join("Cargo.toml").is_file();
+        if product && entry.path().join("src").is_dir() {
+            crates.push(entry.path().join("src"));
+        }
+    }
+    let edge = [root.join("src/main.rs"), root.join("setting/src/environment.rs")];
+    let mut readers = Vec::new();
+    for (path, code) in crates.iter().flat_map(|dir| code_under(dir)) {
+        for reader in ["env::var", "vars_os", "var_os", "of_process", "getenv"] {
+            if code.contains(reader) && !edge.contains(&path) {
+                readers.push(format!("{}: {reader}", path.display()));
+            }
+        }
+    }
+    assert!(crates.len() > 10, "the crates are found: {crates:?}");
+    assert!(readers.is_empty(), "read the environment below main: {readers:?}");
 }

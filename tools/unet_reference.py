@@ -3,10 +3,11 @@
 milliseconds per evaluation (the best, and each) and the peak memory (the process's resident set on the CPU, torch's
 allocated device memory on the GPU).
 
-Run by `vkdiff bench unet` in the same run as its own measurement, with the same config (passed as
-JSON), random weights, latent size and batch. Prints one JSON line.
+Run by `vkdiff bench unet` and `vkdiff bench report` in the same run as their own measurement, with the same config
+(passed as JSON), random weights, latent size and batch. WARM_UP 1 makes one untimed evaluation first, on every
+device, where vkdiff made one on its side (0: none, as on vkdiff's). Prints one JSON line.
 Setup: pip install torch diffusers   (vkdiff runs it with $VKDIFF_REFERENCE_PYTHON, else python3)
-Usage: unet_reference.py CONFIG_JSON LATENT_H LATENT_W BATCH SAMPLES [cpu | cuda f16 | cuda f32]
+Usage: unet_reference.py CONFIG_JSON LATENT_H LATENT_W BATCH SAMPLES WARM_UP [cpu | cuda f16 | cuda f32]
 """
 import json
 import resource
@@ -20,9 +21,9 @@ from diffusers import UNet2DConditionModel
 
 def main():
     config = json.loads(sys.argv[1])
-    h, w, batch, samples = (int(a) for a in sys.argv[2:6])
-    device = sys.argv[6] if len(sys.argv) > 6 else "cpu"
-    dtype = torch.float16 if device == "cuda" and sys.argv[7:8] == ["f16"] else torch.float32
+    h, w, batch, samples, warm_up = (int(a) for a in sys.argv[2:7])
+    device = sys.argv[7] if len(sys.argv) > 7 else "cpu"
+    dtype = torch.float16 if device == "cuda" and sys.argv[8:9] == ["f16"] else torch.float32
     torch.manual_seed(0)
     with torch.device("meta"):
         unet = UNet2DConditionModel(**config)
@@ -41,7 +42,7 @@ def main():
     sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
     times = []
     with torch.inference_mode():
-        if device == "cuda":  # the first call picks kernels and grows the allocator
+        if warm_up:  # the first call picks kernels and grows the allocator
             unet(sample, t, encoder_hidden_states=context, added_cond_kwargs=added)
         for _ in range(samples):
             sync()

@@ -22,10 +22,8 @@ impl DeviceArgs {
         DeviceChoice::from_environment(self.device.clone(), self.require_gpu, env)
     }
 
-    /// Opens the device these flags and this process's environment choose, run as its
-    /// `VKDIFF_*` settings say: the edge where a command that runs on a device reads them.
-    pub fn open(&self) -> vkdiff_runtime::Result<Context> {
-        let env = Environment::of_process();
-        Context::new(&self.choice(&env)?, Settings::from_environment(&env)?)
+    /// Opens the device these flags and `env` choose, run as its `VKDIFF_*` settings say.
+    pub fn open(&self, env: &Environment) -> vkdiff_runtime::Result<Context> {
+        Context::new(&self.choice(env)?, Settings::from_environment(env)?)
     }
 }

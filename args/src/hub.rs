@@ -11,6 +11,7 @@
 
 use crate::Usage;
 use std::path::{Component, Path, PathBuf};
+use vkdiff_runtime::Environment;
 
 /// What a model flag takes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -25,9 +26,9 @@ pub enum Wants {
 }
 
 /// The model `text` names for `flag`: the local path when one exists (an id that is also a
-/// local path says so on stderr), else the Hugging Face id resolved in the cache.
-pub fn resolve_model(flag: &str, text: &Path, wants: Wants) -> anyhow::Result<PathBuf> {
-    let cache = hub_cache(&|k| std::env::var(k).ok());
+/// local path says so on stderr), else the Hugging Face id resolved in the cache `env` points to.
+pub fn resolve_model(flag: &str, text: &Path, wants: Wants, env: &Environment) -> anyhow::Result<PathBuf> {
+    let cache = hub_cache(env);
     let resolved = resolve_in(flag, text, wants, &cache)?;
     if let Some(note) = resolved.note {
         eprintln!("{note}");
@@ -42,9 +43,10 @@ pub struct Resolved {
     pub note: Option<String>,
 }
 
-/// The hub cache folder as `huggingface_hub` chooses it from the environment `env` reads.
-pub fn hub_cache(env: &dyn Fn(&str) -> Option<String>) -> PathBuf {
-    let var = |k: &str| env(k).filter(|v| !v.is_empty()).map(|v| expand_home(&v, env));
+/// The hub cache folder as `huggingface_hub` chooses it from `env`'s values as set (an empty
+/// one skipped).
+pub fn hub_cache(env: &Environment) -> PathBuf {
+    let var = |k: &str| env.raw(k).filter(|v| !v.is_empty()).map(|v| expand_home(v, env));
     if let Some(dir) = var("HF_HUB_CACHE").or_else(|| var("HUGGINGFACE_HUB_CACHE")) {
         return dir;
     }
@@ -55,8 +57,8 @@ pub fn hub_cache(env: &dyn Fn(&str) -> Option<String>) -> PathBuf {
     home.join("hub")
 }
 
-fn expand_home(path: &str, env: &dyn Fn(&str) -> Option<String>) -> PathBuf {
-    match (path.strip_prefix("~/"), env("HOME")) {
+fn expand_home(path: &str, env: &Environment) -> PathBuf {
+    match (path.strip_prefix("~/"), env.raw("HOME")) {
         (Some(rest), Some(home)) => Path::new(&home).join(rest),
         _ => PathBuf::from(path),
     }
@@ -264,9 +266,7 @@ mod tests {
 
     #[test]
     fn the_cache_is_where_huggingface_hub_looks() {
-        let env = |vars: &'static [(&'static str, &'static str)]| {
-            move |k: &str| vars.iter().find(|(n, _)| *n == k).map(|(_, v)| v.to_string())
-        };
+        let env = |vars: &[(&str, &str)]| Environment::from_pairs(vars.iter().copied());
         assert_eq!(hub_cache(&env(&[("HF_HUB_CACHE", "/c"), ("HF_HOME", "/h")])), Path::new("/c"));
         assert_eq!(hub_cache(&env(&[("HF_HOME", "/h"), ("HOME", "/home/u")])), Path::new("/h/hub"));
         assert_eq!(hub_cache(&env(&[("HF_HOME", "~/hf"), ("HOME", "/home/u")])), Path::new("/home/u/hf/hub"));

@@ -9,7 +9,7 @@ use vkdiff_pipeline::{
     ControlNetSettings, IpAdapterSettings, IpMode, IpScale, LoraSetting, ModelSettings, PredictionType, PromptSyntax,
     SamplerKind, Sampling, ScheduleOptions, SizeConditioning, TimestepSpacing, VaeTilingSetting,
 };
-use vkdiff_runtime::Dtype;
+use vkdiff_runtime::{Dtype, Environment};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 pub enum Precision {
@@ -161,9 +161,10 @@ impl ModelArgs {
         .find_map(|(flag, given)| given.then_some(flag))
     }
 
-    /// The settings, every model named by a path or a Hugging Face id resolved to its files.
-    pub fn settings(&self) -> anyhow::Result<ModelSettings> {
-        let resolve = |flag: &str, path: &PathBuf, wants| resolve_model(&format!("--{flag}"), path, wants);
+    /// The settings, every model named by a path or a Hugging Face id resolved to its files (in
+    /// the cache `env` points to).
+    pub fn settings(&self, env: &Environment) -> anyhow::Result<ModelSettings> {
+        let resolve = |flag: &str, path: &PathBuf, wants| resolve_model(&format!("--{flag}"), path, wants, env);
         let controlnet =
             self.controlnet.as_ref().map(|model| resolve("controlnet", model, Wants::Either)).transpose()?;
         let controlnet = controlnet.map(|model| ControlNetSettings {

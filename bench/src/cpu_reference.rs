@@ -6,14 +6,15 @@ use serde::de::DeserializeOwned;
 use serde::Deserialize;
 use std::io::Write;
 use std::process::{Command, Stdio};
+use vkdiff_runtime::Environment;
 
 /// Settings some machines export for older OpenBLAS builds, which force a slower kernel family
 /// (e.g. Haswell's AVX2 kernels on an AVX-512 CPU): a reference runs with OpenBLAS's own choice.
 const SLOWING_VARIABLES: [&str; 2] = ["OPENBLAS_CORETYPE", "OPENBLAS_L2_SIZE"];
 
-/// `$VKDIFF_REFERENCE_PYTHON` (else python3), ready to run a reference script.
-fn reference_python() -> (String, Command) {
-    let python = std::env::var("VKDIFF_REFERENCE_PYTHON").unwrap_or_else(|_| "python3".into());
+/// `env`'s `$VKDIFF_REFERENCE_PYTHON` (else python3), ready to run a reference script.
+fn reference_python(env: &Environment) -> (String, Command) {
+    let python = env.get("VKDIFF_REFERENCE_PYTHON").unwrap_or("python3").to_string();
     let mut command = Command::new(&python);
     for name in SLOWING_VARIABLES {
         command.env_remove(name);
@@ -69,9 +70,9 @@ pub struct CpuGemm {
 }
 
 /// GFLOP/s for each (M, N, K), or why it could not be measured (no python3 or numpy).
-pub fn measure(shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String> {
+pub fn measure(env: &Environment, shapes: &[(usize, usize, usize)]) -> Result<Vec<CpuGemm>, String> {
     let args: Vec<String> = shapes.iter().flat_map(|&(m, n, k)| [m, n, k]).map(|x| x.to_string()).collect();
-    run_script(GEMM_PEAK, args, None, None)?
+    run_script(env, GEMM_PEAK, args, None, None)?
         .lines()
         .map(|line| {
             let g: GemmLine = parse(GEMM_PEAK, line)?;
@@ -93,19 +94,20 @@ fn parse<T: DeserializeOwned>(script: Script, line: &str) -> Result<T, String> {
     serde_json::from_str(line).map_err(|e| format!("{} printed JSON vkdiff cannot read: {e}", script.path))
 }
 
-/// Runs `script` with `$VKDIFF_REFERENCE_PYTHON` (else python3), `args` and, if given, `input` on
+/// Runs `script` with `env`'s `$VKDIFF_REFERENCE_PYTHON` (else python3), `args` and, if given, `input` on
 /// its standard input; its standard output, or why it could not run (the script's path, then the
 /// last line of its errors). The Vulkan instances no context holds are destroyed first: a CPU
 /// driver may keep the device's memory until then, which a CPU reference needs
 /// (`vkdiff_runtime::release_idle_instances`).
 fn run_script<S: AsRef<std::ffi::OsStr>>(
+    env: &Environment,
     script: Script,
     args: impl IntoIterator<Item = S>,
     input: Option<&str>,
     timeout: Option<std::time::Duration>,
 ) -> Result<String, String> {
     vkdiff_runtime::release_idle_instances();
-    let (python, mut command) = reference_python();
+    let (python, mut command) = reference_python(env);
     let failed = |why: String| format!("{}: {why}", script.path);
     command.arg("-c").arg(script.text).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
     let mut child = command.spawn().map_err(|e| failed(format!("{python} not runnable ({e})")))?;
@@ -138,21 +140,23 @@ fn run_script<S: AsRef<std::ffi::OsStr>>(
 
 /// Runs a reference script (see `run_script`) and reads the JSON line it prints last as `T`.
 pub fn run_python_reference<T: DeserializeOwned, S: AsRef<std::ffi::OsStr>>(
+    env: &Environment,
     script: Script,
     args: impl IntoIterator<Item = S>,
     input: Option<&str>,
 ) -> Result<T, String> {
-    run_python_reference_within(script, args, input, None)
+    run_python_reference_within(env, script, args, input, None)
 }
 
 /// [`run_python_reference`], stopped past `timeout` (a reference that may hang on a device).
 pub fn run_python_reference_within<T: DeserializeOwned, S: AsRef<std::ffi::OsStr>>(
+    env: &Environment,
     script: Script,
     args: impl IntoIterator<Item = S>,
     input: Option<&str>,
     timeout: Option<std::time::Duration>,
 ) -> Result<T, String> {
-    let out = run_script(script, args, input, timeout)?;
+    let out = run_script(env, script, args, input, timeout)?;
     parse(script, out.lines().last().unwrap_or(""))
 }
 
@@ -200,7 +204,7 @@ mod tests {
 
     #[test]
     fn references_run_without_the_variables_that_slow_openblas() {
-        let (_, command) = super::reference_python();
+        let (_, command) = super::reference_python(&Default::default());
         let removed: Vec<_> =
             command.get_envs().filter(|(_, value)| value.is_none()).map(|(name, _)| name.to_owned()).collect();
         for name in super::SLOWING_VARIABLES {

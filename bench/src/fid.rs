@@ -10,6 +10,7 @@ use vkdiff_eval::fid::FeatureExtractor;
 use vkdiff_formats::write_safetensors_f32;
 use vkdiff_networks::RandomInception;
 use vkdiff_pipeline::RgbImage;
+use vkdiff_runtime::Environment;
 
 const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("fid_cpu_reference.py");
 
@@ -46,12 +47,12 @@ struct Row {
     ratio_to_cpu: Option<f64>,
 }
 
-pub fn run(args: &FidArgs) -> Result<()> {
+pub fn run(args: &FidArgs, env: &Environment) -> Result<()> {
     vkdiff_args::ensure_usage(args.images > 0 && args.size > 0 && args.batch > 0, || {
         "--images, --size and --batch must be positive".into()
     })?;
     let dir = std::env::temp_dir().join(format!("vkdiff-bench-fid-{}", std::process::id()));
-    let result = bench(args, &dir);
+    let result = bench(args, env, &dir);
     let _ = std::fs::remove_dir_all(&dir);
     let row = result?;
     args.common.print(&row, |row| {
@@ -74,12 +75,12 @@ pub fn run(args: &FidArgs) -> Result<()> {
     })
 }
 
-fn bench(args: &FidArgs, dir: &Path) -> Result<Row> {
+fn bench(args: &FidArgs, env: &Environment, dir: &Path) -> Result<Row> {
     let files = write_images(dir, args.images, args.size)?;
     let weights = dir.join("inception-random.safetensors");
     write_safetensors_f32(&weights, &RandomInception::new().tensors(), &Default::default())?;
     let mut row = {
-        let ctx = args.common.device.open()?;
+        let ctx = args.common.device.open(env)?;
         let start = Instant::now();
         let extractor = FeatureExtractor::new(&ctx, &weights, args.precision.dtype(), args.batch)?;
         let load_s = start.elapsed().as_secs_f64();
@@ -105,7 +106,7 @@ fn bench(args: &FidArgs, dir: &Path) -> Result<Row> {
     if args.common.no_cpu_reference {
         row.cpu_reference = "not run (--no-cpu-reference)".into();
     } else {
-        match reference(&weights, dir, args.batch) {
+        match reference(env, &weights, dir, args.batch) {
             Ok((rate, what)) => {
                 (row.cpu_reference_images_per_s, row.cpu_reference, row.ratio_to_cpu) =
                     (Some(rate), what, Some(row.images_per_s / rate))
@@ -145,8 +146,14 @@ fn write_images(dir: &Path, n: usize, size: usize) -> Result<Vec<PathBuf>> {
 }
 
 /// torch-fidelity on the CPU: images per second and what ran it.
-fn reference(weights: &Path, dir: &Path, batch: usize) -> std::result::Result<(f64, String), String> {
+fn reference(
+    env: &Environment,
+    weights: &Path,
+    dir: &Path,
+    batch: usize,
+) -> std::result::Result<(f64, String), String> {
     let out: FeatureRate = crate::cpu_reference::run_python_reference(
+        env,
         REFERENCE,
         [weights.as_os_str(), dir.as_os_str(), batch.to_string().as_ref()],
         None,

@@ -7,7 +7,7 @@ use anyhow::Result;
 use std::time::Instant;
 use vkdiff_networks::{SDXL_BASE_CONFIG, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_VAE_CONFIG};
 use vkdiff_pipeline::{ClipTokenizer, Guides, SamplerKind, Sampling, Sdxl, TextToImage};
-use vkdiff_runtime::Dtype;
+use vkdiff_runtime::{Dtype, Environment};
 
 const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("gen_cpu_reference.py");
 
@@ -50,12 +50,12 @@ struct Row {
     step_ratio_to_cpu: Option<f64>,
 }
 
-pub fn run(args: &GenArgs) -> Result<()> {
+pub fn run(args: &GenArgs, env: &Environment) -> Result<()> {
     let dtype = args.precision.dtype();
     for &size in &args.size {
-        let mut row = measure(args, dtype, size)?;
+        let mut row = measure(args, env, dtype, size)?;
         if !args.common.no_cpu_reference {
-            let r = reference(size, args.steps);
+            let r = reference(env, size, args.steps);
             row.step_ratio_to_cpu = r.as_ref().ok().map(|(cpu, _)| cpu / row.step_s);
             row.cpu_reference = Some(r.map_or_else(|why| serde_json::json!({ "unavailable": why }), |(_, v)| v));
         }
@@ -82,8 +82,8 @@ pub fn run(args: &GenArgs) -> Result<()> {
 }
 
 /// Our run; the device and every buffer are released before the reference runs.
-fn measure(args: &GenArgs, dtype: Dtype, size: usize) -> Result<Row> {
-    let ctx = args.common.device.open()?;
+fn measure(args: &GenArgs, env: &Environment, dtype: Dtype, size: usize) -> Result<Row> {
+    let ctx = args.common.device.open(env)?;
     let start = Instant::now();
     let model = Sdxl::random_sdxl_base(&ctx, dtype)?;
     let load_s = start.elapsed().as_secs_f64();
@@ -150,7 +150,7 @@ struct GenTimes {
 }
 
 /// diffusers' step time (by the one step rule) and all it printed, as the row shows it.
-fn reference(size: usize, steps: usize) -> std::result::Result<(f64, serde_json::Value), String> {
+fn reference(env: &Environment, size: usize, steps: usize) -> std::result::Result<(f64, serde_json::Value), String> {
     // The reference's tokenizers read vkdiff's built-in vocabulary, written where it can find it.
     let tokenizers = std::env::temp_dir().join(format!("vkdiff-bench-gen-tokenizers-{}", std::process::id()));
     let written =
@@ -159,6 +159,7 @@ fn reference(size: usize, steps: usize) -> std::result::Result<(f64, serde_json:
         let configs = [SDXL_BASE_CONFIG, SDXL_CLIP_L_CONFIG, SDXL_BIGG_CONFIG, SDXL_VAE_CONFIG].map(String::from);
         let tokenizers = tokenizers.display().to_string();
         crate::cpu_reference::run_python_reference::<GenTimes, _>(
+            env,
             REFERENCE,
             configs.into_iter().chain([tokenizers, size.to_string(), steps.to_string()]),
             None,

@@ -4,7 +4,7 @@ use crate::cpu_reference::{self, CpuGemm};
 use crate::peaks;
 use anyhow::Result;
 use std::time::{Duration, Instant};
-use vkdiff_runtime::{Context, Dtype, GemmFamily, MatrixTile, Recorder, Tensor};
+use vkdiff_runtime::{Context, Dtype, Environment, GemmFamily, MatrixTile, Recorder, Tensor};
 
 mod cases;
 mod matrix2;
@@ -176,8 +176,8 @@ fn print_row(row: &Row) {
     );
 }
 
-pub fn run(args: &KernelsArgs) -> Result<()> {
-    let ctx = args.common.device.open()?;
+pub fn run(args: &KernelsArgs, env: &Environment) -> Result<()> {
+    let ctx = args.common.device.open(env)?;
     let info = ctx.info().clone();
     let dtypes: Vec<Dtype> = if info.supports_f16() { vec![Dtype::F32, Dtype::F16] } else { vec![Dtype::F32] };
     let mut rows = Vec::new();
@@ -211,7 +211,7 @@ pub fn run(args: &KernelsArgs) -> Result<()> {
     let cpu: Result<Vec<CpuGemm>, String> = if args.common.no_cpu_reference || gemm_shapes.is_empty() {
         Ok(vec![])
     } else {
-        cpu_reference::measure(&gemm_shapes)
+        cpu_reference::measure(env, &gemm_shapes)
     };
     if let Ok(cpu) = &cpu {
         for (row, gemm) in &mut rows {

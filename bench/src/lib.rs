@@ -58,18 +58,19 @@ pub enum BenchCommand {
     Fid(fid::FidArgs),
 }
 
-pub fn run(cmd: BenchCommand) -> Result<()> {
+/// Runs `cmd`; `env` is the process's environment as the command line read it, the one place.
+pub fn run(cmd: BenchCommand, env: &vkdiff_runtime::Environment) -> Result<()> {
     match cmd {
-        BenchCommand::Report(args) => report::run(&args),
+        BenchCommand::Report(args) => report::run(&args, env),
         BenchCommand::Compare(args) => compare::run(&args),
-        BenchCommand::Kernels(args) => kernels::run(&args),
+        BenchCommand::Kernels(args) => kernels::run(&args, env),
         BenchCommand::Scene(args) => scene::run(&args),
-        BenchCommand::Unet(args) => unet::run(&args),
-        BenchCommand::Gen(args) => gen::run(&args),
-        BenchCommand::Lora(args) => lora::run(&args),
-        BenchCommand::Workflow(args) => workflow::run(&args),
-        BenchCommand::Dataset(args) => dataset::run(&args),
-        BenchCommand::Fid(args) => fid::run(&args),
-        BenchCommand::Vae(args) => vae::run(&args),
+        BenchCommand::Unet(args) => unet::run(&args, env),
+        BenchCommand::Gen(args) => gen::run(&args, env),
+        BenchCommand::Lora(args) => lora::run(&args, env),
+        BenchCommand::Workflow(args) => workflow::run(&args, env),
+        BenchCommand::Dataset(args) => dataset::run(&args, env),
+        BenchCommand::Fid(args) => fid::run(&args, env),
+        BenchCommand::Vae(args) => vae::run(&args, env),
     }
 }

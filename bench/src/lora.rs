@@ -6,6 +6,7 @@ use anyhow::Result;
 use std::time::Instant;
 use vkdiff_lora::{LoraFile, LoraMerger, Targets};
 use vkdiff_networks::{Checkpoint, UNet, UNetConfig};
+use vkdiff_runtime::Environment;
 
 const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("lora_merge_cpu_reference.py");
 
@@ -24,9 +25,9 @@ pub struct LoraArgs {
     no_cpu_reference: bool,
 }
 
-pub fn run(args: &LoraArgs) -> Result<()> {
+pub fn run(args: &LoraArgs, env: &Environment) -> Result<()> {
     let dtype = args.precision.dtype();
-    let ctx = args.device.open()?;
+    let ctx = args.device.open(env)?;
     let unet = UNet::load(&UNetConfig::sdxl_base(), &Checkpoint::random(&ctx, dtype, 0))?;
     let shapes = transformer_linears(&unet);
     let path = std::env::temp_dir().join(format!("vkdiff-bench-lora-{}.safetensors", std::process::id()));
@@ -57,7 +58,7 @@ pub fn run(args: &LoraArgs) -> Result<()> {
         restore_s
     );
     if !args.no_cpu_reference {
-        match reference(&shapes, args.rank) {
+        match reference(env, &shapes, args.rank) {
             Ok(cpu) => println!("torch CPU f32 merge: {cpu:.2} s | merge speed-up {:.2}×", cpu / again.seconds),
             Err(why) => println!("torch CPU reference unavailable: {why}"),
         }
@@ -100,10 +101,10 @@ pub(super) fn write_lora(path: &std::path::Path, shapes: &[(String, [usize; 2])]
     Ok(vkdiff_formats::write_safetensors_f32(path, &refs, &Default::default())?)
 }
 
-fn reference(shapes: &[(String, [usize; 2])], rank: usize) -> std::result::Result<f64, String> {
+fn reference(env: &Environment, shapes: &[(String, [usize; 2])], rank: usize) -> std::result::Result<f64, String> {
     let job = serde_json::json!({ "rank": rank, "shapes": shapes.iter().map(|(_, s)| s).collect::<Vec<_>>() });
     let out: MergeTime =
-        crate::cpu_reference::run_python_reference(REFERENCE, [] as [&str; 0], Some(&job.to_string()))?;
+        crate::cpu_reference::run_python_reference(env, REFERENCE, [] as [&str; 0], Some(&job.to_string()))?;
     Ok(out.merge_s)
 }
 

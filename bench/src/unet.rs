@@ -9,9 +9,13 @@ use anyhow::Result;
 use std::time::{Duration, Instant};
 use vkdiff_args::Precision;
 use vkdiff_networks::{Checkpoint, UNet, UNetConfig, UNetInputs, SDXL_BASE_CONFIG};
-use vkdiff_runtime::{Context, Dtype, Tensor};
+use vkdiff_runtime::{Context, Dtype, Environment, Tensor};
 
 const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("unet_reference.py");
+
+/// One untimed evaluation before the timed ones, on both sides: the best of them is the steady
+/// state's, not the first touch of memory or kernels.
+const WARM_UP: bool = true;
 
 /// Where diffusers runs beside us.
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -82,16 +86,16 @@ struct Row {
     tuned: Vec<TunedRow>,
 }
 
-pub fn run(args: &UnetArgs) -> Result<()> {
+pub fn run(args: &UnetArgs, env: &Environment) -> Result<()> {
     let dtype = args.precision.dtype();
     let config = UNetConfig::sdxl_base();
     for &size in &args.size {
         vkdiff_args::ensure_usage(size % 32 == 0 && size > 0, || {
             format!("--size {size}: SDXL needs a multiple of 32 pixels")
         })?;
-        let mut row = measure(args, &config, dtype, size)?;
+        let mut row = measure(args, env, &config, dtype, size)?;
         if !args.common.no_cpu_reference {
-            match reference(size / 8, args) {
+            match reference(env, size / 8, args) {
                 Ok(r) => {
                     row.ratio_to_reference = Some(r.ms / row.ms);
                     (row.reference_ms, row.reference_peak_mib, row.reference) = (Some(r.ms), Some(r.peak_mib), r.what);
@@ -133,15 +137,15 @@ pub fn run(args: &UnetArgs) -> Result<()> {
 }
 
 /// Our evaluation; the device and every buffer are released before the reference runs.
-fn measure(args: &UnetArgs, config: &UNetConfig, dtype: Dtype, size: usize) -> Result<Row> {
-    let ctx = args.common.device.open()?;
+fn measure(args: &UnetArgs, env: &Environment, config: &UNetConfig, dtype: Dtype, size: usize) -> Result<Row> {
+    let ctx = args.common.device.open(env)?;
     let start = Instant::now();
     let ckpt = Checkpoint::random(&ctx, dtype, 0);
     let unet = UNet::load(config, &ckpt)?;
     let load_s = start.elapsed().as_secs_f64();
     let weights = ctx.live_bytes();
     let tensors = RandomInputs::new(&ctx, config, dtype, args.batch, size)?;
-    let timed = time_unet(&unet, &tensors.inputs(), false, args.samples.max(1))?;
+    let timed = time_unet(&unet, &tensors.inputs(), WARM_UP, args.samples.max(1))?;
     let best = timed.seconds.iter().copied().fold(f64::INFINITY, f64::min);
     let profile = if args.profile { profile(&ctx, &unet, &tensors.inputs())? } else { Vec::new() };
     let mib = |b: u64| b as f64 / (1 << 20) as f64;
@@ -265,26 +269,29 @@ pub(crate) struct Reference {
     pub what: String,
 }
 
-fn reference(latent: usize, args: &UnetArgs) -> std::result::Result<Reference, String> {
+fn reference(env: &Environment, latent: usize, args: &UnetArgs) -> std::result::Result<Reference, String> {
     let cuda = (args.reference_device == ReferenceDevice::Cuda).then(|| args.precision.dtype());
-    diffusers_unet(SDXL_BASE_CONFIG, latent, args.batch, args.samples.max(1), cuda)
+    diffusers_unet(env, SDXL_BASE_CONFIG, latent, args.batch, args.samples.max(1), WARM_UP, cuda)
 }
 
 /// diffusers' UNet2DConditionModel of `config` (random weights) on the CPU in f32, or with
-/// `cuda` on the CUDA GPU at that precision, `samples` timed evaluations.
+/// `cuda` on the CUDA GPU at that precision, `samples` timed evaluations (after an untimed one
+/// with `warm_up`, on either device, as vkdiff's side did).
 pub(crate) fn diffusers_unet(
+    env: &Environment,
     config: &str,
     latent: usize,
     batch: usize,
     samples: usize,
+    warm_up: bool,
     cuda: Option<Dtype>,
 ) -> std::result::Result<Reference, String> {
-    let mut script_args =
-        vec![config.to_string(), latent.to_string(), latent.to_string(), batch.to_string(), samples.to_string()];
+    let mut script_args = [latent, latent, batch, samples, usize::from(warm_up)].map(|n| n.to_string()).to_vec();
+    script_args.insert(0, config.to_string());
     if let Some(dtype) = cuda {
         script_args.extend(["cuda".to_string(), dtype_name(dtype).to_string()]);
     }
-    let out: UnetTimes = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
+    let out: UnetTimes = crate::cpu_reference::run_python_reference(env, REFERENCE, script_args, None)?;
     Ok(Reference { ms: out.ms, times_ms: out.times_ms, peak_mib: out.peak_mib, what: out.run.label() })
 }
 

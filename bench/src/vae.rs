@@ -13,7 +13,7 @@ use anyhow::Result;
 use std::time::Instant;
 use vkdiff_args::Precision;
 use vkdiff_networks::{AutoencoderKl, Checkpoint, VaeConfig, VaeTiling, SDXL_VAE_CONFIG};
-use vkdiff_runtime::{Dtype, HostStats};
+use vkdiff_runtime::{Dtype, Environment, HostStats};
 
 #[derive(clap::Args)]
 pub struct VaeArgs {
@@ -128,13 +128,19 @@ impl Reference {
 
 const REFERENCE: crate::cpu_reference::Script = crate::cpu_reference::script!("vae_reference.py");
 
-fn reference(config: &str, args: &VaeArgs, device: ReferenceDevice) -> std::result::Result<Reference, String> {
-    diffusers_vae(config, args.size, args.samples as usize, device, args.precision.dtype())
+fn reference(
+    env: &Environment,
+    config: &str,
+    args: &VaeArgs,
+    device: ReferenceDevice,
+) -> std::result::Result<Reference, String> {
+    diffusers_vae(env, config, args.size, args.samples as usize, device, args.precision.dtype())
 }
 
 /// diffusers' whole decode of a `size`² image with `config` (random weights), `samples` times
 /// after a warm-up, on `device` in `dtype`.
 pub(crate) fn diffusers_vae(
+    env: &Environment,
     config: &str,
     size: usize,
     samples: usize,
@@ -146,7 +152,7 @@ pub(crate) fn diffusers_vae(
         ReferenceDevice::Cuda => "cuda",
     };
     let script_args = [config, &size.to_string(), &samples.to_string(), device, dtype_name(dtype)].map(str::to_string);
-    let out: VaeTimes = crate::cpu_reference::run_python_reference(REFERENCE, script_args, None)?;
+    let out: VaeTimes = crate::cpu_reference::run_python_reference(env, REFERENCE, script_args, None)?;
     Ok(Reference {
         seconds: out.seconds,
         times: out.times,
@@ -189,9 +195,9 @@ pub(crate) fn time_whole_decode(vae: &AutoencoderKl, size: usize, runs: usize) -
     Ok((first, times))
 }
 
-pub fn run(args: &VaeArgs) -> Result<()> {
-    let vae =
-        args.vae.as_ref().map(|v| vkdiff_args::resolve_model("--vae", v, vkdiff_args::Wants::Either)).transpose()?;
+pub fn run(args: &VaeArgs, env: &Environment) -> Result<()> {
+    let resolve = |v: &std::path::Path| vkdiff_args::resolve_model("--vae", v, vkdiff_args::Wants::Either, env);
+    let vae = args.vae.as_deref().map(resolve).transpose()?;
     let mut config: serde_json::Value = serde_json::from_str(SDXL_VAE_CONFIG)?;
     // f16 is the fp16-fix VAE: SDXL's architecture, with a config that does not ask for f32.
     let upcast = match &vae {
@@ -200,8 +206,8 @@ pub fn run(args: &VaeArgs) -> Result<()> {
     };
     config["force_upcast"] = upcast.into();
     let config = config.to_string();
-    let mut row = measure(args, &config, vae.as_deref())?;
-    row.reference = args.reference_device.map(|device| reference(&config, args, device));
+    let mut row = measure(args, env, &config, vae.as_deref())?;
+    row.reference = args.reference_device.map(|device| reference(env, &config, args, device));
     if args.json {
         println!("{}", serde_json::to_string(&row)?);
     } else {
@@ -242,8 +248,8 @@ pub fn run(args: &VaeArgs) -> Result<()> {
 
 /// vkdiff's decodes (of the VAE at `path`, else random weights of `config`); the device and
 /// every buffer are released before a reference runs.
-fn measure(args: &VaeArgs, config: &str, path: Option<&std::path::Path>) -> Result<Row> {
-    let ctx = args.device.open()?;
+fn measure(args: &VaeArgs, env: &Environment, config: &str, path: Option<&std::path::Path>) -> Result<Row> {
+    let ctx = args.device.open(env)?;
     let config: VaeConfig = serde_json::from_str(config)?;
     let vae = match path {
         Some(path) => AutoencoderKl::load_sdxl(&ctx, path, args.precision.dtype())?,

@@ -10,7 +10,7 @@ use std::time::Instant;
 use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::images::ClipPreprocess;
 use vkdiff_pipeline::{ControlGuide, Denoised, Guides, ImageGuide, Sdxl, VaeTilingSetting};
-use vkdiff_runtime::Context;
+use vkdiff_runtime::{Context, Environment};
 
 #[derive(clap::Args)]
 pub struct WorkflowArgs {
@@ -36,9 +36,9 @@ pub struct WorkflowArgs {
     decode: bool,
 }
 
-pub fn run(args: &WorkflowArgs) -> Result<()> {
+pub fn run(args: &WorkflowArgs, env: &Environment) -> Result<()> {
     let dtype = args.precision.dtype();
-    let ctx = args.device.open()?;
+    let ctx = args.device.open(env)?;
     let start = Instant::now();
     let mut model = Sdxl::random_sdxl_base(&ctx, dtype)?;
     let RandomGuides { controlnet, encoder, adapter, loras } =

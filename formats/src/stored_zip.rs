@@ -88,3 +88,49 @@ pub(crate) fn le(data: &[u8], at: usize, n: usize) -> Option<usize> {
     let bytes = data.get(at..at.checked_add(n)?)?;
     usize::try_from(bytes.iter().rev().fold(0u64, |v, &b| v << 8 | b as u64)).ok()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A one-entry archive laid out by hand as PKWARE's APPNOTE lays it out, the entry's sizes
+    /// and local header offset saturated (0xffffffff) in the central directory and given in its
+    /// zip64 extra field (tag 1), after a field of another tag: as a torch.save past 4 GiB writes it.
+    #[test]
+    fn saturated_sizes_are_read_from_the_zip64_extra_field() {
+        let (name, body) = (b"archive/data/0", b"hello");
+        let u16s = |v: usize| (v as u16).to_le_bytes();
+        let mut zip = Vec::new();
+        zip.extend(0x0403_4b50u32.to_le_bytes());
+        zip.extend([0; 22]); // versions, flags, method 0 (stored), times, CRC, sizes
+        zip.extend(u16s(name.len()));
+        zip.extend(u16s(0));
+        zip.extend(name);
+        zip.extend(body);
+        let cd_at = zip.len();
+        let mut extra = vec![0x55, 0x54, 1, 0, 0]; // tag 0x5455 (times), 1 byte
+        extra.extend([1, 0, 24, 0]); // tag 1 (zip64), 24 bytes: uncompressed, compressed, offset
+        for v in [body.len(), body.len(), 0] {
+            extra.extend((v as u64).to_le_bytes());
+        }
+        zip.extend(0x0201_4b50u32.to_le_bytes());
+        zip.extend([0; 16]); // versions, flags, method 0, times, CRC
+        zip.extend([0xff; 8]); // compressed and uncompressed sizes, saturated
+        zip.extend(u16s(name.len()));
+        zip.extend(u16s(extra.len()));
+        zip.extend([0; 10]); // comment length, disk, attributes
+        zip.extend([0xff; 4]); // local header offset, saturated
+        zip.extend(name);
+        zip.extend(&extra);
+        let cd_size = zip.len() - cd_at;
+        zip.extend(0x0605_4b50u32.to_le_bytes());
+        zip.extend([0, 0, 0, 0, 1, 0, 1, 0]); // disks, entries here and in all
+        zip.extend((cd_size as u32).to_le_bytes());
+        zip.extend((cd_at as u32).to_le_bytes());
+        zip.extend([0, 0]);
+        let entries = zip_entries(&zip).unwrap();
+        let start = 30 + name.len();
+        assert_eq!(entries["archive/data/0"], start..start + body.len());
+        assert_eq!(&zip[entries["archive/data/0"].clone()], body);
+    }
+}

@@ -392,6 +392,22 @@ mod tests {
     }
 
     #[test]
+    fn reads_protocol_4_calls_with_keywords_and_non_ascii_keys() {
+        // tools/make_pickle_cases.py: NEWOBJ_EX of __main__.Point, args (3,), kwargs {'y': 4}.
+        let p = b"\x80\x04\x95%\x00\x00\x00\x00\x00\x00\x00\x8c\x08__main__\x94\x8c\x05Point\x94\x93\x94K\x03\x85\x94}\
+                  \x94\x8c\x01y\x94K\x04s\x92\x94.";
+        let (pickle, _) = load(p).unwrap();
+        let Obj::Call { func, args } = pickle.objs[pickle.root] else { panic!("not a call") };
+        assert_eq!(pickle.global(func), Some(("__main__", "Point")));
+        assert_eq!(pickle.seq(args).unwrap().iter().map(|&a| pickle.int(a)).collect::<Vec<_>>(), [Some(3)]);
+        // {'gewicht·ä': 1}: SHORT_BINUNICODE is UTF-8, not latin-1.
+        let p = b"\x80\x04\x95\x14\x00\x00\x00\x00\x00\x00\x00}\x94\x8c\x0bgewicht\xc2\xb7\xc3\xa4\x94K\x01s.";
+        let (pickle, _) = load(p).unwrap();
+        let Obj::Dict(items) = &pickle.objs[pickle.root] else { panic!("not a dict") };
+        assert_eq!(pickle.str(items[0].0), Some("gewicht·ä"));
+    }
+
+    #[test]
     fn refuses_what_it_cannot_read() {
         for (bytes, why) in [
             (&b"\x80\x02}q\x00"[..], "truncated"),

@@ -121,6 +121,8 @@ mod tests {
         assert_eq!((r.median, r.min, r.max, r.count), (2.0, 1.0, 3.0, 3));
         assert_eq!(Runs::of(&[4.0, 1.0, 2.0, 3.0]).unwrap().median, 2.5);
         assert!((r.spread() - 1.0).abs() < 1e-12);
+        // A zero median has no share to spread over (not an infinity in the table).
+        assert_eq!(Runs::of(&[0.0, 0.0, 5.0]).unwrap().spread(), 0.0);
         assert_eq!(Runs::of(&[f64::NAN]), None);
         assert_eq!(Runs::of(&[1.0, f64::INFINITY]), None);
     }

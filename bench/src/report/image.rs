@@ -314,4 +314,11 @@ mod tests {
         assert_eq!(run, ImageRun { per_image: 18.0 + 42.0, whole: 62.0, parts });
         assert!(ImageRun::of(s(20.0), &StageTimes { steps: vec![s(4.0)], ..times }, 30).is_err());
     }
+
+    #[test]
+    fn only_an_image_with_untimed_steps_says_how_they_were_counted() {
+        let note = Steps { total: 30, timed: 2, lightning: false }.note().unwrap();
+        assert!(note.starts_with("2 of the 30 steps timed") && note.contains("median"), "{note}");
+        assert_eq!(Steps { total: 4, timed: 4, lightning: true }.note(), None);
+    }
 }

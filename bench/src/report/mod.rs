@@ -18,7 +18,7 @@ use anyhow::Result;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 use vkdiff_pipeline::LoraSetting;
-use vkdiff_runtime::{Context, Dtype};
+use vkdiff_runtime::{Context, Dtype, Environment};
 
 /// Changes whenever a figure's work changes: reports of other versions do not compare.
 pub const SUITE_VERSION: u32 = 1;
@@ -180,7 +180,7 @@ fn wants(args: &ReportArgs, group: Group) -> bool {
     }
 }
 
-pub fn run(args: &ReportArgs) -> Result<()> {
+pub fn run(args: &ReportArgs, env: &Environment) -> Result<()> {
     if let Some(out) = &args.out {
         let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
         vkdiff_args::ensure_usage(parent.is_dir(), || {
@@ -192,10 +192,10 @@ pub fn run(args: &ReportArgs) -> Result<()> {
             format!("--size {size} must be a multiple of 64, at least 64")
         })?;
     }
-    let user = resolve_user(args)?;
+    let user = resolve_user(args, env)?;
     let plan = Plan::of(args);
-    let ctx = args.device.open()?;
-    let system = System::of(&ctx);
+    let ctx = args.device.open(env)?;
+    let system = System::of(&ctx, env);
     eprintln!("report: {} on {} ({})", plan.suite(args), system.device, system.driver);
     let mut jobs: Vec<(Figure, networks::Job)> = Vec::new();
     if wants(args, Group::Image) || wants(args, Group::Ablation) {
@@ -228,7 +228,7 @@ pub fn run(args: &ReportArgs) -> Result<()> {
     // vkdiff's own figures first, in case the references do not finish (a lent GPU's minutes).
     report.figures = jobs.iter().map(|(f, _)| f.clone()).collect();
     write(args, &report)?;
-    report.figures = references::references(&plan, jobs);
+    report.figures = references::references(&plan, jobs, env);
     print!("{}", table::markdown(&report));
     write(args, &report)?;
     if let Some(out) = &args.out {
@@ -238,10 +238,10 @@ pub fn run(args: &ReportArgs) -> Result<()> {
 }
 
 /// The models `--model` and its guides name, resolved (Hugging Face ids to their files).
-fn resolve_user(args: &ReportArgs) -> Result<Option<UserModels>> {
+fn resolve_user(args: &ReportArgs, env: &Environment) -> Result<Option<UserModels>> {
     use vkdiff_args::Wants;
     let Some(model) = &args.model else { return Ok(None) };
-    let resolve = |flag: &str, p: &PathBuf, wants| vkdiff_args::resolve_model(flag, p, wants);
+    let resolve = |flag: &str, p: &PathBuf, wants| vkdiff_args::resolve_model(flag, p, wants, env);
     let optional = |flag: &str, p: &Option<PathBuf>, wants| p.as_ref().map(|p| resolve(flag, p, wants)).transpose();
     Ok(Some(UserModels {
         model: resolve("--model", model, Wants::Either)?,

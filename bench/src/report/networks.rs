@@ -24,11 +24,13 @@ pub enum Job {
         dtype: Dtype,
         warm_up: bool,
     },
+    /// diffusers' UNet; `warm_up` as for the workflow.
     Unet {
         config: String,
         latent: usize,
         batch: usize,
         dtype: Dtype,
+        warm_up: bool,
     },
     Vae {
         config: String,
@@ -127,7 +129,7 @@ pub fn unet(ctx: &Context, plan: &Plan, model: Option<&Path>) -> Result<Vec<(Fig
             reference: Reference::Missing { why: String::new() },
         };
         let job = match model.map_or(Some(SDXL_BASE_CONFIG.to_string()), |m| user_config(m, "unet")) {
-            Some(config) => Job::Unet { config, latent: plan.network_size / 8, batch: 2, dtype },
+            Some(config) => Job::Unet { config, latent: plan.network_size / 8, batch: 2, dtype, warm_up: plan.warm_up },
             None => Job::None("a single-file model has no diffusers config for the reference".into()),
         };
         out.push((figure, job));

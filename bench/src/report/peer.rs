@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use vkdiff_networks::{write_random_single_file, SdxlConfigs};
 use vkdiff_pipeline::{Guides, Sdxl};
-use vkdiff_runtime::Context;
+use vkdiff_runtime::{Context, Environment};
 
 const SDCPP_REFERENCE: Script = script!("sdcpp_reference.py");
 
@@ -101,10 +101,10 @@ fn write_and_time(ctx: &Context, plan: &Plan, user: Option<&Path>, dir: &Path) -
 
 /// sd.cpp's step on the same file and device (the median of its steps after the first, as
 /// vkdiff's), or why there is none; the file goes.
-pub fn sdcpp(file: &PeerFile, size: usize, steps: usize, timeout: Duration) -> Reference {
+pub fn sdcpp(env: &Environment, file: &PeerFile, size: usize, steps: usize, timeout: Duration) -> Reference {
     eprintln!("report: stable-diffusion.cpp's text-to-image from the same file (at most {} s)", timeout.as_secs());
     let args = [file.model.display().to_string(), size.to_string(), steps.to_string()];
-    let run = crate::cpu_reference::run_python_reference_within(SDCPP_REFERENCE, args, None, Some(timeout));
+    let run = crate::cpu_reference::run_python_reference_within(env, SDCPP_REFERENCE, args, None, Some(timeout));
     if let Some(dir) = &file.written {
         let _ = std::fs::remove_dir_all(dir);
     }

@@ -4,7 +4,7 @@
 
 use crate::peaks;
 use serde::{Deserialize, Serialize};
-use vkdiff_runtime::{Context, DeviceKind, Dtype};
+use vkdiff_runtime::{Context, DeviceKind, Dtype, Environment};
 
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct System {
@@ -29,7 +29,8 @@ pub struct System {
 }
 
 impl System {
-    pub fn of(ctx: &Context) -> System {
+    /// `ctx`'s device, and the command as run under `env`.
+    pub fn of(ctx: &Context, env: &Environment) -> System {
         let info = ctx.info();
         let (major, minor, patch) = info.api_version;
         System {
@@ -46,7 +47,7 @@ impl System {
             vkdiff: vkdiff_setting::version().into(),
             // As a user types it, whatever path ran the binary; the environment variables that
             // change the kernels in front.
-            command: command_line(),
+            command: command_line(env),
             date: utc_now(),
         }
     }
@@ -118,11 +119,11 @@ fn utc(secs: u64) -> String {
 
 /// This run's command as a user types it: `vkdiff` and its arguments, after the `VKDIFF_*`
 /// variables that choose kernels (a report made under them is made again only with them).
-fn command_line() -> String {
+fn command_line(env: &Environment) -> String {
     let chosen = ["VKDIFF_COOPERATIVE", "VKDIFF_MATRIX_TILE", "VKDIFF_FRAGMENT", "VKDIFF_GPU_PATHS"];
-    let env = chosen.iter().filter_map(|k| std::env::var(k).ok().map(|v| format!("{k}={v} ")));
+    let vars = chosen.iter().filter_map(|k| env.raw(k).map(|v| format!("{k}={v} ")));
     let args = std::env::args().skip(1);
-    env.collect::<String>() + &std::iter::once("vkdiff".to_string()).chain(args).collect::<Vec<_>>().join(" ")
+    vars.collect::<String>() + &std::iter::once("vkdiff".to_string()).chain(args).collect::<Vec<_>>().join(" ")
 }
 
 #[cfg(test)]

@@ -49,3 +49,19 @@ pub fn read_depth_exr(path: &Path) -> Result<(Vec<f32>, usize, usize)> {
     };
     Ok((values, width, height))
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn depth_is_z_then_one_depth_layer_then_v_then_r() {
+        let pick = |names: &[&str]| super::pick(&names.iter().map(|n| n.to_string()).collect::<Vec<_>>());
+        assert_eq!(pick(&["R", "G", "B", "Z"]), Ok(3));
+        assert_eq!(pick(&["R", "View.Depth.Z"]), Ok(1));
+        assert_eq!(pick(&["Depth.Z", "V"]), Ok(0));
+        assert_eq!(pick(&["R", "V"]), Ok(1));
+        assert_eq!(pick(&["G", "R"]), Ok(1));
+        assert!(pick(&["A.Depth.Z", "B.Depth.Z", "Z"]).is_ok(), "Z comes before the layers");
+        assert!(pick(&["A.Depth.Z", "B.Depth.Z"]).unwrap_err().contains("several depth layers"));
+        assert!(pick(&["A", "Y"]).unwrap_err().contains("channels: A, Y"));
+    }
+}
