@@ -89,3 +89,42 @@ pub fn control_file(depth_control: &str, kind: ControlKind) -> String {
     let stem = depth_control.strip_suffix(".png").unwrap_or(depth_control);
     format!("{stem}.{}.png", kind.name())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vkdiff_render::crops::crop_frame;
+    use vkdiff_render::scene::SceneConfig;
+    use vkdiff_scenes::{ProceduralBed, SceneSource};
+
+    #[test]
+    fn a_crops_controls_are_its_frames_controls_cut() {
+        // A bed seen by its camera, and the same frame as a scene without one (Blender's default
+        // camera of the whole frame, its principal point moved with the crop).
+        let bed = ProceduralBed::new(SceneConfig { width: 320, height: 240, ..SceneConfig::default() }).unwrap();
+        let frame = bed.frame(0, 7).unwrap().frame;
+        let no_camera = Frame { camera: None, ..frame.clone() };
+        let kinds = [ControlKind::Edges, ControlKind::Segmentation, ControlKind::Normals];
+        let controls = LabelControls::new(&kinds, DEFAULT_DEPTH_JUMP, &bed.categories()).unwrap();
+        let whole = CropWindow { x0: 0, y0: 0, width: 320, height: 240 };
+        let window = CropWindow { x0: 70, y0: 50, width: 128, height: 96 };
+        for f in [&frame, &no_camera] {
+            let full = controls.images(f, (320, 240), whole);
+            let cut = controls.images(&crop_frame(f, window, 0.0), (320, 240), window);
+            assert!(f.ids.iter().filter(|&&id| id != 0).count() > 1000, "the frame shows mushrooms");
+            for ((kind, full), (_, cut)) in full.iter().zip(&cut) {
+                // One pixel in from the crop's border, where its neighbours are the frame's.
+                let mut worst = 0;
+                for y in 1..95 {
+                    for x in 1..127 {
+                        let (at_cut, at_full) = (3 * (y * 128 + x), 3 * ((y + 50) * 320 + x + 70));
+                        for c in 0..3 {
+                            worst = worst.max(cut[at_cut + c].abs_diff(full[at_full + c]));
+                        }
+                    }
+                }
+                assert!(worst == 0, "{kind:?}, camera {}: off by {worst}", f.camera.is_some());
+            }
+        }
+    }
+}
