@@ -60,7 +60,7 @@ pub fn run(args: &WorkflowArgs, env: &Environment) -> Result<()> {
         let merge = model.set_loras(&refs)?.map_or(0.0, |s| s.seconds);
         let depth = gradient(size, size, 3);
         let guides = Guides {
-            control: Some(ControlGuide { net: &controlnet, image: &depth, scale: 0.5, start: 0.0, end: 1.0 }),
+            control: vec![ControlGuide { net: &controlnet, image: &depth, scale: 0.5, start: 0.0, end: 1.0 }],
             image: Some(ImageGuide {
                 adapter: &adapter,
                 encoder: &encoder,

@@ -279,7 +279,7 @@ impl<'a> Loop<'a> {
             let ip = self.models.ip_use(styles).filter(|_| styles > 0);
             self.recordings += 1;
             self.denoiser = Some((
-                Denoiser::record(&self.models.sdxl, sampling, self.models.control_use(), ip, key.0, tokens)?,
+                Denoiser::record(&self.models.sdxl, sampling, &self.models.control_uses(), ip, key.0, tokens)?,
                 key,
             ));
         }
@@ -302,7 +302,7 @@ impl<'a> Loop<'a> {
                 init: init.as_ref(),
                 seed: item.seed,
                 text: &self.texts[&item.prompt],
-                control_image: Some(&item.scene.control),
+                control_images: self.models.controlnet.iter().map(|_| &item.scene.control).collect(),
                 ip_tokens: item.style.map(|s| self.tokens[&s].as_slice()),
             })
             .collect();

@@ -89,21 +89,21 @@ fn alone_and_together(ctx: &Context, precision: Dtype, size: (usize, usize), spl
         ItemInputs {
             seed: 11,
             text: &texts[0],
-            control_image: Some(&control),
+            control_images: vec![&control],
             ip_tokens: Some(&tokens[0]),
             init: None,
         },
         ItemInputs {
             seed: 12,
             text: &texts[1],
-            control_image: Some(&flipped),
+            control_images: vec![&flipped],
             ip_tokens: Some(&tokens[1]),
             init: None,
         },
         ItemInputs {
             seed: 13,
             text: &texts[1],
-            control_image: Some(&control),
+            control_images: vec![&control],
             ip_tokens: Some(&tokens[0]),
             init: None,
         },
@@ -112,7 +112,7 @@ fn alone_and_together(ctx: &Context, precision: Dtype, size: (usize, usize), spl
         ctx.choose(|c| c.binding_limit = limit);
     }
     let record = |batch| {
-        Denoiser::record(sdxl, &sampling, models.control_use(), models.ip_use(1), batch, texts[0].tokens).unwrap()
+        Denoiser::record(sdxl, &sampling, &models.control_uses(), models.ip_use(1), batch, texts[0].tokens).unwrap()
     };
     ctx.set_profiling(true);
     let one = record(1);

@@ -104,7 +104,13 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
                 })
             }
         };
-        let out = sdxl.text_to_image(&job(case), &Guides { control, image, init: None }, &mut |_, _| {}).unwrap();
+        let out = sdxl
+            .text_to_image(
+                &job(case),
+                &Guides { control: control.into_iter().collect(), image, init: None },
+                &mut |_, _| {},
+            )
+            .unwrap();
         let (_, latents) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
         let rel = relative_l2(&out.latents, &latents);
         let (_, image) = records.values(case["tensors"]["image_u8"].as_str().unwrap()).unwrap();

@@ -54,6 +54,9 @@ pub struct ControlNetInputs<'a> {
     pub hint: &'a Tensor,
     /// Multiplies every residual (`controlnet_conditioning_scale`).
     pub scale: f32,
+    /// Another ControlNet's residuals, onto which this one's are added after it writes its own:
+    /// several ControlNets summed as diffusers' `MultiControlNetModel` sums them.
+    pub add_to: Option<&'a ControlResiduals>,
 }
 
 /// A recorded ControlNet evaluation writing `residuals`, which a recorded UNet pass reads; as
@@ -228,6 +231,18 @@ impl ControlNetModel {
             down.push(self.zero_conv(&mut g, conv, skip, inputs.scale)?);
         }
         let mid = self.zero_conv(&mut g, &self.zero_mid, &h, inputs.scale)?;
+        if let Some(sum) = inputs.add_to {
+            if sum.down.len() != down.len() {
+                return Err(Error::Config(format!(
+                    "ControlNets of {} and {} residuals cannot be summed",
+                    sum.down.len(),
+                    down.len()
+                )));
+            }
+            for (total, own) in sum.down.iter().zip(&down).chain([(&sum.mid, &mid)]) {
+                ops::add(&mut g.rec, total, own, total)?;
+            }
+        }
         Ok(ControlNetPass { recorded: g.finish()?, residuals: ControlResiduals { down, mid } })
     }
 

@@ -44,6 +44,7 @@ fn check(path: &str, records_of: &str, dtype: Dtype, tol: f64) {
         added: Some((&text_embeds, &time_ids)),
         hint: &hint,
         scale: 1.0,
+        add_to: None,
     };
     let (pass, ran) = listing_variants(|| net.record(&inputs).unwrap());
     assert_network_kernels(&ctx, dtype, &ran, 64, &format!("ControlNet {path} {dtype:?}"));

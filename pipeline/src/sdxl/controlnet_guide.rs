@@ -1,6 +1,7 @@
-//! A depth ControlNet steering the denoising loop as `StableDiffusionXLControlNetPipeline` does:
-//! the conditioning image resized to the output, run on both CFG halves, residuals scaled, and
-//! switched off outside [start, end] of the steps.
+//! ControlNets steering the denoising loop as `StableDiffusionXLControlNetPipeline` does: each
+//! conditioning image resized to the output, run on both CFG halves, residuals scaled and switched
+//! off outside the net's own [start, end] of the steps; several nets' residuals summed, as its
+//! `MultiControlNetModel` sums them.
 
 use crate::error::{Error, Result};
 use crate::images::control_tensor;
@@ -73,6 +74,8 @@ pub(crate) struct ControlRun<'a> {
     pass: ControlNetPass,
     /// [rows, h, w, C], the encoded images the recording reads.
     hint: Tensor,
+    /// Whether it adds its residuals onto the first ControlNet's (a second net and after).
+    adds: bool,
 }
 
 /// The tensors the UNet and the ControlNet both read.
@@ -84,8 +87,13 @@ pub(crate) struct SharedInputs<'a> {
 }
 
 impl<'a> ControlRun<'a> {
-    /// Records the ControlNet on `inputs`' shapes, with a hint tensor for their rows.
-    pub fn record(use_: ControlNetUse<'a>, inputs: &SharedInputs) -> Result<ControlRun<'a>> {
+    /// Records the ControlNet on `inputs`' shapes, with a hint tensor for their rows; with `add_to`,
+    /// its residuals are added onto those (the first ControlNet's, which the UNet reads).
+    pub fn record(
+        use_: ControlNetUse<'a>,
+        inputs: &SharedInputs,
+        add_to: Option<&ControlResiduals>,
+    ) -> Result<ControlRun<'a>> {
         check_control_settings(use_.scale, use_.start, use_.end)?;
         let s = inputs.sample.shape();
         let c0 = use_.net.config().encoder.block_out_channels[0];
@@ -97,8 +105,9 @@ impl<'a> ControlRun<'a> {
             added: Some(inputs.added),
             hint: &hint,
             scale: use_.scale,
+            add_to,
         })?;
-        Ok(ControlRun { use_, pass, hint })
+        Ok(ControlRun { use_, pass, hint, adds: add_to.is_some() })
     }
 
     /// Encodes one conditioning image per image of the batch (resized to `width`×`height` as
@@ -127,10 +136,15 @@ impl<'a> ControlRun<'a> {
         &self.pass.residuals
     }
 
-    /// Fills the residuals for step `i` of `total`: the ControlNet's, or zeros outside its range.
+    /// Step `i` of `total`: the ControlNet's residuals, or nothing outside its range (zeros, for
+    /// the first ControlNet, whose residuals the others add onto and the UNet reads). The first
+    /// ControlNet's step comes before the others'.
     pub fn step(&self, i: usize, total: usize) -> Result<()> {
         if self.use_.keeps(i, total) {
             return Ok(self.pass.run()?);
+        }
+        if self.adds {
+            return Ok(());
         }
         let r = &self.pass.residuals;
         for t in r.down.iter().chain([&r.mid]) {

@@ -30,8 +30,8 @@ pub struct ItemInputs<'a> {
     /// Seed of the image's own `torch.Generator("cpu")`.
     pub seed: u64,
     pub text: &'a Conditioning,
-    /// The ControlNet's conditioning image, when the batch has a ControlNet.
-    pub control_image: Option<&'a RgbImage>,
+    /// Each ControlNet's conditioning image, in the batch's ControlNets' order.
+    pub control_images: Vec<&'a RgbImage>,
     /// The image tokens of its rows ([`crate::ImageGuide::tokens`]), when it has an IP-Adapter.
     pub ip_tokens: Option<&'a [f32]>,
     /// img2img: the encoded init image, when the batch samples with a strength.
@@ -59,18 +59,19 @@ pub struct Denoiser<'m> {
     context: Tensor,
     pooled: Tensor,
     _time_ids: Tensor,
-    control: Option<ControlRun<'m>>,
+    /// The ControlNets; the first holds the residuals the others add onto and the UNet reads.
+    controls: Vec<ControlRun<'m>>,
     ip: Vec<IpAdapterInput>,
     pass: UNetPass,
 }
 
 impl<'m> Denoiser<'m> {
     /// Records the passes for `batch` images sampled as `sampling` says, with prompts of
-    /// `tokens` tokens ([`Conditioning::tokens`]), steered by `control` and `ip` when given.
+    /// `tokens` tokens ([`Conditioning::tokens`]), steered by `controls` (summed) and `ip`.
     pub fn record(
         model: &'m Sdxl,
         sampling: &Sampling,
-        control: Option<ControlNetUse<'m>>,
+        controls: &[ControlNetUse<'m>],
         ip: Option<IpAdapterUse<'m>>,
         batch: usize,
         tokens: usize,
@@ -90,7 +91,12 @@ impl<'m> Denoiser<'m> {
         let time_ids = ctx.upload(&[rows, 6], Dtype::F32, &time_ids)?;
         let shared =
             SharedInputs { sample: &sample, timesteps: &timesteps, context: &context, added: (&pooled, &time_ids) };
-        let control = control.map(|c| ControlRun::record(c, &shared)).transpose()?;
+        let mut runs: Vec<ControlRun> = Vec::with_capacity(controls.len());
+        for &control in controls {
+            let add_to = runs.first().map(ControlRun::residuals);
+            let run = ControlRun::record(control, &shared, add_to)?;
+            runs.push(run);
+        }
         let ip = match ip {
             Some(use_) => {
                 let width = model.unet_config.cross_attention_dim;
@@ -104,7 +110,7 @@ impl<'m> Denoiser<'m> {
             timesteps: &timesteps,
             encoder_hidden_states: &context,
             added: Some((&pooled, &time_ids)),
-            control: control.as_ref().map(ControlRun::residuals),
+            control: runs.first().map(ControlRun::residuals),
             ip: &ip,
         };
         let pass = model.unet.record(&inputs)?;
@@ -118,7 +124,7 @@ impl<'m> Denoiser<'m> {
             context,
             pooled,
             _time_ids: time_ids,
-            control,
+            controls: runs,
             ip,
             pass,
         })
@@ -200,7 +206,7 @@ impl<'m> Denoiser<'m> {
             }
             self.sample.write(&x_batch)?;
             self.timesteps.write(&vec![t; self.timesteps.numel()])?;
-            if let Some(control) = &self.control {
+            for control in &self.controls {
                 control.step(step, total)?;
             }
             self.pass.run()?;
@@ -244,13 +250,15 @@ impl<'m> Denoiser<'m> {
         if let Some(ip) = self.ip.first() {
             ip.tokens.write(&by_row(items, per_image, row(&ip.tokens), |i| i.ip_tokens, "IP-Adapter image tokens")?)?;
         }
-        if let Some(control) = &self.control {
-            let images = items
-                .iter()
-                .map(|i| {
-                    i.control_image.ok_or_else(|| Error::Config("an image of the batch has no ControlNet image".into()))
-                })
-                .collect::<Result<Vec<_>>>()?;
+        if let Some(short) = items.iter().find(|i| i.control_images.len() != self.controls.len()) {
+            return Err(Error::Config(format!(
+                "an image of the batch has {} ControlNet images for {} ControlNets",
+                short.control_images.len(),
+                self.controls.len()
+            )));
+        }
+        for (k, control) in self.controls.iter().enumerate() {
+            let images: Vec<&RgbImage> = items.iter().map(|i| i.control_images[k]).collect();
             control.set_images(&images, per_image, self.sampling.width, self.sampling.height)?;
             control.project_conditioning()?;
         }

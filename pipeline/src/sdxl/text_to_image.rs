@@ -34,7 +34,8 @@ pub struct Generated {
 /// What steers a generation beyond the prompt.
 #[derive(Default)]
 pub struct Guides<'a> {
-    pub control: Option<ControlGuide<'a>>,
+    /// The ControlNets, their residuals summed (none: no ControlNet).
+    pub control: Vec<ControlGuide<'a>>,
     pub image: Option<ImageGuide<'a>>,
     /// img2img's init image (with [`Sampling::strength`]).
     pub init: Option<&'a RgbImage>,
@@ -124,17 +125,20 @@ impl Sdxl {
         let mut timings = Timings::default();
         let start = Instant::now();
         let ip_tokens = guides.image.as_ref().map(|g| g.tokens(sampling.guided())).transpose()?;
-        let control =
-            guides.control.as_ref().map(|g| ControlNetUse { net: g.net, scale: g.scale, start: g.start, end: g.end });
+        let controls: Vec<ControlNetUse> = guides
+            .control
+            .iter()
+            .map(|g| ControlNetUse { net: g.net, scale: g.scale, start: g.start, end: g.end })
+            .collect();
         let ip =
             guides.image.as_ref().map(|g| IpAdapterUse { adapter: g.adapter, scale: g.scale, images: g.images.len() });
-        let denoiser = Denoiser::record(self, sampling, control, ip, 1, text.tokens)?;
+        let denoiser = Denoiser::record(self, sampling, &controls, ip, 1, text.tokens)?;
         timings.record = start.elapsed();
         let init = guides.init.map(|image| self.encode_init(image, sampling.width, sampling.height)).transpose()?;
         let item = ItemInputs {
             seed: job.seed,
             text,
-            control_image: guides.control.as_ref().map(|g| g.image),
+            control_images: guides.control.iter().map(|g| g.image).collect(),
             ip_tokens: ip_tokens.as_deref(),
             init: init.as_ref(),
         };

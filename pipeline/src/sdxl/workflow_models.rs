@@ -59,10 +59,10 @@ impl WorkflowModels {
         Ok(WorkflowModels { sdxl, controlnet, style, settings: settings.clone() })
     }
 
-    /// The ControlNet as a batch uses it.
-    pub fn control_use(&self) -> Option<ControlNetUse<'_>> {
-        let (net, c) = (self.controlnet.as_ref()?, self.settings.controlnet.as_ref()?);
-        Some(ControlNetUse { net, scale: c.scale, start: c.start, end: c.end })
+    /// The ControlNets as a batch uses them.
+    pub fn control_uses(&self) -> Vec<ControlNetUse<'_>> {
+        let pairs = self.controlnet.iter().zip(&self.settings.controlnet);
+        pairs.map(|(net, c)| ControlNetUse { net, scale: c.scale, start: c.start, end: c.end }).collect()
     }
 
     /// The IP-Adapter as a batch of images with `images` style images each uses it.
@@ -85,13 +85,13 @@ impl WorkflowModels {
 
     /// One image's guides over its inputs.
     pub fn guides<'a>(&'a self, inputs: &'a GuideInputs) -> Guides<'a> {
-        let control = self.control_use().zip(inputs.control.as_ref()).map(|(c, image)| ControlGuide {
-            net: c.net,
-            image,
-            scale: c.scale,
-            start: c.start,
-            end: c.end,
-        });
+        let images = inputs.control.iter();
+        let control = self
+            .control_uses()
+            .into_iter()
+            .zip(images)
+            .map(|(c, image)| ControlGuide { net: c.net, image, scale: c.scale, start: c.start, end: c.end })
+            .collect();
         Guides { control, image: self.image_guide(&inputs.style), init: inputs.init.as_ref() }
     }
 }

@@ -122,7 +122,7 @@ impl CaseInputs {
             start: *start,
             end: *end,
         });
-        Guides { control, image, init: self.init.as_ref() }
+        Guides { control: control.into_iter().collect(), image, init: self.init.as_ref() }
     }
 }
 
