@@ -9,6 +9,7 @@ mod cli;
 use cli::{chromium, png_pixels, scratch, screenshot, vkdiff};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
+use std::process::Output;
 
 fn fixtures() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures")
@@ -19,10 +20,14 @@ fn read_json(path: &Path) -> Value {
 }
 
 /// A render-only set of the first two scene folders (160×128 whole frames) with `extra` flags.
-fn make_set(out: &Path, extra: &[&str]) {
+fn dataset_of_two(out: &Path, extra: &[&str]) -> Output {
     let scenes = fixtures().join("scenes/folders");
     let args = ["dataset", "--render-only", "--scenes", scenes.to_str().unwrap(), "--count", "2", "--out"];
-    let run = vkdiff(&[&args[..], &[out.to_str().unwrap()], extra].concat());
+    vkdiff(&[&args[..], &[out.to_str().unwrap()], extra].concat())
+}
+
+fn make_set(out: &Path, extra: &[&str]) {
+    let run = dataset_of_two(out, extra);
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
 }
 
@@ -52,18 +57,7 @@ fn controls_are_the_numpy_ones_recorded_and_previewed() {
         "{recorded}"
     );
     // Resuming with other controls is refused, naming the flag.
-    let other = vkdiff(&[
-        "dataset",
-        "--render-only",
-        "--scenes",
-        fixtures().join("scenes/folders").to_str().unwrap(),
-        "--count",
-        "2",
-        "--out",
-        set.to_str().unwrap(),
-        "--controls",
-        "edges",
-    ]);
+    let other = dataset_of_two(&set, &["--controls", "edges"]);
     assert_eq!(other.status.code(), Some(2));
     assert!(
         String::from_utf8_lossy(&other.stderr).contains("--controls"),
@@ -111,9 +105,7 @@ fn a_set_without_controls_has_none_and_bad_values_are_refused() {
         (["--edge-depth-jump", "0"], "--edge-depth-jump 0 must be a positive fraction"),
     ] {
         let out = dir.join(format!("bad{}", flags[0]));
-        let scenes = fixtures().join("scenes/folders");
-        let args = ["dataset", "--render-only", "--scenes", scenes.to_str().unwrap(), "--count", "2", "--out"];
-        let run = vkdiff(&[&args[..], &[out.to_str().unwrap()], &flags[..]].concat());
+        let run = dataset_of_two(&out, &flags);
         let stderr = String::from_utf8_lossy(&run.stderr);
         assert_eq!(run.status.code(), Some(2), "{flags:?}: {stderr}");
         assert!(stderr.contains(needle) && !out.exists(), "{flags:?}: {stderr}");

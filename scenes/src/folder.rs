@@ -136,9 +136,7 @@ fn depth_size(dir: &Path) -> Result<(usize, usize), SceneError> {
     }
     let (png, _) = depth_png(dir)?;
     let (width, height, bits) = grey_png_size(&png).map_err(SceneError::from_file)?;
-    if bits != 16 {
-        return Err(SceneError::file(&png, "8-bit; depth as PNG is 16-bit grey".into()));
-    }
+    sixteen_bits(&png, bits)?;
     Ok((width, height))
 }
 
@@ -156,6 +154,14 @@ fn depth_png(dir: &Path) -> Result<(PathBuf, DepthScale), SceneError> {
     Ok((png, scale))
 }
 
+/// Depth as a PNG is 16-bit grey.
+fn sixteen_bits(png: &Path, bits: u8) -> Result<(), SceneError> {
+    if bits == 16 {
+        return Ok(());
+    }
+    Err(SceneError::file(png, "8-bit; depth as PNG is 16-bit grey".into()))
+}
+
 /// depth.exr, else depth.png scaled by depth.json.
 fn read_depth(dir: &Path) -> Result<(Vec<f32>, usize, usize), SceneError> {
     let exr = dir.join("depth.exr");
@@ -164,9 +170,7 @@ fn read_depth(dir: &Path) -> Result<(Vec<f32>, usize, usize), SceneError> {
     }
     let (png, scale) = depth_png(dir)?;
     let grey = read_grey_png(&png).map_err(SceneError::from_file)?;
-    if grey.bits != 16 {
-        return Err(SceneError::file(&png, "8-bit; depth as PNG is 16-bit grey".into()));
-    }
+    sixteen_bits(&png, grey.bits)?;
     let depth = grey
         .values
         .iter()
