@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use vkdiff_args::Progress;
 use vkdiff_args::{ModelArgs, SamplingArgs};
 use vkdiff_pipeline::{recipe_warnings, GenEvent, GenJob, GenRequest, GenSettings, TextToImage};
+use vkdiff_render::control::ControlKind;
 
 /// Text-to-image with an SDXL model (diffusers folder or single .safetensors file).
 #[derive(Args, Debug)]
@@ -30,6 +31,10 @@ pub struct GenArgs {
     /// into an image as `vkdiff scene` writes control.png, or an image used as it is.
     #[arg(long, requires = "controlnet")]
     depth: Option<PathBuf>,
+    /// The image of a control other than depth that a --controlnet sees, as KIND=FILE (edges,
+    /// segmentation or normals, as `vkdiff dataset --controls` writes them); repeat it for each.
+    #[arg(long, requires = "controlnet", value_parser = parse_control_image, value_name = "KIND=FILE")]
+    control_image: Vec<(ControlKind, PathBuf)>,
     /// A style image for --ip-adapter; repeat it for several, whose tokens are joined as
     /// diffusers joins several images given to one adapter.
     #[arg(long, requires = "ip_adapter")]
@@ -53,6 +58,17 @@ pub struct GenArgs {
     force: bool,
 }
 
+/// `KIND=FILE` for a control other than depth (which `--depth` gives).
+fn parse_control_image(text: &str) -> std::result::Result<(ControlKind, PathBuf), String> {
+    let (kind, file) = text.split_once('=').ok_or("expected KIND=FILE, as edges=edges.png")?;
+    match ControlKind::parse(kind) {
+        Some(ControlKind::Depth) => Err("the depth control is --depth FILE".into()),
+        Some(kind) if !file.is_empty() => Ok((kind, file.into())),
+        Some(_) => Err("expected KIND=FILE, as edges=edges.png".into()),
+        None => Err(format!("{kind}: expected edges, segmentation or normals")),
+    }
+}
+
 pub fn run(args: &GenArgs, env: &vkdiff_runtime::Environment) -> Result<()> {
     let settings = GenSettings {
         models: args.model.settings(env)?,
@@ -63,6 +79,7 @@ pub fn run(args: &GenArgs, env: &vkdiff_runtime::Environment) -> Result<()> {
             sampling: args.sampling.sampling(0, 0),
         },
         depth: args.depth.clone(),
+        control_images: args.control_image.clone(),
         ip_images: args.ip_image.clone(),
         init_image: args.init_image.clone(),
     };

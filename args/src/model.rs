@@ -9,6 +9,7 @@ use vkdiff_pipeline::{
     ControlNetSettings, IpAdapterSettings, IpMode, IpScale, LoraSetting, ModelSettings, PredictionType, PromptSyntax,
     SamplerKind, Sampling, ScheduleOptions, SizeConditioning, TimestepSpacing, VaeTilingSetting,
 };
+use vkdiff_render::control::ControlKind;
 use vkdiff_runtime::{Dtype, Environment};
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -88,10 +89,13 @@ pub struct ModelArgs {
     /// slightly from whole ones; PNGs record the tile as `vae_tile`.
     #[arg(long, default_value = "auto", value_name = "auto|off|on|PIXELS")]
     vae_tiling: VaeTilingSetting,
-    /// Depth ControlNet: a diffusers folder, or one .safetensors in the diffusers or original
-    /// (cldm) layout, or a Hugging Face id.
-    #[arg(long, value_name = "DIR|FILE|ID")]
-    controlnet: Option<PathBuf>,
+    /// A ControlNet: a diffusers folder, or one .safetensors in the diffusers or original (cldm)
+    /// layout, or a Hugging Face id; plain, or ControlNet-Union (xinsir's). Repeat it for several,
+    /// whose residuals are summed. Each may say which scene control it sees (depth, edges,
+    /// segmentation, normals; a Union model several: control=depth+edges) [default: depth], and
+    /// its own scale and range [default: --control-scale, --control-start, --control-end].
+    #[arg(long, value_parser = parse_controlnet, value_name = "MODEL[,control=KIND[+KIND]][,scale=S][,start=F][,end=F]")]
+    controlnet: Vec<ControlNetArg>,
     /// How a depth EXR maps to brightness (near is bright either way).
     #[arg(long, value_enum, default_value_t = ControlMode::Inverse)]
     control_depth: ControlMode,
@@ -129,6 +133,51 @@ pub struct ModelArgs {
     lora: Vec<LoraSetting>,
 }
 
+/// One `--controlnet`: the model and what it sets beside the shared flags.
+#[derive(Clone, Debug)]
+pub struct ControlNetArg {
+    model: PathBuf,
+    controls: Vec<ControlKind>,
+    scale: Option<f32>,
+    start: Option<f64>,
+    end: Option<f64>,
+}
+
+/// `MODEL[,control=KIND[+KIND]][,scale=S][,start=F][,end=F]`; the options come last, so a path
+/// with a comma in it stays whole.
+pub fn parse_controlnet(text: &str) -> Result<ControlNetArg, String> {
+    let mut parts: Vec<&str> = text.split(',').collect();
+    let mut arg = ControlNetArg { model: PathBuf::new(), controls: Vec::new(), scale: None, start: None, end: None };
+    let number = |key: &str, value: &str| value.parse::<f64>().map_err(|_| format!("{key}={value} is not a number"));
+    while parts.len() > 1 {
+        let last = parts[parts.len() - 1];
+        let Some((key, value)) = last.split_once('=') else { break };
+        match key.trim() {
+            "control" => {
+                arg.controls = (value.split('+'))
+                    .map(|name| {
+                        ControlKind::parse(name).ok_or_else(|| {
+                            let kinds: Vec<&str> = ControlKind::ALL.iter().map(|k| k.name()).collect();
+                            format!("control={name}: expected one of {}", kinds.join(", "))
+                        })
+                    })
+                    .collect::<Result<_, _>>()?
+            }
+            "scale" => arg.scale = Some(number(key, value)? as f32),
+            "start" => arg.start = Some(number(key, value)?),
+            "end" => arg.end = Some(number(key, value)?),
+            _ => break,
+        }
+        parts.pop();
+    }
+    let model = parts.join(",");
+    if model.is_empty() {
+        return Err("expected MODEL[,control=KIND[+KIND]][,scale=S][,start=F][,end=F]".into());
+    }
+    arg.model = model.into();
+    Ok(arg)
+}
+
 /// `FILE[:STRENGTH]`; a colon whose tail is not a number belongs to the path.
 pub fn parse_lora(text: &str) -> Result<LoraSetting, String> {
     let (path, strength) = match text.rsplit_once(':').map(|(p, s)| (p, s.parse::<f32>())) {
@@ -153,7 +202,7 @@ impl ModelArgs {
             ("model", self.model.is_some()),
             ("vae", self.vae.is_some()),
             ("unet", self.unet.is_some()),
-            ("controlnet", self.controlnet.is_some()),
+            ("controlnet", !self.controlnet.is_empty()),
             ("ip_adapter", self.ip_adapter.is_some()),
             ("lora", !self.lora.is_empty()),
         ]
@@ -165,15 +214,18 @@ impl ModelArgs {
     /// the cache `env` points to).
     pub fn settings(&self, env: &Environment) -> anyhow::Result<ModelSettings> {
         let resolve = |flag: &str, path: &PathBuf, wants| resolve_model(&format!("--{flag}"), path, wants, env);
-        let controlnet =
-            self.controlnet.as_ref().map(|model| resolve("controlnet", model, Wants::Either)).transpose()?;
-        let controlnet = controlnet.map(|model| ControlNetSettings {
-            model,
-            depth_mode: self.control_depth.into(),
-            scale: self.control_scale,
-            start: self.control_start,
-            end: self.control_end,
-        });
+        let controlnets = (self.controlnet.iter())
+            .map(|c| {
+                Ok(ControlNetSettings {
+                    model: resolve("controlnet", &c.model, Wants::Either)?,
+                    controls: if c.controls.is_empty() { vec![ControlKind::Depth] } else { c.controls.clone() },
+                    depth_mode: self.control_depth.into(),
+                    scale: c.scale.unwrap_or(self.control_scale),
+                    start: c.start.unwrap_or(self.control_start),
+                    end: c.end.unwrap_or(self.control_end),
+                })
+            })
+            .collect::<anyhow::Result<_>>()?;
         let mode = self.ip_mode.map(|m| match m {
             IpModeArg::Style => IpMode::Style,
             IpModeArg::Composition => IpMode::Composition,
@@ -198,7 +250,7 @@ impl ModelArgs {
             vae: self.vae.as_ref().map(|v| resolve("vae", v, Wants::Either)).transpose()?,
             unet: self.unet.as_ref().map(|u| resolve("unet", u, Wants::Either)).transpose()?,
             precision: self.precision.dtype(),
-            controlnet,
+            controlnets,
             ip_adapter,
             loras,
             vae_tiling: self.vae_tiling,

@@ -17,6 +17,7 @@ use vkdiff_pipeline::{
     ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, Sdxl, StyleModels, TextToImage,
     WorkflowModels,
 };
+use vkdiff_render::control::ControlKind;
 use vkdiff_render::scene::SceneConfig;
 use vkdiff_runtime::{Context, Dtype, Environment};
 
@@ -59,7 +60,11 @@ pub fn run(args: &DatasetArgs, env: &Environment) -> Result<()> {
     let styles = vec![style_images().to_vec()];
     // One image as `vkdiff gen` makes it: its own text encoding, guides and recording (first:
     // the set releases the text encoders once its prompts are encoded).
-    let inputs = GuideInputs { control: Some(gradient_depth(args.size)), style: style_images().to_vec(), init: None };
+    let inputs = GuideInputs {
+        controls: [(ControlKind::Depth, gradient_depth(args.size))].into(),
+        style: style_images().to_vec(),
+        init: None,
+    };
     let job = TextToImage {
         prompt: dataset.prompts[0].clone(),
         negative_prompt: None,
@@ -142,7 +147,7 @@ pub(crate) fn random_workflow(ctx: &Context, dtype: Dtype, lora_rank: usize) -> 
     let preprocess = ClipPreprocess::square(encoder.config().image_size);
     let mut models = WorkflowModels {
         sdxl,
-        controlnet: Some(controlnet),
+        controlnets: vec![(controlnet, Vec::new())],
         style: Some(StyleModels { adapter, encoder, preprocess }),
         settings,
     };
@@ -194,13 +199,14 @@ pub(crate) fn model_settings(precision: Dtype, lora_strengths: &[f32]) -> ModelS
         vae: None,
         unet: None,
         precision,
-        controlnet: Some(ControlNetSettings {
+        controlnets: vec![ControlNetSettings {
             model: "random-controlnet-depth".into(),
+            controls: vec![ControlKind::Depth],
             depth_mode: ControlDepth::Inverse,
             scale: 0.5,
             start: 0.0,
             end: 1.0,
-        }),
+        }],
         ip_adapter: Some(IpAdapterSettings {
             adapter: "random-ip-adapter".into(),
             encoder: "random-vit-h".into(),

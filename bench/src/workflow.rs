@@ -9,7 +9,7 @@ use anyhow::Result;
 use std::time::Instant;
 use vkdiff_lora::LoraFile;
 use vkdiff_pipeline::images::ClipPreprocess;
-use vkdiff_pipeline::{ControlGuide, Denoised, Guides, ImageGuide, Sdxl, VaeTilingSetting};
+use vkdiff_pipeline::{ControlGuide, ControlNetUse, Denoised, Guides, ImageGuide, Sdxl, VaeTilingSetting};
 use vkdiff_runtime::{Context, Environment};
 
 #[derive(clap::Args)]
@@ -60,7 +60,10 @@ pub fn run(args: &WorkflowArgs, env: &Environment) -> Result<()> {
         let merge = model.set_loras(&refs)?.map_or(0.0, |s| s.seconds);
         let depth = gradient(size, size, 3);
         let guides = Guides {
-            control: vec![ControlGuide { net: &controlnet, image: &depth, scale: 0.5, start: 0.0, end: 1.0 }],
+            control: vec![ControlGuide {
+                use_: ControlNetUse { net: &controlnet, control_types: &[], scale: 0.5, start: 0.0, end: 1.0 },
+                images: vec![&depth],
+            }],
             image: Some(ImageGuide {
                 adapter: &adapter,
                 encoder: &encoder,

@@ -279,7 +279,7 @@ fn manifest(settings: &DatasetSettings) -> Value {
     });
     if !settings.controls.kinds.is_empty() {
         manifest["layout"]["controls"] =
-            json!("control/NNNNNN.<kind>.png: --controls, each computed from the image's labels (docs/controls.md)");
+            json!("control/NNNNNN.<kind>.png: --controls and the controls the ControlNets see, each computed from the image's labels (docs/controls.md)");
     }
     manifest
 }

@@ -22,6 +22,7 @@ use vkdiff_pipeline::RgbImage;
 use vkdiff_pipeline::TextToImage;
 use vkdiff_pipeline::WorkflowModels;
 use vkdiff_pipeline::{Denoiser, ItemInputs};
+use vkdiff_render::control::ControlKind;
 
 pub struct RunOptions {
     /// Images per UNet pass.
@@ -302,7 +303,7 @@ impl<'a> Loop<'a> {
                 init: init.as_ref(),
                 seed: item.seed,
                 text: &self.texts[&item.prompt],
-                control_images: self.models.controlnet.iter().map(|_| &item.scene.control).collect(),
+                control_images: self.models.control_images(&|kind| item.scene.control_image(kind)),
                 ip_tokens: item.style.map(|s| self.tokens[&s].as_slice()),
             })
             .collect();
@@ -333,6 +334,7 @@ impl<'a> Loop<'a> {
         let index = item.scene.index;
         let files = super::plan::ImageFiles::new(index, s.images());
         let ip_images: Vec<PathBuf> = item.style.map(|k| s.ip_sets[k].clone()).unwrap_or_default();
+        let uses_depth = self.models.settings.control_kinds().contains(&ControlKind::Depth);
         let gen = GenSettings {
             models: self.models.settings.clone(),
             job: TextToImage {
@@ -341,7 +343,11 @@ impl<'a> Loop<'a> {
                 seed: item.seed,
                 sampling: s.sampling.clone(),
             },
-            depth: self.models.settings.controlnet.as_ref().map(|_| PathBuf::from(&files.depth)),
+            depth: uses_depth.then(|| PathBuf::from(&files.depth)),
+            control_images: (item.scene.controls.iter())
+                .filter(|c| self.models.settings.control_kinds().contains(&c.kind))
+                .map(|c| (c.kind, PathBuf::from(&c.file)))
+                .collect(),
             ip_images: ip_images.clone(),
             init_image: item.scene.init.as_ref().map(|_| PathBuf::from(&files.init)),
         };

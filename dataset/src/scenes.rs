@@ -37,8 +37,8 @@ pub struct SceneImage {
     pub control: RgbImage,
     pub depth_exr: Vec<u8>,
     pub control_png: Vec<u8>,
-    /// The other controls (`--controls`): kind, file, PNG.
-    pub controls: Vec<(ControlKind, String, Vec<u8>)>,
+    /// The other controls (`--controls`, and those the ControlNets see).
+    pub controls: Vec<SceneControl>,
     pub mask_png: Vec<u8>,
     /// The crop's shaded render, and as a PNG: img2img's start (`--init-strength`), or a
     /// render-only set's image.
@@ -66,7 +66,7 @@ impl SceneImage {
         entry["crop"]["index"] = json!(self.crop);
         if !self.controls.is_empty() {
             let files: serde_json::Map<String, Value> =
-                self.controls.iter().map(|(kind, file, _)| (kind.name().to_string(), json!(file))).collect();
+                self.controls.iter().map(|c| (c.kind.name().to_string(), json!(c.file))).collect();
             entry["control_files"] = Value::Object(files);
         }
         if let Some(name) = &self.scene_name {
@@ -88,9 +88,26 @@ impl SceneImage {
             (&files.control, &self.control_png),
             (&files.mask, &self.mask_png),
         ];
-        out.extend(self.controls.iter().map(|(_, file, png)| (file.as_str(), png.as_slice())));
+        out.extend(self.controls.iter().map(|c| (c.file.as_str(), c.png.as_slice())));
         out
     }
+
+    /// The image of control `kind` the ControlNets see.
+    pub fn control_image(&self, kind: ControlKind) -> &RgbImage {
+        match self.controls.iter().find(|c| c.kind == kind) {
+            Some(c) => &c.image,
+            None if kind == ControlKind::Depth => &self.control,
+            None => unreachable!("the settings make every control a ControlNet sees"),
+        }
+    }
+}
+
+/// A control beside the depth control: its image, its file and its PNG.
+pub struct SceneControl {
+    pub kind: ControlKind,
+    pub file: String,
+    pub png: Vec<u8>,
+    pub image: RgbImage,
 }
 
 /// The renderer thread: images arrive in the order of `scenes`; the thread's busy time is
@@ -156,7 +173,12 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
                 .controls
                 .images(&part, (frame.width, frame.height), window)
                 .into_iter()
-                .map(|(kind, rgb)| (kind, control_file(&depth_control, kind), rgb8(w, h, &rgb)))
+                .map(|(kind, rgb)| SceneControl {
+                    kind,
+                    file: control_file(&depth_control, kind),
+                    png: rgb8(w, h, &rgb),
+                    image: RgbImage { width: w as usize, height: h as usize, pixels: rgb },
+                })
                 .collect();
             let camera = part.camera.as_ref().map_or(Value::Null, |c| {
                 let c = c.to_json();

@@ -172,8 +172,11 @@ impl DatasetSettings {
 
     /// These settings with `kinds` of control made beside the depth control, edges where the depth
     /// jumps by `depth_jump`.
+    /// The controls the ControlNets see are made too.
     pub fn with_controls(mut self, kinds: &[ControlKind], depth_jump: f32) -> Result<DatasetSettings> {
-        self.controls = LabelControls::new(kinds, depth_jump, &self.source.categories())?;
+        let mut kinds = kinds.to_vec();
+        kinds.extend(self.models.iter().flat_map(ModelSettings::control_kinds));
+        self.controls = LabelControls::new(&kinds, depth_jump, &self.source.categories())?;
         Ok(self)
     }
 
@@ -278,13 +281,28 @@ impl DatasetSettings {
                 "target-size": size(c.target),
             })));
         }
-        if let Some(c) = &m.controlnet {
-            map.extend(object(json!({
+        match &m.controlnets[..] {
+            [] => {}
+            [c] if c.is_depth_only() => map.extend(object(json!({
                 "controlnet": recorded_path(&c.model),
                 "control-scale": c.scale,
                 "control-start": c.start,
                 "control-end": c.end,
-            })));
+            }))),
+            nets => {
+                let nets: Vec<Value> = (nets.iter())
+                    .map(|c| {
+                        json!({
+                            "model": recorded_path(&c.model),
+                            "controls": c.controls.iter().map(|k| k.name()).collect::<Vec<_>>(),
+                            "scale": c.scale,
+                            "start": c.start,
+                            "end": c.end,
+                        })
+                    })
+                    .collect();
+                map.insert("controlnets".into(), Value::Array(nets));
+            }
         }
         if let Some(ip) = &m.ip_adapter {
             let sets: Vec<Vec<String>> =

@@ -10,6 +10,7 @@ use crate::sdxl::{check_control_shape, Sdxl, Timings, WorkflowModels};
 use crate::settings::{GenSettings, GuideInputs};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+use vkdiff_render::control::ControlKind;
 use vkdiff_runtime::Context;
 use vkdiff_setting::Message;
 
@@ -71,7 +72,7 @@ impl GenJob {
         let inputs = settings.read_inputs()?;
         // A depth map (else an init image) sets the size unless it is given: the image then lines
         // up with the depth; an init image keeps its size as diffusers' img2img does.
-        let given = inputs.control.as_ref().filter(|_| settings.depth.is_some()).or(inputs.init.as_ref());
+        let given = inputs.controls.values().next().or(inputs.init.as_ref());
         let (default_w, default_h) = given.map_or((DEFAULT_SIDE, DEFAULT_SIDE), |c| (c.width, c.height));
         let sampling = &mut settings.job.sampling;
         sampling.width = width.unwrap_or(default_w);
@@ -84,8 +85,9 @@ impl GenJob {
         }
         let multiple = Sdxl::probe_pixel_multiple(&settings.models.model, settings.models.swaps())?;
         sampling.check_size(multiple)?;
-        if let Some(control) = &inputs.control {
-            check_control_shape(control, sampling.width, sampling.height, multiple)?;
+        for (&kind, control) in &inputs.controls {
+            let setting = if kind == ControlKind::Depth { "depth" } else { "control_image" };
+            check_control_shape(setting, control, sampling.width, sampling.height, multiple)?;
         }
         Ok(GenJob { settings, inputs, out, latents_out })
     }

@@ -10,6 +10,7 @@ use vkdiff_pipeline::{
     ControlNetSettings, Denoiser, IpAdapterSettings, IpScale, ItemInputs, LoraSetting, ModelSettings, SamplerKind,
     Sampling, WorkflowModels,
 };
+use vkdiff_render::control::ControlKind;
 use vkdiff_runtime::{Context, Dtype, SubmitBudget};
 use vkdiff_testkit::fixture;
 
@@ -19,13 +20,14 @@ fn settings(precision: Dtype) -> ModelSettings {
         vae: None,
         unet: None,
         precision,
-        controlnet: Some(ControlNetSettings {
+        controlnets: vec![ControlNetSettings {
             model: fixture("workflow/controlnet"),
+            controls: vec![ControlKind::Depth],
             depth_mode: ControlDepth::Inverse,
             scale: 0.7,
             start: 0.0,
             end: 1.0,
-        }),
+        }],
         ip_adapter: Some(IpAdapterSettings {
             adapter: fixture("workflow/ip-adapter_tiny.safetensors"),
             encoder: fixture("workflow/image_encoder"),
@@ -89,21 +91,21 @@ fn alone_and_together(ctx: &Context, precision: Dtype, size: (usize, usize), spl
         ItemInputs {
             seed: 11,
             text: &texts[0],
-            control_images: vec![&control],
+            control_images: vec![vec![&control]],
             ip_tokens: Some(&tokens[0]),
             init: None,
         },
         ItemInputs {
             seed: 12,
             text: &texts[1],
-            control_images: vec![&flipped],
+            control_images: vec![vec![&flipped]],
             ip_tokens: Some(&tokens[1]),
             init: None,
         },
         ItemInputs {
             seed: 13,
             text: &texts[1],
-            control_images: vec![&control],
+            control_images: vec![vec![&control]],
             ip_tokens: Some(&tokens[0]),
             init: None,
         },

@@ -10,6 +10,7 @@ use vkdiff_pipeline::images::ControlDepth;
 use vkdiff_pipeline::{
     ControlNetSettings, GenSettings, LoraSetting, ModelSettings, RgbImage, Sampling, ScheduleOptions, TextToImage,
 };
+use vkdiff_render::control::ControlKind;
 use vkdiff_runtime::Dtype;
 
 /// ComfyUI's KSampler sampler names (comfy/samplers.py, KSAMPLER_NAMES and the extra ones).
@@ -116,13 +117,14 @@ fn settings(prompt: &str, negative: Option<&str>, sampler: &str, karras: bool) -
             vae: None,
             unet: None,
             precision: Dtype::F16,
-            controlnet: Some(ControlNetSettings {
+            controlnets: vec![ControlNetSettings {
                 model: "/models/controlnet-depth-sdxl-1.0".into(),
+                controls: vec![ControlKind::Depth],
                 depth_mode: ControlDepth::Inverse,
                 scale: 0.5,
                 start: 0.0,
                 end: 0.8,
-            }),
+            }],
             ip_adapter: None,
             loras: vec![
                 LoraSetting { path: "/loras/mushroom_style.safetensors".into(), strength: 0.7 },
@@ -147,6 +149,7 @@ fn settings(prompt: &str, negative: Option<&str>, sampler: &str, karras: bool) -
             },
         },
         depth: Some(PathBuf::from("scene/depth.exr")),
+        control_images: Vec::new(),
         ip_images: vec![],
         init_image: None,
     }

@@ -9,7 +9,7 @@ use serde_json::Value;
 use vkdiff_formats::SafeTensors;
 use vkdiff_networks::ControlNetModel;
 use vkdiff_pipeline::images::read_image;
-use vkdiff_pipeline::{ControlGuide, Guides, Sdxl};
+use vkdiff_pipeline::{ControlGuide, ControlNetUse, Guides, Sdxl};
 use vkdiff_runtime::Dtype;
 use vkdiff_testkit::fixture;
 
@@ -33,11 +33,14 @@ fn two_controlnets_sum_as_diffusers_sums_them_in_f32() {
             .iter()
             .zip(&images)
             .map(|(c, image)| ControlGuide {
-                net: &nets.iter().find(|(n, _)| *n == c["model"].as_str().unwrap()).unwrap().1,
-                image,
-                scale: c["scale"].as_f64().unwrap() as f32,
-                start: c["start"].as_f64().unwrap(),
-                end: c["end"].as_f64().unwrap(),
+                use_: ControlNetUse {
+                    net: &nets.iter().find(|(n, _)| *n == c["model"].as_str().unwrap()).unwrap().1,
+                    control_types: &[],
+                    scale: c["scale"].as_f64().unwrap() as f32,
+                    start: c["start"].as_f64().unwrap(),
+                    end: c["end"].as_f64().unwrap(),
+                },
+                images: vec![image],
             })
             .collect();
         let out = sdxl.denoise(&job(case), &Guides { control: guides, image: None, init: None }, &mut |_, _| {});

@@ -12,7 +12,7 @@ use vkdiff_formats::SafeTensors;
 use vkdiff_lora::LoraFile;
 use vkdiff_networks::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter};
 use vkdiff_pipeline::images::{read_image, ClipPreprocess};
-use vkdiff_pipeline::{ControlGuide, Guides, ImageGuide, IpScale, Sdxl};
+use vkdiff_pipeline::{ControlGuide, ControlNetUse, Guides, ImageGuide, IpScale, Sdxl};
 use vkdiff_runtime::Dtype;
 use vkdiff_testkit::fixture;
 
@@ -75,11 +75,14 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
                 control_image = read_image(&fixture("workflow").join(c["image"].as_str().unwrap())).unwrap();
                 let net = &g.controlnets[c["model"].as_str().unwrap()];
                 Some(ControlGuide {
-                    net,
-                    image: &control_image,
-                    scale: c["scale"].as_f64().unwrap() as f32,
-                    start: c["start"].as_f64().unwrap(),
-                    end: c["end"].as_f64().unwrap(),
+                    use_: ControlNetUse {
+                        net,
+                        control_types: &[],
+                        scale: c["scale"].as_f64().unwrap() as f32,
+                        start: c["start"].as_f64().unwrap(),
+                        end: c["end"].as_f64().unwrap(),
+                    },
+                    images: vec![&control_image],
                 })
             }
         };

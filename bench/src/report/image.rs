@@ -8,6 +8,7 @@ use crate::dataset::{make_set, model_settings, paper_set, random_workflow};
 use crate::random_models::style_images;
 use crate::step_rate::with_untimed_steps;
 use anyhow::Result;
+use std::mem::take;
 use std::time::Duration;
 use vkdiff_dataset::StageTimes;
 use vkdiff_lora::LoraFile;
@@ -163,7 +164,7 @@ fn image_figure(
 /// What the workflow holds, for the figure's label.
 fn describe(models: &WorkflowModels) -> String {
     let mut parts = vec!["SDXL".to_string()];
-    if models.controlnet.is_some() {
+    if !models.controlnets.is_empty() {
         parts.push("depth ControlNet".into());
     }
     if models.style.is_some() {
@@ -224,18 +225,19 @@ const ABLATION: [Variant; 8] = [
 /// timed as the paper's image is; the workflow is whole again after.
 pub fn ablation(workflow: &mut Workflow, plan: &Plan, ctx: &Context) -> Result<Vec<Figure>> {
     let m = &mut workflow.models;
-    let mut controlnet = (m.controlnet.take(), m.settings.controlnet.take());
+    let take_controlnets = |m: &mut WorkflowModels| (take(&mut m.controlnets), take(&mut m.settings.controlnets));
+    let mut controlnet = take_controlnets(m);
     let mut style = (m.style.take(), m.settings.ip_adapter.take());
     let all_loras = m.settings.loras.clone();
     let mut figures = Vec::new();
     for v in &ABLATION {
         let wants_lora = v.loras.iter().enumerate().any(|(k, &on)| on && k >= workflow.loras.len());
-        if wants_lora || (v.controlnet && controlnet.0.is_none()) || (v.ip_adapter && style.0.is_none()) {
+        if wants_lora || (v.controlnet && controlnet.0.is_empty()) || (v.ip_adapter && style.0.is_none()) {
             continue;
         }
         let m = &mut workflow.models;
         if v.controlnet {
-            (m.controlnet, m.settings.controlnet) = (controlnet.0.take(), controlnet.1.take());
+            (m.controlnets, m.settings.controlnets) = take(&mut controlnet);
         }
         if v.ip_adapter {
             (m.style, m.settings.ip_adapter) = (style.0.take(), style.1.take());
@@ -247,7 +249,7 @@ pub fn ablation(workflow: &mut Workflow, plan: &Plan, ctx: &Context) -> Result<V
         let figure = image_figure(&mut workflow.models, plan, Steps::paper(plan), ctx, v.id, label);
         let m = &mut workflow.models;
         if v.controlnet {
-            controlnet = (m.controlnet.take(), m.settings.controlnet.take());
+            controlnet = take_controlnets(m);
         }
         if v.ip_adapter {
             style = (m.style.take(), m.settings.ip_adapter.take());
@@ -255,7 +257,7 @@ pub fn ablation(workflow: &mut Workflow, plan: &Plan, ctx: &Context) -> Result<V
         figures.push(figure?);
     }
     let m = &mut workflow.models;
-    (m.controlnet, m.settings.controlnet) = controlnet;
+    (m.controlnets, m.settings.controlnets) = controlnet;
     (m.style, m.settings.ip_adapter) = style;
     m.settings.loras = all_loras;
     workflow.merge(&[true; 8])?;
@@ -266,8 +268,9 @@ pub fn ablation(workflow: &mut Workflow, plan: &Plan, ctx: &Context) -> Result<V
 /// workflow has them.
 pub fn user_settings(plan: &Plan, guides: &super::UserModels) -> ModelSettings {
     let paper = model_settings(plan.dtype, &[]);
-    let controlnet =
-        guides.controlnet.clone().zip(paper.controlnet).map(|(model, c)| ControlNetSettings { model, ..c });
+    let controlnets = (guides.controlnet.iter().zip(paper.controlnets))
+        .map(|(model, c)| ControlNetSettings { model: model.clone(), ..c })
+        .collect();
     let ip_adapter = match (&guides.ip_adapter, &guides.image_encoder, paper.ip_adapter) {
         (Some(adapter), Some(encoder), Some(ip)) => {
             Some(IpAdapterSettings { adapter: adapter.clone(), encoder: encoder.clone(), ..ip })
@@ -277,7 +280,7 @@ pub fn user_settings(plan: &Plan, guides: &super::UserModels) -> ModelSettings {
     ModelSettings {
         model: guides.model.clone(),
         unet: guides.unet.clone(),
-        controlnet,
+        controlnets,
         ip_adapter,
         loras: guides.loras.clone(),
         ..paper

@@ -30,8 +30,9 @@ pub struct ItemInputs<'a> {
     /// Seed of the image's own `torch.Generator("cpu")`.
     pub seed: u64,
     pub text: &'a Conditioning,
-    /// Each ControlNet's conditioning image, in the batch's ControlNets' order.
-    pub control_images: Vec<&'a RgbImage>,
+    /// Each ControlNet's conditioning images (one per control it sees), in the batch's
+    /// ControlNets' order.
+    pub control_images: Vec<Vec<&'a RgbImage>>,
     /// The image tokens of its rows ([`crate::ImageGuide::tokens`]), when it has an IP-Adapter.
     pub ip_tokens: Option<&'a [f32]>,
     /// img2img: the encoded init image, when the batch samples with a strength.
@@ -250,15 +251,17 @@ impl<'m> Denoiser<'m> {
         if let Some(ip) = self.ip.first() {
             ip.tokens.write(&by_row(items, per_image, row(&ip.tokens), |i| i.ip_tokens, "IP-Adapter image tokens")?)?;
         }
-        if let Some(short) = items.iter().find(|i| i.control_images.len() != self.controls.len()) {
-            return Err(Error::Config(format!(
-                "an image of the batch has {} ControlNet images for {} ControlNets",
-                short.control_images.len(),
-                self.controls.len()
-            )));
+        for item in items {
+            let given: Vec<usize> = item.control_images.iter().map(Vec::len).collect();
+            let wanted: Vec<usize> = self.controls.iter().map(ControlRun::images_per_item).collect();
+            if given != wanted {
+                return Err(Error::Config(format!(
+                    "an image of the batch has {given:?} control images for ControlNets that see {wanted:?}"
+                )));
+            }
         }
         for (k, control) in self.controls.iter().enumerate() {
-            let images: Vec<&RgbImage> = items.iter().map(|i| i.control_images[k]).collect();
+            let images: Vec<&[&RgbImage]> = items.iter().map(|i| i.control_images[k].as_slice()).collect();
             control.set_images(&images, per_image, self.sampling.width, self.sampling.height)?;
             control.project_conditioning()?;
         }

@@ -125,11 +125,7 @@ impl Sdxl {
         let mut timings = Timings::default();
         let start = Instant::now();
         let ip_tokens = guides.image.as_ref().map(|g| g.tokens(sampling.guided())).transpose()?;
-        let controls: Vec<ControlNetUse> = guides
-            .control
-            .iter()
-            .map(|g| ControlNetUse { net: g.net, scale: g.scale, start: g.start, end: g.end })
-            .collect();
+        let controls: Vec<ControlNetUse> = guides.control.iter().map(|g| g.use_).collect();
         let ip =
             guides.image.as_ref().map(|g| IpAdapterUse { adapter: g.adapter, scale: g.scale, images: g.images.len() });
         let denoiser = Denoiser::record(self, sampling, &controls, ip, 1, text.tokens)?;
@@ -138,7 +134,7 @@ impl Sdxl {
         let item = ItemInputs {
             seed: job.seed,
             text,
-            control_images: guides.control.iter().map(|g| g.image).collect(),
+            control_images: guides.control.iter().map(|g| g.images.clone()).collect(),
             ip_tokens: ip_tokens.as_deref(),
             init: init.as_ref(),
         };

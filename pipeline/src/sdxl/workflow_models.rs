@@ -1,20 +1,24 @@
-//! The paper's workflow loaded once: SDXL, the depth ControlNet, the IP-Adapter with its image
+//! The paper's workflow loaded once: SDXL, its ControlNets, the IP-Adapter with its image
 //! encoder, and the LoRAs merged into the weights. `vkdiff gen` loads it for one image,
 //! `vkdiff dataset` for thousands.
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::images::ClipPreprocess;
-use crate::sdxl::controlnet_guide::{ControlGuide, ControlNetUse};
+use crate::sdxl::controlnet_guide::{union_control_type, ControlGuide, ControlNetUse};
 use crate::sdxl::denoiser::IpAdapterUse;
 use crate::sdxl::Guides;
 use crate::sdxl::ImageGuide;
 use crate::sdxl::Sdxl;
+use crate::settings::models::controlnet_weights;
 use crate::settings::{flagged, GuideInputs, ModelSettings};
 use crate::RgbImage;
 use std::path::Path;
+use vkdiff_formats::SafeTensors;
 use vkdiff_lora::LoraFile;
 use vkdiff_networks::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter};
-use vkdiff_runtime::Context;
+use vkdiff_render::control::ControlKind;
+use vkdiff_runtime::{dtype_size, Context, Dtype};
+use vkdiff_setting::Message;
 
 /// An IP-Adapter with the encoder and preprocessing of its style images.
 pub struct StyleModels {
@@ -25,7 +29,9 @@ pub struct StyleModels {
 
 pub struct WorkflowModels {
     pub sdxl: Sdxl,
-    pub controlnet: Option<ControlNetModel>,
+    /// One per `--controlnet`, with a Union model's control type of each control it sees
+    /// (empty for a plain ControlNet).
+    pub controlnets: Vec<(ControlNetModel, Vec<usize>)>,
     pub style: Option<StyleModels>,
     pub settings: ModelSettings,
 }
@@ -38,13 +44,16 @@ impl WorkflowModels {
         let mut sdxl = Sdxl::load_with(ctx, &settings.model, settings.swaps(), dtype, &mut |part| {
             log(&format!("loading {part}"))
         })?;
-        let controlnet = match &settings.controlnet {
-            Some(c) => {
+        let controlnets = (settings.controlnets.iter())
+            .map(|c| {
+                check_room_for(ctx, &c.model, dtype)?;
                 log(&format!("loading ControlNet {}", c.model.display()));
-                Some(flagged("controlnet", &c.model, ControlNetModel::load(ctx, &c.model, sdxl.unet_config(), dtype))?)
-            }
-            None => None,
-        };
+                let net =
+                    flagged("controlnet", &c.model, ControlNetModel::load(ctx, &c.model, sdxl.unet_config(), dtype))?;
+                let types = flagged("controlnet", &c.model, union_control_types(&net, &c.controls))?;
+                Ok((net, types))
+            })
+            .collect::<Result<Vec<_>>>()?;
         let style =
             settings.ip_adapter.as_ref().map(|ip| load_style(ctx, &sdxl, &ip.adapter, &ip.encoder, log)).transpose()?;
         let loras = settings
@@ -56,13 +65,26 @@ impl WorkflowModels {
         if let Some(summary) = sdxl.set_loras(&refs)? {
             log(&summary.to_string());
         }
-        Ok(WorkflowModels { sdxl, controlnet, style, settings: settings.clone() })
+        Ok(WorkflowModels { sdxl, controlnets, style, settings: settings.clone() })
     }
 
     /// The ControlNets as a batch uses them.
     pub fn control_uses(&self) -> Vec<ControlNetUse<'_>> {
-        let pairs = self.controlnet.iter().zip(&self.settings.controlnet);
-        pairs.map(|(net, c)| ControlNetUse { net, scale: c.scale, start: c.start, end: c.end }).collect()
+        let pairs = self.controlnets.iter().zip(&self.settings.controlnets);
+        pairs
+            .map(|((net, types), c)| ControlNetUse {
+                net,
+                control_types: types,
+                scale: c.scale,
+                start: c.start,
+                end: c.end,
+            })
+            .collect()
+    }
+
+    /// Each ControlNet's images from `controls`, in the order of the controls it sees.
+    pub fn control_images<'a>(&self, controls: &impl Fn(ControlKind) -> &'a RgbImage) -> Vec<Vec<&'a RgbImage>> {
+        self.settings.controlnets.iter().map(|c| c.controls.iter().map(|&k| controls(k)).collect()).collect()
     }
 
     /// The IP-Adapter as a batch of images with `images` style images each uses it.
@@ -85,14 +107,49 @@ impl WorkflowModels {
 
     /// One image's guides over its inputs.
     pub fn guides<'a>(&'a self, inputs: &'a GuideInputs) -> Guides<'a> {
-        let images = inputs.control.iter();
-        let control = self
-            .control_uses()
-            .into_iter()
-            .zip(images)
-            .map(|(c, image)| ControlGuide { net: c.net, image, scale: c.scale, start: c.start, end: c.end })
-            .collect();
+        let images = self.control_images(&|kind| &inputs.controls[&kind]);
+        let control =
+            self.control_uses().into_iter().zip(images).map(|(use_, images)| ControlGuide { use_, images }).collect();
         Guides { control, image: self.image_guide(&inputs.style), init: inputs.init.as_ref() }
+    }
+}
+
+/// A ControlNet's weights must fit the device's room left by the model and the ControlNets before
+/// it, or the run stops before they load, with the figures. The cross-attentions' key and value
+/// weights stay in host memory; the rest is on the device, in the run's precision.
+fn check_room_for(ctx: &Context, model: &Path, dtype: Dtype) -> Result<()> {
+    let Some(file) = controlnet_weights(model) else { return Ok(()) };
+    let header = flagged("controlnet", model, SafeTensors::open(&file))?;
+    let on_device = |name: &str| !(name.contains("attn2.to_k.") || name.contains("attn2.to_v."));
+    let need: u64 = (header.entries.iter())
+        .filter(|(name, _)| on_device(name))
+        .map(|(_, e)| e.shape.iter().product::<usize>() as u64 * dtype_size(dtype) as u64)
+        .sum();
+    let room = ctx.memory_room();
+    if need <= room.free {
+        return Ok(());
+    }
+    Err(Error::Setting(Message::setting("controlnet").then(format!(
+        " {}: its weights need {} MiB of device memory and {} MiB are free by {} after the model and the \
+        ControlNets before it; a ControlNet-Union model sees several controls for the memory of one \
+        (control=depth+edges)",
+        model.display(),
+        need.div_ceil(1 << 20),
+        room.free >> 20,
+        room.source
+    ))))
+}
+
+/// A Union model's control type of each of `controls` (its `control_mode`); none for a plain
+/// ControlNet, which sees one control.
+fn union_control_types(net: &ControlNetModel, controls: &[ControlKind]) -> Result<Vec<usize>> {
+    match net.control_types() {
+        None if controls.len() == 1 => Ok(Vec::new()),
+        None => Err(Error::Setting(Message::setting("controlnet").then(format!(
+            " sees {} controls: a plain ControlNet sees one; several need a ControlNet-Union model",
+            controls.len()
+        )))),
+        Some(_) => Ok(controls.iter().map(|&k| union_control_type(k)).collect()),
     }
 }
 

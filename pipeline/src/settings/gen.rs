@@ -16,6 +16,7 @@ use crate::settings::sampling::{SizeConditioning, TextToImage};
 use crate::RgbImage;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use vkdiff_render::control::ControlKind;
 use vkdiff_setting::Message;
 
 /// A value as A1111 writes it: in quotes where a comma or colon would split it.
@@ -32,8 +33,10 @@ fn quoted(value: &str) -> String {
 pub struct GenSettings {
     pub models: ModelSettings,
     pub job: TextToImage,
-    /// The ControlNet's input (depth EXR or image), as given.
+    /// The depth control's input (depth EXR or image), as given.
     pub depth: Option<PathBuf>,
+    /// The other controls' images, as given (`--control-image KIND=FILE`).
+    pub control_images: Vec<(ControlKind, PathBuf)>,
     /// The IP-Adapter's style images, as given.
     pub ip_images: Vec<PathBuf>,
     /// img2img's init image, as given.
@@ -108,14 +111,7 @@ impl GenSettings {
             text.insert("crops_coords_top_left".into(), format!("{},{}", c.crop_top_left.0, c.crop_top_left.1));
             text.insert("target_size".into(), size(c.target));
         }
-        if let Some(c) = &m.controlnet {
-            text.insert("controlnet".into(), recorded_path(&c.model));
-            text.insert("depth".into(), self.depth.as_deref().map(|d| d.display().to_string()).unwrap_or_default());
-            text.insert("control_depth".into(), control_depth_name(c.depth_mode).into());
-            text.insert("control_scale".into(), c.scale.to_string());
-            text.insert("control_start".into(), c.start.to_string());
-            text.insert("control_end".into(), c.end.to_string());
-        }
+        self.control_text(&mut text);
         if let Some(ip) = &m.ip_adapter {
             text.insert("ip_adapter".into(), recorded_path(&ip.adapter));
             text.insert("image_encoder".into(), recorded_path(&ip.encoder));
@@ -160,14 +156,25 @@ impl GenSettings {
         if let Some(strength) = s.strength {
             pairs.push(format!("Denoising strength: {strength}"));
         }
-        if let Some(c) = &m.controlnet {
-            pairs.push(format!(
+        match &m.controlnets[..] {
+            [c] if c.is_depth_only() => pairs.push(format!(
                 "ControlNet: {}, Control scale: {}, Control range: {}-{}",
                 quoted(&model_name(&c.model)),
                 c.scale,
                 c.start,
                 c.end
-            ));
+            )),
+            // As A1111's ControlNet extension lists its units.
+            nets => pairs.extend(nets.iter().enumerate().map(|(k, c)| {
+                format!(
+                    "ControlNet {k}: \"Module: {}, Model: {}, Weight: {}, Guidance Start: {}, Guidance End: {}\"",
+                    c.controls_name(),
+                    model_name(&c.model).replace('"', "'"),
+                    c.scale,
+                    c.start,
+                    c.end
+                )
+            })),
         }
         if let Some(ip) = &m.ip_adapter {
             pairs.push(format!(
@@ -182,10 +189,11 @@ impl GenSettings {
     }
 }
 
-/// The images one generation's guides read: the ControlNet's and the style images.
+/// The images one generation's guides read: the ControlNets' and the style images.
 #[derive(Default)]
 pub struct GuideInputs {
-    pub control: Option<RgbImage>,
+    /// Each control the ControlNets see, by kind.
+    pub controls: BTreeMap<ControlKind, RgbImage>,
     pub style: Vec<RgbImage>,
     /// img2img's init image.
     pub init: Option<RgbImage>,
@@ -194,11 +202,7 @@ pub struct GuideInputs {
 impl GenSettings {
     /// Reads the input images the settings name (before any model loads, so a bad file fails fast).
     pub fn read_inputs(&self) -> Result<GuideInputs> {
-        let control = match (&self.models.controlnet, &self.depth) {
-            (Some(c), Some(depth)) => Some(flagged("depth", depth, load_control_image(depth, c.depth_mode))?),
-            (Some(_), None) => return Err(Error::Setting(Message::setting("controlnet").then(" needs ").and("depth"))),
-            (None, _) => None,
-        };
+        let controls = self.read_controls()?;
         let style = if self.models.ip_adapter.is_some() {
             if self.ip_images.is_empty() {
                 return Err(Error::Setting(
@@ -210,7 +214,75 @@ impl GenSettings {
             Vec::new()
         };
         let init = self.init_image.as_ref().map(|p| flagged("init_image", p, read_image(p))).transpose()?;
-        Ok(GuideInputs { control, style, init })
+        Ok(GuideInputs { controls, style, init })
+    }
+
+    /// The image of every control the ControlNets see: the depth from `--depth`, the others
+    /// from `--control-image`; an image no ControlNet sees is refused too.
+    fn read_controls(&self) -> Result<BTreeMap<ControlKind, RgbImage>> {
+        let wanted = self.models.control_kinds();
+        if let Some((kind, _)) = self.control_images.iter().find(|(k, _)| !wanted.contains(k)) {
+            return Err(Error::Setting(
+                Message::setting("control_image")
+                    .then(format!(" {}=: no ", kind.name()))
+                    .and("controlnet")
+                    .then(format!(" sees {} (add control={} to one)", kind.name(), kind.name())),
+            ));
+        }
+        let mut controls = BTreeMap::new();
+        for kind in wanted {
+            let image = match (kind, &self.depth) {
+                (ControlKind::Depth, Some(depth)) => {
+                    let mode = self.models.controlnets[0].depth_mode;
+                    flagged("depth", depth, load_control_image(depth, mode))?
+                }
+                (ControlKind::Depth, None) => {
+                    return Err(Error::Setting(Message::setting("controlnet").then(" needs ").and("depth")))
+                }
+                _ => match self.control_images.iter().find(|(k, _)| *k == kind) {
+                    Some((_, path)) => flagged("control_image", path, read_image(path))?,
+                    None => {
+                        return Err(Error::Setting(
+                            Message::setting("controlnet")
+                                .then(format!(" control={} needs ", kind.name()))
+                                .and("control_image")
+                                .then(format!(" {}=FILE", kind.name())),
+                        ))
+                    }
+                },
+            };
+            controls.insert(kind, image);
+        }
+        Ok(controls)
+    }
+
+    /// The ControlNets' records: the paper's one depth ControlNet under the keys it always had;
+    /// otherwise each as the `--controlnet` value that gives it back, one a line.
+    fn control_text(&self, text: &mut BTreeMap<String, String>) {
+        let nets = &self.models.controlnets;
+        let depth = || self.depth.as_deref().map(|d| d.display().to_string()).unwrap_or_default();
+        match &nets[..] {
+            [] => {}
+            [c] if c.is_depth_only() => {
+                text.insert("controlnet".into(), recorded_path(&c.model));
+                text.insert("depth".into(), depth());
+                text.insert("control_depth".into(), control_depth_name(c.depth_mode).into());
+                text.insert("control_scale".into(), c.scale.to_string());
+                text.insert("control_start".into(), c.start.to_string());
+                text.insert("control_end".into(), c.end.to_string());
+            }
+            nets => {
+                text.insert("controlnets".into(), nets.iter().map(|c| c.flag()).collect::<Vec<_>>().join("\n"));
+                if self.models.control_kinds().contains(&ControlKind::Depth) {
+                    text.insert("depth".into(), depth());
+                    text.insert("control_depth".into(), control_depth_name(nets[0].depth_mode).into());
+                }
+                if !self.control_images.is_empty() {
+                    let images = self.control_images.iter().map(|(k, p)| format!("{}={}", k.name(), p.display()));
+                    text.insert("control_images".into(), images.collect::<Vec<_>>().join("\n"));
+                }
+            }
+        }
     }
 }
 

@@ -1,5 +1,5 @@
-//! What loads once per process: the SDXL model, its depth ControlNet, its IP-Adapter and the
-//! LoRAs merged into it; checked before anything loads.
+//! What loads once per process: the SDXL model, its ControlNets, its IP-Adapter and the LoRAs
+//! merged into it; checked before anything loads.
 
 use crate::error::{Error, Result};
 use crate::sdxl::Swaps;
@@ -9,19 +9,46 @@ use std::path::{Path, PathBuf};
 use vkdiff_formats::SafeTensors;
 use vkdiff_lora::LoraFile;
 use vkdiff_networks::{ClipVisionConfig, ControlNetConfig};
-use vkdiff_render::control::ControlDepth;
+use vkdiff_render::control::{ControlDepth, ControlKind};
 use vkdiff_runtime::Dtype;
 use vkdiff_setting::Message;
 
-/// The depth ControlNet and how it steers.
+/// A ControlNet, the scene controls it sees and how it steers.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ControlNetSettings {
     pub model: PathBuf,
+    /// The controls it sees, in order: one for a plain ControlNet, one or more for a
+    /// ControlNet-Union model (`control=depth+edges`).
+    pub controls: Vec<ControlKind>,
     /// How a depth EXR maps to brightness.
     pub depth_mode: ControlDepth,
     pub scale: f32,
     pub start: f64,
     pub end: f64,
+}
+
+impl ControlNetSettings {
+    /// The paper's one depth ControlNet, recorded as it always was.
+    pub fn is_depth_only(&self) -> bool {
+        self.controls == [ControlKind::Depth]
+    }
+
+    /// Its controls as `control=` takes them: `depth+edges`.
+    pub fn controls_name(&self) -> String {
+        self.controls.iter().map(|k| k.name()).collect::<Vec<_>>().join("+")
+    }
+
+    /// The value of `--controlnet` that gives these settings back.
+    pub fn flag(&self) -> String {
+        format!(
+            "{},control={},scale={},start={},end={}",
+            recorded_path(&self.model),
+            self.controls_name(),
+            self.scale,
+            self.start,
+            self.end
+        )
+    }
 }
 
 /// The IP-Adapter, its image encoder and its weight.
@@ -47,7 +74,8 @@ pub struct ModelSettings {
     /// A UNet in place of the model's (`--unet`): a diffusers folder or a file of its weights.
     pub unet: Option<PathBuf>,
     pub precision: Dtype,
-    pub controlnet: Option<ControlNetSettings>,
+    /// Every `--controlnet`, in order; their residuals are summed.
+    pub controlnets: Vec<ControlNetSettings>,
     pub ip_adapter: Option<IpAdapterSettings>,
     pub loras: Vec<LoraSetting>,
     /// Whole or tiled VAE decodes (`--vae-tiling`).
@@ -82,7 +110,7 @@ impl ModelSettings {
 
     /// Settings that are wrong whatever the model, before anything loads.
     pub fn check(&self) -> Result<()> {
-        if let Some(c) = &self.controlnet {
+        for c in &self.controlnets {
             check_control_settings(c.scale, c.start, c.end)?;
         }
         if let Some(ip) = &self.ip_adapter {
@@ -106,13 +134,8 @@ impl ModelSettings {
         for lora in &self.loras {
             flagged("lora", &lora.path, LoraFile::open(&lora.path))?;
         }
-        if let Some(c) = &self.controlnet {
-            let checked = if c.model.is_dir() {
-                ControlNetConfig::from_file(&c.model.join("config.json")).map(drop)
-            } else {
-                SafeTensors::open(&c.model).map(drop).map_err(Into::into)
-            };
-            flagged("controlnet", &c.model, checked)?;
+        for c in &self.controlnets {
+            flagged("controlnet", &c.model, check_controlnet_file(c))?;
         }
         if let Some(vae) = &self.vae {
             flagged("vae", vae, vkdiff_networks::AutoencoderKl::sdxl_config(vae))?;
@@ -129,18 +152,56 @@ impl ModelSettings {
         Ok(())
     }
 
+    /// Every control the ControlNets see, each once, in [`ControlKind`]'s order.
+    pub fn control_kinds(&self) -> Vec<ControlKind> {
+        let mut kinds: Vec<ControlKind> = self.controlnets.iter().flat_map(|c| c.controls.iter().copied()).collect();
+        kinds.sort();
+        kinds.dedup();
+        kinds
+    }
+
     /// Every file or folder the settings name, with the setting's name.
     fn files(&self) -> Vec<(&Path, &'static str)> {
         let mut files = vec![(self.model.as_path(), "model")];
         files.extend(self.vae.iter().map(|v| (v.as_path(), "vae")));
         files.extend(self.unet.iter().map(|u| (u.as_path(), "unet")));
-        files.extend(self.controlnet.iter().map(|c| (c.model.as_path(), "controlnet")));
+        files.extend(self.controlnets.iter().map(|c| (c.model.as_path(), "controlnet")));
         if let Some(ip) = &self.ip_adapter {
             files.extend([(ip.adapter.as_path(), "ip_adapter"), (ip.encoder.as_path(), "image_encoder")]);
         }
         files.extend(self.loras.iter().map(|l| (l.path.as_path(), "lora")));
         files
     }
+}
+
+/// A ControlNet's config or header, and whether its kind takes its controls: a plain
+/// ControlNet sees one, a ControlNet-Union model (`task_embedding`) one or more.
+fn check_controlnet_file(c: &ControlNetSettings) -> Result<()> {
+    if c.model.is_dir() {
+        ControlNetConfig::from_file(&c.model.join("config.json"))?;
+    }
+    let union = match controlnet_weights(&c.model) {
+        Some(file) => SafeTensors::open(&file)?.entries.contains_key("task_embedding"),
+        None => false,
+    };
+    if c.controls.is_empty() || (c.controls.len() > 1 && !union) {
+        return Err(Error::Setting(Message::setting("controlnet").then(format!(
+            " control={}: a plain ControlNet sees one control; several need a ControlNet-Union model",
+            c.controls_name()
+        ))));
+    }
+    Ok(())
+}
+
+/// The safetensors file of a ControlNet given as a diffusers folder or as the file itself.
+pub(crate) fn controlnet_weights(model: &Path) -> Option<PathBuf> {
+    if !model.is_dir() {
+        return Some(model.to_path_buf());
+    }
+    ["diffusion_pytorch_model.safetensors", "diffusion_pytorch_model.fp16.safetensors"]
+        .into_iter()
+        .map(|f| model.join(f))
+        .find(|p| p.is_file())
 }
 
 /// `result`'s error, prefixed by the setting and file it came from.

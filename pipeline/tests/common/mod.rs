@@ -6,8 +6,8 @@ use vkdiff_formats::SafeTensors;
 use vkdiff_networks::ControlNetModel;
 use vkdiff_pipeline::images::read_image;
 use vkdiff_pipeline::{
-    ControlGuide, Generated, Guides, ImageGuide, PromptSyntax, RgbImage, Sampling, ScheduleOptions, Sdxl,
-    SizeConditioning, TextToImage,
+    ControlGuide, ControlNetUse, Generated, Guides, ImageGuide, PromptSyntax, RgbImage, Sampling, ScheduleOptions,
+    Sdxl, SizeConditioning, TextToImage,
 };
 use vkdiff_runtime::{Context, Dtype};
 use vkdiff_testkit::fixture;
@@ -116,11 +116,8 @@ impl CaseInputs {
     /// The case's guides, with the IP-Adapter's `image` guide where it has one.
     pub fn guides<'a>(&'a self, image: Option<ImageGuide<'a>>) -> Guides<'a> {
         let control = self.control.as_ref().map(|(net, image, scale, start, end)| ControlGuide {
-            net,
-            image,
-            scale: *scale,
-            start: *start,
-            end: *end,
+            use_: ControlNetUse { net, control_types: &[], scale: *scale, start: *start, end: *end },
+            images: vec![image],
         });
         Guides { control: control.into_iter().collect(), image, init: self.init.as_ref() }
     }
