@@ -105,6 +105,7 @@ impl<'a> ControlRun<'a> {
             added: Some(inputs.added),
             hint: &hint,
             scale: use_.scale,
+            control_types: &[],
             add_to,
         })?;
         Ok(ControlRun { use_, pass, hint, adds: add_to.is_some() })
