@@ -18,7 +18,9 @@ pub use clip::{
     ClipTextConfig, ClipTextModel, ClipVisionConfig, ClipVisionModelWithProjection, ImageEncoding, ImageFeature,
     TextEncoderSlot, TextEncoding, SDXL_BIGG_CONFIG, SDXL_CLIP_L_CONFIG,
 };
-pub use controlnet::{ControlNetConfig, ControlNetInputs, ControlNetModel, ControlNetPass, SDXL_CONTROLNET_CONFIG};
+pub use controlnet::{
+    ControlNetConfig, ControlNetInputs, ControlNetModel, ControlNetPass, UnionCondition, SDXL_CONTROLNET_CONFIG,
+};
 pub use error::{Error, Result};
 pub use inception::{InceptionV3, RandomInception, RgbPixels, TensorSource, INCEPTION_FEATURES, INCEPTION_SIZE};
 pub use ip_adapter::{IpAdapter, IpAdapterKind};

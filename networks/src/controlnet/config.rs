@@ -5,7 +5,7 @@
 use crate::error::{Error, Result};
 use crate::unet::config::UNetConfig;
 use crate::weights::Checkpoint;
-use crate::weights::{Inner, OriginalNames};
+use crate::weights::{Inner, OriginalNames, StoredAs};
 use serde::Deserialize;
 use std::path::Path;
 use vkdiff_formats::Error as FileError;
@@ -44,6 +44,9 @@ struct ConditioningKeys {
     controlnet_conditioning_channel_order: String,
     #[serde(default)]
     global_pool_conditions: bool,
+    /// ControlNet-Union's: its control types (the weights' `task_embedding` rows decide).
+    num_control_type: Option<usize>,
+    num_trans_layer: Option<usize>,
 }
 
 #[derive(Clone, Debug)]
@@ -56,6 +59,9 @@ pub struct ControlNetConfig {
     pub embedding_channels: Vec<usize>,
     /// The conditioning image's channels arrive reversed (`controlnet_conditioning_channel_order` bgr).
     pub bgr: bool,
+    /// A ControlNet-Union's `num_control_type` when the config names it; the checkpoint's
+    /// `task_embedding` is what makes a ControlNet a Union, and must agree.
+    pub control_types: Option<usize>,
 }
 
 impl ControlNetConfig {
@@ -77,6 +83,12 @@ impl ControlNetConfig {
                 )))
             }
         };
+        if keys.num_trans_layer.is_some_and(|n| n != 1) {
+            return Err(Error::Config(format!(
+                "{what}: a ControlNet-Union with `num_trans_layer` {} is not supported (the published ones have 1)",
+                keys.num_trans_layer.unwrap_or_default()
+            )));
+        }
         mirror_up_path(&mut json);
         let encoder: UNetConfig = serde_json::from_value(json).map_err(bad)?;
         let config = ControlNetConfig {
@@ -84,6 +96,7 @@ impl ControlNetConfig {
             conditioning_channels: keys.conditioning_channels,
             embedding_channels: keys.conditioning_embedding_out_channels,
             bgr,
+            control_types: keys.num_control_type,
         };
         config.validate()?;
         Ok(config)
@@ -145,7 +158,8 @@ impl ControlNetConfig {
         {
             embedding_channels.push(width);
         }
-        let config = ControlNetConfig { encoder, conditioning_channels, embedding_channels, bgr: false };
+        let config =
+            ControlNetConfig { encoder, conditioning_channels, embedding_channels, bgr: false, control_types: None };
         config.validate()?;
         Ok(config)
     }
@@ -188,5 +202,10 @@ pub(crate) fn cldm_names(encoder: &UNetConfig, embedding_stages: usize) -> Resul
         names.module(&format!("controlnet_down_blocks.{k}"), &format!("zero_convs.{k}.0"), Inner::Same);
     }
     names.module("controlnet_mid_block", "middle_block_out.0", Inner::Same);
+    // A Union's extras keep their diffusers names in the cldm layout too.
+    for module in ["transformer_layes", "spatial_ch_projs", "control_add_embedding"] {
+        names.module(module, module, Inner::Same);
+    }
+    names.tensor("task_embedding", StoredAs::plain("task_embedding".into()));
     Ok(names)
 }

@@ -2,6 +2,7 @@
 //! an encoded conditioning image, whose zero-convolved skips become residuals for the UNet.
 
 use crate::controlnet::config::{cldm_names, ControlNetConfig};
+use crate::controlnet::union::UnionExtras;
 use crate::error::{Error, Result};
 use crate::layers::nn::{Conv2d, Graph, Recorded};
 use crate::unet::config::UNetConfig;
@@ -54,6 +55,9 @@ pub struct ControlNetInputs<'a> {
     pub hint: &'a Tensor,
     /// Multiplies every residual (`controlnet_conditioning_scale`).
     pub scale: f32,
+    /// A ControlNet-Union's active control types (diffusers' multi-hot `control_type`), whose
+    /// embedding joins the time embedding; empty for a plain ControlNet, never for a Union.
+    pub control_types: &'a [usize],
     /// Another ControlNet's residuals, onto which this one's are added after it writes its own:
     /// several ControlNets summed as diffusers' `MultiControlNetModel` sums them.
     pub add_to: Option<&'a ControlResiduals>,
@@ -79,13 +83,15 @@ impl ControlNetPass {
 
 pub struct ControlNetModel {
     config: ControlNetConfig,
-    dtype: Dtype,
+    pub(super) dtype: Dtype,
     embedding: ConditioningEmbedding,
     down: DownPath,
     mid: MidBlock,
     /// `controlnet_down_blocks`: one 1×1 conv per skip.
     zero_convs: Vec<Conv2d>,
     zero_mid: Conv2d,
+    /// A ControlNet-Union's extras.
+    pub(super) union: Option<UnionExtras>,
 }
 
 impl ControlNetModel {
@@ -130,7 +136,8 @@ impl ControlNetModel {
     }
 
     /// Builds the network `config` describes, with every weight from `ckpt`, checking that it
-    /// fits the UNet configured by `unet`.
+    /// fits the UNet configured by `unet`; a ControlNet-Union when `ckpt` has a `task_embedding`
+    /// (random weights: when the config names `num_control_type`).
     pub fn build(config: ControlNetConfig, ckpt: &Checkpoint, unet: &UNetConfig) -> Result<ControlNetModel> {
         check_fits(&config.encoder, unet)?;
         let w = ckpt.root();
@@ -145,6 +152,7 @@ impl ControlNetModel {
             .collect::<Result<_>>()?;
         let last = *config.encoder.block_out_channels.last().expect("validated");
         Ok(ControlNetModel {
+            union: UnionExtras::load(&w, ckpt, &config)?,
             embedding: ConditioningEmbedding::load(&w.sub("controlnet_cond_embedding"), &config)?,
             zero_mid: zero("controlnet_mid_block".into(), last)?,
             dtype: ckpt.dtype(),
@@ -170,20 +178,25 @@ impl ControlNetModel {
     /// [`ControlNetModel::encode_condition`] into an existing hint tensor, so that a recorded
     /// pass reading `out` sees the new image.
     pub fn encode_condition_into(&self, image: &Tensor, out: &Tensor) -> Result<()> {
-        let want = self.hint_shape(image.shape())?;
-        if out.shape() != want || out.dtype() != self.dtype {
-            return Err(Error::Config(format!(
-                "ControlNet hint tensor is {:?}, the image {:?} needs {want:?}",
-                out.shape(),
-                image.shape()
-            )));
-        }
+        self.check_hint_tensor(image.shape(), out)?;
         let ctx = image.context();
         let mut g = Graph::new(&ctx, self.dtype)?;
         let image = if self.config.bgr { self.reversed_channels(image)? } else { image.clone() };
         self.embedding.forward_into(&mut g, &image, out)?;
         g.rec.finish()?.run()?;
         Ok(())
+    }
+
+    /// The hint's shape for a conditioning image of shape `image`, which `out` must have.
+    pub(super) fn check_hint_tensor(&self, image: &[usize], out: &Tensor) -> Result<[usize; 4]> {
+        let want = self.hint_shape(image)?;
+        if out.shape() != want || out.dtype() != self.dtype {
+            return Err(Error::Config(format!(
+                "ControlNet hint tensor is {:?}, the image {image:?} needs {want:?}",
+                out.shape()
+            )));
+        }
+        Ok(want)
     }
 
     /// The hint's shape for a conditioning image of shape `s`, which must be [B, H, W, channels]
@@ -220,8 +233,14 @@ impl ControlNetModel {
             )));
         }
         let ctx = inputs.sample.context();
+        let control = self.control_embedding(&ctx, inputs.control_types, s[0])?;
         let mut g = Graph::new(&ctx, self.dtype)?;
-        let cond = DownConditioning { context: inputs.encoder_hidden_states, ip: &[], hint: Some(inputs.hint) };
+        let cond = DownConditioning {
+            context: inputs.encoder_hidden_states,
+            ip: &[],
+            hint: Some(inputs.hint),
+            emb_add: control.as_ref(),
+        };
         let DownOutput { h, skips, emb_silu } =
             self.down.forward(&mut g, inputs.sample, inputs.timesteps, inputs.added, &cond)?;
         let mid_cond = Conditioning { emb_silu: &emb_silu, context: inputs.encoder_hidden_states, ip: &[] };

@@ -62,7 +62,7 @@ impl DownPath {
         self.embeddings.text_embeds_dim()
     }
 
-    /// Runs the embeddings, conv_in (plus `hint`, a ControlNet's encoded conditioning image) and
+    /// Runs the embeddings (plus `emb_add`), conv_in (plus `hint`, a ControlNet's encoded conditioning image) and
     /// the down blocks.
     pub fn forward(
         &self,
@@ -72,7 +72,7 @@ impl DownPath {
         added: Option<(&Tensor, &Tensor)>,
         cond: &DownConditioning,
     ) -> Result<DownOutput> {
-        let emb_silu = self.embeddings.forward(g, timesteps, added)?;
+        let emb_silu = self.embeddings.forward(g, timesteps, added, cond.emb_add)?;
         let h = self.conv_in.forward(g, sample)?;
         if let Some(hint) = cond.hint {
             ops::add(&mut g.rec, &h, hint, &h)?;
@@ -92,4 +92,6 @@ pub struct DownConditioning<'a> {
     pub context: &'a Tensor,
     pub ip: &'a [crate::layers::attention::IpAdapterInput],
     pub hint: Option<&'a Tensor>,
+    /// Added to the time embedding before its SiLU: a ControlNet-Union's control embedding.
+    pub emb_add: Option<&'a Tensor>,
 }

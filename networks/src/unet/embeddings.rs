@@ -73,9 +73,15 @@ impl Embeddings {
         self.added.as_ref().map(|a| a.text_dim)
     }
 
-    /// SiLU(temb + aug_emb) [B, width], what every resnet projects. `timesteps` [B] and
-    /// `time_ids` [B, 6] are f32.
-    pub fn forward(&self, g: &mut Graph, timesteps: &Tensor, added: Option<(&Tensor, &Tensor)>) -> Result<Tensor> {
+    /// SiLU(temb + aug_emb + extra) [B, width], what every resnet projects. `timesteps` [B] and
+    /// `time_ids` [B, 6] are f32; `extra` [B, width] is a ControlNet-Union's control embedding.
+    pub fn forward(
+        &self,
+        g: &mut Graph,
+        timesteps: &Tensor,
+        added: Option<(&Tensor, &Tensor)>,
+        extra: Option<&Tensor>,
+    ) -> Result<Tensor> {
         let b = timesteps.numel();
         let sinusoid = g.alloc(&[b, self.sinusoid.dim])?;
         ops::timestep_embedding(&mut g.rec, timesteps, &sinusoid, &self.sinusoid)?;
@@ -94,6 +100,16 @@ impl Embeddings {
                 return Err(Error::Config("this UNet needs text_embeds and time_ids (SDXL added conditioning)".into()))
             }
             (None, _) => {}
+        }
+        if let Some(extra) = extra {
+            if extra.shape() != [b, self.width] {
+                return Err(Error::Config(format!(
+                    "an extra embedding of shape {:?} cannot join the time embedding [{b}, {}]",
+                    extra.shape(),
+                    self.width
+                )));
+            }
+            ops::add(&mut g.rec, &emb, extra, &emb)?;
         }
         ops::unary(&mut g.rec, UnaryOp::Silu, &emb, &emb, 1.0)?;
         Ok(emb)

@@ -168,7 +168,8 @@ impl UNet {
         self.check(inputs)?;
         let ctx = inputs.sample.context();
         let mut g = Graph::new(&ctx, self.dtype)?;
-        let down_cond = DownConditioning { context: inputs.encoder_hidden_states, ip: inputs.ip, hint: None };
+        let down_cond =
+            DownConditioning { context: inputs.encoder_hidden_states, ip: inputs.ip, hint: None, emb_add: None };
         let DownOutput { h, mut skips, emb_silu } =
             self.down.forward(&mut g, inputs.sample, inputs.timesteps, inputs.added, &down_cond)?;
         let cond = Conditioning { emb_silu: &emb_silu, context: inputs.encoder_hidden_states, ip: inputs.ip };

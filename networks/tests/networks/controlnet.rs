@@ -44,6 +44,7 @@ fn check(path: &str, records_of: &str, dtype: Dtype, tol: f64) {
         added: Some((&text_embeds, &time_ids)),
         hint: &hint,
         scale: 1.0,
+        control_types: &[],
         add_to: None,
     };
     let (pass, ran) = listing_variants(|| net.record(&inputs).unwrap());

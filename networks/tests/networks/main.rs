@@ -3,6 +3,7 @@
 
 mod conditioning;
 mod controlnet;
+mod controlnet_union;
 mod errors;
 mod forward;
 mod fp8;
