@@ -177,3 +177,65 @@ fn a_sets_controlnets_see_their_scene_controls_and_gen_reproduces_its_images() {
         assert!(std::fs::read(&out).unwrap() == std::fs::read(&png).unwrap(), "gen did not reproduce {png:?}");
     }
 }
+
+/// ControlNet-Union by its Hugging Face id, as xinsir's repository holds it (the model and its
+/// ProMax file side by side): one Union model seeing the depth and the edges, and two Union
+/// models with their own controls and ranges, held to diffusers' Union pipeline latents
+/// (tools/make_union_pipeline_fixtures.py) and recorded per net.
+#[test]
+fn union_controlnets_by_hugging_face_id_match_diffusers() {
+    let dir = Path::new(&fixture("workflow")).to_path_buf();
+    let json: Value = serde_json::from_str(&std::fs::read_to_string(dir.join("union_pipeline.json")).unwrap()).unwrap();
+    let records = vkdiff_formats::SafeTensors::open(&dir.join("union_pipeline.safetensors")).unwrap();
+    let out = scratch("controlnets-union");
+    let repo = "vkdiff-test/controlnet-union-sdxl-1.0";
+    // The fixture's union types as scene controls: 1 depth, 3 thin lines, 5 segment.
+    let kind = |mode: u64| match mode {
+        1 => "depth",
+        3 => "edges",
+        5 => "segmentation",
+        other => panic!("no scene control for union type {other}"),
+    };
+    for case in json["cases"].as_array().unwrap() {
+        let name = text(&case["name"]);
+        let mut flags: Vec<String> = vec!["--model".into(), fixture("pipeline/tiny-sdxl")];
+        for key in ["prompt", "seed", "steps", "sampler", "width", "height"] {
+            flags.extend([format!("--{key}"), text(&case[key])]);
+        }
+        flags.extend(["--cfg".into(), text(&case["guidance_scale"])]);
+        for net in case["nets"].as_array().unwrap() {
+            let model = match text(&net["model"]).as_str() {
+                "controlnet-union" => repo.to_string(),
+                _ => format!("{repo}/diffusion_pytorch_model_promax.safetensors"),
+            };
+            let modes = net["modes"].as_array().unwrap();
+            let controls: Vec<&str> = modes.iter().map(|m| kind(m.as_u64().unwrap())).collect();
+            let (scale, start, end) = (text(&net["scale"]), text(&net["start"]), text(&net["end"]));
+            let value = format!("{model},control={},scale={scale},start={start},end={end}", controls.join("+"));
+            flags.extend(["--controlnet".into(), value]);
+            for (control, image) in controls.iter().zip(net["images"].as_array().unwrap()) {
+                let file = dir.join(text(image)).display().to_string();
+                match *control {
+                    "depth" => flags.extend(["--depth".into(), file]),
+                    other => flags.extend(["--control-image".into(), format!("{other}={file}")]),
+                }
+            }
+        }
+        let (png, lat) = (out.join(format!("{name}.png")), out.join(format!("{name}.safetensors")));
+        let mut args = vec!["gen", "--precision", "f32", "--out", png.to_str().unwrap()];
+        args.extend(["--latents-out", lat.to_str().unwrap()]);
+        args.extend(flags.iter().map(String::as_str));
+        let hub = fixture("hub");
+        let result = cli::vkdiff_with(&args, &[("HF_HUB_CACHE", &hub)]);
+        assert!(result.status.success(), "{name}: {}", String::from_utf8_lossy(&result.stderr));
+        let (_, want) = records.values(&text(&case["tensors"]["latents"])).unwrap();
+        let (_, got) = vkdiff_formats::SafeTensors::open(&lat).unwrap().values("latents").unwrap();
+        let err = relative_l2(&got, &want);
+        eprintln!("{name}: latents rel L2 {err:.2e}");
+        assert!(err <= 1e-5, "{name}: latents relative L2 error {err:.2e}");
+        let chunks = png_text(&png);
+        let recorded = chunks.iter().find(|(k, _)| k == "controlnets").map(|(_, v)| v.clone()).unwrap();
+        assert!(recorded.lines().all(|l| l.starts_with(&format!("{repo}@"))), "{recorded}");
+        assert_eq!(recorded.lines().count(), case["nets"].as_array().unwrap().len(), "{recorded}");
+    }
+}

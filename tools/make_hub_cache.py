@@ -43,6 +43,12 @@ REPOS = {
         "config.json": FIXTURES / "workflow/controlnet/config.json",
         "diffusion_pytorch_model.fp16.safetensors": FIXTURES / "workflow/controlnet/diffusion_pytorch_model.fp16.safetensors",
     },
+    # As xinsir/controlnet-union-sdxl-1.0 holds them: the Union model and its ProMax file side by side.
+    "vkdiff-test/controlnet-union-sdxl-1.0": {
+        "config.json": FIXTURES / "workflow/controlnet-union/config.json",
+        "diffusion_pytorch_model.safetensors": FIXTURES / "workflow/controlnet-union/diffusion_pytorch_model.safetensors",
+        "diffusion_pytorch_model_promax.safetensors": FIXTURES / "workflow/controlnet-union-promax.safetensors",
+    },
     "vkdiff-test/IP-Adapter": {
         "sdxl_models/ip-adapter_sdxl.safetensors": FIXTURES / "workflow/ip-adapter_tiny.safetensors",
         "sdxl_models/image_encoder/config.json": FIXTURES / "workflow/image_encoder/config.json",
