@@ -18,8 +18,7 @@ use vkdiff_testkit::fixture;
 #[test]
 fn union_controlnets_match_diffusers_union_pipeline_in_f32() {
     let dir = fixture("workflow");
-    let json: Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("union_pipeline.json")).unwrap()).unwrap();
+    let json: Value = serde_json::from_str(&std::fs::read_to_string(dir.join("union_pipeline.json")).unwrap()).unwrap();
     let records = SafeTensors::open(&dir.join("union_pipeline.safetensors")).unwrap();
     let sdxl = Sdxl::load(&ctx(), &dir.join("../pipeline/tiny-sdxl"), Dtype::F32, &mut |_| {}).unwrap();
     let load = |name: &str| ControlNetModel::load(&ctx(), &dir.join(name), sdxl.unet_config(), Dtype::F32).unwrap();
