@@ -71,7 +71,7 @@ pub fn run(args: &WorkflowArgs, env: &Environment) -> Result<()> {
                 images: &styles,
                 scale: &vkdiff_pipeline::IpScale::All(0.6),
             }),
-            init: None,
+            ..Default::default()
         };
         ctx.reset_peak();
         let start = Instant::now();

@@ -280,7 +280,7 @@ impl<'a> Loop<'a> {
             let ip = self.models.ip_use(styles).filter(|_| styles > 0);
             self.recordings += 1;
             self.denoiser = Some((
-                Denoiser::record(&self.models.sdxl, sampling, &self.models.control_uses(), ip, key.0, tokens)?,
+                Denoiser::record(&self.models.sdxl, sampling, &self.models.control_uses(), ip, key.0, tokens, 0)?,
                 key,
             ));
         }
@@ -301,6 +301,8 @@ impl<'a> Loop<'a> {
             .zip(&inits)
             .map(|(item, init)| ItemInputs {
                 init: init.as_ref(),
+                regions: None,
+                strength: None,
                 seed: item.seed,
                 text: &self.texts[&item.prompt],
                 control_images: self.models.control_images(&|kind| item.scene.control_image(kind)),

@@ -21,7 +21,8 @@ pub use schedulers::{
 };
 pub use sdxl::{
     check_control_shape, BatchOutput, Conditioning, ControlGuide, ControlNetUse, Denoised, Denoiser, Generated, Guides,
-    ImageGuide, InitLatents, IpAdapterUse, ItemInputs, Sdxl, StyleModels, Swaps, Timings, VaePlan, WorkflowModels,
+    ImageGuide, InitLatents, IpAdapterUse, ItemInputs, Regions, Sdxl, StyleModels, Swaps, Timings, VaePlan,
+    WorkflowModels,
 };
 pub use settings::{
     check_control_settings, control_depth_name, parse_attention, precision_name, read_images, recipe_warnings,

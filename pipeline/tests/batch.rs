@@ -94,6 +94,8 @@ fn alone_and_together(ctx: &Context, precision: Dtype, size: (usize, usize), spl
             control_images: vec![vec![&control]],
             ip_tokens: Some(&tokens[0]),
             init: None,
+            regions: None,
+            strength: None,
         },
         ItemInputs {
             seed: 12,
@@ -101,6 +103,8 @@ fn alone_and_together(ctx: &Context, precision: Dtype, size: (usize, usize), spl
             control_images: vec![vec![&flipped]],
             ip_tokens: Some(&tokens[1]),
             init: None,
+            regions: None,
+            strength: None,
         },
         ItemInputs {
             seed: 13,
@@ -108,13 +112,15 @@ fn alone_and_together(ctx: &Context, precision: Dtype, size: (usize, usize), spl
             control_images: vec![vec![&control]],
             ip_tokens: Some(&tokens[0]),
             init: None,
+            regions: None,
+            strength: None,
         },
     ];
     if let Some(limit) = binding_limit {
         ctx.choose(|c| c.binding_limit = limit);
     }
     let record = |batch| {
-        Denoiser::record(sdxl, &sampling, &models.control_uses(), models.ip_use(1), batch, texts[0].tokens).unwrap()
+        Denoiser::record(sdxl, &sampling, &models.control_uses(), models.ip_use(1), batch, texts[0].tokens, 0).unwrap()
     };
     ctx.set_profiling(true);
     let one = record(1);

@@ -43,7 +43,7 @@ fn two_controlnets_sum_as_diffusers_sums_them_in_f32() {
                 images: vec![image],
             })
             .collect();
-        let out = sdxl.denoise(&job(case), &Guides { control: guides, image: None, init: None }, &mut |_, _| {});
+        let out = sdxl.denoise(&job(case), &Guides { control: guides, ..Default::default() }, &mut |_, _| {});
         let (_, latents) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
         let rel = relative_l2(&out.unwrap().latents, &latents);
         // The second net moves diffusers' latents by this much: the tolerance is far below it.

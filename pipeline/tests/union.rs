@@ -48,7 +48,7 @@ fn union_controlnets_match_diffusers_union_pipeline_in_f32() {
                 images: images.iter().collect(),
             })
             .collect();
-        let out = sdxl.denoise(&job(case), &Guides { control: guides, image: None, init: None }, &mut |_, _| {});
+        let out = sdxl.denoise(&job(case), &Guides { control: guides, ..Default::default() }, &mut |_, _| {});
         let (_, latents) = records.values(case["tensors"]["latents"].as_str().unwrap()).unwrap();
         let rel = relative_l2(&out.unwrap().latents, &latents);
         let moved = case["last_control_moves"].as_f64();

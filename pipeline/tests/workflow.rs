@@ -110,7 +110,7 @@ fn check(dtype: Dtype, tol: f64, min_psnr: f64) {
         let out = sdxl
             .text_to_image(
                 &job(case),
-                &Guides { control: control.into_iter().collect(), image, init: None },
+                &Guides { control: control.into_iter().collect(), image, ..Default::default() },
                 &mut |_, _| {},
             )
             .unwrap();

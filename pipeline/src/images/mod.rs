@@ -1,10 +1,11 @@
 //! Image inputs, exact to the Python reference: files read as PIL reads them, Pillow's and
 //! ATen's antialiased resizes, the ControlNet control tensor, CLIP preprocessing for IP-Adapter,
-//! and metric-depth EXR as a control image.
+//! metric-depth EXR as a control image, and masks feathered and brought to the latent grid.
 
 mod clip_preprocess;
 mod control;
 mod depth_input;
+pub mod masks;
 mod resample;
 
 use std::path::Path;

@@ -1,5 +1,6 @@
 //! Batched denoising: B images per UNet pass (2B rows with guidance, laid out as diffusers
-//! concatenates them: every negative row, then every positive row). The UNet and ControlNet are
+//! concatenates them: every negative row, then every positive row; then, with region prompts,
+//! every image's first region's row, and so on). The UNet and ControlNet are
 //! recorded once per batch shape; each batch writes its inputs into the recorded tensors and
 //! replays the passes. Each image keeps its own generator, sampler state and latents, so an
 //! image's result does not depend on the images beside it.
@@ -8,6 +9,7 @@ use crate::error::{finite, Error, Result};
 use crate::rng::TorchCpuRng;
 use crate::sdxl::controlnet_guide::{ControlNetUse, ControlRun, SharedInputs};
 use crate::sdxl::prompt_encoding::Conditioning;
+use crate::sdxl::regions::{blend, HeldLatents, Regions};
 use crate::sdxl::InitLatents;
 use crate::sdxl::Sdxl;
 use crate::settings::ip_scale::IpScale;
@@ -37,6 +39,11 @@ pub struct ItemInputs<'a> {
     pub ip_tokens: Option<&'a [f32]>,
     /// img2img: the encoded init image, when the batch samples with a strength.
     pub init: Option<&'a InitLatents>,
+    /// Its region prompts, when the batch was recorded for them.
+    pub regions: Option<&'a Regions>,
+    /// img2img with a strength per latent pixel, over the batch's strength (in [0, 1]): pixels
+    /// below a step's threshold are held on the init latent's path.
+    pub strength: Option<&'a [f64]>,
 }
 
 /// A batch's latents and where its time went.
@@ -60,6 +67,8 @@ pub struct Denoiser<'m> {
     context: Tensor,
     pooled: Tensor,
     _time_ids: Tensor,
+    /// Region prompts per image: rows beyond the negative and positive ones.
+    regions: usize,
     /// The ControlNets; the first holds the residuals the others add onto and the UNet reads.
     controls: Vec<ControlRun<'m>>,
     ip: Vec<IpAdapterInput>,
@@ -68,7 +77,8 @@ pub struct Denoiser<'m> {
 
 impl<'m> Denoiser<'m> {
     /// Records the passes for `batch` images sampled as `sampling` says, with prompts of
-    /// `tokens` tokens ([`Conditioning::tokens`]), steered by `controls` (summed) and `ip`.
+    /// `tokens` tokens ([`Conditioning::tokens`]) and `regions` region prompts each, steered by
+    /// `controls` (summed) and `ip`.
     pub fn record(
         model: &'m Sdxl,
         sampling: &Sampling,
@@ -76,12 +86,13 @@ impl<'m> Denoiser<'m> {
         ip: Option<IpAdapterUse<'m>>,
         batch: usize,
         tokens: usize,
+        regions: usize,
     ) -> Result<Denoiser<'m>> {
         debug_assert!(model.check_sampling(sampling).is_ok(), "the entries check the sampling before loading");
         assert!(batch > 0, "a denoiser runs batches of at least one image (the entries check the batch)");
         let scale = model.vae_scale();
         let latent = [sampling.height / scale, sampling.width / scale, model.unet_config.in_channels];
-        let rows = batch * sampling.rows_per_image();
+        let rows = batch * (sampling.rows_per_image() + regions);
         let (ctx, dt) = (&model.ctx, model.dtype);
         let sample = ctx.zeros(&[rows, latent[0], latent[1], latent[2]], dt)?;
         let timesteps = ctx.zeros(&[rows], Dtype::F32)?;
@@ -125,10 +136,16 @@ impl<'m> Denoiser<'m> {
             context,
             pooled,
             _time_ids: time_ids,
+            regions,
             controls: runs,
             ip,
             pass,
         })
+    }
+
+    /// UNet rows per image: negative (with guidance), positive, one per region prompt.
+    fn rows_per_image(&self) -> usize {
+        self.sampling.rows_per_image() + self.regions
     }
 
     /// Images per pass.
@@ -157,6 +174,7 @@ impl<'m> Denoiser<'m> {
         let mut samplers = Vec::with_capacity(items.len());
         let mut rngs = Vec::with_capacity(items.len());
         let mut latents = Vec::with_capacity(items.len());
+        let mut holds = Vec::with_capacity(items.len());
         for item in items {
             let sampler = self.sampling.sampler(&self.model.scheduler)?;
             let mut rng = TorchCpuRng::new(item.seed);
@@ -175,7 +193,10 @@ impl<'m> Denoiser<'m> {
                         .zip(rng.randn(n))
                         .map(|((m, s), e)| (m + s * e) * scaling)
                         .collect();
-                    sampler.add_noise(first, &x0, &rng.randn(n))
+                    let noise = rng.randn(n);
+                    let noised = sampler.add_noise(first, &x0, &noise);
+                    holds.push(item.strength.map(|relative| HeldLatents { relative, x0, noise }));
+                    noised
                 }
                 (Some(init), Some(_)) => {
                     return Err(Error::Config(format!(
@@ -192,18 +213,36 @@ impl<'m> Denoiser<'m> {
             samplers.push(sampler);
             rngs.push(rng);
         }
+        if holds.len() != items.len() && items.iter().any(|i| i.strength.is_some()) {
+            return Err(Error::Config("a strength per region needs img2img's init image".into()));
+        }
+        holds.resize_with(items.len(), || None);
+        let prediction = match self.sampling.schedule.prediction {
+            Some(p) => p,
+            None => self.model.scheduler.prediction()?,
+        };
         let timesteps = samplers[0].timesteps().to_vec();
         let total = timesteps.len();
         let guided = self.sampling.guided();
+        let per_image = self.rows_per_image();
         let mut steps = Vec::with_capacity(total - first);
         for (step, &t) in timesteps.iter().enumerate().skip(first) {
             let start = Instant::now();
+            let held: Vec<Option<Vec<bool>>> =
+                holds.iter().map(|hold| hold.as_ref().and_then(|hold| hold.held(t, timesteps[first]))).collect();
+            for ((x, hold), held) in latents.iter_mut().zip(&holds).zip(&held) {
+                if let (Some(hold), Some(held)) = (hold, held) {
+                    let noised = samplers[0].add_noise(step, &hold.x0, &hold.noise);
+                    HeldLatents::hold_input(held, x, &noised);
+                }
+            }
             let mut x_batch = Vec::with_capacity(self.sample.numel());
             for (sampler, x) in samplers.iter().zip(&latents) {
                 x_batch.extend(nchw_to_nhwc(&sampler.scale_model_input(step, x), [1, c, h, w]));
             }
-            if guided {
-                x_batch.extend_from_within(..);
+            let block = x_batch.len();
+            for _ in 1..per_image {
+                x_batch.extend_from_within(..block);
             }
             self.sample.write(&x_batch)?;
             self.timesteps.write(&vec![t; self.timesteps.numel()])?;
@@ -213,15 +252,29 @@ impl<'m> Denoiser<'m> {
             self.pass.run()?;
             let out = self.pass.output.download()?;
             finite(&out, &|| format!("the UNet's output at step {} of {total}", step + 1))?;
+            let row = |r: usize, i: usize| &out[(r * self.batch + i) * n..(r * self.batch + i + 1) * n];
             for (i, ((sampler, x), rng)) in samplers.iter_mut().zip(&mut latents).zip(&mut rngs).enumerate() {
+                let positive_row = usize::from(guided);
+                let blended;
+                let p = match items[i].regions {
+                    Some(regions) => {
+                        let rows: Vec<&[f32]> = (positive_row..per_image).map(|r| row(r, i)).collect();
+                        blended = blend(&rows, &regions.masks, c);
+                        &blended[..]
+                    }
+                    None => row(positive_row, i),
+                };
                 let eps_nhwc: Vec<f32> = if guided {
                     let g = self.sampling.guidance_scale;
-                    let (u, p) = (&out[i * n..(i + 1) * n], &out[(self.batch + i) * n..(self.batch + i + 1) * n]);
-                    u.iter().zip(p).map(|(&u, &p)| u + g * (p - u)).collect()
+                    row(0, i).iter().zip(p).map(|(&u, &p)| u + g * (p - u)).collect()
                 } else {
-                    out[i * n..(i + 1) * n].to_vec()
+                    p.to_vec()
                 };
-                sampler.step(step, &nhwc_to_nchw(&eps_nhwc, [1, h, w, c]), x, rng);
+                let mut eps = nhwc_to_nchw(&eps_nhwc, [1, h, w, c]);
+                if let (Some(hold), Some(held)) = (&holds[i], &held[i]) {
+                    hold.hold_output(held, prediction, &mut eps)?;
+                }
+                sampler.step(step, &eps, x, rng);
             }
             steps.push(start.elapsed());
             on_step(step + 1 - first, total - first);
@@ -232,24 +285,30 @@ impl<'m> Denoiser<'m> {
     /// Text, image tokens and control images of every row (all negatives, then all positives),
     /// and the keys and values projected from them.
     fn write_conditioning(&self, items: &[ItemInputs]) -> Result<()> {
-        let per_image = self.sampling.rows_per_image();
+        let per_image = self.rows_per_image();
         let row = |t: &Tensor| t.numel() / t.shape()[0];
-        self.context.write(&by_row(
-            items,
-            per_image,
-            row(&self.context),
-            |i| Some(&i.text.context),
-            "prompt encoding",
-        )?)?;
-        self.pooled.write(&by_row(
-            items,
-            per_image,
-            row(&self.pooled),
-            |i| Some(&i.text.pooled),
-            "pooled prompt encoding",
-        )?)?;
+        let texts = (items.iter())
+            .map(|i| Regions::rows(i.text, i.regions, self.regions))
+            .collect::<Result<Vec<(Vec<f32>, Vec<f32>)>>>()?;
+        let contexts: Vec<Option<&[f32]>> = texts.iter().map(|(c, _)| Some(&c[..])).collect();
+        self.context.write(&by_row(&contexts, per_image, row(&self.context), "prompt encoding")?)?;
+        let pooled: Vec<Option<&[f32]>> = texts.iter().map(|(_, p)| Some(&p[..])).collect();
+        self.pooled.write(&by_row(&pooled, per_image, row(&self.pooled), "pooled prompt encoding")?)?;
         if let Some(ip) = self.ip.first() {
-            ip.tokens.write(&by_row(items, per_image, row(&ip.tokens), |i| i.ip_tokens, "IP-Adapter image tokens")?)?;
+            // Every region's row sees the image tokens the positive row sees.
+            let width = row(&ip.tokens);
+            let tokens: Vec<Option<Vec<f32>>> = (items.iter())
+                .map(|i| {
+                    i.ip_tokens.map(|t| {
+                        let mut all = t.to_vec();
+                        let last = t.len().saturating_sub(width);
+                        (0..self.regions).for_each(|_| all.extend_from_within(last..));
+                        all
+                    })
+                })
+                .collect();
+            let tokens: Vec<Option<&[f32]>> = tokens.iter().map(Option::as_deref).collect();
+            ip.tokens.write(&by_row(&tokens, per_image, width, "IP-Adapter image tokens")?)?;
         }
         for item in items {
             let given: Vec<usize> = item.control_images.iter().map(Vec::len).collect();
@@ -271,17 +330,11 @@ impl<'m> Denoiser<'m> {
 
 /// Rows of `row_len` values from every item's `per_image` rows: first row of every item, then the
 /// second row of every item.
-fn by_row<'a>(
-    items: &'a [ItemInputs<'a>],
-    per_image: usize,
-    row_len: usize,
-    values: impl Fn(&'a ItemInputs<'a>) -> Option<&'a [f32]>,
-    what: &str,
-) -> Result<Vec<f32>> {
+fn by_row(items: &[Option<&[f32]>], per_image: usize, row_len: usize, what: &str) -> Result<Vec<f32>> {
     let mut out = Vec::with_capacity(row_len * per_image * items.len());
     for r in 0..per_image {
         for item in items {
-            let v = values(item).ok_or_else(|| Error::Config(format!("an image of the batch has no {what}")))?;
+            let v = item.ok_or_else(|| Error::Config(format!("an image of the batch has no {what}")))?;
             if v.len() != row_len * per_image {
                 return Err(Error::Config(format!(
                     "{what}: {} values where the recorded pass takes {}",

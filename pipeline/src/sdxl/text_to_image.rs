@@ -7,7 +7,7 @@ use crate::error::{finite, Error, Result};
 use crate::sdxl::controlnet_guide::{ControlGuide, ControlNetUse};
 use crate::sdxl::denoiser::{Denoiser, IpAdapterUse, ItemInputs};
 use crate::sdxl::Sdxl;
-use crate::sdxl::{Conditioning, ImageGuide};
+use crate::sdxl::{Conditioning, ImageGuide, Regions};
 use crate::settings::sampling::{Sampling, TextToImage};
 use crate::RgbImage;
 use std::time::{Duration, Instant};
@@ -39,6 +39,10 @@ pub struct Guides<'a> {
     pub image: Option<ImageGuide<'a>>,
     /// img2img's init image (with [`Sampling::strength`]).
     pub init: Option<&'a RgbImage>,
+    /// Region prompts over the prompt.
+    pub regions: Option<&'a Regions>,
+    /// img2img with a strength per latent pixel ([`ItemInputs::strength`]).
+    pub strength: Option<&'a [f64]>,
 }
 
 /// The denoising loop's result, before the VAE.
@@ -128,7 +132,8 @@ impl Sdxl {
         let controls: Vec<ControlNetUse> = guides.control.iter().map(|g| g.use_).collect();
         let ip =
             guides.image.as_ref().map(|g| IpAdapterUse { adapter: g.adapter, scale: g.scale, images: g.images.len() });
-        let denoiser = Denoiser::record(self, sampling, &controls, ip, 1, text.tokens)?;
+        let regions = guides.regions.map_or(0, |r| r.texts.len());
+        let denoiser = Denoiser::record(self, sampling, &controls, ip, 1, text.tokens, regions)?;
         timings.record = start.elapsed();
         let init = guides.init.map(|image| self.encode_init(image, sampling.width, sampling.height)).transpose()?;
         let item = ItemInputs {
@@ -137,6 +142,8 @@ impl Sdxl {
             control_images: guides.control.iter().map(|g| g.images.clone()).collect(),
             ip_tokens: ip_tokens.as_deref(),
             init: init.as_ref(),
+            regions: guides.regions,
+            strength: guides.strength,
         };
         let out = denoiser.run(&[item], on_step)?;
         timings.record += out.prepare;

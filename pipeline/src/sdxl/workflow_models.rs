@@ -110,7 +110,7 @@ impl WorkflowModels {
         let images = self.control_images(&|kind| &inputs.controls[&kind]);
         let control =
             self.control_uses().into_iter().zip(images).map(|(use_, images)| ControlGuide { use_, images }).collect();
-        Guides { control, image: self.image_guide(&inputs.style), init: inputs.init.as_ref() }
+        Guides { control, image: self.image_guide(&inputs.style), init: inputs.init.as_ref(), ..Default::default() }
     }
 }
 

@@ -119,7 +119,7 @@ impl CaseInputs {
             use_: ControlNetUse { net, control_types: &[], scale: *scale, start: *start, end: *end },
             images: vec![image],
         });
-        Guides { control: control.into_iter().collect(), image, init: self.init.as_ref() }
+        Guides { control: control.into_iter().collect(), image, init: self.init.as_ref(), ..Default::default() }
     }
 }
 
