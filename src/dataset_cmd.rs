@@ -11,8 +11,8 @@ use vkdiff_args::{dataset_flag, CropArgs, SceneSettings};
 use vkdiff_args::{ModelArgs, SamplingArgs};
 use vkdiff_dataset::{
     merge, parse_size, read_prompts, size, stop_on_signals, Crops, DatasetEvent, DatasetJob, DatasetSettings, Finish,
-    Merged, ProceduralBed, Progress as Event, RenderedScenes, Report, RunOptions, SceneSource, ShardRequest,
-    VersionChange, DEFAULT_FAR,
+    Merged, ProceduralBed, Progress as Event, RegionFlags, RenderedScenes, Report, RunOptions, SceneSource,
+    ShardRequest, VersionChange, DEFAULT_FAR,
 };
 use vkdiff_pipeline::{recipe_warnings, Sampling};
 use vkdiff_render::control::edges::DEFAULT_DEPTH_JUMP;
@@ -85,6 +85,23 @@ pub struct DatasetArgs {
     /// depth is an edge.
     #[arg(long, default_value_t = DEFAULT_DEPTH_JUMP)]
     edge_depth_jump: f32,
+    /// A category's own prompt, as NAME=TEXT (repeat it): SDXL sees it where the category's
+    /// masks are and the scene's prompt elsewhere (a categories.json `"prompt"` does the same;
+    /// this wins). Each costs one more UNet row per image.
+    #[arg(long, value_parser = parse_named_text, value_name = "NAME=TEXT")]
+    category_prompt: Vec<(String, String)>,
+    /// A category's own img2img strength, as NAME=S in (0, 1] (repeat it; a categories.json
+    /// `"strength"` does the same): its pixels start from the render and are redrawn this
+    /// strongly, the rest at --init-strength (else 1), as ComfyUI's DifferentialDiffusion.
+    #[arg(long, value_parser = parse_named_strength, value_name = "NAME=S")]
+    category_strength: Vec<(String, f64)>,
+    /// The background's img2img strength, in (0, 1].
+    #[arg(long)]
+    background_strength: Option<f64>,
+    /// Pixels over which the category prompts' masks and the strengths blend into each other
+    /// (a Gaussian of standard deviation PX/2); 0 keeps the masks' edges.
+    #[arg(long, default_value_t = 0, value_name = "PX")]
+    region_feather: usize,
     /// Images per UNet pass (2 × batch rows with guidance); results do not depend on it.
     #[arg(long, default_value_t = 1)]
     batch: usize,
@@ -261,7 +278,28 @@ fn settings(args: &DatasetArgs, env: &vkdiff_runtime::Environment) -> Result<Dat
         Sampling { strength: args.init_strength, ..args.sampling.sampling(0, 0) },
         ip_sets,
     )?
-    .with_controls(&args.controls, args.edge_depth_jump)?)
+    .with_controls(&args.controls, args.edge_depth_jump)?
+    .with_regions(&RegionFlags {
+        prompts: args.category_prompt.clone(),
+        strengths: args.category_strength.clone(),
+        background: args.background_strength,
+        feather: args.region_feather,
+    })?)
+}
+
+/// `NAME=TEXT`; the first `=` ends the name.
+fn parse_named_text(text: &str) -> std::result::Result<(String, String), String> {
+    match text.split_once('=') {
+        Some((name, value)) if !name.trim().is_empty() => Ok((name.trim().to_string(), value.to_string())),
+        _ => Err("expected NAME=TEXT, as apple=a shiny red apple".into()),
+    }
+}
+
+/// `NAME=S`, S a number.
+fn parse_named_strength(text: &str) -> std::result::Result<(String, f64), String> {
+    let (name, value) = parse_named_text(text)?;
+    let strength = value.trim().parse().map_err(|_| format!("{name}={value}: the strength is not a number"))?;
+    Ok((name, strength))
 }
 
 /// A control's name, as `--controls` takes it.

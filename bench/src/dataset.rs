@@ -241,6 +241,7 @@ pub(crate) fn paper_set(
         crops: Crops { count: crops, size: size as u32, min_fraction: 0.1 },
         control_depth: ControlDepth::Inverse,
         controls: LabelControls::default(),
+        regions: Default::default(),
         models: Some(models.clone()),
         prompts: vec!["white button mushrooms on dark black soil compost mycelium".into()],
         user_prompts: 1,

@@ -277,6 +277,11 @@ fn manifest(settings: &DatasetSettings) -> Value {
         },
         "settings": s,
     });
+    if settings.regions.has_strengths() {
+        manifest["layout"]["strength"] = json!(
+            "init/NNNNNN.strength.png: each pixel's img2img strength (0-255 for 0-1), feathered as the denoiser saw it"
+        );
+    }
     if !settings.controls.kinds.is_empty() {
         manifest["layout"]["controls"] =
             json!("control/NNNNNN.<kind>.png: --controls and the controls the ControlNets see, each computed from the image's labels (docs/controls.md)");

@@ -8,6 +8,7 @@ use super::canvas::Canvas;
 use super::export::{FinishedSet, SetImage, SplitFractions};
 use super::preview_page::page;
 use crate::error::{Error, Result};
+use serde_json::Value;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::atomic::write_atomic;
@@ -47,6 +48,7 @@ pub fn preview(
     let mut kinds: Vec<String> = chosen
         .iter()
         .flat_map(|image| image.entry["control_files"].as_object().into_iter().flat_map(|m| m.keys().cloned()))
+        .chain(chosen.iter().any(|image| image.entry["strength_file"].is_string()).then(|| STRENGTH.to_string()))
         .collect();
     kinds.sort();
     kinds.dedup();
@@ -172,8 +174,12 @@ impl Layers {
         let depth = file("depth_file").map(|p| depth_picture(&p)).transpose()?;
         let palette = categories.palette(image);
         let listed = image.entry["control_files"].as_object().into_iter().flatten();
+        // The strength map shows as one more layer beside the controls.
+        let strength = image.entry["strength_file"].as_str().map(|f| (STRENGTH.to_string(), Value::from(f)));
         let controls = listed
-            .filter_map(|(kind, file)| Some((kind.clone(), dir.join(file.as_str()?))))
+            .map(|(kind, file)| (kind.clone(), file.clone()))
+            .chain(strength)
+            .filter_map(|(kind, file)| Some((kind, dir.join(file.as_str()?))))
             .map(|(kind, path)| Ok((kind, read_image(&path)?)))
             .collect::<Result<_>>()?;
         Ok(Layers {
@@ -348,6 +354,9 @@ pub fn escape(text: &str) -> String {
     text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
+/// The strength map's layer (`init/NNNNNN.strength.png`).
+const STRENGTH: &str = "strength";
+
 fn figure(image: &SetImage, layers: &Layers) -> String {
     let e = &image.entry;
     let mut html = String::from("<figure><div class=\"stack\">");
@@ -370,7 +379,10 @@ fn figure(image: &SetImage, layers: &Layers) -> String {
     if let Some(k) = e["crop"]["index"].as_u64() {
         let _ = write!(caption, " · crop {k}");
     }
-    let prompt = e["prompt"].as_str().map_or_else(|| "shaded render (no prompt)".to_string(), str::to_string);
+    let mut prompt = e["prompt"].as_str().map_or_else(|| "shaded render (no prompt)".to_string(), str::to_string);
+    for (name, region) in e["region_prompts"].as_object().into_iter().flatten() {
+        let _ = write!(prompt, " · {name}: {}", region.as_str().unwrap_or_default());
+    }
     let _ = writeln!(
         html,
         "</div><figcaption>{}<br><span class=\"prompt\">{}</span></figcaption></figure>",

@@ -21,7 +21,7 @@ use vkdiff_pipeline::GenSettings;
 use vkdiff_pipeline::RgbImage;
 use vkdiff_pipeline::TextToImage;
 use vkdiff_pipeline::WorkflowModels;
-use vkdiff_pipeline::{Denoiser, ItemInputs};
+use vkdiff_pipeline::{Denoiser, ItemInputs, Regions};
 use vkdiff_render::control::ControlKind;
 
 pub struct RunOptions {
@@ -128,6 +128,10 @@ pub fn generate(
             ))
         })
         .collect::<Result<HashMap<usize, Conditioning>>>()?;
+    // Each category's prompt, seen without guidance: the rows its pixels take.
+    let region_texts = (settings.regions.prompts.iter())
+        .map(|(_, _, p)| Ok(models.sdxl.encode_prompt_as(sampling.prompt_syntax, p, None, false)?))
+        .collect::<Result<Vec<Conditioning>>>()?;
     // Every prompt is encoded: the encoders' memory goes before the denoiser's comes.
     if !options.keep_text_encoders {
         models.sdxl.release_text_encoders();
@@ -140,6 +144,7 @@ pub fn generate(
         models,
         styles,
         texts,
+        region_texts,
         tokens: HashMap::new(),
         times: StageTimes { setup: start.elapsed(), ..StageTimes::default() },
         denoiser: None,
@@ -170,6 +175,8 @@ struct Loop<'a> {
     models: &'a WorkflowModels,
     styles: &'a [Vec<RgbImage>],
     texts: HashMap<usize, Conditioning>,
+    /// Each prompted category's conditioning, in the settings' order.
+    region_texts: Vec<Conditioning>,
     tokens: HashMap<usize, Vec<f32>>,
     times: StageTimes,
     recordings: usize,
@@ -280,7 +287,15 @@ impl<'a> Loop<'a> {
             let ip = self.models.ip_use(styles).filter(|_| styles > 0);
             self.recordings += 1;
             self.denoiser = Some((
-                Denoiser::record(&self.models.sdxl, sampling, &self.models.control_uses(), ip, key.0, tokens, 0)?,
+                Denoiser::record(
+                    &self.models.sdxl,
+                    sampling,
+                    &self.models.control_uses(),
+                    ip,
+                    key.0,
+                    tokens,
+                    self.region_texts.len(),
+                )?,
                 key,
             ));
         }
@@ -296,13 +311,17 @@ impl<'a> Loop<'a> {
                     .transpose()
             })
             .collect::<vkdiff_pipeline::Result<Vec<_>>>()?;
+        let regions: Vec<Option<Regions>> = (items.iter())
+            .map(|item| item.scene.regions.clone().map(|masks| Regions { texts: &self.region_texts, masks }))
+            .collect();
         let inputs: Vec<ItemInputs> = items
             .iter()
             .zip(&inits)
-            .map(|(item, init)| ItemInputs {
+            .zip(&regions)
+            .map(|((item, init), regions)| ItemInputs {
                 init: init.as_ref(),
-                regions: None,
-                strength: None,
+                regions: regions.as_ref(),
+                strength: item.scene.strength.as_deref(),
                 seed: item.seed,
                 text: &self.texts[&item.prompt],
                 control_images: self.models.control_images(&|kind| item.scene.control_image(kind)),
@@ -361,10 +380,16 @@ impl<'a> Loop<'a> {
             entry["init_file"] = json!(files.init);
             entry["strength"] = json!(strength);
         }
+        if s.regions.has_prompts() {
+            let prompts: serde_json::Map<String, Value> =
+                s.regions.prompts.iter().map(|(_, name, prompt)| (name.clone(), json!(prompt))).collect();
+            entry["region_prompts"] = Value::Object(prompts);
+        }
         if item.style.is_some() {
             entry["ip_images"] = json!(ip_images.iter().map(|p| p.display().to_string()).collect::<Vec<_>>());
         }
         let mut text = gen.png_text();
+        text.extend(s.regions.png_text());
         if let Some(tiling) = self.models.sdxl.vae_tiling() {
             text.insert("vae_tile".into(), tiling.tile.to_string());
         }

@@ -45,6 +45,11 @@ pub struct SceneImage {
     pub init: Option<(RgbImage, Vec<u8>)>,
     /// COCO annotations, ids = the instance ids in the mask.
     pub annotations: Vec<Annotation>,
+    /// Its region masks and strength map on the latent grid, with a set that has them.
+    pub regions: Option<Vec<Vec<f32>>>,
+    pub strength: Option<Vec<f64>>,
+    /// The strength map as a picture: its file and PNG.
+    pub strength_png: Option<(String, Vec<u8>)>,
 }
 
 impl SceneImage {
@@ -72,6 +77,9 @@ impl SceneImage {
         if let Some(name) = &self.scene_name {
             entry["scene"] = json!(name);
         }
+        if let Some((file, _)) = &self.strength_png {
+            entry["strength_file"] = json!(file);
+        }
         entry
     }
 
@@ -89,6 +97,7 @@ impl SceneImage {
             (&files.mask, &self.mask_png),
         ];
         out.extend(self.controls.iter().map(|c| (c.file.as_str(), c.png.as_slice())));
+        out.extend(self.strength_png.iter().map(|(file, png)| (file.as_str(), png.as_slice())));
         out
     }
 
@@ -197,8 +206,16 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
                 let png = rgb8(w, h, &shaded);
                 (RgbImage { width: w as usize, height: h as usize, pixels: shaded }, png)
             });
+            let regions = settings.regions.of_image(&part);
+            let strength_png = regions.strength_picture.map(|grey| {
+                let rgb: Vec<u8> = grey.iter().flat_map(|&v| [v, v, v]).collect();
+                (strength_file(&ImageFiles::new(index, settings.images()).init), rgb8(w, h, &rgb))
+            });
             SceneImage {
                 index,
+                regions: regions.masks,
+                strength: regions.strength,
+                strength_png,
                 scene,
                 scene_seed: seed,
                 scene_name: settings.source.scene(scene).name.map(String::from),
@@ -215,6 +232,11 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
             }
         })
         .collect())
+}
+
+/// The strength map's file beside its init image: `init/NNNNNN.strength.png`.
+pub fn strength_file(init: &str) -> String {
+    format!("{}.strength.png", init.strip_suffix(".png").unwrap_or(init))
 }
 
 /// The pixels of an RGB image `width` wide under `window`.

@@ -5,6 +5,7 @@
 
 use crate::controls::LabelControls;
 use crate::error::{Error, Result};
+use crate::regions::{RegionFlags, RegionSettings};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -41,6 +42,8 @@ pub struct DatasetSettings {
     pub control_depth: ControlDepth,
     /// The controls made beside the depth control (`--controls`).
     pub controls: LabelControls,
+    /// A prompt and a strength per category (none by default).
+    pub regions: RegionSettings,
     /// The diffusion models; None for a render-only set, whose images are the shaded renders.
     pub models: Option<ModelSettings>,
     /// The `--prompt`s, one chosen per image from its seed, then every scene's own prompt
@@ -161,6 +164,7 @@ impl DatasetSettings {
             crops,
             control_depth,
             controls: LabelControls::default(),
+            regions: RegionSettings::default(),
             models,
             prompts,
             user_prompts,
@@ -177,6 +181,32 @@ impl DatasetSettings {
         let mut kinds = kinds.to_vec();
         kinds.extend(self.models.iter().flat_map(ModelSettings::control_kinds));
         self.controls = LabelControls::new(&kinds, depth_jump, &self.source.categories())?;
+        Ok(self)
+    }
+
+    /// These settings with a prompt and a strength per category, from the scenes'
+    /// categories.json and `flags`: the schedule then runs at the largest strength, from the
+    /// renders.
+    pub fn with_regions(mut self, flags: &RegionFlags) -> Result<DatasetSettings> {
+        let given = !flags.prompts.is_empty() || !flags.strengths.is_empty() || flags.background.is_some();
+        let Some(models) = &self.models else {
+            if given {
+                let flag = if flags.prompts.is_empty() { "category_strength" } else { "category_prompt" };
+                return Err(Error::Setting(
+                    Message::setting(flag).then(" needs a model: a ").and("render_only").then(" set has no prompts"),
+                ));
+            }
+            return Ok(self);
+        };
+        let scale = Sdxl::probe_vae_scale(&models.model, models.swaps())?;
+        let categories = self.source.categories();
+        let guides = self.source.category_guides();
+        let regions = RegionSettings::new(&categories, &guides, flags, self.sampling.strength, scale)?;
+        if regions.has_strengths() {
+            self.sampling.strength = Some(regions.largest());
+            self.sampling.first_step()?;
+        }
+        self.regions = regions;
         Ok(self)
     }
 
@@ -235,6 +265,7 @@ impl DatasetSettings {
         let map = v.as_object_mut().expect("an object");
         map.extend(self.source.settings());
         map.extend(self.controls.to_json());
+        map.extend(self.regions.to_json());
         match &self.models {
             Some(models) => map.extend(self.diffusion_json(models)),
             None => {
@@ -265,8 +296,15 @@ impl DatasetSettings {
         if s.prompt_syntax == PromptSyntax::Weighted {
             map.insert("prompt-syntax".into(), json!("weighted"));
         }
-        if let Some(strength) = s.strength {
-            map.insert("init-strength".into(), json!(strength));
+        match (s.strength, self.regions.has_strengths()) {
+            (Some(strength), false) => {
+                map.insert("init-strength".into(), json!(strength));
+            }
+            // The rest's strength; the schedule's is the largest.
+            (Some(_), true) if self.regions.rest != 1.0 => {
+                map.insert("init-strength".into(), json!(self.regions.rest));
+            }
+            _ => {}
         }
         if let Some(vae) = &m.vae {
             map.insert("vae".into(), json!(recorded_path(vae)));

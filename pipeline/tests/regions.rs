@@ -16,7 +16,9 @@ use vkdiff_formats::SafeTensors;
 use vkdiff_networks::ControlNetModel;
 use vkdiff_pipeline::images::masks::{region_masks, relative_strengths};
 use vkdiff_pipeline::images::read_image;
-use vkdiff_pipeline::{ControlNetUse, Denoiser, Guides, InitLatents, ItemInputs, Regions, Sdxl, TextToImage};
+use vkdiff_pipeline::{
+    Conditioning, ControlNetUse, Denoiser, Guides, InitLatents, ItemInputs, Regions, Sdxl, TextToImage,
+};
 use vkdiff_runtime::Dtype;
 use vkdiff_testkit::fixture;
 
@@ -47,13 +49,14 @@ impl Scene {
         (self.width / 8, self.height / 8)
     }
 
-    fn regions(&self, sdxl: &Sdxl, case: &Value) -> Option<Regions> {
+    /// The region prompts' conditioning and masks.
+    fn regions(&self, sdxl: &Sdxl, case: &Value) -> Option<(Vec<Conditioning>, Vec<Vec<f32>>)> {
         let prompts = case["region_prompts"].as_object()?;
         let prompted: Vec<u32> = prompts.keys().map(|k| self.names[k]).collect();
         let feather = case["feather"].as_u64().unwrap() as usize;
         let masks = region_masks(&self.categories, self.width, self.height, &prompted, feather, self.latent());
         let texts = prompts.values().map(|p| sdxl.encode_prompt(p.as_str().unwrap(), None, false).unwrap()).collect();
-        Some(Regions { texts, masks })
+        Some((texts, masks))
     }
 
     /// Per latent pixel over the largest strength, and that largest strength.
@@ -92,6 +95,7 @@ fn denoise_case(
     control: Vec<ControlNetUse>,
 ) -> Vec<f32> {
     let regions = scene.regions(sdxl, case);
+    let regions = regions.as_ref().map(|(texts, masks)| Regions { texts, masks: masks.clone() });
     let strengths = scene.strengths(case);
     let job = case_job(case, strengths.as_ref().map(|s| s.1));
     let tensor = |key: &str| case["tensors"][key].as_str().map(|name| records.values(name).unwrap().1);
@@ -159,7 +163,8 @@ fn one_region_over_everything_is_its_plain_prompt_and_one_strength_everywhere_is
     let everything = vec![1u32; width * height];
     let masks = region_masks(&everything, width, height, &[1], 2, scene.latent());
     let region = "a shiny red apple";
-    let regions = Regions { texts: vec![sdxl.encode_prompt(region, None, false).unwrap()], masks };
+    let texts = [sdxl.encode_prompt(region, None, false).unwrap()];
+    let regions = Regions { texts: &texts, masks };
     let job = case_job(case, None);
     let masked = denoise(&job, &Guides { regions: Some(&regions), ..Default::default() });
     let plain = denoise(&TextToImage { prompt: region.into(), ..job.clone() }, &Guides::default());

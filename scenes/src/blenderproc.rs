@@ -6,7 +6,7 @@
 //! with no HDF5 library on the system.
 
 use crate::format::{SceneFormat, SceneIndex};
-use crate::labels::RawScene;
+use crate::labels::{CategoryGuide, RawScene};
 use crate::SceneError;
 use hdf5_reader::{ByteOrder, Datatype, Hdf5File};
 use serde::Deserialize;
@@ -28,13 +28,19 @@ struct InstanceAttributes {
 pub struct BlenderProcFrames {
     /// categories.json beside the files, naming the category ids; else `category_<id>`.
     names: Option<Vec<Category>>,
+    /// What that categories.json says of how categories are generated.
+    guides: BTreeMap<u32, CategoryGuide>,
 }
 
 impl BlenderProcFrames {
     pub fn new(dir: &Path) -> Result<BlenderProcFrames, SceneError> {
         let path = dir.join("categories.json");
-        let names = path.is_file().then(|| crate::labels::read_categories(&path).map(|(c, _)| c)).transpose()?;
-        Ok(BlenderProcFrames { names })
+        let listed = path.is_file().then(|| crate::labels::read_categories(&path)).transpose()?;
+        let (names, guides) = match listed {
+            Some((names, _, guides)) => (Some(names), guides),
+            None => (None, BTreeMap::new()),
+        };
+        Ok(BlenderProcFrames { names, guides })
     }
 
     /// The `.hdf5` (or `.h5`) files among `paths`, numbered as BlenderProc numbers them (0.hdf5,
@@ -72,7 +78,13 @@ impl SceneFormat for BlenderProcFrames {
         used.sort_unstable();
         used.dedup();
         let categories = used.into_iter().map(|id| self.category(id)).collect();
-        Ok(SceneIndex { width: frame.width as u32, height: frame.height as u32, prompt: None, categories })
+        Ok(SceneIndex {
+            width: frame.width as u32,
+            height: frame.height as u32,
+            prompt: None,
+            categories,
+            guides: self.guides.clone(),
+        })
     }
 
     fn read(&self, path: &Path) -> Result<RawScene, SceneError> {

@@ -5,7 +5,7 @@
 //!                  or depth.png (16-bit grey) with depth.json {"scale": s, "offset": o}: v·s + o,
 //!                  and v = 0 is background
 //! instances.png    8- or 16-bit grey: 0 background, k instance k (the depth's size)
-//! categories.json  optional: {"categories": [{"id", "name", "supercategory"}, ...],
+//! categories.json  optional: {"categories": [{"id", "name", "supercategory"[, "prompt", "strength"]}, ...],
 //!                             "instances": {"1": 1, "2": 3, ...}} (instance → category id)
 //! shaded.png       optional: the renderer's image (img2img's start, a --render-only image)
 //! prompt.txt       optional: this scene's prompt
@@ -76,11 +76,11 @@ impl SceneFormat for SceneFolders {
         if shaded.is_file() {
             same_size(&shaded, image_size(&shaded).map_err(SceneError::from_file)?, (width, height))?;
         }
-        let categories = match self.categories(dir)? {
-            Some((categories, _)) => categories,
-            None => vec![self.default.clone()],
+        let (categories, guides) = match self.categories(dir)? {
+            Some((categories, _, guides)) => (categories, guides),
+            None => (vec![self.default.clone()], Default::default()),
         };
-        Ok(SceneIndex { width: width as u32, height: height as u32, prompt: read_prompt(dir)?, categories })
+        Ok(SceneIndex { width: width as u32, height: height as u32, prompt: read_prompt(dir)?, categories, guides })
     }
 
     fn read(&self, dir: &Path) -> Result<RawScene, SceneError> {
@@ -90,7 +90,7 @@ impl SceneFormat for SceneFolders {
         same_size(&instances, (grey.width, grey.height), (width, height))?;
         let labels: Vec<u32> = grey.values.iter().map(|&v| v as u32).collect();
         let category_of = match self.categories(dir)? {
-            Some((_, instances)) => instances,
+            Some((_, instances, _)) => instances,
             None => labels.iter().filter(|&&l| l != 0).map(|&l| (l, self.default.id)).collect(),
         };
         let shaded_path = dir.join("shaded.png");

@@ -1,8 +1,9 @@
 //! What every way of storing scenes answers: what a scene's headers and side files say, and its
 //! pixels.
 
-use crate::labels::RawScene;
+use crate::labels::{CategoryGuide, RawScene};
 use crate::SceneError;
+use std::collections::BTreeMap;
 use std::path::Path;
 use vkdiff_render::coco::Category;
 
@@ -27,4 +28,6 @@ pub(crate) struct SceneIndex {
     /// The categories the scene names (a scene folder's categories.json, BlenderProc's category
     /// ids with their names).
     pub categories: Vec<Category>,
+    /// What the scene's categories.json says of how categories are generated, by id.
+    pub guides: BTreeMap<u32, CategoryGuide>,
 }

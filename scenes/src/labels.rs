@@ -71,13 +71,39 @@ impl RawScene {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CategoriesFile {
-    categories: Vec<Category>,
+    categories: Vec<CategoryEntry>,
     #[serde(default)]
     instances: BTreeMap<String, u32>,
 }
 
-/// A `categories.json`'s categories, and its map of instance id → category id.
-pub type CategoryMap = (Vec<Category>, BTreeMap<u32, u32>);
+/// A category as categories.json lists it: COCO's fields, and how it is generated.
+#[derive(Deserialize)]
+struct CategoryEntry {
+    #[serde(flatten)]
+    category: Category,
+    #[serde(flatten)]
+    guide: CategoryGuide,
+}
+
+/// What categories.json may say of how a category's pixels are generated: the prompt SDXL sees
+/// there, and how strongly the render is redrawn there.
+#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+pub struct CategoryGuide {
+    #[serde(default)]
+    pub prompt: Option<String>,
+    #[serde(default)]
+    pub strength: Option<f64>,
+}
+
+impl CategoryGuide {
+    pub fn is_empty(&self) -> bool {
+        self.prompt.is_none() && self.strength.is_none()
+    }
+}
+
+/// A `categories.json`'s categories, its map of instance id → category id, and the guides it
+/// gives categories, by id.
+pub type CategoryMap = (Vec<Category>, BTreeMap<u32, u32>, BTreeMap<u32, CategoryGuide>);
 
 /// The categories of a `categories.json` (ids listed once, names given), and its instance map.
 pub fn read_categories(path: &Path) -> Result<CategoryMap, SceneError> {
@@ -85,7 +111,20 @@ pub fn read_categories(path: &Path) -> Result<CategoryMap, SceneError> {
     let file: CategoriesFile = serde_json::from_str(&text)
         .map_err(|e| SceneError::file(path, format!("not JSON of the categories format: {e}")))?;
     let mut ids = BTreeSet::new();
-    for c in &file.categories {
+    let mut guides = BTreeMap::new();
+    for CategoryEntry { category: c, guide } in &file.categories {
+        if guide.prompt.as_ref().is_some_and(|p| p.trim().is_empty()) {
+            return Err(SceneError::file(path, format!("category {}: its prompt is empty", c.id)));
+        }
+        if guide.strength.is_some_and(|s| !(s > 0.0 && s <= 1.0)) {
+            return Err(SceneError::file(
+                path,
+                format!("category {}: strength {} is not in (0, 1]", c.id, guide.strength.unwrap_or_default()),
+            ));
+        }
+        if !guide.is_empty() {
+            guides.insert(c.id, guide.clone());
+        }
         if !ids.insert(c.id) {
             return Err(SceneError::file(path, format!("category id {} is listed twice", c.id)));
         }
@@ -104,5 +143,5 @@ pub fn read_categories(path: &Path) -> Result<CategoryMap, SceneError> {
         }
         instances.insert(id, category);
     }
-    Ok((file.categories, instances))
+    Ok((file.categories.into_iter().map(|e| e.category).collect(), instances, guides))
 }

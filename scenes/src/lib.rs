@@ -14,12 +14,14 @@ mod procedural;
 mod rendered;
 
 use serde_json::{Map, Value};
+use std::collections::BTreeMap;
 use std::path::Path;
 use vkdiff_render::coco::Category;
 use vkdiff_render::frame::Frame;
 use vkdiff_setting::Message;
 
 pub use folder::is_scene_folder;
+pub use labels::CategoryGuide;
 pub use procedural::ProceduralBed;
 pub use rendered::RenderedScenes;
 
@@ -38,6 +40,11 @@ pub trait SceneSource: Send + Sync + std::fmt::Debug {
 
     /// The categories of the set, by id.
     fn categories(&self) -> Vec<Category>;
+
+    /// How the source says categories are generated (a prompt, a strength), by id.
+    fn category_guides(&self) -> BTreeMap<u32, CategoryGuide> {
+        BTreeMap::new()
+    }
 
     /// The source's settings, under their flags' names, as dataset.json records them.
     fn settings(&self) -> Map<String, Value>;

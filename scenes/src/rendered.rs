@@ -5,6 +5,7 @@
 use crate::blenderproc::BlenderProcFrames;
 use crate::folder::SceneFolders;
 use crate::format::{SceneFormat, SceneIndex};
+use crate::labels::CategoryGuide;
 use crate::{Error, Result, SceneError, SceneInfo, SceneSource, SourceFrame};
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
@@ -32,6 +33,8 @@ pub struct RenderedScenes {
     scenes: Vec<ListedScene>,
     /// Every category the scenes use, by id.
     categories: Vec<Category>,
+    /// What the categories.json files say of how categories are generated, by id.
+    guides: BTreeMap<u32, CategoryGuide>,
     far: f32,
 }
 
@@ -64,22 +67,44 @@ impl RenderedScenes {
                     .into(),
             ));
         };
-        let mut scenes =
-            RenderedScenes { dir: dir.to_path_buf(), format, scenes: Vec::new(), categories: Vec::new(), far };
+        let mut scenes = RenderedScenes {
+            dir: dir.to_path_buf(),
+            format,
+            scenes: Vec::new(),
+            categories: Vec::new(),
+            guides: BTreeMap::new(),
+            far,
+        };
         // Every scene's headers read in parallel; the first failure in order is reported.
-        let indexed: Vec<Result<(ListedScene, Vec<Category>)>> = found
+        let indexed: Vec<Result<(ListedScene, SceneIndex)>> = found
             .into_par_iter()
             .map(|path| {
                 let name = path.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned());
                 let index = scenes.format.index(&path).map_err(|e| scenes.refusal(&name, e))?;
-                let SceneIndex { width, height, prompt, categories } = index;
-                Ok((ListedScene { name, path, width, height, prompt }, categories))
+                let scene =
+                    ListedScene { name, path, width: index.width, height: index.height, prompt: index.prompt.clone() };
+                Ok((scene, index))
             })
             .collect();
         let mut by_id: BTreeMap<u32, (Category, String)> = BTreeMap::new();
+        let mut guides: BTreeMap<u32, (CategoryGuide, String)> = BTreeMap::new();
         for result in indexed {
-            let (scene, categories) = result?;
-            for category in categories {
+            let (scene, index) = result?;
+            for (id, guide) in index.guides {
+                match guides.get(&id) {
+                    Some((known, first)) if *known != guide => {
+                        return Err(refuse(format!(
+                            "category {id} is generated with {known:?} in {first} and {guide:?} in {}",
+                            scene.name
+                        )))
+                    }
+                    Some(_) => {}
+                    None => {
+                        guides.insert(id, (guide, scene.name.clone()));
+                    }
+                }
+            }
+            for category in index.categories {
                 match by_id.get(&category.id) {
                     Some((known, first)) if known.name != category.name => {
                         return Err(refuse(format!(
@@ -96,6 +121,7 @@ impl RenderedScenes {
             scenes.scenes.push(scene);
         }
         scenes.categories = by_id.into_values().map(|(c, _)| c).collect();
+        scenes.guides = guides.into_iter().map(|(id, (g, _))| (id, g)).collect();
         Ok(scenes)
     }
 
@@ -140,6 +166,10 @@ impl SceneSource for RenderedScenes {
 
     fn categories(&self) -> Vec<Category> {
         self.categories.clone()
+    }
+
+    fn category_guides(&self) -> BTreeMap<u32, CategoryGuide> {
+        self.guides.clone()
     }
 
     fn settings(&self) -> Map<String, Value> {

@@ -40,7 +40,7 @@ pub struct ItemInputs<'a> {
     /// img2img: the encoded init image, when the batch samples with a strength.
     pub init: Option<&'a InitLatents>,
     /// Its region prompts, when the batch was recorded for them.
-    pub regions: Option<&'a Regions>,
+    pub regions: Option<&'a Regions<'a>>,
     /// img2img with a strength per latent pixel, over the batch's strength (in [0, 1]): pixels
     /// below a step's threshold are held on the init latent's path.
     pub strength: Option<&'a [f64]>,

@@ -218,6 +218,11 @@ impl Sdxl {
         self.vae_scale() * self.latent_multiple()
     }
 
+    /// Pixels per latent along a side: the VAE's downscale, read from its config alone.
+    pub fn probe_vae_scale(path: &Path, swaps: Swaps) -> Result<usize> {
+        Ok(probe_vae_config(path, swaps)?.downscale())
+    }
+
     /// [`Sdxl::pixel_multiple`] of the model at `path`, read from its configs or tensor shapes
     /// without loading any weight (to check sizes before the long load).
     pub fn probe_pixel_multiple(path: &Path, swaps: Swaps) -> Result<usize> {
@@ -229,10 +234,7 @@ impl Sdxl {
             Some(file) => flagged("unet", file, swapped_unet_config(file, &unet))?,
             None => unet,
         };
-        let vae = match swaps.vae {
-            Some(file) => flagged("vae", file, AutoencoderKl::sdxl_config(file))?,
-            None => AutoencoderKl::sdxl_config(path)?,
-        };
+        let vae = probe_vae_config(path, swaps)?;
         if unet.block_out_channels.is_empty() || vae.block_out_channels.is_empty() {
             return Err(Error::Config(format!("{}: a UNet or VAE config without block_out_channels", path.display())));
         }
@@ -303,4 +305,12 @@ fn read_force_zeros(path: &Path) -> Result<bool> {
     let json: serde_json::Value = serde_json::from_str(&text)
         .map_err(|e| FileError::Format { path: path.to_path_buf(), why: format!("not JSON: {e}") })?;
     Ok(json.get("force_zeros_for_empty_prompt").and_then(|v| v.as_bool()).unwrap_or(true))
+}
+
+/// The config of the VAE a run uses: `--vae`'s, else the model's.
+fn probe_vae_config(path: &Path, swaps: Swaps) -> Result<vkdiff_networks::VaeConfig> {
+    match swaps.vae {
+        Some(file) => flagged("vae", file, AutoencoderKl::sdxl_config(file)),
+        None => Ok(AutoencoderKl::sdxl_config(path)?),
+    }
 }

@@ -10,18 +10,22 @@ use crate::schedulers::PredictionType;
 use crate::sdxl::prompt_encoding::Conditioning;
 
 /// One image's region prompts. The scene's prompt is the image's own conditioning.
-pub struct Regions {
+pub struct Regions<'a> {
     /// Each region prompt's conditioning, positive rows only (encoded without guidance).
-    pub texts: Vec<Conditioning>,
+    pub texts: &'a [Conditioning],
     /// On the latent grid (h × w, row-major): the scene prompt's mask, then each region's.
     pub masks: Vec<Vec<f32>>,
 }
 
-impl Regions {
+impl Regions<'_> {
     /// Every row of the image's text conditioning (`rows` of its own, then one per region) and of
     /// its pooled embeddings; all must have the recorded number of tokens.
-    pub(crate) fn rows(own: &Conditioning, regions: Option<&Regions>, count: usize) -> Result<(Vec<f32>, Vec<f32>)> {
-        let texts: &[Conditioning] = regions.map_or(&[], |r| &r.texts);
+    pub(crate) fn rows(
+        own: &Conditioning,
+        regions: Option<&Regions<'_>>,
+        count: usize,
+    ) -> Result<(Vec<f32>, Vec<f32>)> {
+        let texts: &[Conditioning] = regions.map_or(&[], |r| r.texts);
         if texts.len() != count || regions.is_some_and(|r| r.masks.len() != count + 1) {
             return Err(Error::Config(format!(
                 "an image of the batch has {} region prompts and {} masks for a pass recorded for {count}",

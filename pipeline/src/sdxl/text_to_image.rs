@@ -40,7 +40,7 @@ pub struct Guides<'a> {
     /// img2img's init image (with [`Sampling::strength`]).
     pub init: Option<&'a RgbImage>,
     /// Region prompts over the prompt.
-    pub regions: Option<&'a Regions>,
+    pub regions: Option<&'a Regions<'a>>,
     /// img2img with a strength per latent pixel ([`ItemInputs::strength`]).
     pub strength: Option<&'a [f64]>,
 }
