@@ -63,6 +63,9 @@ CASES = [
     dict(name="regions_strengths_lcm", prompt="an orchard in the rain", seed=43, steps=4, sampler="lcm",
          guidance_scale=1.0, feather=2, region_prompts={"apple": "a golden apple"}, init_strength=0.8,
          strengths={"apple": 0.4}, background_strength=1.0),
+    dict(name="regions_ip_adapter", prompt="an orchard at noon", seed=44, steps=4, sampler="euler",
+         guidance_scale=5.0, feather=2, region_prompts={"apple": "a shiny red apple", "leaf": "a green leaf"},
+         ip=dict(adapter="ip-adapter_tiny.safetensors", images=["style-1.png"], scale=0.6)),
 ]
 
 
@@ -151,6 +154,15 @@ def run(case, cats, names, controlnet):
     context, text_embeds = torch.cat(rows_e), torch.cat(rows_p)
     rows = context.shape[0]
     time_ids = torch.tensor([[height, width, 0, 0, height, width]], dtype=torch.float32).repeat(rows, 1)
+    image_embeds = None
+    if "ip" in case:
+        # Every region's row sees the image embeddings the positive row sees.
+        w.load_ip(pipe, OUT, case["ip"]["adapter"])
+        pipe.set_ip_adapter_scale(case["ip"]["scale"])
+        images = [[Image.open(OUT / f).convert("RGB") for f in case["ip"]["images"]]]
+        embeds = pipe.prepare_ip_adapter_image_embeds(images, None, "cpu", 1, guided)[0]
+        positive = embeds[-1:]
+        image_embeds = [torch.cat([embeds] + [positive] * (rows - embeds.shape[0]))]
     masks = [torch.from_numpy(m).float()[None, None] for m in region_masks(case, cats, names, lh, lw)]
 
     generator = torch.Generator("cpu").manual_seed(case["seed"])
@@ -192,6 +204,8 @@ def run(case, cats, names, controlnet):
                 latents = latents * keep + scheduler.add_noise(init, noise, t[None]) * (1 - keep)
         x = scheduler.scale_model_input(torch.cat([latents] * rows), t)
         added = dict(text_embeds=text_embeds, time_ids=time_ids)
+        if image_embeds is not None:
+            added["image_embeds"] = image_embeds
         residuals = {}
         if controlnet is not None:
             n = len(scheduler.timesteps)

@@ -2,7 +2,8 @@
 //! tools/make_regions_fixtures.py (ComfyUI's masked conditioning and DifferentialDiffusion written
 //! out with diffusers' models) over the orchard-a scene: two prompted categories and the rest,
 //! feathered, with guidance and the ControlNet; strengths per category and background from the
-//! render; both together under LCM without guidance. f32 latents within 1e-5. And the two
+//! render; both together under LCM without guidance; regions with the IP-Adapter. f32 latents
+//! within 1e-5. And the two
 //! degenerate cases byte for byte: one region over everything is that region's plain prompt, and
 //! one strength everywhere is plain img2img.
 
@@ -13,11 +14,12 @@ use serde_json::Value;
 use std::collections::HashMap;
 use vkdiff_formats::image::read_grey_png;
 use vkdiff_formats::SafeTensors;
-use vkdiff_networks::ControlNetModel;
+use vkdiff_networks::{ClipVisionModelWithProjection, ControlNetModel, IpAdapter};
 use vkdiff_pipeline::images::masks::{region_masks, relative_strengths};
-use vkdiff_pipeline::images::read_image;
+use vkdiff_pipeline::images::{read_image, ClipPreprocess};
 use vkdiff_pipeline::{
-    Conditioning, ControlNetUse, Denoiser, Guides, InitLatents, ItemInputs, Regions, Sdxl, TextToImage,
+    Conditioning, ControlNetUse, Denoiser, Guides, ImageGuide, InitLatents, IpAdapterUse, IpScale, ItemInputs, Regions,
+    RgbImage, Sdxl, TextToImage,
 };
 use vkdiff_runtime::Dtype;
 use vkdiff_testkit::fixture;
@@ -103,13 +105,33 @@ fn denoise_case(
     let guided = job.sampling.guided();
     let text = sdxl.encode_prompt_as(job.sampling.prompt_syntax, &job.prompt, None, guided).unwrap();
     let count = regions.as_ref().map_or(0, |r| r.texts.len());
-    let denoiser = Denoiser::record(sdxl, &job.sampling, &control, None, 1, text.tokens, count).unwrap();
+    // The IP-Adapter over its style images, every region's row seeing the positive row's tokens.
+    let ip = &case["ip"];
+    let style = ip.is_object().then(|| {
+        let ctx = ctx();
+        let adapter_file = fixture(&format!("workflow/{}", ip["adapter"].as_str().unwrap()));
+        let adapter = IpAdapter::load(&ctx, &adapter_file, sdxl.unet(), Dtype::F32).unwrap();
+        let encoder =
+            ClipVisionModelWithProjection::load_folder(&ctx, &fixture("workflow/image_encoder"), Dtype::F32).unwrap();
+        let images: Vec<RgbImage> = (ip["images"].as_array().unwrap().iter())
+            .map(|f| read_image(&fixture(&format!("workflow/{}", f.as_str().unwrap()))).unwrap())
+            .collect();
+        (adapter, encoder, images, IpScale::All(ip["scale"].as_f64().unwrap() as f32))
+    });
+    let tokens = style.as_ref().map(|(adapter, encoder, images, scale)| {
+        let preprocess = ClipPreprocess::square(encoder.config().image_size);
+        let guide = ImageGuide { adapter, encoder, preprocess: &preprocess, images, scale };
+        guide.tokens(guided).unwrap()
+    });
+    let ip_use =
+        style.as_ref().map(|(adapter, _, images, scale)| IpAdapterUse { adapter, scale, images: images.len() });
+    let denoiser = Denoiser::record(sdxl, &job.sampling, &control, ip_use, 1, text.tokens, count).unwrap();
     let image = read_image(&fixture("workflow/control.png")).unwrap();
     let item = ItemInputs {
         seed: job.seed,
         text: &text,
         control_images: control.iter().map(|_| vec![&image]).collect(),
-        ip_tokens: None,
+        ip_tokens: tokens.as_deref(),
         init: init.as_ref(),
         regions: regions.as_ref(),
         strength: strengths.as_ref().map(|(map, _)| &map[..]),

@@ -300,9 +300,9 @@ impl<'m> Denoiser<'m> {
             let tokens: Vec<Option<Vec<f32>>> = (items.iter())
                 .map(|i| {
                     i.ip_tokens.map(|t| {
+                        let positive = &t[t.len().saturating_sub(width)..];
                         let mut all = t.to_vec();
-                        let last = t.len().saturating_sub(width);
-                        (0..self.regions).for_each(|_| all.extend_from_within(last..));
+                        (0..self.regions).for_each(|_| all.extend_from_slice(positive));
                         all
                     })
                 })
