@@ -3,9 +3,8 @@
 //! out with diffusers' models) over the orchard-a scene: two prompted categories and the rest,
 //! feathered, with guidance and the ControlNet; strengths per category and background from the
 //! render; both together under LCM without guidance; regions with the IP-Adapter. f32 latents
-//! within 1e-5. And the two
-//! degenerate cases byte for byte: one region over everything is that region's plain prompt, and
-//! one strength everywhere is plain img2img.
+//! within 1e-5. And the two degenerate cases byte for byte: one region over everything is that
+//! region's plain prompt, and one strength everywhere is plain img2img.
 
 mod common;
 
