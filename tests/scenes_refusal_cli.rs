@@ -1,7 +1,7 @@
 //! `vkdiff dataset --scenes` refusing what it cannot read, in one line naming it, exit 2, with
 //! nothing written: scene folders missing a file, of mismatched sizes, a category id listed twice
 //! or named two ways, an unreadable depth, none at all; and BlenderProc frames broken one way each
-//! (tools/make_scene_fixtures.py writes them with h5py). What only a scene's pixels show (an
+//! (tools/make_scene_fixtures.py writes them with h5py; a stereo pair's `normals` among them). What only a scene's pixels show (an
 //! instance without a category) stops the run at that scene, its images before it whole, and the
 //! run resumes once the scene is mended.
 
@@ -123,8 +123,9 @@ fn broken_blenderproc_frames_are_refused_in_one_line_naming_them() {
         ("attributes-not-json", "`instance_attribute_maps` is not a list of {idx, category_id}"),
         ("stereo", "one H×W map per file"),
         ("truncated", "cut short: 6222 bytes, where its HDF5 superblock says 12444"),
+        ("../normals/blenderproc-bad/normals-shape", "`normals` has shape [2, 112, 144, 3]; expected 112×144×3"),
     ] {
-        let copy = scratch(&format!("blenderproc-bad-{fault}")).join("scenes");
+        let copy = scratch(&format!("blenderproc-bad-{}", fault.rsplit('/').next().unwrap())).join("scenes");
         std::fs::create_dir_all(&copy).unwrap();
         std::fs::copy(scenes("blenderproc-bad").join(fault).join("0.hdf5"), copy.join("0.hdf5")).unwrap();
         let line = refusal(&copy, &[]);
