@@ -1,9 +1,10 @@
 //! `vkdiff dataset --scenes` refusing what it cannot read, in one line naming it, exit 2, with
 //! nothing written: scene folders missing a file, of mismatched sizes, a category id listed twice
-//! or named two ways, an unreadable depth, none at all; and BlenderProc frames broken one way each
-//! (tools/make_scene_fixtures.py writes them with h5py; a stereo pair's `normals` among them). What only a scene's pixels show (an
-//! instance without a category) stops the run at that scene, its images before it whole, and the
-//! run resumes once the scene is mended.
+//! or named two ways, an unreadable depth, a normals.exr without normals, none at all; and
+//! BlenderProc frames broken one way each (tools/make_scene_fixtures.py writes them with h5py; a
+//! stereo pair's `normals` among them). What only a scene's pixels show (an instance without a
+//! category) stops the run at that scene, its images before it whole, and the run resumes once
+//! the scene is mended.
 
 mod cli;
 
@@ -66,6 +67,13 @@ fn bad_scenes_are_refused_in_one_line_naming_them() {
                     .unwrap();
             }),
             "scene orchard-b: instances.png: 192×144, the depth is 160×128",
+        ),
+        (
+            "normals-channels",
+            Box::new(|d: &Path| {
+                std::fs::copy(d.join("orchard-b/depth.exr"), d.join("orchard-b/normals.exr")).unwrap();
+            }),
+            "scene orchard-b: normals.exr: no X, Y and Z channels (the camera-space normal); channels: ViewLayer.Depth.Z",
         ),
         (
             "twice",

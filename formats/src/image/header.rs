@@ -116,9 +116,12 @@ pub fn normals_exr_size(path: &Path) -> Result<(usize, usize)> {
     Ok(sizes[super::depth_exr::pick_normals(&names, &sizes).map_err(format_error(path))?[0]])
 }
 
+/// Each channel's name, and its part's (width, height).
+type Channels = (Vec<String>, Vec<(usize, usize)>);
+
 /// Every channel's name (`<part>.<channel>` in named parts) and its part's (width, height), from
 /// an EXR file's headers.
-fn exr_channels(path: &Path) -> Result<(Vec<String>, Vec<(usize, usize)>)> {
+fn exr_channels(path: &Path) -> Result<Channels> {
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| match e {
         exr::error::Error::Io(source) => Error::Io { path: path.to_path_buf(), source },
         e => format_error(path)(format!("bad OpenEXR file: {e}")),
