@@ -2,7 +2,8 @@
 //! control, held to tools/make_control_fixtures.py's numpy computation through the whole command
 //! (scene folders read, frames made into images, PNGs written and recorded), listed in the COCO
 //! entries and dataset.json, shown as layers of the preview page (looked at in Chromium), and
-//! nothing of it in a set made without them.
+//! nothing of it in a set made without them; scenes that carry the renderer's normals give
+//! the numpy normals made from those.
 
 mod cli;
 
@@ -109,5 +110,26 @@ fn a_set_without_controls_has_none_and_bad_values_are_refused() {
         let stderr = String::from_utf8_lossy(&run.stderr);
         assert_eq!(run.status.code(), Some(2), "{flags:?}: {stderr}");
         assert!(stderr.contains(needle) && !out.exists(), "{flags:?}: {stderr}");
+    }
+}
+
+#[test]
+fn the_renderers_normals_make_the_normals_control() {
+    // BlenderProc frames with `normals`, and a scene folder with normals.exr: whole frames (their
+    // sides are multiples of 8), the control the numpy one made from the renderer's normals.
+    for (format, scenes) in [("blenderproc", vec!["0", "1"]), ("folders", vec!["orchard-n"])] {
+        let set = scratch(&format!("given-normals-{format}")).join("set");
+        let dir = fixtures().join("scenes/normals").join(format);
+        let args = ["dataset", "--render-only", "--scenes", dir.to_str().unwrap(), "--controls", "normals", "--out"];
+        let run = vkdiff(&[&args[..], &[set.to_str().unwrap()]].concat());
+        assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+        let coco = read_json(&set.join("annotations.json"));
+        assert_eq!(coco["images"].as_array().unwrap().len(), scenes.len());
+        for (image, scene) in coco["images"].as_array().unwrap().iter().zip(&scenes) {
+            let ours = png_pixels(&set.join(image["control_files"]["normals"].as_str().unwrap()));
+            let numpy = png_pixels(&fixtures().join("controls/normals").join(format).join(scene).join("normals.png"));
+            let worst = ours.iter().zip(&numpy).map(|(a, b)| a.abs_diff(*b)).max().unwrap();
+            assert!(ours.len() == numpy.len() && worst == 0, "{format}/{scene}: off by {worst}");
+        }
     }
 }

@@ -1,9 +1,10 @@
 //! `vkdiff dataset --scenes` refusing what it cannot read, in one line naming it, exit 2, with
 //! nothing written: scene folders missing a file, of mismatched sizes, a category id listed twice
-//! or named two ways, an unreadable depth, none at all; and BlenderProc frames broken one way each
-//! (tools/make_scene_fixtures.py writes them with h5py). What only a scene's pixels show (an
-//! instance without a category) stops the run at that scene, its images before it whole, and the
-//! run resumes once the scene is mended.
+//! or named two ways, an unreadable depth, a normals.exr without normals, none at all; and
+//! BlenderProc frames broken one way each (tools/make_scene_fixtures.py writes them with h5py; a
+//! stereo pair's `normals` among them). What only a scene's pixels show (an instance without a
+//! category) stops the run at that scene, its images before it whole, and the run resumes once
+//! the scene is mended.
 
 mod cli;
 
@@ -68,6 +69,13 @@ fn bad_scenes_are_refused_in_one_line_naming_them() {
             "scene orchard-b: instances.png: 192×144, the depth is 160×128",
         ),
         (
+            "normals-channels",
+            Box::new(|d: &Path| {
+                std::fs::copy(d.join("orchard-b/depth.exr"), d.join("orchard-b/normals.exr")).unwrap();
+            }),
+            "scene orchard-b: normals.exr: no X, Y and Z channels (the camera-space normal); channels: ViewLayer.Depth.Z",
+        ),
+        (
             "twice",
             Box::new(|d: &Path| {
                 let path = d.join("orchard-a/categories.json");
@@ -123,8 +131,9 @@ fn broken_blenderproc_frames_are_refused_in_one_line_naming_them() {
         ("attributes-not-json", "`instance_attribute_maps` is not a list of {idx, category_id}"),
         ("stereo", "one H×W map per file"),
         ("truncated", "cut short: 6222 bytes, where its HDF5 superblock says 12444"),
+        ("../normals/blenderproc-bad/normals-shape", "`normals` has shape [2, 112, 144, 3]; expected 112×144×3"),
     ] {
-        let copy = scratch(&format!("blenderproc-bad-{fault}")).join("scenes");
+        let copy = scratch(&format!("blenderproc-bad-{}", fault.rsplit('/').next().unwrap())).join("scenes");
         std::fs::create_dir_all(&copy).unwrap();
         std::fs::copy(scenes("blenderproc-bad").join(fault).join("0.hdf5"), copy.join("0.hdf5")).unwrap();
         let line = refusal(&copy, &[]);

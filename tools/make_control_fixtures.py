@@ -14,12 +14,17 @@ read as source text).
 
 Writes tests/fixtures/controls/<format>/<scene>/{edges,normals,segmentation,segmentation_ade}.png
 (segmentation_ade with the categories renamed as ADE20K classes: leaf → plant, branch → tree) and
-index.json (the settings)."""
+index.json (the settings); and tests/fixtures/controls/normals/<format>/<scene>/normals.png with its
+index.json, the normals of the scenes that carry the renderer's own (tests/fixtures/scenes/normals:
+BlenderProc's `normals` dataset, a scene folder's normals.exr), from those normals where known and
+from the depth elsewhere (`--only-normals` writes these alone; they were written with Pillow
+13.0.0, the rest as above)."""
 import ast
 import colorsys
 import importlib.util
 import json
 import pathlib
+import sys
 from importlib.metadata import version
 
 import h5py
@@ -133,6 +138,52 @@ def normals(ids, z):
     return out
 
 
+def given_normals(ids, z, c):
+    """The normals control of a scene that carries the renderer's normals `c` (H×W×3, Blender's
+    camera axes: x right, y up, z toward the viewer, as float32): where the depth is finite and the
+    normal finite and not zero, (left, up, toward the viewer) = (-c_x, c_y, c_z) made unit length,
+    each component stored as floor((e + 1) / 2 * 255); elsewhere the depth's normals."""
+    out = normals(ids, z)
+    e = np.stack([-c[..., 0], c[..., 1], c[..., 2]], axis=2).astype(np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):
+        length = np.sqrt(e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1] + e[..., 2] * e[..., 2])
+        known = np.isfinite(z) & np.isfinite(e).all(axis=2) & (length > 0)
+        colour = np.clip((e / length[..., None] + 1.0) * 0.5 * 255.0, 0, 255)
+    out[known] = colour[known].astype(np.uint8)
+    return out
+
+
+def write_given_normals():
+    """controls/normals/: the scenes of scenes/normals, read as BlenderProc and a scene folder
+    store their normals."""
+    root = SCENES / "normals"
+    for scene in sorted((root / "folders").iterdir()):
+        meta = json.loads((scene / "categories.json").read_text())
+        category_of = {int(k): v for k, v in meta["instances"].items()}
+        labels = np.asarray(Image.open(scene / "instances.png")).astype(np.int64)
+        ids, z = labelled(labels, read_exr_depth(scene / "depth.exr"), category_of)
+        with OpenEXR.File(str(scene / "normals.exr")) as f:
+            c = np.stack([np.asarray(f.channels()[k].pixels, np.float32) for k in "XYZ"], axis=2)
+        out = OUT / "normals/folders" / scene.name
+        out.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(given_normals(ids, z, c)).save(out / "normals.png")
+    for frame in sorted((root / "blenderproc").glob("*.hdf5")):
+        with h5py.File(frame) as f:
+            labels = np.asarray(f["instance_segmaps"]).astype(np.int64)
+            depth = np.asarray(f["depth"])
+            attributes = json.loads(np.asarray(f["instance_attribute_maps"]).item())
+            stored = np.asarray(f["normals"], np.float32)
+        # enable_normals_output stores each component c as (c + 1) / 2; vkdiff undoes it in f32.
+        c = np.float32(2) * stored - np.float32(1)
+        ids, z = labelled(labels, depth, {a["idx"]: a["category_id"] for a in attributes})
+        out = OUT / "normals/blenderproc" / frame.stem
+        out.mkdir(parents=True, exist_ok=True)
+        Image.fromarray(given_normals(ids, z, c)).save(out / "normals.png")
+    index = {"depth_jump": JUMP, "far": FAR, "camera": "Blender's default: 50 mm lens, 36 mm sensor on the longer side",
+             "versions": {p: version(p) for p in ("numpy", "Pillow", "OpenEXR", "h5py")}}
+    (OUT / "normals/index.json").write_text(json.dumps(index, indent=1) + "\n")
+
+
 def segmentation(ids, category_of_id, colour_of):
     out = np.zeros(ids.shape + (3,), np.uint8)
     for i in np.unique(ids):
@@ -167,6 +218,10 @@ def read_exr_depth(path):
 
 
 def main():
+    if "--only-normals" in sys.argv[1:]:
+        write_given_normals()
+        print("wrote", OUT / "normals")
+        return
     palette = ade20k()
     for scene in sorted((SCENES / "folders").iterdir()):
         meta = json.loads((scene / "categories.json").read_text())
@@ -198,6 +253,7 @@ def main():
              "ade_names": ADE_NAMES,
              "versions": {p: version(p) for p in ("numpy", "Pillow", "OpenEXR", "h5py", "mmsegmentation", "controlnet_aux")}}
     (OUT / "index.json").write_text(json.dumps(index, indent=1) + "\n")
+    write_given_normals()
     print("wrote", OUT)
 
 

@@ -61,7 +61,8 @@ impl LabelControls {
     }
 
     /// The control images (RGB8) of `part`, the part of a `frame_size` frame under `window`;
-    /// normals use the part's camera, else Blender's default camera of the whole frame.
+    /// normals use the renderer's normals where the part has them, and for the rest its depth with
+    /// the part's camera, else Blender's default camera of the whole frame.
     pub fn images(&self, part: &Frame, frame_size: (u32, u32), window: CropWindow) -> Vec<(ControlKind, Vec<u8>)> {
         let width = part.width as usize;
         let categories: Vec<u32> = part.instances.iter().map(|i| i.category_id).collect();
@@ -75,7 +76,9 @@ impl LabelControls {
                 let pixels = match kind {
                     ControlKind::Edges => edge_image(&part.ids, &part.depth, width, self.depth_jump),
                     ControlKind::Segmentation => segmentation_image(&part.ids, &categories, &self.colours),
-                    ControlKind::Normals => normal_image(&part.ids, &part.depth, width, camera, self.depth_jump),
+                    ControlKind::Normals => {
+                        normal_image(&part.ids, &part.depth, part.normals.as_deref(), width, camera, self.depth_jump)
+                    }
                     ControlKind::Depth => unreachable!("the depth control is made on its own"),
                 };
                 (kind, pixels)

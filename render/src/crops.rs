@@ -66,7 +66,8 @@ pub fn crop_frame(frame: &Frame, window: CropWindow, min_fraction: f64) -> Frame
     let rows = (window.y0 as usize..(window.y0 + window.height) as usize)
         .map(|y| y * w + window.x0 as usize..y * w + window.x0 as usize + cw);
     let mut ids: Vec<u16> = rows.clone().flat_map(|r| frame.ids[r].iter().copied()).collect();
-    let depth: Vec<f32> = rows.flat_map(|r| frame.depth[r].iter().copied()).collect();
+    let depth: Vec<f32> = rows.clone().flat_map(|r| frame.depth[r].iter().copied()).collect();
+    let normals = frame.normals.as_ref().map(|n| rows.flat_map(|r| n[r].iter().copied()).collect());
     let labels = frame.instances.len() + 1;
     let in_frame = pixel_counts(&frame.ids, labels);
     let in_crop = pixel_counts(&ids, labels);
@@ -80,6 +81,7 @@ pub fn crop_frame(frame: &Frame, window: CropWindow, min_fraction: f64) -> Frame
         depth,
         ids,
         instances,
+        normals,
     }
 }
 
@@ -114,5 +116,26 @@ mod tests {
         assert_eq!(centered_window(1920, 1080, 32).unwrap(), CropWindow { x0: 0, y0: 12, width: 1920, height: 1056 });
         assert_eq!(centered_window(101, 64, 32).unwrap(), CropWindow { x0: 2, y0: 0, width: 96, height: 64 });
         assert!(centered_window(20, 64, 32).unwrap_err().to_string().contains("at least 32"));
+    }
+
+    #[test]
+    fn the_renderers_normals_are_cut_with_the_frame() {
+        use crate::frame::Instance;
+        let (w, h) = (5usize, 4usize);
+        let frame = Frame {
+            width: w as u32,
+            height: h as u32,
+            camera: None,
+            depth: vec![2.0; w * h],
+            ids: vec![1; w * h],
+            instances: vec![Instance { category_id: 1, attributes: Default::default() }],
+            normals: Some((0..w * h).map(|p| [p as f32, -(p as f32), 1.0]).collect()),
+        };
+        let crop = crop_frame(&frame, CropWindow { x0: 1, y0: 2, width: 3, height: 2 }, 0.0);
+        let firsts: Vec<f32> = crop.normals.unwrap().iter().map(|n| n[0]).collect();
+        assert_eq!(firsts, [11.0, 12.0, 13.0, 16.0, 17.0, 18.0]);
+        let without =
+            crop_frame(&Frame { normals: None, ..frame }, CropWindow { x0: 0, y0: 0, width: 2, height: 2 }, 0.0);
+        assert!(without.normals.is_none());
     }
 }

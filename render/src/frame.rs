@@ -60,6 +60,11 @@ pub struct Frame {
     /// 0 = background, k = `instances[k - 1]`.
     pub ids: Vec<u16>,
     pub instances: Vec<Instance>,
+    /// The renderer's own surface normals, where the scene gives them, row-major: camera space in
+    /// OpenCV's axes (x right, y down, z forward, as camera.json's OpenCV pose), each the normal
+    /// of the surface seen at that pixel, pointing out of it (a surface facing the camera has
+    /// z < 0); any length. A zero or non-finite normal is unknown.
+    pub normals: Option<Vec<[f32; 3]>>,
 }
 
 impl Frame {
@@ -100,6 +105,7 @@ impl Frame {
             depth: raster.depth,
             ids,
             instances,
+            normals: None,
         }
     }
 }

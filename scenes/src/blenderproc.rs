@@ -2,8 +2,11 @@
 //! each array a gzip dataset (`colors` H×W×3 uint8, `depth` planar or `distance` along the ray,
 //! H×W float, `instance_segmaps` H×W integers) and `instance_attribute_maps` a JSON byte string of
 //! `{"idx", "category_id", "name", …}` per instance, `idx` being its value in the segmentation.
-//! Category 0 is background (BlenderProc's default for the world). Read in Rust (`hdf5-reader`),
-//! with no HDF5 library on the system.
+//! Category 0 is background (BlenderProc's default for the world). Where the frame has `normals`
+//! (`enable_normals_output`: H×W×3 floats, already in the camera's frame, Blender's camera axes —
+//! x right, y up, z toward the viewer — each component c stored as (c + 1) / 2, so 0.5 is no
+//! normal, the background's), they become the frame's normals. Read in Rust (`hdf5-reader`), with
+//! no HDF5 library on the system.
 
 use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::{CategoryGuide, RawScene};
@@ -103,6 +106,7 @@ struct Frame {
     segmap: hdf5_reader::Dataset,
     depth: hdf5_reader::Dataset,
     colors: Option<hdf5_reader::Dataset>,
+    normals: Option<hdf5_reader::Dataset>,
     instances: Vec<InstanceAttributes>,
 }
 
@@ -146,11 +150,21 @@ impl Frame {
         if let Some(colors) = &colors {
             rgb_channels(colors, width, height).map_err(|why| fail(format!("`colors`: {why}")))?;
         }
+        let normals = dataset("normals");
+        if let Some(normals) = &normals {
+            if shape(normals) != [height, width, 3] {
+                return Err(fail(format!(
+                    "`normals` has shape {:?}; expected {height}×{width}×3, one normal per pixel of the segmentation",
+                    shape(normals)
+                )));
+            }
+            float_width(normals).map_err(|why| fail(format!("`normals`: {why}")))?;
+        }
         let mut seen = std::collections::BTreeSet::new();
         if let Some(twice) = instances.iter().find(|i| !seen.insert(i.idx)) {
             return Err(fail(format!("`instance_attribute_maps` lists idx {} twice", twice.idx)));
         }
-        Ok(Frame { width, height, segmap, depth, colors, instances })
+        Ok(Frame { width, height, segmap, depth, colors, normals, instances })
     }
 
     /// The frame's pixels.
@@ -161,6 +175,10 @@ impl Frame {
             Some(colors) => Some(rgb(colors, self.width, self.height).map_err(|why| fail(format!("`colors`: {why}")))?),
             None => None,
         };
+        let normals = match &self.normals {
+            Some(normals) => Some(camera_normals(normals).map_err(|why| fail(format!("`normals`: {why}")))?),
+            None => None,
+        };
         let category_of = self.instances.iter().map(|i| (i.idx, i.category_id)).collect();
         let attributes = self
             .instances
@@ -168,8 +186,16 @@ impl Frame {
             .filter_map(|i| i.name.as_ref().map(|name| (i.idx, Map::from_iter([("name".to_string(), json!(name))]))))
             .collect::<BTreeMap<_, _>>();
         let (width, height) = (self.width as u32, self.height as u32);
-        Ok(RawScene { width, height, depth, labels, category_of, attributes, shaded })
+        Ok(RawScene { width, height, depth, labels, category_of, attributes, shaded, normals })
     }
+}
+
+/// BlenderProc's normals as the frame holds them: each stored component v is (c + 1) / 2 of c in
+/// Blender's camera axes (x right, y up, z toward the viewer), so c = 2v − 1 (in f32), and
+/// OpenCV's axes (x right, y down, z forward) are (c_x, −c_y, −c_z).
+fn camera_normals(d: &hdf5_reader::Dataset) -> Result<Vec<[f32; 3]>, String> {
+    let c = |v: f32| 2.0 * v - 1.0;
+    Ok(floats(d)?.chunks_exact(3).map(|v| [c(v[0]), -c(v[1]), -c(v[2])]).collect())
 }
 
 /// An integer dataset's width in bytes (1 to 8), signedness and byte order.

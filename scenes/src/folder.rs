@@ -8,6 +8,9 @@
 //! categories.json  optional: {"categories": [{"id", "name", "supercategory"[, "prompt", "strength"]}, ...],
 //!                             "instances": {"1": 1, "2": 3, ...}} (instance → category id)
 //! shaded.png       optional: the renderer's image (img2img's start, a --render-only image)
+//! normals.exr      optional: the renderer's normals, float channels X, Y, Z (the depth's size), in
+//!                  the camera's frame with Blender's camera axes (x right, y up, z toward the
+//!                  viewer), components in [-1, 1]; zero or non-finite where unknown
 //! prompt.txt       optional: this scene's prompt
 //! ```
 
@@ -17,7 +20,10 @@ use crate::SceneError;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use vkdiff_formats::image::{depth_exr_size, grey_png_size, image_size, read_depth_exr, read_grey_png, read_image};
+use vkdiff_formats::image::{
+    depth_exr_size, grey_png_size, image_size, normals_exr_size, read_depth_exr, read_grey_png, read_image,
+    read_normals_exr,
+};
 use vkdiff_render::coco::Category;
 
 /// A scene folder is one when it holds a depth file.
@@ -76,6 +82,10 @@ impl SceneFormat for SceneFolders {
         if shaded.is_file() {
             same_size(&shaded, image_size(&shaded).map_err(SceneError::from_file)?, (width, height))?;
         }
+        let normals = dir.join("normals.exr");
+        if normals.is_file() {
+            same_size(&normals, normals_exr_size(&normals).map_err(SceneError::from_file)?, (width, height))?;
+        }
         let (categories, guides) = match self.categories(dir)? {
             Some((categories, _, guides)) => (categories, guides),
             None => (vec![self.default.clone()], Default::default()),
@@ -101,8 +111,17 @@ impl SceneFormat for SceneFolders {
         } else {
             None
         };
+        let normals_path = dir.join("normals.exr");
+        let normals = if normals_path.is_file() {
+            let (normals, w, h) = read_normals_exr(&normals_path).map_err(SceneError::from_file)?;
+            same_size(&normals_path, (w, h), (width, height))?;
+            // Blender's camera axes (x right, y up, z toward the viewer) to OpenCV's.
+            Some(normals.into_iter().map(|[x, y, z]| [x, -y, -z]).collect())
+        } else {
+            None
+        };
         let (width, height) = (width as u32, height as u32);
-        Ok(RawScene { width, height, depth, labels, category_of, attributes: BTreeMap::new(), shaded })
+        Ok(RawScene { width, height, depth, labels, category_of, attributes: BTreeMap::new(), shaded, normals })
     }
 }
 

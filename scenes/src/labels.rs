@@ -25,6 +25,8 @@ pub struct RawScene {
     pub attributes: BTreeMap<u32, Map<String, Value>>,
     /// The renderer's own image, 8-bit RGB.
     pub shaded: Option<Vec<u8>>,
+    /// The renderer's own normals, as [`Frame::normals`] holds them (camera space, OpenCV axes).
+    pub normals: Option<Vec<[f32; 3]>>,
 }
 
 impl RawScene {
@@ -32,11 +34,13 @@ impl RawScene {
     /// instances whose category is 0, or that have no pixel, are dropped.
     pub fn into_frame(self, far: f32) -> Result<(Frame, Option<Vec<u8>>), SceneError> {
         let n = (self.width as usize) * (self.height as usize);
-        if self.depth.len() != n || self.labels.len() != n {
+        if self.depth.len() != n || self.labels.len() != n || self.normals.as_ref().is_some_and(|v| v.len() != n) {
             return Err(SceneError::new(format!(
-                "the depth ({} values) and the instance map ({} values) do not both hold its {}×{} pixels",
+                "the depth ({} values), the instance map ({} values) and the normals ({}) do not all hold its \
+                 {}×{} pixels",
                 self.depth.len(),
                 self.labels.len(),
+                self.normals.as_ref().map_or("none".into(), |v| format!("{} values", v.len())),
                 self.width,
                 self.height
             )));
@@ -63,7 +67,8 @@ impl RawScene {
                 attributes: self.attributes.get(l).cloned().unwrap_or_default(),
             })
             .collect();
-        let frame = Frame { width: self.width, height: self.height, camera: None, depth, ids, instances };
+        let (width, height, normals) = (self.width, self.height, self.normals);
+        let frame = Frame { width, height, camera: None, depth, ids, instances, normals };
         Ok((frame, self.shaded))
     }
 }

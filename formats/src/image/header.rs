@@ -106,10 +106,25 @@ pub fn grey_png_size(path: &Path) -> Result<(usize, usize, u8)> {
 /// (width, height) of the depth channel [`super::read_depth_exr`] would read, from the file's
 /// headers.
 pub fn depth_exr_size(path: &Path) -> Result<(usize, usize)> {
-    let fail = format_error(path);
+    let (names, sizes) = exr_channels(path)?;
+    Ok(sizes[super::depth_exr::pick(&names).map_err(format_error(path))?])
+}
+
+/// (width, height) of the normals [`super::read_normals_exr`] would read, from the file's headers.
+pub fn normals_exr_size(path: &Path) -> Result<(usize, usize)> {
+    let (names, sizes) = exr_channels(path)?;
+    Ok(sizes[super::depth_exr::pick_normals(&names, &sizes).map_err(format_error(path))?[0]])
+}
+
+/// Each channel's name, and its part's (width, height).
+type Channels = (Vec<String>, Vec<(usize, usize)>);
+
+/// Every channel's name (`<part>.<channel>` in named parts) and its part's (width, height), from
+/// an EXR file's headers.
+fn exr_channels(path: &Path) -> Result<Channels> {
     let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| match e {
         exr::error::Error::Io(source) => Error::Io { path: path.to_path_buf(), source },
-        e => fail(format!("bad OpenEXR file: {e}")),
+        e => format_error(path)(format!("bad OpenEXR file: {e}")),
     })?;
     let mut names = Vec::new();
     let mut sizes = Vec::new();
@@ -120,5 +135,5 @@ pub fn depth_exr_size(path: &Path) -> Result<(usize, usize)> {
             sizes.push((header.layer_size.0, header.layer_size.1));
         }
     }
-    Ok(sizes[super::depth_exr::pick(&names).map_err(fail)?])
+    Ok((names, sizes))
 }

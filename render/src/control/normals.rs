@@ -1,6 +1,7 @@
 //! Surface normals from planar depth and the camera, as the normal ControlNets read them
 //! (ControlNet 1.1's protocol, ScanNet's: red is left, green is up, blue faces the viewer; each
-//! component c in [-1, 1] stored as ⌊(c + 1) / 2 · 255⌋, as the BAE annotator stores it).
+//! component c in [-1, 1] stored as ⌊(c + 1) / 2 · 255⌋, as the BAE annotator stores it), or
+//! from the renderer's own normals where the scene gives them.
 
 use crate::camera::Camera;
 
@@ -30,10 +31,21 @@ impl Intrinsics {
 /// facing the viewer.
 pub const FACING: [u8; 3] = [127, 127, 255];
 
-/// RGB8 normals of a `width`-wide frame: each pixel's camera-space point from its depth, its
-/// tangents from the neighbours on its own surface (same id, depth within `depth_jump`, as the
-/// edges define it: central differences, else one-sided), the normal their cross product.
-pub fn normal_image(ids: &[u16], depth: &[f32], width: usize, camera: Intrinsics, depth_jump: f32) -> Vec<u8> {
+/// RGB8 normals of a `width`-wide frame. Where `given` (the renderer's normals, as
+/// [`crate::frame::Frame::normals`] holds them: camera space, OpenCV axes, any length) has a
+/// finite, non-zero normal for a pixel of finite depth, that normal, turned into (left, up,
+/// toward the viewer) and made unit length. Elsewhere each pixel's camera-space point from its
+/// depth, its tangents from the neighbours on its own surface (same id, depth within
+/// `depth_jump`, as the edges define it: central differences, else one-sided), the normal their
+/// cross product. Pixels of infinite depth face the viewer.
+pub fn normal_image(
+    ids: &[u16],
+    depth: &[f32],
+    given: Option<&[[f32; 3]]>,
+    width: usize,
+    camera: Intrinsics,
+    depth_jump: f32,
+) -> Vec<u8> {
     let height = ids.len().checked_div(width).unwrap_or(0);
     let point = |x: usize, y: usize| {
         let z = depth[y * width + x] as f64;
@@ -58,11 +70,18 @@ pub fn normal_image(ids: &[u16], depth: &[f32], width: usize, camera: Intrinsics
                 let (pa, pb) = (point(a.0, a.1), point(b.0, b.1));
                 Some([pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]])
             };
-            let along_x = tangent((x > 0).then(|| (x - 1, y)), (x + 1 < width).then(|| (x + 1, y)));
-            let along_y = tangent((y > 0).then(|| (x, y - 1)), (y + 1 < height).then(|| (x, y + 1)));
-            let colour = match (depth[p].is_finite(), along_x, along_y) {
-                (true, Some(tx), Some(ty)) => encode(cross(tx, ty)).unwrap_or(FACING),
-                _ => FACING,
+            let from_depth = || {
+                let along_x = tangent((x > 0).then(|| (x - 1, y)), (x + 1 < width).then(|| (x + 1, y)));
+                let along_y = tangent((y > 0).then(|| (x, y - 1)), (y + 1 < height).then(|| (x, y + 1)));
+                match (along_x, along_y) {
+                    (Some(tx), Some(ty)) => encode(cross(tx, ty)).unwrap_or(FACING),
+                    _ => FACING,
+                }
+            };
+            let colour = if !depth[p].is_finite() {
+                FACING
+            } else {
+                given.and_then(|n| rendered(n[p])).unwrap_or_else(from_depth)
             };
             out.extend_from_slice(&colour);
         }
@@ -72,6 +91,13 @@ pub fn normal_image(ids: &[u16], depth: &[f32], width: usize, camera: Intrinsics
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// The colour of a renderer's normal `n` (OpenCV axes: right, down, forward): (left, up, toward
+/// the viewer) is −n. None for a zero or non-finite normal.
+fn rendered(n: [f32; 3]) -> Option<[u8; 3]> {
+    let e = n.map(|c| -(c as f64));
+    e.iter().all(|c| c.is_finite()).then(|| encode(e)).flatten()
 }
 
 /// The colour of `e`, the normal in (left, up, toward the viewer) coordinates up to its length:
@@ -89,14 +115,37 @@ mod tests {
     #[test]
     fn a_wall_faces_the_viewer_and_a_floor_is_green() {
         let camera = Intrinsics { fx: 10.0, fy: 10.0, cx: 1.0, cy: 1.0 };
-        let wall = normal_image(&[1; 9], &[2.0; 9], 3, camera, 0.05);
+        let wall = normal_image(&[1; 9], &[2.0; 9], None, 3, camera, 0.05);
         assert!(wall.chunks(3).all(|px| px == FACING), "{wall:?}");
         // A floor 1 m below the camera, seen looking ahead: depth 10 / (y - cy) rows below the horizon.
         let (w, h) = (3usize, 3usize);
         let horizon = Intrinsics { fx: 10.0, fy: 10.0, cx: 1.0, cy: -1.0 };
         let depth: Vec<f32> = (0..w * h).map(|p| (10.0 / ((p / w) as f64 + 1.0)) as f32).collect();
-        let floor = normal_image(&[1; 9], &depth, w, horizon, 1.0);
+        let floor = normal_image(&[1; 9], &depth, None, w, horizon, 1.0);
         assert_eq!(&floor[12..15], &[127, 255, 127], "{floor:?}");
-        assert_eq!(normal_image(&[0], &[f32::INFINITY], 1, camera, 0.05), FACING);
+        assert_eq!(normal_image(&[0], &[f32::INFINITY], None, 1, camera, 0.05), FACING);
+    }
+
+    #[test]
+    fn the_renderers_normals_are_turned_and_unknown_ones_come_from_the_depth() {
+        let camera = Intrinsics { fx: 10.0, fy: 10.0, cx: 1.0, cy: 0.0 };
+        // A wall at 2 m: facing the viewer from its depth. The renderer says: facing up (OpenCV
+        // −y), facing right, unknown (zero), unknown (NaN), and something for the sky.
+        let given = [[0.0, -2.0, 0.0], [1.0, 0.0, 0.0], [0.0; 3], [f32::NAN, 0.0, -1.0], [0.0, 0.0, -1.0]];
+        let mut depth = [2.0f32; 5];
+        depth[4] = f32::INFINITY;
+        let image = normal_image(&[1, 1, 1, 1, 0], &depth, Some(&given), 5, camera, 0.05);
+        let pixels: Vec<&[u8]> = image.chunks(3).collect();
+        assert_eq!(pixels, [&[127, 255, 127][..], &[0, 127, 127], &FACING, &FACING, &FACING]);
+        assert_eq!(normal_image(&[1, 1, 1, 1, 0], &depth, None, 5, camera, 0.05), FACING.repeat(5));
+        // A slope, 3×3: the depth's normals where the renderer's are zero or not finite.
+        let slope: Vec<f32> = (0..9).map(|p| 2.0 + 0.5 * (p % 3) as f32).collect();
+        let unknown = [[0.0, 0.0, 0.0], [f32::NAN, 0.0, 0.0], [0.0, f32::INFINITY, 0.0]].repeat(3);
+        let from_depth = normal_image(&[1; 9], &slope, None, 3, camera, 1.0);
+        assert_eq!(normal_image(&[1; 9], &slope, Some(&unknown), 3, camera, 1.0), from_depth);
+        assert!(
+            from_depth.chunks(3).all(|px| px[0] < 64),
+            "a slope going away to the right faces right: {from_depth:?}"
+        );
     }
 }
