@@ -155,6 +155,9 @@ impl RegionSettings {
 
     /// `part`'s masks (the scene prompt's, then each prompted category's) and strength map.
     pub fn of_image(&self, part: &Frame) -> ImageRegions {
+        if !self.has_prompts() && !self.has_strengths() {
+            return ImageRegions { masks: None, strength: None, strength_picture: None };
+        }
         let (w, h) = (part.width(), part.height());
         let latent = (w / self.latent_scale, h / self.latent_scale);
         let categories: Vec<u32> =

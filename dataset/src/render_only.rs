@@ -11,7 +11,7 @@ use super::settings::DatasetSettings;
 use super::stop::{interrupted, stop_requested};
 use crate::error::{Error, Result};
 use serde_json::json;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// Writes the `pending` images of the render-only `dataset`, `disk` checked before each.
 pub fn write_renders(
@@ -49,6 +49,6 @@ pub fn write_renders(
         done += 1;
         on_progress(Progress::Images { done, total });
     }
-    times.scene = stream.thread.join().unwrap_or(Duration::ZERO);
+    times.scene = stream.thread.join().map_err(|_| crate::run::scene_thread_panicked())?;
     Ok(Report { made, times, recordings: 0 })
 }

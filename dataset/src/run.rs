@@ -154,7 +154,7 @@ pub fn generate(
     drop(to_writer);
     drop(stream.images);
     let written = writer.join().map_err(|_| Error::Config("the writer thread panicked".into()))?;
-    run.times.scene = stream.thread.join().unwrap_or_default();
+    run.times.scene = stream.thread.join().map_err(|_| scene_thread_panicked())?;
     // A failed write is the first failure when the loop stopped because it could not hand over.
     let made = match (made, written) {
         (_, Err(e)) => return Err(e),
@@ -165,6 +165,11 @@ pub fn generate(
         }
     };
     Ok(Report { made, times: run.times, recordings: run.recordings })
+}
+
+/// The error when the scene thread stopped on a bug: its images never came.
+pub(crate) fn scene_thread_panicked() -> Error {
+    Error::Config("the scene thread panicked (a bug: please report it with the command)".into())
 }
 
 /// A recorded denoiser with the batch size and [`Loop::shape`] it was recorded for.
