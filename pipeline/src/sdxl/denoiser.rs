@@ -230,10 +230,9 @@ impl<'m> Denoiser<'m> {
             let start = Instant::now();
             let held: Vec<Option<Vec<bool>>> =
                 holds.iter().map(|hold| hold.as_ref().and_then(|hold| hold.held(t, timesteps[first]))).collect();
-            for ((x, hold), held) in latents.iter_mut().zip(&holds).zip(&held) {
+            for (((x, sampler), hold), held) in latents.iter_mut().zip(&samplers).zip(&holds).zip(&held) {
                 if let (Some(hold), Some(held)) = (hold, held) {
-                    let noised = samplers[0].add_noise(step, &hold.x0, &hold.noise);
-                    HeldLatents::hold_input(held, x, &noised);
+                    HeldLatents::hold_input(held, x, &sampler.add_noise(step, &hold.x0, &hold.noise));
                 }
             }
             let mut x_batch = Vec::with_capacity(self.sample.numel());
