@@ -107,12 +107,12 @@ fn every_image_is_a_scene_with_its_masks_depth_camera_and_poses() {
                 let r: Vec<f64> = r.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
                 let t: Vec<f64> = camera["cam_t_w2c"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
                 // T_world_camera · (world → camera) is the identity.
-                for i in 0..3 {
+                for (i, row) in m.iter().take(3).enumerate() {
                     for j in 0..3 {
-                        let product: f64 = (0..3).map(|l| m[i][l] * r[3 * l + j]).sum();
+                        let product: f64 = (0..3).map(|l| row[l] * r[3 * l + j]).sum();
                         assert!((product - (i == j) as u8 as f64).abs() < 1e-9, "{name}: R");
                     }
-                    let origin: f64 = (0..3).map(|l| m[i][l] * t[l] / 1000.0).sum::<f64>() + m[i][3];
+                    let origin: f64 = (0..3).map(|l| row[l] * t[l] / 1000.0).sum::<f64>() + row[3];
                     assert!(origin.abs() < 1e-9, "{name}: t");
                 }
             }
