@@ -180,3 +180,48 @@ fn an_instance_without_a_category_stops_the_run_at_its_scene() {
     assert!(command().args(clean).status().unwrap().success());
     assert!(tree(&out_dir) == tree(&clean_dir), "the resumed set differs from a clean run's");
 }
+
+#[test]
+fn broken_bop_scenes_are_refused_in_one_line_naming_the_file() {
+    // tools/make_bop_fixtures.py writes each fault; the refusal comes before any image is made.
+    for (fault, needle) in [
+        ("missing-mask", "scene 000000/000001: mask_visib/000001_000002.png: missing"),
+        ("depth-size", "scene 000000/000001: rgb/000001.png: 96×72, its depth/ image is 95×72"),
+    ] {
+        let copy = scratch(&format!("bop-bad-{fault}")).join("scenes");
+        for entry in walk(&scenes("bop-bad").join(fault)) {
+            let to = copy.join(entry.strip_prefix(scenes("bop-bad").join(fault)).unwrap());
+            std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+            std::fs::copy(&entry, to).unwrap();
+        }
+        let line = refusal(&copy, &[]);
+        assert!(line.starts_with("error: --scenes") && line.contains(needle), "{fault}: {line}");
+    }
+    // A folder holding two layouts, and one holding none, name what was looked for.
+    let mixed = scratch("bop-mixed").join("scenes");
+    std::fs::create_dir_all(mixed.join("000000")).unwrap();
+    for file in ["scene_camera.json", "scene_gt.json"] {
+        std::fs::copy(scenes("bop/000000").join(file), mixed.join("000000").join(file)).unwrap();
+    }
+    std::fs::copy(scenes("blenderproc/0.hdf5"), mixed.join("0.hdf5")).unwrap();
+    let line = refusal(&mixed, &[]);
+    assert!(line.contains("BlenderProc .hdf5 files and BOP scene folders; one layout per folder"), "{line}");
+    let empty = scratch("bop-none").join("scenes");
+    std::fs::create_dir_all(empty.join("models")).unwrap();
+    let line = refusal(&empty, &[]);
+    assert!(line.contains("no BOP scenes (folders with scene_camera.json and scene_gt.json"), "{line}");
+}
+
+/// Every file under `dir`.
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap().flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            files.extend(walk(&path));
+        } else {
+            files.push(path);
+        }
+    }
+    files
+}

@@ -29,6 +29,21 @@ pub struct Camera {
     pub position: Vec3,
     /// Where this image's pixel (0, 0) lies in the full frame; non-zero for crops.
     pub crop_offset: (u32, u32),
+    /// How the camera is placed in the world.
+    pub pose: Pose,
+}
+
+/// A camera's placement in the world.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Pose {
+    /// At `position`, looking straight down (the procedural bed's camera): what [`Camera::project`],
+    /// [`Camera::ray_direction`] and [`Camera::footprint`] assume.
+    TopDown,
+    /// T_world_camera in OpenCV's camera axes (x right, y down, z forward), metres, row-major 4×4,
+    /// as a renderer gave it (a BOP scene's `cam_R_w2c`, `cam_t_w2c`, inverted).
+    Given([[f64; 4]; 4]),
+    /// Not given: only the intrinsics are known.
+    Unknown,
 }
 
 impl Camera {
@@ -47,7 +62,20 @@ impl Camera {
             sensor_width_mm,
             position,
             crop_offset: (0, 0),
+            pose: Pose::TopDown,
         }
+    }
+
+    /// A camera known by its intrinsics (pixels, OpenCV's convention) and perhaps its pose; its
+    /// lens is recorded as the focal length on a 36 mm sensor spanning the longer image side.
+    pub fn from_intrinsics(width: u32, height: u32, [fx, fy, cx, cy]: [f64; 4], pose: Pose) -> Camera {
+        let sensor_width_mm = 36.0;
+        let position = match &pose {
+            Pose::Given(m) => Vec3::new(m[0][3], m[1][3], m[2][3]),
+            _ => Vec3::new(0.0, 0.0, 0.0),
+        };
+        let lens_mm = fx * sensor_width_mm / width.max(height) as f64;
+        Camera { width, height, fx, fy, cx, cy, lens_mm, sensor_width_mm, position, crop_offset: (0, 0), pose }
     }
 
     /// World point to OpenCV camera coordinates; z is the planar depth.
@@ -97,6 +125,19 @@ impl Camera {
 
     pub fn to_json(&self) -> Value {
         let p = self.position;
+        let (opencv, blender) = match &self.pose {
+            Pose::TopDown => (
+                json!([[1.0, 0.0, 0.0, p.x], [0.0, -1.0, 0.0, p.y], [0.0, 0.0, -1.0, p.z], [0.0, 0.0, 0.0, 1.0]]),
+                json!([[1.0, 0.0, 0.0, p.x], [0.0, 1.0, 0.0, p.y], [0.0, 0.0, 1.0, p.z], [0.0, 0.0, 0.0, 1.0]]),
+            ),
+            // Blender's camera axes are OpenCV's with y and z turned: its columns 1 and 2 negated.
+            Pose::Given(m) => {
+                let flip = |r: &[f64; 4]| [r[0], -r[1], -r[2], r[3]];
+                (json!(m), json!(m.iter().map(flip).collect::<Vec<_>>()))
+            }
+            Pose::Unknown => (Value::Null, Value::Null),
+        };
+        let matrix = |m: Value, axes: &str| if m.is_null() { m } else { json!({"axes": axes, "matrix": m}) };
         json!({
             "width": self.width,
             "height": self.height,
@@ -108,15 +149,12 @@ impl Camera {
             "crop_offset_px": [self.crop_offset.0, self.crop_offset.1],
             "pixel_centers": "integer pixel coordinates are pixel centres (OpenCV)",
             "depth": "depth.exr channel Z: planar depth (camera-space z) in metres",
-            "world": "right-handed, metres, z up, ground plane near z = 0",
-            "T_world_camera_opencv": {
-                "axes": "x right, y down, z forward",
-                "matrix": [[1.0, 0.0, 0.0, p.x], [0.0, -1.0, 0.0, p.y], [0.0, 0.0, -1.0, p.z], [0.0, 0.0, 0.0, 1.0]],
+            "world": match self.pose {
+                Pose::TopDown => "right-handed, metres, z up, ground plane near z = 0",
+                _ => "the renderer's world, metres",
             },
-            "T_world_camera_blender": {
-                "axes": "x right, y up, z backward (Blender camera object)",
-                "matrix": [[1.0, 0.0, 0.0, p.x], [0.0, 1.0, 0.0, p.y], [0.0, 0.0, 1.0, p.z], [0.0, 0.0, 0.0, 1.0]],
-            },
+            "T_world_camera_opencv": matrix(opencv, "x right, y down, z forward"),
+            "T_world_camera_blender": matrix(blender, "x right, y up, z backward (Blender camera object)"),
         })
     }
 }

@@ -186,7 +186,7 @@ impl Frame {
             .filter_map(|i| i.name.as_ref().map(|name| (i.idx, Map::from_iter([("name".to_string(), json!(name))]))))
             .collect::<BTreeMap<_, _>>();
         let (width, height) = (self.width as u32, self.height as u32);
-        Ok(RawScene { width, height, depth, labels, category_of, attributes, shaded, normals })
+        Ok(RawScene { width, height, depth, labels, category_of, attributes, shaded, normals, camera: None })
     }
 }
 

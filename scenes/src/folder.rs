@@ -121,7 +121,17 @@ impl SceneFormat for SceneFolders {
             None
         };
         let (width, height) = (width as u32, height as u32);
-        Ok(RawScene { width, height, depth, labels, category_of, attributes: BTreeMap::new(), shaded, normals })
+        Ok(RawScene {
+            width,
+            height,
+            depth,
+            labels,
+            category_of,
+            attributes: BTreeMap::new(),
+            shaded,
+            normals,
+            camera: None,
+        })
     }
 }
 

@@ -13,6 +13,11 @@ pub(crate) trait SceneFormat: Send + Sync + std::fmt::Debug {
     /// The format's name in dataset.json.
     fn name(&self) -> &'static str;
 
+    /// A scene's name, as its images' COCO entries record it: its folder's or file's name.
+    fn scene_name(&self, path: &Path) -> String {
+        path.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned())
+    }
+
     /// What a scene's headers and side files say: its size, prompt and categories.
     fn index(&self, path: &Path) -> Result<SceneIndex, SceneError>;
 

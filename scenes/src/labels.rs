@@ -8,6 +8,7 @@ use serde::Deserialize;
 use serde_json::{Map, Value};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
+use vkdiff_render::camera::Camera;
 use vkdiff_render::coco::Category;
 use vkdiff_render::frame::{Frame, Instance};
 
@@ -27,6 +28,8 @@ pub struct RawScene {
     pub shaded: Option<Vec<u8>>,
     /// The renderer's own normals, as [`Frame::normals`] holds them (camera space, OpenCV axes).
     pub normals: Option<Vec<[f32; 3]>>,
+    /// The camera, where the format records it (BOP's `scene_camera.json`).
+    pub camera: Option<Camera>,
 }
 
 impl RawScene {
@@ -67,8 +70,8 @@ impl RawScene {
                 attributes: self.attributes.get(l).cloned().unwrap_or_default(),
             })
             .collect();
-        let (width, height, normals) = (self.width, self.height, self.normals);
-        let frame = Frame { width, height, camera: None, depth, ids, instances, normals };
+        let (width, height, normals, camera) = (self.width, self.height, self.normals, self.camera);
+        let frame = Frame { width, height, camera, depth, ids, instances, normals };
         Ok((frame, self.shaded))
     }
 }

@@ -3,6 +3,7 @@
 //! any work starts; a scene's pixels are read once, when its images are made.
 
 use crate::blenderproc::BlenderProcFrames;
+use crate::bop::BopScenes;
 use crate::folder::SceneFolders;
 use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::CategoryGuide;
@@ -39,8 +40,8 @@ pub struct RenderedScenes {
 }
 
 impl RenderedScenes {
-    /// Finds the scenes under `dir` (BlenderProc `.hdf5` files, else scene folders), in their
-    /// order, and checks each from its headers and side files: a missing or unreadable file,
+    /// Finds the scenes under `dir` (BlenderProc `.hdf5` files, BOP scenes or scene folders; a
+    /// folder holding more than one of these is refused), in their order, and checks each from its headers and side files: a missing or unreadable file,
     /// sizes that differ, a category listed twice or named two ways is refused in one line naming
     /// the scene. `default_category` names the instances of scene folders without
     /// categories.json; depth at or past `far` is background.
@@ -55,15 +56,29 @@ impl RenderedScenes {
         let entries = std::fs::read_dir(dir).map_err(|e| within(dir, SceneError::Listing(e)))?;
         let mut paths: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
         paths.sort();
-        let (format, found): (Box<dyn SceneFormat>, Vec<PathBuf>) = if let Some(found) = BlenderProcFrames::find(&paths)
-        {
+        let hdf5 = BlenderProcFrames::find(&paths);
+        let bop = BopScenes::find(dir, &paths);
+        let folders = SceneFolders::find(&paths).filter(|_| bop.is_none());
+        let layouts = [
+            (hdf5.is_some(), "BlenderProc .hdf5 files"),
+            (bop.is_some(), "BOP scene folders"),
+            (paths.iter().any(|p| crate::folder::is_scene_folder(p)), "vkdiff scene folders"),
+        ];
+        let held: Vec<&str> = layouts.iter().filter(|(found, _)| *found).map(|(_, what)| *what).collect();
+        if held.len() > 1 {
+            return Err(refuse(format!("holds {}; one layout per folder", held.join(" and "))));
+        }
+        let (format, found): (Box<dyn SceneFormat>, Vec<PathBuf>) = if let Some(found) = hdf5 {
             (Box::new(BlenderProcFrames::new(dir).map_err(|e| within(dir, e))?), found)
-        } else if let Some(found) = SceneFolders::find(&paths) {
+        } else if let Some(scenes) = bop {
+            let (format, images) = BopScenes::open(dir, &scenes).map_err(|e| within(dir, e))?;
+            (Box::new(format), images)
+        } else if let Some(found) = folders {
             (Box::new(SceneFolders::new(default_category)), found)
         } else {
             return Err(refuse(
-                "holds no scene folders (each with depth.exr or depth.png and instances.png) and no BlenderProc .hdf5 \
-                 files"
+                "holds no scene folders (each with depth.exr or depth.png and instances.png), no BlenderProc .hdf5 \
+                 files and no BOP scenes (folders with scene_camera.json and scene_gt.json, or one such folder)"
                     .into(),
             ));
         };
@@ -79,7 +94,7 @@ impl RenderedScenes {
         let indexed: Vec<Result<(ListedScene, SceneIndex)>> = found
             .into_par_iter()
             .map(|path| {
-                let name = path.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned());
+                let name = scenes.format.scene_name(&path);
                 let index = scenes.format.index(&path).map_err(|e| scenes.refusal(&name, e))?;
                 let scene =
                     ListedScene { name, path, width: index.width, height: index.height, prompt: index.prompt.clone() };

@@ -1,0 +1,176 @@
+//! BOP scenes (tests/fixtures/scenes/bop, written by tools/make_bop_fixtures.py as BOP's writers
+//! write them) read as BOP defines them, each held to the fixture's own files read here with the
+//! png crate: every image of scene_camera.json one scene in scene then image order, each
+//! instance exactly its visible mask's pixels with its obj_id and pose, depth in metres with 0 as
+//! background, the camera's K that of cam_K; broken scenes refused naming the file.
+
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use vkdiff_render::camera::Pose;
+use vkdiff_scenes::{RenderedScenes, SceneSource, DEFAULT_FAR};
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/scenes")
+}
+
+fn json(path: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+/// A grey PNG's samples (8 or 16 bits) and width.
+fn grey(path: &Path) -> (Vec<u32>, usize) {
+    let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let mut reader = png::Decoder::new(file).read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let bytes = &buf[..info.buffer_size()];
+    let values = match info.bit_depth {
+        png::BitDepth::Sixteen => bytes.chunks(2).map(|b| u16::from_be_bytes([b[0], b[1]]) as u32).collect(),
+        _ => bytes.iter().map(|&v| v as u32).collect(),
+    };
+    (values, info.width as usize)
+}
+
+/// Image ids of a scene's scene_camera.json, as numbers, ascending.
+fn image_ids(scene: &Path) -> Vec<u64> {
+    let mut ids: Vec<u64> =
+        json(&scene.join("scene_camera.json")).as_object().unwrap().keys().map(|k| k.parse().unwrap()).collect();
+    ids.sort_unstable();
+    ids
+}
+
+#[test]
+fn every_image_is_a_scene_with_its_masks_depth_camera_and_poses() {
+    let split = fixtures().join("bop");
+    let scenes = RenderedScenes::open(&split, "object", DEFAULT_FAR).unwrap();
+    let scene_dirs = ["000000", "000001"].map(|s| split.join(s));
+    let mut names = Vec::new();
+    for dir in &scene_dirs {
+        for im in image_ids(dir) {
+            names.push(format!("{}/{im:06}", dir.file_name().unwrap().to_string_lossy()));
+        }
+    }
+    let listed: Vec<&str> = (0..scenes.available().unwrap()).map(|k| scenes.scene(k).name.unwrap()).collect();
+    assert_eq!(listed, names, "scene then image order, image ids as numbers");
+    let (mut instances, mut dropped, mut sky) = (0, 0, 0);
+    for (k, name) in names.iter().enumerate() {
+        let (scene, im) = name.split_once('/').unwrap();
+        let (dir, im_id) = (split.join(scene), im.parse::<u64>().unwrap());
+        let camera = &json(&dir.join("scene_camera.json"))[im_id.to_string()];
+        let gts = json(&dir.join("scene_gt.json"))[im_id.to_string()].as_array().unwrap().clone();
+        let frame = scenes.frame(k as u64, 0).unwrap().frame;
+        let (width, height) = (frame.width as usize, frame.height as usize);
+        assert_eq!((width, height), (scenes.scene(k as u64).width as usize, scenes.scene(k as u64).height as usize));
+        // Depth: value × depth_scale mm, in metres; 0 is background.
+        let (depth, w) = grey(&dir.join(format!("depth/{im}.png")));
+        assert_eq!(w, width);
+        let scale = camera["depth_scale"].as_f64().unwrap();
+        for (p, &v) in depth.iter().enumerate() {
+            let z = frame.depth[p];
+            if v == 0 {
+                assert!(z == f32::INFINITY, "{name}: pixel {p} has no depth");
+                sky += 1;
+            } else {
+                assert_eq!(z, (v as f64 * scale / 1000.0) as f32, "{name}: pixel {p}");
+            }
+        }
+        // Instances: the gts whose visible mask is not empty, in gt order, each exactly its mask.
+        let mut shown = Vec::new();
+        for (gt_id, gt) in gts.iter().enumerate() {
+            let (mask, _) = grey(&dir.join(format!("mask_visib/{im}_{gt_id:06}.png")));
+            if mask.iter().all(|&v| v == 0) {
+                dropped += 1;
+                continue;
+            }
+            shown.push((gt_id, gt, mask));
+        }
+        assert_eq!(frame.instances.len(), shown.len(), "{name}");
+        for (n, (gt_id, gt, mask)) in shown.iter().enumerate() {
+            let id = n as u16 + 1;
+            for (p, &v) in mask.iter().enumerate() {
+                assert_eq!(frame.ids[p] == id, v != 0, "{name}: gt {gt_id} at pixel {p}");
+            }
+            let instance = &frame.instances[n];
+            assert_eq!(instance.category_id as u64, gt["obj_id"].as_u64().unwrap());
+            let a = &instance.attributes;
+            assert_eq!((&a["obj_id"], a["gt_id"].as_u64()), (&gt["obj_id"], Some(*gt_id as u64)));
+            assert_eq!((&a["cam_R_m2c"], &a["cam_t_m2c"]), (&gt["cam_R_m2c"], &gt["cam_t_m2c"]), "{name}: pose");
+            instances += 1;
+        }
+        // The camera: K as cam_K; the world pose where scene_camera.json gives it.
+        let c = frame.camera.as_ref().expect("BOP images have their camera");
+        let k: Vec<f64> = camera["cam_K"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        assert_eq!([c.fx, c.cx, c.fy, c.cy], [k[0], k[2], k[4], k[5]], "{name}: K");
+        match (&c.pose, camera.get("cam_R_w2c")) {
+            (Pose::Given(m), Some(r)) => {
+                let r: Vec<f64> = r.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+                let t: Vec<f64> = camera["cam_t_w2c"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+                // T_world_camera · (world → camera) is the identity.
+                for (i, row) in m.iter().take(3).enumerate() {
+                    for j in 0..3 {
+                        let product: f64 = (0..3).map(|l| row[l] * r[3 * l + j]).sum();
+                        assert!((product - (i == j) as u8 as f64).abs() < 1e-9, "{name}: R");
+                    }
+                    let origin: f64 = (0..3).map(|l| row[l] * t[l] / 1000.0).sum::<f64>() + row[3];
+                    assert!(origin.abs() < 1e-9, "{name}: t");
+                }
+            }
+            (Pose::Unknown, None) => {}
+            (pose, given) => panic!("{name}: {pose:?} for {given:?}"),
+        }
+    }
+    assert!(instances >= 10 && dropped >= 1 && sky > 0, "{instances} instances, {dropped} hidden, {sky} sky pixels");
+}
+
+#[test]
+fn categories_are_obj_ids_named_by_categories_json_else_by_id() {
+    let split = fixtures().join("bop");
+    let named: BTreeMap<u64, String> = json(&split.join("categories.json"))["categories"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| (c["id"].as_u64().unwrap(), c["name"].as_str().unwrap().to_string()))
+        .collect();
+    let mut obj_ids: Vec<u64> = ["000000", "000001"]
+        .iter()
+        .flat_map(|s| {
+            json(&split.join(s).join("scene_gt.json")).as_object().unwrap().values().cloned().collect::<Vec<_>>()
+        })
+        .flat_map(|gts| gts.as_array().unwrap().iter().map(|g| g["obj_id"].as_u64().unwrap()).collect::<Vec<_>>())
+        .collect();
+    obj_ids.sort_unstable();
+    obj_ids.dedup();
+    let name = |id: u64, names: &BTreeMap<u64, String>| names.get(&id).cloned().unwrap_or(format!("obj_{id:06}"));
+    let categories = RenderedScenes::open(&split, "object", DEFAULT_FAR).unwrap().categories();
+    let got: Vec<(u64, String)> = categories.iter().map(|c| (c.id as u64, c.name.clone())).collect();
+    let want: Vec<(u64, String)> = obj_ids.iter().map(|&id| (id, name(id, &named))).collect();
+    assert_eq!(got, want);
+    assert!(got.iter().any(|(_, n)| n.starts_with("obj_")) && got.iter().any(|(_, n)| !n.starts_with("obj_")));
+    // One scene folder given alone: no categories.json beside it, every name by id.
+    let alone = RenderedScenes::open(&split.join("000001"), "object", DEFAULT_FAR).unwrap();
+    assert_eq!(alone.scene(0).name, Some("000001/000002"));
+    assert!(alone.categories().iter().all(|c| c.name == format!("obj_{:06}", c.id)), "{:?}", alone.categories());
+}
+
+#[test]
+fn broken_scenes_are_refused_naming_the_file() {
+    let bad = fixtures().join("bop-bad");
+    for (fault, when, needle) in [
+        ("missing-mask", "listed", "scene 000000/000001: mask_visib/000001_000002.png: missing"),
+        ("depth-size", "listed", "scene 000000/000001: rgb/000001.png: 96×72, its depth/ image is 95×72"),
+        ("overlap", "read", "scene 000000/000000: mask_visib/000000_000001.png: pixel"),
+    ] {
+        let refused = match RenderedScenes::open(&bad.join(fault), "object", DEFAULT_FAR) {
+            Err(e) => {
+                assert_eq!(when, "listed", "{fault}: {e}");
+                e.to_string()
+            }
+            Ok(scenes) => {
+                assert_eq!(when, "read", "{fault} listed");
+                (0..scenes.available().unwrap()).find_map(|k| scenes.frame(k, 0).err()).unwrap().to_string()
+            }
+        };
+        assert!(refused.contains(needle) && !refused.contains('\n'), "{fault}: {refused}");
+    }
+}
