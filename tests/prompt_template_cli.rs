@@ -1,14 +1,14 @@
 //! Prompt templates from the command line: a dataset of the tiny SDXL over the orchard scene
 //! folders (categories apple, leaf, branch) whose prompt is a template with choices, category
 //! slots and wildcards read from a folder; each image's expansion and choices recorded as the
-//! library makes them from its seed and its crop's categories, counted by `dataset stats`, and
-//! the image reproduced by `vkdiff gen` from its expanded prompt; a template in `vkdiff gen`;
-//! a resume with changed wildcard files, and every template refusal, one line and exit code 2
-//! with nothing written.
+//! library makes them from its seed and its crop's categories, whatever the batch, counted by
+//! `dataset stats`, and the image reproduced by `vkdiff gen` from its expanded prompt; a template
+//! in `vkdiff gen`; a resume with changed wildcard files, and every template refusal, one line
+//! and exit code 2 with nothing written.
 
 mod cli;
 
-use cli::{command, png_text, scratch};
+use cli::{command, png_text, scratch, tree};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -98,6 +98,12 @@ fn a_dataset_records_each_expansion_counts_its_choices_and_gen_reproduces_it() {
     let model = fixture("pipeline/tiny-sdxl");
     let (set_s, dir_s, model_s) = (set.to_str().unwrap(), dir.to_str().unwrap(), model.to_str().unwrap());
     run_ok(&strs(&dataset_args(set_s, dir_s, model_s)));
+    // In batches of two, the expansions encoded as they come: the very same folder.
+    let batched = root.join("batched");
+    let mut args = dataset_args(batched.to_str().unwrap(), dir_s, model_s);
+    args.extend(["--batch", "2"].map(String::from));
+    run_ok(&strs(&args));
+    assert!(tree(&set) == tree(&batched), "--batch 2 gives the same folder");
 
     let manifest = read_json(&set.join("dataset.json"));
     assert_eq!(manifest["settings"]["wildcards"], dir_s);
