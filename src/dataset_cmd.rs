@@ -51,12 +51,17 @@ pub struct DatasetArgs {
     crops: CropArgs,
     #[command(flatten)]
     model: ModelArgs,
-    /// A prompt; repeat it for several, one chosen per image from its seed.
+    /// A prompt; repeat it for several, one chosen per image from its seed. A prompt may be a
+    /// template, expanded per image from its seed: {wet|dry}, {3::wet|dry}, __soil__,
+    /// {category}, {categories} (docs/dataset.md).
     #[arg(long)]
     prompt: Vec<String>,
     /// A file of prompts, one a line (blank lines skipped), added to any --prompt.
     #[arg(long)]
     prompts: Option<PathBuf>,
+    /// The folder of the wildcard files the templates name: __soil__ is a line of DIR/soil.txt.
+    #[arg(long, value_name = "DIR")]
+    wildcards: Option<PathBuf>,
     #[command(flatten)]
     sampling: SamplingArgs,
     /// A style image for --ip-adapter; repeat it for one set of several.
@@ -277,6 +282,7 @@ fn settings(args: &DatasetArgs, env: &vkdiff_runtime::Environment) -> Result<Dat
         args.sampling.negative_prompt.clone(),
         Sampling { strength: args.init_strength, ..args.sampling.sampling(0, 0) },
         ip_sets,
+        args.wildcards.clone(),
     )?
     .with_controls(&args.controls, args.edge_depth_jump)?
     .with_regions(&RegionFlags {

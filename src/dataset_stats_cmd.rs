@@ -9,8 +9,8 @@ use vkdiff_dataset::{stats, write_charts};
 /// What a finished set holds, in figures and charts.
 ///
 /// Images, instances per image, mask areas by COCO size class, instances cut by the image edge,
-/// each category's instances, images and median area, the seeds, prompts and style sets used;
-/// charts of instances per image, mask areas and instances by category as PNG.
+/// each category's instances, images and median area, the seeds, prompts and style sets used,
+/// the choices each prompt template made at each of its positions; charts of instances per image, mask areas and instances by category as PNG.
 #[derive(Args, Debug)]
 pub struct StatsArgs {
     /// The dataset folder.
@@ -52,7 +52,7 @@ fn report(s: &Value) -> String {
             parts.join(", ")
         }
     };
-    let lines = [
+    let mut lines = vec![
         format!(
             "{}: {} images of {} scenes, {} instances",
             s["dataset"].as_str().unwrap_or_default(),
@@ -93,11 +93,20 @@ fn report(s: &Value) -> String {
         ),
         format!("image seeds: {} distinct; sources: {}", s["image_seeds"], tally(&s["sources"])),
         format!("prompts: {}", tally(&s["prompts"])),
+    ];
+    for (template, positions) in s["prompt_choices"].as_object().into_iter().flatten() {
+        let images = &s["prompt_templates"][template];
+        lines.push(format!("choices of template {template:?} ({images} images):"));
+        for (at, counts) in positions.as_object().into_iter().flatten() {
+            lines.push(format!("  {at}: {}", tally(counts)));
+        }
+    }
+    lines.extend([
         format!("style sets: {}", tally(&s["style_sets"])),
         format!(
             "charts: {}",
             s["charts"].as_array().into_iter().flatten().filter_map(Value::as_str).collect::<Vec<_>>().join(", ")
         ),
-    ];
+    ]);
     lines.join("\n")
 }

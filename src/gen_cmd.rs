@@ -13,9 +13,13 @@ use vkdiff_render::control::ControlKind;
 pub struct GenArgs {
     #[command(flatten)]
     model: ModelArgs,
-    /// The prompt (see --prompt-syntax for weights and prompts past 75 tokens).
+    /// The prompt (see --prompt-syntax for weights and prompts past 75 tokens); it may be a
+    /// template, expanded from --seed: {wet|dry}, {3::wet|dry}, __soil__ (docs/dataset.md).
     #[arg(short, long)]
     prompt: String,
+    /// The folder of the wildcard files a template names: __soil__ is a line of DIR/soil.txt.
+    #[arg(long, value_name = "DIR")]
+    wildcards: Option<PathBuf>,
     /// torch.Generator("cpu").manual_seed(seed): diffusers gives the same noise for the same seed.
     #[arg(short, long, default_value_t = 0)]
     seed: u64,
@@ -91,6 +95,7 @@ pub fn run(args: &GenArgs, env: &vkdiff_runtime::Environment) -> Result<()> {
         out: args.out.clone(),
         latents_out: args.latents_out.clone(),
         replace: args.force,
+        wildcards: args.wildcards.clone(),
     })?;
     for warning in recipe_warnings(&job.settings().models, &job.settings().job.sampling)? {
         eprintln!("{warning}");

@@ -17,6 +17,7 @@ use vkdiff_pipeline::{
     ControlNetSettings, GuideInputs, IpAdapterSettings, LoraSetting, ModelSettings, Sdxl, StyleModels, TextToImage,
     WorkflowModels,
 };
+use vkdiff_pipeline::{PromptTemplate, Wildcards};
 use vkdiff_render::control::ControlKind;
 use vkdiff_render::scene::SceneConfig;
 use vkdiff_runtime::{Context, Dtype, Environment};
@@ -221,6 +222,9 @@ pub(crate) fn model_settings(precision: Dtype, lora_strengths: &[f32]) -> ModelS
     }
 }
 
+/// The paper's prompt.
+const PROMPT: &str = "white button mushrooms on dark black soil compost mycelium";
+
 /// The paper's set in small: `scenes` frames of 1920×1080 scaled by size/1024, `crops` crops each.
 pub(crate) fn paper_set(
     size: usize,
@@ -243,8 +247,10 @@ pub(crate) fn paper_set(
         controls: LabelControls::default(),
         regions: Default::default(),
         models: Some(models.clone()),
-        prompts: vec!["white button mushrooms on dark black soil compost mycelium".into()],
+        prompts: vec![PROMPT.into()],
         user_prompts: 1,
+        templates: vec![PromptTemplate::parse(PROMPT).expect("a plain prompt")],
+        wildcards: Wildcards::default(),
         negative_prompt: None,
         sampling,
         ip_sets: match models.ip_adapter {

@@ -158,7 +158,9 @@ impl DatasetJob {
         if let Some(note) = models.sdxl.plan_vae(model_settings.vae_tiling, 1, width, height)?.note(width, height) {
             events(DatasetEvent::Note(&note));
         }
-        let prompts = s.prompts.iter().chain(&s.negative_prompt);
+        // A template's expansions are not known yet; its plain siblings and the negative are.
+        let plain = s.prompts.iter().zip(&s.templates).filter(|(_, t)| !t.is_template()).map(|(p, _)| p);
+        let prompts = plain.chain(&s.negative_prompt);
         for warning in models.sdxl.cut_prompt_warnings(s.sampling.prompt_syntax, prompts) {
             events(DatasetEvent::Note(&warning));
         }

@@ -5,12 +5,10 @@
 use crate::error::{Error, Result};
 use vkdiff_setting::Message;
 
-/// splitmix64's finaliser: a bijection of u64 that scatters nearby inputs.
-pub(crate) fn mix(mut x: u64) -> u64 {
-    x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    x ^ (x >> 31)
+/// splitmix64's finaliser: a bijection of u64 that scatters nearby inputs (prompt templates
+/// draw their choices from the same generator, on a stream of their own).
+pub(crate) fn mix(x: u64) -> u64 {
+    vkdiff_pipeline::splitmix64(x)
 }
 
 /// Image `index`'s seed: `(splitmix64(seed) + index) mod 2³²`. Consecutive within a dataset,

@@ -1,6 +1,7 @@
 //! The dataset loop: scenes from the renderer thread, batched through one recorded denoiser,
 //! decoded, and handed to a writer thread that encodes and writes each image's files and then
-//! its record. Prompts and style-image sets are encoded once each and reused.
+//! its record. Prompts and style-image sets are encoded once each and reused; a template's
+//! expansions are encoded as images bring them, cached by their text.
 
 use super::disk::DiskGuard;
 use super::folder::{Dataset, Pending, VersionChange};
@@ -17,6 +18,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use vkdiff_pipeline::files::png_bytes;
 use vkdiff_pipeline::Conditioning;
+use vkdiff_pipeline::Expansion;
 use vkdiff_pipeline::GenSettings;
 use vkdiff_pipeline::RgbImage;
 use vkdiff_pipeline::TextToImage;
@@ -34,7 +36,8 @@ pub struct RunOptions {
     /// Whether a build of another version may add to a set (`--allow-version-change`).
     pub versions: VersionChange,
     /// Keep the text encoders once the prompts are encoded (a benchmark makes several sets from
-    /// one load); otherwise their memory goes before the denoiser's comes.
+    /// one load); otherwise their memory goes before the denoiser's comes, unless a prompt is a
+    /// template, whose expansions are encoded as the images come.
     pub keep_text_encoders: bool,
 }
 
@@ -89,17 +92,23 @@ struct Finished {
 /// How many batches' worth of rendered images a batch may be chosen from.
 const LOOKAHEAD: usize = 4;
 
+/// How many encoded expansions of templates are kept beyond those the queued images use.
+const CACHED_EXPANSIONS: usize = 64;
+
 /// One image on its way through the denoiser.
 struct Item {
     scene: SceneImage,
     seed: u64,
-    prompt: usize,
+    /// Which of the settings' prompts (templates) it takes.
+    template: usize,
+    /// Its prompt: the template expanded, with the choices that made it.
+    prompt: Expansion,
     style: Option<usize>,
 }
 
 /// Makes the `pending` images of `dataset` with `models` (whose text encoders it releases once
-/// the prompts are encoded); `styles` are the loaded images of each of `settings.ip_sets`;
-/// `disk` is checked before each image and told what each wrote.
+/// the prompts are encoded, unless a prompt is a template); `styles` are the loaded images of
+/// each of `settings.ip_sets`; `disk` is checked before each image and told what each wrote.
 #[allow(clippy::too_many_arguments)]
 pub fn generate(
     dataset: &Dataset,
@@ -113,27 +122,19 @@ pub fn generate(
 ) -> Result<Report> {
     let total = pending.done + pending.images();
     let start = Instant::now();
-    // Every prompt once, first: batches group images by their prompts' token counts.
-    let sampling = &settings.sampling;
-    let texts = (settings.prompts.iter().enumerate())
-        .map(|(i, p)| {
-            Ok((
-                i,
-                models.sdxl.encode_prompt_as(
-                    sampling.prompt_syntax,
-                    p,
-                    settings.negative_prompt.as_deref(),
-                    sampling.guided(),
-                )?,
-            ))
-        })
-        .collect::<Result<HashMap<usize, Conditioning>>>()?;
+    // Every plain prompt once, first: batches group images by their prompts' token counts.
+    let plain = settings.prompts.iter().zip(&settings.templates).filter(|(_, t)| !t.is_template());
+    let texts = plain
+        .map(|(p, _)| Ok((p.clone(), encode(models, settings, p)?)))
+        .collect::<Result<HashMap<String, Conditioning>>>()?;
     // Each category's prompt, seen without guidance: the rows its pixels take.
+    let syntax = settings.sampling.prompt_syntax;
     let region_texts = (settings.regions.prompts.iter())
-        .map(|(_, _, p)| Ok(models.sdxl.encode_prompt_as(sampling.prompt_syntax, p, None, false)?))
+        .map(|(_, _, p)| Ok(models.sdxl.encode_prompt_as(syntax, p, None, false)?))
         .collect::<Result<Vec<Conditioning>>>()?;
-    // Every prompt is encoded: the encoders' memory goes before the denoiser's comes.
-    if !options.keep_text_encoders {
+    // Every prompt is encoded: the encoders' memory goes before the denoiser's comes. A
+    // template's expansions are known only as the images come: the encoders stay for them.
+    if !options.keep_text_encoders && !settings.uses_templates() {
         models.sdxl.release_text_encoders();
     }
     let models = &*models;
@@ -143,6 +144,7 @@ pub fn generate(
         settings,
         models,
         styles,
+        pinned: texts.len(),
         texts,
         region_texts,
         tokens: HashMap::new(),
@@ -172,6 +174,13 @@ pub(crate) fn scene_thread_panicked() -> Error {
     Error::Config("the scene thread panicked (a bug: please report it with the command)".into())
 }
 
+/// `prompt`'s conditioning, with the set's negative prompt.
+fn encode(models: &WorkflowModels, settings: &DatasetSettings, prompt: &str) -> Result<Conditioning> {
+    let s = &settings.sampling;
+    let negative = settings.negative_prompt.as_deref();
+    Ok(models.sdxl.encode_prompt_as(s.prompt_syntax, prompt, negative, s.guided())?)
+}
+
 /// A recorded denoiser with the batch size and [`Loop::shape`] it was recorded for.
 type RecordedDenoiser<'a> = (Denoiser<'a>, (usize, (usize, usize)));
 
@@ -179,7 +188,10 @@ struct Loop<'a> {
     settings: &'a DatasetSettings,
     models: &'a WorkflowModels,
     styles: &'a [Vec<RgbImage>],
-    texts: HashMap<usize, Conditioning>,
+    /// Each prompt's conditioning, by its text: the plain prompts', then templates' expansions.
+    texts: HashMap<String, Conditioning>,
+    /// How many of `texts` are plain prompts, kept for the whole run.
+    pinned: usize,
     /// Each prompted category's conditioning, in the settings' order.
     region_texts: Vec<Conditioning>,
     tokens: HashMap<usize, Vec<f32>>,
@@ -205,15 +217,16 @@ impl<'a> Loop<'a> {
             // Wait for a batch's worth; look further ahead only at what is already rendered.
             while open && queue.len() < batch {
                 let start = Instant::now();
-                match images.recv() {
-                    Ok(scene) => queue.push_back(self.item(scene?)),
+                let received = images.recv();
+                self.times.waiting += start.elapsed();
+                match received {
+                    Ok(scene) => queue.push_back(self.item(scene?)?),
                     Err(_) => open = false,
                 }
-                self.times.waiting += start.elapsed();
             }
             while open && queue.len() < LOOKAHEAD * batch {
                 match images.try_recv() {
-                    Ok(scene) => queue.push_back(self.item(scene?)),
+                    Ok(scene) => queue.push_back(self.item(scene?)?),
                     Err(TryRecvError::Empty) => break,
                     Err(TryRecvError::Disconnected) => open = false,
                 }
@@ -223,7 +236,9 @@ impl<'a> Loop<'a> {
                 return Err(interrupted(done, total));
             }
             let items = self.take_batch(&mut queue, fallback, batch);
-            for finished in self.batch(items, on_progress)? {
+            let finished = self.batch(items, on_progress)?;
+            self.forget_expansions(&queue);
+            for finished in finished {
                 disk.check(total.saturating_sub(done - made + disk.images_written()))?;
                 to_writer.send(finished).map_err(|_| Error::Config("the writer stopped".into()))?;
                 made += 1;
@@ -255,12 +270,30 @@ impl<'a> Loop<'a> {
         items
     }
 
-    fn item(&self, scene: SceneImage) -> Item {
+    /// The image's seed, prompt (a template expanded from the seed and the crop's categories,
+    /// encoded now where its text is new) and style set.
+    fn item(&mut self, scene: SceneImage) -> Result<Item> {
         let seed = image_seed(self.settings.seed, scene.index);
-        let prompt = self.settings.prompt_of(scene.scene, seed);
+        let categories = scene.annotations.iter().map(|a| a.category_id);
+        let (template, prompt) = self.settings.image_prompt(scene.scene, seed, categories)?;
+        if !self.texts.contains_key(&prompt.prompt) {
+            let start = Instant::now();
+            let text = encode(self.models, self.settings, &prompt.prompt)?;
+            self.texts.insert(prompt.prompt.clone(), text);
+            self.times.setup += start.elapsed();
+        }
         let style =
             (!self.settings.ip_sets.is_empty()).then(|| choose(seed, Choice::StyleSet, self.settings.ip_sets.len()));
-        Item { scene, seed, prompt, style }
+        Ok(Item { scene, seed, template, prompt, style })
+    }
+
+    /// Past [`CACHED_EXPANSIONS`], drops the encoded expansions no queued image takes.
+    fn forget_expansions(&mut self, queue: &VecDeque<Item>) {
+        if self.texts.len() > self.pinned + CACHED_EXPANSIONS {
+            let s = self.settings;
+            let plain = |text: &String| s.prompts.iter().zip(&s.templates).any(|(p, t)| p == text && !t.is_template());
+            self.texts.retain(|text, _| plain(text) || queue.iter().any(|i| i.prompt.prompt == *text));
+        }
     }
 
     fn style_images(&self, item: &Item) -> usize {
@@ -269,7 +302,7 @@ impl<'a> Loop<'a> {
 
     /// What a recorded pass is specific to: (style images, prompt tokens).
     fn shape(&self, item: &Item) -> (usize, usize) {
-        (self.style_images(item), self.texts[&item.prompt].tokens)
+        (self.style_images(item), self.texts[&item.prompt.prompt].tokens)
     }
 
     /// Denoises and decodes one batch.
@@ -328,7 +361,7 @@ impl<'a> Loop<'a> {
                 regions: regions.as_ref(),
                 strength: item.scene.strength.as_deref(),
                 seed: item.seed,
-                text: &self.texts[&item.prompt],
+                text: &self.texts[&item.prompt.prompt],
                 control_images: self.models.control_images(&|kind| item.scene.control_image(kind)),
                 ip_tokens: item.style.map(|s| self.tokens[&s].as_slice()),
             })
@@ -364,7 +397,7 @@ impl<'a> Loop<'a> {
         let gen = GenSettings {
             models: self.models.settings.clone(),
             job: TextToImage {
-                prompt: s.prompts[item.prompt].clone(),
+                prompt: item.prompt.prompt.clone(),
                 negative_prompt: s.negative_prompt.clone(),
                 seed: item.seed,
                 sampling: s.sampling.clone(),
@@ -381,6 +414,11 @@ impl<'a> Loop<'a> {
         entry["seed"] = json!(item.seed);
         entry["prompt"] = json!(gen.job.prompt);
         entry["negative_prompt"] = json!(s.negative_prompt);
+        if s.templates[item.template].is_template() {
+            entry["prompt_template"] = json!(s.prompts[item.template]);
+            let choices = item.prompt.choices.iter().map(|c| json!({"at": c.at, "choice": c.choice}));
+            entry["prompt_choices"] = Value::Array(choices.collect());
+        }
         if let (Some(_), Some(strength)) = (&item.scene.init, s.sampling.strength) {
             entry["init_file"] = json!(files.init);
             entry["strength"] = json!(strength);

@@ -1,6 +1,6 @@
 //! A dataset's settings: the scenes (the procedural bed with `vkdiff scene`'s flags, or scenes
 //! rendered elsewhere), the images (`vkdiff gen`'s flags), and the per-image variety (prompts,
-//! style-image sets). They are recorded in `dataset.json` under the flag names, so a run with
+//! each perhaps a template expanded per image, style-image sets). They are recorded in `dataset.json` under the flag names, so a run with
 //! other settings into the same folder is refused naming the flag.
 
 use crate::controls::LabelControls;
@@ -15,6 +15,7 @@ use vkdiff_pipeline::PromptSyntax;
 use vkdiff_pipeline::SchedulerConfig;
 use vkdiff_pipeline::Sdxl;
 use vkdiff_pipeline::{control_depth_name, precision_name, schedule_name, schedule_records, ModelSettings, RNG};
+use vkdiff_pipeline::{CategorySlots, Expansion, PromptTemplate, Wildcards};
 use vkdiff_pipeline::{Sampling, SizeConditioning};
 use vkdiff_render::control::{ControlDepth, ControlKind};
 use vkdiff_render::crops::{centered, centered_window, validate_min_fraction, CropWindow};
@@ -51,6 +52,11 @@ pub struct DatasetSettings {
     pub prompts: Vec<String>,
     /// How many of `prompts` are the `--prompt`s.
     pub user_prompts: usize,
+    /// Each of `prompts` read as a template (a prompt without template syntax is its own
+    /// expansion); empty for a render-only set.
+    pub templates: Vec<PromptTemplate>,
+    /// The wildcard files the templates read (`--wildcards`).
+    pub wildcards: Wildcards,
     pub negative_prompt: Option<String>,
     /// Steps, guidance and sampler; the size is the images' (crop size, or the cut frame).
     pub sampling: Sampling,
@@ -62,7 +68,8 @@ impl DatasetSettings {
     /// Checks every setting and fixes the image size: crops of `crops.size`, or the frame cut to
     /// sides that are multiples of the model's pixel multiple (`Sdxl::probe_pixel_multiple`;
     /// SDXL's 8 for a render-only set, `models` None, which takes no prompts or styles). `count`
-    /// is the procedural bed's scenes, or how many of the rendered scenes (all: None).
+    /// is the procedural bed's scenes, or how many of the rendered scenes (all: None). Every
+    /// prompt (a scene's own too) is read as a template, its wildcards from `wildcards`.
     #[allow(clippy::too_many_arguments)]
     pub fn new(
         seed: u64,
@@ -75,6 +82,7 @@ impl DatasetSettings {
         negative_prompt: Option<String>,
         mut sampling: Sampling,
         ip_sets: Vec<Vec<PathBuf>>,
+        wildcards: Option<PathBuf>,
     ) -> Result<DatasetSettings> {
         validate_min_fraction(crops.min_fraction)?;
         let count = match (source.available(), count) {
@@ -99,14 +107,20 @@ impl DatasetSettings {
             ));
         }
         let scene_prompts = distinct((0..count).filter_map(|k| source.scene(k).prompt));
+        let (mut templates, mut loaded) = (Vec::new(), Wildcards::default());
         let multiple = match &models {
             Some(models) => {
                 let every_scene_has_one = (0..count).all(|k| source.scene(k).prompt.is_some());
-                check_diffusion(models, &prompts, every_scene_has_one, &negative_prompt, &sampling, &ip_sets)?;
+                templates = (prompts.iter().chain(&scene_prompts))
+                    .map(|p| PromptTemplate::parse(p))
+                    .collect::<vkdiff_pipeline::Result<Vec<_>>>()?;
+                loaded = Wildcards::load(wildcards.as_deref(), &templates.iter().collect::<Vec<_>>())?;
+                let user = &templates[..prompts.len()];
+                check_diffusion(models, user, &loaded, every_scene_has_one, &negative_prompt, &sampling, &ip_sets)?;
                 Sdxl::probe_pixel_multiple(&models.model, models.swaps())? as u32
             }
             None => {
-                check_render_only(&prompts, &negative_prompt, &sampling, &ip_sets)?;
+                check_render_only(&prompts, &negative_prompt, &sampling, &ip_sets, &wildcards)?;
                 RENDER_ONLY_MULTIPLE
             }
         };
@@ -168,6 +182,8 @@ impl DatasetSettings {
             models,
             prompts,
             user_prompts,
+            templates,
+            wildcards: loaded,
             negative_prompt,
             sampling,
             ip_sets,
@@ -250,6 +266,26 @@ impl DatasetSettings {
         }
     }
 
+    /// Whether any prompt is a template, whose images' prompts are known only as they come.
+    pub fn uses_templates(&self) -> bool {
+        self.templates.iter().any(PromptTemplate::is_template)
+    }
+
+    /// The prompt of an image with `seed` of scene `scene`, whose instances have the categories
+    /// `instances`: which of `prompts` ([`DatasetSettings::prompt_of`]), and its expansion from
+    /// the seed, the category slots filled from the instances.
+    pub fn image_prompt(
+        &self,
+        scene: u64,
+        seed: u64,
+        instances: impl IntoIterator<Item = u32>,
+    ) -> Result<(usize, Expansion)> {
+        let index = self.prompt_of(scene, seed);
+        let template = &self.templates[index];
+        let slots = template.is_template().then(|| CategorySlots::new(instances, &self.source.categories()));
+        Ok((index, template.expand(seed, &self.wildcards, slots.as_ref())?))
+    }
+
     /// Every setting that shapes the output, under its flag's name.
     pub fn to_json(&self) -> Value {
         let s = &self.sampling;
@@ -295,6 +331,10 @@ impl DatasetSettings {
         let size = |s: Option<(usize, usize)>| s.map(|(w, h)| format!("{w}x{h}"));
         if s.prompt_syntax == PromptSyntax::Weighted {
             map.insert("prompt-syntax".into(), json!("weighted"));
+        }
+        if let Some(dir) = self.wildcards.dir() {
+            map.insert("wildcards".into(), json!(dir.display().to_string()));
+            map.insert("wildcards-hash".into(), json!(self.wildcards.digest()));
         }
         match (s.strength, self.regions.has_strengths()) {
             (Some(strength), false) => {
@@ -362,13 +402,14 @@ const RENDER_ONLY_MULTIPLE: u32 = 8;
 /// The prompts, styles and sampling of a diffusion set, before any model loads.
 fn check_diffusion(
     models: &ModelSettings,
-    prompts: &[String],
+    prompts: &[PromptTemplate],
+    wildcards: &Wildcards,
     every_scene_has_one: bool,
     negative_prompt: &Option<String>,
     sampling: &Sampling,
     ip_sets: &[Vec<PathBuf>],
 ) -> Result<()> {
-    if (prompts.is_empty() && !every_scene_has_one) || prompts.iter().any(|p| p.trim().is_empty()) {
+    if (prompts.is_empty() && !every_scene_has_one) || prompts.iter().any(|p| p.text().trim().is_empty()) {
         return Err(Error::Setting(
             Message::setting("prompt").then(" (or ").and("prompts").then(
                 " FILE) must give at least one prompt, none of them empty, unless every scene has its prompt.txt",
@@ -398,7 +439,9 @@ fn check_diffusion(
     }
     models.check()?;
     sampling.check(&SchedulerConfig::of_model(&models.model)?)?;
-    for prompt in prompts.iter().chain(negative_prompt) {
+    // A template's expansions are checked as they come; its literal pieces now.
+    let pieces = prompts.iter().flat_map(|t| wildcards.literals(t));
+    for prompt in pieces.chain(negative_prompt.as_deref()) {
         sampling.prompt_syntax.check(prompt)?;
     }
     Ok(())
@@ -411,6 +454,7 @@ fn check_render_only(
     negative_prompt: &Option<String>,
     sampling: &Sampling,
     ip_sets: &[Vec<PathBuf>],
+    wildcards: &Option<PathBuf>,
 ) -> Result<()> {
     let unused = if !prompts.is_empty() {
         Some(Message::setting("prompt").then("/").and("prompts"))
@@ -420,6 +464,8 @@ fn check_render_only(
         Some(Message::setting("ip_image").then("/").and("ip_set"))
     } else if sampling.strength.is_some() {
         Some(Message::setting("strength"))
+    } else if wildcards.is_some() {
+        Some(Message::setting("wildcards"))
     } else {
         None
     };
@@ -461,6 +507,7 @@ pub fn first_difference(recorded: &Value, wanted: &Value) -> Option<Message> {
             }
             "ip-set" => Message::setting("ip_image").then("/").and("ip_set"),
             "prompt" => Message::setting("prompt").then("/").and("prompts"),
+            "wildcards-hash" => Message::text("the content of the ").and("wildcards").then(" files"),
             "cfg" => Message::setting("guidance_scale"),
             "init-strength" => Message::setting("strength"),
             other => Message::setting(other.replace('-', "_")),

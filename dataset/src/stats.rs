@@ -1,7 +1,7 @@
 //! `vkdiff dataset stats`: what a finished set holds (images, instances per image, mask areas
 //! by COCO size class, instances cut by the image edge, each category's instances, images and
-//! median area, the seeds, prompts and style sets used), as JSON and as the charts people look
-//! at first.
+//! median area, the seeds, prompts and style sets used, the choices prompt templates made), as
+//! JSON and as the charts people look at first.
 
 use super::canvas::bar_chart;
 use super::export::{FinishedSet, SplitFractions};
@@ -96,8 +96,24 @@ pub fn stats(dir: &Path) -> Result<Value> {
         "image_seeds": seeds.len(),
         "sources": tally("source"),
         "prompts": tally("prompt"),
+        "prompt_templates": tally("prompt_template"),
+        "prompt_choices": choices(&set),
         "style_sets": tally("ip_images"),
     }))
+}
+
+/// Per template, per position in it (`at`), how many images took each alternative.
+fn choices(set: &FinishedSet) -> BTreeMap<String, BTreeMap<String, BTreeMap<String, u64>>> {
+    let mut counts: BTreeMap<String, BTreeMap<String, BTreeMap<String, u64>>> = BTreeMap::new();
+    for image in &set.images {
+        let Some(template) = image.entry["prompt_template"].as_str() else { continue };
+        let positions = counts.entry(template.to_string()).or_default();
+        for chosen in image.entry["prompt_choices"].as_array().into_iter().flatten() {
+            let (at, choice) = (chosen["at"].as_str().unwrap_or("?"), chosen["choice"].as_str().unwrap_or("?"));
+            *positions.entry(at.to_string()).or_default().entry(choice.to_string()).or_default() += 1;
+        }
+    }
+    counts
 }
 
 fn median(values: &[u64]) -> Option<u64> {

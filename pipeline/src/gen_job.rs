@@ -1,13 +1,13 @@
 //! `vkdiff gen`'s one entry: a request checked once, before any model loads (the output files,
-//! the models, the input images, the size the inputs imply, the sampling, the prompts), then run
-//! and written atomically: the PNG with its settings and, if asked, the latents, together or not
-//! at all.
+//! the prompt's template expanded, the models, the input images, the size the inputs imply, the
+//! sampling, the prompts), then run and written atomically: the PNG with its settings and, if
+//! asked, the latents, together or not at all.
 
 use crate::error::{Error, Result};
 use crate::files::{png_bytes, write_atomic_all};
 use crate::schedulers::SchedulerConfig;
 use crate::sdxl::{check_control_shape, Sdxl, Timings, WorkflowModels};
-use crate::settings::{GenSettings, GuideInputs};
+use crate::settings::{GenSettings, GuideInputs, PromptTemplate, Wildcards};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use vkdiff_render::control::ControlKind;
@@ -34,6 +34,8 @@ pub struct GenRequest {
     pub latents_out: Option<PathBuf>,
     /// Replace output files that exist.
     pub replace: bool,
+    /// The folder of the wildcard files the prompt's template names (`__soil__`: `soil.txt`).
+    pub wildcards: Option<PathBuf>,
 }
 
 /// A checked request with its input images read.
@@ -42,6 +44,8 @@ pub struct GenJob {
     inputs: GuideInputs,
     out: PathBuf,
     latents_out: Option<PathBuf>,
+    /// The prompt as given, where it was a template (the settings hold its expansion).
+    prompt_template: Option<String>,
 }
 
 /// What a run tells as it goes.
@@ -58,7 +62,7 @@ impl GenJob {
     /// Checks everything that can be checked without loading a model, in the order a user
     /// fixes it: output files, model files, input images, then the image settings.
     pub fn new(request: GenRequest) -> Result<GenJob> {
-        let GenRequest { mut settings, width, height, strength, out, latents_out, replace } = request;
+        let GenRequest { mut settings, width, height, strength, out, latents_out, replace, wildcards } = request;
         for (setting, path) in std::iter::once(("out", &out)).chain(latents_out.iter().map(|p| ("latents_out", p))) {
             check_output(setting, path, replace)?;
         }
@@ -68,6 +72,12 @@ impl GenJob {
                     .then(format!(" {}: the image is written as PNG; give a .png path", out.display())),
             ));
         }
+        // The prompt's template, expanded from the seed (the negative prompt is taken as written).
+        let template = PromptTemplate::parse(&settings.job.prompt)?;
+        let wildcards = Wildcards::load(wildcards.as_deref(), &[&template])?;
+        wildcards.check_no_scene(&template)?;
+        settings.job.prompt = template.expand(settings.job.seed, &wildcards, None)?.prompt;
+        let prompt_template = template.is_template().then(|| template.text().to_string());
         settings.models.check()?;
         let inputs = settings.read_inputs()?;
         // A depth map (else an init image) sets the size unless it is given: the image then lines
@@ -89,7 +99,7 @@ impl GenJob {
             let setting = if kind == ControlKind::Depth { "depth" } else { "control_image" };
             check_control_shape(setting, control, sampling.width, sampling.height, multiple)?;
         }
-        Ok(GenJob { settings, inputs, out, latents_out })
+        Ok(GenJob { settings, inputs, out, latents_out, prompt_template })
     }
 
     pub fn settings(&self) -> &GenSettings {
@@ -124,6 +134,9 @@ impl GenJob {
         let mut text = self.settings.png_text();
         if let Some(tiling) = vae.tiling {
             text.insert("vae_tile".into(), tiling.tile.to_string());
+        }
+        if let Some(template) = &self.prompt_template {
+            text.insert("prompt_template".into(), template.clone());
         }
         let png = png_bytes(&out.image, &text)?;
         let latents = self

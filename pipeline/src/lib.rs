@@ -30,5 +30,6 @@ pub use settings::{
     IpBlock, IpMode, IpScale, LoraSetting, ModelSettings, PromptSyntax, Sampling, SizeConditioning, TextToImage,
     VaeTilingSetting, RNG,
 };
+pub use settings::{splitmix64, CategorySlots, Chosen, Expansion, PromptTemplate, Wildcards};
 pub use tokenizer::ClipTokenizer;
 pub use vkdiff_formats::RgbImage;
