@@ -267,7 +267,11 @@ fn settings(args: &DatasetArgs, env: &vkdiff_runtime::Environment) -> Result<Dat
     let source: Arc<dyn SceneSource> = match &args.scenes {
         Some(dir) => {
             eprintln!("reading the scenes in {}", dir.display());
-            Arc::new(RenderedScenes::open(dir, &args.category, args.far)?)
+            let scenes = RenderedScenes::open(dir, &args.category, args.far)?;
+            for note in scenes.notes() {
+                eprintln!("note: {note}");
+            }
+            Arc::new(scenes)
         }
         None => Arc::new(ProceduralBed::new(args.scene.config())?),
     };

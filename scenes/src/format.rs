@@ -23,6 +23,11 @@ pub(crate) trait SceneFormat: Send + Sync + std::fmt::Debug {
 
     /// The scene's pixels.
     fn read(&self, path: &Path) -> Result<RawScene, SceneError>;
+
+    /// What opening the folder noticed that the user should hear (a frame left out).
+    fn notes(&self) -> Vec<String> {
+        Vec::new()
+    }
 }
 
 /// A scene as its headers and side files describe it.

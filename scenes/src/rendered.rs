@@ -7,6 +7,7 @@ use crate::bop::BopScenes;
 use crate::folder::SceneFolders;
 use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::CategoryGuide;
+use crate::replicator::ReplicatorFrames;
 use crate::{Error, Result, SceneError, SceneInfo, SceneSource, SourceFrame};
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
@@ -37,11 +38,13 @@ pub struct RenderedScenes {
     /// What the categories.json files say of how categories are generated, by id.
     guides: BTreeMap<u32, CategoryGuide>,
     far: f32,
+    /// What opening the folder noticed (a frame left out), for the user.
+    notes: Vec<String>,
 }
 
 impl RenderedScenes {
-    /// Finds the scenes under `dir` (BlenderProc `.hdf5` files, BOP scenes or scene folders; a
-    /// folder holding more than one of these is refused), in their order, and checks each from its headers and side files: a missing or unreadable file,
+    /// Finds the scenes under `dir` (BlenderProc `.hdf5` files, BOP scenes, Replicator BasicWriter
+    /// frames or scene folders; a folder holding more than one of these is refused), in their order, and checks each from its headers and side files: a missing or unreadable file,
     /// sizes that differ, a category listed twice or named two ways is refused in one line naming
     /// the scene. `default_category` names the instances of scene folders without
     /// categories.json; depth at or past `far` is background.
@@ -58,10 +61,12 @@ impl RenderedScenes {
         paths.sort();
         let hdf5 = BlenderProcFrames::find(&paths);
         let bop = BopScenes::find(dir, &paths);
+        let replicator = ReplicatorFrames::find(&paths);
         let folders = SceneFolders::find(&paths).filter(|_| bop.is_none());
         let layouts = [
             (hdf5.is_some(), "BlenderProc .hdf5 files"),
             (bop.is_some(), "BOP scene folders"),
+            (replicator.is_some(), "Replicator BasicWriter frames"),
             (paths.iter().any(|p| crate::folder::is_scene_folder(p)), "vkdiff scene folders"),
         ];
         let held: Vec<&str> = layouts.iter().filter(|(found, _)| *found).map(|(_, what)| *what).collect();
@@ -73,12 +78,16 @@ impl RenderedScenes {
         } else if let Some(scenes) = bop {
             let (format, images) = BopScenes::open(dir, &scenes).map_err(|e| within(dir, e))?;
             (Box::new(format), images)
+        } else if let Some(frames) = replicator {
+            let (format, rgb) = ReplicatorFrames::open(dir, &frames).map_err(|e| within(dir, e))?;
+            (Box::new(format), rgb)
         } else if let Some(found) = folders {
             (Box::new(SceneFolders::new(default_category)), found)
         } else {
             return Err(refuse(
                 "holds no scene folders (each with depth.exr or depth.png and instances.png), no BlenderProc .hdf5 \
-                 files and no BOP scenes (folders with scene_camera.json and scene_gt.json, or one such folder)"
+                 files, no BOP scenes (folders with scene_camera.json and scene_gt.json, or one such folder) and no \
+                 Replicator BasicWriter frames (instance_segmentation_mapping_N.json with its frame's files)"
                     .into(),
             ));
         };
@@ -89,7 +98,9 @@ impl RenderedScenes {
             categories: Vec::new(),
             guides: BTreeMap::new(),
             far,
+            notes: Vec::new(),
         };
+        scenes.notes = scenes.format.notes();
         // Every scene's headers read in parallel; the first failure in order is reported.
         let indexed: Vec<Result<(ListedScene, SceneIndex)>> = found
             .into_par_iter()
@@ -138,6 +149,11 @@ impl RenderedScenes {
         scenes.categories = by_id.into_values().map(|(c, _)| c).collect();
         scenes.guides = guides.into_iter().map(|(id, (g, _))| (id, g)).collect();
         Ok(scenes)
+    }
+
+    /// What opening the folder noticed that the user should hear: a frame left out, say.
+    pub fn notes(&self) -> &[String] {
+        &self.notes
     }
 
     fn refusal(&self, scene: &str, e: SceneError) -> Error {
