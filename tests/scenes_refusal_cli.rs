@@ -225,3 +225,24 @@ fn walk(dir: &Path) -> Vec<PathBuf> {
     }
     files
 }
+
+#[test]
+fn broken_replicator_frames_are_refused_in_one_line_naming_the_file() {
+    // tools/make_replicator_fixtures.py writes each fault; the refusal comes before any image is
+    // made (an unlisted colour, which only the pixels show, is scenes/tests/replicator.rs's).
+    for (fault, needle) in [
+        ("missing-semantics", "frame 0001: instance_segmentation_semantics_mapping_0001.json: missing"),
+        ("depth-size", "scene 0001: rgb_0001.png: 80×60, the frame's depth is 79×60"),
+        ("depth-dtype", "scene 0000: distance_to_image_plane_0000.npy: dtype <i4; distance_to_image_plane is float32"),
+        ("depth-3d", "scene 0000: distance_to_image_plane_0000.npy: shape [60, 80, 1]"),
+        ("mixed", "holds BlenderProc .hdf5 files and Replicator BasicWriter frames; one layout per folder"),
+    ] {
+        let copy = scratch(&format!("replicator-bad-{fault}")).join("scenes");
+        std::fs::create_dir_all(&copy).unwrap();
+        for entry in walk(&scenes("replicator-bad").join(fault)) {
+            std::fs::copy(&entry, copy.join(entry.file_name().unwrap())).unwrap();
+        }
+        let line = refusal(&copy, &[]);
+        assert!(line.starts_with("error: --scenes") && line.contains(needle), "{fault}: {line}");
+    }
+}
