@@ -4,19 +4,13 @@
 //! instance exactly its visible mask's pixels with its obj_id and pose, depth in metres with 0 as
 //! background, the camera's K that of cam_K; broken scenes refused naming the file.
 
-use serde_json::Value;
+mod common;
+
+use common::{fixtures, json, refusal, When};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use vkdiff_render::camera::Pose;
 use vkdiff_scenes::{RenderedScenes, SceneSource, DEFAULT_FAR};
-
-fn fixtures() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/scenes")
-}
-
-fn json(path: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
 
 /// A grey PNG's samples (8 or 16 bits) and width.
 fn grey(path: &Path) -> (Vec<u32>, usize) {
@@ -157,20 +151,11 @@ fn categories_are_obj_ids_named_by_categories_json_else_by_id() {
 fn broken_scenes_are_refused_naming_the_file() {
     let bad = fixtures().join("bop-bad");
     for (fault, when, needle) in [
-        ("missing-mask", "listed", "scene 000000/000001: mask_visib/000001_000002.png: missing"),
-        ("depth-size", "listed", "scene 000000/000001: rgb/000001.png: 96×72, its depth/ image is 95×72"),
-        ("overlap", "read", "scene 000000/000000: mask_visib/000000_000001.png: pixel"),
+        ("missing-mask", When::Listed, "scene 000000/000001: mask_visib/000001_000002.png: missing"),
+        ("depth-size", When::Listed, "scene 000000/000001: rgb/000001.png: 96×72, its depth/ image is 95×72"),
+        ("overlap", When::Read, "scene 000000/000000: mask_visib/000000_000001.png: pixel"),
     ] {
-        let refused = match RenderedScenes::open(&bad.join(fault), "object", DEFAULT_FAR) {
-            Err(e) => {
-                assert_eq!(when, "listed", "{fault}: {e}");
-                e.to_string()
-            }
-            Ok(scenes) => {
-                assert_eq!(when, "read", "{fault} listed");
-                (0..scenes.available().unwrap()).find_map(|k| scenes.frame(k, 0).err()).unwrap().to_string()
-            }
-        };
-        assert!(refused.contains(needle) && !refused.contains('\n'), "{fault}: {refused}");
+        let refused = refusal(&bad.join(fault), fault, when);
+        assert!(refused.contains(needle), "{fault}: {refused}");
     }
 }

@@ -6,19 +6,14 @@
 //! BACKGROUND and UNLABELLED background; depth as written, inf background; K and the pose agreeing
 //! with camera_params' matrices; broken frames refused naming the file.
 
+mod common;
+
+use common::{fixtures, json, refusal, When};
 use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use vkdiff_render::camera::Pose;
 use vkdiff_scenes::{RenderedScenes, SceneSource, DEFAULT_FAR};
-
-fn fixtures() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures/scenes")
-}
-
-fn json(path: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
 
 /// An RGBA PNG's pixels, as BasicWriter's mappings key them, and its width.
 fn colours(path: &Path) -> (Vec<String>, usize) {
@@ -215,23 +210,18 @@ fn categories_json_beside_the_frames_gives_the_ids_and_must_name_every_class() {
 fn broken_frames_are_refused_in_one_line_naming_the_file() {
     let bad = fixtures().join("replicator-bad");
     for (fault, when, needle) in [
-        ("missing-semantics", "listed", "frame 0001: instance_segmentation_semantics_mapping_0001.json: missing"),
-        ("depth-size", "listed", "scene 0001: rgb_0001.png: 80×60, the frame's depth is 79×60"),
-        ("depth-dtype", "listed", "scene 0000: distance_to_image_plane_0000.npy: dtype <i4"),
-        ("depth-3d", "listed", "scene 0000: distance_to_image_plane_0000.npy: shape [60, 80, 1]"),
-        ("unknown-colour", "read", "scene 0000: instance_segmentation_0000.png: pixel (5, 30) is [1, 2, 3, 255]"),
-        ("mixed", "listed", "holds BlenderProc .hdf5 files and Replicator BasicWriter frames; one layout per folder"),
+        ("missing-semantics", When::Listed, "frame 0001: instance_segmentation_semantics_mapping_0001.json: missing"),
+        ("depth-size", When::Listed, "scene 0001: rgb_0001.png: 80×60, the frame's depth is 79×60"),
+        ("depth-dtype", When::Listed, "scene 0000: distance_to_image_plane_0000.npy: dtype <i4"),
+        ("depth-3d", When::Listed, "scene 0000: distance_to_image_plane_0000.npy: shape [60, 80, 1]"),
+        ("unknown-colour", When::Read, "scene 0000: instance_segmentation_0000.png: pixel (5, 30) is [1, 2, 3, 255]"),
+        (
+            "mixed",
+            When::Listed,
+            "holds BlenderProc .hdf5 files and Replicator BasicWriter frames; one layout per folder",
+        ),
     ] {
-        let refused = match RenderedScenes::open(&bad.join(fault), "object", DEFAULT_FAR) {
-            Err(e) => {
-                assert_eq!(when, "listed", "{fault}: {e}");
-                e.to_string()
-            }
-            Ok(scenes) => {
-                assert_eq!(when, "read", "{fault} listed");
-                (0..scenes.available().unwrap()).find_map(|k| scenes.frame(k, 0).err()).unwrap().to_string()
-            }
-        };
-        assert!(refused.contains(needle) && !refused.contains('\n'), "{fault}: {refused}");
+        let refused = refusal(&bad.join(fault), fault, when);
+        assert!(refused.contains(needle), "{fault}: {refused}");
     }
 }
