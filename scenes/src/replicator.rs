@@ -119,8 +119,9 @@ fn refuse(frame: &str, file: &str, why: impl std::fmt::Display) -> SceneError {
 }
 
 impl ReplicatorFrames {
-    /// The frames among `paths` (a folder's entries), each as its rgb file, in frame order: None
-    /// where no file is named as BasicWriter names an instance segmentation mapping.
+    /// The frames among `paths` (a folder's entries), by their numbers as written (`0042`), in
+    /// frame order: None where no file is named as BasicWriter names an instance segmentation
+    /// mapping.
     pub fn find(paths: &[PathBuf]) -> Option<Vec<String>> {
         let names: Vec<String> =
             paths.iter().filter_map(|p| p.file_name()).map(|n| n.to_string_lossy().into_owned()).collect();
@@ -128,7 +129,7 @@ impl ReplicatorFrames {
         if !mapped {
             return None;
         }
-        // Every frame any of its files names (the mapping's name also fits the image's prefix).
+        // Every frame any of its files names, so that a frame missing one is found and refused.
         let mut frames: Vec<String> = names
             .iter()
             .filter_map(|n| {
