@@ -428,7 +428,13 @@ fn bop_scenes_make_a_set_whose_masks_are_the_visible_masks() {
         for a in &ours {
             let gt = &gts[a["gt_id"].as_u64().unwrap() as usize];
             assert_eq!((&a["obj_id"], &a["category_id"]), (&gt["obj_id"], &gt["obj_id"]));
-            assert_eq!((&a["cam_R_m2c"], &a["cam_t_m2c"]), (&gt["cam_R_m2c"], &gt["cam_t_m2c"]));
+            let r: Vec<Value> =
+                a["pose"]["R"].as_array().unwrap().iter().flat_map(|row| row.as_array().unwrap().clone()).collect();
+            assert_eq!(Value::from(r), gt["cam_R_m2c"]);
+            let t: Vec<f64> =
+                gt["cam_t_m2c"].as_array().unwrap().iter().map(|mm| mm.as_f64().unwrap() / 1000.0).collect();
+            assert_eq!(a["pose"]["t"], serde_json::json!(t));
+            assert!(a["amodal_area"].as_u64().unwrap() >= a["area"].as_u64().unwrap(), "the whole covers what shows");
         }
         visible += bop_scene(&split, image["scene"].as_str().unwrap()).category.len();
         listed += 1;

@@ -29,6 +29,11 @@ Writes under --out:
       another (its visible mask empty); the top rows are sky (depth 0), a table fills the rest.
       bop/categories.json names obj_id 1 only (obj_id 2 falls back to obj_000002); a scene folder
       given alone (--scenes bop/000001) has none beside it, so both are named by id.
+  bop-dataset/: a BOP dataset's root: train_pbr/000000/ (scene 0 as above) and
+      models/models_info.json (each obj_id's box, mm, as the toolkit's calc_model_info writes
+      min_x/y/z and size_x/y/z), and expected_keypoints.json: per scene/image/gt, the nine box
+      keypoints (the eight corners, x slowest, then the centre) projected here with numpy, each
+      x, y, v (2 seen, 1 behind the depth seen at its pixel, 0 outside the image: 0, 0, 0).
   bop-bad/<fault>/000000/: scene 000000 broken one way each: missing-mask (a mask_visib file
       removed), depth-size (image 1's depth 95×72), overlap (two visible masks share pixels).
 """
@@ -192,6 +197,65 @@ def gt_info(amodal, visible):
     }
 
 
+# obj_id → (min xyz, size xyz), mm.
+MODELS = {1: ([-30.0, -20.0, -10.0], [60.0, 40.0, 20.0]), 2: ([-150.0, -8.0, -6.0], [300.0, 16.0, 12.0])}
+
+
+def box_points(obj_id):
+    """The box's corners (x slowest, then y, then z; min before max) and its centre, mm."""
+    lo, size = np.array(MODELS[obj_id][0]), np.array(MODELS[obj_id][1])
+    hi = lo + size
+    corners = [[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    return np.array(corners + [list((lo + hi) / 2)])
+
+
+def round_hundredth(c):
+    """To 1/100 pixel, halves away from zero."""
+    return float(np.sign(c) * np.floor(abs(c) * 100 + 0.5) / 100)
+
+
+def expected_keypoints(scene_dir):
+    """Each gt's box keypoints, projected with cam_K; seen unless the depth at its pixel (metres,
+    0 = nothing) is nearer than 99 % of its own."""
+    cameras = json.loads((scene_dir / "scene_camera.json").read_text())
+    gts = json.loads((scene_dir / "scene_gt.json").read_text())
+    out = {}
+    for im_id, camera in cameras.items():
+        K = np.array(camera["cam_K"]).reshape(3, 3)
+        depth = imageio.imread(scene_dir / f"depth/{int(im_id):06d}.png").astype(np.float64)
+        depth = np.where(depth == 0, np.inf, depth * camera["depth_scale"] / 1000.0)
+        out[im_id] = []
+        for gt in gts[im_id]:
+            R = np.array(gt["cam_R_m2c"]).reshape(3, 3)
+            t = np.array(gt["cam_t_m2c"]) / 1000.0
+            points = []
+            for p in box_points(gt["obj_id"]) / 1000.0:
+                x, y, z = R @ p + t
+                u, v = K[0, 0] * x / z + K[0, 2], K[1, 1] * y / z + K[1, 2]
+                col, row = int(np.floor(u + 0.5)), int(np.floor(v + 0.5))
+                if z <= 0 or not (0 <= col < WIDTH and 0 <= row < HEIGHT):
+                    points.append([0.0, 0.0, 0])
+                    continue
+                seen = depth[row, col] >= z * 0.99
+                points.append([round_hundredth(u), round_hundredth(v), 2 if seen else 1])
+            out[im_id].append(points)
+    return out
+
+
+def write_dataset(root):
+    shutil.rmtree(root, ignore_errors=True)
+    write_scene(root / "train_pbr/000000", 0)
+    info = {
+        obj_id: {"diameter": float(np.linalg.norm(size)), **{f"min_{a}": m for a, m in zip("xyz", lo)},
+                 **{f"size_{a}": s for a, s in zip("xyz", size)}}
+        for obj_id, (lo, size) in MODELS.items()
+    }
+    (root / "models").mkdir()
+    write_json(root / "models/models_info.json", info)
+    expected = {"000000": expected_keypoints(root / "train_pbr/000000")}
+    (root / "expected_keypoints.json").write_text(json.dumps(expected) + "\n")
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--out", default="tests/fixtures/scenes")
@@ -202,6 +266,8 @@ def main():
         write_scene(split / f"{scene_id:06d}", scene_id)
     categories = {"categories": [{"id": 1, "name": "duck", "supercategory": "toy"}]}
     (split / "categories.json").write_text(json.dumps(categories, indent=2) + "\n")
+
+    write_dataset(out / "bop-dataset")
 
     bad = out / "bop-bad"
     shutil.rmtree(bad, ignore_errors=True)

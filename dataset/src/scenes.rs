@@ -193,6 +193,8 @@ fn scene_images(settings: &DatasetSettings, scene: u64, indices: &[u64]) -> Resu
                 let c = c.to_json();
                 json!({
                     "K": c["K"],
+                    "width": c["width"],
+                    "height": c["height"],
                     "crop_offset_px": c["crop_offset_px"],
                     "T_world_camera_opencv": c["T_world_camera_opencv"]["matrix"],
                 })

@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::frame::{Frame, MUSHROOM};
+use crate::geometry::{BOX_KEYPOINTS, BOX_SKELETON};
 use crate::rle::{PixelBox, Rle};
 
 /// Where the frame's annotations point for the picture itself: the control image, the one image
@@ -81,23 +82,41 @@ struct Image {
 }
 
 /// A COCO category, as the scenes name it.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Category {
     pub id: u32,
     pub name: String,
     #[serde(default)]
     pub supercategory: String,
+    /// The names of its instances' keypoints, in their order (COCO's person keypoints' form).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub keypoints: Vec<String>,
+    /// Lines between keypoints, numbered from 1.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub skeleton: Vec<[u32; 2]>,
+}
+
+impl Category {
+    pub fn new(id: u32, name: &str, supercategory: &str) -> Category {
+        Category { id, name: name.into(), supercategory: supercategory.into(), ..Category::default() }
+    }
+
+    /// This category with the keypoints of a 3D box ([`BOX_KEYPOINTS`]).
+    pub fn with_box_keypoints(self) -> Category {
+        let keypoints = BOX_KEYPOINTS.iter().map(|k| k.to_string()).collect();
+        Category { keypoints, skeleton: BOX_SKELETON.to_vec(), ..self }
+    }
 }
 
 /// A compressed RLE mask, as pycocotools' `encode` writes it.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Segmentation {
     pub size: [u32; 2],
     pub counts: String,
 }
 
 /// One COCO annotation as vkdiff writes it, with the instance's attributes as extra fields.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Annotation {
     /// None only in a dataset's per-image records, which are numbered when merged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -112,6 +131,19 @@ pub struct Annotation {
     /// the whole set there, so they are not the mask's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mask_id: Option<u64>,
+    /// COCO's keypoints, x, y, v for each of its category's, and how many are labelled (v > 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub keypoints: Option<Vec<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub num_keypoints: Option<u32>,
+    /// The whole shape, hidden parts too, with its box and area (COCOA's and KINS's amodal
+    /// fields beside the visible `segmentation`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub amodal_segmentation: Option<Segmentation>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub amodal_bbox: Option<[u32; 4]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub amodal_area: Option<u64>,
     #[serde(flatten)]
     pub attributes: serde_json::Map<String, Value>,
 }
@@ -142,23 +174,48 @@ pub fn annotations(frame: &Frame, masks: &[InstanceMask]) -> Vec<Annotation> {
         .iter()
         .zip(&frame.instances)
         .enumerate()
-        .map(|(k, (mask, instance))| Annotation {
-            id: Some(k as u64 + 1),
-            image_id: 1,
-            category_id: instance.category_id,
-            segmentation: Segmentation { size: [h, w], counts: mask.rle.to_coco_string() },
-            area: mask.area,
-            bbox: mask.bbox.to_xywh(),
-            iscrowd: 0,
-            mask_id: None,
-            attributes: instance.attributes.clone(),
+        .map(|(k, (mask, instance))| {
+            let amodal = instance.amodal.as_ref().map(|m| {
+                let pixels = m.to_image(w, h);
+                let rle = Rle::from_labels(
+                    &pixels,
+                    w,
+                    h,
+                    true,
+                    PixelBox { x0: m.x0, y0: m.y0, x1: m.x0 + m.width - 1, y1: m.y0 + m.height - 1 },
+                );
+                (Segmentation { size: [h, w], counts: rle.to_coco_string() }, rle.area())
+            });
+            let keypoints = &instance.keypoints;
+            Annotation {
+                id: Some(k as u64 + 1),
+                image_id: 1,
+                category_id: instance.category_id,
+                segmentation: Segmentation { size: [h, w], counts: mask.rle.to_coco_string() },
+                area: mask.area,
+                bbox: mask.bbox.to_xywh(),
+                iscrowd: 0,
+                mask_id: None,
+                keypoints: (!keypoints.is_empty())
+                    .then(|| keypoints.iter().flat_map(|p| [hundredth(p.x), hundredth(p.y), p.v as f64]).collect()),
+                num_keypoints: (!keypoints.is_empty()).then(|| keypoints.iter().filter(|p| p.v > 0).count() as u32),
+                amodal_bbox: instance.amodal.as_ref().map(|m| [m.x0, m.y0, m.width, m.height]),
+                amodal_area: amodal.as_ref().map(|(_, area)| *area),
+                amodal_segmentation: amodal.map(|(s, _)| s),
+                attributes: instance.attributes.clone(),
+            }
         })
         .collect()
 }
 
+/// A keypoint coordinate as written: to 1/100 pixel.
+fn hundredth(c: f64) -> f64 {
+    (c * 100.0).round() / 100.0
+}
+
 /// The procedural bed's one category.
 pub fn mushroom_category() -> Category {
-    Category { id: MUSHROOM, name: "mushroom".into(), supercategory: "mushroom".into() }
+    Category::new(MUSHROOM, "mushroom", "mushroom")
 }
 
 /// annotations.json for `frame`, whose masks are `masks` and whose instances belong to

@@ -73,7 +73,10 @@ pub fn crop_frame(frame: &Frame, window: CropWindow, min_fraction: f64) -> Frame
     let in_crop = pixel_counts(&ids, labels);
     let kept =
         renumber(&mut ids, labels, |id| in_crop[id] > 0 && in_crop[id] as f64 >= min_fraction * in_frame[id] as f64);
-    let instances = kept.iter().map(|&id| frame.instances[id - 1].clone()).collect();
+    let instances = kept
+        .iter()
+        .map(|&id| frame.instances[id - 1].in_window(window.x0, window.y0, window.width, window.height))
+        .collect();
     Frame {
         width: window.width,
         height: window.height,
@@ -128,7 +131,7 @@ mod tests {
             camera: None,
             depth: vec![2.0; w * h],
             ids: vec![1; w * h],
-            instances: vec![Instance { category_id: 1, attributes: Default::default() }],
+            instances: vec![Instance { category_id: 1, ..Instance::default() }],
             normals: Some((0..w * h).map(|p| [p as f32, -(p as f32), 1.0]).collect()),
         };
         let crop = crop_frame(&frame, CropWindow { x0: 1, y0: 2, width: 3, height: 2 }, 0.0);

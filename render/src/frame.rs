@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::bed::Bed;
 use crate::camera::Camera;
+use crate::geometry::{AmodalMask, Keypoint};
 use crate::raster::RasterImage;
 
 /// What a mushroom of the procedural bed is, written next to its mask in the COCO annotation.
@@ -38,11 +39,28 @@ impl InstanceInfo {
 }
 
 /// One instance of a frame: its COCO category, and what else its annotation records.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Instance {
     pub category_id: u32,
-    /// Extra annotation fields (the procedural bed's: [`InstanceInfo`]'s).
+    /// Extra annotation fields (the procedural bed's: [`InstanceInfo`]'s; a renderer's pose and
+    /// 3D box, in [`crate::geometry`]'s conventions).
     pub attributes: serde_json::Map<String, serde_json::Value>,
+    /// Its keypoints in the frame's pixels, as its category names them; empty when it has none.
+    pub keypoints: Vec<Keypoint>,
+    /// Its whole shape, hidden parts too, where the renderer gives it.
+    pub amodal: Option<AmodalMask>,
+}
+
+impl Instance {
+    /// This instance as the `width`×`height` window at (x0, y0) of its frame shows it.
+    pub fn in_window(&self, x0: u32, y0: u32, width: u32, height: u32) -> Instance {
+        Instance {
+            category_id: self.category_id,
+            attributes: self.attributes.clone(),
+            keypoints: self.keypoints.iter().map(|k| k.in_window(x0, y0, width, height)).collect(),
+            amodal: self.amodal.as_ref().and_then(|m| m.in_window(x0, y0, width, height)),
+        }
+    }
 }
 
 /// The procedural bed's only category.
@@ -96,7 +114,11 @@ impl Frame {
         let kept = renumber(&mut ids, counts.len(), |raw| counts[raw] > 0);
         let instances = kept
             .iter()
-            .map(|&raw| Instance { category_id: MUSHROOM, attributes: instance_info(bed, raw - 1).attributes() })
+            .map(|&raw| Instance {
+                category_id: MUSHROOM,
+                attributes: instance_info(bed, raw - 1).attributes(),
+                ..Instance::default()
+            })
             .collect();
         Frame {
             width: camera.width,

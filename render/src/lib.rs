@@ -22,6 +22,7 @@ pub mod crops;
 pub mod error;
 pub mod exr;
 pub mod frame;
+pub mod geometry;
 pub mod ground;
 pub mod math;
 pub mod mesh;

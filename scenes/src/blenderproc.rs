@@ -60,7 +60,7 @@ impl BlenderProcFrames {
         let listed = self.names.as_ref().and_then(|names| names.iter().find(|c| c.id == id));
         listed.cloned().unwrap_or_else(|| {
             let name = format!("category_{id}");
-            Category { id, name: name.clone(), supercategory: name }
+            Category::new(id, &name, &name)
         })
     }
 }
@@ -186,7 +186,7 @@ impl Frame {
             .filter_map(|i| i.name.as_ref().map(|name| (i.idx, Map::from_iter([("name".to_string(), json!(name))]))))
             .collect::<BTreeMap<_, _>>();
         let (width, height) = (self.width as u32, self.height as u32);
-        Ok(RawScene { width, height, depth, labels, category_of, attributes, shaded, normals, camera: None })
+        Ok(RawScene { width, height, depth, labels, category_of, attributes, shaded, normals, ..RawScene::default() })
     }
 }
 

@@ -9,6 +9,7 @@
 //! depth/{im:06d}.png           16-bit grey, planar depth (camera-space z) in steps of depth_scale
 //!                              mm; 0 = no depth
 //! mask_visib/{im:06d}_{gt:06d}.png   8-bit grey, the gt's visible pixels non-zero (255)
+//! mask/{im:06d}_{gt:06d}.png   optional: the gt's whole silhouette, hidden parts too (amodal)
 //! rgb/{im:06d}.png or .jpg     the render (PBR renders: PNG; photos: JPEG), or gray/ (grey)
 //! ```
 //!
@@ -16,11 +17,14 @@
 //! Every image listed in scene_camera.json is one: scene_gt.json must list it, and its depth,
 //! render and a visible mask for each of its gts must be there (checked from their headers when
 //! the scenes are listed; both JSON files are parsed once). The instances are the gts (renderer id
-//! gt + 1), each of category obj_id, their annotations carrying `obj_id`, `gt_id`, `cam_R_m2c` and
-//! `cam_t_m2c` as scene_gt.json gives them. Category names: a categories.json beside the scene
-//! folders, else `obj_<id, six digits>` (the name of the object's model file, models/obj_000001.ply).
-//! scene_gt_info.json and the amodal masks (mask/) are not read.
+//! gt + 1), each of category obj_id, their annotations carrying `obj_id`, `gt_id` and `pose`
+//! (cam_R_m2c and cam_t_m2c, in metres), their amodal masks where the scene has mask/, and, where
+//! the dataset's models/models_info.json gives the object's box, `bbox_3d` (and so the box's
+//! keypoints). Category names: a categories.json beside the scene folders, else
+//! `obj_<id, six digits>` (the name of the object's model file, models/obj_000001.ply).
+//! scene_gt_info.json is not read.
 
+use crate::bop_geometry::{models_info_path, read_models_info, world_from_camera};
 use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::{read_categories, CategoryGuide, RawScene};
 use crate::SceneError;
@@ -32,6 +36,7 @@ use std::path::{Path, PathBuf};
 use vkdiff_formats::image::{grey_png_size, image_size, read_grey_png, read_image};
 use vkdiff_render::camera::{Camera, Pose};
 use vkdiff_render::coco::Category;
+use vkdiff_render::geometry::{AmodalMask, Box3, ObjectPose};
 
 /// What a folder must hold to be a BOP scene.
 const SCENE_FILES: [&str; 2] = ["scene_camera.json", "scene_gt.json"];
@@ -74,8 +79,8 @@ struct BopImage {
 #[derive(Debug)]
 struct Gt {
     obj_id: u32,
-    r: Vec<f64>,
-    t: Vec<f64>,
+    /// cam_R_m2c and cam_t_m2c, the translation in metres.
+    pose: ObjectPose,
 }
 
 /// BOP scenes, every image's entries parsed from its scene's JSON files once.
@@ -86,6 +91,8 @@ pub struct BopScenes {
     /// categories.json beside the scene folders, naming the obj_ids; else `obj_<id>`.
     names: Option<Vec<Category>>,
     guides: BTreeMap<u32, CategoryGuide>,
+    /// Each obj_id's 3D box, from the dataset's models_info.json where it has one.
+    models: BTreeMap<u32, Box3>,
 }
 
 /// Whether `dir` is a BOP scene folder.
@@ -117,6 +124,10 @@ impl BopScenes {
             Some((names, _, guides)) => (Some(names), guides),
             None => (None, BTreeMap::new()),
         };
+        let models = match models_info_path(dir, is_bop_scene(dir)) {
+            Some(path) => read_models_info(&path)?,
+            None => BTreeMap::new(),
+        };
         let parsed: Vec<Result<Vec<BopImage>, SceneError>> = scenes.par_iter().map(|s| scene_images(s)).collect();
         let mut images = BTreeMap::new();
         let mut keys = Vec::new();
@@ -127,16 +138,21 @@ impl BopScenes {
                 images.insert(key, image);
             }
         }
-        Ok((BopScenes { images, names, guides }, keys))
+        Ok((BopScenes { images, names, guides, models }, keys))
     }
 
-    /// An obj_id's category: from categories.json, else `obj_<id>` as BOP names model files.
+    /// An obj_id's category: from categories.json, else `obj_<id>` as BOP names model files;
+    /// with its model's box, the box's keypoints unless categories.json names others.
     fn category(&self, id: u32) -> Category {
         let listed = self.names.as_ref().and_then(|names| names.iter().find(|c| c.id == id));
-        listed.cloned().unwrap_or_else(|| {
+        let category = listed.cloned().unwrap_or_else(|| {
             let name = format!("obj_{id:06}");
-            Category { id, name: name.clone(), supercategory: "object".into() }
-        })
+            Category::new(id, &name, "object")
+        });
+        match self.models.contains_key(&id) && category.keypoints.is_empty() {
+            true => category.with_box_keypoints(),
+            false => category,
+        }
     }
 
     fn image(&self, key: &Path) -> Result<&BopImage, SceneError> {
@@ -199,10 +215,11 @@ fn scene_images(scene: &Path) -> Result<Vec<BopImage>, SceneError> {
             if gt.obj_id == 0 {
                 return Err(at("obj_id 0; BOP's object ids start at 1"));
             }
-            if gt.r.len() != 9 || gt.t.len() != 3 {
+            let (&[r00, r01, r02, r10, r11, r12, r20, r21, r22], &[t0, t1, t2]) = (&gt.r[..], &gt.t[..]) else {
                 return Err(at("cam_R_m2c holds 9 values and cam_t_m2c 3"));
-            }
-            kept.push(Gt { obj_id: gt.obj_id, r: gt.r.clone(), t: gt.t.clone() });
+            };
+            let r = [[r00, r01, r02], [r10, r11, r12], [r20, r21, r22]];
+            kept.push(Gt { obj_id: gt.obj_id, pose: ObjectPose { r, t: [t0, t1, t2].map(|mm| mm / 1000.0) } });
         }
         images.push(BopImage {
             scene: scene.to_path_buf(),
@@ -226,18 +243,6 @@ fn image_id(scene: &Path, file: &str, key: &str) -> Result<u64, SceneError> {
     key.parse().map_err(|_| refuse(scene, file, format!("key `{key}` is not an image id")))
 }
 
-/// T_world_camera (metres) from BOP's world-to-camera rotation and translation (mm).
-fn world_from_camera(r: &[f64], t: &[f64]) -> Result<Pose, String> {
-    let (&[r00, r01, r02, r10, r11, r12, r20, r21, r22], &[t0, t1, t2]) = (r, t) else {
-        return Err("cam_R_w2c holds 9 values and cam_t_w2c 3".into());
-    };
-    // The inverse of [R | t]: [Rᵀ | −Rᵀt], millimetres to metres.
-    let rt = [[r00, r10, r20], [r01, r11, r21], [r02, r12, r22]];
-    let centre = |row: [f64; 3]| -(row[0] * t0 + row[1] * t1 + row[2] * t2) / 1000.0;
-    let row = |k: usize| [rt[k][0], rt[k][1], rt[k][2], centre(rt[k])];
-    Ok(Pose::Given([row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]]))
-}
-
 /// An image's files, relative to its scene folder.
 fn depth_file(im_id: u64) -> String {
     format!("depth/{im_id:06}.png")
@@ -245,6 +250,16 @@ fn depth_file(im_id: u64) -> String {
 
 fn mask_file(im_id: u64, gt_id: usize) -> String {
     format!("mask_visib/{im_id:06}_{gt_id:06}.png")
+}
+
+/// A gt's amodal mask: its whole silhouette, hidden parts too.
+fn amodal_file(im_id: u64, gt_id: usize) -> String {
+    format!("mask/{im_id:06}_{gt_id:06}.png")
+}
+
+/// Whether the image's scene has amodal masks (then every gt has one).
+fn has_amodal(image: &BopImage) -> bool {
+    image.scene.join("mask").is_dir()
 }
 
 /// The render: rgb/ (PNG, else JPEG), else gray/.
@@ -300,8 +315,12 @@ impl SceneFormat for BopScenes {
         let render = render_file(image)?;
         let size = image_size(&image.scene.join(&render)).map_err(file_error(image.im_id, &render))?;
         same_size(&render, size, (width, height))?;
-        for gt_id in 0..image.gts.len() {
-            let mask = mask_file(image.im_id, gt_id);
+        let amodal = has_amodal(image);
+        let masks = (0..image.gts.len()).flat_map(|gt_id| {
+            let visible = mask_file(image.im_id, gt_id);
+            [Some(visible), amodal.then(|| amodal_file(image.im_id, gt_id))].into_iter().flatten()
+        });
+        for mask in masks {
             let (w, h, _) = grey_png_size(&image.scene.join(&mask)).map_err(file_error(image.im_id, &mask))?;
             same_size(&mask, (w, h), (width, height))?;
         }
@@ -329,6 +348,7 @@ impl SceneFormat for BopScenes {
         let mut labels = vec![0u32; width * height];
         let mut category_of = BTreeMap::new();
         let mut attributes = BTreeMap::new();
+        let mut amodal = BTreeMap::new();
         for (gt_id, gt) in image.gts.iter().enumerate() {
             let mask = mask_file(image.im_id, gt_id);
             let visible = read_grey_png(&image.scene.join(&mask)).map_err(file_error(image.im_id, &mask))?;
@@ -344,13 +364,21 @@ impl SceneFormat for BopScenes {
                 labels[p] = label;
             }
             category_of.insert(label, gt.obj_id);
-            let carried = [
-                ("obj_id", json!(gt.obj_id)),
-                ("gt_id", json!(gt_id)),
-                ("cam_R_m2c", json!(gt.r)),
-                ("cam_t_m2c", json!(gt.t)),
-            ];
-            attributes.insert(label, Map::from_iter(carried.map(|(k, v)| (k.to_string(), v))));
+            let mut carried = Map::from_iter([("obj_id".into(), json!(gt.obj_id)), ("gt_id".into(), json!(gt_id))]);
+            carried.insert("pose".into(), gt.pose.to_json());
+            if let Some(bbox) = self.models.get(&gt.obj_id) {
+                carried.insert("bbox_3d".into(), bbox.to_json());
+            }
+            attributes.insert(label, carried);
+            if has_amodal(image) {
+                let file = amodal_file(image.im_id, gt_id);
+                let whole = read_grey_png(&image.scene.join(&file)).map_err(file_error(image.im_id, &file))?;
+                same_size(&file, (whole.width, whole.height), (width, height))?;
+                let pixels: Vec<bool> = whole.values.iter().map(|&v| v != 0).collect();
+                if let Some(mask) = AmodalMask::from_frame(&pixels, width) {
+                    amodal.insert(label, mask);
+                }
+            }
         }
         let render = render_file(image)?;
         let shaded = read_image(&image.scene.join(&render)).map_err(file_error(image.im_id, &render))?;
@@ -367,6 +395,8 @@ impl SceneFormat for BopScenes {
             shaded: Some(shaded.pixels),
             normals: None,
             camera: Some(camera),
+            amodal,
+            ..RawScene::default()
         })
     }
 }

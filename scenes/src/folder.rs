@@ -12,8 +12,11 @@
 //!                  the camera's frame with Blender's camera axes (x right, y up, z toward the
 //!                  viewer), components in [-1, 1]; zero or non-finite where unknown
 //! prompt.txt       optional: this scene's prompt
+//! camera.json      optional: the camera, as `vkdiff scene` writes it (K, width, height, pose)
+//! keypoints.json   optional: instance → its keypoints, COCO's flat x, y, v list
 //! ```
 
+use crate::folder_geometry::{read_camera, read_keypoints};
 use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::{read_categories, CategoryMap, RawScene};
 use crate::SceneError;
@@ -48,7 +51,7 @@ pub struct SceneFolders {
 impl SceneFolders {
     pub fn new(default_category: &str) -> SceneFolders {
         let name = default_category.trim().to_string();
-        SceneFolders { default: Category { id: 1, name: name.clone(), supercategory: name } }
+        SceneFolders { default: Category::new(1, &name, &name) }
     }
 
     /// The scene folders among `paths` (hidden ones skipped); None where there is none.
@@ -90,6 +93,8 @@ impl SceneFormat for SceneFolders {
             Some((categories, _, guides)) => (categories, guides),
             None => (vec![self.default.clone()], Default::default()),
         };
+        read_camera(dir, (width, height))?;
+        read_keypoints(dir)?;
         Ok(SceneIndex { width: width as u32, height: height as u32, prompt: read_prompt(dir)?, categories, guides })
     }
 
@@ -130,7 +135,9 @@ impl SceneFormat for SceneFolders {
             attributes: BTreeMap::new(),
             shaded,
             normals,
-            camera: None,
+            camera: read_camera(dir, (width as usize, height as usize))?,
+            keypoints: read_keypoints(dir)?,
+            ..RawScene::default()
         })
     }
 }

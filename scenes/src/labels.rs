@@ -11,8 +11,10 @@ use std::path::Path;
 use vkdiff_render::camera::Camera;
 use vkdiff_render::coco::Category;
 use vkdiff_render::frame::{Frame, Instance};
+use vkdiff_render::geometry::{box_keypoints, AmodalMask, Box3, Keypoint, ObjectPose, BOX_KEYPOINTS};
 
 /// One scene as read from its files, before it becomes a [`Frame`].
+#[derive(Default)]
 pub struct RawScene {
     pub width: u32,
     pub height: u32,
@@ -30,12 +32,18 @@ pub struct RawScene {
     pub normals: Option<Vec<[f32; 3]>>,
     /// The camera, where the format records it (BOP's `scene_camera.json`).
     pub camera: Option<Camera>,
+    /// Renderer id → its keypoints, where the scene lists them (a scene folder's keypoints.json);
+    /// instances of a category with a 3D box's keypoints get them from their `pose` and `bbox_3d`.
+    pub keypoints: BTreeMap<u32, Vec<Keypoint>>,
+    /// Renderer id → its whole shape, where the renderer gives it (BOP's `mask/`).
+    pub amodal: BTreeMap<u32, AmodalMask>,
 }
 
 impl RawScene {
     /// The frame: depth at or past `far` (and NaN, infinite, zero or negative) is background;
-    /// instances whose category is 0, or that have no pixel, are dropped.
-    pub fn into_frame(self, far: f32) -> Result<(Frame, Option<Vec<u8>>), SceneError> {
+    /// instances whose category is 0, or that have no pixel, are dropped. `categories` name each
+    /// category's keypoints.
+    pub fn into_frame(mut self, far: f32, categories: &[Category]) -> Result<(Frame, Option<Vec<u8>>), SceneError> {
         let n = (self.width as usize) * (self.height as usize);
         if self.depth.len() != n || self.labels.len() != n || self.normals.as_ref().is_some_and(|v| v.len() != n) {
             return Err(SceneError::new(format!(
@@ -62,17 +70,45 @@ impl RawScene {
         let id_of: BTreeMap<u32, u16> = kept.iter().enumerate().map(|(k, &l)| (l, k as u16 + 1)).collect();
         let ids = self.labels.iter().map(|l| id_of.get(l).copied().unwrap_or(0)).collect();
         let background = |z: f32| !z.is_finite() || z <= 0.0 || z >= far;
-        let depth = self.depth.into_iter().map(|z| if background(z) { f32::INFINITY } else { z }).collect();
+        let depth: Vec<f32> = self.depth.into_iter().map(|z| if background(z) { f32::INFINITY } else { z }).collect();
         let instances = kept
             .iter()
-            .map(|l| Instance {
-                category_id: self.category_of[l],
-                attributes: self.attributes.get(l).cloned().unwrap_or_default(),
+            .map(|l| {
+                let category = categories.iter().find(|c| c.id == self.category_of[l]);
+                let attributes = self.attributes.remove(l).unwrap_or_default();
+                let keypoints =
+                    keypoints_of(category, &attributes, self.keypoints.remove(l), self.camera.as_ref(), &depth)
+                        .map_err(|why| SceneError::new(format!("instance {l}: {why}")))?;
+                Ok(Instance { category_id: self.category_of[l], attributes, keypoints, amodal: self.amodal.remove(l) })
             })
-            .collect();
+            .collect::<Result<_, SceneError>>()?;
         let (width, height, normals, camera) = (self.width, self.height, self.normals, self.camera);
         let frame = Frame { width, height, camera, depth, ids, instances, normals };
         Ok((frame, self.shaded))
+    }
+}
+
+/// An instance's keypoints: those the scene lists, which must be as many as its category names;
+/// else a 3D box's corners, where its category has them and the camera, pose and box are known;
+/// else none.
+fn keypoints_of(
+    category: Option<&Category>,
+    attributes: &Map<String, Value>,
+    listed: Option<Vec<Keypoint>>,
+    camera: Option<&Camera>,
+    depth: &[f32],
+) -> Result<Vec<Keypoint>, String> {
+    let names = category.map_or(&[][..], |c| &c.keypoints[..]);
+    if let Some(listed) = listed {
+        if listed.len() != names.len() {
+            return Err(format!("{} keypoints listed; its category names {}", listed.len(), names.len()));
+        }
+        return Ok(listed);
+    }
+    let boxed = !names.is_empty() && names.iter().zip(BOX_KEYPOINTS).all(|(n, b)| n == b);
+    match (boxed, camera, ObjectPose::of(attributes), Box3::of(attributes)) {
+        (true, Some(camera), Some(pose), Some(bbox)) => Ok(box_keypoints(camera, depth, &pose, &bbox)),
+        _ => Ok(vec![Keypoint::ABSENT; names.len()]),
     }
 }
 

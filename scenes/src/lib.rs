@@ -8,7 +8,9 @@
 
 mod blenderproc;
 mod bop;
+mod bop_geometry;
 mod folder;
+mod folder_geometry;
 mod format;
 mod labels;
 mod procedural;

@@ -191,7 +191,7 @@ impl SceneSource for RenderedScenes {
                 raw.width, raw.height, scene.width, scene.height
             ))));
         }
-        let (frame, shaded) = raw.into_frame(self.far).map_err(refuse)?;
+        let (frame, shaded) = raw.into_frame(self.far, &self.categories).map_err(refuse)?;
         Ok(SourceFrame { frame, shaded })
     }
 

@@ -193,7 +193,7 @@ impl ReplicatorFrames {
         } else {
             // Sorted names: ids that do not depend on which frames are read, or in which order.
             let named = classes.iter().enumerate().map(|(k, &name)| {
-                let category = Category { id: k as u32 + 1, name: name.to_string(), supercategory: "object".into() };
+                let category = Category::new(k as u32 + 1, name, "object");
                 (name.to_string(), category)
             });
             (named.collect(), BTreeMap::new())
@@ -490,6 +490,7 @@ impl SceneFormat for ReplicatorFrames {
             shaded: Some(shaded.pixels),
             normals: None,
             camera,
+            ..RawScene::default()
         })
     }
 

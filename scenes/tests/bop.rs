@@ -10,6 +10,7 @@ use common::{fixtures, json, refusal, When};
 use std::collections::BTreeMap;
 use std::path::Path;
 use vkdiff_render::camera::Pose;
+use vkdiff_render::geometry::{Box3, Keypoint, ObjectPose, BOX_KEYPOINTS};
 use vkdiff_scenes::{RenderedScenes, SceneSource, DEFAULT_FAR};
 
 /// A grey PNG's samples (8 or 16 bits) and width.
@@ -47,7 +48,7 @@ fn every_image_is_a_scene_with_its_masks_depth_camera_and_poses() {
     }
     let listed: Vec<&str> = (0..scenes.available().unwrap()).map(|k| scenes.scene(k).name.unwrap()).collect();
     assert_eq!(listed, names, "scene then image order, image ids as numbers");
-    let (mut instances, mut dropped, mut sky) = (0, 0, 0);
+    let (mut instances, mut dropped, mut sky, mut occluded) = (0, 0, 0, 0);
     for (k, name) in names.iter().enumerate() {
         let (scene, im) = name.split_once('/').unwrap();
         let (dir, im_id) = (split.join(scene), im.parse::<u64>().unwrap());
@@ -89,7 +90,16 @@ fn every_image_is_a_scene_with_its_masks_depth_camera_and_poses() {
             assert_eq!(instance.category_id as u64, gt["obj_id"].as_u64().unwrap());
             let a = &instance.attributes;
             assert_eq!((&a["obj_id"], a["gt_id"].as_u64()), (&gt["obj_id"], Some(*gt_id as u64)));
-            assert_eq!((&a["cam_R_m2c"], &a["cam_t_m2c"]), (&gt["cam_R_m2c"], &gt["cam_t_m2c"]), "{name}: pose");
+            // The pose: cam_R_m2c as 3×3, cam_t_m2c in metres.
+            let pose = ObjectPose::of(a).expect("every gt has its pose");
+            let given = |key: &str| gt[key].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect::<Vec<_>>();
+            assert_eq!(pose.r.concat(), given("cam_R_m2c"), "{name}: R");
+            assert_eq!(pose.t.to_vec(), given("cam_t_m2c").iter().map(|mm| mm / 1000.0).collect::<Vec<_>>());
+            // The amodal mask: exactly mask/'s pixels.
+            let (whole, _) = grey(&dir.join(format!("mask/{im}_{gt_id:06}.png")));
+            let amodal = instance.amodal.as_ref().expect("the scene has mask/").to_image(width as u32, height as u32);
+            assert_eq!(amodal, whole.iter().map(|&v| v != 0).collect::<Vec<_>>(), "{name}: gt {gt_id} amodal");
+            occluded += whole.iter().zip(mask).filter(|(&w, &v)| w != 0 && v == 0).count();
             instances += 1;
         }
         // The camera: K as cam_K; the world pose where scene_camera.json gives it.
@@ -115,6 +125,7 @@ fn every_image_is_a_scene_with_its_masks_depth_camera_and_poses() {
         }
     }
     assert!(instances >= 10 && dropped >= 1 && sky > 0, "{instances} instances, {dropped} hidden, {sky} sky pixels");
+    assert!(occluded > 0, "the amodal masks cover hidden pixels");
 }
 
 #[test]
@@ -158,4 +169,69 @@ fn broken_scenes_are_refused_naming_the_file() {
         let refused = refusal(&bad.join(fault), fault, when);
         assert!(refused.contains(needle), "{fault}: {refused}");
     }
+}
+
+#[test]
+fn models_boxes_give_each_gt_its_bbox_3d_and_projected_keypoints() {
+    let root = fixtures().join("bop-dataset");
+    let expected = json(&root.join("expected_keypoints.json"));
+    let info = json(&root.join("models/models_info.json"));
+    for given in [root.join("train_pbr"), root.join("train_pbr/000000")] {
+        let scenes = RenderedScenes::open(&given, "object", DEFAULT_FAR).unwrap();
+        for category in scenes.categories() {
+            assert_eq!(category.keypoints, BOX_KEYPOINTS.map(String::from), "{}", category.name);
+            assert_eq!(category.skeleton.len(), 12);
+        }
+        let (mut seen, mut hidden, mut absent) = (0, 0, 0);
+        for k in 0..scenes.available().unwrap() {
+            let im = scenes.scene(k).name.unwrap().split_once('/').unwrap().1.parse::<u64>().unwrap();
+            let gts = expected["000000"][im.to_string()].as_array().unwrap();
+            let frame = scenes.frame(k, 0).unwrap().frame;
+            for instance in &frame.instances {
+                let a = &instance.attributes;
+                let gt = &gts[a["gt_id"].as_u64().unwrap() as usize];
+                let model = &info[a["obj_id"].to_string()];
+                let mm = |key: &str| model[key].as_f64().unwrap();
+                let bbox = Box3::of(a).expect("a model's box");
+                for (i, axis) in ["x", "y", "z"].iter().enumerate() {
+                    let (lo, size) = (mm(&format!("min_{axis}")), mm(&format!("size_{axis}")));
+                    assert_eq!((bbox.min[i], bbox.max[i]), (lo / 1000.0, (lo + size) / 1000.0));
+                }
+                let want: Vec<Keypoint> = gt
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|p| Keypoint {
+                        x: p[0].as_f64().unwrap(),
+                        y: p[1].as_f64().unwrap(),
+                        v: p[2].as_u64().unwrap() as u8,
+                    })
+                    .collect();
+                // numpy's to 1/100 pixel, as annotations.json writes them.
+                for (got, want) in instance.keypoints.iter().zip(&want) {
+                    let close = (got.x - want.x).abs() <= 0.005 + 1e-9 && (got.y - want.y).abs() <= 0.005 + 1e-9;
+                    assert!(close && got.v == want.v, "image {im}, {a:?}: {got:?}, numpy {want:?}");
+                }
+                assert_eq!(instance.keypoints.len(), 9);
+                for p in &want {
+                    match p.v {
+                        2 => seen += 1,
+                        1 => hidden += 1,
+                        _ => absent += 1,
+                    }
+                }
+            }
+        }
+        assert!(seen > 0 && hidden > 0 && absent > 0, "{seen} seen, {hidden} hidden, {absent} outside");
+    }
+    // Without models_info.json: no box, no keypoints.
+    let plain = RenderedScenes::open(&fixtures().join("bop"), "object", DEFAULT_FAR).unwrap();
+    assert!(plain.categories().iter().all(|c| c.keypoints.is_empty()));
+    assert!(plain
+        .frame(0, 0)
+        .unwrap()
+        .frame
+        .instances
+        .iter()
+        .all(|i| i.keypoints.is_empty() && Box3::of(&i.attributes).is_none()));
 }

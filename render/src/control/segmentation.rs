@@ -77,7 +77,7 @@ mod tests {
     use super::*;
 
     fn category(id: u32, name: &str) -> Category {
-        Category { id, name: name.into(), supercategory: name.into() }
+        Category::new(id, name, name)
     }
 
     #[test]

@@ -193,9 +193,7 @@ fn refusals_name_the_template_and_the_position() {
 #[test]
 fn category_slots_take_the_scene_and_are_refused_without_one() {
     let cats = |names: &[&str]| -> Vec<Category> {
-        (names.iter().enumerate())
-            .map(|(i, n)| Category { id: i as u32 + 1, name: n.to_string(), supercategory: String::new() })
-            .collect()
+        (names.iter().enumerate()).map(|(i, n)| Category::new(i as u32 + 1, n, "")).collect()
     };
     let categories = cats(&["apple", "leaf", "branch"]);
     let slots = CategorySlots::new([3, 2, 3, 2, 1], &categories);
