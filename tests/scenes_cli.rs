@@ -321,6 +321,18 @@ fn vkdiff_scene_folders_fed_back_give_the_built_in_annotations() {
     for name in ["depth/000000.exr", "masks/000001.png", "control/000002.png"] {
         assert!(std::fs::read(built_in.join(name)).unwrap() == std::fs::read(fed_back.join(name)).unwrap(), "{name}");
     }
+    // camera.json read back: each crop's camera is the built-in one's (K shifted by the crop).
+    let cameras = |d: &Path| -> Vec<Value> {
+        read_json(&d.join("annotations.json"))["images"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|i| i["camera"].clone())
+            .collect()
+    };
+    let built_in_cameras = cameras(&built_in);
+    assert!(built_in_cameras.iter().all(|c| c["K"].is_array() && c["width"] == 128 && c["height"] == 128));
+    assert_eq!(built_in_cameras, cameras(&fed_back));
 }
 
 fn strs(v: &[String]) -> Vec<&str> {

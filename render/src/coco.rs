@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use serde_json::Value;
+use serde_json::{json, Value};
 
 use crate::frame::{Frame, MUSHROOM};
 use crate::geometry::{BOX_KEYPOINTS, BOX_SKELETON};
@@ -132,7 +132,7 @@ pub struct Annotation {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mask_id: Option<u64>,
     /// COCO's keypoints, x, y, v for each of its category's, and how many are labelled (v > 0).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none", serialize_with = "serialize_keypoints")]
     pub keypoints: Option<Vec<f64>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub num_keypoints: Option<u32>,
@@ -160,6 +160,15 @@ impl Annotation {
     pub fn sorted_json(&self) -> Value {
         serde_json::to_value(self).expect("COCO structures always serialise")
     }
+}
+
+/// Keypoints as COCO writes them: x and y as numbers, v as an integer, an unlabelled one 0, 0, 0.
+fn serialize_keypoints<S: serde::Serializer>(keypoints: &Option<Vec<f64>>, s: S) -> Result<S::Ok, S::Error> {
+    let flat = keypoints.as_deref().unwrap_or_default();
+    s.collect_seq(flat.chunks(3).flat_map(|p| match p {
+        [x, y, v] if *v > 0.0 => [json!(x), json!(y), json!(*v as u8)],
+        _ => [json!(0), json!(0), json!(0)],
+    }))
 }
 
 /// Serialises a list of annotations with sorted keys (see [`Annotation::sorted_json`]).
