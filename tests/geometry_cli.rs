@@ -141,3 +141,105 @@ impl<const N: usize> ConcatValues for [Value; N] {
         Value::from(self.iter().flat_map(|v| v.as_array().unwrap().clone()).collect::<Vec<_>>())
     }
 }
+
+fn stdout_of(args: &[&str]) -> String {
+    let out = command().args(args).output().unwrap();
+    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The bytes of a base64 `data:` URI's payload.
+fn base64(text: &str) -> Vec<u8> {
+    let value = |c: u8| "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/".bytes().position(|d| d == c);
+    let sextets: Vec<u32> = text.bytes().filter_map(value).map(|v| v as u32).collect();
+    let mut bytes = Vec::new();
+    for chunk in sextets.chunks(4) {
+        let n = chunk.iter().enumerate().fold(0u32, |n, (k, &s)| n | s << (18 - 6 * k));
+        bytes.extend(&n.to_be_bytes()[1..chunk.len()]);
+    }
+    bytes
+}
+
+/// An RGBA PNG's width and pixels.
+fn rgba(png_bytes: &[u8]) -> (usize, Vec<[u8; 4]>) {
+    let mut reader = png::Decoder::new(std::io::Cursor::new(png_bytes)).read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgba);
+    (info.width as usize, buf[..info.buffer_size()].chunks(4).map(|p| [p[0], p[1], p[2], p[3]]).collect())
+}
+
+/// The PNG of each `<img class="CLASS">` of a preview page, in order.
+fn layer_pngs(page: &str, class: &str) -> Vec<Vec<u8>> {
+    let marker = format!("<img class=\"{class}\" src=\"data:image/png;base64,");
+    page.split(&marker).skip(1).map(|rest| base64(&rest[..rest.find('"').unwrap()])).collect()
+}
+
+#[test]
+fn preview_draws_keypoints_and_amodal_outlines_and_stats_count_them() {
+    let root = scratch("geometry-look");
+    let set = root.join("set");
+    let split = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/scenes/bop-dataset/train_pbr");
+    run_ok(&["dataset", "--render-only", "--scenes", split.to_str().unwrap(), "--out", set.to_str().unwrap()]);
+    let coco = read_json(&set.join("annotations.json"));
+    let annotations = coco["annotations"].as_array().unwrap();
+
+    let stats: Value =
+        serde_json::from_str(&stdout_of(&["dataset", "stats", set.to_str().unwrap(), "--json"])).unwrap();
+    let g = &stats["geometry"];
+    let vs: Vec<u64> = annotations
+        .iter()
+        .flat_map(|a| a["keypoints"].as_array().unwrap().iter().skip(2).step_by(3))
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    let count = |v: u64| vs.iter().filter(|&&x| x == v).count();
+    assert_eq!(
+        g["keypoints"],
+        json!({"instances": annotations.len(), "seen": count(2), "hidden": count(1), "not_in_image": count(0)})
+    );
+    let occluded = annotations.iter().filter(|a| a["area"].as_u64() < a["amodal_area"].as_u64()).count();
+    assert!(occluded > 0);
+    assert_eq!((&g["amodal"]["instances"], &g["amodal"]["occluded"]), (&json!(annotations.len()), &json!(occluded)));
+    assert_eq!((&g["poses"], &g["boxes_3d"]), (&json!(annotations.len()), &json!(annotations.len())));
+    assert_eq!(g["images_with_camera"], coco["images"].as_array().unwrap().len());
+
+    let html = root.join("preview.html");
+    stdout_of(&["dataset", "preview", set.to_str().unwrap(), "--out", html.to_str().unwrap(), "--count", "2"]);
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.contains("value=\"keypoints\"") && page.contains("value=\"amodal\""), "the overlays' switches");
+    let images = coco["images"].as_array().unwrap();
+    let (keypoint_layers, amodal_layers) = (layer_pngs(&page, "keypoints"), layer_pngs(&page, "amodal"));
+    assert_eq!((keypoint_layers.len(), amodal_layers.len()), (2, 2));
+    for (image, (points, outlines)) in images.iter().zip(keypoint_layers.iter().zip(&amodal_layers)) {
+        let (w, points) = rgba(points);
+        let (_, outlines) = rgba(outlines);
+        for a in annotations.iter().filter(|a| a["image_id"] == image["id"]) {
+            // A marker at every labelled keypoint: its centre drawn, filled (seen) or not (hidden).
+            for p in a["keypoints"].as_array().unwrap().chunks(3) {
+                let (x, y, v) = (
+                    p[0].as_f64().unwrap().round() as usize,
+                    p[1].as_f64().unwrap().round() as usize,
+                    p[2].as_u64().unwrap(),
+                );
+                if v > 0 && x + 2 < w && y + 2 < points.len() / w && x >= 2 && y >= 2 {
+                    assert_eq!(points[(y + 2) * w + x][3], 255, "{a}: the marker's ring at ({x}, {y})");
+                }
+            }
+        }
+        let union: Vec<bool> = annotations
+            .iter()
+            .filter(|a| a["image_id"] == image["id"])
+            .map(|a| {
+                Rle::from_coco_string(
+                    a["amodal_segmentation"]["counts"].as_str().unwrap(),
+                    image["height"].as_u64().unwrap() as u32,
+                    w as u32,
+                )
+                .unwrap()
+                .to_mask()
+            })
+            .fold(vec![false; outlines.len()], |u, m| u.iter().zip(m).map(|(a, b)| *a || b).collect());
+        let drawn: Vec<usize> = (0..outlines.len()).filter(|&p| outlines[p][3] != 0).collect();
+        assert!(!drawn.is_empty() && drawn.iter().all(|&p| union[p]), "amodal outlines off their masks");
+    }
+}

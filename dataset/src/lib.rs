@@ -15,6 +15,7 @@ mod job;
 mod merge;
 mod plan;
 mod preview;
+mod preview_geometry;
 mod preview_page;
 mod regions;
 mod render_only;
@@ -22,6 +23,7 @@ mod run;
 mod scenes;
 mod settings;
 mod stats;
+mod stats_geometry;
 mod stop;
 
 pub use controls::{control_file, LabelControls};

@@ -2,10 +2,12 @@
 //! instance outlines drawn over them (one colour per instance; with several categories, one
 //! colour per category and a legend), switchable to the depth, the control image and the init
 //! image, each captioned with its seed, prompt and instance count; and a contact sheet PNG of
-//! the same images with their outlines.
+//! the same images with their outlines. Where the set has them, amodal outlines and keypoints
+//! are layers of their own, drawn over whichever picture shows.
 
 use super::canvas::Canvas;
 use super::export::{FinishedSet, SetImage, SplitFractions};
+use super::preview_geometry::{amodal_overlay, keypoint_overlay, Overlay};
 use super::preview_page::page;
 use crate::error::{Error, Result};
 use serde_json::Value;
@@ -76,7 +78,9 @@ pub fn preview(
         progress(k + 1, n);
     }
     let title = format!("{} · {} of {} images", dir.display(), n, set.images.len());
-    write_atomic(html, page(&title, &categories.legend_html(), &figures, &kinds).as_bytes())?;
+    let overlays: Vec<&str> =
+        ["amodal", "keypoints"].into_iter().filter(|class| figures.contains(&format!("class=\"{class}\""))).collect();
+    write_atomic(html, page(&title, &categories.legend_html(), &figures, &kinds, &overlays).as_bytes())?;
     let sheet_path = html.with_extension("png");
     write_atomic(&sheet_path, &sheet.png())?;
     Ok(Preview { html: html.to_path_buf(), sheet: sheet_path, images: n })
@@ -89,6 +93,8 @@ struct Categories {
     colors: std::collections::BTreeMap<u64, [u8; 3]>,
     /// Name and colour of each category, in the set's order.
     legend: Vec<(String, [u8; 3])>,
+    /// Category id → its keypoints' skeleton (pairs numbered from 1).
+    skeletons: std::collections::BTreeMap<u64, Vec<[usize; 2]>>,
 }
 
 impl Categories {
@@ -96,12 +102,15 @@ impl Categories {
         let listed = set.categories.as_array().cloned().unwrap_or_default();
         let mut colors = std::collections::BTreeMap::new();
         let mut legend = Vec::new();
+        let mut skeletons = std::collections::BTreeMap::new();
         for (k, c) in listed.iter().enumerate() {
             let color = category_color(k);
             colors.insert(c["id"].as_u64().unwrap_or(0), color);
             legend.push((c["name"].as_str().unwrap_or("?").to_string(), color));
+            let skeleton = serde_json::from_value(c["skeleton"].clone()).unwrap_or_default();
+            skeletons.insert(c["id"].as_u64().unwrap_or(0), skeleton);
         }
-        Categories { colors, legend }
+        Categories { colors, legend, skeletons }
     }
 
     fn by_category(&self) -> bool {
@@ -160,6 +169,9 @@ struct Layers {
     init: Option<RgbImage>,
     /// The other controls (`--controls`), by kind.
     controls: Vec<(String, RgbImage)>,
+    /// The amodal outlines and the keypoints, where the image has them.
+    amodal: Option<Overlay>,
+    keypoints: Option<Overlay>,
 }
 
 impl Layers {
@@ -182,7 +194,16 @@ impl Layers {
             .filter_map(|(kind, file)| Some((kind, dir.join(file.as_str()?))))
             .map(|(kind, path)| Ok((kind, read_image(&path)?)))
             .collect::<Result<_>>()?;
+        let (w, h) = (image_rgb.width, image_rgb.height);
+        let color = |a: &Value| {
+            let id = a["mask_id"].as_u64().unwrap_or(0) as usize;
+            palette.get(id).copied().unwrap_or([255, 255, 255])
+        };
+        let skeleton =
+            |a: &Value| categories.skeletons.get(&a["category_id"].as_u64().unwrap_or(0)).cloned().unwrap_or_default();
         Ok(Layers {
+            amodal: amodal_overlay(image, w, h, color),
+            keypoints: keypoint_overlay(image, w, h, skeleton, color),
             depth,
             control: picture("control_file")?,
             init: picture("init_file")?,
@@ -209,6 +230,8 @@ impl Layers {
             control: self.control.as_ref().map(|c| box_down(c, f)),
             init: self.init.as_ref().map(|i| box_down(i, f)),
             controls: self.controls.iter().map(|(kind, c)| (kind.clone(), box_down(c, f))).collect(),
+            amodal: self.amodal.as_ref().map(|o| o.pooled(f)),
+            keypoints: self.keypoints.as_ref().map(|o| o.pooled(f)),
         }
     }
 
@@ -372,6 +395,11 @@ fn figure(image: &SetImage, layers: &Layers) -> String {
         html += &base(&format!("control-{kind}"), &png(picture));
     }
     html += &base("outline", &layers.outlines_png());
+    for (class, overlay) in [("amodal", &layers.amodal), ("keypoints", &layers.keypoints)] {
+        if let Some(o) = overlay {
+            html += &base(class, &rgba_png(o.width as u32, o.height as u32, &o.rgba));
+        }
+    }
     let mut caption = format!("#{} · {} instances · scene {}", e["id"], image.annotations.len(), e["scene_seed"]);
     if let Some(seed) = e["seed"].as_u64() {
         let _ = write!(caption, " · seed {seed}");

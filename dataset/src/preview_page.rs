@@ -2,8 +2,23 @@
 //! legend, and the script that switches layers (also from the page's #hash).
 
 /// The page around `figures`, with a layer switch for the image, the depth, the depth control,
-/// the init image and each of `controls` (the kinds of `--controls` the figures carry).
-pub fn page(title: &str, legend: &str, figures: &str, controls: &[String]) -> String {
+/// the init image and each of `controls` (the kinds of `--controls` the figures carry), and a
+/// checkbox for the instance outlines and each of `overlays` (amodal outlines, keypoints).
+pub fn page(title: &str, legend: &str, figures: &str, controls: &[String], overlays: &[&str]) -> String {
+    let overlay_css: String = overlays
+        .iter()
+        .map(|o| format!("\n.stack img.{o} {{ position: absolute; top: 0; left: 0; }}\nbody.{o} .stack img.{o} {{ display: block; }}"))
+        .collect();
+    let overlay_boxes: String = overlays
+        .iter()
+        .map(|o| {
+            format!(
+                "\n<label><input type=\"checkbox\" class=\"overlay\" value=\"{o}\" checked> {}</label>",
+                overlay_label(o)
+            )
+        })
+        .collect();
+    let body_classes: String = overlays.iter().map(|o| format!(" {o}")).collect();
     let layer_css: String =
         controls.iter().map(|k| format!(",\nbody[data-layer=\"control-{k}\"] img.control-{k}")).collect();
     let layer_radios: String = controls
@@ -22,7 +37,7 @@ figure {{ margin: 0; }}
 .stack {{ position: relative; }}
 .stack img {{ display: none; width: 100%; image-rendering: pixelated; }}
 .stack img.outline {{ position: absolute; top: 0; left: 0; }}
-body.outlines .stack img.outline {{ display: block; }}
+body.outlines .stack img.outline {{ display: block; }}{overlay_css}
 body[data-layer="image"] img.image, body[data-layer="depth"] img.depth,
 body[data-layer="control"] img.control, body[data-layer="init"] img.init{layer_css} {{ display: block; }}
 figcaption {{ margin-top: 4px; }}
@@ -31,9 +46,9 @@ label {{ margin-right: 12px; }}
 .legend span {{ margin-right: 14px; }}
 .legend i {{ display: inline-block; width: 12px; height: 12px; margin-right: 4px; vertical-align: -1px; }}
 </style></head>
-<body class="outlines" data-layer="image">
+<body class="outlines{body_classes}" data-layer="image">
 <header><strong>{title}</strong><br>
-<label><input type="checkbox" id="outlines" checked> instance outlines</label>
+<label><input type="checkbox" id="outlines" checked> instance outlines</label>{overlay_boxes}
 <label><input type="radio" name="layer" value="image" checked> image</label>
 <label><input type="radio" name="layer" value="depth"> depth</label>
 <label><input type="radio" name="layer" value="control"> control</label>
@@ -50,6 +65,7 @@ function show(layer) {{
 }}
 for (const r of document.querySelectorAll('input[name=layer]')) r.onchange = () => show(r.value);
 document.getElementById('outlines').onchange = e => document.body.classList.toggle('outlines', e.target.checked);
+for (const c of document.querySelectorAll('input.overlay')) c.onchange = () => document.body.classList.toggle(c.value, c.checked);
 const hash = location.hash.slice(1).split(',');
 if (['image', 'depth', 'control', 'init'{layer_names}].includes(hash[0])) show(hash[0]);
 if (hash.includes('nooutlines')) {{ document.body.classList.remove('outlines'); document.getElementById('outlines').checked = false; }}
@@ -57,4 +73,12 @@ if (hash.includes('nooutlines')) {{ document.body.classList.remove('outlines'); 
 </body></html>
 "#
     )
+}
+
+/// What an overlay's checkbox says.
+fn overlay_label(overlay: &str) -> &str {
+    match overlay {
+        "amodal" => "amodal outlines",
+        other => other,
+    }
 }

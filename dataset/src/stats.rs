@@ -1,10 +1,12 @@
 //! `vkdiff dataset stats`: what a finished set holds (images, instances per image, mask areas
 //! by COCO size class, instances cut by the image edge, each category's instances, images and
-//! median area, the seeds, prompts and style sets used, the choices prompt templates made), as
+//! median area, the seeds, prompts and style sets used, the choices prompt templates made, the
+//! geometric labels), as
 //! JSON and as the charts people look at first.
 
 use super::canvas::bar_chart;
 use super::export::{FinishedSet, SplitFractions};
+use super::stats_geometry::geometry;
 use crate::error::Result;
 use serde_json::{json, Value};
 use std::collections::{BTreeMap, BTreeSet};
@@ -99,6 +101,7 @@ pub fn stats(dir: &Path) -> Result<Value> {
         "prompt_templates": tally("prompt_template"),
         "prompt_choices": choices(&set),
         "style_sets": tally("ip_images"),
+        "geometry": geometry(&set),
     }))
 }
 
