@@ -101,6 +101,34 @@ fn bad_scenes_are_refused_in_one_line_naming_them() {
             "category id 1 is `apple` in orchard-a and `pear` in orchard-b",
         ),
         (
+            "camera-size",
+            Box::new(|d: &Path| {
+                let k = [[100.0, 0.0, 79.5], [0.0, 100.0, 63.5], [0.0, 0.0, 1.0]];
+                let camera = serde_json::json!({"K": k, "width": 161, "height": 128});
+                std::fs::write(d.join("orchard-b/camera.json"), camera.to_string()).unwrap();
+            }),
+            "scene orchard-b: camera.json: 161×128, the depth is 160×128",
+        ),
+        (
+            "camera-skew",
+            Box::new(|d: &Path| {
+                let k = [[100.0, 3.0, 79.5], [0.0, 100.0, 63.5], [0.0, 0.0, 1.0]];
+                let camera = serde_json::json!({"K": k, "width": 160, "height": 128});
+                std::fs::write(d.join("orchard-b/camera.json"), camera.to_string()).unwrap();
+            }),
+            "scene orchard-b: camera.json: K [[100.0, 3.0, 79.5]",
+        ),
+        (
+            "keypoint-visibility",
+            Box::new(|d: &Path| std::fs::write(d.join("orchard-a/keypoints.json"), r#"{"5": [3, 4, 7]}"#).unwrap()),
+            "scene orchard-a: keypoints.json: instance 5: [3.0, 4.0, 7.0] is not x, y and a visibility of 0, 1 or 2",
+        ),
+        (
+            "keypoint-count",
+            Box::new(|d: &Path| std::fs::write(d.join("orchard-a/keypoints.json"), r#"{"5": [3, 4, 2]}"#).unwrap()),
+            "scene orchard-a: keypoints.json: instance 5: 1 keypoints; its category `apple` names 0 in categories.json",
+        ),
+        (
             "empty",
             Box::new(|d: &Path| std::fs::remove_dir_all(d).and_then(|_| std::fs::create_dir_all(d)).unwrap()),
             "holds no scene folders",
@@ -197,6 +225,24 @@ fn broken_bop_scenes_are_refused_in_one_line_naming_the_file() {
         let line = refusal(&copy, &[]);
         assert!(line.starts_with("error: --scenes") && line.contains(needle), "{fault}: {line}");
     }
+    // A scene with mask/ missing one amodal mask; a dataset whose models_info.json is not BOP's.
+    let copy_of = |from: &Path, name: &str| {
+        let copy = scratch(name).join("dataset");
+        for entry in walk(from) {
+            let to = copy.join(entry.strip_prefix(from).unwrap());
+            std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+            std::fs::copy(&entry, to).unwrap();
+        }
+        copy
+    };
+    let amodal = copy_of(&scenes("bop-dataset"), "bop-no-amodal");
+    std::fs::remove_file(amodal.join("train_pbr/000000/mask/000001_000003.png")).unwrap();
+    let line = refusal(&amodal.join("train_pbr"), &[]);
+    assert!(line.contains("scene 000000/000001: mask/000001_000003.png: missing"), "{line}");
+    let models = copy_of(&scenes("bop-dataset"), "bop-bad-models");
+    std::fs::write(models.join("models/models_info.json"), r#"{"1": {"min_x": 0, "size_x": 1}}"#).unwrap();
+    let line = refusal(&models.join("train_pbr"), &[]);
+    assert!(line.contains("models_info.json: not BOP's models_info: missing field `min_y`"), "{line}");
     // A folder holding two layouts, and one holding none, name what was looked for.
     let mixed = scratch("bop-mixed").join("scenes");
     std::fs::create_dir_all(mixed.join("000000")).unwrap();

@@ -16,7 +16,7 @@
 //! keypoints.json   optional: instance → its keypoints, COCO's flat x, y, v list
 //! ```
 
-use crate::folder_geometry::{read_camera, read_keypoints};
+use crate::folder_geometry::{check_keypoint_counts, read_camera, read_keypoints};
 use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::{read_categories, CategoryMap, RawScene};
 use crate::SceneError;
@@ -89,12 +89,16 @@ impl SceneFormat for SceneFolders {
         if normals.is_file() {
             same_size(&normals, normals_exr_size(&normals).map_err(SceneError::from_file)?, (width, height))?;
         }
-        let (categories, guides) = match self.categories(dir)? {
-            Some((categories, _, guides)) => (categories, guides),
-            None => (vec![self.default.clone()], Default::default()),
+        let (categories, instances, guides) = match self.categories(dir)? {
+            Some(map) => map,
+            None => (vec![self.default.clone()], Default::default(), Default::default()),
         };
         read_camera(dir, (width, height))?;
-        read_keypoints(dir)?;
+        let category_of = |id: u32| {
+            let category_id = instances.get(&id).copied().unwrap_or(self.default.id);
+            categories.iter().find(|c| c.id == category_id)
+        };
+        check_keypoint_counts(dir, &read_keypoints(dir)?, category_of)?;
         Ok(SceneIndex { width: width as u32, height: height as u32, prompt: read_prompt(dir)?, categories, guides })
     }
 

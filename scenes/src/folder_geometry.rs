@@ -8,6 +8,7 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
 use vkdiff_render::camera::{Camera, Pose};
+use vkdiff_render::coco::Category;
 use vkdiff_render::geometry::Keypoint;
 
 pub const CAMERA: &str = "camera.json";
@@ -79,4 +80,22 @@ pub fn read_keypoints(dir: &Path) -> Result<BTreeMap<u32, Vec<Keypoint>>, SceneE
             Ok((id, points))
         })
         .collect()
+}
+
+/// Refuses keypoints listed for an instance other than its category names (by `category_of`).
+pub fn check_keypoint_counts<'a>(
+    dir: &Path,
+    keypoints: &BTreeMap<u32, Vec<Keypoint>>,
+    category_of: impl Fn(u32) -> Option<&'a Category>,
+) -> Result<(), SceneError> {
+    for (&id, points) in keypoints {
+        let names = category_of(id).map_or(0, |c| c.keypoints.len());
+        if points.len() != names {
+            let category = category_of(id).map_or("no category".to_string(), |c| format!("category `{}`", c.name));
+            let why =
+                format!("instance {id}: {} keypoints; its {category} names {names} in categories.json", points.len());
+            return Err(SceneError::file(&dir.join(KEYPOINTS), why));
+        }
+    }
+    Ok(())
 }
