@@ -6,17 +6,23 @@ use std::path::PathBuf;
 use vkdiff_args::Progress;
 use vkdiff_dataset::{export, ExportFormat, ExportOptions, Exported, Split, SplitFractions};
 
-/// Write a finished set in a trainer's layout (COCO splits, YOLO, WebDataset, Hugging Face).
+/// Write a finished set in a trainer's layout (COCO splits, YOLO, YOLO pose, WebDataset, Hugging
+/// Face, BOP).
 ///
 /// The set must be merged (annotations.json written). Splits are by scene: every crop of a scene
 /// goes to the same split, and a scene's split does not change when the set grows. DIR is only
-/// read; OUT appears whole or not at all.
+/// read; OUT appears whole or not at all. The geometric labels (keypoints, poses, 3D boxes,
+/// amodal masks, cameras) go into coco as annotations.json has them, into yolo-pose and into bop.
 #[derive(Args, Debug)]
 pub struct ExportArgs {
     /// The dataset folder.
     dir: PathBuf,
     /// coco: train/val/test.json beside the set's files; yolo: Ultralytics segmentation
-    /// (images/, labels/, data.yaml); webdataset: tar shards; hf: a Hugging Face image folder.
+    /// (images/, labels/, data.yaml); yolo-pose: Ultralytics pose (boxes and keypoints,
+    /// kpt_shape; no flip_idx, so Ultralytics turns flips off); webdataset: tar shards; hf: a
+    /// Hugging Face image folder; bop: BOP scenes ({split}/{scene}/ with rgb/, depth/,
+    /// mask_visib/, mask/ and scene_camera, scene_gt, scene_gt_info JSON; models/models_info.json),
+    /// every instance needing a pose.
     #[arg(long, value_enum)]
     format: FormatArg,
     /// The folder to write (new, or replaced with --force).
@@ -46,16 +52,20 @@ pub struct ExportArgs {
 enum FormatArg {
     Coco,
     Yolo,
+    YoloPose,
     Webdataset,
     Hf,
+    Bop,
 }
 
 pub fn run(args: &ExportArgs) -> Result<()> {
     let format = match args.format {
         FormatArg::Coco => ExportFormat::Coco,
         FormatArg::Yolo => ExportFormat::Yolo,
+        FormatArg::YoloPose => ExportFormat::YoloPose,
         FormatArg::Webdataset => ExportFormat::WebDataset,
         FormatArg::Hf => ExportFormat::Hf,
+        FormatArg::Bop => ExportFormat::Bop,
     };
     let options = ExportOptions {
         format,
@@ -100,6 +110,24 @@ fn summary(args: &ExportArgs, e: &Exported) -> String {
     }
     if e.shards > 0 {
         line += &format!("; {} shards", e.shards);
+    }
+    if let Some(k) = e.keypoints {
+        line += &format!("; {} per label line (kpt_shape [{k}, 3])", count(k as u64, "keypoint"));
+    }
+    if let Some(bop) = e.bop {
+        line += &format!("; {}", count(bop.scene_folders, "scene folder"));
+        if bop.without_amodal > 0 {
+            line += &format!(
+                "; {} without an amodal mask: their silhouette in scene_gt_info.json is the visible mask",
+                count(bop.without_amodal, "instance")
+            );
+        }
+        if bop.coarse_depth > 0 {
+            line += &format!(
+                "; {} too deep for 0.1 mm depth steps: stored in 1 or 10 mm",
+                count(bop.coarse_depth, "image")
+            );
+        }
     }
     line
 }

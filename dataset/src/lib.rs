@@ -29,7 +29,7 @@ mod stop;
 pub use controls::{control_file, LabelControls};
 pub use disk::{parse_size, size, DiskGuard, DEFAULT_MIN_FREE};
 pub use error::{Error, Result};
-pub use export::{export, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions};
+pub use export::{export, BopWritten, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions};
 pub use folder::{Dataset, ImageRecord, Pending, VersionChange, ANNOTATIONS, MANIFEST};
 pub use job::{DatasetEvent, DatasetJob, Finish, ShardRequest};
 pub use merge::{merge, Merged};

@@ -26,3 +26,8 @@ pub fn gray16(width: u32, height: u32, samples: &[u16]) -> Vec<u8> {
 pub fn rgb8(width: u32, height: u32, rgb: &[u8]) -> Vec<u8> {
     encode(width, height, ColorType::Rgb, BitDepth::Eight, rgb)
 }
+
+/// Single-channel 8-bit PNG.
+pub fn gray8(width: u32, height: u32, samples: &[u8]) -> Vec<u8> {
+    encode(width, height, ColorType::Grayscale, BitDepth::Eight, samples)
+}

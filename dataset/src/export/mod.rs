@@ -1,8 +1,11 @@
 //! `vkdiff dataset export`: a finished dataset folder in the layout a trainer reads (COCO with
-//! splits, Ultralytics YOLO segmentation, WebDataset shards, a Hugging Face image folder), split
-//! by scene. The dataset folder is only read; the export is built in a hidden sibling of OUT and
+//! splits, Ultralytics YOLO segmentation or pose, WebDataset shards, a Hugging Face image folder,
+//! BOP scenes), split by scene. The dataset folder is only read; the export is built in a hidden sibling of OUT and
 //! renamed into place whole, so a killed export leaves no folder that looks finished.
 
+mod bop;
+mod bop_image;
+mod bop_json;
 mod coco;
 mod hf;
 mod hf_card;
@@ -12,7 +15,9 @@ mod splits;
 mod staging;
 mod webdataset;
 mod yolo;
+mod yolo_pose;
 
+pub use bop::BopWritten;
 pub use splits::{Split, SplitFractions};
 
 use crate::error::{Error, Result};
@@ -28,10 +33,14 @@ pub enum ExportFormat {
     Coco,
     /// Ultralytics' segmentation layout with `data.yaml`.
     Yolo,
+    /// Ultralytics' pose layout: boxes and keypoints, `kpt_shape` in `data.yaml`.
+    YoloPose,
     /// Tar shards of samples (`KEY.png`, `KEY.json`, `KEY.mask.png`, `KEY.depth.exr`).
     WebDataset,
     /// A folder `datasets.load_dataset("imagefolder", data_dir=OUT)` loads.
     Hf,
+    /// BOP scenes (`{split}/{scene}/`) with the images in `rgb/`, poses, depth and masks.
+    Bop,
 }
 
 pub struct ExportOptions {
@@ -59,6 +68,9 @@ pub struct Exported {
     pub polygons: Option<PolygonFit>,
     /// WebDataset: tar files written.
     pub shards: usize,
+    /// YOLO pose: keypoints per label line.
+    pub keypoints: Option<usize>,
+    pub bop: Option<BopWritten>,
 }
 
 /// IoU of each instance's polygon with its mask, over every instance exported.
@@ -83,6 +95,10 @@ pub fn export(
     }
     check_out(dir, out, options.force)?;
     let set = FinishedSet::read(dir, &options.splits)?;
+    // What the set's labels refuse is refused before anything is written.
+    let models = (options.format == ExportFormat::Bop).then(|| bop::checked_models(&set)).transpose()?;
+    let most_keypoints =
+        (options.format == ExportFormat::YoloPose).then(|| yolo_pose::keypoints_per_line(&set)).transpose()?;
     let mut staging = Staging::beside(out, options.copy)?;
     let mut exported = Exported::default();
     for split in set.splits() {
@@ -99,10 +115,17 @@ pub fn export(
     let written = match options.format {
         ExportFormat::Coco => coco::write(&set, &mut staging, progress),
         ExportFormat::Yolo => yolo::write(&set, &mut staging, progress).map(|fit| exported.polygons = Some(fit)),
+        ExportFormat::YoloPose => {
+            let most = most_keypoints.unwrap_or_default();
+            yolo_pose::write(&set, most, &mut staging, progress).map(|_| exported.keypoints = Some(most))
+        }
         ExportFormat::WebDataset => {
             webdataset::write(&set, &mut staging, options.shard_bytes, progress).map(|n| exported.shards = n)
         }
         ExportFormat::Hf => hf::write(&set, &mut staging, progress),
+        ExportFormat::Bop => {
+            bop::write(&set, &models.unwrap_or_default(), &mut staging, progress).map(|b| exported.bop = Some(b))
+        }
     };
     if let Err(e) = written {
         staging.abandon();

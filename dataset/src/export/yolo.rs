@@ -17,9 +17,46 @@ use vkdiff_render::rle::Rle;
 const MIN_IOU: f64 = 0.95;
 
 pub fn write(set: &FinishedSet, staging: &mut Staging, progress: &mut dyn FnMut(usize, usize)) -> Result<PolygonFit> {
+    let mut fit = PolygonFit { instances: 0, min_iou: 1.0, mean_iou: 0.0, points: 0 };
+    let mut line = |annotation: &Value, class: usize, width: f64, height: f64| -> Result<Option<String>> {
+        let (polygon, iou) = mask_window(annotation)?.polygon(MIN_IOU);
+        if polygon.is_empty() {
+            return Ok(None);
+        }
+        fit.instances += 1;
+        fit.points += polygon.len() as u64;
+        fit.min_iou = fit.min_iou.min(iou);
+        fit.mean_iou += iou;
+        let mut text = format!("{class}");
+        for [x, y] in polygon {
+            write!(text, " {} {}", coordinate(x / width), coordinate(y / height)).expect("strings take writes");
+        }
+        Ok(Some(text))
+    };
+    write_layout(set, staging, progress, &Layout { task: "segmentation", extra_yaml: String::new() }, &mut line)?;
+    fit.mean_iou /= fit.instances.max(1) as f64;
+    Ok(fit)
+}
+
+/// What a YOLO layout's data.yaml says beyond the splits and names.
+pub struct Layout {
+    /// The labels' kind, for the file's heading.
+    pub task: &'static str,
+    /// More keys (pose: kpt_shape), each line ending in a newline.
+    pub extra_yaml: String,
+}
+
+/// Writes Ultralytics' folders and data.yaml: each image linked, each label file a `line` per
+/// annotation (given the annotation, its class and the image's width and height; None skips it).
+pub fn write_layout(
+    set: &FinishedSet,
+    staging: &mut Staging,
+    progress: &mut dyn FnMut(usize, usize),
+    layout: &Layout,
+    line: &mut dyn FnMut(&Value, usize, f64, f64) -> Result<Option<String>>,
+) -> Result<()> {
     let classes: Vec<u64> =
         set.categories.as_array().map_or(Vec::new(), |c| c.iter().filter_map(|c| c["id"].as_u64()).collect());
-    let mut fit = PolygonFit { instances: 0, min_iou: 1.0, mean_iou: 0.0, points: 0 };
     for split in set.splits() {
         staging.folder(&format!("images/{}", split.name()))?;
         staging.folder(&format!("labels/{}", split.name()))?;
@@ -39,38 +76,28 @@ pub fn write(set: &FinishedSet, staging: &mut Staging, progress: &mut dyn FnMut(
                         annotation["id"], annotation["category_id"]
                     ))
                 })?;
-            let (polygon, iou) = mask_window(annotation)?.polygon(MIN_IOU);
-            if polygon.is_empty() {
-                continue;
+            if let Some(text) = line(annotation, class, width, height)? {
+                labels.push_str(&text);
+                labels.push('\n');
             }
-            fit.instances += 1;
-            fit.points += polygon.len() as u64;
-            fit.min_iou = fit.min_iou.min(iou);
-            fit.mean_iou += iou;
-            write!(labels, "{class}").expect("strings take writes");
-            for [x, y] in polygon {
-                write!(labels, " {} {}", coordinate(x / width), coordinate(y / height)).expect("strings take writes");
-            }
-            labels.push('\n');
         }
         staging.write(&format!("labels/{split}/{}.txt", stem(name)), labels.as_bytes())?;
         progress(done + 1, set.images.len());
     }
-    fit.mean_iou /= fit.instances.max(1) as f64;
-    staging.write("data.yaml", data_yaml(set).as_bytes())?;
-    Ok(fit)
+    staging.write("data.yaml", data_yaml(set, layout).as_bytes())
 }
 
 /// At most 6 decimals, no trailing zeros, within [0, 1].
-fn coordinate(v: f64) -> String {
+pub fn coordinate(v: f64) -> String {
     let text = format!("{:.6}", v.clamp(0.0, 1.0));
     text.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
-fn data_yaml(set: &FinishedSet) -> String {
+fn data_yaml(set: &FinishedSet, layout: &Layout) -> String {
     let mut yaml = format!(
-        "# YOLO segmentation labels exported by vkdiff {} from a vkdiff dataset, split by scene\n\
+        "# YOLO {} labels exported by vkdiff {} from a vkdiff dataset, split by scene\n\
          # (val fraction {}, test fraction {}, seed {}). Ultralytics takes this file's folder as the root.\n",
+        layout.task,
         vkdiff_setting::version(),
         set.fractions.val,
         set.fractions.test,
@@ -90,7 +117,7 @@ fn data_yaml(set: &FinishedSet) -> String {
     for (k, category) in set.categories.as_array().into_iter().flatten().enumerate() {
         let _ = writeln!(yaml, "  {k}: {}", serde_json::to_string(&category["name"]).unwrap_or_default());
     }
-    yaml
+    yaml + &layout.extra_yaml
 }
 
 /// The annotation's RLE mask over its bounding box.
