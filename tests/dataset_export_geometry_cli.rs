@@ -1,6 +1,7 @@
 //! The geometric labels through `vkdiff dataset export`, on render-only sets made from the BOP
-//! dataset fixture (tests/fixtures/scenes/bop-dataset: poses, 3D boxes and so box keypoints,
-//! amodal masks, cameras with world poses), whole frames and crops: the BOP export read back by
+//! fixtures (tests/fixtures/scenes/bop-dataset: poses, 3D boxes and so box keypoints, amodal
+//! masks, cameras with world poses; tests/fixtures/scenes/bop: named categories, a scene without
+//! world poses, crops without instances), whole frames and crops: the BOP export read back by
 //! vkdiff's own BOP reader (`--scenes`) gives the set again, the COCO export keeps every label,
 //! and each YOLO pose line holds its instance's box and keypoints. A set without poses or
 //! keypoints is refused in one line.
@@ -22,9 +23,10 @@ fn read_json(path: &Path) -> Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// A render-only set of the fixture's BOP split, with `extra` flags (crops).
-fn bop_set(dir: &Path, extra: &[&str]) -> PathBuf {
-    let split = vkdiff_testkit::fixture("scenes/bop-dataset/train_pbr");
+/// A render-only set of a BOP fixture's split (`scenes/<split>` of the fixtures), with `extra`
+/// flags (crops).
+fn bop_set(dir: &Path, split: &str, extra: &[&str]) -> PathBuf {
+    let split = vkdiff_testkit::fixture(&format!("scenes/{split}"));
     let set = dir.join("set");
     let args =
         [&["dataset", "--render-only", "--scenes", split.to_str().unwrap(), "--out", set.to_str().unwrap()], extra];
@@ -42,6 +44,7 @@ fn numbers(v: &Value) -> Vec<f64> {
         Value::Array(items) => items.iter().flat_map(numbers).collect(),
         Value::Object(map) => map.values().flat_map(numbers).collect(),
         Value::Number(n) => vec![n.as_f64().unwrap()],
+        Value::Null => Vec::new(),
         other => panic!("not numbers: {other}"),
     }
 }
@@ -158,11 +161,119 @@ fn assert_bop_round_trip(dir: &Path, set: &Path) {
 #[test]
 fn bop_exports_of_whole_frames_and_crops_read_back_as_the_set() {
     let dir = scratch("export-bop-frames");
-    assert_bop_round_trip(&dir, &bop_set(&dir, &[]));
+    assert_bop_round_trip(&dir, &bop_set(&dir, "bop-dataset/train_pbr", &[]));
     let dir = scratch("export-bop-crops");
-    let set = bop_set(&dir, &["--crops", "3", "--crop-size", "48", "--seed", "3"]);
+    let set = bop_set(&dir, "bop-dataset/train_pbr", &["--crops", "3", "--crop-size", "48", "--seed", "3"]);
     let cut = read_json(&set.join("annotations.json"));
     let cut_amodal = cut["annotations"].as_array().unwrap().iter().filter(|a| a["amodal_area"] != a["area"]).count();
     assert!(cut_amodal > 0, "some instance is hidden in part: its amodal mask is more than its visible one");
     assert_bop_round_trip(&dir, &set);
+}
+
+/// Categories named by categories.json, cameras without a world pose, and crops without any
+/// instance (an empty scene_gt list) come back too.
+#[test]
+fn bop_exports_without_world_poses_or_instances_read_back_as_the_set() {
+    let dir = scratch("export-bop-split");
+    let set = bop_set(&dir, "bop", &["--crops", "4", "--crop-size", "40", "--seed", "5"]);
+    let coco = read_json(&set.join("annotations.json"));
+    let images = coco["images"].as_array().unwrap();
+    assert!(images.iter().any(|i| i["camera"]["T_world_camera_opencv"].is_null()), "a camera without a pose");
+    let annotated = |i: &&Value| coco["annotations"].as_array().unwrap().iter().any(|a| a["image_id"] == i["id"]);
+    assert!(!images.iter().all(|i| annotated(&i)), "a crop without instances");
+    assert_eq!(coco["categories"][0]["name"], "duck");
+    assert_bop_round_trip(&dir, &set);
+}
+
+/// The COCO split files hold the set's image entries (cameras too), annotations (keypoints,
+/// poses, 3D boxes, amodal masks and all) and categories (keypoint names, skeletons) unchanged.
+#[test]
+fn coco_exports_keep_every_geometric_label() {
+    let dir = scratch("export-coco-geometry");
+    let set = bop_set(&dir, "bop-dataset/train_pbr", &["--crops", "2", "--crop-size", "48"]);
+    let out = dir.join("coco");
+    export(&set, &out, "coco", &["--val-fraction", "0.5"]);
+    let original = read_json(&set.join("annotations.json"));
+    let (mut images, mut annotations) = (Vec::new(), Vec::new());
+    for split in ["train", "val"] {
+        let file = read_json(&out.join(format!("{split}.json")));
+        assert_eq!(file["categories"], original["categories"]);
+        assert!(file["categories"][0]["keypoints"].as_array().unwrap().len() == 9, "box keypoints named");
+        images.extend(file["images"].as_array().unwrap().iter().cloned());
+        annotations.extend(file["annotations"].as_array().unwrap().iter().cloned());
+    }
+    let by_id = |list: &[Value]| -> HashMap<u64, Value> {
+        list.iter().map(|v| (v["id"].as_u64().unwrap(), v.clone())).collect()
+    };
+    assert_eq!(by_id(&images), by_id(original["images"].as_array().unwrap()));
+    assert_eq!(by_id(&annotations), by_id(original["annotations"].as_array().unwrap()));
+    let fields = ["keypoints", "num_keypoints", "pose", "bbox_3d", "obj_id", "amodal_segmentation", "amodal_bbox"];
+    assert!(annotations.iter().all(|a| fields.iter().all(|f| !a[f].is_null())), "every label is there");
+    assert!(images.iter().all(|i| i["camera"]["K"].is_array()));
+}
+
+/// Each YOLO pose line: the class, the COCO box as centre and size over the image's sides, then
+/// each keypoint's x and y over the width and height with its visibility (0 0 0 unlabelled);
+/// data.yaml gives kpt_shape and no flip_idx.
+#[test]
+fn yolo_pose_lines_hold_each_box_and_keypoint() {
+    let dir = scratch("export-yolo-pose");
+    let set = bop_set(&dir, "bop-dataset/train_pbr", &["--crops", "3", "--crop-size", "48", "--seed", "3"]);
+    let out = dir.join("yolo-pose");
+    export(&set, &out, "yolo-pose", &["--val-fraction", "0"]);
+    let yaml = std::fs::read_to_string(out.join("data.yaml")).unwrap();
+    assert!(yaml.lines().any(|l| l == "kpt_shape: [9, 3]") && !yaml.contains("flip_idx"), "{yaml}");
+    let coco = read_json(&set.join("annotations.json"));
+    let mut lines = 0;
+    let mut absent = 0;
+    for image in coco["images"].as_array().unwrap() {
+        let stem = image["file_name"].as_str().unwrap().trim_start_matches("images/").trim_end_matches(".png");
+        let (w, h) = (image["width"].as_f64().unwrap(), image["height"].as_f64().unwrap());
+        let text = std::fs::read_to_string(out.join(format!("labels/train/{stem}.txt"))).unwrap();
+        let want: Vec<&Value> =
+            coco["annotations"].as_array().unwrap().iter().filter(|a| a["image_id"] == image["id"]).collect();
+        assert_eq!(text.lines().count(), want.len(), "{stem}: a line per instance");
+        for (line, a) in text.lines().zip(want) {
+            let v: Vec<f64> = line.split(' ').map(|t| t.parse().unwrap()).collect();
+            assert_eq!(v.len(), 5 + 27, "{line}");
+            assert_eq!(v[0], a["category_id"].as_f64().unwrap() - 1.0, "classes in the categories' order");
+            let b = numbers(&a["bbox"]);
+            let box_want = [(b[0] + b[2] / 2.0) / w, (b[1] + b[3] / 2.0) / h, b[2] / w, b[3] / h];
+            assert!(box_want.iter().zip(&v[1..5]).all(|(p, q)| (p - q).abs() <= 5e-7), "{line}");
+            for (p, q) in numbers(&a["keypoints"]).chunks(3).zip(v[5..].chunks(3)) {
+                assert_eq!(p[2], q[2], "{line}");
+                // The set's keypoint, to the line's 6 decimals (and at the edge within its pixel).
+                let (x, y) = (p[0].clamp(0.0, w) / w, p[1].clamp(0.0, h) / h);
+                assert!((x - q[0]).abs() <= 5e-7 && (y - q[1]).abs() <= 5e-7, "{p:?} {q:?}");
+                absent += (q[2] == 0.0) as usize;
+            }
+            lines += 1;
+        }
+    }
+    assert_eq!(lines, coco["annotations"].as_array().unwrap().len());
+    assert!(absent > 0, "some keypoint falls outside its crop");
+}
+
+/// A set whose instances have no pose cannot be BOP gts, nor one without keypoints a pose set:
+/// one line, exit 2, nothing written.
+#[test]
+fn sets_without_poses_or_keypoints_are_refused_in_one_line() {
+    let dir = scratch("export-geometry-refused");
+    let beds = dir.join("beds");
+    let args = ["--render-only", "--count", "1", "--width", "160", "--height", "128", "--out"];
+    run_ok(&[&["dataset"][..], &args, &[beds.to_str().unwrap()]].concat());
+    let out = dir.join("out");
+    for (format, message) in [
+        ("bop", "has no pose: BOP's scene_gt.json needs every instance's cam_R_m2c and cam_t_m2c"),
+        ("yolo-pose", "the set's categories name no keypoints"),
+    ] {
+        let args = ["dataset", "export", beds.to_str().unwrap(), "--format", format, "--out", out.to_str().unwrap()];
+        let result = vkdiff(&args);
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error")).collect();
+        assert_eq!(result.status.code(), Some(2), "{format}: {stderr}");
+        assert!(errors.len() == 1 && errors[0].contains(message), "{format}: {stderr}");
+        let left: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().map(|e| e.file_name()).collect();
+        assert_eq!(left, ["beds"], "{format} wrote {left:?}");
+    }
 }

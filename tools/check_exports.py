@@ -2,17 +2,33 @@
 
     python tools/check_exports.py DATASET_DIR EXPORTS_DIR
 
-EXPORTS_DIR holds `coco/`, `yolo/`, `webdataset/` and `hf/`, each exported from DATASET_DIR
-(`vkdiff dataset export DATASET_DIR --format F --out EXPORTS_DIR/F`). Checks, and prints:
+EXPORTS_DIR holds any of `coco/`, `yolo/`, `yolo-pose/`, `webdataset/`, `hf/` and `bop/`, each
+exported from DATASET_DIR (`vkdiff dataset export DATASET_DIR --format F --out EXPORTS_DIR/F`);
+each one there is checked, and the figures printed:
 - coco: every split file loads in pycocotools, the splits partition the set's images and
-  annotations, and no scene is in two splits;
+  annotations, and no scene is in two splits; `loadAnns` and `loadImgs` give back each
+  annotation and image entry as annotations.json holds it (keypoints, poses, 3D boxes, amodal
+  masks, cameras and all), `loadCats` the categories with their keypoints and skeletons;
 - yolo: Ultralytics' `check_det_dataset` and `YOLODataset` load every split with every label, and
   each polygon rasterised as Ultralytics trains on it (`polygon2mask`: OpenCV's `fillPoly`) covers
-  its instance's COCO mask with IoU >= 0.9, and so does pycocotools' polygon rasterisation\n  (`frPyObjects`) (min and mean reported);
+  its instance's COCO mask with IoU >= 0.9, and so does pycocotools' polygon rasterisation
+  (`frPyObjects`) (min and mean reported);
+- yolo-pose: `YOLODataset(task="pose")` on `check_det_dataset`'s data loads every label; each
+  box is its COCO bbox and each keypoint the set's (x, y to the labels' 6 decimals, v exactly;
+  categories with fewer keypoints padded 0 0 0); built for training with Ultralytics' default
+  hyperparameters it turns fliplr and flipud off itself, as data.yaml has no flip_idx;
 - webdataset: `webdataset.WebDataset` yields every sample with its four files, and `tarfile`
   reads every shard;
 - hf: `datasets.load_dataset(OUT)` loads every split with its objects, `objects.category` a ClassLabel
-  of the set's category names.
+  of the set's category names;
+- bop: read with bop_toolkit's own readers (`bop_toolkit_lib.dataset.bop_scenewise.load_image_data`,
+  `inout`): each JSON file is byte for byte what `inout.save_json` writes of its content; each
+  image's cam_K, world pose, depth (to half a depth step), visible and amodal masks (exactly)
+  and poses are the set's; scene_gt_info.json is what calc_gt_info's formulas (`misc.calc_2d_bbox`)
+  give from those masks and that depth; and each seen or hidden box keypoint of the set is the
+  projection (`misc.project_pts`) of its models_info.json box corner by cam_K and the gt's pose.
+  bop_toolkit is not on the Python package registry: give a checkout of thodan/bop_toolkit as
+  BOP_TOOLKIT (its bop_toolkit_lib needs numpy, scipy, imageio, pypng); OpenEXR reads the depth.
 
 Last run with: ultralytics 8.4.190, webdataset 1.0.2, datasets 5.2.0, pycocotools 2.0, opencv-python 5.0.
 """
@@ -28,6 +44,8 @@ import numpy as np
 from pycocotools import mask as mask_utils
 from pycocotools.coco import COCO
 
+from check_bop_export import check_bop
+
 
 def iou(a, b):
     return (a & b).sum() / max((a | b).sum(), 1)
@@ -36,6 +54,10 @@ def iou(a, b):
 def check_coco(dataset, out):
     full = json.load(open(os.path.join(dataset, "annotations.json")))
     seen_images, seen_annotations, scene_split = set(), 0, {}
+    images = {i["id"]: i for i in full["images"]}
+    annotations = {a["id"]: a for a in full["annotations"]}
+    geometric = ("keypoints", "pose", "bbox_3d", "amodal_segmentation")
+    labelled = {f: 0 for f in geometric}
     for path in sorted(glob.glob(os.path.join(out, "*.json"))):
         split = os.path.basename(path)[:-5]
         coco = COCO(path)
@@ -44,10 +66,19 @@ def check_coco(dataset, out):
             seen_images.add(image["id"])
             assert scene_split.setdefault(image["scene_seed"], split) == split, "a scene in two splits"
             assert os.path.isfile(os.path.join(out, image["file_name"]))
+        # pycocotools' own indexes give each entry back whole, the geometric labels with it.
+        assert coco.loadImgs(coco.getImgIds()) == [images[i] for i in coco.getImgIds()]
+        for a in coco.loadAnns(coco.getAnnIds()):
+            assert a == annotations[a["id"]], a["id"]
+            for f in geometric:
+                labelled[f] += f in a
+        assert coco.loadCats(coco.getCatIds()) == full["categories"]
         seen_annotations += len(coco.dataset["annotations"])
     assert seen_images == {i["id"] for i in full["images"]}
     assert seen_annotations == len(full["annotations"])
-    print(f"coco: {len(seen_images)} images, {seen_annotations} annotations, {len(scene_split)} scenes, splits disjoint")
+    cameras = sum("camera" in i for i in full["images"])
+    print(f"coco: {len(seen_images)} images, {seen_annotations} annotations, {len(scene_split)} scenes, splits disjoint; "
+          f"loadAnns/loadImgs/loadCats give back every entry: annotations with {labelled}, {cameras} image cameras")
 
 
 def check_yolo(dataset, out):
@@ -96,6 +127,52 @@ def check_yolo(dataset, out):
     )
 
 
+def check_yolo_pose(dataset, out):
+    from ultralytics.cfg import get_cfg
+    from ultralytics.data.dataset import YOLODataset
+    from ultralytics.data.utils import check_det_dataset
+
+    data = check_det_dataset(os.path.join(out, "data.yaml"))
+    k_most, dims = data["kpt_shape"]
+    assert dims == 3 and "flip_idx" not in data, data
+    full = json.load(open(os.path.join(dataset, "annotations.json")))
+    class_of = {c["id"]: k for k, c in enumerate(full["categories"])}
+    by_stem = {os.path.splitext(os.path.basename(i["file_name"]))[0]: i for i in full["images"]}
+    annotations = {}
+    for a in full["annotations"]:
+        annotations.setdefault(a["image_id"], []).append(a)
+    loaded, instances, points, worst, worst_box = 0, 0, {0: 0, 1: 0, 2: 0}, 0.0, 0.0
+    for path in dict.fromkeys(data[s] for s in ("train", "val", "test") if s in data):
+        ds = YOLODataset(img_path=path, data=data, task="pose", augment=False)
+        for label in ds.labels:
+            image = by_stem[os.path.splitext(os.path.basename(label["im_file"]))[0]]
+            want, (w, h) = annotations.get(image["id"], []), (image["width"], image["height"])
+            assert [int(c) for c in label["cls"].reshape(-1)] == [class_of[a["category_id"]] for a in want]
+            for box, kpts, a in zip(label["bboxes"], label["keypoints"], want):
+                x, y, bw, bh = a["bbox"]
+                worst_box = max(worst_box, np.abs(box * [w, h, w, h] - [x + bw / 2, y + bh / 2, bw, bh]).max())
+                kp = np.zeros((k_most, 3))
+                kp[: len(a.get("keypoints", [])) // 3] = np.array(a.get("keypoints", [])).reshape(-1, 3)
+                assert (kpts[:, 2] == kp[:, 2]).all(), (image["id"], kpts, kp)
+                # Written within the image: a keypoint less than half a pixel past its edge sits on it.
+                xy = np.clip(kp[:, :2], 0, [w, h]) / [w, h]
+                worst = max(worst, (np.abs(kpts[:, :2] - xy) * [w, h]).max())
+                for v in kp[:, 2]:
+                    points[int(v)] += 1
+                instances += 1
+            loaded += 1
+    assert loaded == len(full["images"]) and instances == len(full["annotations"]), (loaded, instances)
+    assert worst <= 1e-6 * max(max(i["width"], i["height"]) for i in full["images"]) + 1e-4, worst
+    hyp = get_cfg()
+    assert hyp.fliplr > 0
+    training = YOLODataset(img_path=data["train"], data=data, task="pose", augment=True, hyp=hyp)
+    flips = [t.p for t in training.transforms.transforms if type(t).__name__ == "RandomFlip"]
+    assert len(flips) == 2 and not any(flips), "without flip_idx Ultralytics turns flips off"
+    print(f"yolo-pose: Ultralytics loaded {loaded} images, {instances} instances, kpt_shape {data['kpt_shape']}; "
+          f"keypoints by v {points}, largest difference from the set's {worst:.2e} px (box {worst_box:.2e} px); "
+          f"fliplr and flipud turned off for training")
+
+
 def check_webdataset(dataset, out):
     import webdataset as wds
 
@@ -137,9 +214,12 @@ def check_hf(dataset, out):
           f"features {sorted(loaded['train'].features)}")
 
 
+CHECKS = {"coco": check_coco, "yolo": check_yolo, "yolo-pose": check_yolo_pose, "webdataset": check_webdataset,
+          "hf": check_hf, "bop": check_bop}
+
 if __name__ == "__main__":
     dataset, exports = sys.argv[1], sys.argv[2]
-    check_coco(dataset, os.path.join(exports, "coco"))
-    check_yolo(dataset, os.path.join(exports, "yolo"))
-    check_webdataset(dataset, os.path.join(exports, "webdataset"))
-    check_hf(dataset, os.path.join(exports, "hf"))
+    present = [f for f in CHECKS if os.path.isdir(os.path.join(exports, f))]
+    assert present, f"{exports} holds none of {list(CHECKS)}"
+    for format in present:
+        CHECKS[format](dataset, os.path.join(exports, format))

@@ -46,14 +46,17 @@ pub struct Layout {
     pub extra_yaml: String,
 }
 
+/// A label line of an annotation, given its class and the image's width and height; None skips it.
+pub type LabelLine<'a> = dyn FnMut(&Value, usize, f64, f64) -> Result<Option<String>> + 'a;
+
 /// Writes Ultralytics' folders and data.yaml: each image linked, each label file a `line` per
-/// annotation (given the annotation, its class and the image's width and height; None skips it).
+/// annotation.
 pub fn write_layout(
     set: &FinishedSet,
     staging: &mut Staging,
     progress: &mut dyn FnMut(usize, usize),
     layout: &Layout,
-    line: &mut dyn FnMut(&Value, usize, f64, f64) -> Result<Option<String>>,
+    line: &mut LabelLine,
 ) -> Result<()> {
     let classes: Vec<u64> =
         set.categories.as_array().map_or(Vec::new(), |c| c.iter().filter_map(|c| c["id"].as_u64()).collect());

@@ -45,7 +45,7 @@ pub fn write(
             Value::Null => Vec::new(),
             k => serde_json::from_value(k.clone()).map_err(|_| bad("its keypoints are not numbers"))?,
         };
-        if keypoints.len() % 3 != 0 || keypoints.len() > 3 * most {
+        if !keypoints.len().is_multiple_of(3) || keypoints.len() > 3 * most {
             return Err(bad(&format!("{} keypoint values, not x, y, v for up to {most} keypoints", keypoints.len())));
         }
         let [x, y, w, h] = bbox;
