@@ -254,6 +254,20 @@ fn yolo_pose_lines_hold_each_box_and_keypoint() {
     assert!(absent > 0, "some keypoint falls outside its crop");
 }
 
+/// Exporting `set` (in `dir`) as `format` to `dir/out` fails with one error line holding
+/// `message`, exit 2, and writes nothing beside the set.
+fn assert_refused(dir: &Path, set: &Path, format: &str, message: &str) {
+    let out = dir.join("out");
+    let args = ["dataset", "export", set.to_str().unwrap(), "--format", format, "--out", out.to_str().unwrap()];
+    let result = vkdiff(&args);
+    let stderr = String::from_utf8_lossy(&result.stderr);
+    let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error")).collect();
+    assert_eq!(result.status.code(), Some(2), "{message}: {stderr}");
+    assert!(errors.len() == 1 && errors[0].contains(message), "{message}: {stderr}");
+    let left: Vec<_> = std::fs::read_dir(dir).unwrap().flatten().map(|e| e.file_name()).collect();
+    assert_eq!(left, [set.file_name().unwrap()], "{message}: wrote {left:?}");
+}
+
 /// A set whose instances have no pose cannot be BOP gts, nor one without keypoints a pose set:
 /// one line, exit 2, nothing written.
 #[test]
@@ -262,18 +276,31 @@ fn sets_without_poses_or_keypoints_are_refused_in_one_line() {
     let beds = dir.join("beds");
     let args = ["--render-only", "--count", "1", "--width", "160", "--height", "128", "--out"];
     run_ok(&[&["dataset"][..], &args, &[beds.to_str().unwrap()]].concat());
-    let out = dir.join("out");
     for (format, message) in [
         ("bop", "has no pose: BOP's scene_gt.json needs every instance's cam_R_m2c and cam_t_m2c"),
         ("yolo-pose", "the set's categories name no keypoints"),
     ] {
-        let args = ["dataset", "export", beds.to_str().unwrap(), "--format", format, "--out", out.to_str().unwrap()];
-        let result = vkdiff(&args);
-        let stderr = String::from_utf8_lossy(&result.stderr);
-        let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error")).collect();
-        assert_eq!(result.status.code(), Some(2), "{format}: {stderr}");
-        assert!(errors.len() == 1 && errors[0].contains(message), "{format}: {stderr}");
-        let left: Vec<_> = std::fs::read_dir(&dir).unwrap().flatten().map(|e| e.file_name()).collect();
-        assert_eq!(left, ["beds"], "{format} wrote {left:?}");
+        assert_refused(&dir, &beds, format, message);
+    }
+}
+
+/// A BOP set edited to hold what BOP cannot: an image without a camera K, two boxes for one
+/// obj_id, an obj_id that is not the category. One line each, exit 2, nothing written.
+#[test]
+fn bop_exports_refuse_cameras_boxes_and_objects_bop_cannot_hold() {
+    let dir = scratch("export-bop-refused");
+    let set = bop_set(&dir, "bop-dataset/train_pbr", &[]);
+    let original = std::fs::read(set.join("annotations.json")).unwrap();
+    type Edit = fn(&mut Value);
+    let edits: [(Edit, &str); 3] = [
+        (|c| c["images"][1]["camera"] = Value::Null, "image 2 (images/000001.png) has no camera K"),
+        (|c| c["annotations"][4]["bbox_3d"]["max"][0] = 0.5.into(), "differs from another of category"),
+        (|c| c["annotations"][0]["obj_id"] = 7.into(), "obj_id 7 differs from its category 1"),
+    ];
+    for (edit, message) in edits {
+        let mut coco: Value = serde_json::from_slice(&original).unwrap();
+        edit(&mut coco);
+        std::fs::write(set.join("annotations.json"), serde_json::to_vec(&coco).unwrap()).unwrap();
+        assert_refused(&dir, &set, "bop", message);
     }
 }
