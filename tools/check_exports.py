@@ -43,7 +43,7 @@ instances) and in three 48² crops `--seed 3` (6 images, 14), tests/fixtures/sce
 (136 instances). Figures: every COCO annotation, image and category given back whole; YOLO pose
 keypoints within 8.2e-5 px of the set's and boxes within 3.4e-5 px, v equal, flips off in
 training; BOP masks, cameras and poses equal, depth within 0.000 mm, scene_gt_info equal to
-calc_gt_info's formulas, 140 box keypoints within 0.0048 px of project_pts, all 45 JSON files byte
+calc_gt_info's formulas, 140 box keypoints within 0.0048 px of project_pts, all 38 JSON files byte
 for byte as save_json writes them.
 """
 
