@@ -1,7 +1,8 @@
 //! `vkdiff dataset export`: a finished dataset folder in the layout a trainer reads (COCO with
 //! splits, Ultralytics YOLO segmentation or pose, WebDataset shards, a Hugging Face image folder,
-//! BOP scenes), split by scene. The dataset folder is only read; the export is built in a hidden sibling of OUT and
-//! renamed into place whole, so a killed export leaves no folder that looks finished.
+//! BOP scenes), split by scene. The dataset folder is only read; the export is built in a hidden
+//! sibling of OUT and renamed into place whole, so a killed export leaves no folder that looks
+//! finished.
 
 mod bop;
 mod bop_image;

@@ -1,6 +1,7 @@
 //! Ultralytics' YOLO segmentation layout: `images/{split}/NAME.png`, `labels/{split}/NAME.txt`
 //! (a line `class x1 y1 x2 y2 …` per instance, coordinates normalised to the image) and a
 //! `data.yaml` without `path`, so Ultralytics takes the folder the file is in and OUT can move.
+//! The folders and data.yaml are shared with the pose labels (`yolo_pose.rs`).
 
 use super::polygons::MaskWindow;
 use super::set::FinishedSet;
