@@ -8,7 +8,7 @@ use crate::error::{Error, Result};
 use serde_json::{json, Value};
 use vkdiff_formats::image::{read_depth_exr, read_grey_png};
 use vkdiff_render::geometry::ObjectPose;
-use vkdiff_render::png_out::gray8;
+use vkdiff_render::png_out::{gray16, gray8};
 use vkdiff_render::rle::Rle;
 
 /// Depth steps tried in turn, in mm: 0.1 mm as BOP's PBR training sets store depth (to 6.55 m);
@@ -55,10 +55,7 @@ pub fn write(
         return Err(bad(format!("its mask ({}×{}) or depth ({dw}×{dh}) is not {w}×{h}", ids.width, ids.height)));
     }
     let (steps, depth_scale) = depth_steps(&metres);
-    staging.write(
-        &format!("{}/depth/{im_id:06}.png", scene.path),
-        &vkdiff_render::png_out::gray16(width as u32, height as u32, &steps),
-    )?;
+    staging.write(&format!("{}/depth/{im_id:06}.png", scene.path), &gray16(width as u32, height as u32, &steps))?;
 
     let mut written = BopImage {
         camera: camera_entry(&image.entry["camera"], depth_scale).ok_or_else(|| bad("no camera K".into()))?,
