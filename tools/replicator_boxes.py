@@ -2,18 +2,27 @@
 gives them, placed around the drawn instances, and what vkdiff should make of them, computed here
 with numpy alone.
 
-Followed (read through the project's code and docs search):
-  - the row's dtype: omni.replicator.core's annotator registry, `bounding_box_3d_fast` and
-    `bounding_box_3d` `output_data_type`: semanticId <u4; x_min, y_min, z_min, x_max, y_max,
-    z_max <f4 (the prim's extent in its own frame, stage units); transform <f4 (4, 4);
-    occlusionRatio <f4 (0 fully seen, 1 fully hidden);
+Followed (read through the project's code, docs and pages search):
+  - the row's dtype: omni.replicator.core's annotator definitions (the 2025 Apache-2.0 release),
+    `bounding_box_3d_fast` and `bounding_box_3d` `output_data_type`: semanticId <u4; x_min,
+    y_min, z_min, x_max, y_max, z_max <f4 (the prim's extent in its own frame, stage units);
+    transform <f4 (4, 4); occlusionRatio <f4 (0 fully seen, 1 fully hidden). Older releases (the
+    forum thread below, Replicator's "Annotators Information" page,
+    docs.omniverse.nvidia.com/.../ext_replicator/annotators_details.html) had an instanceId
+    first and no occlusionRatio; BasicWriter 0.0.2 saves the rows above;
   - the transform: the prim's local-to-world matrix in USD's row-vector convention, translation in
-    the last row (the annotator docs' example: a cone at x = 100 has [100, 0, 0, 1] as its last
-    row; Isaac Sim's isaacsim.replicator.writers PoseWriter reads it as "Local space to world
-    transform (row-major)" and takes a box corner to the camera as corner @ transform @
-    cameraViewTransform). The registry's docstring of `bounding_box_3d_360` calls it "world to
-    local"; its own example and every reader say local to world. The scale of the prim is in it
-    (PoseWriter: the extent is "before scale").
+    the last row: the annotator's own example (a cone at x = 100 has [100, 0, 0, 1] as its last
+    row); NVIDIA's answer in forums.developer.nvidia.com/t/mathematical-definition-of-3d-
+    bounding-boxes-annotator-nvidia-omniverse-isaac-sim/223416 ("the transform matrix from
+    object space to world space", corners then through cameraViewTransform and
+    cameraProjection as row vectors); Isaac Sim's PoseWriter
+    (source/extensions/isaacsim.replicator.writers/python/scripts/writers/pose_writer.py,
+    __version__ 0.2.0): "Local space to world transform (row-major)", a box corner to the
+    camera as corner @ transform @ cameraViewTransform. (The definitions' docstring of
+    `bounding_box_3d_360` says "world to local", against its own example; PoseWriter's
+    location_camera_frame multiplies the two matrices the other way round, which differs from
+    its own corners in general: the corners' order is the one followed.) The prim's scale is in
+    the transform (PoseWriter: the extent is "before scale").
 """
 import numpy as np
 
