@@ -506,6 +506,18 @@ fn replicator_scene(dir: &Path, frame: &str) -> SourceScene {
     SourceScene { width: info.width as usize, ids, category }
 }
 
+/// The same JSON but for numbers, which may differ by 1e-9.
+fn same_numbers(a: &Value, b: &Value) -> bool {
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => (x.as_f64().unwrap() - y.as_f64().unwrap()).abs() < 1e-9,
+        (Value::Array(x), Value::Array(y)) => x.len() == y.len() && x.iter().zip(y).all(|(x, y)| same_numbers(x, y)),
+        (Value::Object(x), Value::Object(y)) => {
+            x.len() == y.len() && x.iter().all(|(k, v)| y.get(k).is_some_and(|w| same_numbers(v, w)))
+        }
+        _ => a == b,
+    }
+}
+
 #[test]
 fn replicator_frames_make_a_set_whose_masks_are_the_colour_maps() {
     let dir = scratch("scenes-replicator").join("set");
@@ -529,14 +541,48 @@ fn replicator_frames_make_a_set_whose_masks_are_the_colour_maps() {
     let skipped = format!("{:04}", whole.len());
     assert!(frames.join(format!("rgb_{skipped}.png")).is_file());
     assert!(note.contains(&format!("note: frame {skipped} skipped")), "{note}");
-    // Each annotation carries its colour's prim path; each image the camera where camera_params
-    // is given.
+    // Each annotation carries its colour's prim path, and its 3D box row's bbox_3d, pose and
+    // projected corners as numpy computed them (the corners shifted into the image's window, those
+    // outside it 0, 0, 0); each image the camera where camera_params is given.
+    let expected = read_json(&fixtures().join("scenes/replicator-expected.json"));
+    let mut boxed = 0;
     for image in images {
         let frame = image["scene"].as_str().unwrap();
         let prims = read_json(&frames.join(format!("instance_segmentation_mapping_{frame}.json")));
         let paths: BTreeSet<&str> = prims.as_object().unwrap().values().map(|v| v.as_str().unwrap()).collect();
         for a in coco["annotations"].as_array().unwrap().iter().filter(|a| a["image_id"] == image["id"]) {
-            assert!(paths.contains(a["prim_path"].as_str().unwrap()), "{frame}: {}", a["prim_path"]);
+            let prim = a["prim_path"].as_str().unwrap();
+            assert!(paths.contains(prim), "{frame}: {prim}");
+            let want = &expected[frame][prim];
+            assert_eq!(a.get("bbox_3d").is_some(), !want.is_null(), "{frame} {prim}");
+            if want.is_null() {
+                assert!(
+                    a["keypoints"].as_array().unwrap().iter().all(|v| v == 0),
+                    "{frame} {prim}: no row, no corners"
+                );
+                continue;
+            }
+            let pose = a.get("pose").unwrap_or(&Value::Null);
+            assert!(
+                same_numbers(&a["bbox_3d"], &want["bbox_3d"]) && same_numbers(pose, &want["pose"]),
+                "{frame} {prim}"
+            );
+            let [ox, oy] = [0, 1].map(|i| image["crop"]["offset_px"][i].as_f64().unwrap());
+            let [w, h] = ["width", "height"].map(|k| image[k].as_f64().unwrap());
+            let written = a["keypoints"].as_array().unwrap();
+            for (k, p) in want["keypoints"].as_array().unwrap().iter().enumerate() {
+                let (x, y) = (p[0].as_f64().unwrap() - ox, p[1].as_f64().unwrap() - oy);
+                let inside = p[2] != 0 && (-0.5..w - 0.5).contains(&x) && (-0.5..h - 0.5).contains(&y);
+                let got = &written[3 * k..3 * k + 3];
+                let (gx, gy) = (got[0].as_f64().unwrap(), got[1].as_f64().unwrap());
+                let same = if inside {
+                    got[2] == p[2] && (gx - x).abs() < 0.005 + 1e-9 && (gy - y).abs() < 0.005 + 1e-9
+                } else {
+                    got == [0, 0, 0]
+                };
+                assert!(same, "{frame} {prim} keypoint {k}: {got:?}, numpy {p} less the offset");
+            }
+            boxed += 1;
         }
         let params = frames.join(format!("camera_params_{frame}.json"));
         assert_eq!(image["camera"].is_null(), !params.is_file(), "{frame}");
@@ -550,7 +596,7 @@ fn replicator_frames_make_a_set_whose_masks_are_the_colour_maps() {
             assert!(!image["camera"]["T_world_camera_opencv"].is_null(), "{frame}: the view transform's pose");
         }
     }
-    assert!(checked >= 6, "{checked} annotations");
+    assert!(checked >= 6 && boxed >= 6, "{checked} annotations, {boxed} with a box");
     let names: Vec<&str> = coco["categories"].as_array().unwrap().iter().map(|c| c["name"].as_str().unwrap()).collect();
     let ids: Vec<u64> = coco["categories"].as_array().unwrap().iter().map(|c| c["id"].as_u64().unwrap()).collect();
     let classes = replicator_classes(&frames);

@@ -282,6 +282,8 @@ fn broken_replicator_frames_are_refused_in_one_line_naming_the_file() {
         ("depth-dtype", "scene 0000: distance_to_image_plane_0000.npy: dtype <i4; distance_to_image_plane is float32"),
         ("depth-3d", "scene 0000: distance_to_image_plane_0000.npy: shape [60, 80, 1]"),
         ("mixed", "holds BlenderProc .hdf5 files and Replicator BasicWriter frames; one layout per folder"),
+        ("missing-box", "frame 0001: bounding_box_3d_0001.npy: missing"),
+        ("box-dtype", "frame 0000: bounding_box_3d_0000.npy: dtype [semanticId <u4, x_min <f4"),
     ] {
         let copy = scratch(&format!("replicator-bad-{fault}")).join("scenes");
         std::fs::create_dir_all(&copy).unwrap();

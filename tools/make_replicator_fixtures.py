@@ -21,10 +21,17 @@ code search). What it follows from there:
     the reserved entries are BACKGROUND (0, 0, 0, 0) and UNLABELLED (0, 0, 0, 255), in both maps;
   - camera_params: the annotator's dict, numpy arrays made lists, written as JSON
     (cameraProjection and cameraViewTransform: 4×4 flattened, row-vector convention;
-    renderProductResolution [W, H]; cameraModel; metersPerSceneUnit; the lens fields).
+    renderProductResolution [W, H]; cameraModel; metersPerSceneUnit; the lens fields);
+  - bounding_box_3d (_write_bounding_box_data with bbox_type "3d"): the annotator's structured
+    rows through np.save (bounding_box_3d_N.npy), its idToLabels (semanticId → {"class": …})
+    and its primPaths (one per row) each through json.dumps (bounding_box_3d_labels_N.json,
+    bounding_box_3d_prim_paths_N.json). The rows' dtype and the transform's convention, and
+    where they were read, are in tools/replicator_boxes.py.
   Images go through Pillow (Image.fromarray(...).save), .npy through np.save, JSON through
   json.dumps with its defaults, as BasicWriter's functional writers do.
-The pixels are drawn here with numpy (ellipses and bars at planar depths, nearest wins).
+The pixels are drawn here with numpy (ellipses and bars at planar depths, nearest wins); each 3D
+box is placed around its drawing (about as wide and tall, its front at the drawn depth, turned),
+and the prim's transform carries a scale (centimetres, uneven, a mirror) for some.
 
 Versions used for the committed fixtures: Python 3.11, numpy 2.4.6, Pillow 13.0.0.
 Setup and rerun:
@@ -36,12 +43,23 @@ Writes under --out:
       /World), touching, occluding and cut-off instances, an unlabelled box (UNLABELLED), a sky at
       inf depth (BACKGROUND), a table (UNLABELLED); frames 0000 and 0001 have camera_params (0001
       with an off-centre principal point), 0002 none; frame 0003 is incomplete (its semantics
-      mapping not yet written), as BasicWriter leaves a run that is stopped while it writes.
+      mapping not yet written), as BasicWriter leaves a run that is stopped while it writes. Every
+      frame has its 3D boxes, the rows in another order than the instances: a row for a prim
+      hidden behind another (no instance), none for Leaf_03; the frame without camera_params has
+      boxes but no view to pose them.
+  replicator-expected.json: what vkdiff should make of each whole frame's rows whose prim is an
+      instance, by frame and prim, computed from the rows as saved (float32) with numpy's 4×4
+      products: `pose` (object → camera, OpenCV axes, metres; the object's frame is the prim's
+      with its scale taken out and a mirror folded into x; null without camera_params),
+      `bbox_3d` (metres) and the nine box keypoints, projected through the prim's transform, the
+      view and cameraProjection (v 2 where the depth at the pixel floor(u + 0.5), floor(v + 0.5)
+      is at least 99 % of the corner's, 1 where nearer, 0 outside or behind), to 1/100 pixel.
   replicator-bad/<fault>/: the frames broken one way each: missing-semantics (frame 0001's
       semantics mapping missing, a frame after it complete), depth-size (frame 0001's depth
       79×60), depth-dtype (frame 0000's depth int32), depth-3d (frame 0000's depth H×W×1),
       unknown-colour (a colour of frame 0000's PNG not in its mapping), mixed (a BlenderProc
-      .hdf5 name beside the frames).
+      .hdf5 name beside the frames), missing-box (frame 0001's bounding_box_3d_0001.npy missing),
+      box-dtype (frame 0000's rows with a float64 transform).
 """
 import argparse
 import json
@@ -51,7 +69,10 @@ import shutil
 import numpy as np
 from PIL import Image
 
+import replicator_boxes as boxes
+
 WIDTH, HEIGHT = 80, 60
+METRES_PER_UNIT = 1.0
 BACKGROUND = (0, 0, 0, 0)
 UNLABELLED = (0, 0, 0, 255)
 
@@ -94,20 +115,57 @@ FRAMES = [
 LENS = [(24.0, 20.955, (0.0, 0.0)), (24.0, 20.955, (0.6, -0.4)), None]
 
 
+def lens_of(frame):
+    """A frame's lens; frames that write no camera_params are still drawn through frame 0's lens
+    (their boxes are placed with it)."""
+    return LENS[frame] if frame < len(LENS) and LENS[frame] is not None else LENS[0]
+
+
+# The 3D boxes (bounding_box_3d=True), per frame in the rows' order: prim -> (the prim's scale, a
+# negative entry mirroring; its turn in the camera's frame, a rotation vector in rad). Rows are matched to instances by
+# prim path: Apple_07 (hidden behind Apple_01, no instance) has a row, Leaf_03 none.
+BOXES = [
+    {
+        "/World/Apple_07": ((1.0, 1.0, 1.0), (0.1, 0.2, 0.0)),
+        "/World/Leaf_01": ((2.0, 1.0, 0.5), (0.0, 0.3, 0.6)),
+        "/World/Apple_03": ((1.0, 1.0, 1.0), (0.4, -0.2, 0.1)),  # cut off: corners outside
+        "/World/Apple_01": ((1.0, 1.0, 1.0), (0.3, 0.5, -0.2)),
+        "/World/Apple_02": ((0.01, 0.01, 0.01), (-0.3, 0.2, 0.4)),  # an asset in centimetres
+    },
+    {
+        "/World/Apple_04": ((-1.0, 1.0, 1.0), (0.2, -0.4, 0.3)),  # mirrored
+        "/World/Leaf_02": ((1.0, 1.0, 1.0), (-0.2, 0.1, 0.5)),
+    },
+    {
+        "/World/Apple_06": ((1.0, 1.0, 1.0), (0.0, 0.0, 0.2)),
+        "/World/Apple_05": ((0.5, 0.5, 0.5), (0.1, 0.1, 0.1)),
+    },
+]
+HIDDEN = [("/World/Apple_07", "apple", None, "ellipse", (22, 34), (5, 4), 2.6)]
+SEMANTIC_IDS = {"apple": 3, "leaf": 5}
+
+GRID = np.mgrid[:HEIGHT, :WIDTH].astype(np.float64)
+
+
+def shape(kind, centre, radii):
+    """The pixels an object covers, hidden or not."""
+    (yy, xx), (cx, cy), (rx, ry) = GRID, centre, radii
+    if kind == "ellipse":
+        return ((xx - cx) / rx) ** 2 + ((yy - cy) / ry) ** 2 <= 1
+    return (abs(xx - cx) <= rx) & (abs(yy - cy) <= ry)
+
+
 def draw(objects):
     """Planar depth (m; inf in the sky), the RGBA instance image, each prim's colour, a render."""
-    yy, xx = np.mgrid[:HEIGHT, :WIDTH].astype(np.float64)
+    yy, xx = GRID
     sky = yy < 8
     depth = np.where(sky, np.inf, 2.6 - 0.005 * yy).astype(np.float32)
     instance = np.zeros((HEIGHT, WIDTH, 4), np.uint8)
     instance[~sky] = UNLABELLED  # the table carries no semantics
     rgb = np.zeros((HEIGHT, WIDTH, 4), np.uint8)
     rgb[:] = np.where(sky[..., None], [150, 190, 235, 255], [120, 100, 80, 255])
-    for _, cls, colour, kind, (cx, cy), (rx, ry), z in objects:
-        if kind == "ellipse":
-            inside = ((xx - cx) / rx) ** 2 + ((yy - cy) / ry) ** 2 <= 1
-        else:
-            inside = (abs(xx - cx) <= rx) & (abs(yy - cy) <= ry)
+    for _, cls, colour, kind, centre, radii, z in objects:
+        inside = shape(kind, centre, radii)
         closer = inside & (depth > z)
         depth[closer] = z + 0.001 * (xx[closer] % 3)
         instance[closer] = colour
@@ -118,7 +176,7 @@ def draw(objects):
 
 def camera_params(frame):
     """The camera_params annotator's dict for a frame, as BasicWriter writes it."""
-    focal, aperture_w, (off_x, off_y) = LENS[frame]
+    focal, aperture_w, (off_x, off_y) = lens_of(frame)
     aperture_h = aperture_w * HEIGHT / WIDTH
     near, far = 0.01, 1000000.0
     # USD's projection, row-vector convention (transposed OpenGL): the aperture offset shifts the
@@ -159,14 +217,46 @@ def camera_params(frame):
         "cameraNearFar": np.array([near, far]),
         "cameraProjection": projection.flatten(),
         "cameraViewTransform": view.flatten(),
-        "metersPerSceneUnit": 1.0,
+        "metersPerSceneUnit": METRES_PER_UNIT,
         "renderProductResolution": np.array([WIDTH, HEIGHT]),
     }
     # BasicWriter's _write_camera_params: ndarrays to lists, the rest as given.
     return {k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in params.items()}
 
 
-def write_frame(dir, frame, objects, semantics=True):
+def write_boxes(dir, name, objects, placed, camera, instance, depth):
+    """bounding_box_3d_N.npy, _labels_N.json and _prim_paths_N.json, as BasicWriter's
+    _write_bounding_box_data writes them (np.save of the rows; json.dumps of idToLabels and of
+    primPaths); what vkdiff should make of the rows whose prim is an instance, by prim."""
+    projection, view, has_camera = camera
+    rows, prims = [], []
+    for prim, (scale, turn) in placed.items():
+        obj = next(o for o in objects + HIDDEN if o[0] == prim)
+        lo, hi, transform = boxes.place(obj, scale, turn, projection, view, (WIDTH, HEIGHT))
+        covered = shape(*obj[3:6]).sum()
+        seen = (instance == obj[2]).all(axis=-1).sum() if obj[2] is not None else 0
+        rows.append(boxes.row(SEMANTIC_IDS[obj[1]], lo, hi, transform, 1.0 - seen / covered))
+        prims.append(prim)
+    np.save(dir / f"bounding_box_3d_{name}.npy", np.array(rows, dtype=boxes.BOX_DTYPE))
+    labels = {i: {"class": c} for c, i in SEMANTIC_IDS.items() if any(o[1] == c for o in objects + HIDDEN)}
+    write_json(dir / f"bounding_box_3d_labels_{name}.json", labels)
+    write_json(dir / f"bounding_box_3d_prim_paths_{name}.json", prims)
+    # What vkdiff should read, from the rows as saved (float32).
+    expected = {}
+    mapped = json.loads((dir / f"instance_segmentation_mapping_{name}.json").read_text()).values()
+    for row, prim in zip(np.load(dir / f"bounding_box_3d_{name}.npy"), prims):
+        if prim not in mapped:
+            continue
+        pose, bbox = boxes.expected_pose_and_box(row, view, METRES_PER_UNIT)
+        keypoints = [[0.0, 0.0, 0]] * 9
+        if has_camera:
+            keypoints = boxes.expected_keypoints(row, bbox, projection, view, depth, METRES_PER_UNIT)
+        expected[prim] = {"pose": pose if has_camera else None, "bbox_3d": bbox, "keypoints": keypoints}
+    return expected
+
+
+def write_frame(dir, frame, objects, placed, semantics=True):
+    """Frame `frame`'s files; what vkdiff should make of its 3D boxes."""
     name = f"{frame:04d}"
     depth, instance, rgb = draw(objects)
     write_image(dir / f"rgb_{name}.png", rgb)
@@ -180,30 +270,39 @@ def write_frame(dir, frame, objects, semantics=True):
             labels[key(colour)] = prim
             classes[key(colour)] = {"class": cls}
     write_json(dir / f"instance_segmentation_mapping_{name}.json", labels)
-    if frame < len(LENS) and LENS[frame] is not None:
+    has_camera = frame < len(LENS) and LENS[frame] is not None
+    if has_camera:
         write_json(dir / f"camera_params_{name}.json", camera_params(frame))
+    # A frame without camera_params still has its boxes placed through the camera it would have.
+    params = camera_params(frame)
+    projection, view = (np.array(params[k]).reshape(4, 4) for k in ("cameraProjection", "cameraViewTransform"))
+    expected = write_boxes(dir, name, objects, placed, (projection, view, has_camera), instance, depth)
     # BasicWriter schedules the semantics mapping last: a frame is whole once it is there.
     if semantics:
         write_json(dir / f"instance_segmentation_semantics_mapping_{name}.json", classes)
+    return expected
 
 
 def write_set(dir):
+    """The frames; what vkdiff should make of the whole frames' 3D boxes, by frame."""
     shutil.rmtree(dir, ignore_errors=True)
     dir.mkdir(parents=True)
-    for frame, objects in enumerate(FRAMES):
-        write_frame(dir, frame, objects)
-    write_frame(dir, len(FRAMES), FRAMES[0], semantics=False)
+    expected = {f"{k:04d}": write_frame(dir, k, objects, BOXES[k]) for k, objects in enumerate(FRAMES)}
+    write_frame(dir, len(FRAMES), FRAMES[0], BOXES[0], semantics=False)
+    return expected
 
 
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--out", default="tests/fixtures/scenes")
     out = pathlib.Path(parser.parse_args().out)
-    write_set(out / "replicator")
+    expected = write_set(out / "replicator")
+    (out / "replicator-expected.json").write_text(json.dumps(expected) + "\n")
 
     bad = out / "replicator-bad"
     shutil.rmtree(bad, ignore_errors=True)
-    for fault in ["missing-semantics", "depth-size", "depth-dtype", "depth-3d", "unknown-colour", "mixed"]:
+    faults = ["missing-semantics", "depth-size", "depth-dtype", "depth-3d", "unknown-colour", "mixed"]
+    for fault in faults + ["missing-box", "box-dtype"]:
         dir = bad / fault
         write_set(dir)
         for f in dir.glob("*_0003.*"):  # no incomplete last frame: the fault is the only one
@@ -218,6 +317,14 @@ def main():
         elif fault == "depth-3d":
             depth = np.load(dir / "distance_to_image_plane_0000.npy")
             np.save(dir / "distance_to_image_plane_0000.npy", depth[..., None])
+        elif fault == "missing-box":
+            (dir / "bounding_box_3d_0001.npy").unlink()
+        elif fault == "box-dtype":
+            # The transform saved as float64: not the annotator's rows.
+            rows = np.load(dir / "bounding_box_3d_0000.npy")
+            wrong = boxes.BOX_DTYPE.descr
+            wrong[7] = ("transform", "<f8", (4, 4))
+            np.save(dir / "bounding_box_3d_0000.npy", rows.astype(np.dtype(wrong)))
         elif fault == "unknown-colour":
             instance = np.array(Image.open(dir / "instance_segmentation_0000.png"))
             instance[30:33, 5:8] = (1, 2, 3, 255)

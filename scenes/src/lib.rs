@@ -16,6 +16,9 @@ mod labels;
 mod procedural;
 mod rendered;
 mod replicator;
+mod replicator_boxes;
+mod replicator_camera;
+mod replicator_files;
 
 use serde_json::{Map, Value};
 use std::collections::BTreeMap;

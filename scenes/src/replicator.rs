@@ -11,25 +11,31 @@
 //! instance_segmentation_semantics_mapping_N.json   "(R, G, B, A)" → {"class": …}
 //! camera_params_N.json                      optional: cameraProjection, cameraViewTransform,
 //!                                           renderProductResolution, cameraModel, …
+//! bounding_box_3d_N.npy                     optional (every frame or none): each labelled prim's
+//!                                           extent and local-to-world transform
+//! bounding_box_3d_labels_N.json             semanticId → {"class": …}
+//! bounding_box_3d_prim_paths_N.json         each row's prim path
 //! ```
 //!
 //! Each frame is one scene, named N, in frame order. BasicWriter writes asynchronously: a frame is
-//! whole once its semantics mapping is written, so a last frame without it is skipped (with a
-//! note) and an earlier one is refused. The reserved BACKGROUND and UNLABELLED entries are
-//! background; every other colour is an instance of its class, its annotation carrying the prim
-//! path. Category ids: a categories.json beside the frames (its names the classes), else the
-//! classes of all frames sorted by name, id = 1 + the index. Every JSON file is parsed once, when
-//! the folder is opened; the images' and the depth's headers are checked when the scenes are
-//! listed.
+//! whole once its semantics mapping (and, with 3D boxes, its box files) is written, so a last
+//! frame without them is skipped (with a note) and an earlier one is refused. The reserved
+//! BACKGROUND and UNLABELLED entries are background; every other colour is an instance of its
+//! class, its annotation carrying the prim path, and its box row's `bbox_3d` and `pose` (matched
+//! by prim path). Category ids: a categories.json beside the frames (its names the classes), else
+//! the classes of all frames sorted by name, id = 1 + the index; with 3D boxes, each category's
+//! keypoints are the box's. Every JSON file and box row is parsed once, when the folder is opened;
+//! the images' and the depth's headers are checked when the scenes are listed.
 
 use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::{read_categories, CategoryGuide, RawScene};
+use crate::replicator_boxes::{box_files, frame_boxes, FrameBoxes, BOXES};
+use crate::replicator_camera::{intrinsics_of, view_of, CameraParams};
+use crate::replicator_files::{bad, depth_header, file_error, instance_header, read_json, refuse, same_size};
 use crate::SceneError;
 use rayon::prelude::*;
-use serde::Deserialize;
 use serde_json::{json, Map};
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::BufReader;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::image::{image_size, read_image};
 use vkdiff_render::camera::{Camera, Pose};
@@ -46,7 +52,7 @@ const PRIMS: &str = "instance_segmentation_mapping_";
 const SEMANTICS: &str = "instance_segmentation_semantics_mapping_";
 const CAMERA: &str = "camera_params_";
 
-fn file(prefix: &str, frame: &str, ext: &str) -> String {
+pub(crate) fn file(prefix: &str, frame: &str, ext: &str) -> String {
     format!("{prefix}{frame}.{ext}")
 }
 
@@ -63,17 +69,6 @@ fn frame_key(frame: &str) -> Option<Vec<u64>> {
 fn frame_of<'a>(name: &'a str, prefix: &str, ext: &str) -> Option<&'a str> {
     let frame = name.strip_prefix(prefix)?.strip_suffix(ext)?.strip_suffix('.')?;
     frame_key(frame).is_some().then_some(frame)
-}
-
-/// camera_params_N.json, the fields read (the lens fields are left alone).
-#[derive(Deserialize)]
-#[serde(rename_all = "camelCase")]
-struct CameraParams {
-    camera_projection: Vec<f64>,
-    camera_view_transform: Option<Vec<f64>>,
-    render_product_resolution: [u32; 2],
-    camera_model: Option<String>,
-    meters_per_scene_unit: Option<f64>,
 }
 
 /// One colour of a frame's instance image: its prim and class.
@@ -95,6 +90,8 @@ struct ReplicatorFrame {
     /// renderProductResolution, checked against the images.
     resolution: Option<[u32; 2]>,
     metres_per_unit: f64,
+    /// The 3D boxes, by prim path.
+    boxes: FrameBoxes,
 }
 
 /// A folder of BasicWriter frames.
@@ -106,16 +103,6 @@ pub struct ReplicatorFrames {
     categories: BTreeMap<String, Category>,
     guides: BTreeMap<u32, CategoryGuide>,
     notes: Vec<String>,
-}
-
-/// `why`, about `file` (of the frame being read, which the refusal names).
-fn bad(file: &str, why: impl std::fmt::Display) -> SceneError {
-    SceneError::new(format!("{file}: {why}"))
-}
-
-/// `why`, about `file` of frame `frame`, before the frames are listed.
-fn refuse(frame: &str, file: &str, why: impl std::fmt::Display) -> SceneError {
-    SceneError::new(format!("frame {frame}: {file}: {why}"))
 }
 
 impl ReplicatorFrames {
@@ -146,25 +133,35 @@ impl ReplicatorFrames {
         Some(frames)
     }
 
-    /// Parses the frames' JSON files and categories.json in `dir`; the whole frames' rgb files, in
-    /// frame order. A last frame without its semantics mapping is left out with a note.
+    /// Parses the frames' JSON files, their 3D boxes and categories.json in `dir`; the whole
+    /// frames' rgb files, in frame order. A last frame without its semantics mapping (or, where
+    /// the frames have 3D boxes, without its box files) is left out with a note.
     pub fn open(dir: &Path, frames: &[String]) -> Result<(ReplicatorFrames, Vec<PathBuf>), SceneError> {
         let mut whole = frames.to_vec();
         let mut notes = Vec::new();
         let complete = |f: &str| dir.join(file(SEMANTICS, f, "json")).is_file();
+        // bounding_box_3d=True writes the box files of every frame, or of none.
+        let boxed = frames.iter().any(|f| dir.join(file(BOXES, f, "npy")).is_file());
+        let missing_box = |f: &str| box_files(f).into_iter().find(|name| boxed && !dir.join(name).is_file());
         if let Some(last) = whole.last().filter(|f| !complete(f)).cloned() {
             whole.pop();
             notes.push(format!(
                 "frame {last} skipped: {} is not written yet (BasicWriter writes a frame's files in turn, that one last)",
                 file(SEMANTICS, &last, "json")
             ));
+        } else if let Some(name) = whole.last().and_then(|f| missing_box(f)) {
+            notes.push(format!("frame {} skipped: {name} is not written yet", whole.pop().unwrap_or_default()));
         }
         if let Some(broken) = whole.iter().find(|f| !complete(f)) {
             let why = "missing; BasicWriter writes it last, and only the last frame may be cut short";
             return Err(refuse(broken, &file(SEMANTICS, broken, "json"), why));
         }
+        if let Some((broken, name)) = whole.iter().find_map(|f| Some((f, missing_box(f)?))) {
+            let why = "missing; the other frames have 3D boxes, which bounding_box_3d=True writes for every frame";
+            return Err(refuse(broken, &name, why));
+        }
         let parsed: Vec<Result<(PathBuf, ReplicatorFrame), SceneError>> =
-            whole.par_iter().map(|f| parse_frame(dir, f)).collect();
+            whole.par_iter().map(|f| parse_frame(dir, f, boxed)).collect();
         let mut by_rgb = BTreeMap::new();
         let mut keys = Vec::new();
         for frame in parsed {
@@ -175,7 +172,7 @@ impl ReplicatorFrames {
         let classes: BTreeSet<&str> =
             by_rgb.values().flat_map(|f| f.colours.values()).map(|c| c.class.as_str()).collect();
         let path = dir.join("categories.json");
-        let (categories, guides) = if path.is_file() {
+        let (mut categories, guides) = if path.is_file() {
             let (listed, _, guides) = read_categories(&path)?;
             let mut named = BTreeMap::new();
             for category in listed {
@@ -198,6 +195,12 @@ impl ReplicatorFrames {
             });
             (named.collect(), BTreeMap::new())
         };
+        if boxed {
+            // Each box's corners are its instance's keypoints, unless categories.json names others.
+            for category in categories.values_mut().filter(|c| c.keypoints.is_empty()) {
+                *category = std::mem::take(category).with_box_keypoints();
+            }
+        }
         Ok((ReplicatorFrames { frames: by_rgb, categories, guides, notes }, keys))
     }
 
@@ -206,8 +209,9 @@ impl ReplicatorFrames {
     }
 }
 
-/// Frame `frame`'s rgb file (PNG, else JPEG) and its parsed JSON files.
-fn parse_frame(dir: &Path, frame: &str) -> Result<(PathBuf, ReplicatorFrame), SceneError> {
+/// Frame `frame`'s rgb file (PNG, else JPEG) and its parsed JSON files, its 3D boxes too where
+/// the frames are `boxed`.
+fn parse_frame(dir: &Path, frame: &str, boxed: bool) -> Result<(PathBuf, ReplicatorFrame), SceneError> {
     let rgb = ["png", "jpg", "jpeg"].iter().map(|e| dir.join(file(RGB, frame, e))).find(|p| p.is_file());
     let rgb = rgb.ok_or_else(|| refuse(frame, &file(RGB, frame, "png"), "missing (the frame's render)"))?;
     let prims: BTreeMap<String, String> = read_json(dir, frame, &file(PRIMS, frame, "json"))?;
@@ -250,21 +254,24 @@ fn parse_frame(dir: &Path, frame: &str) -> Result<(PathBuf, ReplicatorFrame), Sc
     if !(metres_per_unit.is_finite() && metres_per_unit > 0.0) {
         return Err(refuse(frame, &camera_file, format!("metersPerSceneUnit {metres_per_unit} is not positive")));
     }
-    let camera = match &params {
-        Some(p) => camera_of(p, metres_per_unit).map_err(|why| refuse(frame, &camera_file, why))?,
-        None => None,
+    let (intrinsics, view) = match &params {
+        Some(p) => (intrinsics_of(p), view_of(p)),
+        None => (Ok(None), Ok(None)),
+    };
+    let intrinsics = intrinsics.map_err(|why| refuse(frame, &camera_file, &why))?;
+    let view = view.map_err(|why| refuse(frame, &camera_file, &why))?;
+    let pose = view.as_ref().map_or(Pose::Unknown, |v| v.world_from_camera(metres_per_unit));
+    let camera = intrinsics.map(|k| (k, pose));
+    let boxes = match boxed {
+        true => {
+            let class_of = colours.values().filter_map(|c| Some((c.prim.as_deref()?, c.class.as_str()))).collect();
+            frame_boxes(dir, frame, &class_of, view.as_ref(), metres_per_unit)?
+        }
+        false => FrameBoxes::new(),
     };
     let resolution = params.map(|p| p.render_product_resolution);
     let frame = frame.to_string();
-    Ok((rgb, ReplicatorFrame { frame, colours, reserved, camera, resolution, metres_per_unit }))
-}
-
-fn read_json<T: serde::de::DeserializeOwned>(dir: &Path, frame: &str, name: &str) -> Result<T, SceneError> {
-    let text = std::fs::read_to_string(dir.join(name)).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => refuse(frame, name, "missing"),
-        _ => refuse(frame, name, e),
-    })?;
-    serde_json::from_str(&text).map_err(|e| refuse(frame, name, format!("not BasicWriter's format: {e}")))
+    Ok((rgb, ReplicatorFrame { frame, colours, reserved, camera, resolution, metres_per_unit, boxes }))
 }
 
 /// "(R, G, B, A)" as BasicWriter's colourised mappings key a colour.
@@ -272,119 +279,6 @@ fn parse_colour(key: &str) -> Option<[u8; 4]> {
     let inner = key.trim().strip_prefix('(')?.strip_suffix(')')?;
     let values: Vec<u8> = inner.split(',').map(|v| v.trim().parse().ok()).collect::<Option<_>>()?;
     values.try_into().ok()
-}
-
-/// K and the pose from camera_params: None where the camera is not a pinhole (a fisheye model, an
-/// orthographic or skewed projection); a view transform that is not a rotation and a translation
-/// is refused.
-fn camera_of(p: &CameraParams, metres_per_unit: f64) -> Result<Option<([f64; 4], Pose)>, String> {
-    let [w, h] = p.render_product_resolution;
-    if w == 0 || h == 0 {
-        return Err(format!("renderProductResolution [{w}, {h}] is empty"));
-    }
-    let &[p00, p01, p02, p03, p10, p11, p12, p13, p20, p21, _, p23, _, _, _, p33] = &p.camera_projection[..] else {
-        return Err(format!("cameraProjection has {} values, not 16 (4×4)", p.camera_projection.len()));
-    };
-    let pinhole = p.camera_model.as_deref().is_none_or(|m| m == "pinhole")
-        && [p01, p02, p03, p10, p12, p13, p33] == [0.0; 7]
-        && p23 == -1.0
-        && p00 > 0.0
-        && p11 > 0.0;
-    if !pinhole {
-        return Ok(None);
-    }
-    // Row-vector convention (the transpose of OpenGL's matrix): a point in the camera's USD axes
-    // (x right, y up, looking along −z) goes to clip space as [x y z 1]·P, then NDC [−1, 1] spans
-    // the image's pixel edges, y up. In OpenCV's axes and pixel centres:
-    let (w, h) = (w as f64, h as f64);
-    let intrinsics = [p00 * w / 2.0, p11 * h / 2.0, w / 2.0 * (1.0 - p20) - 0.5, h / 2.0 * (1.0 + p21) - 0.5];
-    let Some(view) = &p.camera_view_transform else {
-        return Ok(Some((intrinsics, Pose::Unknown)));
-    };
-    let &[v00, v01, v02, v03, v10, v11, v12, v13, v20, v21, v22, v23, v30, v31, v32, v33] = &view[..] else {
-        return Err(format!("cameraViewTransform has {} values, not 16 (4×4)", view.len()));
-    };
-    if [v03, v13, v23, v33] != [0.0, 0.0, 0.0, 1.0] {
-        return Err("cameraViewTransform's last column is not [0, 0, 0, 1] (row-vector convention)".into());
-    }
-    // camera = world · V: the rotation world → camera is Vᵀ's 3×3, its translation V's last row.
-    let r = [[v00, v10, v20], [v01, v11, v21], [v02, v12, v22]];
-    let t = [v30, v31, v32];
-    for i in 0..3 {
-        for j in 0..3 {
-            let dot: f64 = (0..3).map(|k| r[i][k] * r[j][k]).sum();
-            if (dot - if i == j { 1.0 } else { 0.0 }).abs() > 1e-4 {
-                return Err("cameraViewTransform is not a rotation and a translation".into());
-            }
-        }
-    }
-    // World from camera: [Rᵀ | −Rᵀt], scene units to metres; USD's camera axes to OpenCV's (y and z
-    // turned: columns 1 and 2 negated).
-    let centre = |j: usize| -(0..3).map(|k| r[k][j] * t[k]).sum::<f64>() * metres_per_unit;
-    let row = |j: usize| [r[0][j], -r[1][j], -r[2][j], centre(j)];
-    Ok(Some((intrinsics, Pose::Given([row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]]))))
-}
-
-/// A file's error, naming it.
-fn file_error(name: &str) -> impl Fn(vkdiff_formats::Error) -> SceneError + '_ {
-    move |e| match e {
-        vkdiff_formats::Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
-            bad(name, "missing")
-        }
-        vkdiff_formats::Error::Io { source, .. } => bad(name, source),
-        vkdiff_formats::Error::Format { why, .. } => bad(name, why),
-        vkdiff_formats::Error::Tensor(why) => bad(name, why),
-    }
-}
-
-fn open_file(dir: &Path, name: &str) -> Result<BufReader<std::fs::File>, SceneError> {
-    let f = std::fs::File::open(dir.join(name)).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => bad(name, "missing"),
-        _ => bad(name, e),
-    })?;
-    Ok(BufReader::new(f))
-}
-
-/// A .npy file, its header read.
-type Npy = npyz::NpyFile<BufReader<std::fs::File>>;
-
-/// The depth file's header: a 2-D float array; its width, height, and whether it is float64.
-fn depth_header(dir: &Path, name: &str) -> Result<(Npy, usize, usize, bool), SceneError> {
-    let npy = npyz::NpyFile::new(open_file(dir, name)?).map_err(|e| bad(name, format!("not a .npy file: {e}")))?;
-    let &[rows, cols] = npy.shape() else {
-        return Err(bad(name, format!("shape {:?}; distance_to_image_plane is H×W", npy.shape())));
-    };
-    match npy.dtype() {
-        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float && matches!(t.size_field(), 4 | 8) => {
-            let double = t.size_field() == 8;
-            Ok((npy, cols as usize, rows as usize, double))
-        }
-        npyz::DType::Plain(t) => Err(bad(name, format!("dtype {t}; distance_to_image_plane is float32"))),
-        _ => Err(bad(name, "a structured array; distance_to_image_plane is float32")),
-    }
-}
-
-/// The instance image's header: 8-bit RGBA, (width, height).
-fn instance_header(dir: &Path, name: &str) -> Result<png::Reader<BufReader<std::fs::File>>, SceneError> {
-    let reader =
-        png::Decoder::new(open_file(dir, name)?).read_info().map_err(|e| bad(name, format!("bad PNG: {e}")))?;
-    let info = reader.info();
-    if (info.color_type, info.bit_depth) != (png::ColorType::Rgba, png::BitDepth::Eight) {
-        let why = format!(
-            "{:?} {:?}-bit, not 8-bit RGBA; only colorize_instance_segmentation=True (BasicWriter's default) is read",
-            info.color_type, info.bit_depth as u8
-        );
-        return Err(bad(name, why));
-    }
-    Ok(reader)
-}
-
-/// Refuses `name` of `size` where the frame's depth is `depth`.
-fn same_size(name: &str, size: (usize, usize), depth: (usize, usize)) -> Result<(), SceneError> {
-    if size == depth {
-        return Ok(());
-    }
-    Err(bad(name, format!("{}×{}, the frame's depth is {}×{}", size.0, size.1, depth.0, depth.1)))
 }
 
 impl SceneFormat for ReplicatorFrames {
@@ -471,6 +365,10 @@ impl SceneFormat for ReplicatorFrames {
             let mut carried = Map::new();
             if let Some(prim) = &entry.prim {
                 carried.insert("prim_path".into(), json!(prim));
+                if let Some((bbox, pose)) = frame.boxes.get(prim) {
+                    carried.insert("bbox_3d".into(), bbox.to_json());
+                    carried.extend(pose.map(|p| ("pose".to_string(), p.to_json())));
+                }
             }
             carried.insert("class".into(), json!(entry.class));
             attributes.insert(id, carried);

@@ -4,7 +4,9 @@
 //! npyz, the JSON with serde_json): every whole frame one scene in frame order, the incomplete last
 //! one skipped; each instance exactly the pixels of its colour, with its prim path and class;
 //! BACKGROUND and UNLABELLED background; depth as written, inf background; K and the pose agreeing
-//! with camera_params' matrices; broken frames refused naming the file.
+//! with camera_params' matrices; each instance's 3D box, pose and projected corners as numpy
+//! computed them (tests/fixtures/scenes/replicator-expected.json, by the same script); broken
+//! frames refused naming the file.
 
 mod common;
 
@@ -13,6 +15,7 @@ use serde_json::Value;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use vkdiff_render::camera::Pose;
+use vkdiff_render::geometry::{Box3, Keypoint, ObjectPose, BOX_KEYPOINTS};
 use vkdiff_scenes::{RenderedScenes, SceneSource, DEFAULT_FAR};
 
 /// An RGBA PNG's pixels, as BasicWriter's mappings key them, and its width.
@@ -160,8 +163,8 @@ fn every_whole_frame_is_a_scene_with_its_masks_classes_depth_and_camera() {
     assert!(instances >= 8 && sky > 0 && unlabelled > 0 && cameras >= 2, "{instances} {sky} {unlabelled} {cameras}");
 }
 
-/// A copy of the fixture's frames in a fresh folder, with `categories` as its categories.json.
-fn with_categories(name: &str, categories: &str) -> PathBuf {
+/// A copy of the fixture's frames in a fresh folder, changed by `edit`.
+fn copy_of(name: &str, edit: impl FnOnce(&Path)) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("vkdiff-replicator-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -169,8 +172,13 @@ fn with_categories(name: &str, categories: &str) -> PathBuf {
         let path = entry.unwrap().path();
         std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
     }
-    std::fs::write(dir.join("categories.json"), categories).unwrap();
+    edit(&dir);
     dir
+}
+
+/// A copy of the fixture's frames with `categories` as its categories.json.
+fn with_categories(name: &str, categories: &str) -> PathBuf {
+    copy_of(name, |dir| std::fs::write(dir.join("categories.json"), categories).unwrap())
 }
 
 #[test]
@@ -215,6 +223,13 @@ fn broken_frames_are_refused_in_one_line_naming_the_file() {
         ("depth-dtype", When::Listed, "scene 0000: distance_to_image_plane_0000.npy: dtype <i4"),
         ("depth-3d", When::Listed, "scene 0000: distance_to_image_plane_0000.npy: shape [60, 80, 1]"),
         ("unknown-colour", When::Read, "scene 0000: instance_segmentation_0000.png: pixel (5, 30) is [1, 2, 3, 255]"),
+        ("missing-box", When::Listed, "frame 0001: bounding_box_3d_0001.npy: missing; the other frames have 3D boxes"),
+        (
+            "box-dtype",
+            When::Listed,
+            "frame 0000: bounding_box_3d_0000.npy: dtype [semanticId <u4, x_min <f4, y_min <f4, z_min <f4, x_max <f4, \
+             y_max <f4, z_max <f4, transform <f8 (4, 4), occlusionRatio <f4]; BasicWriter's bounding_box_3d rows are",
+        ),
         (
             "mixed",
             When::Listed,
@@ -224,4 +239,135 @@ fn broken_frames_are_refused_in_one_line_naming_the_file() {
         let refused = refusal(&bad.join(fault), fault, when);
         assert!(refused.contains(needle), "{fault}: {refused}");
     }
+}
+
+fn close(got: &[f64], want: &Value, what: &str) {
+    let want = floats(want);
+    assert!(
+        got.len() == want.len() && got.iter().zip(&want).all(|(a, b)| (a - b).abs() < 1e-9),
+        "{what}: {got:?}, numpy {want:?}"
+    );
+}
+
+#[test]
+fn box_rows_give_their_instances_a_pose_a_bbox_3d_and_the_projected_corners() {
+    let dir = fixtures().join("replicator");
+    let expected = json(&fixtures().join("replicator-expected.json"));
+    let scenes = RenderedScenes::open(&dir, "object", DEFAULT_FAR).unwrap();
+    for category in scenes.categories() {
+        assert_eq!(category.keypoints, BOX_KEYPOINTS.map(String::from), "{}", category.name);
+        assert_eq!(category.skeleton.len(), 12);
+    }
+    let (mut boxed, mut bare, mut left_out, mut unposed, mut visibility) = (0, 0, 0, 0, [0; 3]);
+    for k in 0..scenes.available().unwrap() {
+        let name = scenes.scene(k).name.unwrap();
+        let want = expected[name].as_object().unwrap();
+        let frame = scenes.frame(k, 0).unwrap().frame;
+        let prims: BTreeSet<&str> =
+            frame.instances.iter().map(|i| i.attributes["prim_path"].as_str().unwrap()).collect();
+        // The rows' prims that are instances are the ones numpy expects; the others are left out.
+        let rows = json(&dir.join(format!("bounding_box_3d_prim_paths_{name}.json")));
+        let rows: BTreeSet<&str> = rows.as_array().unwrap().iter().map(|p| p.as_str().unwrap()).collect();
+        assert_eq!(
+            rows.intersection(&prims).copied().collect::<BTreeSet<_>>(),
+            want.keys().map(String::as_str).collect()
+        );
+        left_out += rows.difference(&prims).count();
+        for instance in &frame.instances {
+            let a = &instance.attributes;
+            let prim = a["prim_path"].as_str().unwrap();
+            let Some(w) = want.get(prim) else {
+                assert!(!a.contains_key("bbox_3d") && !a.contains_key("pose"), "{name} {prim}: no row, no box");
+                assert_eq!(instance.keypoints, [Keypoint::ABSENT; 9], "{name} {prim}");
+                bare += 1;
+                continue;
+            };
+            let bbox = Box3::of(a).unwrap();
+            close(&bbox.min, &w["bbox_3d"]["min"], &format!("{name} {prim} min"));
+            close(&bbox.max, &w["bbox_3d"]["max"], &format!("{name} {prim} max"));
+            match ObjectPose::of(a) {
+                Some(pose) => {
+                    let r: Vec<f64> = pose.r.iter().flatten().copied().collect();
+                    let want_r: Vec<Value> = w["pose"]["R"]
+                        .as_array()
+                        .unwrap()
+                        .iter()
+                        .flat_map(|row| row.as_array().unwrap().clone())
+                        .collect();
+                    close(&r, &Value::from(want_r), &format!("{name} {prim} R"));
+                    close(&pose.t, &w["pose"]["t"], &format!("{name} {prim} t"));
+                }
+                None => {
+                    assert!(w["pose"].is_null() && frame.camera.is_none(), "{name} {prim}: a pose where numpy has one");
+                    unposed += 1;
+                }
+            }
+            // numpy's to 1/100 pixel, as annotations.json writes them.
+            let want = w["keypoints"].as_array().unwrap();
+            assert_eq!(instance.keypoints.len(), want.len());
+            for (got, p) in instance.keypoints.iter().zip(want) {
+                let (x, y, v) = (p[0].as_f64().unwrap(), p[1].as_f64().unwrap(), p[2].as_u64().unwrap() as u8);
+                let near = (got.x - x).abs() <= 0.005 + 1e-9 && (got.y - y).abs() <= 0.005 + 1e-9;
+                assert!(near && got.v == v, "{name} {prim}: {got:?}, numpy {p}");
+                visibility[v as usize] += 1;
+            }
+            boxed += 1;
+        }
+    }
+    assert!(boxed >= 6 && bare >= 1 && left_out >= 1 && unposed >= 2, "{boxed} {bare} {left_out} {unposed}");
+    assert!(visibility.iter().all(|&n| n > 0), "outside, hidden and seen corners: {visibility:?}");
+}
+
+#[test]
+fn broken_box_files_are_refused_in_one_line_and_a_last_frame_without_them_skipped() {
+    let edit_json = |dir: &Path, file: &str, value: Value| std::fs::write(dir.join(file), value.to_string()).unwrap();
+    let prims = json(&fixtures().join("replicator/bounding_box_3d_prim_paths_0000.json"));
+    let mut twice = prims.clone();
+    twice[4] = twice[3].clone();
+    let labels = "bounding_box_3d_labels_0000.json";
+    for (fault, file, value, needle) in [
+        (
+            "short",
+            "bounding_box_3d_prim_paths_0000.json",
+            Value::from(prims.as_array().unwrap()[..4].to_vec()),
+            "lists 4 prims; bounding_box_3d_0000.npy has 5 rows",
+        ),
+        ("twice", "bounding_box_3d_prim_paths_0000.json", twice, "lists /World/Apple_01 twice"),
+        (
+            "unlabelled",
+            labels,
+            serde_json::json!({"5": {"class": "leaf"}}),
+            "no class for semanticId 3 (row 0, /World/Apple_07)",
+        ),
+        (
+            "relabelled",
+            labels,
+            serde_json::json!({"3": {"class": "leaf"}, "5": {"class": "leaf"}}),
+            "row 2 (/World/Apple_03) is `leaf`; the semantics mapping makes its instance `apple`",
+        ),
+    ] {
+        let dir = copy_of(fault, |dir| edit_json(dir, file, value));
+        let refused = refusal(&dir, fault, When::Listed);
+        assert!(refused.contains(&format!("frame 0000: {file}: {needle}")), "{fault}: {refused}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+    // A last whole frame (0002, once 0003 is gone) without its rows: cut short, skipped.
+    let cut = copy_of("cut", |dir| {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.to_string_lossy().contains("_0003.") {
+                std::fs::remove_file(path).unwrap();
+            }
+        }
+        std::fs::remove_file(dir.join("bounding_box_3d_0002.npy")).unwrap();
+    });
+    let scenes = RenderedScenes::open(&cut, "object", DEFAULT_FAR).unwrap();
+    let listed: Vec<&str> = (0..scenes.available().unwrap()).map(|k| scenes.scene(k).name.unwrap()).collect();
+    assert_eq!(listed, ["0000", "0001"]);
+    assert!(
+        scenes.notes().iter().any(|n| n.contains("frame 0002 skipped: bounding_box_3d_0002.npy")),
+        "{:?}",
+        scenes.notes()
+    );
+    std::fs::remove_dir_all(&cut).unwrap();
 }
