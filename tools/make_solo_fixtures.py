@@ -55,6 +55,14 @@ Versions used for the committed fixtures: Python 3.11, numpy 2.4.6, Pillow 13.0.
 Setup and rerun:
   /tmp/ref/bin/pip install numpy pillow OpenEXR
   /tmp/ref/bin/python tools/make_solo_fixtures.py [--out tests/fixtures/scenes]
+Read back with Unity's own reader (by hand; pysolotools pins pandas~=1.4.3, which does not build
+on Python 3.11, so it goes in a venv of its own without its pins; its FramesIterator assumes every
+sequence has totalFrames / totalSequences steps, as the fixture's do):
+  python3 -m venv /tmp/solo_venv && /tmp/solo_venv/bin/pip install --no-deps pysolotools==0.3.17
+  /tmp/solo_venv/bin/pip install "dataclasses-json~=0.5.7" pandas numpy pillow tqdm
+  /tmp/solo_venv/bin/python -c "from pysolotools.consumers import Solo
+  for f in Solo('tests/fixtures/scenes/solo').frames(): print(f.sequence, f.step, len(f.captures))"
+  (2026-12-05: all four steps, five RGBCameraCaptures, each annotation parsed as its typed class.)
 
 Writes under --out:
   solo/: a SOLO dataset, 48×40, labels Crate (labelId 1), Cube (2, never seen) and Box (3), an
