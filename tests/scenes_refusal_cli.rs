@@ -294,3 +294,30 @@ fn broken_replicator_frames_are_refused_in_one_line_naming_the_file() {
         assert!(line.starts_with("error: --scenes") && line.contains(needle), "{fault}: {line}");
     }
 }
+
+#[test]
+fn broken_solo_steps_are_refused_in_one_line_naming_the_file() {
+    // tools/make_solo_fixtures.py writes each fault; the refusal comes before any image is made
+    // (an unlisted colour, which only the pixels show, is scenes/tests/solo.rs's).
+    for (fault, needle) in [
+        (
+            "missing-png",
+            "scene sequence.0/step1: step1.camera.instance segmentation.png: missing (step1.frame_data.json names it)",
+        ),
+        ("wrong-size", "scene sequence.0/step0: step0.camera.instance segmentation.png: 47×40, the depth is 48×40"),
+        ("bad-json", "scene sequence.0/step1: step1.frame_data.json: not SOLO's frame data"),
+        ("no-depth", "scene sequence.0/step0: step0.frame_data.json: capture `camera` has no DepthAnnotation"),
+        ("label-clash", "labelId 1 is `Crate` in sequence.0/step0 and `Barrel` in sequence.1/step0.camera"),
+        ("mixed", "holds BlenderProc .hdf5 files and Unity Perception SOLO sequences; one layout per folder"),
+    ] {
+        let from = scenes("solo-bad").join(fault);
+        let copy = scratch(&format!("solo-bad-{fault}")).join("dataset");
+        for entry in walk(&from) {
+            let to = copy.join(entry.strip_prefix(&from).unwrap());
+            std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+            std::fs::copy(&entry, to).unwrap();
+        }
+        let line = refusal(&copy, &[]);
+        assert!(line.starts_with("error: --scenes") && line.contains(needle), "{fault}: {line}");
+    }
+}

@@ -60,6 +60,25 @@ pub fn read_normals_exr(path: &Path) -> Result<(Vec<[f32; 3]>, usize, usize)> {
     Ok((normals, sizes[x].0, sizes[x].1))
 }
 
+/// The `R`, `G` and `B` channels of an EXR file (row-major, as stored) and (width, height): what a
+/// renderer that stores vectors as colour writes (Unity Perception's normals).
+pub fn read_rgb_exr(path: &Path) -> Result<(Vec<[f32; 3]>, usize, usize)> {
+    let image = read_file(path)?;
+    let channels = channels(&image);
+    let find = |want: &str| channels.iter().position(|c| c.0 == want);
+    let (Some(r), Some(g), Some(b)) = (find("R"), find("G"), find("B")) else {
+        let names: Vec<&str> = channels.iter().map(|c| c.0.as_str()).collect();
+        return Err(format_error(path)(format!("no R, G and B channels; channels: {}", names.join(", "))));
+    };
+    let size = (channels[r].2, channels[r].3);
+    if [g, b].iter().any(|&k| (channels[k].2, channels[k].3) != size) {
+        return Err(format_error(path)("R, G and B differ in size".into()));
+    }
+    let [rs, gs, bs] = [r, g, b].map(|k| floats(channels[k].1));
+    let values = rs.iter().zip(&gs).zip(&bs).map(|((&r, &g), &b)| [r, g, b]).collect();
+    Ok((values, size.0, size.1))
+}
+
 fn format_error(path: &Path) -> impl Fn(String) -> Error + '_ {
     move |why| Error::Format { path: path.to_path_buf(), why }
 }

@@ -7,7 +7,7 @@ mod header;
 mod jpeg;
 mod read;
 
-pub use depth_exr::{read_depth_exr, read_normals_exr};
+pub use depth_exr::{read_depth_exr, read_normals_exr, read_rgb_exr};
 pub use grey::{read_grey_png, GreyImage};
 pub use header::{depth_exr_size, grey_png_size, image_size, normals_exr_size};
 pub use read::{decode_image, read_control_image, read_image};
