@@ -321,3 +321,28 @@ fn broken_solo_steps_are_refused_in_one_line_naming_the_file() {
         assert!(line.starts_with("error: --scenes") && line.contains(needle), "{fault}: {line}");
     }
 }
+
+#[test]
+fn broken_kubric_frames_are_refused_in_one_line_naming_the_file() {
+    // tools/make_kubric_fixtures.py writes each fault (the folder given is the sequence, but for
+    // mixed); the refusal comes before any image is made (an index past the instances, which
+    // only the pixels show, is scenes/tests/kubric.rs's).
+    for (fault, needle) in [
+        ("missing-tiff", "scene missing-tiff/00001: depth_00001.tiff: missing (metadata.json says the frame is there)"),
+        ("wrong-size", "scene wrong-size/00000: segmentation_00000.png: 47×40, metadata.json's resolution is 48×40"),
+        ("bad-metadata", "bad-metadata: metadata.json: not Kubric's metadata"),
+        ("frame-count", "frame-count: metadata.json: camera.positions has 1 frames, metadata.num_frames says 2"),
+        ("float-depth", "scene float-depth/00000: depth_00000.tiff: Gray(16) unsigned, not the one-channel float32"),
+        ("mixed", "holds BlenderProc .hdf5 files and Kubric sequences; one layout per folder"),
+    ] {
+        let from = scenes("kubric-bad").join(fault);
+        let copy = scratch(&format!("kubric-bad-{fault}")).join(fault);
+        for entry in walk(&from) {
+            let to = copy.join(entry.strip_prefix(&from).unwrap());
+            std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+            std::fs::copy(&entry, to).unwrap();
+        }
+        let line = refusal(&copy, &[]);
+        assert!(line.starts_with("error: --scenes") && line.contains(needle), "{fault}: {line}");
+    }
+}

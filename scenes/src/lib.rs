@@ -1,6 +1,6 @@
 //! vkdiff's scene sources: where a dataset's scenes come from, behind one trait, [`SceneSource`].
 //! The procedural mushroom bed draws as many as asked; scenes rendered elsewhere (`--scenes DIR`:
-//! scene folders in the format `vkdiff scene` writes, BlenderProc's `.hdf5` files, BOP scenes, Replicator's BasicWriter frames, or Unity Perception's SOLO datasets) are listed
+//! scene folders in the format `vkdiff scene` writes, BlenderProc's `.hdf5` files, BOP scenes, Replicator's BasicWriter frames, Unity Perception's SOLO datasets, or Kubric's sequences) are listed
 //! and checked from their headers and side files, and each scene's pixels are read once, when its
 //! images are made. Each source gives, for scene k, a [`Frame`] (depth, instance ids, each
 //! instance's category and attributes) and perhaps the renderer's own image; everything after
@@ -12,6 +12,8 @@ mod bop_geometry;
 mod folder;
 mod folder_geometry;
 mod format;
+mod kubric;
+mod kubric_geometry;
 mod labels;
 mod procedural;
 mod rendered;

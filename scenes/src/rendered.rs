@@ -6,6 +6,7 @@ use crate::blenderproc::BlenderProcFrames;
 use crate::bop::BopScenes;
 use crate::folder::SceneFolders;
 use crate::format::{SceneFormat, SceneIndex};
+use crate::kubric::KubricSequences;
 use crate::labels::CategoryGuide;
 use crate::replicator::ReplicatorFrames;
 use crate::solo::SoloDataset;
@@ -45,7 +46,7 @@ pub struct RenderedScenes {
 
 impl RenderedScenes {
     /// Finds the scenes under `dir` (BlenderProc `.hdf5` files, BOP scenes, Replicator BasicWriter
-    /// frames, Unity Perception SOLO sequences or scene folders; a folder holding more than one of these is refused), in their order, and checks each from its headers and side files: a missing or unreadable file,
+    /// frames, Unity Perception SOLO sequences, Kubric sequences or scene folders; a folder holding more than one of these is refused), in their order, and checks each from its headers and side files: a missing or unreadable file,
     /// sizes that differ, a category listed twice or named two ways is refused in one line naming
     /// the scene. `default_category` names the instances of scene folders without
     /// categories.json; depth at or past `far` is background.
@@ -64,12 +65,14 @@ impl RenderedScenes {
         let bop = BopScenes::find(dir, &paths);
         let replicator = ReplicatorFrames::find(&paths);
         let solo = SoloDataset::find(dir, &paths);
+        let kubric = KubricSequences::find(dir, &paths);
         let folders = SceneFolders::find(&paths).filter(|_| bop.is_none());
         let layouts = [
             (hdf5.is_some(), "BlenderProc .hdf5 files"),
             (bop.is_some(), "BOP scene folders"),
             (replicator.is_some(), "Replicator BasicWriter frames"),
             (solo.is_some(), "Unity Perception SOLO sequences"),
+            (kubric.is_some(), "Kubric sequences"),
             (paths.iter().any(|p| crate::folder::is_scene_folder(p)), "vkdiff scene folders"),
         ];
         let held: Vec<&str> = layouts.iter().filter(|(found, _)| *found).map(|(_, what)| *what).collect();
@@ -87,6 +90,10 @@ impl RenderedScenes {
         } else if let Some(sequences) = solo {
             let (format, steps) = SoloDataset::open(dir, &sequences).map_err(|e| within(dir, e))?;
             (Box::new(format), steps)
+        } else if let Some(sequences) = kubric {
+            let (format, frames) =
+                KubricSequences::open(dir, &sequences, default_category).map_err(|e| within(dir, e))?;
+            (Box::new(format), frames)
         } else if let Some(found) = folders {
             (Box::new(SceneFolders::new(default_category)), found)
         } else {
@@ -94,7 +101,8 @@ impl RenderedScenes {
                 "holds no scene folders (each with depth.exr or depth.png and instances.png), no BlenderProc .hdf5 \
                  files, no BOP scenes (folders with scene_camera.json and scene_gt.json, or one such folder) and no \
                  Replicator BasicWriter frames (instance_segmentation_mapping_N.json with its frame's files)\
-                 , nor any Unity Perception SOLO sequence (sequence.K/stepM.frame_data.json)"
+                 , nor any Unity Perception SOLO sequence (sequence.K/stepM.frame_data.json)\
+                 , nor any Kubric sequence (metadata.json with segmentation_NNNNN.png and depth_NNNNN.tiff)"
                     .into(),
             ));
         };
