@@ -1,289 +1,328 @@
 #!/usr/bin/env python3
-"""BOP scenes for `vkdiff dataset --scenes`, written as BOP's own writers write them.
+"""BOP scenes for `vkdiff dataset --scenes`, written by BlenderProc's own BOP writer.
 
-bop_toolkit (thodan/bop_toolkit) is not on the Python package registry (BlenderProc installs it
-from git), so this script writes the files the way its writers do, read from their source:
-  - bop_toolkit_lib/inout.py, thodan/bop_toolkit at commit 1454e87118109c0715fbd1f0623451429d25b53f:
-    save_json (a dict written one sorted key per line, each value json.dumps(sort_keys=True)),
-    save_scene_camera / save_scene_gt (matrices flattened row-major to lists), save_depth (np.round
-    to uint16, 16-bit greyscale PNG through PyPNG), save_im (imageio, PNG compression 3);
-  - blenderproc/python/writer/BopWriterUtility.py, DLR-RM/BlenderProc at commit
-    02a5c92839c8bbf18d5c593a76f44660c44921cc: the layout (<scene:06d>/scene_camera.json,
-    scene_gt.json, rgb/<im:06d>.png, depth/<im:06d>.png, mask/ and mask_visib/<im:06d>_<gt:06d>.png
-    with 255 inside), depth in mm / depth_scale, scene_camera entries cam_K, depth_scale,
-    cam_R_w2c, cam_t_w2c (mm), scene_gt entries obj_id, cam_R_m2c, cam_t_m2c (mm), gt id = index.
-The pixels are drawn here with numpy (ellipses and bars at planar depths, nearest wins); the
-visible mask of a gt is where it is nearest, its amodal mask where it covers.
+BlenderProc's `bproc.writer.write_bop` (blenderproc 2.8.0 from the Python package registry, run
+unchanged) writes every scene here, with Blender stood in for by tools/blender_stubs.py (the
+scene's frames, the camera's lens and pose, the objects' poses and meshes; mathutils is
+Blender's own math library). Each image is one write_bop call appending to its split, and its
+`calc_mask_info_coco` step runs as in BlenderProc: bop_toolkit's code (thodan/bop_toolkit at
+commit cea62d651c7e395b2e1962b9749e4e89693c6ac4, its master, which write_bop would pip-install
+from git; here a checkout given as BOP_TOOLKIT, as bop_toolkit is not on the package registry)
+with pyrender on EGL renders each gt's depth from
+scene_gt.json and writes mask/, mask_visib/ (bop19 visibility against the depth written, delta
+15 mm) and scene_gt_info.json.
 
-Versions used for the committed fixtures: Python 3.11, numpy 2.4.6, pypng 0.20220715.0,
-imageio 2.38.2, Pillow 13.0.0.
-Setup and rerun:
-  /tmp/ref/bin/pip install numpy pillow pypng imageio
-  /tmp/ref/bin/python tools/make_bop_fixtures.py [--out tests/fixtures/scenes]
+From BlenderProc's and bop_toolkit's code: every scene_camera.json and scene_gt.json (poses from
+the Blender objects' matrices, cam_K from the Blender lens, through BlenderProc's CameraUtility),
+depth/ (BopWriterUtility.save_depth), rgb/ (cv2.imwrite), mask/, mask_visib/ and
+scene_gt_info.json (calc_gt_masks, calc_gt_info), camera.json, and models/obj_*.ply and
+models_info.json (inout.save_ply; calc_model_info.py's steps: misc.calc_3d_bbox,
+misc.calc_pts_diameter, inout.save_json).
+From this maker: the scenes themselves (the models' shapes, where each object and camera is),
+the depth and colour images handed to write_bop in place of Blender's render (each object's
+depth rendered with write_bop's own pyrender set-up, `_BopWriterUtility._pyrender_init`, from
+the very pose write_bop writes; nearest wins over a tilted table, the top rows sky at depth 0;
+flat colours); and, where write_bop cannot: scene 000001's images renamed from 0 and 1 to 2 and
+10 (as BOP's test splits number theirs; JSON keys rewritten by the same save_json functions),
+its rgb/ folder renamed gray/ (write_bop wrote the one-channel images given), scene_gt_coco.json
+removed (vkdiff does not read it; it holds the run's clock and the ids before the renaming),
+camera.json left out of bop/ (a split folder alone), the fault copies of bop-bad/ (rewritten
+with BlenderProc's save_depth and bop_toolkit's save_im), and expected_keypoints.json (numpy,
+tools/bop_keypoints.py). The maker checks that each written visible mask is exactly
+where its gt is the nearest surface and each amodal mask where it covers.
+
+Versions used for the committed fixtures: Python 3.11.7, blenderproc 2.8.0, mathutils 3.3.0
+(Blender 3.3's; later releases need Python 3.13), pyrender 0.1.45, PyOpenGL 3.1.0 on Mesa's EGL
+(llvmpipe), trimesh 5.2.0, numpy 2.4.6, opencv-python 5.1.0, pypng 0.20220715.0, imageio 2.38.2,
+scipy 1.17.1, scikit-image 0.26.0, pycocotools 2.0.11. A rerun writes the same bytes.
+Setup and rerun (Debian: apt-get install libegl-mesa0 libeigen3-dev, for EGL and for building
+mathutils from source):
+  /tmp/ref/bin/pip install blenderproc==2.8.0 mathutils==3.3.0 pyrender trimesh opencv-python \
+      pypng imageio scipy scikit-image pycocotools
+  BOP_TOOLKIT=<checkout of thodan/bop_toolkit> /tmp/ref/bin/python tools/make_bop_fixtures.py \
+      [--out tests/fixtures/scenes]
 
 Writes under --out:
-  bop/: a split of two scenes, 96×72. 000000/ (images 0 and 1; rgb/ PNGs as PBR renders are
-      written, depth_scale 0.1, cam_R_w2c/cam_t_w2c given) and 000001/ (images 2 and 10, so that
-      image ids sort as numbers; gray/ PNGs, depth_scale 1.0, no world pose). Objects of obj_ids
-      1 and 2 touch, occlude each other and are cut by the frame's edge; one gt is hidden behind
-      another (its visible mask empty); the top rows are sky (depth 0), a table fills the rest.
-      bop/categories.json names obj_id 1 only (obj_id 2 falls back to obj_000002); a scene folder
-      given alone (--scenes bop/000001) has none beside it, so both are named by id.
-  bop-dataset/: a BOP dataset's root: train_pbr/000000/ (scene 0 as above) and
-      models/models_info.json (each obj_id's box, mm, as the toolkit's calc_model_info writes
-      min_x/y/z and size_x/y/z), and expected_keypoints.json: per scene/image/gt, the nine box
-      keypoints (the eight corners, x slowest, then the centre) projected here with numpy, each
-      x, y, v (2 seen, 1 behind the depth seen at its pixel, 0 outside the image: 0, 0, 0).
+  bop/: a split of two scenes, 96×72. 000000/ (images 0 and 1; rgb/ PNGs, depth_scale 0.1,
+      cam_R_w2c/cam_t_w2c given) and 000001/ (images 2 and 10, so that image ids sort as
+      numbers; gray/ PNGs, depth_scale 1.0, no world pose). Objects of obj_ids 1 (an ellipsoid)
+      and 2 (a bar) touch, occlude each other and are cut by the frame's edge; one gt is hidden
+      behind another (its visible mask empty); the top rows are sky (depth 0), a table fills the
+      rest. bop/categories.json names obj_id 1 only (obj_id 2 falls back to obj_000002); a scene
+      folder given alone (--scenes bop/000001) has none beside it, so both are named by id.
+  bop-dataset/: a BOP dataset's root: train_pbr/000000/ (scene 0 as above), camera.json,
+      models/ (obj_000001.ply, obj_000002.ply, models_info.json: each obj_id's box, mm), and
+      expected_keypoints.json: per scene/image/gt, the nine box keypoints (the eight corners, x
+      slowest, then the centre) projected here with numpy, each x, y, v (2 seen, 1 behind the
+      depth seen at its pixel, 0 outside the image: 0, 0, 0).
   bop-bad/<fault>/000000/: scene 000000 broken one way each: missing-mask (a mask_visib file
       removed), depth-size (image 1's depth 95×72), overlap (two visible masks share pixels).
 """
 import argparse
 import json
+import math
+import multiprocessing
+import os
 import pathlib
 import shutil
+import sys
+import tempfile
 
-import imageio.v2 as imageio
 import numpy as np
-import png
+import trimesh
+
+import blender_stubs
+import bop_keypoints
 
 WIDTH, HEIGHT = 96, 72
+SKY_ROWS = 10
 
-
-def write_json(path, content):
-    """A dict as BOP's save_json writes it: `{`, one `  "key": value` line per key in sorted key
-    order (values serialised with sorted keys), `}`, no trailing newline."""
-    lines = [f'  "{k}": {json.dumps(v, sort_keys=True)}' for k, v in sorted(content.items())]
-    path.write_text("{\n" + ",\n".join(lines) + "\n}")
-
-
-def write_depth(path, depth):
-    """Depth in depth_scale steps: rounded to uint16, a 16-bit grey PNG through PyPNG."""
-    values = np.round(depth).astype(np.uint16)
-    writer = png.Writer(values.shape[1], values.shape[0], greyscale=True, bitdepth=16)
-    with open(path, "wb") as f:
-        writer.write(f, values.reshape(-1, values.shape[1]))
-
-
-def write_image(path, pixels):
-    imageio.imwrite(path, pixels, compression=3)
-
-
-def rotation(angles):
-    """A rotation matrix from three angles (radians) about x, y and z."""
-    a, b, c = angles
-    rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
-    ry = np.array([[np.cos(b), 0, np.sin(b)], [0, 1, 0], [-np.sin(b), 0, np.cos(b)]])
-    rz = np.array([[np.cos(c), -np.sin(c), 0], [np.sin(c), np.cos(c), 0], [0, 0, 1]])
-    return rz @ ry @ rx
-
-
-def draw(objects):
-    """Planar depth (mm; 0 in the sky), each object's amodal and visible masks, and a render."""
-    yy, xx = np.mgrid[:HEIGHT, :WIDTH].astype(np.float64)
-    sky = yy < 10
-    depth = np.where(sky, 0.0, 900.0 + 2.0 * (HEIGHT - yy))
-    nearest = np.full((HEIGHT, WIDTH), -1)
-    amodal = []
-    for k, (_, kind, (cx, cy), (rx, ry), z) in enumerate(objects):
-        if kind == "ellipse":
-            inside = ((xx - cx) / rx) ** 2 + ((yy - cy) / ry) ** 2 <= 1
-        else:
-            inside = (abs(xx - cx) <= rx) & (abs(yy - cy) <= ry)
-        amodal.append(inside)
-        closer = inside & ((depth == 0) | (depth > z))
-        depth[closer] = z + (xx[closer] % 3)
-        nearest[closer] = k
-    visible = [nearest == k for k in range(len(objects))]
-    rgb = np.zeros((HEIGHT, WIDTH, 3), np.uint8)
-    rgb[:] = np.where(sky[..., None], [150, 190, 235], [120, 100, 80])
-    for k, (obj_id, *_rest) in enumerate(objects):
-        rgb[visible[k]] = {1: [200, 40, 40], 2: [40, 60, 200]}[obj_id]
-    return depth, amodal, visible, rgb
-
-
-# Per scene: (depth_scale, K, world pose given, render folder, {im_id: objects}); an object is
-# (obj_id, shape, centre px, radii px, depth mm).
-SCENES = {
-    0: (
-        0.1,
-        [[80.0, 0.0, 47.5], [0.0, 80.0, 35.5], [0.0, 0.0, 1.0]],
-        True,
-        "rgb",
-        {
-            0: [
-                (1, "ellipse", (30, 40), (12, 10), 600.0),
-                (1, "ellipse", (53, 40), (11, 10), 610.0),  # touches the first
-                (2, "bar", (45, 52), (30, 4), 550.0),  # occludes both
-                (2, "ellipse", (90, 30), (14, 12), 700.0),  # cut by the right edge
-            ],
-            1: [
-                (2, "ellipse", (10, 60), (16, 14), 500.0),  # cut by the left and bottom edges
-                (1, "ellipse", (50, 30), (10, 9), 650.0),
-                (1, "ellipse", (50, 30), (6, 5), 800.0),  # hidden behind the one above
-                (2, "bar", (70, 20), (6, 18), 640.0),  # cut by the top, over the sky
-            ],
-        },
-    ),
-    1: (
-        1.0,
-        [[90.0, 0.0, 48.0], [0.0, 88.0, 36.0], [0.0, 0.0, 1.0]],
-        False,
-        "gray",
-        {
-            2: [
-                (2, "ellipse", (40, 36), (20, 12), 700.0),
-                (1, "ellipse", (62, 36), (9, 9), 690.0),  # touches, a little in front
-                (1, "bar", (85, 60), (12, 8), 720.0),  # cut by the corner
-            ],
-            10: [
-                (1, "ellipse", (20, 30), (10, 12), 600.0),
-                (2, "ellipse", (28, 34), (10, 8), 580.0),  # occludes it
-            ],
-        },
-    ),
+# obj_id → its model, mm: an ellipsoid of semi-axes 80, 60, 40, and a 300 × 40 × 30 bar.
+MODELS = {
+    1: lambda: trimesh.creation.uv_sphere(radius=1.0, count=[10, 12]).apply_scale([80.0, 60.0, 40.0]),
+    2: lambda: trimesh.creation.box(extents=[300.0, 40.0, 30.0]),
 }
 
-
-def write_scene(dir, scene_id):
-    depth_scale, K, world, render, images = SCENES[scene_id]
-    rng = np.random.default_rng(scene_id)
-    for sub in ["depth", "mask", "mask_visib", render]:
-        (dir / sub).mkdir(parents=True, exist_ok=True)
-    cameras, gts = {}, {}
-    for im_id, objects in images.items():
-        depth, amodal, visible, rgb = draw(objects)
-        camera = {"cam_K": np.array(K).flatten().tolist(), "depth_scale": depth_scale}
-        if world:
-            r_w2c = rotation(rng.uniform(-0.5, 0.5, 3))
-            camera["cam_R_w2c"] = r_w2c.flatten().tolist()
-            camera["cam_t_w2c"] = rng.uniform(-300, 300, 3).tolist()
-        cameras[im_id] = camera
-        gts[im_id] = []
-        for gt_id, (obj_id, _, (cx, cy), _, z) in enumerate(objects):
-            t = [(cx - K[0][2]) * z / K[0][0], (cy - K[1][2]) * z / K[1][1], z]
-            r = rotation(rng.uniform(-np.pi, np.pi, 3))
-            gts[im_id].append({"obj_id": obj_id, "cam_R_m2c": r.flatten().tolist(), "cam_t_m2c": t})
-            write_image(dir / f"mask/{im_id:06d}_{gt_id:06d}.png", 255 * amodal[gt_id].astype(np.uint8))
-            write_image(dir / f"mask_visib/{im_id:06d}_{gt_id:06d}.png", 255 * visible[gt_id].astype(np.uint8))
-        write_depth(dir / f"depth/{im_id:06d}.png", depth / depth_scale)
-        pixels = rgb if render == "rgb" else rgb.mean(axis=2).round().astype(np.uint8)
-        write_image(dir / f"{render}/{im_id:06d}.png", pixels)
-    write_json(dir / "scene_camera.json", cameras)
-    write_json(dir / "scene_gt.json", gts)
-    # scene_gt_info.json as the toolkit's calc_gt_info gives it (bounding boxes, pixel counts).
-    info = {}
-    for im_id, objects in images.items():
-        _, amodal, visible, _ = draw(objects)
-        info[im_id] = [gt_info(a, v) for a, v in zip(amodal, visible)]
-    write_json(dir / "scene_gt_info.json", info)
-
-
-def bbox(mask):
-    ys, xs = np.nonzero(mask)
-    if len(xs) == 0:
-        return [-1, -1, -1, -1]
-    return [int(xs.min()), int(ys.min()), int(xs.max() - xs.min() + 1), int(ys.max() - ys.min() + 1)]
+# Per scene: depth_scale, the K asked of the camera, the render folder, and per image id the
+# camera's pose in Blender's world (location m, XYZ Euler degrees; written only where `world`)
+# and its objects: (obj_id, centre pixel, depth mm, XYZ Euler degrees of the model in the camera).
+SCENES = {
+    0: dict(depth_scale=0.1, K=[[80.0, 0.0, 47.5], [0.0, 80.0, 35.5], [0.0, 0.0, 1.0]], world=True, render="rgb",
+            images={
+                0: (((0.12, -0.55, 0.48), (52, 0, 12)), [
+                    (1, (30, 38), 600, (10, 20, 0)),
+                    (1, (47, 38), 700, (-15, 10, 30)),  # touches the first, behind it
+                    (2, (45, 46), 500, (0, 0, 3)),  # occludes both
+                    (2, (90, 30), 700, (0, 0, 35)),  # cut by the right edge
+                ]),
+                1: (((0.30, -0.45, 0.50), (48, 0, 33)), [
+                    (2, (10, 62), 500, (0, 0, -30)),  # cut by the left and bottom edges
+                    (1, (50, 30), 600, (30, 0, 20)),
+                    (1, (50, 30), 780, (30, 0, 20)),  # hidden behind the one above
+                    (2, (72, 16), 640, (0, 0, 85)),  # cut by the top, over the sky
+                ]),
+            }),
+    1: dict(depth_scale=1.0, K=[[90.0, 0.0, 48.0], [0.0, 88.0, 36.0], [0.0, 0.0, 1.0]], world=False, render="gray",
+            images={
+                2: (((0.0, 0.0, 1.0), (0, 0, 0)), [
+                    (2, (38, 36), 700, (0, 0, 0)),
+                    (1, (62, 36), 600, (0, 30, 0)),  # touches the bar, in front
+                    (1, (88, 64), 720, (20, 0, 45)),  # cut by the corner
+                ]),
+                10: (((0.0, 0.0, 1.0), (0, 0, 0)), [
+                    (1, (20, 30), 600, (0, 0, 0)),
+                    (2, (28, 34), 520, (0, 0, -20)),  # occludes it
+                ]),
+            }),
+}
+# Flat colours whose greys differ too: sky 192, table 100, obj_id 1 137, obj_id 2 70.
+COLOURS = {"sky": (150, 190, 235), "table": (120, 100, 80), 1: (240, 90, 80), 2: (20, 40, 150)}
 
 
-def gt_info(amodal, visible):
-    all_, visib = int(amodal.sum()), int(visible.sum())
-    return {
-        "bbox_obj": bbox(amodal),
-        "bbox_visib": bbox(visible),
-        "px_count_all": all_,
-        "px_count_valid": all_,
-        "px_count_visib": visib,
-        "visib_fract": visib / all_ if all_ else 0.0,
-    }
+def write_models(models_dir):
+    """Each model as BOP ships it (PLY, mm, bop_toolkit's save_ply), models_info.json as
+    bop_toolkit's scripts/calc_model_info.py computes it, and each model loaded back."""
+    from bop_toolkit_lib import inout, misc
+
+    models_dir.mkdir(parents=True)
+    info, loaded = {}, {}
+    for obj_id, make in MODELS.items():
+        mesh = make()
+        path = models_dir / f"obj_{obj_id:06d}.ply"
+        inout.save_ply(path, {"pts": np.asarray(mesh.vertices), "faces": np.asarray(mesh.faces)})
+        model = inout.load_ply(path)
+        pts = model["pts"]
+        bbox = misc.calc_3d_bbox(pts[:, 0], pts[:, 1], pts[:, 2])
+        keys = ["min_x", "min_y", "min_z", "size_x", "size_y", "size_z"]
+        info[obj_id] = {**{k: float(v) for k, v in zip(keys, bbox)}, "diameter": float(misc.calc_pts_diameter(pts))}
+        loaded[obj_id] = model
+    inout.save_json(models_dir / "models_info.json", info)
+    return loaded
 
 
-# obj_id → (min xyz, size xyz), mm.
-MODELS = {1: ([-30.0, -20.0, -10.0], [60.0, 40.0, 20.0]), 2: ([-150.0, -8.0, -6.0], [300.0, 16.0, 12.0])}
+def euler(degrees):
+    """A rotation (4 × 4) from XYZ Euler angles in degrees, by Blender's mathutils."""
+    import mathutils
+
+    return mathutils.Euler([math.radians(a) for a in degrees]).to_matrix().to_4x4()  # XYZ: its default
 
 
-def box_points(obj_id):
-    """The box's corners (x slowest, then y, then z; min before max) and its centre, mm."""
-    lo, size = np.array(MODELS[obj_id][0]), np.array(MODELS[obj_id][1])
-    hi = lo + size
-    corners = [[(lo, hi)[i][0], (lo, hi)[j][1], (lo, hi)[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
-    return np.array(corners + [list((lo + hi) / 2)])
+def stage(scene_spec, im_id, meshes):
+    """A fresh Blender scene holding image im_id's camera and objects; the MeshObjects."""
+    import mathutils
+    from blenderproc.python.camera import CameraUtility
+    from blenderproc.python.types.MeshObjectUtility import MeshObject
+
+    scene = blender_stubs.new_scene(WIDTH, HEIGHT)
+    K = scene_spec["K"]
+    CameraUtility.set_intrinsics_from_K_matrix(K, WIDTH, HEIGHT)
+    (location, angles), objects = scene_spec["images"][im_id]
+    cam2world = mathutils.Matrix.Translation(location) @ euler(angles)
+    CameraUtility.add_camera_pose(cam2world, frame=0)
+    opencv_to_blender = mathutils.Matrix.Diagonal((1.0, -1.0, -1.0, 1.0))
+    placed = []
+    for k, (obj_id, (u, v), z, angles) in enumerate(objects):
+        t = [(u - K[0][2]) * z / K[0][0] / 1000.0, (v - K[1][2]) * z / K[1][1] / 1000.0, z / 1000.0]
+        model2camera = mathutils.Matrix.Translation(t) @ euler(angles)
+        obj = MeshObject(blender_stubs.BlenderObject(f"obj_{obj_id:06d}.{k:03d}", meshes[obj_id]))
+        obj.set_cp("category_id", obj_id)
+        obj.set_local2world_mat(cam2world @ opencv_to_blender @ model2camera)
+        scene.objects.append(obj.blender_obj)
+        placed.append(obj)
+    scene.frame_set(0)
+    return placed
 
 
-def round_hundredth(c):
-    """To 1/100 pixel, halves away from zero."""
-    return float(np.sign(c) * np.floor(abs(c) * 100 + 0.5) / 100)
+def render_depth(K, gt):
+    """One gt's depth (m, 0 off it) as write_bop's calc_gt_masks renders it: its pyrender set-up
+    (`_pyrender_init`, run as this pool's initializer), camera and pose conversion."""
+    import pyrender
+    from blenderproc.python.writer import BopWriterUtility as writer
+
+    K = np.array(K).reshape(3, 3)
+    scene = pyrender.Scene()
+    scene.add(pyrender.IntrinsicsCamera(fx=K[0, 0], fy=K[1, 1], cx=K[0, 2], cy=K[1, 2], znear=0.1, zfar=100000))
+    t = np.array(gt["cam_t_m2c"])
+    t /= 1000.0
+    pose = writer.bop_pose_to_pyrender_coordinate_system(cam_R_m2c=np.array(gt["cam_R_m2c"]).reshape(3, 3), cam_t_m2c=t)
+    scene.add(writer.dataset_objects[gt["obj_id"]], pose=pose)
+    return writer.renderer.render(scene=scene)[1]
 
 
-def expected_keypoints(scene_dir):
-    """Each gt's box keypoints, projected with cam_K; seen unless the depth at its pixel (metres,
-    0 = nothing) is nearer than 99 % of its own."""
-    cameras = json.loads((scene_dir / "scene_camera.json").read_text())
-    gts = json.loads((scene_dir / "scene_gt.json").read_text())
-    out = {}
-    for im_id, camera in cameras.items():
-        K = np.array(camera["cam_K"]).reshape(3, 3)
-        depth = imageio.imread(scene_dir / f"depth/{int(im_id):06d}.png").astype(np.float64)
-        depth = np.where(depth == 0, np.inf, depth * camera["depth_scale"] / 1000.0)
-        out[im_id] = []
-        for gt in gts[im_id]:
-            R = np.array(gt["cam_R_m2c"]).reshape(3, 3)
-            t = np.array(gt["cam_t_m2c"]) / 1000.0
-            points = []
-            for p in box_points(gt["obj_id"]) / 1000.0:
-                x, y, z = R @ p + t
-                u, v = K[0, 0] * x / z + K[0, 2], K[1, 1] * y / z + K[1, 2]
-                col, row = int(np.floor(u + 0.5)), int(np.floor(v + 0.5))
-                if z <= 0 or not (0 <= col < WIDTH and 0 <= row < HEIGHT):
-                    points.append([0.0, 0.0, 0])
-                    continue
-                seen = depth[row, col] >= z * 0.99
-                points.append([round_hundredth(u), round_hundredth(v), 2 if seen else 1])
-            out[im_id].append(points)
-    return out
+def compose(depths, obj_ids):
+    """The frame Blender would render: nearest surface wins over a table tilted away (sky at the
+    top, depth 0); the depth (m), which gt is seen at each pixel (-1 none), flat colours."""
+    rows = np.arange(HEIGHT, dtype=np.float64)[:, None] * np.ones((1, WIDTH))
+    depth = np.where(rows < SKY_ROWS, 0.0, (900.0 + 2.0 * (HEIGHT - rows)) / 1000.0)
+    nearest = np.full((HEIGHT, WIDTH), -1)
+    for k, d in enumerate(depths):
+        closer = (d > 0) & ((depth == 0) | (d < depth))
+        depth[closer] = d[closer]
+        nearest[closer] = k
+    rgb = np.where((rows < SKY_ROWS)[..., None], COLOURS["sky"], COLOURS["table"]).astype(np.uint8)
+    for k, obj_id in enumerate(obj_ids):
+        rgb[nearest == k] = COLOURS[obj_id]
+    return depth, nearest, rgb
 
 
-def write_dataset(root):
-    shutil.rmtree(root, ignore_errors=True)
-    write_scene(root / "train_pbr/000000", 0)
-    info = {
-        obj_id: {"diameter": float(np.linalg.norm(size)), **{f"min_{a}": m for a, m in zip("xyz", lo)},
-                 **{f"size_{a}": s for a, s in zip("xyz", size)}}
-        for obj_id, (lo, size) in MODELS.items()
-    }
-    (root / "models").mkdir()
-    write_json(root / "models/models_info.json", info)
-    expected = {"000000": expected_keypoints(root / "train_pbr/000000")}
-    (root / "expected_keypoints.json").write_text(json.dumps(expected) + "\n")
+def write_split(out, dataset, scene_ids, meshes, pool):
+    """Each image of the scenes through its own write_bop call, appending to out/dataset/train_pbr
+    two images a chunk; per (scene, image): the gt seen at each pixel and each gt's silhouette."""
+    from blenderproc.api import writer
+    from blenderproc.python.writer.BopWriterUtility import _BopWriterUtility
+
+    drawn = {}
+    for scene_id in scene_ids:
+        spec = SCENES[scene_id]
+        for im_id in spec["images"]:
+            objects = stage(spec, im_id, meshes)
+            # The poses and K write_bop writes, which its calc_gt_masks renders from.
+            gts = _BopWriterUtility.get_frame_gt(objects, 1000.0, 100.0)
+            K = _BopWriterUtility.get_frame_camera(False)["cam_K"]
+            depths = pool.starmap(render_depth, [(K, gt) for gt in gts])
+            depth, nearest, rgb = compose(depths, [gt["obj_id"] for gt in gts])
+            colour = rgb if spec["render"] == "rgb" else rgb.mean(axis=2, keepdims=True).round().astype(np.uint8)
+            writer.write_bop(str(out), target_objects=objects, depths=[depth], colors=[colour],
+                             color_file_format="PNG", dataset=dataset, depth_scale=spec["depth_scale"],
+                             save_world2cam=spec["world"], annotation_unit="mm", frames_per_chunk=2,
+                             calc_mask_info_coco=True, delta=0.015, num_worker=1)
+            drawn[(scene_id, im_id)] = (nearest, [d > 0 for d in depths])
+    return drawn
+
+
+def check_masks(split, drawn):
+    """Each visible mask written is exactly where its gt is the nearest surface, each amodal mask
+    where it covers; the hidden gt has none."""
+    import imageio.v2 as imageio
+
+    hidden = 0
+    for (scene_id, im_id), (nearest, silhouettes) in drawn.items():
+        frame = list(SCENES[scene_id]["images"]).index(im_id)
+        for k, silhouette in enumerate(silhouettes):
+            name = f"{frame:06d}_{k:06d}.png"
+            visible = imageio.imread(split / f"{scene_id:06d}/mask_visib/{name}") > 0
+            whole = imageio.imread(split / f"{scene_id:06d}/mask/{name}") > 0
+            if not (np.array_equal(visible, nearest == k) and np.array_equal(whole, silhouette)):
+                sys.exit(f"scene {scene_id} image {im_id} gt {k}: write_bop's masks differ from the scene drawn")
+            hidden += not visible.any()
+    if hidden == 0:
+        sys.exit("no gt is hidden")
+
+
+def renumber(scene, new_ids):
+    """Images 0, 1, … of a scene renamed new_ids[0], new_ids[1], …: files, and the JSON files'
+    keys through the functions that wrote them."""
+    from blenderproc.python.writer.BopWriterUtility import _BopWriterUtility
+    from bop_toolkit_lib import inout
+
+    for old, new in reversed(list(enumerate(new_ids))):
+        for path in scene.glob(f"*/{old:06d}*.png"):
+            path.rename(path.with_name(f"{new:06d}{path.name[6:]}"))
+    for name, load, save in [("scene_camera.json", _BopWriterUtility.load_json, _BopWriterUtility.save_json),
+                             ("scene_gt.json", _BopWriterUtility.load_json, _BopWriterUtility.save_json),
+                             ("scene_gt_info.json", inout.load_json, inout.save_json)]:
+        content = load(scene / name, keys_to_int=True)
+        save(scene / name, {new_ids[old]: value for old, value in content.items()})
+
+
+def write_faults(bad, scene):
+    """Copies of `scene` broken one way each, with BOP's own writers."""
+    import imageio.v2 as imageio
+    from blenderproc.python.writer.BopWriterUtility import _BopWriterUtility
+    from bop_toolkit_lib import inout
+
+    for fault in ["missing-mask", "depth-size", "overlap"]:
+        copy = bad / fault / "000000"
+        shutil.copytree(scene, copy)
+        if fault == "missing-mask":
+            (copy / "mask_visib/000001_000002.png").unlink()
+        elif fault == "depth-size":
+            depth = imageio.imread(copy / "depth/000001.png")
+            _BopWriterUtility.save_depth(str(copy / "depth/000001.png"), depth[:, :-1].astype(np.float64))
+        else:
+            # gt 1's visible mask grown onto gt 0's pixels.
+            first = imageio.imread(copy / "mask_visib/000000_000000.png")
+            second = imageio.imread(copy / "mask_visib/000000_000001.png")
+            inout.save_im(copy / "mask_visib/000000_000001.png", np.maximum(first, second))
 
 
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--out", default="tests/fixtures/scenes")
     out = pathlib.Path(parser.parse_args().out)
-    split = out / "bop"
-    shutil.rmtree(split, ignore_errors=True)
-    for scene_id in SCENES:
-        write_scene(split / f"{scene_id:06d}", scene_id)
-    categories = {"categories": [{"id": 1, "name": "duck", "supercategory": "toy"}]}
-    (split / "categories.json").write_text(json.dumps(categories, indent=2) + "\n")
+    toolkit = os.environ.get("BOP_TOOLKIT")
+    if not toolkit or not os.path.isdir(os.path.join(toolkit, "bop_toolkit_lib")):
+        sys.exit("BOP_TOOLKIT must name a checkout of thodan/bop_toolkit (it holds bop_toolkit_lib/)")
+    blender_stubs.install(toolkit)
+    from blenderproc.python.types.MeshObjectUtility import MeshObject
+    from blenderproc.python.writer.BopWriterUtility import _BopWriterUtility
 
-    write_dataset(out / "bop-dataset")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = pathlib.Path(tmp)
+        models = write_models(tmp / "bop-dataset/models")
+        meshes = {i: blender_stubs.blender_mesh(m["pts"] / 1000.0, m["faces"]) for i, m in models.items()}
+        # write_bop's meshes for its renderer, as it makes them; this pool renders the frames with them.
+        trimeshes = {i: MeshObject(blender_stubs.BlenderObject(f"obj_{i:06d}", m)).mesh_as_trimesh()
+                     for i, m in meshes.items()}
+        with multiprocessing.Pool(1, _BopWriterUtility._pyrender_init, [WIDTH, HEIGHT, trimeshes]) as pool:
+            for dataset, scene_ids in [("bop", [0, 1]), ("bop-dataset", [0])]:
+                check_masks(tmp / dataset / "train_pbr", write_split(tmp, dataset, scene_ids, meshes, pool))
+        for coco in tmp.glob("*/train_pbr/*/scene_gt_coco.json"):
+            coco.unlink()
 
-    bad = out / "bop-bad"
-    shutil.rmtree(bad, ignore_errors=True)
-    for fault in ["missing-mask", "depth-size", "overlap"]:
-        scene = bad / fault / "000000"
-        write_scene(scene, 0)
-        if fault == "missing-mask":
-            (scene / "mask_visib/000001_000002.png").unlink()
-        elif fault == "depth-size":
-            depth = imageio.imread(scene / "depth/000001.png")
-            write_depth(scene / "depth/000001.png", depth[:, :-1].astype(np.float64))
-        else:
-            # gt 1's visible mask grown onto gt 0's pixels.
-            first = imageio.imread(scene / "mask_visib/000000_000000.png")
-            second = imageio.imread(scene / "mask_visib/000000_000001.png")
-            write_image(scene / "mask_visib/000000_000001.png", np.maximum(first, second))
+        split = tmp / "bop/train_pbr"
+        renumber(split / "000001", list(SCENES[1]["images"]))
+        (split / "000001/rgb").rename(split / "000001/gray")
+        categories = {"categories": [{"id": 1, "name": "duck", "supercategory": "toy"}]}
+        (split / "categories.json").write_text(json.dumps(categories, indent=2) + "\n")
+        write_faults(tmp / "bop-bad", split / "000000")
+        dataset = tmp / "bop-dataset"
+        expected = {"000000": bop_keypoints.expected_keypoints(dataset / "train_pbr/000000", dataset / "models")}
+        (dataset / "expected_keypoints.json").write_text(json.dumps(expected) + "\n")
+
+        for name, made in [("bop", split), ("bop-dataset", dataset), ("bop-bad", tmp / "bop-bad")]:
+            shutil.rmtree(out / name, ignore_errors=True)
+            shutil.copytree(made, out / name)
 
 
 if __name__ == "__main__":

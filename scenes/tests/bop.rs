@@ -1,5 +1,5 @@
-//! BOP scenes (tests/fixtures/scenes/bop, written by tools/make_bop_fixtures.py as BOP's writers
-//! write them) read as BOP defines them, each held to the fixture's own files read here with the
+//! BOP scenes (tests/fixtures/scenes/bop, written by BlenderProc's own write_bop through
+//! tools/make_bop_fixtures.py) read as BOP defines them, each held to the fixture's own files read here with the
 //! png crate: every image of scene_camera.json one scene in scene then image order, each
 //! instance exactly its visible mask's pixels with its obj_id and pose, depth in metres with 0 as
 //! background, the camera's K that of cam_K; broken scenes refused naming the file.
@@ -110,11 +110,12 @@ fn every_image_is_a_scene_with_its_masks_depth_camera_and_poses() {
             (Pose::Given(m), Some(r)) => {
                 let r: Vec<f64> = r.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
                 let t: Vec<f64> = camera["cam_t_w2c"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-                // T_world_camera · (world → camera) is the identity.
+                // T_world_camera · (world → camera) is the identity: to 1e-5 for R, which write_bop
+                // gives in Blender's single precision (RᵀR is I to 9e-7 in the fixture).
                 for (i, row) in m.iter().take(3).enumerate() {
                     for j in 0..3 {
                         let product: f64 = (0..3).map(|l| row[l] * r[3 * l + j]).sum();
-                        assert!((product - (i == j) as u8 as f64).abs() < 1e-9, "{name}: R");
+                        assert!((product - (i == j) as u8 as f64).abs() < 1e-5, "{name}: R");
                     }
                     let origin: f64 = (0..3).map(|l| row[l] * t[l] / 1000.0).sum::<f64>() + row[3];
                     assert!(origin.abs() < 1e-9, "{name}: t");
