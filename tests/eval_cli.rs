@@ -149,7 +149,7 @@ fn bad_input_is_one_error_line() {
     for (args, message) in [
         (vec!["--pred", bad.to_str().unwrap()], "image 99 is not in the ground truth"),
         (vec!["--pred", "/nonexistent.json"], "cannot read /nonexistent.json"),
-        (vec!["--pred", &fixture("dt_segm.json"), "--max-dets", "10,1,100"], "must be positive and ascending"),
+        (vec!["--pred", &fixture("dt_segm.json"), "--max-dets", "10,1,100"], "positive and ascending"),
     ] {
         let out = vkdiff(&[&["eval", "--gt", &fixture("gt.json")][..], &args].concat());
         let err = String::from_utf8_lossy(&out.stderr);

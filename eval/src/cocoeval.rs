@@ -1,10 +1,11 @@
-//! `COCOeval` for segm and bbox: per image and category, detections sorted by score are matched
-//! greedily to ground truth at each IoU threshold; precision is interpolated at 101 recall
-//! points; the twelve statistics average it over categories (and thresholds), as pycocotools
-//! 2.0 does. One deliberate difference: a match to a ground-truth annotation with id 0 counts
+//! `COCOeval` for segm, bbox and keypoints: per image and category, detections sorted by score
+//! are matched greedily to ground truth at each IoU (or OKS) threshold; precision is interpolated
+//! at 101 recall points; the twelve statistics (ten for keypoints) average it over categories
+//! (and thresholds), as pycocotools 2.0 does. One deliberate difference: a match to a ground-truth annotation with id 0 counts
 //! (pycocotools stores matches by id and takes 0 for "none").
 
 use crate::dataset::{Annotation, Dataset, Geometry};
+use crate::keypoints::{oks, sigmas};
 use crate::masks::{bbox as mask_box, bbox_iou, mask_iou, ones};
 use crate::{EvalError, Result};
 use std::collections::HashMap;
@@ -13,18 +14,51 @@ use std::collections::HashMap;
 pub enum IouType {
     Segm,
     Bbox,
+    /// Object keypoint similarity (OKS) in place of IoU.
+    Keypoints,
+}
+
+impl IouType {
+    /// pycocotools' name (`iouType`).
+    pub fn name(self) -> &'static str {
+        match self {
+            IouType::Segm => "segm",
+            IouType::Bbox => "bbox",
+            IouType::Keypoints => "keypoints",
+        }
+    }
+
+    /// Area ranges and their names, as pycocotools sets them (keypoints have no small range).
+    pub fn area_ranges(self) -> &'static [(f64, f64, &'static str)] {
+        const OBJECTS: [(f64, f64, &str); 4] =
+            [(0.0, 1e10, "all"), (0.0, 1024.0, "small"), (1024.0, 9216.0, "medium"), (9216.0, 1e10, "large")];
+        const KEYPOINTS: [(f64, f64, &str); 3] =
+            [(0.0, 1e10, "all"), (1024.0, 9216.0, "medium"), (9216.0, 1e10, "large")];
+        match self {
+            IouType::Keypoints => &KEYPOINTS,
+            _ => &OBJECTS,
+        }
+    }
+
+    /// pycocotools' detection caps: 1, 10, 100 (20 for keypoints).
+    pub fn default_max_dets(self) -> Vec<usize> {
+        match self {
+            IouType::Keypoints => vec![20],
+            _ => vec![1, 10, 100],
+        }
+    }
 }
 
 #[derive(Clone, Debug)]
 pub struct EvalParams {
     pub iou_type: IouType,
-    /// Three detection caps, ascending (pycocotools: 1, 10, 100).
-    pub max_dets: [usize; 3],
+    /// Detection caps, ascending: three for segm and bbox (pycocotools: 1, 10, 100), one or more
+    /// for keypoints (20).
+    pub max_dets: Vec<usize>,
+    /// Keypoint evaluation's per-keypoint sigmas (`kpt_oks_sigmas`); `None` takes COCO's person
+    /// sigmas for 17 keypoints, 1/k each for k others.
+    pub kpt_sigmas: Option<Vec<f64>>,
 }
-
-/// Area ranges and their names, as pycocotools sets them.
-const AREAS: [(f64, f64, &str); 4] =
-    [(0.0, 1e10, "all"), (0.0, 1024.0, "small"), (1024.0, 9216.0, "medium"), (9216.0, 1e10, "large")];
 
 /// numpy's `linspace(start, stop, n)`: i·step + start, the last value exactly `stop`.
 fn linspace(start: f64, stop: f64, n: usize) -> Vec<f64> {
@@ -44,6 +78,8 @@ pub struct Stats {
     pub dims: [usize; 5],
     /// The category ids along the k axis, ascending (pycocotools' `catIds`).
     pub categories: Vec<u64>,
+    /// The sigmas keypoints were scored with (empty for segm and bbox).
+    pub kpt_sigmas: Vec<f64>,
     /// Mean over ground-truth instances (not crowd, any area) of the IoU with the detection
     /// matched to them at IoU ≥ 0.5 within the last detection cap, 0 for those unmatched.
     pub mean_instance_iou: f64,
@@ -70,8 +106,9 @@ fn by_score(anns: &[&Annotation]) -> Vec<usize> {
     order
 }
 
-/// IoU of every detection with every ground truth, [detection][ground truth].
-fn ious(dts: &[&Annotation], gts: &[&Annotation], iou_type: IouType) -> Vec<Vec<f64>> {
+/// IoU (OKS for keypoints, scored with `sigmas`) of every detection with every ground truth,
+/// [detection][ground truth].
+fn ious(dts: &[&Annotation], gts: &[&Annotation], iou_type: IouType, sigmas: &[f64]) -> Vec<Vec<f64>> {
     // A mask's runs and the box around its pixels: masks whose boxes are apart share no pixel.
     let runs = |a: &Annotation| match &a.geometry {
         Geometry::Mask(r) => (ones(r), mask_box(r)),
@@ -85,6 +122,7 @@ fn ious(dts: &[&Annotation], gts: &[&Annotation], iou_type: IouType) -> Vec<Vec<
                 .zip(&g_runs)
                 .map(|(g, (g_runs, g_box))| match iou_type {
                     IouType::Bbox => bbox_iou(d.bbox, g.bbox, g.iscrowd),
+                    IouType::Keypoints => oks(d, g, sigmas),
                     IouType::Segm if !overlap(d_box, *g_box) => 0.0,
                     IouType::Segm => mask_iou(&d_runs, g_runs, g.iscrowd),
                 })
@@ -111,7 +149,7 @@ fn evaluate_image(
         return None;
     }
     let outside = |x: f64| x < area.0 || x > area.1;
-    let g_ignore: Vec<bool> = gts.iter().map(|g| g.iscrowd || outside(g.area)).collect();
+    let g_ignore: Vec<bool> = gts.iter().map(|g| g.ignore || outside(g.area)).collect();
     // Not ignored first, stable.
     let mut g_order: Vec<usize> = (0..gts.len()).collect();
     g_order.sort_by_key(|&i| g_ignore[i]);
@@ -163,9 +201,20 @@ type ImageMatches<'a> = (Vec<&'a Annotation>, Vec<&'a Annotation>, Vec<Vec<f64>>
 
 /// Runs `COCOeval.evaluate()`, `accumulate()` and `summarize()` on `dt` against `gt`.
 pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
-    if !(p.max_dets[0] <= p.max_dets[1] && p.max_dets[1] <= p.max_dets[2] && p.max_dets[0] > 0) {
-        return Err(EvalError::Invalid(format!("max detections {:?} must be positive and ascending", p.max_dets)));
+    let caps = &p.max_dets;
+    let counted = if p.iou_type == IouType::Keypoints { !caps.is_empty() } else { caps.len() == 3 };
+    if !counted || caps.windows(2).any(|w| w[0] > w[1]) || caps[0] == 0 {
+        let needed = if p.iou_type == IouType::Keypoints { "one or more" } else { "three" };
+        return Err(EvalError::Invalid(format!(
+            "max detections {caps:?}: {} evaluation takes {needed}, positive and ascending",
+            p.iou_type.name()
+        )));
     }
+    let areas = p.iou_type.area_ranges();
+    let sigmas = match p.iou_type {
+        IouType::Keypoints => sigmas(p.kpt_sigmas.as_deref(), gt, dt)?,
+        _ => Vec::new(),
+    };
     let thresholds = linspace(0.5, 0.95, 10);
     let rec_thrs = linspace(0.0, 1.0, 101);
     let mut images: Vec<u64> = gt.images.keys().copied().collect();
@@ -184,8 +233,8 @@ pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
         m
     };
     let (g_map, d_map) = (group(gt), group(dt));
-    let max_det = p.max_dets[2];
-    let (t_n, r_n, k_n, a_n, m_n) = (thresholds.len(), rec_thrs.len(), cats.len(), AREAS.len(), 3);
+    let max_det = caps[caps.len() - 1];
+    let (t_n, r_n, k_n, a_n, m_n) = (thresholds.len(), rec_thrs.len(), cats.len(), areas.len(), caps.len());
     // evalImgs[k][a][i]
     let mut evals: Vec<Option<ImageEval>> = Vec::with_capacity(k_n * a_n * images.len());
     for &cat in &cats {
@@ -198,11 +247,11 @@ pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
                     d_map.get(&(img, cat)).map_or(vec![], |v| v.iter().map(|&i| &dt.annotations[i]).collect());
                 let mut dts: Vec<&Annotation> = by_score(&dts).into_iter().map(|i| dts[i]).collect();
                 dts.truncate(max_det);
-                let iou = ious(&dts, &gts, p.iou_type);
+                let iou = ious(&dts, &gts, p.iou_type, &sigmas);
                 (dts, gts, iou)
             })
             .collect();
-        for &(lo, hi, _) in &AREAS {
+        for &(lo, hi, _) in areas {
             for (dts, gts, iou) in &per_image {
                 evals.push(evaluate_image(dts, gts, iou, (lo, hi), &thresholds, max_det));
             }
@@ -221,7 +270,7 @@ pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
             if npig == 0 {
                 continue;
             }
-            for (m, &cap) in p.max_dets.iter().enumerate() {
+            for (m, &cap) in caps.iter().enumerate() {
                 // Every image's first `cap` detections, by score (stable across images).
                 let mut dets: Vec<(f64, usize, usize)> = Vec::new();
                 for (ei, e) in e.iter().enumerate() {
@@ -266,42 +315,78 @@ pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
     let mean = |v: &[f64], n: usize| if n == 0 { -1.0 } else { v.iter().sum::<f64>() / n as f64 };
     let (mean_instance_iou, mean_matched_iou) = (mean(&matched, all_area.len()), mean(&matched, matched.len()));
     let dims = [t_n, r_n, k_n, a_n, m_n];
-    let (names, values) = summarize(&precision, &recall, dims, p.max_dets);
-    Ok(Stats { names, values, precision, recall, dims, categories: cats, mean_instance_iou, mean_matched_iou })
+    let (names, values) = match p.iou_type {
+        IouType::Keypoints => summarize_keypoints(&precision, &recall, dims, max_det),
+        _ => summarize(&precision, &recall, dims, [caps[0], caps[1], caps[2]]),
+    };
+    let kpt_sigmas = sigmas;
+    Ok(Stats {
+        names,
+        values,
+        precision,
+        recall,
+        dims,
+        categories: cats,
+        kpt_sigmas,
+        mean_instance_iou,
+        mean_matched_iou,
+    })
 }
 
-/// pycocotools' `summarize()`: means over the defined (> -1) entries.
-fn summarize(
-    precision: &[f64],
-    recall: &[f64],
-    [t_n, r_n, k_n, a_n, m_n]: [usize; 5],
-    max_dets: [usize; 3],
-) -> (Vec<String>, Vec<f64>) {
-    let mean = |vals: Vec<f64>| {
-        let v: Vec<f64> = vals.into_iter().filter(|&x| x > -1.0).collect();
-        if v.is_empty() {
+/// Means over the defined (> -1) entries of the precision and recall arrays, as pycocotools'
+/// `_summarize` takes them, at the last detection cap unless one is named.
+struct Arrays<'a> {
+    precision: &'a [f64],
+    recall: &'a [f64],
+    dims: [usize; 5],
+}
+
+impl Arrays<'_> {
+    fn mean(vals: impl Iterator<Item = f64>) -> f64 {
+        let (sum, n) = vals.filter(|&x| x > -1.0).fold((0.0, 0usize), |(sum, n), x| (sum + x, n + 1));
+        if n == 0 {
             -1.0
         } else {
-            v.iter().sum::<f64>() / v.len() as f64
+            sum / n as f64
         }
-    };
-    let ap = |t: Option<usize>, a: usize| {
-        let ts: Vec<usize> = t.map_or((0..t_n).collect(), |t| vec![t]);
-        mean(
-            ts.iter()
-                .flat_map(|&t| {
-                    (0..r_n).flat_map(move |r| {
-                        (0..k_n).map(move |k| precision[(((t * r_n + r) * k_n + k) * a_n + a) * m_n + 2])
-                    })
-                })
-                .collect(),
+    }
+
+    /// Thresholds `t` (all when `None`), area range `a`.
+    fn thresholds(&self, t: Option<usize>) -> std::ops::Range<usize> {
+        t.map_or(0..self.dims[0], |t| t..t + 1)
+    }
+
+    fn ap(&self, t: Option<usize>, a: usize) -> f64 {
+        let [_, r_n, k_n, a_n, m_n] = self.dims;
+        Self::mean(self.thresholds(t).flat_map(|t| {
+            (0..r_n).flat_map(move |r| {
+                (0..k_n).map(move |k| self.precision[(((t * r_n + r) * k_n + k) * a_n + a) * m_n + m_n - 1])
+            })
+        }))
+    }
+
+    fn ar(&self, t: Option<usize>, a: usize, m: usize) -> f64 {
+        let [_, _, k_n, a_n, m_n] = self.dims;
+        Self::mean(
+            self.thresholds(t).flat_map(|t| (0..k_n).map(move |k| self.recall[((t * k_n + k) * a_n + a) * m_n + m])),
         )
-    };
-    let ar = |a: usize, m: usize| {
-        mean((0..t_n).flat_map(|t| (0..k_n).map(move |k| recall[((t * k_n + k) * a_n + a) * m_n + m])).collect())
-    };
+    }
+}
+
+/// `name`, tagged with the last cap where it is not pycocotools' (`default`).
+fn tagged(name: &str, cap: usize, default: usize) -> String {
+    if cap == default {
+        name.to_string()
+    } else {
+        format!("{name}@{cap}")
+    }
+}
+
+/// pycocotools' `summarize()` for segm and bbox: the twelve statistics.
+fn summarize(precision: &[f64], recall: &[f64], dims: [usize; 5], max_dets: [usize; 3]) -> (Vec<String>, Vec<f64>) {
+    let s = Arrays { precision, recall, dims };
     let d = max_dets[2];
-    let tag = |name: &str| if d == 100 { name.to_string() } else { format!("{name}@{d}") };
+    let tag = |name: &str| tagged(name, d, 100);
     let names = [
         tag("AP"),
         tag("AP50"),
@@ -317,20 +402,41 @@ fn summarize(
         tag("ARl"),
     ];
     let values = vec![
-        ap(None, 0),
-        ap(Some(0), 0),
-        ap(Some(5), 0),
-        ap(None, 1),
-        ap(None, 2),
-        ap(None, 3),
-        ar(0, 0),
-        ar(0, 1),
-        ar(0, 2),
-        ar(1, 2),
-        ar(2, 2),
-        ar(3, 2),
+        s.ap(None, 0),
+        s.ap(Some(0), 0),
+        s.ap(Some(5), 0),
+        s.ap(None, 1),
+        s.ap(None, 2),
+        s.ap(None, 3),
+        s.ar(None, 0, 0),
+        s.ar(None, 0, 1),
+        s.ar(None, 0, 2),
+        s.ar(None, 1, 2),
+        s.ar(None, 2, 2),
+        s.ar(None, 3, 2),
     ];
     (names.to_vec(), values)
+}
+
+/// pycocotools' `_summarizeKps()`: AP and AR over OKS 0.50:0.95, at 0.50 and 0.75, and for
+/// medium and large objects, at the last cap (pycocotools: 20).
+fn summarize_keypoints(precision: &[f64], recall: &[f64], dims: [usize; 5], cap: usize) -> (Vec<String>, Vec<f64>) {
+    let s = Arrays { precision, recall, dims };
+    let last = dims[4] - 1;
+    let names = ["AP", "AP50", "AP75", "APm", "APl", "AR", "AR50", "AR75", "ARm", "ARl"];
+    let values = vec![
+        s.ap(None, 0),
+        s.ap(Some(0), 0),
+        s.ap(Some(5), 0),
+        s.ap(None, 1),
+        s.ap(None, 2),
+        s.ar(None, 0, last),
+        s.ar(Some(0), 0, last),
+        s.ar(Some(5), 0, last),
+        s.ar(None, 1, last),
+        s.ar(None, 2, last),
+    ];
+    (names.iter().map(|n| tagged(n, cap, 20)).collect(), values)
 }
 
 impl Stats {
@@ -339,22 +445,13 @@ impl Stats {
     /// `recall[:, k, 0, -1]` give (-1 where the category has no ground truth).
     pub fn per_category(&self, k: usize) -> [f64; 3] {
         let [t_n, r_n, k_n, a_n, m_n] = self.dims;
-        let mean = |v: Vec<f64>| {
-            let v: Vec<f64> = v.into_iter().filter(|&x| x > -1.0).collect();
-            if v.is_empty() {
-                -1.0
-            } else {
-                v.iter().sum::<f64>() / v.len() as f64
-            }
-        };
         let precision = |ts: std::ops::Range<usize>| {
-            mean(
+            Arrays::mean(
                 ts.flat_map(|t| (0..r_n).map(move |r| (t, r)))
-                    .map(|(t, r)| self.precision[(((t * r_n + r) * k_n + k) * a_n) * m_n + m_n - 1])
-                    .collect(),
+                    .map(|(t, r)| self.precision[(((t * r_n + r) * k_n + k) * a_n) * m_n + m_n - 1]),
             )
         };
-        let recall = mean((0..t_n).map(|t| self.recall[((t * k_n + k) * a_n) * m_n + m_n - 1]).collect());
+        let recall = Arrays::mean((0..t_n).map(|t| self.recall[((t * k_n + k) * a_n) * m_n + m_n - 1]));
         [precision(0..t_n), precision(0..1), recall]
     }
 }

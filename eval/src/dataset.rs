@@ -1,8 +1,9 @@
 //! COCO ground truth (`images`, `annotations`, `categories`) and COCO results (a list of
 //! detections), read as pycocotools' `COCO` and `loadRes` read them.
 
+use crate::keypoints;
 use crate::masks::{self, polygon_rle, union};
-use crate::{EvalError, Result};
+use crate::{EvalError, IouType, Result};
 use serde_json::Value;
 use std::collections::HashMap;
 use vkdiff_render::rle::Rle;
@@ -24,9 +25,14 @@ pub struct Annotation {
     pub area: f64,
     pub bbox: [f64; 4],
     pub iscrowd: bool,
+    /// Ground truth COCOeval leaves out: crowd regions, and in keypoint evaluation those with no
+    /// labelled keypoint (`num_keypoints` 0).
+    pub ignore: bool,
     /// Detections only (ground truth: 1).
     pub score: f64,
     pub geometry: Geometry,
+    /// x, y, v triples (keypoint evaluation only; empty otherwise or where none are given).
+    pub keypoints: Vec<f64>,
 }
 
 /// Which rule gives each detection its area (and so its small / medium / large range).
@@ -46,6 +52,8 @@ pub enum AreaSource {
     Box,
     /// The area of each `segmentation`.
     Mask,
+    /// The box around each result's keypoints (loadRes when results have neither box nor mask).
+    Keypoints,
 }
 
 impl AreaSource {
@@ -60,8 +68,10 @@ impl AreaSource {
             Ok(AreaSource::Box)
         } else if first.get("segmentation").is_some() {
             Ok(AreaSource::Mask)
+        } else if first.get("keypoints").is_some() {
+            Ok(AreaSource::Keypoints)
         } else {
-            Err(err("results[0] has neither `bbox` nor `segmentation`".into()))
+            Err(err("results[0] has no `bbox`, `segmentation` or `keypoints`".into()))
         }
     }
 
@@ -69,6 +79,7 @@ impl AreaSource {
         match self {
             AreaSource::Box => "box",
             AreaSource::Mask => "mask",
+            AreaSource::Keypoints => "keypoints' box",
         }
     }
 }
@@ -83,11 +94,11 @@ pub struct Dataset {
     pub annotations: Vec<Annotation>,
 }
 
-fn err(what: String) -> EvalError {
+pub(crate) fn err(what: String) -> EvalError {
     EvalError::Invalid(what)
 }
 
-fn number(v: &Value, what: &str) -> Result<f64> {
+pub(crate) fn number(v: &Value, what: &str) -> Result<f64> {
     v.as_f64().ok_or_else(|| err(format!("{what} is not a number: {}", short(v))))
 }
 
@@ -104,7 +115,7 @@ fn short(v: &Value) -> String {
     }
 }
 
-fn field<'a>(o: &'a Value, key: &str, what: &str) -> Result<&'a Value> {
+pub(crate) fn field<'a>(o: &'a Value, key: &str, what: &str) -> Result<&'a Value> {
     o.get(key).ok_or_else(|| err(format!("{what} has no `{key}`")))
 }
 
@@ -155,8 +166,10 @@ fn bbox(v: &Value, what: &str) -> Result<[f64; 4]> {
 }
 
 impl Dataset {
-    /// COCO ground truth. Masks are decoded only when `masks` (segm evaluation).
-    pub fn ground_truth(json: &Value, masks: bool) -> Result<Dataset> {
+    /// COCO ground truth. Masks are decoded only for segm evaluation, keypoints only for
+    /// keypoint evaluation.
+    pub fn ground_truth(json: &Value, iou_type: IouType) -> Result<Dataset> {
+        let masks = iou_type == IouType::Segm;
         let mut d = Dataset::default();
         for (i, img) in json
             .get("images")
@@ -203,15 +216,22 @@ impl Dataset {
                     Geometry::Box => return Err(err(format!("{what} has no `bbox`"))),
                 },
             };
+            let iscrowd = a.get("iscrowd").and_then(Value::as_u64).unwrap_or(0) != 0;
+            let (keypoints, labelled) = match iou_type {
+                IouType::Keypoints => keypoints::ground_truth(a, &what)?,
+                _ => (Vec::new(), 0),
+            };
             d.annotations.push(Annotation {
                 id: id(field(a, "id", &what)?, &what)?,
                 image_id,
                 category_id: id(field(a, "category_id", &what)?, &what)?,
                 area: number(field(a, "area", &what)?, &what)?,
                 bbox,
-                iscrowd: a.get("iscrowd").and_then(Value::as_u64).unwrap_or(0) != 0,
+                iscrowd,
+                ignore: iscrowd || (iou_type == IouType::Keypoints && labelled == 0),
                 score: 1.0,
                 geometry,
+                keypoints,
             });
         }
         Ok(d)
@@ -241,8 +261,11 @@ impl Dataset {
 
     /// COCO results on the images of `gt`, as `loadRes` reads them: ids 1, 2, … in file order,
     /// not crowd; with areas from boxes, each w·h, or from masks, and a result's missing mask the
-    /// polygon of its box (box areas) or its missing box the mask's (mask areas).
-    pub fn results(json: &Value, gt: &Dataset, masks: bool, areas: AreaSource) -> Result<Dataset> {
+    /// polygon of its box (box areas) or its missing box the mask's (mask areas); in keypoint
+    /// evaluation each result's keypoints, its area and box those of the keypoints where it has
+    /// neither box nor mask.
+    pub fn results(json: &Value, gt: &Dataset, iou_type: IouType, areas: AreaSource) -> Result<Dataset> {
+        let masks = iou_type == IouType::Segm;
         let list = json.as_array().ok_or_else(|| err("results are not a JSON list of detections".into()))?;
         let mut d = Dataset {
             images: gt.images.clone(),
@@ -289,6 +312,14 @@ impl Dataset {
                     };
                     (if masks { Geometry::Mask(rle) } else { Geometry::Box }, area, b)
                 }
+                AreaSource::Keypoints => {
+                    let (area, b) = keypoints::extent(&keypoints::result(a, &what)?);
+                    (Geometry::Box, area, b)
+                }
+            };
+            let keypoints = match iou_type {
+                IouType::Keypoints => keypoints::result(a, &what)?,
+                _ => Vec::new(),
             };
             d.annotations.push(Annotation {
                 id: i as u64 + 1,
@@ -297,8 +328,10 @@ impl Dataset {
                 area,
                 bbox,
                 iscrowd: false,
+                ignore: false,
                 score: number(field(a, "score", &what)?, &what)?,
                 geometry,
+                keypoints,
             });
         }
         d.check_categories(gt)?;

@@ -1,15 +1,17 @@
 //! COCO evaluation on the CPU: ground truth and results read from COCO JSON, masks as COCO
-//! run-length encodings, and `COCOeval`'s matching, accumulation and twelve statistics computed
-//! as pycocotools does (held to it by `tests/`).
+//! run-length encodings, keypoints scored by OKS, and `COCOeval`'s matching, accumulation and
+//! statistics computed as pycocotools does (held to it by `tests/`).
 
 mod cocoeval;
 mod dataset;
 pub mod fid;
+mod keypoints;
 mod masks;
 mod summary;
 
 pub use cocoeval::{evaluate, EvalParams, IouType, Stats};
 pub use dataset::{Annotation, AreaRule, AreaSource, Dataset, Geometry};
+pub use keypoints::{oks, COCO_PERSON_SIGMAS};
 pub use masks::{bbox_iou, foreground_iou, mask_iou, polygon_rle, union};
 pub use summary::{summarize, CategoryScores, Summary, SummaryRequest};
 use vkdiff_setting::Message;

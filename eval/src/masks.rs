@@ -243,7 +243,7 @@ mod tests {
         let json: serde_json::Value = serde_json::from_str(include_str!("../../tests/fixtures/eval/gt.json")).unwrap();
         let written: std::collections::HashMap<u64, &serde_json::Value> =
             json["annotations"].as_array().unwrap().iter().map(|a| (a["id"].as_u64().unwrap(), a)).collect();
-        let gt = crate::dataset::Dataset::ground_truth(&json, true).unwrap();
+        let gt = crate::dataset::Dataset::ground_truth(&json, crate::IouType::Segm).unwrap();
         assert!(gt.annotations.len() > 20);
         for a in &gt.annotations {
             let crate::dataset::Geometry::Mask(r) = &a.geometry else { panic!("annotation {} has no mask", a.id) };

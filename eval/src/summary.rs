@@ -16,8 +16,10 @@ pub struct SummaryRequest<'a> {
     pub gt: &'a Path,
     pub pred: &'a Path,
     pub iou_type: IouType,
-    /// The three detection caps per image, ascending.
-    pub max_dets: [usize; 3],
+    /// The detection caps per image, ascending (three for segm and bbox).
+    pub max_dets: &'a [usize],
+    /// Keypoint evaluation's sigmas, `None` for the default (`EvalParams::kpt_sigmas`).
+    pub kpt_sigmas: Option<&'a [f64]>,
     /// Predictions at or above this score make the foreground mask.
     pub score_threshold: f64,
     pub area_rule: AreaRule,
@@ -36,6 +38,8 @@ pub struct Summary {
     pub per_category: Vec<CategoryScores>,
     /// Things the user should know about the files.
     pub warnings: Vec<String>,
+    /// The sigmas keypoints were scored with (empty for segm and bbox).
+    pub kpt_sigmas: Vec<f64>,
 }
 
 /// One category's AP (IoU 0.50:0.95), AP50 and AR, as pycocotools' per-category arrays give them.
@@ -78,10 +82,10 @@ fn in_file<T>(path: &Path, result: Result<T>) -> Result<T> {
 pub fn summarize(request: &SummaryRequest) -> Result<Summary> {
     let SummaryRequest { gt: gt_path, pred: pred_path, iou_type, max_dets, .. } = *request;
     let masks = iou_type == IouType::Segm;
-    let gt = in_file(gt_path, Dataset::ground_truth(&read_json(gt_path)?, masks))?;
+    let gt = in_file(gt_path, Dataset::ground_truth(&read_json(gt_path)?, iou_type))?;
     let pred = read_json(pred_path)?;
     let areas = in_file(pred_path, AreaSource::of_results(&pred, request.area_rule))?;
-    let dt = in_file(pred_path, Dataset::results(&pred, &gt, masks, areas))?;
+    let dt = in_file(pred_path, Dataset::results(&pred, &gt, iou_type, areas))?;
     if gt.annotations.is_empty() {
         return Err(EvalError::Invalid(format!("{} holds no annotations", gt_path.display())));
     }
@@ -93,16 +97,24 @@ pub fn summarize(request: &SummaryRequest) -> Result<Summary> {
             gt_path.display()
         ));
     }
-    let stats = evaluate(&gt, &dt, &EvalParams { iou_type, max_dets })?;
+    let params =
+        EvalParams { iou_type, max_dets: max_dets.to_vec(), kpt_sigmas: request.kpt_sigmas.map(<[f64]>::to_vec) };
+    let stats = evaluate(&gt, &dt, &params)?;
     let v = &stats.values;
-    // Recall at IoU 0.5 over categories, at the last cap: AR's partner for AP50.
-    let [_, _, k_n, a_n, m_n] = stats.dims;
-    let r50: Vec<f64> = (0..k_n).map(|k| stats.recall[(k * a_n) * m_n + 2]).filter(|&r| r > -1.0).collect();
-    let ar50 = if r50.is_empty() { -1.0 } else { r50.iter().sum::<f64>() / r50.len() as f64 };
     let mut rows: Vec<(String, f64)> = stats.names.iter().cloned().zip(v.iter().copied()).collect();
-    rows.push((format!("AR50@{}", max_dets[2]), ar50));
-    rows.push(("F1".into(), f1(v[0], v[8])));
-    rows.push(("F1_50".into(), f1(v[1], ar50)));
+    if iou_type == IouType::Keypoints {
+        // _summarizeKps gives AR and AR at OKS 0.5 itself.
+        rows.push(("F1".into(), f1(v[0], v[5])));
+        rows.push(("F1_50".into(), f1(v[1], v[6])));
+    } else {
+        // Recall at IoU 0.5 over categories, at the last cap: AR's partner for AP50.
+        let [_, _, k_n, a_n, m_n] = stats.dims;
+        let r50: Vec<f64> = (0..k_n).map(|k| stats.recall[(k * a_n) * m_n + m_n - 1]).filter(|&r| r > -1.0).collect();
+        let ar50 = if r50.is_empty() { -1.0 } else { r50.iter().sum::<f64>() / r50.len() as f64 };
+        rows.push((format!("AR50@{}", max_dets[m_n - 1]), ar50));
+        rows.push(("F1".into(), f1(v[0], v[8])));
+        rows.push(("F1_50".into(), f1(v[1], ar50)));
+    }
     if masks {
         rows.push(("mIoU".into(), stats.mean_instance_iou));
         rows.push(("mIoU_matched".into(), stats.mean_matched_iou));
@@ -143,5 +155,6 @@ pub fn summarize(request: &SummaryRequest) -> Result<Summary> {
         rows,
         per_category,
         warnings,
+        kpt_sigmas: stats.kpt_sigmas,
     })
 }

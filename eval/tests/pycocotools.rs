@@ -23,10 +23,10 @@ fn check_as(ground_truth: &str, iou_type: IouType, results: &str, max_dets: [usi
     let mut gt_json = fixture(ground_truth);
     // pycocotools 2.0.10's loadRes needs the ground truth's `info`; vkdiff does not.
     gt_json.as_object_mut().unwrap().remove("info");
-    let gt = Dataset::ground_truth(&gt_json, masks).unwrap();
+    let gt = Dataset::ground_truth(&gt_json, iou_type).unwrap();
     let json = fixture(results);
-    let dt = Dataset::results(&json, &gt, masks, AreaSource::of_results(&json, rule).unwrap()).unwrap();
-    let stats = evaluate(&gt, &dt, &EvalParams { iou_type, max_dets }).unwrap();
+    let dt = Dataset::results(&json, &gt, iou_type, AreaSource::of_results(&json, rule).unwrap()).unwrap();
+    let stats = evaluate(&gt, &dt, &EvalParams { iou_type, max_dets: max_dets.to_vec(), kpt_sigmas: None }).unwrap();
     let kind = if masks { "segm" } else { "bbox" };
     let key = format!("{kind} {max_dets:?}{label}");
     let want = &fixture("expected.json")[&key];
@@ -153,14 +153,14 @@ fn box_scoring_of_mask_only_results_takes_boxes_from_the_masks() {
 
 #[test]
 fn a_result_without_the_first_ones_box_is_refused_with_the_rule_named() {
-    let gt = Dataset::ground_truth(&fixture("gt.json"), true).unwrap();
+    let gt = Dataset::ground_truth(&fixture("gt.json"), IouType::Segm).unwrap();
     let mut json = fixture("dt_both.json");
     json.as_array_mut().unwrap()[4].as_object_mut().unwrap().remove("bbox");
     let areas = AreaSource::of_results(&json, AreaRule::LoadRes).unwrap();
-    let e = Dataset::results(&json, &gt, true, areas).unwrap_err().to_string();
+    let e = Dataset::results(&json, &gt, IouType::Segm, areas).unwrap_err().to_string();
     assert!(e.contains("results[4] has no `bbox`") && e.contains("area_from mask"), "{e}");
     // Detectron2's rule needs no boxes.
-    Dataset::results(&json, &gt, true, AreaSource::of_results(&json, AreaRule::Mask).unwrap()).unwrap();
+    Dataset::results(&json, &gt, IouType::Segm, AreaSource::of_results(&json, AreaRule::Mask).unwrap()).unwrap();
 }
 
 #[test]
@@ -187,12 +187,16 @@ fn polygons_rasterise_as_pycocotools_does() {
 
 #[test]
 fn detection_caps_must_be_positive_and_ascending() {
-    let gt = Dataset::ground_truth(&fixture("gt.json"), false).unwrap();
+    let gt = Dataset::ground_truth(&fixture("gt.json"), IouType::Bbox).unwrap();
     let json = fixture("dt_bbox.json");
-    let dt = Dataset::results(&json, &gt, false, AreaSource::of_results(&json, AreaRule::LoadRes).unwrap()).unwrap();
-    for caps in [[10, 1, 100], [1, 100, 10], [0, 10, 100]] {
-        let refused = evaluate(&gt, &dt, &EvalParams { iou_type: IouType::Bbox, max_dets: caps });
-        assert!(refused.is_err_and(|e| e.to_string().contains("must be positive and ascending")), "{caps:?}");
+    let dt =
+        Dataset::results(&json, &gt, IouType::Bbox, AreaSource::of_results(&json, AreaRule::LoadRes).unwrap()).unwrap();
+    for caps in [vec![10, 1, 100], vec![1, 100, 10], vec![0, 10, 100], vec![1, 10]] {
+        let refused =
+            evaluate(&gt, &dt, &EvalParams { iou_type: IouType::Bbox, max_dets: caps.clone(), kpt_sigmas: None });
+        assert!(refused.is_err_and(|e| e.to_string().contains("positive and ascending")), "{caps:?}");
     }
-    assert!(evaluate(&gt, &dt, &EvalParams { iou_type: IouType::Bbox, max_dets: [1, 1, 1] }).is_ok());
+    assert!(
+        evaluate(&gt, &dt, &EvalParams { iou_type: IouType::Bbox, max_dets: vec![1, 1, 1], kpt_sigmas: None }).is_ok()
+    );
 }
