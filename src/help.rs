@@ -58,6 +58,7 @@ pub fn eval() -> String {
         "Examples:
   vkdiff eval --gt annotations.json --pred detections.json
   vkdiff eval --gt annotations.json --pred boxes.json --iou-type bbox --json > scores.json
+  vkdiff eval --gt annotations.json --pred poses.json --iou-type keypoints
 
 {EXIT_CODES}"
     )
