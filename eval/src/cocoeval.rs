@@ -88,7 +88,7 @@ pub struct Stats {
 }
 
 /// One image × category × area range: what `evaluateImg` returns.
-struct ImageEval {
+pub(crate) struct ImageEval {
     scores: Vec<f64>,
     /// [threshold][detection]: matched.
     matched: Vec<Vec<bool>>,
@@ -97,6 +97,9 @@ struct ImageEval {
     gt_ignored: Vec<bool>,
     /// At IoU 0.5, the IoU of each ground truth (in `gt_ignored`'s order) with its match.
     gt_match_iou: Vec<Option<f64>>,
+    /// At the first threshold, the ground truth (its index in the image's file order) each
+    /// detection matched.
+    pub(crate) dt_match: Vec<Option<usize>>,
 }
 
 /// Indices sorted by descending score, ties in input order (numpy's stable mergesort).
@@ -157,6 +160,7 @@ fn evaluate_image(
     let mut matched = vec![vec![false; d]; thresholds.len()];
     let mut ignored = vec![vec![false; d]; thresholds.len()];
     let mut gt_match_iou = vec![None; gts.len()];
+    let mut dt_match = vec![None; d];
     for (t, &thr) in thresholds.iter().enumerate() {
         let mut g_taken = vec![false; gts.len()];
         for di in 0..d {
@@ -181,6 +185,7 @@ fn evaluate_image(
                 g_taken[gi] = true;
                 if t == 0 {
                     gt_match_iou[gi] = Some(iou[di][gi]);
+                    dt_match[di] = Some(gi);
                 }
             } else if outside(dts[di].area) {
                 ignored[t][di] = true;
@@ -193,11 +198,67 @@ fn evaluate_image(
         ignored,
         gt_ignored: g_order.iter().map(|&i| g_ignore[i]).collect(),
         gt_match_iou: g_order.iter().map(|&i| gt_match_iou[i]).collect(),
+        dt_match,
     })
 }
 
-/// One image's ground truth and detections of a category, and their IoUs.
-type ImageMatches<'a> = (Vec<&'a Annotation>, Vec<&'a Annotation>, Vec<Vec<f64>>);
+/// One image's ground truth (file order) and detections (by score, capped) of a category, as
+/// indices into their datasets' annotations, and their IoUs [detection][ground truth].
+pub(crate) struct Pairing {
+    pub(crate) gts: Vec<usize>,
+    pub(crate) dts: Vec<usize>,
+    pub(crate) iou: Vec<Vec<f64>>,
+}
+
+impl Pairing {
+    /// `evaluateImg` of this pairing.
+    pub(crate) fn evaluate(
+        &self,
+        gt: &Dataset,
+        dt: &Dataset,
+        area: (f64, f64),
+        thresholds: &[f64],
+        max_det: usize,
+    ) -> Option<ImageEval> {
+        let gts: Vec<&Annotation> = self.gts.iter().map(|&i| &gt.annotations[i]).collect();
+        let dts: Vec<&Annotation> = self.dts.iter().map(|&i| &dt.annotations[i]).collect();
+        evaluate_image(&dts, &gts, &self.iou, area, thresholds, max_det)
+    }
+}
+
+/// Every image's pairing for category `cat`, `images` ascending.
+pub(crate) fn pairings(
+    gt: &Dataset,
+    dt: &Dataset,
+    cat: u64,
+    images: &[u64],
+    max_det: usize,
+    iou_type: IouType,
+    sigmas: &[f64],
+) -> Vec<Pairing> {
+    let group = |d: &Dataset| {
+        let mut m: HashMap<u64, Vec<usize>> = HashMap::new();
+        for (i, a) in d.annotations.iter().enumerate().filter(|(_, a)| a.category_id == cat) {
+            m.entry(a.image_id).or_default().push(i);
+        }
+        m
+    };
+    let (g_map, d_map) = (group(gt), group(dt));
+    images
+        .iter()
+        .map(|img| {
+            let gts = g_map.get(img).cloned().unwrap_or_default();
+            let found = d_map.get(img).cloned().unwrap_or_default();
+            let refs: Vec<&Annotation> = found.iter().map(|&i| &dt.annotations[i]).collect();
+            let mut dts: Vec<usize> = by_score(&refs).into_iter().map(|i| found[i]).collect();
+            dts.truncate(max_det);
+            let g: Vec<&Annotation> = gts.iter().map(|&i| &gt.annotations[i]).collect();
+            let d: Vec<&Annotation> = dts.iter().map(|&i| &dt.annotations[i]).collect();
+            let iou = ious(&d, &g, iou_type, sigmas);
+            Pairing { gts, dts, iou }
+        })
+        .collect()
+}
 
 /// Runs `COCOeval.evaluate()`, `accumulate()` and `summarize()` on `dt` against `gt`.
 pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
@@ -217,43 +278,16 @@ pub fn evaluate(gt: &Dataset, dt: &Dataset, p: &EvalParams) -> Result<Stats> {
     };
     let thresholds = linspace(0.5, 0.95, 10);
     let rec_thrs = linspace(0.0, 1.0, 101);
-    let mut images: Vec<u64> = gt.images.keys().copied().collect();
-    images.sort_unstable();
-    let mut cats = gt.categories.clone();
-    if cats.is_empty() {
-        cats = gt.annotations.iter().map(|a| a.category_id).collect();
-    }
-    cats.sort_unstable();
-    cats.dedup();
-    let group = |d: &Dataset| {
-        let mut m: HashMap<(u64, u64), Vec<usize>> = HashMap::new();
-        for (i, a) in d.annotations.iter().enumerate() {
-            m.entry((a.image_id, a.category_id)).or_default().push(i);
-        }
-        m
-    };
-    let (g_map, d_map) = (group(gt), group(dt));
+    let (images, cats) = (gt.image_ids(), gt.category_ids());
     let max_det = caps[caps.len() - 1];
     let (t_n, r_n, k_n, a_n, m_n) = (thresholds.len(), rec_thrs.len(), cats.len(), areas.len(), caps.len());
     // evalImgs[k][a][i]
     let mut evals: Vec<Option<ImageEval>> = Vec::with_capacity(k_n * a_n * images.len());
     for &cat in &cats {
-        let per_image: Vec<ImageMatches> = images
-            .iter()
-            .map(|&img| {
-                let gts: Vec<&Annotation> =
-                    g_map.get(&(img, cat)).map_or(vec![], |v| v.iter().map(|&i| &gt.annotations[i]).collect());
-                let dts: Vec<&Annotation> =
-                    d_map.get(&(img, cat)).map_or(vec![], |v| v.iter().map(|&i| &dt.annotations[i]).collect());
-                let mut dts: Vec<&Annotation> = by_score(&dts).into_iter().map(|i| dts[i]).collect();
-                dts.truncate(max_det);
-                let iou = ious(&dts, &gts, p.iou_type, &sigmas);
-                (dts, gts, iou)
-            })
-            .collect();
+        let per_image = pairings(gt, dt, cat, &images, max_det, p.iou_type, &sigmas);
         for &(lo, hi, _) in areas {
-            for (dts, gts, iou) in &per_image {
-                evals.push(evaluate_image(dts, gts, iou, (lo, hi), &thresholds, max_det));
+            for pairing in &per_image {
+                evals.push(pairing.evaluate(gt, dt, (lo, hi), &thresholds, max_det));
             }
         }
     }

@@ -166,6 +166,25 @@ fn bbox(v: &Value, what: &str) -> Result<[f64; 4]> {
 }
 
 impl Dataset {
+    /// The images' ids, ascending (pycocotools' `imgIds`).
+    pub fn image_ids(&self) -> Vec<u64> {
+        let mut images: Vec<u64> = self.images.keys().copied().collect();
+        images.sort_unstable();
+        images
+    }
+
+    /// The categories' ids, ascending (pycocotools' `catIds`): those listed, else those the
+    /// annotations name.
+    pub fn category_ids(&self) -> Vec<u64> {
+        let mut cats = self.categories.clone();
+        if cats.is_empty() {
+            cats = self.annotations.iter().map(|a| a.category_id).collect();
+        }
+        cats.sort_unstable();
+        cats.dedup();
+        cats
+    }
+
     /// COCO ground truth. Masks are decoded only for segm evaluation, keypoints only for
     /// keypoint evaluation.
     pub fn ground_truth(json: &Value, iou_type: IouType) -> Result<Dataset> {
