@@ -140,6 +140,7 @@ enum DatasetCommand {
     Export(crate::dataset_export_cmd::ExportArgs),
     Stats(crate::dataset_stats_cmd::StatsArgs),
     Preview(crate::dataset_preview_cmd::PreviewArgs),
+    Audit(crate::dataset_audit_cmd::AuditArgs),
 }
 
 pub fn run(args: &DatasetArgs, env: &vkdiff_runtime::Environment) -> Result<()> {
@@ -151,6 +152,7 @@ pub fn run(args: &DatasetArgs, env: &vkdiff_runtime::Environment) -> Result<()> 
         Some(DatasetCommand::Export(export)) => return crate::dataset_export_cmd::run(export),
         Some(DatasetCommand::Stats(stats)) => return crate::dataset_stats_cmd::run(stats),
         Some(DatasetCommand::Preview(preview)) => return crate::dataset_preview_cmd::run(preview),
+        Some(DatasetCommand::Audit(audit)) => return crate::dataset_audit_cmd::run(audit),
         None => {}
     }
     let out = args.out.as_deref().context("--out DIR is required")?;

@@ -63,6 +63,7 @@ fn dataset(e: &vkdiff_dataset::Error) -> i32 {
         E::Render(e) => render(e),
         E::Scenes(e) => scenes(e),
         E::Pipeline(e) => pipeline(e),
+        E::Eval(e) => eval(e),
     }
 }
 

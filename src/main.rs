@@ -1,6 +1,7 @@
 //! `vkdiff`: the command line. Each command parses its flags, calls its one library entry, and
 //! prints; the benchmarks live in `vkdiff-bench`, the shared flags in `vkdiff-args`.
 
+mod dataset_audit_cmd;
 mod dataset_cmd;
 mod dataset_export_cmd;
 mod dataset_preview_cmd;

@@ -28,6 +28,8 @@ pub enum Error {
     Scenes(#[from] vkdiff_scenes::Error),
     #[error(transparent)]
     Pipeline(#[from] vkdiff_pipeline::Error),
+    #[error(transparent)]
+    Eval(#[from] vkdiff_eval::EvalError),
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -5,6 +5,9 @@
 //! the folder, and merged into one `annotations.json` at the end; then exported to trainers'
 //! formats, summarised and previewed.
 
+mod audit;
+mod audit_boundary;
+mod audit_summary;
 mod canvas;
 mod controls;
 mod disk;
@@ -26,6 +29,7 @@ mod stats;
 mod stats_geometry;
 mod stop;
 
+pub use audit::{audit, AuditOptions, Audited, AUDIT, KINDS as AUDIT_KINDS};
 pub use controls::{control_file, LabelControls};
 pub use disk::{parse_size, size, DiskGuard, DEFAULT_MIN_FREE};
 pub use error::{Error, Result};
