@@ -25,12 +25,17 @@ pub struct PreviewArgs {
     /// of 1024² images stays light; the contact sheet is made from the full images.
     #[arg(long, default_value_t = 512)]
     max_side: usize,
+    /// Only the images `vkdiff dataset audit` flagged, their flagged instances outlined and
+    /// invented detections boxed in red (reads DIR/audit.json).
+    #[arg(long)]
+    flagged: bool,
 }
 
 pub fn run(args: &PreviewArgs) -> Result<()> {
     let html = args.out.clone().unwrap_or_else(|| args.dir.join("preview.html"));
     let bar = Progress::new("preview", "image");
-    let made = preview(&args.dir, &html, args.count, args.max_side, &mut |done, total| bar.update(done, total))?;
+    let made =
+        preview(&args.dir, &html, args.count, args.max_side, args.flagged, &mut |done, total| bar.update(done, total))?;
     println!("wrote {} ({} images) and its contact sheet {}", made.html.display(), made.images, made.sheet.display());
     Ok(())
 }

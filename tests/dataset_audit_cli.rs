@@ -1,11 +1,12 @@
 //! `vkdiff dataset audit` on a render-only set with faults planted in it: objects painted over
 //! with background (and left out of the predictions), detections added over background, masks
 //! shifted off their objects. Each kind's flags are held to what was planted (precision and
-//! recall, printed for docs/dataset-audit.md); bad predictions files are refused in one line.
+//! recall, printed for docs/dataset-audit.md) and shown by `dataset preview --flagged`; bad
+//! predictions files are refused in one line.
 
 mod cli;
 
-use cli::{render_set_of, scratch, vkdiff};
+use cli::{layer_pngs, render_set_of, rgba, scratch, vkdiff};
 use serde_json::{json, Value};
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -184,6 +185,19 @@ fn planted_faults_are_found() {
     }
     let (_, p, r, _) = rows[3];
     assert!(p >= 0.9 && r >= 0.5, "weak_boundary: precision {p}, recall {r}");
+
+    // The preview of the flagged images only, each with red outlines or boxes.
+    let html = root.join("flagged.html");
+    let out = vkdiff(&["dataset", "preview", set.to_str().unwrap(), "--flagged", "--out", html.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let page = std::fs::read_to_string(&html).unwrap();
+    let flagged_images = audit["summary"]["flagged"]["images"].as_u64().unwrap();
+    assert!(page.contains(&format!("of {flagged_images} flagged images")), "the page's title");
+    let outlines = layer_pngs(&page, "outline");
+    assert_eq!(outlines.len() as u64, flagged_images.min(24));
+    for png in &outlines {
+        assert!(rgba(png).1.contains(&[255, 0, 0, 255]), "a flagged image with nothing in the warning colour");
+    }
 }
 
 /// `v` with `key` set to `value`.
@@ -218,4 +232,8 @@ fn bad_predictions_are_refused_in_one_line_before_any_work() {
         assert!(err.contains(message) && err.trim().lines().count() == 1, "{name}: {err}");
         assert!(!set.join("audit.json").exists(), "{name}: an audit was written");
     }
+    let out = vkdiff(&["dataset", "preview", set.to_str().unwrap(), "--flagged"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("has no audit.json: run `vkdiff dataset audit"), "{err}");
 }

@@ -18,6 +18,7 @@ mod job;
 mod merge;
 mod plan;
 mod preview;
+mod preview_flagged;
 mod preview_geometry;
 mod preview_page;
 mod regions;

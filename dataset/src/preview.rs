@@ -7,6 +7,7 @@
 
 use super::canvas::Canvas;
 use super::export::{FinishedSet, SetImage, SplitFractions};
+use super::preview_flagged::{box_outline, Flagged, ImageFlags, WARNING};
 use super::preview_geometry::{amodal_overlay, keypoint_overlay, Overlay};
 use super::preview_page::page;
 use crate::error::{Error, Result};
@@ -29,22 +30,33 @@ pub struct Preview {
 /// Thumbnails of the contact sheet fit this square.
 const THUMB: usize = 256;
 
-/// Writes the preview of `count` images of the set in `dir`, spread evenly over it, to `html`
-/// (pictures at most `max_side` pixels on a side, 0: full size) and the contact sheet beside it
-/// (`html` with `.png`); `progress(done, total)` per image.
+/// Writes the preview of `count` images of the set in `dir`, spread evenly over it (over those
+/// its audit flagged, when `only_flagged`), to `html` (pictures at most `max_side` pixels on a
+/// side, 0: full size) and the contact sheet beside it (`html` with `.png`);
+/// `progress(done, total)` per image.
 pub fn preview(
     dir: &Path,
     html: &Path,
     count: usize,
     max_side: usize,
+    only_flagged: bool,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Preview> {
     if count == 0 {
         return Err(Error::Setting(vkdiff_setting::Message::setting("count").then(" must be at least 1")));
     }
     let set = FinishedSet::read(dir, &SplitFractions { val: 0.0, test: 0.0, seed: 0 })?;
-    let n = count.min(set.images.len());
-    let chosen: Vec<&SetImage> = (0..n).map(|k| &set.images[k * set.images.len() / n]).collect();
+    let flagged = only_flagged.then(|| Flagged::read(dir)).transpose()?;
+    let id_of = |image: &SetImage| image.entry["id"].as_u64().unwrap_or_default();
+    let pool: Vec<&SetImage> = match &flagged {
+        Some(f) => set.images.iter().filter(|i| f.0.contains_key(&id_of(i))).collect(),
+        None => set.images.iter().collect(),
+    };
+    if pool.is_empty() {
+        return Err(Error::Config(format!("the audit of {} flagged no image: nothing to preview", dir.display())));
+    }
+    let n = count.min(pool.len());
+    let chosen: Vec<&SetImage> = (0..n).map(|k| pool[k * pool.len() / n]).collect();
     let categories = Categories::of(&set);
     let mut figures = String::new();
     let mut kinds: Vec<String> = chosen
@@ -68,8 +80,9 @@ pub fn preview(
         }
     }
     for (k, image) in chosen.iter().enumerate() {
-        let layers = Layers::read(&set.dir, image, &categories)?;
-        figures += &figure(image, &layers.shrunk(max_side));
+        let flags = flagged.as_ref().and_then(|f| f.0.get(&id_of(image)));
+        let layers = Layers::read(&set.dir, image, &categories, flags)?;
+        figures += &figure(image, &layers.shrunk(max_side), flags);
         let thumb = layers.outlined_thumbnail();
         let (x, y) = (8 + (k % columns) * (THUMB + 8), 8 + top + (k / columns) * (THUMB + 30));
         sheet.blit(x as i64, y as i64, thumb.width, thumb.height, &thumb.pixels);
@@ -77,7 +90,8 @@ pub fn preview(
         sheet.text(x as i64, (y + THUMB + 8) as i64, &label, 2, [230, 230, 230]);
         progress(k + 1, n);
     }
-    let title = format!("{} · {} of {} images", dir.display(), n, set.images.len());
+    let what = if flagged.is_some() { "flagged images" } else { "images" };
+    let title = format!("{} · {} of {} {what}", dir.display(), n, pool.len());
     let overlays: Vec<&str> =
         ["amodal", "keypoints"].into_iter().filter(|class| figures.contains(&format!("class=\"{class}\""))).collect();
     write_atomic(html, page(&title, &categories.legend_html(), &figures, &kinds, &overlays).as_bytes())?;
@@ -172,10 +186,14 @@ struct Layers {
     /// The amodal outlines and the keypoints, where the image has them.
     amodal: Option<Overlay>,
     keypoints: Option<Overlay>,
+    /// Boxes drawn in the warning colour (the audit's invented detections), x, y, w, h.
+    warnings: Vec<[f64; 4]>,
+    /// The factor the picture was scaled down by.
+    scale: usize,
 }
 
 impl Layers {
-    fn read(dir: &Path, image: &SetImage, categories: &Categories) -> Result<Layers> {
+    fn read(dir: &Path, image: &SetImage, categories: &Categories, flags: Option<&ImageFlags>) -> Result<Layers> {
         let file = |key: &str| image.entry[key].as_str().map(|f| dir.join(f));
         let picture = |key: &str| file(key).map(|p| read_image(&p)).transpose();
         let image_rgb = read_image(&dir.join(image.file_name()))?;
@@ -184,7 +202,16 @@ impl Layers {
             None => vec![0; image_rgb.width * image_rgb.height],
         };
         let depth = file("depth_file").map(|p| depth_picture(&p)).transpose()?;
-        let palette = categories.palette(image);
+        let mut palette = categories.palette(image);
+        for a in image
+            .annotations
+            .iter()
+            .filter(|a| flags.is_some_and(|f| a["id"].as_u64().is_some_and(|id| f.instances.contains(&id))))
+        {
+            if let Some(slot) = a["mask_id"].as_u64().and_then(|id| palette.get_mut(id as usize)) {
+                *slot = WARNING;
+            }
+        }
         let listed = image.entry["control_files"].as_object().into_iter().flatten();
         // The strength map shows as one more layer beside the controls.
         let strength = image.entry["strength_file"].as_str().map(|f| (STRENGTH.to_string(), Value::from(f)));
@@ -211,6 +238,8 @@ impl Layers {
             image: image_rgb,
             ids,
             palette,
+            warnings: flags.map(|f| f.boxes.clone()).unwrap_or_default(),
+            scale: 1,
         })
     }
 
@@ -232,6 +261,8 @@ impl Layers {
             controls: self.controls.iter().map(|(kind, c)| (kind.clone(), box_down(c, f))).collect(),
             amodal: self.amodal.as_ref().map(|o| o.pooled(f)),
             keypoints: self.keypoints.as_ref().map(|o| o.pooled(f)),
+            warnings: self.warnings.clone(),
+            scale: self.scale * f,
         }
     }
 
@@ -245,20 +276,24 @@ impl Layers {
         rgba_png(w as u32, h as u32, &rgba)
     }
 
-    /// Pixels of an instance that touch another id, with the instance's colour.
+    /// Pixels of an instance that touch another id, with the instance's colour; then the
+    /// warning boxes' outlines.
     fn outline_pixels(&self) -> impl Iterator<Item = (usize, [u8; 3])> + '_ {
         let (w, h) = (self.image.width, self.image.height);
-        (0..w * h).filter_map(move |p| {
-            let id = self.ids[p];
-            let (x, y) = (p % w, p / w);
-            let differs = |q: usize| self.ids[q] != id;
-            let edge = id != 0
-                && ((x > 0 && differs(p - 1))
-                    || (x + 1 < w && differs(p + 1))
-                    || (y > 0 && differs(p - w))
-                    || (y + 1 < h && differs(p + w)));
-            edge.then(|| (p, self.palette.get(id as usize).copied().unwrap_or_else(|| instance_color(id))))
-        })
+        let boxes = self.warnings.iter().flat_map(move |&b| box_outline(b, (w, h), self.scale)).map(|p| (p, WARNING));
+        (0..w * h)
+            .filter_map(move |p| {
+                let id = self.ids[p];
+                let (x, y) = (p % w, p / w);
+                let differs = |q: usize| self.ids[q] != id;
+                let edge = id != 0
+                    && ((x > 0 && differs(p - 1))
+                        || (x + 1 < w && differs(p + 1))
+                        || (y > 0 && differs(p - w))
+                        || (y + 1 < h && differs(p + w)));
+                edge.then(|| (p, self.palette.get(id as usize).copied().unwrap_or_else(|| instance_color(id))))
+            })
+            .chain(boxes)
     }
 
     /// The image with its outlines, scaled (nearest: outlines stay sharp) to fit [`THUMB`].
@@ -380,7 +415,7 @@ pub fn escape(text: &str) -> String {
 /// The strength map's layer (`init/NNNNNN.strength.png`).
 const STRENGTH: &str = "strength";
 
-fn figure(image: &SetImage, layers: &Layers) -> String {
+fn figure(image: &SetImage, layers: &Layers, flags: Option<&ImageFlags>) -> String {
     let e = &image.entry;
     let mut html = String::from("<figure><div class=\"stack\">");
     let base = |class: &str, png: &[u8]| format!("<img class=\"{class}\" src=\"{}\" alt=\"{class}\">", data_uri(png));
@@ -406,6 +441,9 @@ fn figure(image: &SetImage, layers: &Layers) -> String {
     }
     if let Some(k) = e["crop"]["index"].as_u64() {
         let _ = write!(caption, " · crop {k}");
+    }
+    if let Some(f) = flags {
+        let _ = write!(caption, " · flagged: {}", f.kinds.join(", "));
     }
     let mut prompt = e["prompt"].as_str().map_or_else(|| "shaded render (no prompt)".to_string(), str::to_string);
     for (name, region) in e["region_prompts"].as_object().into_iter().flatten() {

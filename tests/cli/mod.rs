@@ -115,3 +115,33 @@ pub fn screenshot(browser: &str, url: &str, out: &Path) -> Vec<[u8; 3]> {
     let image = vkdiff_pipeline::images::read_image(out).unwrap();
     image.pixels.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect()
 }
+
+#[allow(dead_code)] // for the tests that read preview pages
+/// The bytes of a base64 `data:` URI's payload.
+pub fn base64(text: &str) -> Vec<u8> {
+    let value = |c: u8| "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/".bytes().position(|d| d == c);
+    let sextets: Vec<u32> = text.bytes().filter_map(value).map(|v| v as u32).collect();
+    let mut bytes = Vec::new();
+    for chunk in sextets.chunks(4) {
+        let n = chunk.iter().enumerate().fold(0u32, |n, (k, &s)| n | s << (18 - 6 * k));
+        bytes.extend(&n.to_be_bytes()[1..chunk.len()]);
+    }
+    bytes
+}
+
+#[allow(dead_code)] // for the tests that read preview pages
+/// An RGBA PNG's width and pixels.
+pub fn rgba(png_bytes: &[u8]) -> (usize, Vec<[u8; 4]>) {
+    let mut reader = png::Decoder::new(std::io::Cursor::new(png_bytes)).read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgba);
+    (info.width as usize, buf[..info.buffer_size()].chunks(4).map(|p| [p[0], p[1], p[2], p[3]]).collect())
+}
+
+#[allow(dead_code)] // for the tests that read preview pages
+/// The PNG of each `<img class="CLASS">` of a preview page, in order.
+pub fn layer_pngs(page: &str, class: &str) -> Vec<Vec<u8>> {
+    let marker = format!("<img class=\"{class}\" src=\"data:image/png;base64,");
+    page.split(&marker).skip(1).map(|rest| base64(&rest[..rest.find('"').unwrap()])).collect()
+}
