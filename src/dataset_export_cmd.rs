@@ -4,7 +4,9 @@ use anyhow::Result;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
 use vkdiff_args::Progress;
-use vkdiff_dataset::{export, ExportFormat, ExportOptions, Exported, Split, SplitFractions};
+use vkdiff_dataset::{
+    export, Exclusion, ExportFormat, ExportOptions, Exported, Split, SplitFractions, AUDIT_KINDS, EXCLUDED,
+};
 
 /// Write a finished set in a trainer's layout (COCO splits, YOLO, YOLO pose, WebDataset, Hugging
 /// Face, BOP).
@@ -13,6 +15,7 @@ use vkdiff_dataset::{export, ExportFormat, ExportOptions, Exported, Split, Split
 /// goes to the same split, and a scene's split does not change when the set grows. DIR is only
 /// read; OUT appears whole or not at all. The geometric labels (keypoints, poses, 3D boxes,
 /// amodal masks, cameras) go into coco as annotations.json has them, into yolo-pose and into bop.
+/// `--exclude-flagged` and `--min-boundary-score` leave out what `vkdiff dataset audit` found.
 #[derive(Args, Debug)]
 pub struct ExportArgs {
     /// The dataset folder.
@@ -46,6 +49,14 @@ pub struct ExportArgs {
     /// webdataset: close each shard once it holds this many MB.
     #[arg(long, default_value_t = 1000)]
     shard_size: u64,
+    /// Leave out the images `vkdiff dataset audit` flagged (DIR/audit.json): with any flag, or
+    /// with one of KINDS (`--exclude-flagged=missing,invented`; kinds: missing, invented,
+    /// poor_mask, weak_boundary). The kept and dropped lists go into OUT/excluded.json.
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "all", value_delimiter = ',', value_name = "KINDS")]
+    exclude_flagged: Option<Vec<String>>,
+    /// Leave out the images whose boundary F-score in the audit is below S (0 to 1).
+    #[arg(long, value_name = "S")]
+    min_boundary_score: Option<f64>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -73,6 +84,14 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         copy: args.copy,
         force: args.force,
         shard_bytes: args.shard_size.saturating_mul(1_000_000),
+        exclude: Exclusion {
+            kinds: match args.exclude_flagged.as_deref() {
+                Some([all]) if all == "all" => AUDIT_KINDS.map(str::to_string).to_vec(),
+                Some(kinds) => kinds.to_vec(),
+                None => Vec::new(),
+            },
+            min_boundary_score: args.min_boundary_score,
+        },
     };
     let bar = Progress::new("export", "image");
     let exported = export(&args.dir, &args.out, &options, &mut |done, total| bar.update(done, total))?;
@@ -113,6 +132,9 @@ fn summary(args: &ExportArgs, e: &Exported) -> String {
     }
     if let Some(k) = e.keypoints {
         line += &format!("; {} per label line (kpt_shape [{k}, 3])", count(k as u64, "keypoint"));
+    }
+    if let Some(dropped) = e.dropped {
+        line += &format!("; {} left out by the audit (listed in {EXCLUDED})", count(dropped, "image"));
     }
     if let Some(bop) = e.bop {
         line += &format!("; {}", count(bop.scene_folders, "scene folder"));

@@ -101,6 +101,21 @@ fn report(s: &Value) -> String {
             lines.push(format!("  {at}: {}", tally(counts)));
         }
     }
+    let audit = &s["audit"];
+    if audit.is_object() {
+        let kinds: Vec<String> = audit["by_kind"]
+            .as_object()
+            .into_iter()
+            .flatten()
+            .map(|(kind, k)| format!("{kind} {}", k["images"]))
+            .collect();
+        let stale = if audit["covers_every_image"] == true { "" } else { " (older than the set: audit it again)" };
+        lines.push(format!(
+            "audit: images flagged {}, left out by export --exclude-flagged (images by kind: {}){stale}",
+            audit["flagged"]["images"],
+            kinds.join(", ")
+        ));
+    }
     lines.extend([
         format!("style sets: {}", tally(&s["style_sets"])),
         format!(

@@ -34,7 +34,9 @@ pub use audit::{audit, AuditOptions, Audited, AUDIT, KINDS as AUDIT_KINDS};
 pub use controls::{control_file, LabelControls};
 pub use disk::{parse_size, size, DiskGuard, DEFAULT_MIN_FREE};
 pub use error::{Error, Result};
-pub use export::{export, BopWritten, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions};
+pub use export::{
+    export, BopWritten, Exclusion, ExportFormat, ExportOptions, Exported, PolygonFit, Split, SplitFractions, EXCLUDED,
+};
 pub use folder::{Dataset, ImageRecord, Pending, VersionChange, ANNOTATIONS, MANIFEST};
 pub use job::{DatasetEvent, DatasetJob, Finish, ShardRequest};
 pub use merge::{merge, Merged};

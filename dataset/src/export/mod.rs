@@ -8,6 +8,7 @@ mod bop;
 mod bop_image;
 mod bop_json;
 mod coco;
+mod excluded;
 mod hf;
 mod hf_card;
 mod polygons;
@@ -19,6 +20,7 @@ mod yolo;
 mod yolo_pose;
 
 pub use bop::BopWritten;
+pub use excluded::{Exclusion, EXCLUDED};
 pub use splits::{Split, SplitFractions};
 
 use crate::error::{Error, Result};
@@ -53,6 +55,8 @@ pub struct ExportOptions {
     pub force: bool,
     /// WebDataset: a shard is closed once it holds this many bytes.
     pub shard_bytes: u64,
+    /// Images the audit flagged, left out of every format.
+    pub exclude: Exclusion,
 }
 
 /// What an export wrote.
@@ -72,6 +76,8 @@ pub struct Exported {
     /// YOLO pose: keypoints per label line.
     pub keypoints: Option<usize>,
     pub bop: Option<BopWritten>,
+    /// Images left out by the audit (`--exclude-flagged`, `--min-boundary-score`).
+    pub dropped: Option<u64>,
 }
 
 /// IoU of each instance's polygon with its mask, over every instance exported.
@@ -94,8 +100,13 @@ pub fn export(
     if options.format == ExportFormat::WebDataset && options.shard_bytes == 0 {
         return Err(Error::Setting(Message::setting("shard_size").then(" must be at least 1 MB")));
     }
+    options.exclude.check()?;
     check_out(dir, out, options.force)?;
-    let set = FinishedSet::read(dir, &options.splits)?;
+    let mut set = FinishedSet::read(dir, &options.splits)?;
+    let excluded = (!options.exclude.is_empty()).then(|| excluded::exclude(&mut set, &options.exclude)).transpose()?;
+    if set.images.is_empty() {
+        return Err(Error::Config(format!("every image of {} is excluded: nothing to export", dir.display())));
+    }
     // What the set's labels refuse is refused before anything is written.
     let models = (options.format == ExportFormat::Bop).then(|| bop::checked_models(&set)).transpose()?;
     let most_keypoints =
@@ -112,6 +123,14 @@ pub fn export(
     }
     for (split, scenes) in set.scenes_per_split() {
         exported.scenes.insert(split, scenes);
+    }
+    if let Some(list) = &excluded {
+        exported.dropped = list["dropped"].as_array().map(|d| d.len() as u64);
+        let text = serde_json::to_string_pretty(list).expect("JSON values serialise");
+        if let Err(e) = staging.write(EXCLUDED, text.as_bytes()) {
+            staging.abandon();
+            return Err(e);
+        }
     }
     let written = match options.format {
         ExportFormat::Coco => coco::write(&set, &mut staging, progress),
