@@ -125,6 +125,11 @@ pub struct DatasetArgs {
     /// version is recorded in dataset.json, and later runs of it need no flag.
     #[arg(long)]
     allow_version_change: bool,
+    /// Make the images `vkdiff dataset audit` flagged (DIR/audit.json) again with new seeds, the
+    /// other images kept: with any flag, or one of KINDS (`--regenerate-flagged=missing`). Give
+    /// the flags the set was made with; the same command resumes. Audit again afterwards.
+    #[arg(long, num_args = 0..=1, require_equals = true, default_missing_value = "all", value_delimiter = ',', value_name = "KINDS")]
+    regenerate_flagged: Option<Vec<String>>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -163,12 +168,19 @@ pub fn run(args: &DatasetArgs, env: &vkdiff_runtime::Environment) -> Result<()> 
         min_free: args.min_free,
         versions: versions(args.allow_version_change),
         keep_text_encoders: false,
+        regenerate: args.regenerate_flagged.as_deref().map(|kinds| match kinds {
+            [all] if all == "all" => Vec::new(),
+            kinds => kinds.to_vec(),
+        }),
     };
     let mut job = DatasetJob::new(settings(args, env)?, out, shard, options, &|k| env.raw(k).map(String::from))?;
     if let Some(models) = &job.settings().models {
         for warning in recipe_warnings(models, &job.settings().sampling)? {
             eprintln!("{warning}");
         }
+    }
+    if let Some(line) = job.regeneration_line() {
+        eprintln!("{line}");
     }
     for why in job.redo() {
         eprintln!("making again: {why}");

@@ -252,7 +252,7 @@ fn bad_predictions_are_refused_in_one_line_before_any_work() {
     let out = vkdiff(&["dataset", "preview", set.to_str().unwrap(), "--flagged"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
-    assert!(err.contains("has no audit.json: run `vkdiff dataset audit"), "{err}");
+    assert!(err.contains("has no audit.json to show: run `vkdiff dataset audit"), "{err}");
     for (flag, message) in [
         ("--exclude-flagged", "has no audit.json to exclude by"),
         ("--exclude-flagged=painted", "no flag `painted`"),

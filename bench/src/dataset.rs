@@ -181,7 +181,14 @@ pub(crate) fn make_set(
         models,
         styles,
         pending,
-        &RunOptions { batch, threads: 0, min_free: 0, versions: Default::default(), keep_text_encoders },
+        &RunOptions {
+            batch,
+            threads: 0,
+            min_free: 0,
+            versions: Default::default(),
+            keep_text_encoders,
+            regenerate: None,
+        },
         &mut |event| {
             if let vkdiff_dataset::Progress::Images { done, total } = event {
                 eprintln!("{done}/{total} images");

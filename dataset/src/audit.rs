@@ -306,6 +306,26 @@ pub fn audit(dir: &Path, o: &AuditOptions, progress: &mut dyn FnMut(usize, usize
     Ok(Audited { path, summary })
 }
 
+/// DIR/audit.json, refused in one line where the set has not been audited (`to` says what the
+/// audit was wanted for) or the file is not JSON.
+pub(crate) fn read_audit(dir: &Path, to: &str) -> Result<Value> {
+    let path = dir.join(AUDIT);
+    if !path.is_file() {
+        return Err(Error::Config(format!(
+            "{} has no {AUDIT} {to}: run `vkdiff dataset audit {}` first",
+            dir.display(),
+            dir.display()
+        )));
+    }
+    let text = std::fs::read(&path).map_err(|e| FileError::Io { path: path.clone(), source: e })?;
+    let audit: Value = serde_json::from_slice(&text)
+        .map_err(|e| FileError::Format { path: path.clone(), why: format!("not JSON: {e}") })?;
+    if !audit["images"].is_array() {
+        return Err(FileError::Format { path, why: "no `images` list".into() }.into());
+    }
+    Ok(audit)
+}
+
 /// Instances listed per image beside the flagged ones: the lowest boundary scores.
 const WORST: usize = 5;
 

@@ -55,7 +55,7 @@ pub struct Dataset {
 }
 
 /// FNV-1a, 64 bits: a stable digest of the settings (not a security measure).
-fn fnv1a(text: &str) -> String {
+pub(crate) fn fnv1a(text: &str) -> String {
     let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x0100_0000_01b3));
     format!("{hash:016x}")
 }

@@ -8,6 +8,7 @@ use crate::error::{Error, Result};
 use crate::folder::{Dataset, Pending};
 use crate::merge::{merge, Merged};
 use crate::plan::Shard;
+use crate::regenerate::{mark_flagged, Marked};
 use crate::render_only::write_renders;
 use crate::run::{generate, Progress, Report, RunOptions};
 use crate::settings::DatasetSettings;
@@ -37,6 +38,8 @@ pub struct DatasetJob {
     shard_source: String,
     options: RunOptions,
     disk: DiskGuard,
+    /// The images `--regenerate-flagged` marked.
+    marked: Option<Marked>,
 }
 
 /// What a run tells as it goes.
@@ -75,14 +78,30 @@ impl DatasetJob {
             settings.ip_sets.iter().map(|set| read_images(set)).collect::<vkdiff_pipeline::Result<Vec<_>>>()?;
         check_margin(out, options.min_free)?;
         let dataset = Dataset::open(out, &settings, options.versions)?;
+        let marked = match &options.regenerate {
+            Some(_) if settings.models.is_none() => return Err(Error::Config(
+                "--regenerate-flagged: a --render-only set's images are its renders; there is nothing to sample again"
+                    .into(),
+            )),
+            Some(kinds) => Some(mark_flagged(&dataset, kinds)?),
+            None => None,
+        };
         let pending = dataset.pending(shard)?;
         let disk = DiskGuard::new(&dataset, options.min_free, pending.done_bytes, pending.done);
         disk.check(pending.images())?;
-        Ok(DatasetJob { settings, dataset, styles, pending, shard, shard_source, options, disk })
+        Ok(DatasetJob { settings, dataset, styles, pending, shard, shard_source, options, disk, marked })
     }
 
     pub fn settings(&self) -> &DatasetSettings {
         &self.settings
+    }
+
+    /// What `--regenerate-flagged` marked, in a line.
+    pub fn regeneration_line(&self) -> Option<String> {
+        self.marked.as_ref().map(|m| {
+            let how = if m.resumed { "resuming the regeneration of" } else { "regenerating" };
+            format!("{how} {} images the audit flagged, with new seeds (rounds in resamples.json)", m.images)
+        })
     }
 
     /// Records found but not whole, each with why; their images are made again.

@@ -18,6 +18,16 @@ pub fn image_seed(dataset_seed: u64, index: u64) -> u64 {
     mix(dataset_seed).wrapping_add(index) & 0xFFFF_FFFF
 }
 
+/// The seed of an image regenerated `round` times (`--regenerate-flagged`): its first seed
+/// where it never was, else one drawn from the first seed and the round.
+pub fn resampled_seed(seed: u64, round: u64) -> u64 {
+    if round == 0 {
+        seed
+    } else {
+        mix(seed ^ round.rotate_left(32)) & 0xFFFF_FFFF
+    }
+}
+
 /// What a per-image choice is for; each draws from its own stream of the image seed.
 #[derive(Clone, Copy)]
 pub enum Choice {

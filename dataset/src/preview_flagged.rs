@@ -2,12 +2,10 @@
 //! show only the flagged images, with the flagged instances outlined and the invented
 //! detections boxed in the warning colour.
 
-use crate::audit::AUDIT;
-use crate::error::{Error, Result};
-use serde_json::Value;
+use crate::audit::read_audit;
+use crate::error::Result;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
-use vkdiff_formats::Error as FileError;
 
 /// Flagged instances' outlines and invented detections' boxes.
 pub const WARNING: [u8; 3] = [255, 0, 0];
@@ -27,18 +25,8 @@ pub struct Flagged(pub BTreeMap<u64, ImageFlags>);
 impl Flagged {
     /// Reads DIR/audit.json, refusing a set that has not been audited.
     pub fn read(dir: &Path) -> Result<Flagged> {
-        let path = dir.join(AUDIT);
-        if !path.is_file() {
-            return Err(Error::Config(format!(
-                "{} has no {AUDIT}: run `vkdiff dataset audit {}` first",
-                dir.display(),
-                dir.display()
-            )));
-        }
-        let bad = |why: String| Error::from(FileError::Format { path: path.clone(), why });
-        let text = std::fs::read(&path).map_err(|e| FileError::Io { path: path.clone(), source: e })?;
-        let audit: Value = serde_json::from_slice(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
-        let images = audit["images"].as_array().ok_or_else(|| bad("no `images` list".into()))?;
+        let audit = read_audit(dir, "to show")?;
+        let images = audit["images"].as_array().into_iter().flatten();
         let mut flagged = BTreeMap::new();
         for image in images {
             let kinds: Vec<String> = image["flags"]
@@ -50,7 +38,7 @@ impl Flagged {
             if kinds.is_empty() {
                 continue;
             }
-            let id = image["id"].as_u64().ok_or_else(|| bad("an image without an id".into()))?;
+            let Some(id) = image["id"].as_u64() else { continue };
             let instances = image["worst"]
                 .as_array()
                 .into_iter()

@@ -5,7 +5,8 @@
 
 use super::disk::DiskGuard;
 use super::folder::{Dataset, Pending, VersionChange};
-use super::plan::{choose, image_seed, Choice};
+use super::plan::{choose, image_seed, resampled_seed, Choice};
+use super::regenerate::read_rounds;
 use super::scenes::{render_scenes, SceneImage};
 use super::settings::DatasetSettings;
 use super::stop::{interrupted, stop_requested};
@@ -39,6 +40,9 @@ pub struct RunOptions {
     /// one load); otherwise their memory goes before the denoiser's comes, unless a prompt is a
     /// template, whose expansions are encoded as the images come.
     pub keep_text_encoders: bool,
+    /// Make the images the audit flagged (with these kinds; all where empty) again with new
+    /// seeds (`--regenerate-flagged`).
+    pub regenerate: Option<Vec<String>>,
 }
 
 /// What the loop tells its caller as it goes.
@@ -141,6 +145,7 @@ pub fn generate(
     let stream = render_scenes(settings, pending.scenes, options.threads, 2 * options.batch);
     let (to_writer, writer) = start_writer(dataset.clone(), disk.clone(), options.batch);
     let mut run = Loop {
+        rounds: read_rounds(&dataset.dir)?,
         settings,
         models,
         styles,
@@ -185,6 +190,8 @@ fn encode(models: &WorkflowModels, settings: &DatasetSettings, prompt: &str) -> 
 type RecordedDenoiser<'a> = (Denoiser<'a>, (usize, (usize, usize)));
 
 struct Loop<'a> {
+    /// Each regenerated image's round, by index (`--regenerate-flagged`).
+    rounds: std::collections::BTreeMap<u64, u64>,
     settings: &'a DatasetSettings,
     models: &'a WorkflowModels,
     styles: &'a [Vec<RgbImage>],
@@ -273,7 +280,7 @@ impl<'a> Loop<'a> {
     /// The image's seed, prompt (a template expanded from the seed and the crop's categories,
     /// encoded now where its text is new) and style set.
     fn item(&mut self, scene: SceneImage) -> Result<Item> {
-        let seed = image_seed(self.settings.seed, scene.index);
+        let seed = resampled_seed(image_seed(self.settings.seed, scene.index), self.round(scene.index));
         let categories = scene.annotations.iter().map(|a| a.category_id);
         let (template, prompt) = self.settings.image_prompt(scene.scene, seed, categories)?;
         if !self.texts.contains_key(&prompt.prompt) {
@@ -285,6 +292,11 @@ impl<'a> Loop<'a> {
         let style =
             (!self.settings.ip_sets.is_empty()).then(|| choose(seed, Choice::StyleSet, self.settings.ip_sets.len()));
         Ok(Item { scene, seed, template, prompt, style })
+    }
+
+    /// How many times image `index` was regenerated.
+    fn round(&self, index: u64) -> u64 {
+        self.rounds.get(&index).copied().unwrap_or(0)
     }
 
     /// Past [`CACHED_EXPANSIONS`], drops the encoded expansions no queued image takes.
@@ -412,6 +424,9 @@ impl<'a> Loop<'a> {
         };
         let mut entry = item.scene.entry(&files);
         entry["seed"] = json!(item.seed);
+        if self.round(item.scene.index) > 0 {
+            entry["resample"] = json!(self.round(item.scene.index));
+        }
         entry["prompt"] = json!(gen.job.prompt);
         entry["negative_prompt"] = json!(s.negative_prompt);
         if s.templates[item.template].is_template() {

@@ -12,7 +12,6 @@ use serde_json::{json, Value};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use vkdiff_formats::atomic::write_atomic;
-use vkdiff_formats::Error as FileError;
 
 /// COCO's size classes: small below 32², medium below 96², large above (areas in pixels).
 const SMALL: u64 = 32 * 32;
@@ -110,13 +109,10 @@ pub fn stats(dir: &Path) -> Result<Value> {
 /// What the set's audit (audit.json) flagged, by kind: the images `export --exclude-flagged`
 /// leaves out; `null` for a set not audited.
 fn audit_flags(set: &FinishedSet) -> Result<Value> {
-    let path = set.dir.join(crate::AUDIT);
-    if !path.is_file() {
+    if !set.dir.join(crate::AUDIT).is_file() {
         return Ok(Value::Null);
     }
-    let text = std::fs::read(&path).map_err(|e| FileError::Io { path: path.clone(), source: e })?;
-    let audit: Value = serde_json::from_slice(&text)
-        .map_err(|e| FileError::Format { path: path.clone(), why: format!("not JSON: {e}") })?;
+    let audit = crate::audit::read_audit(&set.dir, "")?;
     let audited: BTreeSet<u64> =
         audit["images"].as_array().into_iter().flatten().filter_map(|i| i["id"].as_u64()).collect();
     let current = set.images.iter().all(|i| i.entry["id"].as_u64().is_some_and(|id| audited.contains(&id)));

@@ -3,11 +3,10 @@
 //! format, and the kept and dropped lists written beside the export (`excluded.json`).
 
 use super::set::FinishedSet;
-use crate::audit::{AUDIT, KINDS};
+use crate::audit::{read_audit, AUDIT, KINDS};
 use crate::error::{Error, Result};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
-use vkdiff_formats::Error as FileError;
 
 /// The exclusion file an export writes at its root.
 pub const EXCLUDED: &str = "excluded.json";
@@ -44,26 +43,13 @@ impl Exclusion {
 /// Drops from `set` the images `rule` excludes, by DIR/audit.json, which must cover every image
 /// of the set; returns what excluded.json holds.
 pub fn exclude(set: &mut FinishedSet, rule: &Exclusion) -> Result<Value> {
-    let path = set.dir.join(AUDIT);
-    if !path.is_file() {
-        return Err(Error::Config(format!(
-            "{} has no {AUDIT} to exclude by: run `vkdiff dataset audit {}` first",
-            set.dir.display(),
-            set.dir.display()
-        )));
-    }
-    let bad = |why: String| Error::from(FileError::Format { path: path.clone(), why });
-    let text = std::fs::read(&path).map_err(|e| FileError::Io { path: path.clone(), source: e })?;
-    let audit: Value = serde_json::from_slice(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
-    let audited: BTreeMap<u64, &Value> = audit["images"]
-        .as_array()
-        .ok_or_else(|| bad("no `images` list".into()))?
-        .iter()
-        .filter_map(|i| Some((i["id"].as_u64()?, i)))
-        .collect();
+    let audit = read_audit(&set.dir, "to exclude by")?;
+    let stale = |why: String| Error::Config(format!("{}: {why}", set.dir.join(AUDIT).display()));
+    let audited: BTreeMap<u64, &Value> =
+        audit["images"].as_array().into_iter().flatten().filter_map(|i| Some((i["id"].as_u64()?, i))).collect();
     let id_of = |entry: &Value| entry["id"].as_u64().unwrap_or_default();
     if let Some(image) = set.images.iter().find(|i| !audited.contains_key(&id_of(&i.entry))) {
-        return Err(bad(format!(
+        return Err(stale(format!(
             "the audit has no image {} ({}): the set changed after it; run `vkdiff dataset audit` again",
             id_of(&image.entry),
             image.file_name()
