@@ -5,7 +5,7 @@ use clap::Args;
 use serde_json::Value;
 use std::path::PathBuf;
 use vkdiff_args::Progress;
-use vkdiff_dataset::{audit, AuditOptions, AUDIT_KINDS};
+use vkdiff_dataset::{audit, AuditOptions, PredictionFormat, AUDIT_KINDS};
 use vkdiff_eval::IouType;
 
 /// Finds the images whose pixels no longer match their labels, and writes DIR/audit.json.
@@ -21,10 +21,17 @@ use vkdiff_eval::IouType;
 pub struct AuditArgs {
     /// The dataset folder.
     dir: PathBuf,
-    /// Predictions on the set's images: COCO results JSON (bbox or segm), image and category ids
-    /// those of the set's annotations.json.
+    /// Predictions on the set's images: COCO results JSON (bbox or segm) with the set's image and
+    /// category ids (Detectron2, MMDetection); Ultralytics' predict labels (a folder of STEM.txt
+    /// written with save_txt=True, save_conf=True); or Ultralytics' JSON (val with
+    /// save_json=True). Ultralytics names images by file stem and classes in the order of the
+    /// set's categories, as `dataset export --format yolo` writes them.
     #[arg(long)]
     predictions: Option<PathBuf>,
+    /// The predictions' format [default: told by the file: a folder is Ultralytics' labels, JSON
+    /// naming images by file Ultralytics' JSON, else COCO results].
+    #[arg(long, value_parser = ["coco", "ultralytics-txt", "ultralytics-json"])]
+    predictions_format: Option<String>,
     /// Match detections to objects by boxes (a predicted mask is then judged by --mask-iou) or
     /// by masks.
     #[arg(long = "match", default_value = "bbox", value_parser = ["bbox", "segm"])]
@@ -56,6 +63,11 @@ pub struct AuditArgs {
 pub fn run(args: &AuditArgs) -> Result<()> {
     let options = AuditOptions {
         predictions: args.predictions.clone(),
+        format: args.predictions_format.as_deref().map(|f| match f {
+            "ultralytics-txt" => PredictionFormat::UltralyticsTxt,
+            "ultralytics-json" => PredictionFormat::UltralyticsJson,
+            _ => PredictionFormat::Coco,
+        }),
         match_by: if args.match_by == "bbox" { IouType::Bbox } else { IouType::Segm },
         iou: args.iou,
         min_score: args.min_score,

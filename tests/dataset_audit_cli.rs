@@ -292,7 +292,7 @@ fn bad_predictions_are_refused_in_one_line_before_any_work() {
     let good = as_result(&coco["annotations"][0]);
     for (name, content, message) in [
         ("malformed.json", "[{".to_string(), "not JSON"),
-        ("object.json", "{}".to_string(), "not a COCO results list"),
+        ("object.json", "{}".to_string(), "not a results list"),
         (
             "unknown-image.json",
             json!([with(&good, "image_id", json!(999))]).to_string(),

@@ -1,6 +1,6 @@
 //! `vkdiff dataset audit DIR`: finds the images whose pixels no longer match their labels. With
 //! a detector's or segmenter's predictions on the set's images (COCO results, as Detectron2 and
-//! MMDetection write them), each labelled object nothing detects is *missing*, each confident
+//! MMDetection write them, or Ultralytics' labels or JSON: audit_predictions.rs), each labelled object nothing detects is *missing*, each confident
 //! detection mostly over unlabelled pixels *invented*, and each matched object whose predicted
 //! mask overlaps its label poorly a *poor mask*; matches (by boxes unless asked for masks) are
 //! the COCO evaluator's own (`vkdiff_eval::match_at`).
@@ -9,6 +9,7 @@
 //! result is `DIR/audit.json`, with a summary by kind and category.
 
 use crate::audit_boundary::{boundary_scores, strong_edges, BoundaryScore};
+use crate::audit_predictions::{read_predictions, PredictionFormat, SetIndex};
 use crate::audit_summary::summary;
 use crate::error::{Error, Result};
 use crate::export::{FinishedSet, SetImage, SplitFractions};
@@ -28,8 +29,10 @@ pub const AUDIT: &str = "audit.json";
 /// What the audit measures and where it draws its lines.
 #[derive(Clone, Debug)]
 pub struct AuditOptions {
-    /// COCO results on the set's images; without them only boundary scores are computed.
+    /// Predictions on the set's images; without them only boundary scores are computed.
     pub predictions: Option<PathBuf>,
+    /// Their format; `None`: told by the file (audit_predictions.rs).
+    pub format: Option<PredictionFormat>,
     /// Match by boxes (the default: a mask's quality is then judged apart) or masks.
     pub match_by: IouType,
     /// The IoU a detection must reach to match a labelled object.
@@ -51,6 +54,7 @@ impl Default for AuditOptions {
     fn default() -> AuditOptions {
         AuditOptions {
             predictions: None,
+            format: None,
             match_by: IouType::Bbox,
             iou: 0.5,
             min_score: 0.5,
@@ -95,15 +99,11 @@ fn check(o: &AuditOptions) -> Result<()> {
 }
 
 /// The predictions, read and checked against the set before any image is looked at: those
-/// scoring at least `min_score`, with their masks where they have them.
-fn predictions(path: &Path, gt: &Dataset, o: &AuditOptions) -> Result<Dataset> {
+/// scoring at least `min_score`, with their masks where they have them; and their format.
+fn predictions(path: &Path, coco: &Value, gt: &Dataset, o: &AuditOptions) -> Result<(Dataset, PredictionFormat)> {
     let in_file = |e: vkdiff_eval::EvalError| Error::Eval(e.context(path.display().to_string()));
-    let text = std::fs::read(path).map_err(|e| FileError::Io { path: path.to_path_buf(), source: e })?;
-    let json: Value = serde_json::from_slice(&text)
-        .map_err(|e| FileError::Format { path: path.to_path_buf(), why: format!("not JSON: {e}") })?;
-    let list = json.as_array().ok_or_else(|| {
-        Error::Config(format!("{}: not a COCO results list (a JSON list of detections)", path.display()))
-    })?;
+    let (json, format) = read_predictions(path, o.format, &SetIndex::of(coco))?;
+    let list = json.as_array().map_or(&[][..], Vec::as_slice);
     let masks = list.first().is_some_and(|r| r.get("segmentation").is_some());
     if o.match_by == IouType::Segm && !masks && !list.is_empty() {
         return Err(Error::Config(format!(
@@ -116,7 +116,7 @@ fn predictions(path: &Path, gt: &Dataset, o: &AuditOptions) -> Result<Dataset> {
     );
     let read_as = if masks { IouType::Segm } else { IouType::Bbox };
     let areas = AreaSource::of_results(&kept, AreaRule::LoadRes).map_err(in_file)?;
-    Dataset::results(&kept, gt, read_as, areas).map_err(in_file)
+    Ok((Dataset::results(&kept, gt, read_as, areas).map_err(in_file)?, format))
 }
 
 /// The mask IoU of two masks of one image.
@@ -194,6 +194,56 @@ fn render_of(image: &SetImage) -> Option<&str> {
     image.entry["init_file"].as_str()
 }
 
+/// Flags `instances` (indexed as `gt`'s annotations) missing or with a poor mask by the
+/// detections `dt`; returns the invented detections by image id.
+fn flag_by_predictions(
+    gt: &Dataset,
+    dt: &Dataset,
+    o: &AuditOptions,
+    instances: &mut [InstanceAudit],
+) -> HashMap<u64, Vec<Value>> {
+    let by = o.match_by;
+    let mut invented: HashMap<u64, Vec<Value>> = HashMap::new();
+    let m = match_at(gt, dt, by, o.iou, usize::MAX);
+    for pair in &m.matched {
+        let (g, d) = (&gt.annotations[pair.gt], &dt.annotations[pair.dt]);
+        let masks = match (&d.geometry, &g.geometry) {
+            (Geometry::Mask(a), Geometry::Mask(b)) => Some(mask_iou(a, b)),
+            _ => None,
+        };
+        let audit = &mut instances[pair.gt];
+        audit.matched = Some((pair.iou, masks, d.score));
+        if masks.is_some_and(|iou| iou < o.mask_iou) {
+            audit.flags.push("poor_mask");
+        }
+    }
+    for &g in &m.missed {
+        instances[g].flags.push("missing");
+    }
+    // Unmatched detections mostly over pixels no label covers: objects the labels lack.
+    let mut labelled: HashMap<u64, Vec<bool>> = HashMap::new();
+    for &d in &m.unmatched {
+        let d = &dt.annotations[d];
+        let (h, w) = gt.images[&d.image_id];
+        let labels = labelled.entry(d.image_id).or_insert_with(|| {
+            let mut union = vec![false; (w * h) as usize];
+            for g in gt.annotations.iter().filter(|g| g.image_id == d.image_id) {
+                if let Geometry::Mask(r) = &g.geometry {
+                    r.to_mask().iter().zip(union.iter_mut()).for_each(|(on, u)| *u |= on);
+                }
+            }
+            union
+        });
+        if on_labels(d, labels, w as usize) < 0.5 {
+            invented
+                .entry(d.image_id)
+                .or_default()
+                .push(json!({"category_id": d.category_id, "bbox": d.bbox, "score": d.score}));
+        }
+    }
+    invented
+}
+
 /// Audits the set in `dir`, writes `DIR/audit.json`; `progress(done, total)` per image.
 pub fn audit(dir: &Path, o: &AuditOptions, progress: &mut dyn FnMut(usize, usize)) -> Result<Audited> {
     check(o)?;
@@ -205,50 +255,14 @@ pub fn audit(dir: &Path, o: &AuditOptions, progress: &mut dyn FnMut(usize, usize
     .map_err(|e| FileError::Format { path: coco_path.clone(), why: e.to_string() })?;
     let gt = Dataset::ground_truth(&coco, IouType::Segm)
         .map_err(|e| Error::Eval(e.context(coco_path.display().to_string())))?;
-    let found = o.predictions.as_deref().map(|p| predictions(p, &gt, o)).transpose()?;
-    let by = o.match_by;
+    let read = o.predictions.as_deref().map(|p| predictions(p, &coco, &gt, o)).transpose()?;
+    let (found, format) = read.map_or((None, None), |(dt, f)| (Some(dt), Some(f)));
     let by_id: HashMap<u64, usize> = gt.annotations.iter().enumerate().map(|(i, a)| (a.id, i)).collect();
     let mut instances: Vec<InstanceAudit> = (0..gt.annotations.len()).map(|_| InstanceAudit::default()).collect();
-    let mut invented: HashMap<u64, Vec<Value>> = HashMap::new();
-    if let Some(dt) = &found {
-        let m = match_at(&gt, dt, by, o.iou, usize::MAX);
-        for pair in &m.matched {
-            let (g, d) = (&gt.annotations[pair.gt], &dt.annotations[pair.dt]);
-            let masks = match (&d.geometry, &g.geometry) {
-                (Geometry::Mask(a), Geometry::Mask(b)) => Some(mask_iou(a, b)),
-                _ => None,
-            };
-            let audit = &mut instances[pair.gt];
-            audit.matched = Some((pair.iou, masks, d.score));
-            if masks.is_some_and(|iou| iou < o.mask_iou) {
-                audit.flags.push("poor_mask");
-            }
-        }
-        for &g in &m.missed {
-            instances[g].flags.push("missing");
-        }
-        // Unmatched detections mostly over pixels no label covers: objects the labels lack.
-        let mut labelled: HashMap<u64, Vec<bool>> = HashMap::new();
-        for &d in &m.unmatched {
-            let d = &dt.annotations[d];
-            let (h, w) = gt.images[&d.image_id];
-            let labels = labelled.entry(d.image_id).or_insert_with(|| {
-                let mut union = vec![false; (w * h) as usize];
-                for g in gt.annotations.iter().filter(|g| g.image_id == d.image_id) {
-                    if let Geometry::Mask(r) = &g.geometry {
-                        r.to_mask().iter().zip(union.iter_mut()).for_each(|(on, u)| *u |= on);
-                    }
-                }
-                union
-            });
-            if on_labels(d, labels, w as usize) < 0.5 {
-                invented
-                    .entry(d.image_id)
-                    .or_default()
-                    .push(json!({"category_id": d.category_id, "bbox": d.bbox, "score": d.score}));
-            }
-        }
-    }
+    let mut invented = match &found {
+        Some(dt) => flag_by_predictions(&gt, dt, o, &mut instances),
+        None => HashMap::new(),
+    };
     // Every image's boundaries first: weak ones are judged against the set's own median.
     let mut scored = Vec::with_capacity(set.images.len());
     for (k, image) in set.images.iter().enumerate() {
@@ -295,7 +309,8 @@ pub fn audit(dir: &Path, o: &AuditOptions, progress: &mut dyn FnMut(usize, usize
     let summary = summary(&images, &flagged, &coco["categories"]);
     let settings = json!({
         "predictions": o.predictions.as_ref().map(|p| p.display().to_string()),
-        "match": by.name(),
+        "predictions_format": format.map(PredictionFormat::name),
+        "match": o.match_by.name(),
         "predictions_kept": found.as_ref().map(|dt| dt.annotations.len()),
         "iou": o.iou, "min_score": o.min_score, "mask_iou": o.mask_iou, "tolerance_px": o.tolerance,
         "edge_threshold": o.edge_threshold, "min_boundary": o.min_boundary, "median_instance_boundary_f": median,

@@ -7,6 +7,7 @@
 
 mod audit;
 mod audit_boundary;
+mod audit_predictions;
 mod audit_summary;
 mod canvas;
 mod controls;
@@ -32,6 +33,7 @@ mod stats_geometry;
 mod stop;
 
 pub use audit::{audit, AuditOptions, Audited, AUDIT, KINDS as AUDIT_KINDS};
+pub use audit_predictions::PredictionFormat;
 pub use controls::{control_file, LabelControls};
 pub use disk::{parse_size, size, DiskGuard, DEFAULT_MIN_FREE};
 pub use error::{Error, Result};
