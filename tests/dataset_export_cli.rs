@@ -116,6 +116,12 @@ fn yolo_polygons_cover_every_instance_mask() {
     assert!(rendered.status.success(), "{}", String::from_utf8_lossy(&rendered.stderr));
     export(&wide, &dir.join("wide-yolo"), &["--format", "yolo"]);
     ious.extend(polygon_ious(&wide, &dir.join("wide-yolo")));
+    // Both scenes in val (this seed): Ultralytics, which needs a train key, trains on val.
+    let all_val = dir.join("all-val");
+    export(&wide, &all_val, &["--format", "yolo", "--val-fraction", "0.5", "--seed", "1"]);
+    let yaml = std::fs::read_to_string(all_val.join("data.yaml")).unwrap();
+    assert_eq!(std::fs::read_dir(all_val.join("images/train")).map_or(0, |d| d.count()), 0, "train is not empty");
+    assert!(yaml.lines().any(|l| l == "train: images/val") && yaml.lines().any(|l| l == "val: images/val"), "{yaml}");
     let min = ious.iter().copied().fold(1.0, f64::min);
     let mean = ious.iter().sum::<f64>() / ious.len() as f64;
     let points = read_labels_points(&out);

@@ -115,6 +115,9 @@ fn data_yaml(set: &FinishedSet, layout: &Layout) -> String {
             // Ultralytics refuses a dataset without val: with --val-fraction 0 (or a one-scene
             // set) it validates on train, and says so here.
             let _ = writeln!(yaml, "# no scene is in val: Ultralytics validates on train\nval: images/train");
+        } else if split == Split::Train {
+            // Nor does it take one without train: where every scene fell in val, it trains there.
+            let _ = writeln!(yaml, "# no scene is in train: Ultralytics trains on val\ntrain: images/val");
         }
     }
     yaml.push_str("names:\n");
