@@ -33,7 +33,7 @@ mod stats_geometry;
 mod stop;
 
 pub use audit::{audit, AuditOptions, Audited, AUDIT, KINDS as AUDIT_KINDS};
-pub use audit_predictions::PredictionFormat;
+pub use audit_predictions::{read_predictions, PredictionFormat, SetIndex};
 pub use controls::{control_file, LabelControls};
 pub use disk::{parse_size, size, DiskGuard, DEFAULT_MIN_FREE};
 pub use error::{Error, Result};
