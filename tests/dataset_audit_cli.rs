@@ -276,6 +276,19 @@ fn planted_faults_are_found() {
     }
 }
 
+/// Runs vkdiff, which must succeed.
+fn run_ok(args: &[&str]) {
+    let out = vkdiff(args);
+    assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// Exports `set` to `out` as `format`, leaving out the images the audit flagged `missing`.
+fn export_without_missing(set: &Path, out: &Path, format: &str, val_fraction: &str) {
+    let (set, out) = (set.to_str().unwrap(), out.to_str().unwrap());
+    let args = ["--format", format, "--out", out, "--exclude-flagged=missing", "--val-fraction", val_fraction];
+    run_ok(&[&["dataset", "export", set][..], &args].concat());
+}
+
 /// `v` with `key` set to `value`.
 fn with(v: &Value, key: &str, value: Value) -> Value {
     let mut v = v.clone();
@@ -371,8 +384,7 @@ fn exported_stems(out: &Path, format: &str) -> BTreeSet<String> {
 fn exports_leave_out_exactly_the_flagged_images() {
     let root = scratch("audit-exports");
     let Planted { set, predictions, invented, .. } = planted(&root);
-    let out = vkdiff(&["dataset", "audit", set.to_str().unwrap(), "--predictions", predictions.to_str().unwrap()]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    run_ok(&["dataset", "audit", set.to_str().unwrap(), "--predictions", predictions.to_str().unwrap()]);
     let audit = read_json(&set.join("audit.json"));
     let stems_of = |ids: &dyn Fn(&Value) -> bool| -> BTreeSet<String> {
         let images = audit["images"].as_array().unwrap().iter().filter(|i| ids(i));
@@ -387,19 +399,7 @@ fn exports_leave_out_exactly_the_flagged_images() {
     assert!(!clean.is_empty() && !flagged.is_empty(), "{clean:?} {flagged:?}");
     for format in ["coco", "yolo", "webdataset", "hf"] {
         let out_dir = root.join(format!("out-{format}"));
-        let out = vkdiff(&[
-            "dataset",
-            "export",
-            set.to_str().unwrap(),
-            "--format",
-            format,
-            "--out",
-            out_dir.to_str().unwrap(),
-            "--exclude-flagged=missing",
-            "--val-fraction",
-            "0.3",
-        ]);
-        assert!(out.status.success(), "{format}: {}", String::from_utf8_lossy(&out.stderr));
+        export_without_missing(&set, &out_dir, format, "0.3");
         assert_eq!(exported_stems(&out_dir, format), clean, "{format}");
         let listed = read_json(&out_dir.join("excluded.json"));
         let names = |key: &str| -> BTreeSet<String> {
@@ -469,24 +469,11 @@ fn geometric_exports_leave_out_the_flagged_images() {
     let results: Vec<Value> = coco["annotations"].as_array().unwrap()[1..].iter().map(as_result).collect();
     let predictions = root.join("predictions.json");
     std::fs::write(&predictions, Value::from(results).to_string()).unwrap();
-    let out = vkdiff(&["dataset", "audit", set.to_str().unwrap(), "--predictions", predictions.to_str().unwrap()]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    run_ok(&["dataset", "audit", set.to_str().unwrap(), "--predictions", predictions.to_str().unwrap()]);
     let missed_image = coco["annotations"][0]["image_id"].as_u64().unwrap();
     for format in ["yolo-pose", "bop"] {
         let out_dir = root.join(format);
-        let out = vkdiff(&[
-            "dataset",
-            "export",
-            set.to_str().unwrap(),
-            "--format",
-            format,
-            "--out",
-            out_dir.to_str().unwrap(),
-            "--exclude-flagged=missing",
-            "--val-fraction",
-            "0",
-        ]);
-        assert!(out.status.success(), "{format}: {}", String::from_utf8_lossy(&out.stderr));
+        export_without_missing(&set, &out_dir, format, "0");
         let listed = read_json(&out_dir.join("excluded.json"));
         assert_eq!(listed["dropped"][0]["id"].as_u64(), Some(missed_image), "{format}");
         assert_eq!(listed["dropped"][0]["reasons"], json!(["missing"]), "{format}");

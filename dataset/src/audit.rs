@@ -16,7 +16,7 @@ use crate::export::{FinishedSet, SetImage, SplitFractions};
 use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use vkdiff_eval::{match_at, AreaRule, AreaSource, Dataset, Geometry, IouType};
+use vkdiff_eval::{match_at, rle_iou, AreaRule, AreaSource, Dataset, Geometry, IouType};
 use vkdiff_formats::atomic::write_atomic;
 use vkdiff_formats::Error as FileError;
 use vkdiff_pipeline::images::read_image;
@@ -119,18 +119,6 @@ fn predictions(path: &Path, coco: &Value, gt: &Dataset, o: &AuditOptions) -> Res
     Ok((Dataset::results(&kept, gt, read_as, areas).map_err(in_file)?, format))
 }
 
-/// The mask IoU of two masks of one image.
-fn mask_iou(a: &Rle, b: &Rle) -> f64 {
-    let (a, b) = (a.to_mask(), b.to_mask());
-    let inter = a.iter().zip(&b).filter(|(x, y)| **x && **y).count();
-    let union = a.iter().zip(&b).filter(|(x, y)| **x || **y).count();
-    if union == 0 {
-        0.0
-    } else {
-        inter as f64 / union as f64
-    }
-}
-
 /// The share of a detection's pixels (its mask's, else its box's) that some label covers.
 fn on_labels(d: &vkdiff_eval::Annotation, labelled: &[bool], width: usize) -> f64 {
     let pixels: Vec<usize> = match &d.geometry {
@@ -208,7 +196,7 @@ fn flag_by_predictions(
     for pair in &m.matched {
         let (g, d) = (&gt.annotations[pair.gt], &dt.annotations[pair.dt]);
         let masks = match (&d.geometry, &g.geometry) {
-            (Geometry::Mask(a), Geometry::Mask(b)) => Some(mask_iou(a, b)),
+            (Geometry::Mask(a), Geometry::Mask(b)) => Some(rle_iou(a, b)),
             _ => None,
         };
         let audit = &mut instances[pair.gt];

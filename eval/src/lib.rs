@@ -13,7 +13,7 @@ mod summary;
 pub use cocoeval::{evaluate, EvalParams, IouType, Stats};
 pub use dataset::{Annotation, AreaRule, AreaSource, Dataset, Geometry};
 pub use keypoints::{oks, COCO_PERSON_SIGMAS};
-pub use masks::{bbox_iou, foreground_iou, mask_iou, polygon_rle, union};
+pub use masks::{bbox_iou, foreground_iou, mask_iou, polygon_rle, rle_iou, union};
 pub use matching::{match_at, Matched, Matching};
 pub use summary::{summarize, CategoryScores, Summary, SummaryRequest};
 use vkdiff_setting::Message;

@@ -79,6 +79,11 @@ pub fn mask_iou(dt: &[(u64, u64)], gt: &[(u64, u64)], crowd: bool) -> f64 {
     }
 }
 
+/// The IoU of two masks of one image (neither a crowd region).
+pub fn rle_iou(a: &Rle, b: &Rle) -> f64 {
+    mask_iou(&ones(a), &ones(b), false)
+}
+
 /// IoU of two `[x, y, w, h]` boxes, with the crowd rule of [`mask_iou`].
 pub fn bbox_iou(dt: [f64; 4], gt: [f64; 4], crowd: bool) -> f64 {
     let w = (dt[0] + dt[2]).min(gt[0] + gt[2]) - dt[0].max(gt[0]);
