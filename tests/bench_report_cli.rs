@@ -15,11 +15,14 @@ use vkdiff_testkit::fixture;
 /// A stand-in for `$VKDIFF_REFERENCE_PYTHON`, run as `STUB -c SCRIPT ARGS…`: it knows each reference
 /// by the usage line its script carries, checks the arguments the quick suite gives it (the
 /// image's: 128², 2 steps timed, 1 run, no warm-up image, and the UNet's: no warm-up evaluation,
-/// as vkdiff's quick suite makes neither; a model's config, first, is not checked), and prints
-/// fixed JSON.
+/// as vkdiff's quick suite makes neither; a model's config, first, is not checked), that
+/// `tools/reference_timing.py` came with each timed reference, and prints fixed JSON.
 fn stub_python() -> PathBuf {
     let path = scratch("bench-report-stub").join("python");
-    let diffusers = r#""torch": "9.1", "diffusers": "9.2", "where": "stub CPU float32""#;
+    let diffusers = r#""torch": "9.1", "diffusers": "9.2", "where": "stub CPU float32", "settings": ["channels_last"], "sdpa": "math", "host": "stub host", "clocks": null"#;
+    let compiled =
+        |s: f64| format!(r#""gpu": null, "compiled": {{"wall": [{s}], "gpu": null, "how": "stub compile"}}"#);
+    let (unet_compiled, vae_compiled) = (compiled(0.12), compiled(0.25));
     let script = format!(
         r#"#!/bin/sh
 cat > /dev/null
@@ -29,16 +32,19 @@ case "$script" in
   *"Usage: workflow_reference.py"*) want="128 2 1 0"
     answer='{{"images": [{{"seconds": 7.0, "steps": [4.0, 1.5]}}], {diffusers}}}' ;;
   *"Usage: unet_reference.py"*) shift; want="16 16 2 1 0"
-    answer='{{"ms": 240.0, "times_ms": [240.0], "peak_mib": 1.0, {diffusers}}}' ;;
+    answer='{{"ms": 240.0, "times_ms": [240.0], "peak_mib": 1.0, {unet_compiled}, {diffusers}}}' ;;
   *"Usage: vae_reference.py"*) shift; want="128 1 cpu f32"
-    answer='{{"seconds": 0.5, "times": [0.5], "peak_mib": 1.0, {diffusers}}}' ;;
+    answer='{{"seconds": 0.5, "times": [0.5], "peak_mib": 1.0, {vae_compiled}, {diffusers}}}' ;;
   *"Usage: kernels_reference.py"*) want="1"
-    answer='{{"linear": [0.5], "conv": [0.25], "attention": [0.125], "torch": "9.1", "where": "stub CPU"}}' ;;
+    answer='{{"linear": [0.5], "conv": [0.25], "attention": [0.125], "torch": "9.1", "where": "stub CPU", "settings": ["channels_last", "wall-clock"], "sdpa": "math", "host": "stub host", "clocks": null}}' ;;
   *"sdcpp_reference.py MODEL"*) shift; want="64 2"
     answer='{{"load_s": 4.2, "steps": [9.0, 3.0], "total_s": 12.5, "what": "stub sd.cpp"}}' ;;
   *) echo "stub: no such reference" >&2; exit 2 ;;
 esac
 [ "$*" = "$want" ] || {{ echo "stub: arguments $*, not $want" >&2; exit 2; }}
+case "$script" in
+  *"import reference_timing"*) [ -n "$VKDIFF_REFERENCE_TIMING" ] || {{ echo "stub: reference_timing.py not given" >&2; exit 2; }} ;;
+esac
 echo "$answer"
 "#
     );
@@ -211,16 +217,20 @@ fn diffusers_beside_the_image_unet_and_vae_gives_each_its_speed_up() {
     let report = read_json(path);
     let figures = report["figures"].as_array().unwrap();
     let ids: Vec<&str> = figures.iter().map(|f| f["id"].as_str().unwrap()).collect();
-    assert_eq!(ids, ["image", "image_4_steps", "unet.f16", "vae.f32"]);
-    let diffusers = "stub CPU float32, torch 9.1 / diffusers 9.2";
+    assert_eq!(ids, ["image", "image_4_steps", "unet.f16", "unet.f16.compiled", "vae.f32", "vae.f32.compiled"]);
+    let diffusers = "stub CPU float32, torch 9.1 / diffusers 9.2; channels_last; SDPA math; stub host";
     // The stub's image ran 2 steps in 7 s: the 28 others at the second step's 1.5 s (the timed
     // steps' mean, the first included, would make it 84 s).
     assert_reference(table, &figures[0], "s", 7.0 + 28.0 * 1.5, diffusers);
     let thirty = figures[0]["runs"]["median"].as_f64().unwrap();
     assert_reference(table, &figures[1], "s", thirty, "the paper's 30-step image, this run");
     assert_reference(table, &figures[2], "ms", 240.0, diffusers);
-    assert_reference(table, &figures[3], "s", 0.5, diffusers);
-    assert!(table.contains("| 49.0 s (stub CPU float32, torch 9.1 / diffusers 9.2) |"), "{table}");
+    // The same vkdiff figure again, against the compiled model: 0.12 s a UNet, 0.25 s a decode.
+    assert_reference(table, &figures[3], "ms", 120.0, &format!("stub compile; {diffusers}"));
+    assert_eq!(figures[3]["runs"], figures[2]["runs"]);
+    assert_reference(table, &figures[4], "s", 0.5, diffusers);
+    assert_reference(table, &figures[5], "s", 0.25, &format!("stub compile; {diffusers}"));
+    assert!(table.contains(&format!("| 49.0 s ({diffusers}) |")), "{table}");
 }
 
 #[test]
@@ -240,7 +250,13 @@ fn torch_kernels_and_sd_cpp_beside_vkdiff_give_rates_by_product_and_a_step() {
     assert_eq!(ids, ["kernels.linear", "kernels.conv", "kernels.attention", "peer.sdcpp"]);
     for (figure, rate) in figures.iter().zip([0.5, 0.25, 0.125]) {
         assert_eq!(figure["higher_is_better"], true, "{figure}");
-        assert_reference(&table, figure, "TFLOP/s", rate, "torch 9.1, stub CPU");
+        assert_reference(
+            &table,
+            figure,
+            "TFLOP/s",
+            rate,
+            "torch 9.1, stub CPU; channels_last, wall-clock; SDPA math; stub host",
+        );
     }
     // sd.cpp's steps of 9 and 3 s: its step is the second (their median with the first is 6 s).
     assert_reference(&table, &figures[3], "s", 3.0, "stub sd.cpp, loaded in 4 s");
@@ -256,11 +272,16 @@ fn reports_compare_as_markdown_and_as_a_page_with_charts() {
     let markdown = String::from_utf8(out.stdout).unwrap();
     let rows: Vec<&str> = markdown.lines().filter(|l| l.starts_with("| ") && !l.starts_with("| figure")).collect();
     assert_eq!(rows.len(), 4, "{markdown}");
-    // The second column holds each value beside its speed relative to the first report.
+    // The second column holds each value beside its speed relative to the first report; the rows
+    // that repeat a figure against compiled PyTorch are not vkdiff's own, and are left out.
     let (ra, rb) = (read_json(Path::new(a)), read_json(Path::new(b)));
-    for (row, (fa, fb)) in
-        rows.iter().zip(ra["figures"].as_array().unwrap().iter().zip(rb["figures"].as_array().unwrap()))
-    {
+    let own = |r: &Value| -> Vec<Value> {
+        let figures = r["figures"].as_array().unwrap().iter();
+        figures.filter(|f| !f["id"].as_str().unwrap().ends_with(".compiled")).cloned().collect()
+    };
+    let (own_a, own_b) = (own(&ra), own(&rb));
+    assert_eq!(own_b.len() + 2, rb["figures"].as_array().unwrap().len(), "the UNet's and the VAE's compiled rows");
+    for (row, (fa, fb)) in rows.iter().zip(own_a.iter().zip(&own_b)) {
         let speed = fa["runs"]["median"].as_f64().unwrap() / fb["runs"]["median"].as_f64().unwrap();
         assert!(row.ends_with(&format!("({speed:.2}×) |")), "{row}: {speed:.2}");
     }

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
-"""diffusers' UNet2DConditionModel on the CPU (torch, float32) or a CUDA GPU (float16 or float32):
-milliseconds per evaluation (the best, and each) and the peak memory (the process's resident set on the CPU, torch's
-allocated device memory on the GPU).
+"""diffusers' UNet2DConditionModel on the CPU (torch, float32) or a CUDA GPU (float16 or float32), at its best
+(tools/reference_timing.py: cuDNN's autotuner, channels_last, fused QKV): milliseconds per evaluation (the best, each
+by wall-clock and on CUDA by CUDA events, at least 10), the peak memory (the process's resident set on the CPU, torch's
+allocated device memory on the GPU), then the same through torch.compile (`compiled`, seconds).
 
 Run by `vkdiff bench unet` and `vkdiff bench report` in the same run as their own measurement, with the same config
 (passed as JSON), random weights, latent size and batch. WARM_UP 1 makes one untimed evaluation first, on every
@@ -12,11 +13,12 @@ Usage: unet_reference.py CONFIG_JSON LATENT_H LATENT_W BATCH SAMPLES WARM_UP [cp
 import json
 import resource
 import sys
-import time
 
 import diffusers
 import torch
 from diffusers import UNet2DConditionModel
+
+import reference_timing as rt
 
 
 def main():
@@ -39,26 +41,33 @@ def main():
     context = torch.randn(batch, 77, config["cross_attention_dim"], **make)
     time_ids = torch.tensor([[8.0 * h, 8.0 * w, 0, 0, 8.0 * h, 8.0 * w]] * batch, **make)
     added = dict(text_embeds=torch.randn(batch, text, **make), time_ids=time_ids)
-    sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
-    times = []
+    settings = rt.best_settings(device)
+    unet = rt.at_best(unet, settings)
+    sample = sample.to(memory_format=torch.channels_last)
+    host = rt.host(device)
+    clocks = [rt.gpu_clocks()] if device == "cuda" else None
+
+    def evaluation(model):
+        return lambda: model(sample, t, encoder_hidden_states=context, added_cond_kwargs=added)
+
     with torch.inference_mode():
-        if warm_up:  # the first call picks kernels and grows the allocator
-            unet(sample, t, encoder_hidden_states=context, added_cond_kwargs=added)
-        for _ in range(samples):
-            sync()
-            start = time.perf_counter()
-            unet(sample, t, encoder_hidden_states=context, added_cond_kwargs=added)
-            sync()
-            times.append(time.perf_counter() - start)
+        # The first call picks kernels and grows the allocator: untimed only where vkdiff's side had one.
+        times = rt.timed(evaluation(unet), samples, warm_up, device)
+        peak = torch.cuda.max_memory_allocated() / 2**20 if device == "cuda" else None
+        sdpa = rt.sdpa_backend(evaluation(unet))
+        compiled = rt.time_compiled(unet, evaluation, samples, device)
+    if clocks:
+        clocks.append(rt.gpu_clocks())
     if device == "cuda":
-        peak_mib = torch.cuda.max_memory_allocated() / 2**20
+        peak_mib = peak
         where = f"{torch.cuda.get_device_name()} {str(dtype).removeprefix('torch.')}"
     else:
         peak_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux reports KiB
         where = f"CPU float32, {torch.get_num_threads()} threads"
-    print(json.dumps(dict(ms=1000 * min(times), times_ms=[1000 * t for t in times], peak_mib=peak_mib,
-                          torch=torch.__version__,
-                          diffusers=diffusers.__version__, where=where)))
+    wall = times["wall"]
+    print(json.dumps(dict(ms=1000 * min(wall), times_ms=[1000 * t for t in wall], gpu=times["gpu"], peak_mib=peak_mib,
+                          torch=torch.__version__, diffusers=diffusers.__version__, where=where,
+                          settings=settings, sdpa=sdpa, host=host, clocks=clocks, compiled=compiled)))
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
-"""diffusers' AutoencoderKL decoder (SDXL's VAE config, random weights) on the CPU or a CUDA GPU:
-seconds per whole decode (the best, and each) and the peak memory.
+"""diffusers' AutoencoderKL decoder (SDXL's VAE config, random weights) on the CPU or a CUDA GPU, at its best
+(tools/reference_timing.py): seconds per whole decode (the best, each by wall-clock and on CUDA by CUDA events, at
+least 10) and the peak memory, then the same through torch.compile (`compiled`).
 
 Run by `vkdiff bench vae --reference-device` in the same run as its own measurement, with the
 same config (passed as JSON), image size and precision: float32 (SDXL's VAE) or float16 (the
@@ -13,24 +14,19 @@ Usage: vae_reference.py CONFIG_JSON SIZE SAMPLES [cpu | cuda] [f32 | f16]
 import json
 import resource
 import sys
-import time
 
 import diffusers
 import torch
 from diffusers import AutoencoderKL
 
+import reference_timing as rt
 
-def decodes(vae, latents, samples, sync):
-    times = []
+
+def decodes(vae, latents, samples, device):
+    """Each decode's wall-clock and GPU seconds, after one untimed (it picks kernels and grows the
+    allocator)."""
     with torch.inference_mode():
-        vae.decode(latents)  # the first call picks kernels and grows the allocator
-        for _ in range(samples):
-            sync()
-            start = time.perf_counter()
-            vae.decode(latents)
-            sync()
-            times.append(time.perf_counter() - start)
-    return times
+        return rt.timed(lambda: vae.decode(latents), samples, 1, device)
 
 
 def main():
@@ -48,18 +44,28 @@ def main():
     factor = 2 ** (len(config["block_out_channels"]) - 1)
     latents = torch.randn(1, config["latent_channels"], size // factor, size // factor, device=device, dtype=dtype)
     result = dict(torch=torch.__version__, diffusers=diffusers.__version__)
-    sync = torch.cuda.synchronize if device == "cuda" else (lambda: None)
+    result["settings"] = rt.best_settings(device)
+    vae = rt.at_best(vae, result["settings"])
+    result["host"] = rt.host(device)
+    result["clocks"] = [rt.gpu_clocks()] if device == "cuda" else None
     torch.backends.cuda.matmul.allow_tf32 = False  # torch's default, kept for every timing
     torch.backends.cudnn.allow_tf32 = False
-    result["times"] = decodes(vae, latents, samples, sync)
-    result["seconds"] = min(result["times"])
-    if device == "cuda" and dtype == torch.float32:
-        torch.backends.cudnn.allow_tf32 = True  # torch's default
-        result["times_tf32"] = decodes(vae, latents, samples, sync)
-        result["seconds_tf32"] = min(result["times_tf32"])
-    name = str(dtype).removeprefix("torch.")
+    timed = decodes(vae, latents, samples, device)
+    result.update(times=timed["wall"], gpu=timed["gpu"], seconds=min(timed["wall"]))
     if device == "cuda":
         result["peak_mib"] = torch.cuda.max_memory_allocated() / 2**20
+    if device == "cuda" and dtype == torch.float32:
+        torch.backends.cudnn.allow_tf32 = True  # torch's default
+        result["times_tf32"] = decodes(vae, latents, samples, device)["wall"]
+        result["seconds_tf32"] = min(result["times_tf32"])
+        torch.backends.cudnn.allow_tf32 = False
+    with torch.inference_mode():
+        result["sdpa"] = rt.sdpa_backend(lambda: vae.decode(latents))
+        result["compiled"] = rt.time_compiled(vae.decode, lambda decode: lambda: decode(latents), samples, device)
+    if device == "cuda":
+        result["clocks"].append(rt.gpu_clocks())
+    name = str(dtype).removeprefix("torch.")
+    if device == "cuda":
         result["where"] = f"{torch.cuda.get_device_name()} {name}"
     else:
         result["peak_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # KiB on Linux

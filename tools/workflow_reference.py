@@ -8,8 +8,10 @@ as vkdiff's set encodes them once), and LoRAs fused into the weights cost nothin
 loaded). Each image's seconds and each of its STEPS_TIMED steps' seconds are printed as measured:
 vkdiff counts the suite's steps that did not run by its one rule (the median of the timed steps
 after the first), the rule its own images are counted by. With WARM_UP 1 an untimed image comes
-first, as vkdiff's full suite makes one (its quick suite makes none, and passes 0). Prints one
-JSON line: {"images": [{"seconds": S, "steps": [S, ...]}, ...], "torch", "diffusers", "where"}.
+first, as vkdiff's full suite makes one (its quick suite makes none, and passes 0). The models run
+at their best (tools/reference_timing.py), the UNet's projections unfused where an IP-Adapter's
+processors must stay. Prints one JSON line: {"images": [{"seconds": S, "steps": [S, ...]}, ...],
+"torch", "diffusers", "where", "settings", "host", "clocks"}.
 
 Standard input: {"unet": {...}, "controlnet": {...}, "vae": {...}, "scheduler": {...},
                  "ip_adapter": true}   (false: no IP-Adapter, as the workflow timed has none)
@@ -27,6 +29,8 @@ from diffusers import (AutoencoderKL, ControlNetModel, EulerDiscreteScheduler,
 from diffusers.models.attention_processor import AttnProcessor2_0, IPAdapterAttnProcessor2_0
 from diffusers.models.embeddings import ImageProjection, MultiIPAdapterImageProjection
 from PIL import Image
+
+import reference_timing as rt
 
 
 def random(module, device, dtype):
@@ -76,6 +80,10 @@ def main():
         controlnet = ControlNetModel(**configs["controlnet"])
         vae = AutoencoderKL(**configs["vae"])
     unet, controlnet, vae = (random(m, device, dtype) for m in (unet, controlnet, vae))
+    settings = rt.best_settings(device)
+    unet = rt.at_best(unet, settings, fuse=not configs.get("ip_adapter", True))
+    controlnet, vae = (rt.at_best(m, settings) for m in (controlnet, vae))
+    clocks = [rt.gpu_clocks()] if device == "cuda" else None
     scheduler = EulerDiscreteScheduler.from_config(configs["scheduler"])
     pipe = StableDiffusionXLControlNetPipeline(vae=vae, text_encoder=None, text_encoder_2=None, tokenizer=None,
                                                tokenizer_2=None, unet=unet, controlnet=controlnet,
@@ -115,7 +123,10 @@ def main():
         images = [image() for _ in range(runs)]
     name = str(dtype).removeprefix("torch.")
     where = f"{torch.cuda.get_device_name()} {name}" if device == "cuda" else f"CPU {name}, {torch.get_num_threads()} threads"
-    print(json.dumps(dict(images=images, torch=torch.__version__, diffusers=diffusers.__version__, where=where)))
+    if clocks:
+        clocks.append(rt.gpu_clocks())
+    print(json.dumps(dict(images=images, torch=torch.__version__, diffusers=diffusers.__version__, where=where,
+                          settings=settings, host=rt.host(device), clocks=clocks)))
 
 
 if __name__ == "__main__":

@@ -43,6 +43,25 @@ pub(crate) use script;
 
 const GEMM_PEAK: Script = script!("cpu_gemm_peak.py");
 
+/// `tools/reference_timing.py`, which the timed references import: carried beside them, and
+/// registered as the module before a script that imports it runs.
+const TIMING: &str = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/../tools/reference_timing.py"));
+const TIMING_BOOTSTRAP: &str = "import os as _os, sys as _sys, types as _types\n\
+    _m = _types.ModuleType('reference_timing')\n\
+    exec(_os.environ.pop('VKDIFF_REFERENCE_TIMING'), _m.__dict__)\n\
+    _sys.modules['reference_timing'] = _m\n";
+
+/// The program `python -c` runs for `script`: the script, after the timing module's registration
+/// where it imports it.
+fn program(script: Script, command: &mut Command) -> String {
+    if script.text.contains("import reference_timing") {
+        command.env("VKDIFF_REFERENCE_TIMING", TIMING);
+        format!("{TIMING_BOOTSTRAP}{}", script.text)
+    } else {
+        script.text.to_string()
+    }
+}
+
 /// One measured shape, as `tools/cpu_gemm_peak.py` prints it (one JSON object a line).
 #[derive(serde::Deserialize)]
 struct GemmLine {
@@ -109,7 +128,8 @@ fn run_script<S: AsRef<std::ffi::OsStr>>(
     vkdiff_runtime::release_idle_instances();
     let (python, mut command) = reference_python(env);
     let failed = |why: String| format!("{}: {why}", script.path);
-    command.arg("-c").arg(script.text).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
+    let program = program(script, &mut command);
+    command.arg("-c").arg(program).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped());
     let mut child = command.spawn().map_err(|e| failed(format!("{python} not runnable ({e})")))?;
     let mut stdin = child.stdin.take().expect("piped");
     if let Some(input) = input {
@@ -167,12 +187,79 @@ pub struct DiffusersRun {
     pub place: String,
     pub torch: String,
     pub diffusers: String,
+    #[serde(flatten)]
+    pub conditions: Conditions,
 }
 
 impl DiffusersRun {
     pub fn label(&self) -> String {
-        format!("{}, torch {} / diffusers {}", self.place, self.torch, self.diffusers)
+        format!("{}, torch {} / diffusers {}; {}", self.place, self.torch, self.diffusers, self.conditions.label())
     }
+}
+
+/// How a reference ran (`tools/reference_timing.py`): the switches that make it fastest, the
+/// attention backend torch picked (where the script can tell), the host's CPU, load, threads and
+/// BLAS, and on CUDA the GPU's clocks before and after.
+#[derive(Clone, Debug, Deserialize, serde::Serialize)]
+pub struct Conditions {
+    pub settings: Vec<String>,
+    #[serde(default)]
+    pub sdpa: Option<String>,
+    pub host: String,
+    #[serde(deserialize_with = "Option::deserialize")]
+    pub clocks: Option<Vec<String>>,
+}
+
+impl Conditions {
+    pub fn label(&self) -> String {
+        let mut parts = vec![self.settings.join(", ")];
+        parts.extend(self.sdpa.as_ref().map(|b| format!("SDPA {b}")));
+        parts.push(self.host.clone());
+        if let Some(clocks) = &self.clocks {
+            parts.push(format!("clocks {}", clocks.join(" → ")));
+        }
+        parts.retain(|p| !p.is_empty());
+        parts.join("; ")
+    }
+}
+
+/// The same model through torch.compile (CUDA graphs where compiling failed): each sample's
+/// wall-clock and, on CUDA, GPU seconds (None where nothing ran), and what ran or why not.
+#[derive(Clone, Debug, Deserialize, serde::Serialize)]
+pub struct Compiled {
+    #[serde(deserialize_with = "Option::deserialize")]
+    pub wall: Option<Vec<f64>>,
+    #[serde(deserialize_with = "Option::deserialize")]
+    pub gpu: Option<Vec<f64>>,
+    pub how: String,
+}
+
+impl Compiled {
+    /// Wall-clock samples in the figure's unit (`scale` per second), or why none ran.
+    pub fn samples(&self, scale: f64) -> Result<Vec<f64>, String> {
+        match &self.wall {
+            Some(wall) => Ok(wall.iter().map(|s| s * scale).collect()),
+            None => Err(self.how.clone()),
+        }
+    }
+
+    /// One line for a bench's row: what ran, and its wall-clock and GPU medians.
+    pub fn describe(&self, scale: f64, unit: &str) -> String {
+        let median = |v: &Option<Vec<f64>>| v.as_deref().and_then(|v| median(v).map(|m| m * scale));
+        match (median(&self.wall), median(&self.gpu)) {
+            (Some(w), Some(g)) => format!("{}: {w:.1} {unit} (GPU {g:.1} {unit})", self.how),
+            (Some(w), None) => format!("{}: {w:.1} {unit}", self.how),
+            _ => self.how.clone(),
+        }
+    }
+}
+
+/// The median of `values`; None for none.
+pub fn median(values: &[f64]) -> Option<f64> {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    (n > 0).then(|| if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 })
 }
 
 #[cfg(test)]

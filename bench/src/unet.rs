@@ -98,7 +98,10 @@ pub fn run(args: &UnetArgs, env: &Environment) -> Result<()> {
             match reference(env, size / 8, args) {
                 Ok(r) => {
                     row.ratio_to_reference = Some(r.ms / row.ms);
-                    (row.reference_ms, row.reference_peak_mib, row.reference) = (Some(r.ms), Some(r.peak_mib), r.what);
+                    let events = r.gpu_ms.as_deref().and_then(crate::cpu_reference::median);
+                    let events = events.map_or(String::new(), |m| format!("; GPU median {m:.1} ms (CUDA events)"));
+                    let what = format!("{}{events}; compiled {}", r.what, r.compiled.describe(1e3, "ms"));
+                    (row.reference_ms, row.reference_peak_mib, row.reference) = (Some(r.ms), Some(r.peak_mib), what);
                 }
                 Err(why) => row.reference = format!("unavailable: {why}"),
             }
@@ -260,13 +263,15 @@ fn profile(ctx: &Context, unet: &UNet, inputs: &UNetInputs) -> Result<Vec<Kernel
     Ok(by_kernel(pass.run_profiled()?))
 }
 
-/// diffusers: milliseconds of each timed evaluation (the best first), its peak memory, and what
-/// ran it.
+/// diffusers: milliseconds of each timed evaluation by wall-clock (the best first) and on CUDA
+/// by CUDA events, its peak memory, what ran it, and the same model compiled.
 pub(crate) struct Reference {
     pub ms: f64,
     pub times_ms: Vec<f64>,
+    pub gpu_ms: Option<Vec<f64>>,
     pub peak_mib: f64,
     pub what: String,
+    pub compiled: crate::cpu_reference::Compiled,
 }
 
 fn reference(env: &Environment, latent: usize, args: &UnetArgs) -> std::result::Result<Reference, String> {
@@ -292,7 +297,9 @@ pub(crate) fn diffusers_unet(
         script_args.extend(["cuda".to_string(), dtype_name(dtype).to_string()]);
     }
     let out: UnetTimes = crate::cpu_reference::run_python_reference(env, REFERENCE, script_args, None)?;
-    Ok(Reference { ms: out.ms, times_ms: out.times_ms, peak_mib: out.peak_mib, what: out.run.label() })
+    let gpu_ms = out.gpu.map(|g| g.iter().map(|s| s * 1e3).collect());
+    let what = out.run.label();
+    Ok(Reference { ms: out.ms, times_ms: out.times_ms, gpu_ms, peak_mib: out.peak_mib, what, compiled: out.compiled })
 }
 
 /// What `tools/unet_reference.py` prints.
@@ -300,7 +307,11 @@ pub(crate) fn diffusers_unet(
 struct UnetTimes {
     ms: f64,
     times_ms: Vec<f64>,
+    /// Seconds by CUDA events; null on the CPU.
+    #[serde(deserialize_with = "Option::deserialize")]
+    gpu: Option<Vec<f64>>,
     peak_mib: f64,
+    compiled: crate::cpu_reference::Compiled,
     #[serde(flatten)]
     run: crate::cpu_reference::DiffusersRun,
 }

@@ -106,8 +106,11 @@ pub(crate) struct Reference {
     /// Each timed decode, in the precision's own arithmetic.
     pub times: Vec<f64>,
     pub seconds_tf32: Option<f64>,
+    /// Each timed decode by CUDA events (CUDA only).
+    pub gpu: Option<Vec<f64>>,
     pub peak_mib: f64,
     pub what: String,
+    pub compiled: crate::cpu_reference::Compiled,
 }
 
 impl Reference {
@@ -116,12 +119,15 @@ impl Reference {
         let tf32 = self.seconds_tf32.map_or(String::new(), |s| {
             format!(", {s:.2} s with TF32 convolutions (torch's default; speed-up {:.2}×)", s / ours)
         });
+        let events = self.gpu.as_deref().and_then(crate::cpu_reference::median);
+        let events = events.map_or(String::new(), |m| format!(", GPU median {m:.3} s (CUDA events)"));
         format!(
-            "{:.2} s (speed-up {:.2}×){tf32}, peak {:.0} MiB ({})",
+            "{:.2} s (speed-up {:.2}×){tf32}{events}, peak {:.0} MiB ({}); compiled {}",
             self.seconds,
             self.seconds / ours,
             self.peak_mib,
-            self.what
+            self.what,
+            self.compiled.describe(1.0, "s")
         )
     }
 }
@@ -157,8 +163,10 @@ pub(crate) fn diffusers_vae(
         seconds: out.seconds,
         times: out.times,
         seconds_tf32: out.seconds_tf32,
+        gpu: out.gpu,
         peak_mib: out.peak_mib,
         what: out.run.label(),
+        compiled: out.compiled,
     })
 }
 
@@ -167,8 +175,12 @@ pub(crate) fn diffusers_vae(
 struct VaeTimes {
     seconds: f64,
     times: Vec<f64>,
+    /// Seconds by CUDA events; null on the CPU.
+    #[serde(deserialize_with = "Option::deserialize")]
+    gpu: Option<Vec<f64>>,
     seconds_tf32: Option<f64>,
     peak_mib: f64,
+    compiled: crate::cpu_reference::Compiled,
     #[serde(flatten)]
     run: crate::cpu_reference::DiffusersRun,
 }

@@ -67,16 +67,29 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 // #end
             }
         } else {
+            // Every B value of the chunk first, then each row's sums over the whole chunk: a row's
+            // sums stay in registers for 8·SG products while the B values are read back from the
+            // stack (LLVM spills them once), where B loads between the products spilled every sum
+            // at each one (docs/benchmark-log.md, 2026-12-05: 2.3× on Mesa 26.1 in f16).
+            var bv: array<array<vec4<f32>, 8>, SG>;
             // #unroll L SG
+            bv[L] = load_b(boff, k0 + 4u * L, n);
+            // #end
+            // #unroll R TM
             {
-                let bv = load_b(boff, k0 + 4u * L, n);
-                // #unroll R TM
+                var s0 = acc[2u * R];
+                var s1 = acc[2u * R + 1u];
+                // #unroll L SG
                 {
                     let x = subgroupBroadcast(av[R], L);
-                    acc[2u * R] += x.x * bv[0] + x.y * bv[2] + x.z * bv[4] + x.w * bv[6];
-                    acc[2u * R + 1u] += x.x * bv[1] + x.y * bv[3] + x.z * bv[5] + x.w * bv[7];
+                    // #unroll C 4
+                    s0 = fma(vec4<f32>(x[C]), bv[L][2u * C], s0);
+                    s1 = fma(vec4<f32>(x[C]), bv[L][2u * C + 1u], s1);
+                    // #end
                 }
                 // #end
+                acc[2u * R] = s0;
+                acc[2u * R + 1u] = s1;
             }
             // #end
         }

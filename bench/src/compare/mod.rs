@@ -53,10 +53,11 @@ fn read(args: &CompareArgs) -> Result<Vec<Named>> {
     Ok(out)
 }
 
-/// Every figure id in the order the reports list them (the first's, then ones it lacks).
+/// Every figure id in the order the reports list them (the first's, then ones it lacks), but
+/// for the rows that repeat a figure against the compiled reference.
 fn figure_ids(reports: &[Named]) -> Vec<(String, String, String)> {
     let mut ids: Vec<(String, String, String)> = Vec::new();
-    for f in reports.iter().flat_map(|r| &r.report.figures) {
+    for f in reports.iter().flat_map(|r| &r.report.figures).filter(|f| !f.is_compiled_twin()) {
         if !ids.iter().any(|(id, ..)| *id == f.id) {
             ids.push((f.id.clone(), f.group.clone(), f.label.clone()));
         }

@@ -81,7 +81,17 @@ pub struct Figure {
     pub reference: Reference,
 }
 
+/// The id suffix of a figure repeated against the compiled PyTorch model: the same vkdiff runs,
+/// another reference.
+pub const COMPILED: &str = ".compiled";
+
 impl Figure {
+    /// Whether this row repeats another's vkdiff runs against the compiled reference
+    /// (`bench compare` lines up vkdiff's own figures, so it leaves these out).
+    pub fn is_compiled_twin(&self) -> bool {
+        self.id.ends_with(COMPILED)
+    }
+
     /// How much faster vkdiff is than the reference (above 1: faster), where one was measured.
     pub fn speedup(&self) -> Option<f64> {
         match self.reference {
