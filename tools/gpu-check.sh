@@ -7,7 +7,8 @@
 #      a timing below runs (the eight-subgroup tiles, VK_NV_cooperative_matrix2's workgroup-scope
 #      probes) held to f64 on this driver first, since the time of a wrong kernel says nothing;
 #   3. the SDXL UNet at 1024², batch 2, beside diffusers on CUDA in the same call (where torch
-#      sees the GPU), on the tile `auto` takes;
+#      sees the GPU), eager at its best (cudnn.benchmark, channels_last, fused QKV, CUDA events)
+#      and through torch.compile, on the tile `auto` takes;
 #   3b. the same UNet on the kit's baseline build (the last one a GPU timed), where it has one:
 #      every kernel change since, as one ratio from one machine;
 #   4. the UNet with VKDIFF_TUNE=1 (each shape's kernels timed and the fastest taken: the table
@@ -74,12 +75,13 @@ export VKDIFF_REFERENCE_PYTHON=python3
 vkdiff=$work/vkdiff
 step 30 sh -c "'$vkdiff' devices --json >'$out/devices.json'"
 step 90 env VKDIFF_EXPECT_COOPERATIVE=1 "$work/kernels-test" --test-threads 4
-unet() { # the output's name, the environment, then bench unet's further arguments
+unet() { # the output's name, the environment, then bench unet's further arguments ($limit: 90 s)
     local name=$1 env=$2
     shift 2
-    step 90 sh -c "$env '${bin:-$vkdiff}' bench unet --size 1024 --samples 3 --profile $* >'$out/unet-$name.txt'"
+    step "${limit:-90}" sh -c "$env '${bin:-$vkdiff}' bench unet --size 1024 --samples 3 --profile $* >'$out/unet-$name.txt'"
 }
-if [ "$reference" = cuda ]; then unet auto "" --reference-device cuda; else unet auto "" --no-cpu-reference; fi
+# With the references: diffusers eager at its best, then torch.compile (minutes of compiling).
+if [ "$reference" = cuda ]; then limit=240 unet auto "" --reference-device cuda; else unet auto "" --no-cpu-reference; fi
 if [ -x "$work/vkdiff-baseline" ]; then
     bin=$work/vkdiff-baseline unet "baseline-$(cat "$kit/baseline-commit")" "" --no-cpu-reference
 fi
@@ -107,5 +109,6 @@ if ls "$kit"/cyllama_vulkan-*.whl >/dev/null 2>&1; then
 fi
 step 40 sh -c "'$vkdiff' devices --compile --json >'$out/compile.json'"
 step 570 "$vkdiff" bench report --only ablation --runs 1 --reference-device none --out "$out/ablation.json"
+nvidia-smi --query-gpu=clocks.sm,clocks.mem,temperature.gpu,power.draw --format=csv >>"$log" 2>&1
 echo "=== done [$((SECONDS - start)) s]" >>"$log"
 rm -rf "$work"
