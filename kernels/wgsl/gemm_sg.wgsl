@@ -67,29 +67,34 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
                 // #end
             }
         } else {
-            // Every B value of the chunk first, then each row's sums over the whole chunk: a row's
-            // sums stay in registers for 8·SG products while the B values are read back from the
-            // stack (LLVM spills them once), where B loads between the products spilled every sum
-            // at each one (docs/benchmark-log.md, 2026-12-05: 2.3× on Mesa 26.1 in f16).
-            var bv: array<array<vec4<f32>, 8>, SG>;
-            // #unroll L SG
-            bv[L] = load_b(boff, k0 + 4u * L, n);
-            // #end
-            // #unroll R TM
+            // Four source lanes' B values (16 rows of K) first, then each row's sums over them: a
+            // row's sums stay in registers for 32 products while the B values are read back from
+            // the stack (LLVM spills them once), where B loads between the products spilled every
+            // sum at each one (docs/benchmark-log.md, 2026-12-05: 2.3× on Mesa 26.1 in f16). A
+            // whole chunk's B at 16 lanes spilled too much: four lanes at a time at every width.
+            // #unroll G SG/4
             {
-                var s0 = acc[2u * R];
-                var s1 = acc[2u * R + 1u];
-                // #unroll L SG
+                var bv: array<array<vec4<f32>, 8>, 4>;
+                // #unroll L 4
+                bv[L] = load_b(boff, k0 + 4u * (4u * G + L), n);
+                // #end
+                // #unroll R TM
                 {
-                    let x = subgroupBroadcast(av[R], L);
-                    // #unroll C 4
-                    s0 = fma(vec4<f32>(x[C]), bv[L][2u * C], s0);
-                    s1 = fma(vec4<f32>(x[C]), bv[L][2u * C + 1u], s1);
+                    var s0 = acc[2u * R];
+                    var s1 = acc[2u * R + 1u];
+                    // #unroll L 4
+                    {
+                        let x = subgroupBroadcast(av[R], 4u * G + L);
+                        // #unroll C 4
+                        s0 = fma(vec4<f32>(x[C]), bv[L][2u * C], s0);
+                        s1 = fma(vec4<f32>(x[C]), bv[L][2u * C + 1u], s1);
+                        // #end
+                    }
                     // #end
+                    acc[2u * R] = s0;
+                    acc[2u * R + 1u] = s1;
                 }
                 // #end
-                acc[2u * R] = s0;
-                acc[2u * R + 1u] = s1;
             }
             // #end
         }
