@@ -254,12 +254,9 @@ impl Compiled {
     }
 }
 
-/// The median of `values`; None for none.
+/// The median of `values`, the report's (`Runs`); None for none or any not finite.
 pub fn median(values: &[f64]) -> Option<f64> {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    (n > 0).then(|| if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 })
+    crate::report::Runs::of(values).map(|runs| runs.median)
 }
 
 #[cfg(test)]

@@ -121,6 +121,25 @@ pub fn show(value: f64, unit: &str) -> String {
     format!("{value:.digits$} {unit}")
 }
 
+/// A UNet figure in ms of one run, `id` its id and label, for the report's tests.
+#[cfg(test)]
+pub(crate) fn test_figure(id: &str, median: f64, reference: Reference) -> Figure {
+    Figure {
+        id: id.into(),
+        group: "unet".into(),
+        label: id.into(),
+        unit: "ms".into(),
+        higher_is_better: false,
+        runs: Runs::of(&[median]).unwrap(),
+        first_run: None,
+        peak_mib: None,
+        parts: vec![],
+        note: None,
+        peak_share: None,
+        reference,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -139,20 +158,7 @@ mod tests {
 
     #[test]
     fn speedups_read_the_same_way_for_times_and_rates() {
-        let mut f = Figure {
-            id: "x".into(),
-            group: "unet".into(),
-            label: "x".into(),
-            unit: "ms".into(),
-            higher_is_better: false,
-            runs: Runs::of(&[100.0]).unwrap(),
-            first_run: None,
-            peak_mib: None,
-            parts: vec![],
-            note: None,
-            peak_share: None,
-            reference: Reference::Measured { value: 50.0, what: "diffusers".into() },
-        };
+        let mut f = test_figure("x", 100.0, Reference::Measured { value: 50.0, what: "diffusers".into() });
         assert_eq!(f.speedup(), Some(0.5));
         f.higher_is_better = true;
         assert_eq!(f.speedup(), Some(2.0));

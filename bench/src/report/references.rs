@@ -212,20 +212,7 @@ mod tests {
 
     #[test]
     fn a_compiled_reference_that_did_not_run_says_why_in_its_row() {
-        let figure = Figure {
-            id: "unet.f16".into(),
-            group: "unet".into(),
-            label: "UNet".into(),
-            unit: "ms".into(),
-            higher_is_better: false,
-            runs: Runs::of(&[100.0]).unwrap(),
-            first_run: None,
-            peak_mib: None,
-            parts: vec![],
-            note: None,
-            peak_share: None,
-            reference: Reference::Missing { why: String::new() },
-        };
+        let figure = super::super::figure::test_figure("unet.f16", 100.0, Reference::Missing { why: String::new() });
         let failed = Compiled { wall: None, gpu: None, how: "torch.compile failed: no compiler".into() };
         let twin = compiled_twin(&figure, &failed, "eager", 1e3);
         assert_eq!((twin.id.as_str(), twin.is_compiled_twin()), ("unet.f16.compiled", true));
