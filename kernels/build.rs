@@ -39,7 +39,13 @@ fn main() {
     for (spec, dtype, cooperative) in scalar.chain(cooperative) {
         let target = if cooperative || GPU_KERNELS.contains(&spec.name) { Target::Gpu } else { Target::Any };
         let files = read_files(spec);
-        for (i, params) in spec.params.iter().enumerate() {
+        let word_loads: &[u32] = if WORD_LOADS.contains(&spec.name) { &[0, 1] } else { &[] };
+        let all = spec.params.iter().flat_map(|params| match word_loads {
+            [] => vec![params.to_vec()],
+            both => both.iter().map(|&wd| params.iter().copied().chain([("WD", wd)]).collect()).collect(),
+        });
+        for (i, params) in all.enumerate() {
+            let params = &params[..];
             let src = Source::new(&prelude(dtype == Dtype::F16, params, cooperative), &files);
             let what = format!("kernel `{}` ({dtype:?}, {params:?})", spec.name);
             let words = compile(src, params, (cooperative, target), &what).unwrap_or_else(|e| fail(&e));

@@ -54,9 +54,13 @@ impl Source {
 fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
     let mut text = String::from(match (f16, cooperative) {
         (_, true) => "enable f16; enable wgpu_cooperative_matrix; alias S = f16;",
-        (true, false) => "enable f16; alias S = f16; alias Unit = vec4<S>;",
-        (false, false) => "alias S = f32; alias Unit = vec4<S>;",
+        (true, false) => "enable f16; alias S = f16;",
+        (false, false) => "alias S = f32;",
     });
+    if !cooperative {
+        let lanes = params.iter().find(|(name, _)| *name == "SG").map_or(0, |(_, value)| *value);
+        text.push_str(scalar_unit(f16, params.contains(&("WD", 1)).then_some(lanes)));
+    }
     for (name, value) in params {
         text.push_str(&format!(" const {name}: u32 = {value}u;"));
     }
@@ -72,6 +76,31 @@ fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
         }
     }
     text
+}
+
+/// `Unit` and `unit_f32`, a unit widened to f32, for the kernels that are not cooperative. With
+/// `word_loads` (the WD = 1 variants of [`WORD_LOADS`], at that many lanes) the unit is read as
+/// 64-bit words where the subgroup has up to 8 lanes: Mesa 22's lavapipe loads a storage buffer one
+/// component at a time, each a loop of branches over the lanes, so 64-bit components take a quarter of the
+/// loops of f16 ones and half of f32 ones (docs/benchmark-log.md, 2026-12-06). At 16 lanes
+/// LLVM's code for 64-bit vectors (1,024 bits) ran the products at half speed, so f16 units
+/// are read as two 32-bit words there, and f32 ones as they are.
+fn scalar_unit(f16: bool, word_loads: Option<u32>) -> &'static str {
+    match (f16, word_loads) {
+        (true, Some(lanes)) if lanes <= 0 => {
+            " alias Unit = u64; fn unit_f32(u: Unit) -> vec4<f32> \
+             { return vec4<f32>(unpack2x16float(u32(u)), unpack2x16float(u32(u >> 32u))); }"
+        }
+        (true, Some(_)) => {
+            " alias Unit = vec2<u32>; fn unit_f32(u: Unit) -> vec4<f32> \
+             { return vec4<f32>(unpack2x16float(u.x), unpack2x16float(u.y)); }"
+        }
+        (false, Some(lanes)) if lanes <= 0 => {
+            " alias Unit = vec2<u64>; fn unit_f32(u: Unit) -> vec4<f32> \
+             { return bitcast<vec4<f32>>(vec4<u32>(u32(u.x), u32(u.x >> 32u), u32(u.y), u32(u.y >> 32u))); }"
+        }
+        _ => " alias Unit = vec4<S>; fn unit_f32(u: Unit) -> vec4<f32> { return vec4<f32>(u); }",
+    }
 }
 
 /// The products of a cooperative variant's matrices ([`Products`]): those declared 8×8 (the
@@ -212,7 +241,8 @@ fn compile(
         | valid::Capabilities::SHADER_FLOAT16
         | valid::Capabilities::SHADER_FLOAT16_IN_FLOAT32
         | valid::Capabilities::SUBGROUP
-        | valid::Capabilities::SUBGROUP_BARRIER;
+        | valid::Capabilities::SUBGROUP_BARRIER
+        | valid::Capabilities::SHADER_INT64;
     caps.set(valid::Capabilities::COOPERATIVE_MATRIX, cooperative);
     let info = valid::Validator::new(valid::ValidationFlags::all(), caps)
         .subgroup_stages(valid::ShaderStages::COMPUTE)

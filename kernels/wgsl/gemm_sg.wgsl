@@ -6,7 +6,7 @@
 // at 16 rows. The others unroll it (LU = SG), a broadcast from a constant lane: rolled, the
 // networks' tests ran 1.6× slower at 16 lanes.
 // Needs N, K and every stride to be multiples of 4. B is K×N (BT = 0) or N×K (BT = 1).
-@group(0) @binding(1) var<storage, read> b: array<vec4<S>>;
+@group(0) @binding(1) var<storage, read> b: array<Unit>;
 
 const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): a lane's 8 columns are 4 values, 4 gates
 
@@ -19,13 +19,13 @@ fn load_b(boff: u32, k_in: u32, n: u32) -> array<vec4<f32>, 8> {
         let n0 = min(n, p.g.n - 4u);
         let n1 = min(n + 4u, p.g.n - 4u);
         // #unroll I 4
-        r[2u * I] = vec4<f32>(b[(boff + (k + I) * p.g.ldb + n0) / 4u]);
-        r[2u * I + 1u] = vec4<f32>(b[(boff + (k + I) * p.g.ldb + n1) / 4u]);
+        r[2u * I] = unit_f32(b[(boff + (k + I) * p.g.ldb + n0) / 4u]);
+        r[2u * I + 1u] = unit_f32(b[(boff + (k + I) * p.g.ldb + n1) / 4u]);
         // #end
     } else {
         var col: array<vec4<f32>, 8>;
         // #unroll J 8
-        col[J] = vec4<f32>(b[(boff + b_row(min(n + J, p.g.n - 1u)) * p.g.ldb + k) / 4u]);
+        col[J] = unit_f32(b[(boff + b_row(min(n + J, p.g.n - 1u)) * p.g.ldb + k) / 4u]);
         // #end
         // #unroll I 4
         r[2u * I] = vec4<f32>(col[0][I], col[1][I], col[2][I], col[3][I]);

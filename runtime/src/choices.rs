@@ -30,6 +30,9 @@ pub struct Choices {
     /// than 2¹⁷ weights or at most 8 rows, the workgroup attention for fewer than 256 channels:
     /// tiny models, whose products take milliseconds).
     pub quick_compile: bool,
+    /// Whether the subgroup-register kernels read their operands as 64-bit words (their WD = 1
+    /// variants; [`KernelPlan`]'s `word_loads` says where). Tests run both.
+    pub word_loads: bool,
     /// Where recordings split into submissions and how long a wait for one may last.
     pub submit_budget: SubmitBudget,
     /// The most bytes one kernel binding may span; ops split larger tensors into bands below
@@ -55,6 +58,7 @@ impl Choices {
             conv,
             gpu_paths: plan.gpu_paths,
             quick_compile: plan.quick_compile,
+            word_loads: plan.word_loads,
             submit_budget: SubmitBudget::for_device(info, settings),
             binding_limit: info.max_storage_buffer_range,
             allocation_limit: info.max_allocation,
@@ -62,13 +66,16 @@ impl Choices {
         }
     }
 
-    /// These choices with the limits no higher than `info`'s own.
+    /// These choices with the limits no higher than `info`'s own, and word loads only where it
+    /// has the integers they need.
     pub(crate) fn within(mut self, info: &DeviceInfo) -> Choices {
         self.binding_limit = self.binding_limit.min(info.max_storage_buffer_range);
         if info.max_allocation > 0 {
             self.allocation_limit = self.allocation_limit.min(info.max_allocation);
         }
         self.workgroup_limit = [0, 1, 2].map(|i| self.workgroup_limit[i].clamp(1, info.max_workgroup_count[i]));
+        // Up to 8 lanes the words are 64-bit integers.
+        self.word_loads &= info.gemm_subgroup_width() == Some(16) || info.shader_int64;
         self
     }
 }

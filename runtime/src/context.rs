@@ -172,8 +172,12 @@ impl Context {
         if device::is_portability_subset(instance, pd) {
             extensions.push(ash::khr::portability_subset::NAME.as_ptr());
         }
-        let mut create =
-            vk::DeviceCreateInfo::default().queue_create_infos(&queues).push_next(&mut f11).push_next(&mut f12);
+        let core = vk::PhysicalDeviceFeatures::default().shader_int64(info.shader_int64);
+        let mut create = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queues)
+            .enabled_features(&core)
+            .push_next(&mut f11)
+            .push_next(&mut f12);
         // A 1.2 device takes the extensions of the 1.3 features (and no 1.3 struct).
         if info.api_version >= (1, 3, 0) {
             create = create.push_next(&mut f13);

@@ -54,6 +54,8 @@ pub struct DeviceInfo {
     pub lavapipe_mesa: Option<(u32, u32)>,
     pub api_version: (u32, u32, u32),
     pub shader_f16: bool,
+    /// `shaderInt64`: the CPU family's kernels read 64-bit words at up to 8 lanes.
+    pub shader_int64: bool,
     /// 16-bit values in storage buffers: `storageBuffer16BitAccess` and
     /// `uniformAndStorageBuffer16BitAccess` (naga declares the second capability for them).
     pub storage_16bit: bool,
@@ -254,6 +256,7 @@ pub(crate) fn describe(
         instance.get_physical_device_features2(pd, &mut feats2);
         (instance.get_physical_device_memory_properties(pd), instance.get_physical_device_queue_family_properties(pd))
     };
+    let shader_int64 = feats2.features.shader_int64 == vk::TRUE;
     let subgroup_size_control =
         if core13 { f13.subgroup_size_control } else { size_control_features.subgroup_size_control };
     let zero_init_workgroup = if core13 {
@@ -289,6 +292,7 @@ pub(crate) fn describe(
             .flatten(),
         api_version,
         shader_f16: f12.shader_float16 == vk::TRUE,
+        shader_int64,
         storage_16bit: f11.storage_buffer16_bit_access == vk::TRUE
             && f11.uniform_and_storage_buffer16_bit_access == vk::TRUE,
         zero_init_workgroup: zero_init_workgroup == vk::TRUE,
@@ -381,6 +385,7 @@ pub(crate) mod tests {
             lavapipe_mesa: None,
             api_version: (1, 3, 0),
             shader_f16: true,
+            shader_int64: true,
             storage_16bit: true,
             zero_init_workgroup: true,
             zero_init_extension: false,

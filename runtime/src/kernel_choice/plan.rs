@@ -56,6 +56,11 @@ pub struct KernelPlan {
     pub compiled_at_first_use: bool,
     /// Each shape's kernels timed and the fastest taken (`VKDIFF_TUNE`).
     pub tune: bool,
+    /// Whether the subgroup-register kernels read their operands as 64-bit words (WD = 1 in
+    /// kernels/src/spec.rs): on Mesa 22's lavapipe, whose every storage-buffer component is a
+    /// loop of branches over the lanes, so wider components make fewer loops (f16 linear 1.2×
+    /// faster on Mesa 22.3; 0.7× on Mesa 26.1, which loads each lane without a loop).
+    pub word_loads: bool,
     /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen).
     pub wider_vectors: bool,
 }
@@ -105,6 +110,9 @@ impl KernelPlan {
                 && settings.quick_compile.unwrap_or(info.lavapipe_mesa.is_some_and(|(major, _)| major > 22)),
             compiled_at_first_use: info.lavapipe_mesa.is_some(),
             tune: settings.tune,
+            word_loads: subgroup_width.is_some()
+                && info.lavapipe_mesa.is_some_and(|(major, _)| major < 23)
+                && (subgroup_width == Some(16) || info.shader_int64),
             wider_vectors: info.lavapipe_mesa.is_some()
                 && crate::kernel_choice::cpu_vectors::wider_lavapipe_vectors_available(settings),
         }

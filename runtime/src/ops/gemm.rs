@@ -289,7 +289,9 @@ pub(super) fn dispatch_gemm_family(
     let width = ctx.info().gemm_subgroup_width().filter(|_| family == GemmFamily::Subgroup && s.vec4);
     if let Some(sg) = width {
         let tm = subgroup_rows(s, sg, ctx.choices().quick_compile);
-        let want: Vec<(&str, u32)> = [("SG", sg), ("TM", tm)].into_iter().chain(params.iter().copied()).collect();
+        let words = ("WD", u32::from(ctx.choices().word_loads));
+        let want: Vec<(&str, u32)> =
+            [("SG", sg), ("TM", tm), words].into_iter().chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.subgroup, dtype, &want, 4)?;
         let columns = u(s.n.div_ceil(8 * sg as usize));
         return rec.dispatch(&k, reads, &[out], push, [columns, u(s.m.div_ceil(tm as usize)), u(s.batch)]);

@@ -127,23 +127,45 @@ fn params_of(ran: &[(GemmFamily, Vec<&'static Variant>)], family: GemmFamily, ke
         .collect()
 }
 
+/// The subgroup kernels reading their operands as declared and as 64-bit words where the device
+/// takes them (gemm.rs holds the refusal): padding and a residual, both dtypes against f64.
+#[test]
+fn subgroup_kernels_read_as_declared_or_as_words() {
+    let ctx = ctx_with(GemmFamily::Subgroup);
+    let c = padded_residual();
+    for words in [false, true] {
+        ctx.choose(|c| c.word_loads = words);
+        let wd = u32::from(ctx.choices().word_loads);
+        for dtype in DTYPES {
+            let ran = check_on(&ctx, dtype, &c, 31);
+            assert!(
+                ran.iter().all(|v| v.kernel == "conv_sg" && v.param("WD") == Some(wd)),
+                "{:?}",
+                ran.iter().map(|v| (v.kernel, v.params)).collect::<Vec<_>>()
+            );
+        }
+    }
+}
+
+/// A 3×3 convolution with padding 1 onto a residual.
+fn padded_residual() -> Case {
+    Case {
+        b: 2,
+        h: 9,
+        w: 7,
+        cin: 16,
+        cout: 24,
+        k: [3, 3],
+        stride: 1,
+        pad: Padding::same(1),
+        accumulate: true,
+        relu: false,
+    }
+}
+
 #[test]
 fn conv3x3_stride1_pad1() {
-    all(
-        Case {
-            b: 2,
-            h: 9,
-            w: 7,
-            cin: 16,
-            cout: 24,
-            k: [3, 3],
-            stride: 1,
-            pad: Padding::same(1),
-            accumulate: true,
-            relu: false,
-        },
-        21,
-    );
+    all(padded_residual(), 21);
 }
 
 #[test]

@@ -240,6 +240,35 @@ fn batched_strided_alpha_accumulate() {
     assert!(tiled.iter().all(|&k| k == "gemm_tiled") && !tiled.is_empty(), "{tiled:?}");
 }
 
+/// The subgroup kernels reading their operands as declared and as 64-bit words (WD, which Mesa
+/// 22's lavapipe takes), in both dtypes against f64: B stored K×N and N×K, batched and strided,
+/// and GEGLU fused. Up to 8 lanes a device without 64-bit integers must be refused the words.
+#[test]
+fn subgroup_kernels_read_as_declared_or_as_words() {
+    let ctx = ctx_with(GemmFamily::Subgroup);
+    let info = ctx.info().clone();
+    assert!(info.gemm_subgroup_width().is_some(), "{} runs no subgroup-register kernel", info.name);
+    for words in [false, true] {
+        ctx.choose(|c| c.word_loads = words);
+        if words && !info.shader_int64 && info.gemm_subgroup_width() != Some(16) {
+            assert!(!ctx.choices().word_loads, "word loads without shaderInt64 on {}", info.name);
+            continue;
+        }
+        for dtype in DTYPES {
+            for s in [Matmul::dense(70, 96, 40, false), Matmul::dense(37, 64, 52, true), batched_strided()] {
+                let ran = check_on(&ctx, dtype, &s, true, 41);
+                let read = |v: &&Variant| v.kernel == "gemm_sg" && v.param("WD") == Some(u32::from(words));
+                assert!(
+                    ran.iter().any(|v| v.kernel == "gemm_sg") && ran.iter().all(|v| read(&v)),
+                    "{:?}",
+                    ran.iter().map(|v| (v.kernel, v.params)).collect::<Vec<_>>()
+                );
+            }
+            check_linear_geglu(&ctx, dtype, (37, 64, 64 * GEGLU_COLUMNS), true, 44);
+        }
+    }
+}
+
 #[test]
 fn linear_layer_shapes() {
     for dtype in DTYPES {
