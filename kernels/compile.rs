@@ -87,7 +87,7 @@ fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
 /// are read as two 32-bit words there, and f32 ones as they are.
 fn scalar_unit(f16: bool, word_loads: Option<u32>) -> &'static str {
     match (f16, word_loads) {
-        (true, Some(lanes)) if lanes <= 0 => {
+        (true, Some(lanes)) if lanes <= 8 => {
             " alias Unit = u64; fn unit_f32(u: Unit) -> vec4<f32> \
              { return vec4<f32>(unpack2x16float(u32(u)), unpack2x16float(u32(u >> 32u))); }"
         }
@@ -95,7 +95,7 @@ fn scalar_unit(f16: bool, word_loads: Option<u32>) -> &'static str {
             " alias Unit = vec2<u32>; fn unit_f32(u: Unit) -> vec4<f32> \
              { return vec4<f32>(unpack2x16float(u.x), unpack2x16float(u.y)); }"
         }
-        (false, Some(lanes)) if lanes <= 0 => {
+        (false, Some(lanes)) if lanes <= 8 => {
             " alias Unit = vec2<u64>; fn unit_f32(u: Unit) -> vec4<f32> \
              { return bitcast<vec4<f32>>(vec4<u32>(u32(u.x), u32(u.x >> 32u), u32(u.y), u32(u.y >> 32u))); }"
         }
