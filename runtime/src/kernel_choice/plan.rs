@@ -122,7 +122,8 @@ impl KernelPlan {
     fn products(&self) -> String {
         match (self.gemm, self.fragment) {
             (GemmFamily::Subgroup, _) => {
-                format!("subgroup-register, {} lanes (CPU)", self.subgroup_width.unwrap_or_default())
+                let words = if self.word_loads { ", operands read as words" } else { "" };
+                format!("subgroup-register, {} lanes (CPU){words}", self.subgroup_width.unwrap_or_default())
             }
             (GemmFamily::Cooperative, Some(f)) => {
                 let trial = match self.trial {
@@ -246,5 +247,27 @@ mod tests {
         let gpu = KernelPlan::for_device(&d, &Settings { gpu_paths: true, ..Settings::default() });
         assert_eq!((gpu.gemm, gpu.subgroup_attention, gpu.quick_compile), (GemmFamily::Tiled, false, false));
         assert!(gpu.to_string().contains("VKDIFF_GPU_PATHS=1"), "{gpu}");
+    }
+
+    #[test]
+    fn only_mesa_22s_lavapipe_reads_words_and_only_with_the_integers_they_need() {
+        let mut d = device(0, DeviceKind::Cpu, true);
+        d.subgroup_size = 8;
+        let words = |d: &DeviceInfo| KernelPlan::for_device(d, &Settings::default()).word_loads;
+        d.lavapipe_mesa = Some((22, 3));
+        assert!(words(&d));
+        let plan = KernelPlan::for_device(&d, &Settings::default()).to_string();
+        assert!(plan.contains("8 lanes (CPU), operands read as words"), "{plan}");
+        d.lavapipe_mesa = Some((26, 1));
+        assert!(!words(&d), "Mesa 26.1 loads 16-bit values faster than words");
+        d.lavapipe_mesa = None;
+        assert!(!words(&d), "another CPU driver keeps the declared units");
+        d.lavapipe_mesa = Some((22, 3));
+        d.shader_int64 = false;
+        assert!(!words(&d), "8 lanes' words are 64-bit integers");
+        d.subgroup_size = 16;
+        assert!(words(&d), "16 lanes read 32-bit words");
+        let gpu_paths = Settings { gpu_paths: true, ..Settings::default() };
+        assert!(!KernelPlan::for_device(&d, &gpu_paths).word_loads);
     }
 }

@@ -259,7 +259,7 @@ fn subgroup_kernels_read_as_declared_or_as_words() {
                 let ran = check_on(&ctx, dtype, &s, true, 41);
                 let read = |v: &&Variant| v.kernel == "gemm_sg" && v.param("WD") == Some(u32::from(words));
                 assert!(
-                    ran.iter().any(|v| v.kernel == "gemm_sg") && ran.iter().all(|v| read(&v)),
+                    !ran.is_empty() && ran.iter().all(read),
                     "{:?}",
                     ran.iter().map(|v| (v.kernel, v.params)).collect::<Vec<_>>()
                 );
