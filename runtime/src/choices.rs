@@ -74,8 +74,7 @@ impl Choices {
             self.allocation_limit = self.allocation_limit.min(info.max_allocation);
         }
         self.workgroup_limit = [0, 1, 2].map(|i| self.workgroup_limit[i].clamp(1, info.max_workgroup_count[i]));
-        // Up to 8 lanes the words are 64-bit integers.
-        self.word_loads &= info.gemm_subgroup_width() == Some(16) || info.shader_int64;
+        self.word_loads &= info.can_read_words();
         self
     }
 }

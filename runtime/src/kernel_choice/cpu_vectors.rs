@@ -1,6 +1,6 @@
 //! lavapipe's vector width on CPUs with AVX-512. Mesa picks 256 bits (8-lane subgroups) unless
 //! `LP_NATIVE_VECTOR_WIDTH` says otherwise, and vkdiff leaves it so: 512 bits (16 lanes) ran the
-//! SDXL UNet 4.9× slower on an Intel Xeon and 1.04× faster on an AMD EPYC (1.24× since the CPU
+//! SDXL UNet 4.9× slower on an Intel Xeon and 1.04× faster on an AMD EPYC (1.14× since the CPU
 //! kernels read 64-bit words, 2026-12-05), and made the README's demo 1.4× (Mesa 22.3) to 3×
 //! (Mesa 25) slower from a cold shader cache on that EPYC, as the 16-lane kernels take 2–3×
 //! longer to compile (BENCHMARKS.md).

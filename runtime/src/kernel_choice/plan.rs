@@ -112,7 +112,7 @@ impl KernelPlan {
             tune: settings.tune,
             word_loads: subgroup_width.is_some()
                 && info.lavapipe_mesa.is_some_and(|(major, _)| major < 23)
-                && (subgroup_width == Some(16) || info.shader_int64),
+                && info.can_read_words(),
             wider_vectors: info.lavapipe_mesa.is_some()
                 && crate::kernel_choice::cpu_vectors::wider_lavapipe_vectors_available(settings),
         }

@@ -372,6 +372,12 @@ impl DeviceInfo {
         let native = self.subgroup_size;
         ([4, 8, 16].contains(&native) && self.can_use_subgroup(native)).then_some(native)
     }
+
+    /// Whether the device has the integers the subgroup kernels' words are read as at its width:
+    /// 64-bit ones (`shaderInt64`) up to 8 lanes, 32-bit ones at 16 (kernels/compile.rs).
+    pub fn can_read_words(&self) -> bool {
+        self.gemm_subgroup_width() == Some(16) || self.shader_int64
+    }
 }
 
 /// A PyTorch `Linear` followed by GEGLU (diffusers' `GEGLU`: value first, gate second):

@@ -250,7 +250,7 @@ fn subgroup_kernels_read_as_declared_or_as_words() {
     assert!(info.gemm_subgroup_width().is_some(), "{} runs no subgroup-register kernel", info.name);
     for words in [false, true] {
         ctx.choose(|c| c.word_loads = words);
-        if words && !info.shader_int64 && info.gemm_subgroup_width() != Some(16) {
+        if words && !info.can_read_words() {
             assert!(!ctx.choices().word_loads, "word loads without shaderInt64 on {}", info.name);
             continue;
         }
