@@ -39,10 +39,14 @@ fn main() {
     for (spec, dtype, cooperative) in scalar.chain(cooperative) {
         let target = if cooperative || GPU_KERNELS.contains(&spec.name) { Target::Gpu } else { Target::Any };
         let files = read_files(spec);
-        let word_loads: &[u32] = if WORD_LOADS.contains(&spec.name) { &[0, 1] } else { &[] };
-        let all = spec.params.iter().flat_map(|params| match word_loads {
-            [] => vec![params.to_vec()],
-            both => both.iter().map(|&wd| params.iter().copied().chain([("WD", wd)]).collect()).collect(),
+        let word_loads = WORD_LOADS.contains(&spec.name);
+        let all = spec.params.iter().flat_map(|params| {
+            let reading = |wd: u32| params.iter().copied().chain([("WD", wd)]).collect::<Vec<_>>();
+            if word_loads {
+                vec![reading(0), reading(1)]
+            } else {
+                vec![params.to_vec()]
+            }
         });
         for (i, params) in all.enumerate() {
             let params = &params[..];

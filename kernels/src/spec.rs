@@ -219,13 +219,13 @@ pub const KERNELS: &[KernelSpec] = &[
     KernelSpec { name: "timestep_embedding", files: &["timestep.wgsl"], params: NONE },
 ];
 
-/// The kernels above written for GPUs only (lavapipe runs them where tests ask for the GPU paths,
-/// and the tiled GEMM for shapes off the vec4 grid). They and [`COOPERATIVE_KERNELS`] are
-/// compiled without naga's loop counters and index clamps (`Target` in compile.rs).
 /// The kernels built twice, reading their operands as declared (WD = 0) and as 64-bit words
 /// (WD = 1, `scalar_unit` in compile.rs), which Mesa 22's lavapipe loads faster; the words need
 /// `shaderInt64` up to 8 lanes.
 pub const WORD_LOADS: &[&str] = &["gemm_sg", "conv_sg"];
 
+/// The kernels above written for GPUs only (lavapipe runs them where tests ask for the GPU paths,
+/// and the tiled GEMM for shapes off the vec4 grid). They and [`COOPERATIVE_KERNELS`] are
+/// compiled without naga's loop counters and index clamps (`Target` in compile.rs).
 pub const GPU_KERNELS: &[&str] =
     &["gemm_tiled", "gemm_tiled_v4", "conv_tiled_v4", "attention_tiled", "attention_rows", "attention_wg"];
