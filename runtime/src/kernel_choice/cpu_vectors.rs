@@ -1,9 +1,11 @@
-//! lavapipe's vector width on CPUs with AVX-512. Mesa picks 256 bits (8-lane subgroups) unless
-//! `LP_NATIVE_VECTOR_WIDTH` says otherwise, and vkdiff leaves it so: 512 bits (16 lanes) ran the
-//! SDXL UNet 4.9× slower on an Intel Xeon and 1.04× faster on an AMD EPYC (1.14× since the CPU
-//! kernels read 64-bit words, 2026-12-05), and made the README's demo 1.4× (Mesa 22.3) to 3×
-//! (Mesa 25) slower from a cold shader cache on that EPYC, as the 16-lane kernels take 2–3×
-//! longer to compile (BENCHMARKS.md).
+//! lavapipe's vector width: the CPU family's subgroup width, and on CPUs with AVX-512 the choice
+//! of 512 bits. Mesa picks 256 bits (8-lane subgroups) unless `LP_NATIVE_VECTOR_WIDTH` says
+//! otherwise, and vkdiff leaves it so: 512 bits (16 lanes) ran the SDXL UNet 4.9× slower on an
+//! Intel Xeon and 1.04× faster on an AMD EPYC (1.14× since the CPU kernels read 64-bit words,
+//! 2026-12-05), and made the README's demo 1.4× (Mesa 22.3) to 3× (Mesa 25) slower from a cold
+//! shader cache on that EPYC, as the 16-lane kernels take 2–3× longer to compile (BENCHMARKS.md).
+
+use crate::device::DeviceInfo;
 
 /// Whether to point the user at the wider vectors: the CPU has AVX-512 and `settings` say no
 /// width is chosen.
@@ -19,5 +21,21 @@ fn avx512() -> bool {
     #[cfg(not(target_arch = "x86_64"))]
     {
         false
+    }
+}
+
+// The subgroup-register (CPU) family's width, and the integers its word loads need.
+impl DeviceInfo {
+    /// The width of the subgroup GEMM/convolution variants this device runs: its native
+    /// subgroup width where variants exist for it (4, 8 or 16 lanes) and kernels can be pinned to it.
+    pub fn gemm_subgroup_width(&self) -> Option<u32> {
+        let native = self.subgroup_size;
+        ([4, 8, 16].contains(&native) && self.can_use_subgroup(native)).then_some(native)
+    }
+
+    /// Whether the device has the integers the subgroup kernels' words are read as at its width:
+    /// 64-bit ones (`shaderInt64`) up to 8 lanes, 32-bit ones at 16 (kernels/compile.rs).
+    pub fn can_read_words(&self) -> bool {
+        self.gemm_subgroup_width() == Some(16) || self.shader_int64
     }
 }

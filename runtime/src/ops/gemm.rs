@@ -365,21 +365,6 @@ fn small(m: usize, n: usize, k: usize) -> bool {
 /// take the quickly compiled kernels.
 const SMALL_WEIGHTS: usize = 1 << 17;
 
-impl DeviceInfo {
-    /// The width of the subgroup GEMM/convolution variants this device runs: its native
-    /// subgroup width where variants exist for it (4, 8 or 16 lanes) and kernels can be pinned to it.
-    pub fn gemm_subgroup_width(&self) -> Option<u32> {
-        let native = self.subgroup_size;
-        ([4, 8, 16].contains(&native) && self.can_use_subgroup(native)).then_some(native)
-    }
-
-    /// Whether the device has the integers the subgroup kernels' words are read as at its width:
-    /// 64-bit ones (`shaderInt64`) up to 8 lanes, 32-bit ones at 16 (kernels/compile.rs).
-    pub fn can_read_words(&self) -> bool {
-        self.gemm_subgroup_width() == Some(16) || self.shader_int64
-    }
-}
-
 /// A PyTorch `Linear` followed by GEGLU (diffusers' `GEGLU`: value first, gate second):
 /// out[.., N/2] = value · GELU_erf(gate) of x[.., K] · wᵀ (+ bias), w stored [N, K]. Fused into
 /// the product's epilogue, so the N-wide projection is never stored, where that measured faster:
