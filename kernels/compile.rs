@@ -83,7 +83,7 @@ fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
 /// 64-bit words up to 8 lanes: Mesa 22's lavapipe loads a storage buffer one component at a
 /// time, each a loop of branches over the lanes, so 64-bit components take a quarter of the
 /// loops of f16 ones and half of f32 ones (docs/benchmark-log.md, "64-bit words"). At 16 lanes
-/// LLVM's code for 64-bit vectors (1,024 bits) ran the products at half speed, so f16 units are
+/// LLVM's code for 64-bit vectors (1,024 bits) ran the products at 0.4× speed, so f16 units are
 /// read as two 32-bit words there, and f32 ones as they are.
 fn scalar_unit(f16: bool, word_loads: Option<u32>) -> &'static str {
     match (f16, word_loads) {

@@ -58,7 +58,7 @@ pub struct KernelPlan {
     pub tune: bool,
     /// Whether the subgroup-register kernels read their operands as 64-bit words (WD = 1 in
     /// kernels/src/spec.rs): on Mesa 22's lavapipe, whose every storage-buffer component is a
-    /// loop of branches over the lanes, so wider components make fewer loops (f16 linear 1.2×
+    /// loop of branches over the lanes, so wider components make fewer loops (f16 linear 1.3×
     /// faster on Mesa 22.3; 0.7× on Mesa 26.1, which loads each lane without a loop).
     pub word_loads: bool,
     /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen).
