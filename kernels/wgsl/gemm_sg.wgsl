@@ -1,10 +1,9 @@
 // GEMM core for CPU-like devices (lavapipe), after a kernel study on lavapipe: a workgroup is one subgroup of
-// SG lanes; each lane owns 8 consecutive output columns for TM rows, reads A once as vec4 along K
-// and hands it to the other lanes by subgroup shuffles, so no shared memory and few loads per FMA.
-// The loop over the lanes whose A is shared stays rolled in the 8-row variants (LU = 1, for
-// quick compiles): a shuffle from a varying lane, which took Mesa 25's JIT 14 s instead of 34 s
-// at 16 rows. The others unroll it (LU = SG), a broadcast from a constant lane: rolled, the
-// networks' tests ran 1.6× slower at 16 lanes.
+// SG lanes; each lane owns 8 consecutive output columns for TM rows and reads AU = TM / SG of
+// those rows' A (at least one) as vec4 along K, which subgroup broadcasts from constant lanes
+// hand to the others, so no shared memory and few loads per product. Lavapipe splits every fma
+// into a multiply and an add, so a step adds its four products to a row's sums at once, not by
+// four fmas (1.1× in f32).
 // Needs N, K and every stride to be multiples of 4. B is K×N (BT = 0) or N×K (BT = 1).
 @group(0) @binding(1) var<storage, read> b: array<Unit>;
 
@@ -41,63 +40,44 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     let row0 = wg.y * TM;
     let batch = wg.z;
     let boff = batch * p.g.b_batch;
-    var rows: array<RowCtx, TM>;
-    // #unroll R TM
-    rows[R] = row_ctx(batch, row0 + R);
+    // Lane l reads rows l, l + SG, …: row r's A is lane r % SG's slot r / SG.
+    var rows: array<RowCtx, AU>;
+    // #unroll J AU
+    rows[J] = row_ctx(batch, row0 + J * SG + lane);
     // #end
     var acc: array<vec4<f32>, 2u * TM>;
-    for (var k0 = 0u; k0 < p.g.k; k0 += 4u * SG) {
-        // The last chunk may run past K: those lanes hold zeros, so no step needs a branch
-        // (llvmpipe masks every branch, which costs more than the wasted FMAs).
-        let ka = k0 + 4u * lane;
-        let kc = k_ctx(ka);
-        var av: array<vec4<f32>, TM>;
-        // #unroll R TM
-        av[R] = select(vec4<f32>(0.0), load_a(rows[R], kc), ka < p.g.k);
+    // KS steps of 4 along K a turn: every B and A value of the turn first, then each row's sums
+    // over them, kept in registers while the values are read back from the stack (LLVM spills
+    // them once). Four steps ran fastest: one stored the sums 4× as often, eight spilled more
+    // (docs/benchmark-log.md); the 8-row variants take one, for short compiles. Steps past K read
+    // clamped B against zero A.
+    for (var k = 0u; k < p.g.k; k += 4u * KS) {
+        var av: array<array<vec4<f32>, AU>, KS>;
+        var bv: array<array<vec4<f32>, 8>, KS>;
+        // #unroll S KS
+        {
+            let kc = k_ctx(min(k + 4u * S, p.g.k - 4u));
+            // #unroll J AU
+            av[S][J] = select(vec4<f32>(0.0), load_a(rows[J], kc), k + 4u * S < p.g.k);
+            // #end
+            bv[S] = load_b(boff, k + 4u * S, n);
+        }
         // #end
-        if LU == 1u {
-            for (var source = 0u; source < SG; source++) {
-                let bv = load_b(boff, k0 + 4u * source, n);
-                // #unroll R TM
-                {
-                    let x = subgroupShuffle(av[R], source);
-                    acc[2u * R] += x.x * bv[0] + x.y * bv[2] + x.z * bv[4] + x.w * bv[6];
-                    acc[2u * R + 1u] += x.x * bv[1] + x.y * bv[3] + x.z * bv[5] + x.w * bv[7];
-                }
-                // #end
-            }
-        } else {
-            // Four source lanes' B values (16 rows of K) first, then each row's sums over them: a
-            // row's sums stay in registers for 32 products while the B values are read back from
-            // the stack (LLVM spills them once), where B loads between the products spilled every
-            // sum at each one (docs/benchmark-log.md, 2026-12-05: 2.3× on Mesa 26.1 in f16). A
-            // whole chunk's B at 16 lanes spilled too much: four lanes at a time at every width.
-            // #unroll G SG/4
+        // #unroll R TM
+        {
+            var s0 = acc[2u * R];
+            var s1 = acc[2u * R + 1u];
+            // #unroll S KS
             {
-                var bv: array<array<vec4<f32>, 8>, 4>;
-                // #unroll L 4
-                bv[L] = load_b(boff, k0 + 4u * (4u * G + L), n);
-                // #end
-                // #unroll R TM
-                {
-                    var s0 = acc[2u * R];
-                    var s1 = acc[2u * R + 1u];
-                    // #unroll L 4
-                    {
-                        let x = subgroupBroadcast(av[R], 4u * G + L);
-                        // #unroll C 4
-                        s0 = fma(vec4<f32>(x[C]), bv[L][2u * C], s0);
-                        s1 = fma(vec4<f32>(x[C]), bv[L][2u * C + 1u], s1);
-                        // #end
-                    }
-                    // #end
-                    acc[2u * R] = s0;
-                    acc[2u * R + 1u] = s1;
-                }
-                // #end
+                let x = subgroupBroadcast(av[S][R / SG], R % SG);
+                s0 += (x.x * bv[S][0] + x.y * bv[S][2]) + (x.z * bv[S][4] + x.w * bv[S][6]);
+                s1 += (x.x * bv[S][1] + x.y * bv[S][3]) + (x.z * bv[S][5] + x.w * bv[S][7]);
             }
             // #end
+            acc[2u * R] = s0;
+            acc[2u * R + 1u] = s1;
         }
+        // #end
     }
     if GE == 1u {
         // #unroll R TM
