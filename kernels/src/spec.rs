@@ -23,6 +23,16 @@ const NONE: &[&[(&str, u32)]] = &[&[]];
 const UNARY: &[&[(&str, u32)]] = &[&[("OP", 0)], &[("OP", 1)], &[("OP", 2)], &[("OP", 3)], &[("OP", 4)]];
 const BINARY: &[&[(&str, u32)]] = &[&[("OP", 0)], &[("OP", 1)]];
 
+/// A subgroup GEMM variant (kernels/wgsl/gemm_sg.wgsl) of SG lanes and TM rows, B K×N or N×K
+/// (BT), GEGLU fused or not (GE), with what follows from them: AU, the rows of A each lane
+/// reads (TM / SG, at least 1), and KS, the steps of 4 along K a turn (one in the 8-row variants,
+/// which compile quickly, else four).
+const fn subgroup_tile(sg: u32, tm: u32, bt: u32, ge: u32) -> [(&'static str, u32); 6] {
+    let au = if tm > sg { tm / sg } else { 1 };
+    let ks = if tm == 8 { 1 } else { 4 };
+    [("SG", sg), ("TM", tm), ("BT", bt), ("AU", au), ("KS", ks), ("GE", ge)]
+}
+
 /// A GroupNorm kernel: the workgroup reductions, then `files`.
 macro_rules! group_norm_spec {
     ($name:literal, $($file:literal),+) => {
@@ -32,65 +42,64 @@ macro_rules! group_norm_spec {
 
 pub const KERNELS: &[KernelSpec] = &[
     // Register-blocked GEMM for CPU-like devices: workgroup = one subgroup, A shared by broadcasts
-    // (AU: rows of A each lane reads, TM / SG and at least 1; KS: steps of 4 along K a turn, one
-    // in the 8-row variants, which compile quickly);
-    // one variant set per lavapipe width (LP_NATIVE_VECTOR_WIDTH 128, 256, 512 → 4, 8, 16 lanes).
+    // ([`subgroup_tile`]); one variant set per lavapipe width (LP_NATIVE_VECTOR_WIDTH 128, 256,
+    // 512 → 4, 8, 16 lanes).
     // Every GEMM-family kernel has GE (gemm_common.wgsl): 1 fuses GEGLU into a linear layer's
     // epilogue (matrix products with B stored N×K only), 0 is the plain product.
     KernelSpec {
         name: "gemm_sg",
         files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "gemm_sg.wgsl"],
         params: &[
-            &[("SG", 4), ("TM", 8), ("BT", 0), ("AU", 2), ("KS", 1), ("GE", 0)],
-            &[("SG", 4), ("TM", 8), ("BT", 1), ("AU", 2), ("KS", 1), ("GE", 0)],
-            &[("SG", 4), ("TM", 8), ("BT", 1), ("AU", 2), ("KS", 1), ("GE", 1)],
-            &[("SG", 4), ("TM", 16), ("BT", 0), ("AU", 4), ("KS", 4), ("GE", 0)],
-            &[("SG", 4), ("TM", 16), ("BT", 1), ("AU", 4), ("KS", 4), ("GE", 0)],
-            &[("SG", 4), ("TM", 16), ("BT", 1), ("AU", 4), ("KS", 4), ("GE", 1)],
-            &[("SG", 4), ("TM", 32), ("BT", 0), ("AU", 8), ("KS", 4), ("GE", 0)],
-            &[("SG", 4), ("TM", 32), ("BT", 1), ("AU", 8), ("KS", 4), ("GE", 0)],
-            &[("SG", 4), ("TM", 32), ("BT", 1), ("AU", 8), ("KS", 4), ("GE", 1)],
-            &[("SG", 4), ("TM", 64), ("BT", 0), ("AU", 16), ("KS", 4), ("GE", 0)],
-            &[("SG", 4), ("TM", 64), ("BT", 1), ("AU", 16), ("KS", 4), ("GE", 0)],
-            &[("SG", 4), ("TM", 64), ("BT", 1), ("AU", 16), ("KS", 4), ("GE", 1)],
-            &[("SG", 8), ("TM", 8), ("BT", 0), ("AU", 1), ("KS", 1), ("GE", 0)],
-            &[("SG", 8), ("TM", 8), ("BT", 1), ("AU", 1), ("KS", 1), ("GE", 0)],
-            &[("SG", 8), ("TM", 8), ("BT", 1), ("AU", 1), ("KS", 1), ("GE", 1)],
-            &[("SG", 8), ("TM", 16), ("BT", 0), ("AU", 2), ("KS", 4), ("GE", 0)],
-            &[("SG", 8), ("TM", 16), ("BT", 1), ("AU", 2), ("KS", 4), ("GE", 0)],
-            &[("SG", 8), ("TM", 16), ("BT", 1), ("AU", 2), ("KS", 4), ("GE", 1)],
-            &[("SG", 8), ("TM", 32), ("BT", 0), ("AU", 4), ("KS", 4), ("GE", 0)],
-            &[("SG", 8), ("TM", 32), ("BT", 1), ("AU", 4), ("KS", 4), ("GE", 0)],
-            &[("SG", 8), ("TM", 32), ("BT", 1), ("AU", 4), ("KS", 4), ("GE", 1)],
-            &[("SG", 8), ("TM", 64), ("BT", 0), ("AU", 8), ("KS", 4), ("GE", 0)],
-            &[("SG", 8), ("TM", 64), ("BT", 1), ("AU", 8), ("KS", 4), ("GE", 0)],
-            &[("SG", 8), ("TM", 64), ("BT", 1), ("AU", 8), ("KS", 4), ("GE", 1)],
-            &[("SG", 16), ("TM", 8), ("BT", 0), ("AU", 1), ("KS", 1), ("GE", 0)],
-            &[("SG", 16), ("TM", 8), ("BT", 1), ("AU", 1), ("KS", 1), ("GE", 0)],
-            &[("SG", 16), ("TM", 8), ("BT", 1), ("AU", 1), ("KS", 1), ("GE", 1)],
-            &[("SG", 16), ("TM", 16), ("BT", 0), ("AU", 1), ("KS", 4), ("GE", 0)],
-            &[("SG", 16), ("TM", 16), ("BT", 1), ("AU", 1), ("KS", 4), ("GE", 0)],
-            &[("SG", 16), ("TM", 16), ("BT", 1), ("AU", 1), ("KS", 4), ("GE", 1)],
-            &[("SG", 16), ("TM", 32), ("BT", 0), ("AU", 2), ("KS", 4), ("GE", 0)],
-            &[("SG", 16), ("TM", 32), ("BT", 1), ("AU", 2), ("KS", 4), ("GE", 0)],
-            &[("SG", 16), ("TM", 32), ("BT", 1), ("AU", 2), ("KS", 4), ("GE", 1)],
+            &subgroup_tile(4, 8, 0, 0),
+            &subgroup_tile(4, 8, 1, 0),
+            &subgroup_tile(4, 8, 1, 1),
+            &subgroup_tile(4, 16, 0, 0),
+            &subgroup_tile(4, 16, 1, 0),
+            &subgroup_tile(4, 16, 1, 1),
+            &subgroup_tile(4, 32, 0, 0),
+            &subgroup_tile(4, 32, 1, 0),
+            &subgroup_tile(4, 32, 1, 1),
+            &subgroup_tile(4, 64, 0, 0),
+            &subgroup_tile(4, 64, 1, 0),
+            &subgroup_tile(4, 64, 1, 1),
+            &subgroup_tile(8, 8, 0, 0),
+            &subgroup_tile(8, 8, 1, 0),
+            &subgroup_tile(8, 8, 1, 1),
+            &subgroup_tile(8, 16, 0, 0),
+            &subgroup_tile(8, 16, 1, 0),
+            &subgroup_tile(8, 16, 1, 1),
+            &subgroup_tile(8, 32, 0, 0),
+            &subgroup_tile(8, 32, 1, 0),
+            &subgroup_tile(8, 32, 1, 1),
+            &subgroup_tile(8, 64, 0, 0),
+            &subgroup_tile(8, 64, 1, 0),
+            &subgroup_tile(8, 64, 1, 1),
+            &subgroup_tile(16, 8, 0, 0),
+            &subgroup_tile(16, 8, 1, 0),
+            &subgroup_tile(16, 8, 1, 1),
+            &subgroup_tile(16, 16, 0, 0),
+            &subgroup_tile(16, 16, 1, 0),
+            &subgroup_tile(16, 16, 1, 1),
+            &subgroup_tile(16, 32, 0, 0),
+            &subgroup_tile(16, 32, 1, 0),
+            &subgroup_tile(16, 32, 1, 1),
         ],
     },
     KernelSpec {
         name: "conv_sg",
         files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "gemm_sg.wgsl"],
         params: &[
-            &[("SG", 4), ("TM", 8), ("BT", 1), ("AU", 2), ("KS", 1), ("GE", 0)],
-            &[("SG", 4), ("TM", 16), ("BT", 1), ("AU", 4), ("KS", 4), ("GE", 0)],
-            &[("SG", 4), ("TM", 32), ("BT", 1), ("AU", 8), ("KS", 4), ("GE", 0)],
-            &[("SG", 4), ("TM", 64), ("BT", 1), ("AU", 16), ("KS", 4), ("GE", 0)],
-            &[("SG", 8), ("TM", 8), ("BT", 1), ("AU", 1), ("KS", 1), ("GE", 0)],
-            &[("SG", 8), ("TM", 16), ("BT", 1), ("AU", 2), ("KS", 4), ("GE", 0)],
-            &[("SG", 8), ("TM", 32), ("BT", 1), ("AU", 4), ("KS", 4), ("GE", 0)],
-            &[("SG", 8), ("TM", 64), ("BT", 1), ("AU", 8), ("KS", 4), ("GE", 0)],
-            &[("SG", 16), ("TM", 8), ("BT", 1), ("AU", 1), ("KS", 1), ("GE", 0)],
-            &[("SG", 16), ("TM", 16), ("BT", 1), ("AU", 1), ("KS", 4), ("GE", 0)],
-            &[("SG", 16), ("TM", 32), ("BT", 1), ("AU", 2), ("KS", 4), ("GE", 0)],
+            &subgroup_tile(4, 8, 1, 0),
+            &subgroup_tile(4, 16, 1, 0),
+            &subgroup_tile(4, 32, 1, 0),
+            &subgroup_tile(4, 64, 1, 0),
+            &subgroup_tile(8, 8, 1, 0),
+            &subgroup_tile(8, 16, 1, 0),
+            &subgroup_tile(8, 32, 1, 0),
+            &subgroup_tile(8, 64, 1, 0),
+            &subgroup_tile(16, 8, 1, 0),
+            &subgroup_tile(16, 16, 1, 0),
+            &subgroup_tile(16, 32, 1, 0),
         ],
     },
     // Shared-memory tiled GEMM: any shape; GPUs without matrix units, and f32 products on any GPU.
