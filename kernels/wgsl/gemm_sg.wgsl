@@ -48,7 +48,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     var acc: array<vec4<f32>, 2u * TM>;
     // KS steps of 4 along K a turn: every B and A value of the turn first, then each row's sums
     // over them, kept in registers while the values are read back from the stack (LLVM spills
-    // them once). Four steps ran fastest: one stored the sums 4× as often, eight spilled more
+    // them once). Four steps ran fastest: one stores the sums 4× as often; eight ran slower too
     // (docs/benchmark-log.md); the 8-row variants take one, for short compiles. Steps past K read
     // clamped B against zero A.
     for (var k = 0u; k < p.g.k; k += 4u * KS) {
