@@ -78,7 +78,8 @@ fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
     text
 }
 
-/// `Unit` and `unit_f32`, a unit widened to f32, for the kernels that are not cooperative.
+/// `Unit`, `unit_f32` (a unit widened to f32) and `f32_unit` (four f32 values narrowed to a
+/// unit, for stores), for the kernels that are not cooperative.
 /// `word_loads` (the WD = 1 variants of [`WORD_LOADS`], at that many lanes) reads the unit as
 /// 64-bit words up to 8 lanes: Mesa 22's lavapipe loads a storage buffer one component at a
 /// time, each a loop of branches over the lanes, so 64-bit components take a quarter of the
@@ -89,17 +90,25 @@ fn scalar_unit(f16: bool, word_loads: Option<u32>) -> &'static str {
     match (f16, word_loads) {
         (true, Some(lanes)) if lanes <= 8 => {
             " alias Unit = u64; fn unit_f32(u: Unit) -> vec4<f32> \
-             { return vec4<f32>(unpack2x16float(u32(u)), unpack2x16float(u32(u >> 32u))); }"
+             { return vec4<f32>(unpack2x16float(u32(u)), unpack2x16float(u32(u >> 32u))); } \
+             fn f32_unit(v: vec4<f32>) -> Unit \
+             { return u64(pack2x16float(v.xy)) | (u64(pack2x16float(v.zw)) << 32u); }"
         }
         (true, Some(_)) => {
             " alias Unit = vec2<u32>; fn unit_f32(u: Unit) -> vec4<f32> \
-             { return vec4<f32>(unpack2x16float(u.x), unpack2x16float(u.y)); }"
+             { return vec4<f32>(unpack2x16float(u.x), unpack2x16float(u.y)); } \
+             fn f32_unit(v: vec4<f32>) -> Unit { return vec2<u32>(pack2x16float(v.xy), pack2x16float(v.zw)); }"
         }
         (false, Some(lanes)) if lanes <= 8 => {
             " alias Unit = vec2<u64>; fn unit_f32(u: Unit) -> vec4<f32> \
-             { return bitcast<vec4<f32>>(vec4<u32>(u32(u.x), u32(u.x >> 32u), u32(u.y), u32(u.y >> 32u))); }"
+             { return bitcast<vec4<f32>>(vec4<u32>(u32(u.x), u32(u.x >> 32u), u32(u.y), u32(u.y >> 32u))); } \
+             fn f32_unit(v: vec4<f32>) -> Unit { let w = bitcast<vec4<u32>>(v); \
+             return vec2<u64>(u64(w.x) | (u64(w.y) << 32u), u64(w.z) | (u64(w.w) << 32u)); }"
         }
-        _ => " alias Unit = vec4<S>; fn unit_f32(u: Unit) -> vec4<f32> { return vec4<f32>(u); }",
+        _ => {
+            " alias Unit = vec4<S>; fn unit_f32(u: Unit) -> vec4<f32> { return vec4<f32>(u); } \
+             fn f32_unit(v: vec4<f32>) -> Unit { return Unit(v); }"
+        }
     }
 }
 

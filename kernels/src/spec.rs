@@ -233,7 +233,7 @@ pub const KERNELS: &[KernelSpec] = &[
 /// The kernels built twice, reading their operands as declared (WD = 0) and as 64-bit words
 /// (WD = 1, `scalar_unit` in compile.rs), which Mesa 22's lavapipe loads faster; the words need
 /// `shaderInt64` up to 8 lanes.
-pub const WORD_LOADS: &[&str] = &["gemm_sg", "conv_sg"];
+pub const WORD_LOADS: &[&str] = &["gemm_sg", "conv_sg", "attention"];
 
 /// The kernels above written for GPUs only (lavapipe runs them where tests ask for the GPU paths,
 /// and the tiled GEMM for shapes off the vec4 grid). They and [`COOPERATIVE_KERNELS`] are

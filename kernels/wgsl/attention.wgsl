@@ -22,7 +22,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     {
         let base = (p.q_off + batch * p.q_batch + min(row0 + R, p.nq - 1u) * p.q_ld + head * p.d) / 4u;
         // #unroll V DV
-        qs[R * DV + V] = select(vec4<f32>(0.0), p.scale * vec4<f32>(q[base + min(V * SG + lane, last)]), V * SG + lane < slots);
+        qs[R * DV + V] = select(vec4<f32>(0.0), p.scale * unit_f32(q[base + min(V * SG + lane, last)]), V * SG + lane < slots);
         // #end
         m[R] = NEG;
     }
@@ -35,7 +35,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         // #unroll V DV
         // #unroll SRC SG
         {
-            let kv = vec4<f32>(k[kbase + min(V * SG + SRC, last)]);
+            let kv = unit_f32(k[kbase + min(V * SG + SRC, last)]);
             // #unroll R TM
             score[R] += dot(subgroupBroadcast(qs[R * DV + V], SRC), kv);
             // #end
@@ -65,7 +65,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let vbase = (p.v_off + batch * p.v_batch + min(j0 + SRC, p.nk - 1u) * p.v_ld + head * p.d) / 4u;
             // #unroll V DV
             {
-                let vv = vec4<f32>(v[vbase + min(V * SG + lane, last)]);
+                let vv = unit_f32(v[vbase + min(V * SG + lane, last)]);
                 // #unroll R TM
                 acc[R * DV + V] += subgroupBroadcast(score[R], SRC) * vv;
                 // #end
@@ -80,7 +80,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         let row = row0 + R;
         let slot = V * SG + lane;
         if (row < p.nq) & (slot < slots) {
-            o[(batch * p.o_batch + row * p.o_ld + head * p.d) / 4u + slot] = vec4<S>(acc[R * DV + V] / l[R]);
+            o[(batch * p.o_batch + row * p.o_ld + head * p.d) / 4u + slot] = f32_unit(acc[R * DV + V] / l[R]);
         }
     }
     // #end

@@ -252,7 +252,8 @@ fn rows_variant(dtype: Dtype, slots: u32) -> Option<&'static vkdiff_kernels::Var
 
 /// The subgroup attention variant for a head of `slots` vec4s at a width this device can pin,
 /// its native width first, with the fewest slots per lane; none where the device takes no
-/// subgroup attention ([`crate::DeviceInfo::subgroup_attention`]) or no width fits.
+/// subgroup attention ([`crate::DeviceInfo::subgroup_attention`]) or no width fits. Its operands
+/// are read as 64-bit words where the context says so, as the GEMM's are.
 fn subgroup_variant(ctx: &Context, dtype: Dtype, slots: u32) -> Option<&'static vkdiff_kernels::Variant> {
     if !ctx.info().subgroup_attention(ctx.choices().gpu_paths) {
         return None;
@@ -260,9 +261,10 @@ fn subgroup_variant(ctx: &Context, dtype: Dtype, slots: u32) -> Option<&'static 
     let native = ctx.info().subgroup_size;
     let mut widths: Vec<u32> = WIDTHS.iter().copied().filter(|&w| ctx.subgroup_ok(w)).collect();
     widths.sort_by_key(|&w| (w != native, w));
+    let words = Some(u32::from(ctx.choices().word_loads));
     widths.iter().find_map(|&sg| {
         vkdiff_kernels::variants("attention", dtype)
-            .filter(|v| v.param("SG") == Some(sg) && v.param("DV").unwrap() * sg >= slots)
+            .filter(|v| v.param("SG") == Some(sg) && v.param("WD") == words && v.param("DV").unwrap() * sg >= slots)
             .min_by_key(|v| v.param("DV"))
     })
 }

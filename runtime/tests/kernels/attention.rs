@@ -1,7 +1,7 @@
 //! Fused attention against an f64 softmax(QKᵀ)V, for self- and cross-attention and many head sizes.
 
 use vkdiff_runtime::ops::{attention, AttentionLayout};
-use vkdiff_runtime::{Context, Dtype, Recorder};
+use vkdiff_runtime::{Context, Dtype, GemmFamily, Recorder, Variant};
 use vkdiff_testkit::*;
 
 pub(super) fn reference(q: &[f32], k: &[f32], v: &[f32], l: &AttentionLayout, scale: f64) -> Vec<f64> {
@@ -43,19 +43,21 @@ fn check(dtype: Dtype, l: &AttentionLayout, seed: u64) {
     }
 }
 
-fn check_on(ctx: &Context, dtype: Dtype, l: &AttentionLayout, seed: u64) -> Vec<&'static str> {
+fn check_on(ctx: &Context, dtype: Dtype, l: &AttentionLayout, seed: u64) -> Ran {
     check_with_key_gain(ctx, dtype, l, seed, |_| 1.0)
 }
 
-/// As [`check_on`], with key token t's K values multiplied by `gain(t)`; returns the kernels
-/// the attention dispatched.
+/// The kernels an attention dispatched, in order, and the variants it recorded.
+type Ran = (Vec<&'static str>, Vec<&'static Variant>);
+
+/// As [`check_on`], with key token t's K values multiplied by `gain(t)`.
 fn check_with_key_gain(
     ctx: &Context,
     dtype: Dtype,
     l: &AttentionLayout,
     seed: u64,
     gain: impl Fn(usize) -> f32,
-) -> Vec<&'static str> {
+) -> Ran {
     let extent =
         |off: usize, ld: usize, bs: usize, n: usize| off + (l.batch - 1) * bs + (n - 1) * ld + l.heads * l.head_dim;
     let q = stored(&random(extent(l.q_offset, l.q_ld, l.q_batch, l.q_tokens), seed), dtype);
@@ -95,8 +97,9 @@ fn check_with_key_gain(
         l.kv_tokens
     );
     assert_close(&what, &out.download().unwrap(), &want, atol, storage_rtol(dtype));
-    assert_attention_kernel(ctx, dtype, l.head_dim, &recording.variants(), &what);
-    kernels
+    let variants = recording.variants();
+    assert_attention_kernel(ctx, dtype, l.head_dim, &variants, &what);
+    (kernels, variants)
 }
 
 #[test]
@@ -140,6 +143,37 @@ fn scores_whose_maximum_jumps_between_chunks() {
     for dtype in DTYPES {
         for ctx in [ctx(), gpu_ctx()] {
             check_with_key_gain(&ctx, dtype, &AttentionLayout::dense(1, 2, 64, 70, 530), 90, gain);
+        }
+    }
+}
+
+/// The subgroup attention reading its operands as declared and as 64-bit words (WD, which Mesa
+/// 22's lavapipe takes), in both dtypes: self-attention over chunk and row-tile edges, and
+/// cross-attention from a fused projection's strided columns. Up to 8 lanes a device without
+/// 64-bit integers must be refused the words.
+#[test]
+fn subgroup_attention_reads_as_declared_or_as_words() {
+    let ctx = ctx_with(GemmFamily::Subgroup);
+    ctx.set_gpu_paths(false);
+    ctx.choose(|c| c.quick_compile = false);
+    let info = ctx.info().clone();
+    assert!(info.subgroup_attention(false), "{} runs no subgroup attention", info.name);
+    let mut strided = AttentionLayout::dense(2, 4, 64, 45, 77);
+    (strided.k_ld, strided.v_ld, strided.k_batch, strided.v_batch) = (512, 512, 77 * 512, 77 * 512);
+    strided.v_offset = 256;
+    for words in [false, true] {
+        ctx.choose(|c| c.word_loads = words);
+        if words && !info.can_read_words() {
+            assert!(!ctx.choices().word_loads, "word loads without shaderInt64 on {}", info.name);
+            continue;
+        }
+        for dtype in DTYPES {
+            for (i, l) in [AttentionLayout::dense(1, 4, 64, 70, 83), strided.clone()].iter().enumerate() {
+                let (_, variants) = check_on(&ctx, dtype, l, 130 + i as u64);
+                let read = |v: &&Variant| v.kernel == "attention" && v.param("WD") == Some(u32::from(words));
+                let named: Vec<_> = variants.iter().map(|v| (v.kernel, v.params)).collect();
+                assert!(variants.len() == 1 && variants.iter().all(read), "{named:?}");
+            }
         }
     }
 }
@@ -245,7 +279,7 @@ fn wide_heads_run_as_products_in_chunks() {
     ];
     for (seed, &(l, dtype, limit, chunks)) in cases.iter().enumerate() {
         for gpu_paths in [false, true] {
-            let kernels = check_on(&limited_ctx(gpu_paths, limit), dtype, l, 100 + seed as u64);
+            let (kernels, _) = check_on(&limited_ctx(gpu_paths, limit), dtype, l, 100 + seed as u64);
             let count = |name: &str| kernels.iter().filter(|&&k| k == name).count();
             let what = format!("{dtype:?} d{}: {kernels:?}", l.head_dim);
             assert!(as_products(&kernels), "{what}");
@@ -279,7 +313,7 @@ fn heads_the_products_do_not_take_stay_flash() {
     ];
     for (i, (dtype, l)) in cases.into_iter().enumerate() {
         for ctx in [ctx(), gpu_ctx()] {
-            let kernels = check_on(&ctx, dtype, &l, 110 + i as u64);
+            let (kernels, _) = check_on(&ctx, dtype, &l, 110 + i as u64);
             assert!(kernels.len() == 1 && kernels[0].starts_with("attention"), "case {i}: {kernels:?}");
         }
     }
