@@ -26,11 +26,25 @@ fn read_files(spec: &KernelSpec) -> Vec<(String, String)> {
         .collect()
 }
 
+/// `files` with B read from texels (b_texels.wgsl) where they read it from storage.
+fn texel_b_files(files: &[(String, String)]) -> Vec<(String, String)> {
+    let texels = fs::read_to_string(Path::new("wgsl").join("b_texels.wgsl"))
+        .unwrap_or_else(|e| fail(&format!("wgsl/b_texels.wgsl: {e}")));
+    files
+        .iter()
+        .map(|(name, body)| match name.as_str() {
+            "b_units.wgsl" => ("b_texels.wgsl".to_string(), texels.clone()),
+            _ => (name.clone(), body.clone()),
+        })
+        .collect()
+}
+
 fn main() {
     println!("cargo::rerun-if-changed=src/spec.rs");
     println!("cargo::rerun-if-changed=src/spec_cooperative.rs");
     println!("cargo::rerun-if-changed=compile.rs");
     println!("cargo::rerun-if-changed=spirv_rewrite.rs");
+    println!("cargo::rerun-if-changed=spirv_texels.rs");
     println!("cargo::rerun-if-changed=wgsl");
     let out = env::var("OUT_DIR").unwrap();
     let mut table = String::from("pub static VARIANTS: &[Variant] = &[\n");
@@ -39,18 +53,22 @@ fn main() {
     for (spec, dtype, cooperative) in scalar.chain(cooperative) {
         let target = if cooperative || GPU_KERNELS.contains(&spec.name) { Target::Gpu } else { Target::Any };
         let files = read_files(spec);
-        let word_loads = WORD_LOADS.contains(&spec.name);
+        // Each reading of the operands a kernel is built for: as declared and as words (WD), B
+        // from storage and from texels (TB).
+        let words: &[u32] = if WORD_LOADS.contains(&spec.name) { &[0, 1] } else { &[] };
+        let texels: &[u32] = if TEXEL_B.contains(&spec.name) { &[0, 1] } else { &[] };
         let all = spec.params.iter().flat_map(|params| {
-            let reading = |wd: u32| params.iter().copied().chain([("WD", wd)]).collect::<Vec<_>>();
-            if word_loads {
-                vec![reading(0), reading(1)]
-            } else {
-                vec![params.to_vec()]
-            }
+            let with = |name: &'static str, values: &[u32], sets: Vec<Vec<(&'static str, u32)>>| match values {
+                [] => sets,
+                _ => sets.iter().flat_map(|set| values.iter().map(|&x| [&set[..], &[(name, x)]].concat())).collect(),
+            };
+            with("TB", texels, with("WD", words, vec![params.to_vec()]))
         });
+        let texel_files = if texels.is_empty() { Vec::new() } else { texel_b_files(&files) };
         for (i, params) in all.enumerate() {
             let params = &params[..];
-            let src = Source::new(&prelude(dtype == Dtype::F16, params, cooperative), &files);
+            let files = if params.contains(&("TB", 1)) { &texel_files } else { &files };
+            let src = Source::new(&prelude(dtype == Dtype::F16, params, cooperative), files);
             let what = format!("kernel `{}` ({dtype:?}, {params:?})", spec.name);
             let words = compile(src, params, (cooperative, target), &what).unwrap_or_else(|e| fail(&e));
             let file = format!("{}.{dtype:?}.{i}.spv", spec.name);

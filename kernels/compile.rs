@@ -3,6 +3,7 @@
 // Included by build.rs (which compiles every variant) and by the crate's tests.
 
 include!("spirv_rewrite.rs");
+include!("spirv_texels.rs");
 
 /// A kernel's source: a one-line prelude followed by its files, with where each file starts.
 struct Source {
@@ -276,7 +277,9 @@ fn compile(
         bounds_check_policies: naga::proc::BoundsCheckPolicies {
             index: if target == Target::Gpu { naga::proc::BoundsCheckPolicy::Unchecked } else { restrict },
             buffer: restrict,
-            image_load: restrict,
+            // The only images are the texel buffers (spirv_texels.rs), whose reads the kernels
+            // clamp; naga's clamp would query mip levels, which a buffer has none of.
+            image_load: naga::proc::BoundsCheckPolicy::Unchecked,
             binding_array: restrict,
         },
         ..Default::default()
@@ -284,6 +287,9 @@ fn compile(
     let pipeline = spv::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".into() };
     let words =
         spv::write_vec(&module, &info, &options, Some(&pipeline)).map_err(|e| format!("{what}: SPIR-V output: {e}"))?;
+    if params.contains(&("TB", 1)) {
+        return texel_buffers(&words).map_err(|e| format!("{what}: texel buffers: {e}"));
+    }
     if !cooperative {
         return Ok(words);
     }

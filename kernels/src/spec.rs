@@ -48,7 +48,7 @@ pub const KERNELS: &[KernelSpec] = &[
     // epilogue (matrix products with B stored N×K only), 0 is the plain product.
     KernelSpec {
         name: "gemm_sg",
-        files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "gemm_sg.wgsl"],
+        files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "b_units.wgsl", "gemm_sg.wgsl"],
         params: &[
             &subgroup_tile(4, 8, 0, 0),
             &subgroup_tile(4, 8, 1, 0),
@@ -87,7 +87,7 @@ pub const KERNELS: &[KernelSpec] = &[
     },
     KernelSpec {
         name: "conv_sg",
-        files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "gemm_sg.wgsl"],
+        files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "b_units.wgsl", "gemm_sg.wgsl"],
         params: &[
             &subgroup_tile(4, 8, 1, 0),
             &subgroup_tile(4, 16, 1, 0),
@@ -234,6 +234,10 @@ pub const KERNELS: &[KernelSpec] = &[
 /// (WD = 1, `scalar_unit` in compile.rs), which Mesa 22's lavapipe loads faster; the words need
 /// `shaderInt64` up to 8 lanes.
 pub const WORD_LOADS: &[&str] = &["gemm_sg", "conv_sg", "attention"];
+
+/// The kernels also built with B read from a uniform texel buffer (TB = 1: b_texels.wgsl in
+/// place of b_units.wgsl), which Mesa 22's lavapipe fetches without a loop over the lanes.
+pub const TEXEL_B: &[&str] = &["gemm_sg", "conv_sg"];
 
 /// The kernels above written for GPUs only (lavapipe runs them where tests ask for the GPU paths,
 /// and the tiled GEMM for shapes off the vec4 grid). They and [`COOPERATIVE_KERNELS`] are

@@ -4,8 +4,8 @@
 // hand to the others, so no shared memory and few loads per product. Lavapipe splits every fma
 // into a multiply and an add, so a step adds its four products to a row's sums at once, not by
 // four fmas (1.1× in f32).
-// Needs N, K and every stride to be multiples of 4. B is K×N (BT = 0) or N×K (BT = 1).
-@group(0) @binding(1) var<storage, read> b: array<Unit>;
+// Needs N, K and every stride to be multiples of 4. B is K×N (BT = 0) or N×K (BT = 1), read by
+// `b_at` (b_units.wgsl, or b_texels.wgsl where TB = 1).
 
 const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): a lane's 8 columns are 4 values, 4 gates
 
@@ -18,13 +18,13 @@ fn load_b(boff: u32, k_in: u32, n: u32) -> array<vec4<f32>, 8> {
         let n0 = min(n, p.g.n - 4u);
         let n1 = min(n + 4u, p.g.n - 4u);
         // #unroll I 4
-        r[2u * I] = unit_f32(b[(boff + (k + I) * p.g.ldb + n0) / 4u]);
-        r[2u * I + 1u] = unit_f32(b[(boff + (k + I) * p.g.ldb + n1) / 4u]);
+        r[2u * I] = b_at((boff + (k + I) * p.g.ldb + n0) / 4u);
+        r[2u * I + 1u] = b_at((boff + (k + I) * p.g.ldb + n1) / 4u);
         // #end
     } else {
         var col: array<vec4<f32>, 8>;
         // #unroll J 8
-        col[J] = unit_f32(b[(boff + b_row(min(n + J, p.g.n - 1u)) * p.g.ldb + k) / 4u]);
+        col[J] = b_at((boff + b_row(min(n + J, p.g.n - 1u)) * p.g.ldb + k) / 4u);
         // #end
         // #unroll I 4
         r[2u * I] = vec4<f32>(col[0][I], col[1][I], col[2][I], col[3][I]);

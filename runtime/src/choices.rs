@@ -33,6 +33,9 @@ pub struct Choices {
     /// Whether the subgroup-register kernels read their operands as 64-bit words (their WD = 1
     /// variants; [`KernelPlan`]'s `word_loads` says where). Tests run both.
     pub word_loads: bool,
+    /// Whether the subgroup-register kernels read B through a texel view (their TB = 1
+    /// variants; [`KernelPlan`]'s `texel_b` says where). Tests run both.
+    pub texel_b: bool,
     /// Where recordings split into submissions and how long a wait for one may last.
     pub submit_budget: SubmitBudget,
     /// The most bytes one kernel binding may span; ops split larger tensors into bands below
@@ -59,6 +62,7 @@ impl Choices {
             gpu_paths: plan.gpu_paths,
             quick_compile: plan.quick_compile,
             word_loads: plan.word_loads,
+            texel_b: plan.texel_b,
             submit_budget: SubmitBudget::for_device(info, settings),
             binding_limit: info.max_storage_buffer_range,
             allocation_limit: info.max_allocation,
@@ -66,8 +70,8 @@ impl Choices {
         }
     }
 
-    /// These choices with the limits no higher than `info`'s own, and word loads only where it
-    /// has the integers they need.
+    /// These choices with the limits no higher than `info`'s own, word loads only where it has
+    /// the integers they need, and texel reads only where it fetches texels.
     pub(crate) fn within(mut self, info: &DeviceInfo) -> Choices {
         self.binding_limit = self.binding_limit.min(info.max_storage_buffer_range);
         if info.max_allocation > 0 {
@@ -75,6 +79,7 @@ impl Choices {
         }
         self.workgroup_limit = [0, 1, 2].map(|i| self.workgroup_limit[i].clamp(1, info.max_workgroup_count[i]));
         self.word_loads &= info.can_read_words();
+        self.texel_b &= info.reads_texel_b();
         self
     }
 }

@@ -41,6 +41,13 @@ impl DeviceKind {
     }
 }
 
+/// What a device allows of a uniform texel buffer's view.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TexelLimits {
+    pub max_elements: u32,
+    pub offset_alignment: u64,
+}
+
 /// Everything vkdiff records about a physical device to choose kernels and report on it.
 #[derive(Clone, Debug)]
 pub struct DeviceInfo {
@@ -93,6 +100,9 @@ pub struct DeviceInfo {
     pub max_allocation: u64,
     pub device_local_bytes: u64,
     pub min_storage_offset_alignment: u64,
+    /// Four-value texels (RGBA in f32 and in f16) read from uniform texel buffers: the texels a
+    /// buffer view may hold and the alignment of its offset, where the device fetches both.
+    pub texel_fetch: Option<TexelLimits>,
     pub timestamp_period_ns: f32,
     /// The bits of a timestamp the compute queue writes (0: no timestamps).
     pub timestamp_bits: u32,
@@ -321,6 +331,7 @@ pub(crate) fn describe(
         max_allocation: maintenance3.max_memory_allocation_size,
         device_local_bytes,
         min_storage_offset_alignment: p.limits.min_storage_buffer_offset_alignment,
+        texel_fetch: texel_limits(instance, pd, &p.limits),
         timestamp_period_ns: p.limits.timestamp_period,
         timestamp_bits: family.map_or(0, |f| families[f as usize].timestamp_valid_bits),
         compute_queue_family: family,
@@ -334,6 +345,24 @@ pub(crate) fn describe(
         memory_budget,
         pipeline_statistics,
     }
+}
+
+/// The texel views the device allows, where it fetches RGBA texels in f32 and f16 from uniform
+/// texel buffers.
+fn texel_limits(
+    instance: &ash::Instance,
+    pd: vk::PhysicalDevice,
+    limits: &vk::PhysicalDeviceLimits,
+) -> Option<TexelLimits> {
+    let fetched = [vk::Format::R32G32B32A32_SFLOAT, vk::Format::R16G16B16A16_SFLOAT].iter().all(|&format| {
+        // SAFETY: pd comes from this instance.
+        let props = unsafe { instance.get_physical_device_format_properties(pd, format) };
+        props.buffer_features.contains(vk::FormatFeatureFlags::UNIFORM_TEXEL_BUFFER)
+    });
+    fetched.then_some(TexelLimits {
+        max_elements: limits.max_texel_buffer_elements,
+        offset_alignment: limits.min_texel_buffer_offset_alignment.max(1),
+    })
 }
 
 /// The queue family to compute on: the first with compute and without graphics, else the first
@@ -407,6 +436,7 @@ pub(crate) mod tests {
             max_allocation: 1 << 31,
             device_local_bytes: 1 << 31,
             min_storage_offset_alignment: 16,
+            texel_fetch: None,
             timestamp_period_ns: 1.0,
             timestamp_bits: 64,
             compute_queue_family: Some(0),

@@ -164,8 +164,12 @@ impl Drop for Buffer {
 
 /// A new buffer of `size` bytes and its memory, from the driver.
 fn allocate(shared: &Shared, size: u64, use_: BufferUse, name: &str) -> Result<(vk::Buffer, Allocation)> {
-    let usage =
+    let mut usage =
         vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
+    // The CPU GEMM may read B through a texel view of any buffer (KernelPlan::texel_b).
+    if shared.info.reads_texel_b() {
+        usage |= vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
+    }
     let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);
     let device = &shared.device;
     // SAFETY: valid device and create info.

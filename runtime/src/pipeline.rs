@@ -73,6 +73,15 @@ impl PipelineCache {
 
 type StatisticsLoader = ash::khr::pipeline_executable_properties::Device;
 
+/// What `variant` reads at `binding`: a storage buffer, or B's uniform texel buffer where the
+/// variant reads B from texels (TB = 1, binding 1).
+pub(crate) fn descriptor_type(variant: &Variant, binding: u32) -> vk::DescriptorType {
+    match (variant.param("TB"), binding) {
+        (Some(1), 1) => vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
+        _ => vk::DescriptorType::STORAGE_BUFFER,
+    }
+}
+
 /// What a driver reported of each executable of a pipeline created with statistics captured, or
 /// why it reported nothing.
 pub(crate) type Reported = std::result::Result<Vec<Statistics>, String>;
@@ -89,7 +98,7 @@ pub(crate) fn create_kernel(
         .map(|b| {
             vk::DescriptorSetLayoutBinding::default()
                 .binding(b)
-                .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
+                .descriptor_type(descriptor_type(variant, b))
                 .descriptor_count(1)
                 .stage_flags(vk::ShaderStageFlags::COMPUTE)
         })

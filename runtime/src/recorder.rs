@@ -4,11 +4,11 @@
 use crate::context::Context;
 use crate::error::{ensure, Result, VkContext};
 use crate::memory::Buffer;
-use crate::pipeline::{Kernel, PUSH_BYTES};
+use crate::pipeline::{descriptor_type, Kernel, PUSH_BYTES};
 use crate::recording::Recording;
 use crate::submit::memory_barrier;
 use crate::submit_budget::SubmitBudget;
-use crate::tensor::Tensor;
+use crate::tensor::{dtype_size, Dtype, Tensor};
 use ash::vk;
 use std::collections::HashSet;
 use std::sync::atomic::Ordering;
@@ -50,6 +50,8 @@ pub(crate) struct Resources {
     pub(crate) query_pools: Vec<vk::QueryPool>,
     pub(crate) labels: Vec<&'static str>,
     buffers: Vec<Arc<Buffer>>,
+    /// Texel views of those buffers that dispatches read (see [`texel_view`]).
+    views: Vec<vk::BufferView>,
     pub(crate) kernels: Vec<Arc<Kernel>>,
 }
 
@@ -68,6 +70,9 @@ impl Drop for Resources {
             }
             for &q in &self.query_pools {
                 device.destroy_query_pool(q, None);
+            }
+            for &v in &self.views {
+                device.destroy_buffer_view(v, None);
             }
             device.destroy_command_pool(self.command_pool, None);
         }
@@ -99,6 +104,7 @@ impl Recorder {
                 query_pools: Vec::new(),
                 labels: Vec::new(),
                 buffers: Vec::new(),
+                views: Vec::new(),
                 kernels: Vec::new(),
             };
             let mut rec = Recorder {
@@ -202,20 +208,35 @@ impl Recorder {
         let timed = if self.profile { Some(self.query_slot()?) } else { None };
         let ctx = self.ctx.clone();
         let device = &ctx.shared.device;
-        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = reads
+        let operands: Vec<(&Tensor, vk::DescriptorType)> = reads
             .iter()
             .chain(writes)
-            .map(|t| [vk::DescriptorBufferInfo { buffer: t.buf.raw, offset: t.offset, range: t.bytes().max(4) }])
-            .collect();
-        let descriptor_writes: Vec<_> = infos
-            .iter()
             .enumerate()
-            .map(|(i, info)| {
-                vk::WriteDescriptorSet::default()
-                    .dst_set(set)
-                    .dst_binding(i as u32)
-                    .descriptor_type(vk::DescriptorType::STORAGE_BUFFER)
-                    .buffer_info(info)
+            .map(|(i, &t)| (t, descriptor_type(kernel.variant, i as u32)))
+            .collect();
+        let mut views = Vec::new();
+        for &(t, ty) in &operands {
+            if ty == vk::DescriptorType::UNIFORM_TEXEL_BUFFER {
+                let view = texel_view(&ctx, t)?;
+                self.res.views.push(view);
+                views.push([view]);
+            }
+        }
+        let infos: Vec<[vk::DescriptorBufferInfo; 1]> = operands
+            .iter()
+            .map(|(t, _)| [vk::DescriptorBufferInfo { buffer: t.buf.raw, offset: t.offset, range: t.bytes().max(4) }])
+            .collect();
+        let mut texels = views.iter();
+        let descriptor_writes: Vec<_> = operands
+            .iter()
+            .zip(&infos)
+            .enumerate()
+            .map(|(i, (&(_, ty), info))| {
+                let write = vk::WriteDescriptorSet::default().dst_set(set).dst_binding(i as u32).descriptor_type(ty);
+                match ty {
+                    vk::DescriptorType::UNIFORM_TEXEL_BUFFER => write.texel_buffer_view(texels.next().unwrap()),
+                    _ => write.buffer_info(info),
+                }
             })
             .collect();
         // SAFETY: the command buffer is recording; every handle is kept alive by `res`.
@@ -301,10 +322,16 @@ impl Recorder {
         // SAFETY: pools and layouts are valid; pools are destroyed with the recording.
         unsafe {
             if self.sets_left == 0 {
-                let sizes = [vk::DescriptorPoolSize {
-                    ty: vk::DescriptorType::STORAGE_BUFFER,
-                    descriptor_count: SETS_PER_POOL * MAX_BINDINGS,
-                }];
+                let sizes = [
+                    vk::DescriptorPoolSize {
+                        ty: vk::DescriptorType::STORAGE_BUFFER,
+                        descriptor_count: SETS_PER_POOL * MAX_BINDINGS,
+                    },
+                    vk::DescriptorPoolSize {
+                        ty: vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
+                        descriptor_count: SETS_PER_POOL,
+                    },
+                ];
                 let pool = device
                     .create_descriptor_pool(
                         &vk::DescriptorPoolCreateInfo::default().max_sets(SETS_PER_POOL).pool_sizes(&sizes),
@@ -382,4 +409,21 @@ fn human_bytes(n: u64) -> String {
     } else {
         format!("{n} bytes")
     }
+}
+
+/// A view of `t` as four-value texels (RGBA in its dtype), which the kernels that read B from
+/// texels bind; the caller checked that the device allows it (`texel_view_fits` in ops/gemm.rs).
+fn texel_view(ctx: &Context, t: &Tensor) -> Result<vk::BufferView> {
+    let format = match t.dtype() {
+        Dtype::F32 => vk::Format::R32G32B32A32_SFLOAT,
+        Dtype::F16 => vk::Format::R16G16B16A16_SFLOAT,
+    };
+    let texel = 4 * dtype_size(t.dtype()) as u64;
+    let info = vk::BufferViewCreateInfo::default()
+        .buffer(t.buf.raw)
+        .format(format)
+        .offset(t.offset)
+        .range(t.bytes() / texel * texel);
+    // SAFETY: the buffer lives as long as the recording, which destroys the view.
+    unsafe { ctx.shared.device.create_buffer_view(&info, None) }.vk("vkCreateBufferView")
 }

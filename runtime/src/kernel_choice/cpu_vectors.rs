@@ -38,4 +38,11 @@ impl DeviceInfo {
     pub fn can_read_words(&self) -> bool {
         self.gemm_subgroup_width() == Some(16) || self.shader_int64
     }
+
+    /// Whether the subgroup kernels may read B through texel views (TB = 1 in
+    /// kernels/src/spec.rs): a device that runs them and fetches both texel formats. Its buffers
+    /// are then made for texel views too.
+    pub fn reads_texel_b(&self) -> bool {
+        self.gemm_subgroup_width().is_some() && self.texel_fetch.is_some()
+    }
 }

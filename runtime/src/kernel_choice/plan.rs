@@ -61,6 +61,9 @@ pub struct KernelPlan {
     /// loop of branches over the lanes, so wider components make fewer loops (f16 linear 1.3×
     /// faster on Mesa 22.3; 0.7× on Mesa 26.1, which loads each lane without a loop).
     pub word_loads: bool,
+    /// Whether the subgroup-register kernels read B through a texel view (TB = 1): on Mesa 22's
+    /// lavapipe, which fetches texels for all lanes at once but loads storage in loops over them.
+    pub texel_b: bool,
     /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen).
     pub wider_vectors: bool,
 }
@@ -113,6 +116,9 @@ impl KernelPlan {
             word_loads: subgroup_width.is_some()
                 && info.lavapipe_mesa.is_some_and(|(major, _)| major < 23)
                 && info.can_read_words(),
+            texel_b: subgroup_width.is_some()
+                && info.lavapipe_mesa.is_some_and(|(major, _)| major < 23)
+                && info.reads_texel_b(),
             wider_vectors: info.lavapipe_mesa.is_some()
                 && crate::kernel_choice::cpu_vectors::wider_lavapipe_vectors_available(settings),
         }
@@ -123,7 +129,8 @@ impl KernelPlan {
         match (self.gemm, self.fragment) {
             (GemmFamily::Subgroup, _) => {
                 let words = if self.word_loads { ", operands read as words" } else { "" };
-                format!("subgroup-register, {} lanes (CPU){words}", self.subgroup_width.unwrap_or_default())
+                let texels = if self.texel_b { ", B from texels" } else { "" };
+                format!("subgroup-register, {} lanes (CPU){words}{texels}", self.subgroup_width.unwrap_or_default())
             }
             (GemmFamily::Cooperative, Some(f)) => {
                 let trial = match self.trial {
@@ -269,5 +276,28 @@ mod tests {
         assert!(words(&d), "16 lanes read 32-bit words");
         let gpu_paths = Settings { gpu_paths: true, ..Settings::default() };
         assert!(!KernelPlan::for_device(&d, &gpu_paths).word_loads);
+    }
+
+    #[test]
+    fn only_mesa_22s_lavapipe_reads_b_from_texels_and_only_where_it_fetches_them() {
+        let mut d = device(0, DeviceKind::Cpu, true);
+        d.subgroup_size = 8;
+        d.texel_fetch = Some(crate::device::TexelLimits { max_elements: 1 << 27, offset_alignment: 16 });
+        let texels = |d: &DeviceInfo| KernelPlan::for_device(d, &Settings::default()).texel_b;
+        d.lavapipe_mesa = Some((22, 3));
+        assert!(texels(&d));
+        let plan = KernelPlan::for_device(&d, &Settings::default()).to_string();
+        assert!(plan.contains("8 lanes (CPU), operands read as words, B from texels"), "{plan}");
+        d.subgroup_size = 16;
+        assert!(texels(&d), "every width fetches texels");
+        d.lavapipe_mesa = Some((26, 1));
+        assert!(!texels(&d), "Mesa 26.1 ran f16 products slower from texels");
+        d.lavapipe_mesa = None;
+        assert!(!texels(&d), "another CPU driver reads storage");
+        d.lavapipe_mesa = Some((22, 3));
+        let gpu_paths = Settings { gpu_paths: true, ..Settings::default() };
+        assert!(!KernelPlan::for_device(&d, &gpu_paths).texel_b);
+        d.texel_fetch = None;
+        assert!(!texels(&d), "a device that cannot fetch both formats reads storage");
     }
 }

@@ -239,6 +239,17 @@ pub(super) struct GemmShape {
     pub vec8: bool,
 }
 
+/// Whether the device allows a texel view of all of `b` (four values a texel, from its offset),
+/// as the subgroup kernels bind B where they read it from texels.
+pub(crate) fn texel_view_fits(info: &crate::DeviceInfo, b: &Tensor) -> bool {
+    let texel = 4 * crate::tensor::dtype_size(b.dtype()) as u64;
+    info.texel_fetch.is_some_and(|limits| {
+        b.offset.is_multiple_of(limits.offset_alignment)
+            && b.bytes() >= texel
+            && b.bytes() / texel <= u64::from(limits.max_elements)
+    })
+}
+
 /// The kernels of one GEMM-shaped op, one per family.
 pub(super) struct GemmKernels {
     pub subgroup: &'static str,
@@ -290,8 +301,9 @@ pub(super) fn dispatch_gemm_family(
     if let Some(sg) = width {
         let tm = subgroup_rows(s, sg, ctx.choices().quick_compile);
         let words = ("WD", u32::from(ctx.choices().word_loads));
+        let texels = ("TB", u32::from(ctx.choices().texel_b && texel_view_fits(ctx.info(), reads[1])));
         let want: Vec<(&str, u32)> =
-            [("SG", sg), ("TM", tm), words].into_iter().chain(params.iter().copied()).collect();
+            [("SG", sg), ("TM", tm), words, texels].into_iter().chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.subgroup, dtype, &want, 4)?;
         let columns = u(s.n.div_ceil(8 * sg as usize));
         return rec.dispatch(&k, reads, &[out], push, [columns, u(s.m.div_ceil(tm as usize)), u(s.batch)]);

@@ -127,19 +127,21 @@ fn params_of(ran: &[(GemmFamily, Vec<&'static Variant>)], family: GemmFamily, ke
         .collect()
 }
 
-/// The subgroup kernels reading their operands as declared and as 64-bit words where the device
-/// takes them (gemm.rs holds the refusal): padding and a residual, both dtypes against f64.
+/// The subgroup kernels reading their operands as declared and as 64-bit words, and the weights
+/// from storage and from texels, where the device takes them (gemm.rs holds the refusals):
+/// padding and a residual, both dtypes against f64.
 #[test]
-fn subgroup_kernels_read_as_declared_or_as_words() {
+fn subgroup_kernels_read_as_declared_as_words_or_from_texels() {
     let ctx = ctx_with(GemmFamily::Subgroup);
     let c = padded_residual();
-    for words in [false, true] {
-        ctx.choose(|c| c.word_loads = words);
-        let wd = u32::from(ctx.choices().word_loads);
+    for (words, texels) in [(false, false), (true, false), (false, true), (true, true)] {
+        ctx.choose(|c| (c.word_loads, c.texel_b) = (words, texels));
+        let (wd, tb) = (u32::from(ctx.choices().word_loads), u32::from(ctx.choices().texel_b));
         for dtype in DTYPES {
             let ran = check_on(&ctx, dtype, &c, 31);
+            let read = |v: &&Variant| v.kernel == "conv_sg" && v.param("WD") == Some(wd) && v.param("TB") == Some(tb);
             assert!(
-                !ran.is_empty() && ran.iter().all(|v| v.kernel == "conv_sg" && v.param("WD") == Some(wd)),
+                !ran.is_empty() && ran.iter().all(read),
                 "{:?}",
                 ran.iter().map(|v| (v.kernel, v.params)).collect::<Vec<_>>()
             );

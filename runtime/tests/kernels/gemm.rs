@@ -47,6 +47,17 @@ fn check(family: GemmFamily, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u6
 /// Runs the product on `ctx` against the reference, asserts the family it ran on (a shape off
 /// the vec4 grid may fall back to the tiled kernel), and returns the product's variants.
 fn check_on(ctx: &Context, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64) -> Vec<&'static Variant> {
+    check_with_b_at(ctx, dtype, s, (with_bias, seed), 0)
+}
+
+/// As [`check_on`], with B a view that starts `b_start` elements into its buffer.
+fn check_with_b_at(
+    ctx: &Context,
+    dtype: Dtype,
+    s: &Matmul,
+    (with_bias, seed): (bool, u64),
+    b_start: usize,
+) -> Vec<&'static Variant> {
     let family = (ctx.choices().gemm_family, if ctx.choices().quick_compile { "quick" } else { "" });
     let (b_rows, b_cols) = if s.b_transposed { (s.n, s.k) } else { (s.k, s.n) };
     let a_len = (s.batch - 1) * s.a_batch + (s.m - 1) * s.lda + s.k;
@@ -57,7 +68,8 @@ fn check_on(ctx: &Context, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64)
     let bias = stored(&random(s.n, seed + 2), dtype);
     let c0 = stored(&random(c_len, seed + 3), dtype);
     let ta = ctx.upload(&[a_len], dtype, &a).unwrap();
-    let tb = ctx.upload(&[b_len], dtype, &b).unwrap();
+    let padded: Vec<f32> = std::iter::repeat_n(f32::NAN, b_start).chain(b.iter().copied()).collect();
+    let tb = ctx.upload(&[b_start + b_len], dtype, &padded).unwrap().narrow(b_start, b_len).unwrap();
     let tbias = ctx.upload(&[s.n], dtype, &bias).unwrap();
     let tc = ctx.upload(&[c_len], dtype, &c0).unwrap();
     let variants = ctx.run_listing(|rec| matmul(rec, &ta, &tb, with_bias.then_some(&tbias), &tc, s)).unwrap();
@@ -240,24 +252,36 @@ fn batched_strided_alpha_accumulate() {
     assert!(tiled.iter().all(|&k| k == "gemm_tiled") && !tiled.is_empty(), "{tiled:?}");
 }
 
-/// The subgroup kernels reading their operands as declared and as 64-bit words (WD, which Mesa
-/// 22's lavapipe takes), in both dtypes against f64: B stored K×N and N×K, batched and strided,
-/// and GEGLU fused. Up to 8 lanes a device without 64-bit integers must be refused the words.
+/// The subgroup kernels reading their operands as declared and as 64-bit words (WD), and B from
+/// storage and from texels (TB), as Mesa 22's lavapipe takes both, in both dtypes against f64:
+/// B stored K×N and N×K, batched and strided, as a view past the start of its buffer, and GEGLU
+/// fused. Up to 8 lanes a device without 64-bit integers must be refused the words, and one
+/// that fetches no texels the texels.
 #[test]
-fn subgroup_kernels_read_as_declared_or_as_words() {
+fn subgroup_kernels_read_as_declared_as_words_or_from_texels() {
     let ctx = ctx_with(GemmFamily::Subgroup);
     let info = ctx.info().clone();
     assert!(info.gemm_subgroup_width().is_some(), "{} runs no subgroup-register kernel", info.name);
-    for words in [false, true] {
-        ctx.choose(|c| c.word_loads = words);
+    // B a whole binding alignment into its buffer (the texel views' start).
+    let b_start = |dtype: Dtype| info.binding_alignment() as usize / if dtype == Dtype::F16 { 2 } else { 4 };
+    for (words, texels) in [(false, false), (true, false), (false, true), (true, true)] {
+        ctx.choose(|c| (c.word_loads, c.texel_b) = (words, texels));
         if words && !info.can_read_words() {
             assert!(!ctx.choices().word_loads, "word loads without shaderInt64 on {}", info.name);
             continue;
         }
+        if texels && !info.reads_texel_b() {
+            assert!(!ctx.choices().texel_b, "texels where {} fetches none", info.name);
+            continue;
+        }
         for dtype in DTYPES {
             for s in [Matmul::dense(70, 96, 40, false), Matmul::dense(37, 64, 52, true), batched_strided()] {
-                let ran = check_on(&ctx, dtype, &s, true, 41);
-                let read = |v: &&Variant| v.kernel == "gemm_sg" && v.param("WD") == Some(u32::from(words));
+                let ran = check_with_b_at(&ctx, dtype, &s, (true, 41), b_start(dtype));
+                let read = |v: &&Variant| {
+                    v.kernel == "gemm_sg"
+                        && v.param("WD") == Some(u32::from(words))
+                        && v.param("TB") == Some(u32::from(texels))
+                };
                 assert!(
                     !ran.is_empty() && ran.iter().all(read),
                     "{:?}",
