@@ -8,7 +8,7 @@ use crate::pipeline::{descriptor_type, Kernel, PUSH_BYTES};
 use crate::recording::Recording;
 use crate::submit::memory_barrier;
 use crate::submit_budget::SubmitBudget;
-use crate::tensor::{dtype_size, Dtype, Tensor};
+use crate::tensor::{texel_bytes, Dtype, Tensor};
 use ash::vk;
 use std::collections::HashSet;
 use std::sync::atomic::Ordering;
@@ -418,7 +418,7 @@ fn texel_view(ctx: &Context, t: &Tensor) -> Result<vk::BufferView> {
         Dtype::F32 => vk::Format::R32G32B32A32_SFLOAT,
         Dtype::F16 => vk::Format::R16G16B16A16_SFLOAT,
     };
-    let texel = 4 * dtype_size(t.dtype()) as u64;
+    let texel = texel_bytes(t.dtype());
     let info = vk::BufferViewCreateInfo::default()
         .buffer(t.buf.raw)
         .format(format)

@@ -242,7 +242,7 @@ pub(super) struct GemmShape {
 /// Whether the device allows a texel view of all of `b` (four values a texel, from its offset),
 /// as the subgroup kernels bind B where they read it from texels.
 pub(crate) fn texel_view_fits(info: &crate::DeviceInfo, b: &Tensor) -> bool {
-    let texel = 4 * crate::tensor::dtype_size(b.dtype()) as u64;
+    let texel = crate::tensor::texel_bytes(b.dtype());
     info.texel_fetch.is_some_and(|limits| texels_fit(limits, b.offset, b.bytes(), texel))
 }
 
