@@ -5,6 +5,7 @@ use crate::kernel_choice::flexible_dimensions::{self, CooperativeMatrix2Features
 use crate::kernel_choice::matrix_units::{self, Fragment, MatrixShape};
 use crate::pci::PciAddress;
 use crate::settings::Settings;
+use crate::texel_views::TexelLimits;
 use ash::vk;
 use std::ffi::CStr;
 use vkdiff_setting::Environment;
@@ -39,13 +40,6 @@ impl DeviceKind {
             DeviceKind::Other => "other",
         }
     }
-}
-
-/// What a device allows of a uniform texel buffer's view.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct TexelLimits {
-    pub max_elements: u32,
-    pub offset_alignment: u64,
 }
 
 /// Everything vkdiff records about a physical device to choose kernels and report on it.
@@ -331,7 +325,7 @@ pub(crate) fn describe(
         max_allocation: maintenance3.max_memory_allocation_size,
         device_local_bytes,
         min_storage_offset_alignment: p.limits.min_storage_buffer_offset_alignment,
-        texel_fetch: texel_limits(instance, pd, &p.limits),
+        texel_fetch: crate::texel_views::limits(instance, pd, &p.limits),
         timestamp_period_ns: p.limits.timestamp_period,
         timestamp_bits: family.map_or(0, |f| families[f as usize].timestamp_valid_bits),
         compute_queue_family: family,
@@ -345,24 +339,6 @@ pub(crate) fn describe(
         memory_budget,
         pipeline_statistics,
     }
-}
-
-/// The texel views the device allows, where it fetches RGBA texels in f32 and f16 from uniform
-/// texel buffers.
-fn texel_limits(
-    instance: &ash::Instance,
-    pd: vk::PhysicalDevice,
-    limits: &vk::PhysicalDeviceLimits,
-) -> Option<TexelLimits> {
-    let fetched = [vk::Format::R32G32B32A32_SFLOAT, vk::Format::R16G16B16A16_SFLOAT].iter().all(|&format| {
-        // SAFETY: pd comes from this instance.
-        let props = unsafe { instance.get_physical_device_format_properties(pd, format) };
-        props.buffer_features.contains(vk::FormatFeatureFlags::UNIFORM_TEXEL_BUFFER)
-    });
-    fetched.then_some(TexelLimits {
-        max_elements: limits.max_texel_buffer_elements,
-        offset_alignment: limits.min_texel_buffer_offset_alignment.max(1),
-    })
 }
 
 /// The queue family to compute on: the first with compute and without graphics, else the first

@@ -27,6 +27,7 @@ mod settings;
 mod submit;
 mod submit_budget;
 mod tensor;
+mod texel_views;
 mod timing;
 mod validation;
 

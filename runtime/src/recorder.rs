@@ -8,7 +8,7 @@ use crate::pipeline::{descriptor_type, Kernel, PUSH_BYTES};
 use crate::recording::Recording;
 use crate::submit::memory_barrier;
 use crate::submit_budget::SubmitBudget;
-use crate::tensor::{texel_bytes, Dtype, Tensor};
+use crate::tensor::Tensor;
 use ash::vk;
 use std::collections::HashSet;
 use std::sync::atomic::Ordering;
@@ -50,7 +50,7 @@ pub(crate) struct Resources {
     pub(crate) query_pools: Vec<vk::QueryPool>,
     pub(crate) labels: Vec<&'static str>,
     buffers: Vec<Arc<Buffer>>,
-    /// Texel views of those buffers that dispatches read (see [`texel_view`]).
+    /// Texel views of those buffers that dispatches read (`texel_views::create`).
     views: Vec<vk::BufferView>,
     pub(crate) kernels: Vec<Arc<Kernel>>,
 }
@@ -217,7 +217,7 @@ impl Recorder {
         let mut views = Vec::new();
         for &(t, ty) in &operands {
             if ty == vk::DescriptorType::UNIFORM_TEXEL_BUFFER {
-                let view = texel_view(&ctx, t)?;
+                let view = crate::texel_views::create(&ctx, t)?;
                 self.res.views.push(view);
                 views.push([view]);
             }
@@ -409,21 +409,4 @@ fn human_bytes(n: u64) -> String {
     } else {
         format!("{n} bytes")
     }
-}
-
-/// A view of `t` as four-value texels (RGBA in its dtype), which the kernels that read B from
-/// texels bind; the caller checked that the device allows it (`texel_view_fits` in ops/gemm.rs).
-fn texel_view(ctx: &Context, t: &Tensor) -> Result<vk::BufferView> {
-    let format = match t.dtype() {
-        Dtype::F32 => vk::Format::R32G32B32A32_SFLOAT,
-        Dtype::F16 => vk::Format::R16G16B16A16_SFLOAT,
-    };
-    let texel = texel_bytes(t.dtype());
-    let info = vk::BufferViewCreateInfo::default()
-        .buffer(t.buf.raw)
-        .format(format)
-        .offset(t.offset)
-        .range(t.bytes() / texel * texel);
-    // SAFETY: the buffer lives as long as the recording, which destroys the view.
-    unsafe { ctx.shared.device.create_buffer_view(&info, None) }.vk("vkCreateBufferView")
 }

@@ -33,11 +33,6 @@ pub fn dtype_size(dtype: Dtype) -> usize {
     }
 }
 
-/// Bytes of a four-value texel of a storage dtype, as the CPU GEMM's texel views read B.
-pub(crate) fn texel_bytes(dtype: Dtype) -> u64 {
-    4 * dtype_size(dtype) as u64
-}
-
 /// A dense, row-major tensor in device memory. Clones and views share the buffer.
 #[derive(Clone)]
 pub struct Tensor {

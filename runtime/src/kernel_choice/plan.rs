@@ -282,7 +282,7 @@ mod tests {
     fn only_mesa_22s_lavapipe_reads_b_from_texels_and_only_where_it_fetches_them() {
         let mut d = device(0, DeviceKind::Cpu, true);
         d.subgroup_size = 8;
-        d.texel_fetch = Some(crate::device::TexelLimits { max_elements: 1 << 27, offset_alignment: 16 });
+        d.texel_fetch = Some(crate::texel_views::TexelLimits { max_elements: 1 << 27, offset_alignment: 16 });
         let texels = |d: &DeviceInfo| KernelPlan::for_device(d, &Settings::default()).texel_b;
         d.lavapipe_mesa = Some((22, 3));
         assert!(texels(&d));

@@ -239,18 +239,6 @@ pub(super) struct GemmShape {
     pub vec8: bool,
 }
 
-/// Whether the device allows a texel view of all of `b` (four values a texel, from its offset),
-/// as the subgroup kernels bind B where they read it from texels.
-pub(crate) fn texel_view_fits(info: &crate::DeviceInfo, b: &Tensor) -> bool {
-    let texel = crate::tensor::texel_bytes(b.dtype());
-    info.texel_fetch.is_some_and(|limits| texels_fit(limits, b.offset, b.bytes(), texel))
-}
-
-/// Whether `bytes` from `offset` make a texel view of `texel`-byte texels within `limits`.
-fn texels_fit(limits: crate::device::TexelLimits, offset: u64, bytes: u64, texel: u64) -> bool {
-    offset.is_multiple_of(limits.offset_alignment) && bytes >= texel && bytes / texel <= u64::from(limits.max_elements)
-}
-
 /// The kernels of one GEMM-shaped op, one per family.
 pub(super) struct GemmKernels {
     pub subgroup: &'static str,
@@ -302,7 +290,7 @@ pub(super) fn dispatch_gemm_family(
     if let Some(sg) = width {
         let tm = subgroup_rows(s, sg, ctx.choices().quick_compile);
         let words = ("WD", u32::from(ctx.choices().word_loads));
-        let texels = ("TB", u32::from(ctx.choices().texel_b && texel_view_fits(ctx.info(), reads[1])));
+        let texels = ("TB", u32::from(ctx.choices().texel_b && crate::texel_views::fits(ctx.info(), reads[1])));
         let want: Vec<(&str, u32)> =
             [("SG", sg), ("TM", tm), words, texels].into_iter().chain(params.iter().copied()).collect();
         let k = kernel(&ctx, names.subgroup, dtype, &want, 4)?;
@@ -427,17 +415,7 @@ pub fn linear(rec: &mut Recorder, x: &Tensor, w: &Tensor, bias: Option<&Tensor>,
 mod tests {
     use super::*;
     use crate::device::tests::device;
-    use crate::device::{DeviceKind, TexelLimits};
-
-    #[test]
-    fn b_takes_a_texel_view_only_within_the_devices_limits() {
-        let limits = TexelLimits { max_elements: 1000, offset_alignment: 64 };
-        assert!(texels_fit(limits, 128, 16 * 1000, 16), "aligned, at the element limit");
-        assert!(!texels_fit(limits, 16, 16 * 1000, 16), "an offset off the texel alignment");
-        assert!(!texels_fit(limits, 0, 16 * 1001, 16), "past the element limit");
-        assert!(!texels_fit(limits, 0, 8, 16), "less than one texel");
-        assert!(texels_fit(limits, 0, 8 * 1000 + 4, 8), "a partial last texel is left out of the view");
-    }
+    use crate::device::DeviceKind;
 
     #[test]
     fn the_tiled_kernel_takes_its_tall_tiles_where_they_fill_and_fit() {
