@@ -53,7 +53,7 @@ fn main() {
     for (spec, dtype, cooperative) in scalar.chain(cooperative) {
         let target = if cooperative || GPU_KERNELS.contains(&spec.name) { Target::Gpu } else { Target::Any };
         let files = read_files(spec);
-        // Each reading of the operands a kernel is built for: as declared and as words (WD), B
+        // Each reading of the operands a kernel is built for: as 32- and 64-bit words (WD), B
         // from storage and from texels (TB).
         let words: &[u32] = if WORD_LOADS.contains(&spec.name) { &[0, 1] } else { &[] };
         let texels: &[u32] = if TEXEL_B.contains(&spec.name) { &[0, 1] } else { &[] };

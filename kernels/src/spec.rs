@@ -230,9 +230,10 @@ pub const KERNELS: &[KernelSpec] = &[
     KernelSpec { name: "timestep_embedding", files: &["timestep.wgsl"], params: NONE },
 ];
 
-/// The kernels built twice, reading their operands as declared (WD = 0) and as 64-bit words
-/// (WD = 1, `scalar_unit` in compile.rs), which Mesa 22's lavapipe loads faster; the words need
-/// `shaderInt64` up to 8 lanes.
+/// The kernels built twice, reading their operands as 32-bit words (WD = 0: an f16 unit as two
+/// `u32`s, which Mesa 26.1's lavapipe loads faster than four halves) and as 64-bit words (WD = 1,
+/// which Mesa 22's lavapipe loads faster still; `scalar_unit` in compile.rs). Up to 8 lanes the
+/// 64-bit words need `shaderInt64`.
 pub const WORD_LOADS: &[&str] = &["gemm_sg", "conv_sg", "attention"];
 
 /// The kernels also built with B read from a uniform texel buffer (TB = 1: b_texels.wgsl in

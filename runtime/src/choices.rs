@@ -31,7 +31,7 @@ pub struct Choices {
     /// tiny models, whose products take milliseconds).
     pub quick_compile: bool,
     /// Whether the subgroup-register kernels read their operands as 64-bit words (their WD = 1
-    /// variants; [`KernelPlan`]'s `word_loads` says where). Tests run both.
+    /// variants; [`KernelPlan`]'s `word_loads` says where), not as 32-bit words. Tests run both.
     pub word_loads: bool,
     /// Whether the subgroup-register kernels read B through a texel view (their TB = 1
     /// variants; [`KernelPlan`]'s `texel_b` says where). Tests run both.

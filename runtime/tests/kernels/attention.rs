@@ -147,12 +147,12 @@ fn scores_whose_maximum_jumps_between_chunks() {
     }
 }
 
-/// The subgroup attention reading its operands as declared and as 64-bit words (WD, which Mesa
+/// The subgroup attention reading its operands as 32- and as 64-bit words (WD, which Mesa
 /// 22's lavapipe takes), in both dtypes: self-attention over chunk and row-tile edges, and
 /// cross-attention from a fused projection's strided columns. Up to 8 lanes a device without
 /// 64-bit integers must be refused the words.
 #[test]
-fn subgroup_attention_reads_as_declared_or_as_words() {
+fn subgroup_attention_reads_32_or_64_bit_words() {
     let ctx = ctx_with(GemmFamily::Subgroup);
     ctx.set_gpu_paths(false);
     ctx.choose(|c| c.quick_compile = false);

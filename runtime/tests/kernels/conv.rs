@@ -127,11 +127,11 @@ fn params_of(ran: &[(GemmFamily, Vec<&'static Variant>)], family: GemmFamily, ke
         .collect()
 }
 
-/// The subgroup kernels reading their operands as declared and as 64-bit words, and the weights
+/// The subgroup kernels reading their operands as 32- and as 64-bit words, and the weights
 /// from storage and from texels, where the device takes them (gemm.rs holds the refusals):
 /// padding and a residual, both dtypes against f64.
 #[test]
-fn subgroup_kernels_read_as_declared_as_words_or_from_texels() {
+fn subgroup_kernels_read_32_or_64_bit_words_from_storage_or_texels() {
     let ctx = ctx_with(GemmFamily::Subgroup);
     let c = padded_residual();
     for (words, texels) in [(false, false), (true, false), (false, true), (true, true)] {

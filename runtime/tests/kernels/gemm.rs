@@ -252,13 +252,13 @@ fn batched_strided_alpha_accumulate() {
     assert!(tiled.iter().all(|&k| k == "gemm_tiled") && !tiled.is_empty(), "{tiled:?}");
 }
 
-/// The subgroup kernels reading their operands as declared and as 64-bit words (WD), and B from
+/// The subgroup kernels reading their operands as 32- and as 64-bit words (WD), and B from
 /// storage and from texels (TB), as Mesa 22's lavapipe takes both, in both dtypes against f64:
 /// B stored K×N and N×K, batched and strided, as a view past the start of its buffer, and GEGLU
 /// fused. Up to 8 lanes a device without 64-bit integers must be refused the words, and one
 /// that fetches no texels the texels.
 #[test]
-fn subgroup_kernels_read_as_declared_as_words_or_from_texels() {
+fn subgroup_kernels_read_32_or_64_bit_words_from_storage_or_texels() {
     let ctx = ctx_with(GemmFamily::Subgroup);
     let info = ctx.info().clone();
     assert!(info.gemm_subgroup_width().is_some(), "{} runs no subgroup-register kernel", info.name);
