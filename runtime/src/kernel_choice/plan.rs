@@ -128,7 +128,9 @@ impl KernelPlan {
     fn products(&self) -> String {
         match (self.gemm, self.fragment) {
             (GemmFamily::Subgroup, _) => {
-                let words = if self.word_loads { ", operands read as words" } else { "" };
+                // Up to 8 lanes (kernels/compile.rs, `scalar_unit`): 16 read 32-bit words either way.
+                let wide = self.word_loads && self.subgroup_width.is_some_and(|lanes| lanes <= 8);
+                let words = if wide { ", operands in 64-bit words" } else { ", operands in 32-bit words" };
                 let texels = if self.texel_b { ", B from texels" } else { "" };
                 format!("subgroup-register, {} lanes (CPU){words}{texels}", self.subgroup_width.unwrap_or_default())
             }
@@ -264,16 +266,20 @@ mod tests {
         d.lavapipe_mesa = Some((22, 3));
         assert!(words(&d));
         let plan = KernelPlan::for_device(&d, &Settings::default()).to_string();
-        assert!(plan.contains("8 lanes (CPU), operands read as words"), "{plan}");
+        assert!(plan.contains("8 lanes (CPU), operands in 64-bit words"), "{plan}");
         d.lavapipe_mesa = Some((26, 1));
-        assert!(!words(&d), "Mesa 26.1 loads 16-bit values faster than words");
+        assert!(!words(&d), "Mesa 26.1 gathers 32-bit words faster than 64-bit ones");
+        let plan = KernelPlan::for_device(&d, &Settings::default()).to_string();
+        assert!(plan.contains("8 lanes (CPU), operands in 32-bit words"), "{plan}");
         d.lavapipe_mesa = None;
-        assert!(!words(&d), "another CPU driver keeps the declared units");
+        assert!(!words(&d), "another CPU driver reads 32-bit words");
         d.lavapipe_mesa = Some((22, 3));
         d.shader_int64 = false;
         assert!(!words(&d), "8 lanes' words are 64-bit integers");
         d.subgroup_size = 16;
         assert!(words(&d), "16 lanes read 32-bit words");
+        let plan = KernelPlan::for_device(&d, &Settings::default()).to_string();
+        assert!(plan.contains("16 lanes (CPU), operands in 32-bit words"), "{plan}");
         let gpu_paths = Settings { gpu_paths: true, ..Settings::default() };
         assert!(!KernelPlan::for_device(&d, &gpu_paths).word_loads);
     }
@@ -287,7 +293,7 @@ mod tests {
         d.lavapipe_mesa = Some((22, 3));
         assert!(texels(&d));
         let plan = KernelPlan::for_device(&d, &Settings::default()).to_string();
-        assert!(plan.contains("8 lanes (CPU), operands read as words, B from texels"), "{plan}");
+        assert!(plan.contains("8 lanes (CPU), operands in 64-bit words, B from texels"), "{plan}");
         d.subgroup_size = 16;
         assert!(texels(&d), "every width fetches texels");
         d.lavapipe_mesa = Some((26, 1));
