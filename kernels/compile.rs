@@ -83,11 +83,10 @@ fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
 /// `Unit`, `unit_f32` (a unit widened to f32) and `f32_unit` (four f32 values narrowed to a
 /// unit, for stores), for the kernels that are not cooperative.
 /// The kernels of [`WORD_LOADS`] read their units as words, `words` = WD at `lanes` lanes:
-/// - WD = 1, 64-bit words up to 8 lanes: Mesa 22's lavapipe loads a storage buffer one component
-///   at a time, each a loop of branches over the lanes, so 64-bit components take a quarter of
-///   the loops of f16 ones and half of f32 ones (docs/benchmark-log.md, "64-bit words"). At 16
-///   lanes LLVM's code for 64-bit vectors (1,024 bits) ran the products at 0.4× speed, so there
-///   WD = 1 reads 32-bit words as WD = 0 does.
+/// - WD = 1, 64-bit words up to [`WIDEST_64_BIT_WORDS`] lanes: Mesa 22's lavapipe loads a
+///   storage buffer one component at a time, each a loop of branches over the lanes, so 64-bit
+///   components take a quarter of the loops of f16 ones and half of f32 ones
+///   (docs/benchmark-log.md, "64-bit words"). Wider, WD = 1 reads 32-bit words as WD = 0 does.
 /// - WD = 0, 32-bit words: an f16 unit is two `u32`s, not four halves, which Mesa 26.1's
 ///   lavapipe gathers 1.2–1.5× faster (docs/benchmark-log.md, "32-bit words"); an f32 unit is
 ///   read as it is.
@@ -95,7 +94,7 @@ fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
 /// Every other kernel reads its units as declared.
 fn scalar_unit(f16: bool, words: Option<u32>, lanes: u32) -> &'static str {
     match (f16, words) {
-        (true, Some(1)) if lanes <= 8 => {
+        (true, Some(1)) if lanes <= WIDEST_64_BIT_WORDS => {
             " alias Unit = u64; fn unit_f32(u: Unit) -> vec4<f32> \
              { return vec4<f32>(unpack2x16float(u32(u)), unpack2x16float(u32(u >> 32u))); } \
              fn f32_unit(v: vec4<f32>) -> Unit \
@@ -106,7 +105,7 @@ fn scalar_unit(f16: bool, words: Option<u32>, lanes: u32) -> &'static str {
              { return vec4<f32>(unpack2x16float(u.x), unpack2x16float(u.y)); } \
              fn f32_unit(v: vec4<f32>) -> Unit { return vec2<u32>(pack2x16float(v.xy), pack2x16float(v.zw)); }"
         }
-        (false, Some(1)) if lanes <= 8 => {
+        (false, Some(1)) if lanes <= WIDEST_64_BIT_WORDS => {
             " alias Unit = vec2<u64>; fn unit_f32(u: Unit) -> vec4<f32> \
              { return bitcast<vec4<f32>>(vec4<u32>(u32(u.x), u32(u.x >> 32u), u32(u.y), u32(u.y >> 32u))); } \
              fn f32_unit(v: vec4<f32>) -> Unit { let w = bitcast<vec4<u32>>(v); \

@@ -41,6 +41,7 @@ pub fn find(kernel: &str, dtype: Dtype, want: &[(&str, u32)]) -> Option<&'static
 /// The build-time compiler, tested on sources written to fail.
 #[cfg(test)]
 mod compile_tests {
+    use super::WIDEST_64_BIT_WORDS;
     include!("../compile.rs");
 
     fn one_file(body: &str) -> Source {

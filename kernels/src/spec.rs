@@ -236,6 +236,10 @@ pub const KERNELS: &[KernelSpec] = &[
 /// 64-bit words need `shaderInt64`.
 pub const WORD_LOADS: &[&str] = &["gemm_sg", "conv_sg", "attention"];
 
+/// The widest subgroup whose WD = 1 variants read 64-bit words; wider ones read 32-bit words
+/// there too (at 16 lanes LLVM's code for 64-bit vectors ran the products at 0.4× speed).
+pub const WIDEST_64_BIT_WORDS: u32 = 8;
+
 /// The kernels also built with B read from a uniform texel buffer (TB = 1: b_texels.wgsl in
 /// place of b_units.wgsl), which Mesa 22's lavapipe fetches without a loop over the lanes.
 pub const TEXEL_B: &[&str] = &["gemm_sg", "conv_sg"];

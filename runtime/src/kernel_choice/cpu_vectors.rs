@@ -34,9 +34,9 @@ impl DeviceInfo {
     }
 
     /// Whether the device has the integers the subgroup kernels' words are read as at its width:
-    /// 64-bit ones (`shaderInt64`) up to 8 lanes, 32-bit ones at 16 (kernels/compile.rs).
+    /// 64-bit ones (`shaderInt64`) up to `WIDEST_64_BIT_WORDS` lanes, 32-bit ones past it.
     pub fn can_read_words(&self) -> bool {
-        self.gemm_subgroup_width() == Some(16) || self.shader_int64
+        self.gemm_subgroup_width().is_some_and(|lanes| lanes > vkdiff_kernels::WIDEST_64_BIT_WORDS) || self.shader_int64
     }
 
     /// Whether the subgroup kernels may read B through texel views (TB = 1 in

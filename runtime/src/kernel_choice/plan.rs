@@ -128,8 +128,8 @@ impl KernelPlan {
     fn products(&self) -> String {
         match (self.gemm, self.fragment) {
             (GemmFamily::Subgroup, _) => {
-                // Up to 8 lanes (kernels/compile.rs, `scalar_unit`): 16 read 32-bit words either way.
-                let wide = self.word_loads && self.subgroup_width.is_some_and(|lanes| lanes <= 8);
+                let wide = self.word_loads
+                    && self.subgroup_width.is_some_and(|lanes| lanes <= vkdiff_kernels::WIDEST_64_BIT_WORDS);
                 let words = if wide { ", operands in 64-bit words" } else { ", operands in 32-bit words" };
                 let texels = if self.texel_b { ", B from texels" } else { "" };
                 format!("subgroup-register, {} lanes (CPU){words}{texels}", self.subgroup_width.unwrap_or_default())
