@@ -255,8 +255,8 @@ fn conv_large_products_take_the_large_tiles() {
 
 #[test]
 fn conv_large_images_take_the_large_row_tiles() {
-    // 34×34 = 1156 and 2·13·13 = 338 output pixels select the 64- and 32-row variants where
-    // the weights number at least 2¹⁷ (3·3·128·116; smaller convolutions take 16 rows).
+    // 34×34 = 1156 and 2·13·13 = 338 output pixels select the tallest and the 32-row variants
+    // where the weights number at least 2¹⁷ (3·3·128·116; smaller convolutions take 16 rows).
     let ran = all(
         Case {
             b: 1,
@@ -272,8 +272,7 @@ fn conv_large_images_take_the_large_row_tiles() {
         },
         26,
     );
-    // 16 lanes stop at 32 rows (for code size).
-    let tallest = if ctx().info().gemm_subgroup_width() == Some(16) { 32 } else { 64 };
+    let tallest = crate::tallest_subgroup_rows();
     assert_eq!(params_of(&ran, GemmFamily::Subgroup, "conv_sg", "TM"), [tallest; 2], "1156 pixels: {tallest} rows");
     let ran = all(
         Case {

@@ -144,12 +144,11 @@ fn eight_subgroup_tiles_of_two_by_two_fragments() {
 
 #[test]
 fn tall_shapes_take_the_large_row_tiles() {
-    // M ≥ 256 and ≥ 1024 select the 32- and 64-row subgroup variants for products of at least
-    // 2¹⁷ weights (smaller ones take 16 rows); M off their multiples.
+    // M ≥ 256 and ≥ 1024 select the 32-row and the tallest subgroup variants for products of at
+    // least 2¹⁷ weights (smaller ones take 16 rows); M off their multiples.
     let ran = both(Matmul::dense(300, 516, 256, true), true, 8);
     assert_eq!(params_of(&ran, GemmFamily::Subgroup, "gemm_sg", "TM"), [32, 32], "M ≥ 256: 32 rows");
-    // 16 lanes stop at 32 rows (for code size).
-    let tallest = if ctx().info().gemm_subgroup_width() == Some(16) { 32 } else { 64 };
+    let tallest = crate::tallest_subgroup_rows();
     let ran = both(Matmul::dense(1030, 520, 256, false), false, 9);
     assert_eq!(params_of(&ran, GemmFamily::Subgroup, "gemm_sg", "TM"), [tallest; 2], "M ≥ 1024: {tallest} rows");
 }

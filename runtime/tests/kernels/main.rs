@@ -15,3 +15,15 @@ mod norm;
 mod pool;
 mod runtime;
 mod tuning;
+
+/// The tallest subgroup GEMM tile the shared context takes: 64 rows, or 32 at 16 lanes (for code
+/// size) and where small products take the quickly compiled variants (lavapipe after Mesa 22,
+/// whose JIT takes minutes at 64 rows).
+fn tallest_subgroup_rows() -> u32 {
+    let ctx = vkdiff_testkit::ctx();
+    if ctx.info().gemm_subgroup_width() == Some(16) || ctx.choices().quick_compile {
+        32
+    } else {
+        64
+    }
+}
