@@ -4,7 +4,8 @@
 //! and every file it lists has the size it lists; anything less is made again.
 
 use super::plan::{index_of, ImageFiles, Shard, FOLDERS};
-use super::settings::{first_difference, DatasetSettings};
+use super::settings::DatasetSettings;
+use super::settings_record::first_difference;
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};

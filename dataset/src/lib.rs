@@ -28,6 +28,7 @@ mod render_only;
 mod run;
 mod scenes;
 mod settings;
+mod settings_record;
 mod stats;
 mod stats_geometry;
 mod stop;

@@ -19,8 +19,8 @@
 //! scene, named `<seq>/<NNNNN>` (the folder's name), in sequence (name) then frame order;
 //! `--scenes` is one sequence folder or a folder of them. A sequence folder whose frames are
 //! written but whose metadata.json is not (a run stopped, or still writing) is skipped with a note.
-//! metadata.json is parsed once, when the folder is opened; the frames' headers are checked when
-//! the scenes are listed.
+//! metadata.json is parsed once, when the folder is opened (kubric_metadata.rs); the frames'
+//! headers are checked when the scenes are listed.
 //!
 //! Instances: segmentation index k is instance k, its annotation carrying `instance_id` k and its
 //! `asset_id`; an index past the instances listed stops the scene, naming the pixel. Categories:
@@ -33,11 +33,11 @@
 //! camera's frame.
 
 use crate::format::{SceneFormat, SceneIndex};
-use crate::kubric_geometry::{camera_pose, decode_normal, instance_pose, intrinsics, planar_from_distance, Matrix};
+use crate::kubric_geometry::{decode_normal, planar_from_distance};
+use crate::kubric_metadata::{name_of, parse_sequence, Sequence, METADATA};
 use crate::labels::{read_categories, CategoryGuide, RawScene};
 use crate::SceneError;
 use rayon::prelude::*;
-use serde::Deserialize;
 use serde_json::{json, Map};
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::BufReader;
@@ -45,9 +45,6 @@ use std::path::{Path, PathBuf};
 use vkdiff_formats::image::{image_size, read_image};
 use vkdiff_render::camera::{Camera, Pose};
 use vkdiff_render::coco::Category;
-use vkdiff_render::geometry::{Box3, ObjectPose};
-
-const METADATA: &str = "metadata.json";
 
 /// `<prefix>NNNNN<suffix>` → NNNNN (five digits or more, as `{:05d}` writes them).
 fn frame_number(name: &str, prefix: &str, suffix: &str) -> Option<usize> {
@@ -73,61 +70,6 @@ fn has_frames(path: &Path) -> bool {
     })
 }
 
-#[derive(Deserialize)]
-struct MetadataFile {
-    metadata: SceneMetadata,
-    camera: CameraMetadata,
-    #[serde(default)]
-    instances: Vec<InstanceMetadata>,
-}
-
-#[derive(Deserialize)]
-struct SceneMetadata {
-    resolution: [u32; 2],
-    num_frames: usize,
-}
-
-#[derive(Deserialize)]
-struct CameraMetadata {
-    #[serde(rename = "K")]
-    k: Matrix,
-    positions: Vec<[f64; 3]>,
-    quaternions: Vec<[f64; 4]>,
-}
-
-#[derive(Deserialize)]
-struct InstanceMetadata {
-    asset_id: Option<String>,
-    category: Option<String>,
-    positions: Option<Vec<[f64; 3]>>,
-    quaternions: Option<Vec<[f64; 4]>>,
-    bboxes_3d: Option<Vec<[[f64; 3]; 8]>>,
-}
-
-/// One instance of a sequence: segmentation index `index`.
-#[derive(Debug)]
-struct KubricInstance {
-    index: u32,
-    category: String,
-    asset_id: Option<String>,
-    /// Per frame, its pose in the camera and its box, where metadata.json gives them.
-    boxes: Vec<Option<(ObjectPose, Box3)>>,
-}
-
-/// One Kubric output folder, its metadata.json parsed.
-#[derive(Debug)]
-struct Sequence {
-    name: String,
-    folder: PathBuf,
-    width: u32,
-    height: u32,
-    /// fx, fy, cx, cy in pixels.
-    k: [f64; 4],
-    /// Per frame: camera → world (OpenCV's camera axes) and its rotation.
-    poses: Vec<([[f64; 4]; 4], Matrix)>,
-    instances: Vec<KubricInstance>,
-}
-
 /// Kubric sequences, every metadata.json parsed.
 #[derive(Debug)]
 pub struct KubricSequences {
@@ -138,10 +80,6 @@ pub struct KubricSequences {
     categories: BTreeMap<String, Category>,
     guides: BTreeMap<u32, CategoryGuide>,
     notes: Vec<String>,
-}
-
-fn name_of(folder: &Path) -> String {
-    folder.file_name().map_or(folder.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
 impl KubricSequences {
@@ -238,59 +176,6 @@ impl KubricSequences {
             .ok_or_else(|| SceneError::new(format!("{} is not a listed Kubric frame", key.display())))?;
         Ok((&self.sequences[s], f))
     }
-}
-
-/// A sequence's metadata.json, checked: frame counts, K, the camera's and instances' poses.
-fn parse_sequence(folder: &Path, default_category: &str) -> Result<Sequence, SceneError> {
-    let name = name_of(folder);
-    let fail = |why: String| SceneError::new(format!("{name}: {METADATA}: {why}"));
-    let text = std::fs::read_to_string(folder.join(METADATA)).map_err(|e| fail(e.to_string()))?;
-    let data: MetadataFile = serde_json::from_str(&text).map_err(|e| fail(format!("not Kubric's metadata: {e}")))?;
-    let [width, height] = data.metadata.resolution;
-    let frames = data.metadata.num_frames;
-    if width == 0 || height == 0 || frames == 0 {
-        return Err(fail(format!("resolution [{width}, {height}] and num_frames {frames} must be positive")));
-    }
-    let counted = |what: &str, n: usize| -> Result<(), SceneError> {
-        if n == frames {
-            return Ok(());
-        }
-        Err(fail(format!("{what} has {n} frames, metadata.num_frames says {frames}")))
-    };
-    let camera = &data.camera;
-    counted("camera.positions", camera.positions.len())?;
-    counted("camera.quaternions", camera.quaternions.len())?;
-    let k = intrinsics(&camera.k, width, height).map_err(|why| fail(format!("camera: {why}")))?;
-    let poses = (0..frames)
-        .map(|f| camera_pose(camera.positions[f], camera.quaternions[f]))
-        .collect::<Result<Vec<_>, String>>()
-        .map_err(|why| fail(format!("camera: {why}")))?;
-    let mut instances = Vec::new();
-    for (k0, i) in data.instances.into_iter().enumerate() {
-        let index = k0 as u32 + 1;
-        let what = format!("instance {index}{}", i.asset_id.as_ref().map_or(String::new(), |a| format!(" ({a})")));
-        let category = match (&i.category, &i.asset_id) {
-            (Some(c), _) if !c.trim().is_empty() => c.trim().to_string(),
-            (None, Some(a)) if !a.trim().is_empty() => a.trim().to_string(),
-            (None, None) => default_category.to_string(),
-            _ => return Err(fail(format!("{what}: its category (or asset_id) is empty"))),
-        };
-        let mut boxes = vec![None; frames];
-        if let (Some(positions), Some(quaternions), Some(corners)) = (&i.positions, &i.quaternions, &i.bboxes_3d) {
-            counted(&format!("{what}: positions"), positions.len())?;
-            counted(&format!("{what}: quaternions"), quaternions.len())?;
-            counted(&format!("{what}: bboxes_3d"), corners.len())?;
-            for (f, slot) in boxes.iter_mut().enumerate() {
-                let (t, cv) = &poses[f];
-                let eye = [t[0][3], t[1][3], t[2][3]];
-                let pose = instance_pose((cv, eye), positions[f], quaternions[f], &corners[f])
-                    .map_err(|why| fail(format!("{what}, frame {f}: {why}")))?;
-                *slot = Some(pose);
-            }
-        }
-        instances.push(KubricInstance { index, category, asset_id: i.asset_id, boxes });
-    }
-    Ok(Sequence { name, folder: folder.to_path_buf(), width, height, k, poses, instances })
 }
 
 /// `why`, about `file` of the scene being read (the refusal names the scene).

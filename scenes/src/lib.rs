@@ -14,6 +14,7 @@ mod folder_geometry;
 mod format;
 mod kubric;
 mod kubric_geometry;
+mod kubric_metadata;
 mod labels;
 mod procedural;
 mod rendered;
@@ -23,6 +24,7 @@ mod replicator_camera;
 mod replicator_files;
 mod solo;
 mod solo_geometry;
+mod solo_step;
 
 use serde_json::{Map, Value};
 use std::collections::BTreeMap;

@@ -19,8 +19,8 @@
 //! order, as numbers. Unity writes a step's frame_data.json after every file it names, so a step
 //! is whole once that is there: one without it (its images written, a run stopped) is skipped
 //! with a note; a frame_data.json naming a missing or empty file is refused in one line naming
-//! the file. Every frame_data.json is parsed once, when the folder is opened; the images' headers
-//! are checked when the scenes are listed.
+//! the file. Every frame_data.json is parsed once, when the folder is opened (solo_step.rs); the
+//! images' headers are checked when the scenes are listed.
 //!
 //! Instances: the colours of the annotation's `instances` (instanceId, labelId, labelName, color
 //! RGBA), each the renderer id `instanceId`; (0, 0, 0, 255), the colour Unity gives instance index
@@ -38,28 +38,17 @@
 
 use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::{read_categories, CategoryGuide, RawScene};
-use crate::solo_geometry::{box_pose, camera_of, decode_normal, planar_from_range, Box3DValue, CaptureCamera};
+use crate::solo_geometry::{decode_normal, planar_from_range};
+use crate::solo_step::{parse_step, SoloScene, BACKGROUND, FRAME_DATA, INSTANCES};
 use crate::SceneError;
 use rayon::prelude::*;
-use serde::Deserialize;
-use serde_json::{json, Map, Value};
+use serde_json::{json, Map};
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 use vkdiff_formats::image::{depth_exr_size, image_size, read_depth_exr, read_image, read_rgb_exr};
-use vkdiff_render::camera::{Camera, Pose};
+use vkdiff_render::camera::Camera;
 use vkdiff_render::coco::Category;
-use vkdiff_render::geometry::{Box3, ObjectPose};
-
-const FRAME_DATA: &str = "frame_data.json";
-const SOLO: &str = "type.unity.com/unity.solo.";
-const INSTANCES: &str = "InstanceSegmentationAnnotation";
-const DEPTH: &str = "DepthAnnotation";
-const NORMALS: &str = "NormalAnnotation";
-const BOXES: &str = "BoundingBox3DAnnotation";
-/// The colours of instance index 0 (LabelManager's instanceSegmentationColors[0]) and of nothing
-/// drawn at all; InstanceIdToColorMapping reads both as no instance.
-const BACKGROUND: [[u8; 4]; 2] = [[0, 0, 0, 255], [0, 0, 0, 0]];
 
 /// `sequence.<K>` → K.
 fn sequence_number(name: &str) -> Option<u64> {
@@ -73,70 +62,9 @@ fn step_of(name: &str) -> Option<(u64, &str)> {
     (!step.is_empty() && step.bytes().all(|b| b.is_ascii_digit())).then(|| Some((step.parse().ok()?, rest)))?
 }
 
-/// `why`, about `file` of scene `scene`, before the scenes are listed.
-fn refuse(scene: &str, file: &str, why: impl std::fmt::Display) -> SceneError {
-    SceneError::new(format!("scene {scene}: {file}: {why}"))
-}
-
 /// `why`, about `file` of the scene being read (the refusal names the scene).
 fn bad(file: &str, why: impl std::fmt::Display) -> SceneError {
     SceneError::new(format!("{file}: {why}"))
-}
-
-#[derive(Deserialize)]
-struct FrameData {
-    #[serde(default)]
-    captures: Vec<Value>,
-}
-
-/// A capture's or annotation's "@type" ("" where it has none).
-fn kind_of(record: &Value) -> &str {
-    record.get("@type").and_then(Value::as_str).unwrap_or_default()
-}
-
-/// A capture's or annotation's "filename": None where it is absent or null (a capture whose
-/// image Unity was told not to save).
-fn filename_of(record: &Value) -> Result<Option<String>, String> {
-    match record.get("filename") {
-        None | Some(Value::Null) => Ok(None),
-        Some(Value::String(name)) => Ok(Some(name.clone())),
-        Some(other) => Err(format!("\"filename\" {other} is not a file name")),
-    }
-}
-
-#[derive(Deserialize)]
-#[serde(rename_all = "camelCase")]
-struct InstanceEntry {
-    instance_id: i64,
-    label_id: i64,
-    label_name: String,
-    color: [u8; 4],
-}
-
-/// One instance of a scene.
-#[derive(Clone, Debug)]
-struct SoloInstance {
-    id: u32,
-    label_id: i64,
-    label: String,
-}
-
-/// One capture with its instance segmentation: a scene.
-#[derive(Debug)]
-struct SoloScene {
-    name: String,
-    folder: PathBuf,
-    rgb: Option<String>,
-    /// The capture's `dimension`, W × H.
-    dimension: (u32, u32),
-    camera: Option<([f64; 4], Pose)>,
-    instances: String,
-    colours: BTreeMap<[u8; 4], SoloInstance>,
-    depth: String,
-    range: bool,
-    normals: Option<String>,
-    /// instanceId → its 3D box.
-    boxes: BTreeMap<u32, (ObjectPose, Box3)>,
 }
 
 /// A SOLO dataset's scenes, every frame_data.json parsed.
@@ -305,151 +233,6 @@ fn categories_from_labels(scenes: &[&SoloScene]) -> Result<BTreeMap<String, Cate
         .into_iter()
         .map(|(name, (id, _))| (name.to_string(), Category::new(id as u32, name, "object")))
         .collect())
-}
-
-/// Step `step` of the sequence folder `folder` (named `seq`): its scenes, keyed.
-fn parse_step(folder: &Path, seq: &str, step: u64) -> Result<Vec<(PathBuf, SoloScene)>, SceneError> {
-    let step_name = format!("{seq}/step{step}");
-    let data_name = format!("step{step}.{FRAME_DATA}");
-    let text = std::fs::read_to_string(folder.join(&data_name)).map_err(|e| refuse(&step_name, &data_name, e))?;
-    let data: FrameData = serde_json::from_str(&text)
-        .map_err(|e| refuse(&step_name, &data_name, format!("not SOLO's frame data: {e}")))?;
-    // Every file the step names must be there, whole.
-    let named = |v: &Value| filename_of(v).map_err(|why| refuse(&step_name, &data_name, why));
-    for capture in &data.captures {
-        let annotations = capture.get("annotations").and_then(Value::as_array).map_or(&[][..], |a| &a[..]);
-        for record in std::iter::once(capture).chain(annotations) {
-            if let Some(name) = named(record)? {
-                let why = match std::fs::metadata(folder.join(&name)) {
-                    Ok(m) if m.is_file() && m.len() > 0 => continue,
-                    Ok(m) if m.is_file() => "empty".to_string(),
-                    _ => "missing".to_string(),
-                };
-                return Err(refuse(&step_name, &name, format!("{why} ({data_name} names it)")));
-            }
-        }
-    }
-    let mut scenes = Vec::new();
-    for capture in &data.captures {
-        let annotations = capture.get("annotations").and_then(Value::as_array).map_or(&[][..], |a| &a[..]);
-        let of_kind = |kind: &str| -> Vec<&Value> {
-            annotations.iter().filter(|a| kind_of(a).strip_prefix(SOLO) == Some(kind)).collect()
-        };
-        if of_kind(INSTANCES).is_empty() {
-            continue;
-        }
-        scenes.push((capture, of_kind(INSTANCES), of_kind(DEPTH), of_kind(NORMALS), of_kind(BOXES)));
-    }
-    if scenes.is_empty() {
-        let why = format!("no capture has an {INSTANCES} (an InstanceSegmentationLabeler on the Perception Camera)");
-        return Err(refuse(&step_name, &data_name, why));
-    }
-    let several = scenes.len() > 1;
-    let mut out = Vec::new();
-    for (capture, instances, depth, normals, boxes) in scenes {
-        let sensor = capture.get("id").and_then(Value::as_str).unwrap_or_default();
-        let name = if several { format!("{step_name}.{sensor}") } else { step_name.clone() };
-        let fail = |why: String| refuse(&name, &data_name, why);
-        let one = |found: Vec<&Value>, kind: &str| -> Result<Option<Value>, SceneError> {
-            match &found[..] {
-                [] => Ok(None),
-                [a] => Ok(Some((*a).clone())),
-                _ => Err(fail(format!(
-                    "capture `{sensor}` has {} {kind}s; one labeler of each kind is read",
-                    found.len()
-                ))),
-            }
-        };
-        let instances = one(instances, INSTANCES)?.expect("a capture with an instance segmentation");
-        let Some(depth) = one(depth, DEPTH)? else {
-            return Err(fail(format!("capture `{sensor}` has no {DEPTH} (a DepthLabeler on the Perception Camera)")));
-        };
-        let normals = one(normals, NORMALS)?;
-        let boxes = one(boxes, BOXES)?;
-        let dimension = capture.get("dimension").cloned().and_then(|d| serde_json::from_value::<[f64; 2]>(d).ok());
-        let dimension = match dimension {
-            Some([w, h]) if w >= 1.0 && h >= 1.0 && w.fract() == 0.0 && h.fract() == 0.0 && w.max(h) < 1e6 => {
-                (w as u32, h as u32)
-            }
-            _ => {
-                let given = capture.get("dimension").map_or("none".to_string(), Value::to_string);
-                return Err(fail(format!("capture `{sensor}`: dimension {given} is not [W, H] in pixels")));
-            }
-        };
-        let camera_fields: CaptureCamera =
-            serde_json::from_value(capture.clone()).map_err(|e| fail(format!("capture `{sensor}`: {e}")))?;
-        let camera = camera_of(&camera_fields, dimension.0, dimension.1)
-            .map_err(|why| fail(format!("capture `{sensor}`: {why}")))?;
-        let file_of = |a: &Value, kind: &str| -> Result<String, SceneError> {
-            named(a)?.ok_or_else(|| fail(format!("its {kind} names no file (\"filename\": null)")))
-        };
-        let colours = instance_colours(&instances).map_err(|why| fail(format!("{INSTANCES}: {why}")))?;
-        let strategy = depth.get("measurementStrategy").and_then(Value::as_str).unwrap_or("Depth");
-        let range = match strategy {
-            "Depth" => false,
-            "Range" => true,
-            other => return Err(fail(format!("{DEPTH}: measurementStrategy `{other}` is neither Depth nor Range"))),
-        };
-        let mut by_instance = BTreeMap::new();
-        if let Some(boxes) = &boxes {
-            let values: Vec<Box3DValue> = match boxes.get("values") {
-                Some(v) => serde_json::from_value(v.clone()).map_err(|e| fail(format!("{BOXES}: {e}")))?,
-                None => Vec::new(),
-            };
-            for v in &values {
-                let id =
-                    u32::try_from(v.instance_id).map_err(|_| fail(format!("{BOXES}: instanceId {}", v.instance_id)))?;
-                let pose = box_pose(v).map_err(|why| fail(format!("{BOXES}: instance {id}: {why}")))?;
-                by_instance.insert(id, pose);
-            }
-        }
-        let scene = SoloScene {
-            name: name.clone(),
-            folder: folder.to_path_buf(),
-            rgb: named(capture)?,
-            dimension,
-            camera,
-            instances: file_of(&instances, INSTANCES)?,
-            colours,
-            depth: file_of(&depth, DEPTH)?,
-            range,
-            normals: normals.as_ref().map(|n| file_of(n, NORMALS)).transpose()?,
-            boxes: by_instance,
-        };
-        let key = folder.join(if several { format!("step{step}.{sensor}") } else { format!("step{step}") });
-        out.push((key, scene));
-    }
-    Ok(out)
-}
-
-/// An InstanceSegmentationAnnotation's instances by colour; background colours, repeated colours
-/// and instance ids are refused.
-fn instance_colours(annotation: &Value) -> Result<BTreeMap<[u8; 4], SoloInstance>, String> {
-    let entries: Vec<InstanceEntry> = match annotation.get("instances") {
-        Some(v) => serde_json::from_value(v.clone()).map_err(|e| format!("instances: {e}"))?,
-        None => Vec::new(),
-    };
-    let mut colours = BTreeMap::new();
-    let mut ids = BTreeSet::new();
-    for e in entries {
-        let id = u32::try_from(e.instance_id).ok().filter(|&id| id > 0);
-        let id = id.ok_or_else(|| format!("instanceId {} is not a positive 32-bit id", e.instance_id))?;
-        if BACKGROUND.contains(&e.color) {
-            return Err(format!("instance {id} has the background's colour {:?}", e.color));
-        }
-        if !ids.insert(id) {
-            return Err(format!("instance {id} is listed twice"));
-        }
-        let label = e.label_name.trim().to_string();
-        if label.is_empty() {
-            return Err(format!("instance {id} has an empty labelName"));
-        }
-        let instance = SoloInstance { id, label_id: e.label_id, label };
-        if let Some(other) = colours.insert(e.color, instance) {
-            return Err(format!("instances {} and {id} share the colour {:?}", other.id, e.color));
-        }
-    }
-    Ok(colours)
 }
 
 /// A file's error, naming it.
