@@ -83,7 +83,7 @@ fn prelude(f16: bool, params: &[(&str, u32)], cooperative: bool) -> String {
 /// `Unit`, `unit_f32` (a unit widened to f32) and `f32_unit` (four f32 values narrowed to a
 /// unit, for stores), for the kernels that are not cooperative.
 /// The kernels of [`WORD_LOADS`] read their units as words, `words` = WD at `lanes` lanes:
-/// - WD = 1, 64-bit words up to [`WIDEST_64_BIT_WORDS`] lanes: Mesa 22's lavapipe loads a
+/// - WD = 1, 64-bit words up to [`WIDEST_64_BIT_WORDS`] lanes: lavapipe before Mesa 26 loads a
 ///   storage buffer one component at a time, each a loop of branches over the lanes, so 64-bit
 ///   components take a quarter of the loops of f16 ones and half of f32 ones
 ///   (docs/benchmark-log.md, "64-bit words"). Wider, WD = 1 reads 32-bit words as WD = 0 does.

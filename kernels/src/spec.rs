@@ -232,8 +232,8 @@ pub const KERNELS: &[KernelSpec] = &[
 
 /// The kernels built twice, reading their operands as 32-bit words (WD = 0: an f16 unit as two
 /// `u32`s, which Mesa 26.1's lavapipe loads faster than four halves) and as 64-bit words (WD = 1,
-/// which Mesa 22's lavapipe loads faster still; `scalar_unit` in compile.rs). Up to 8 lanes the
-/// 64-bit words need `shaderInt64`.
+/// which lavapipe before Mesa 26, loading lane by lane, reads faster; `scalar_unit` in
+/// compile.rs). Up to 8 lanes the 64-bit words need `shaderInt64`.
 pub const WORD_LOADS: &[&str] = &["gemm_sg", "conv_sg", "attention"];
 
 /// The widest subgroup whose WD = 1 variants read 64-bit words; wider ones read 32-bit words
@@ -241,7 +241,7 @@ pub const WORD_LOADS: &[&str] = &["gemm_sg", "conv_sg", "attention"];
 pub const WIDEST_64_BIT_WORDS: u32 = 8;
 
 /// The kernels also built with B read from a uniform texel buffer (TB = 1: b_texels.wgsl in
-/// place of b_units.wgsl), which Mesa 22's lavapipe fetches without a loop over the lanes.
+/// place of b_units.wgsl), which lavapipe before Mesa 26 fetches without a loop over the lanes.
 pub const TEXEL_B: &[&str] = &["gemm_sg", "conv_sg"];
 
 /// The kernels above written for GPUs only (lavapipe runs them where tests ask for the GPU paths,

@@ -57,12 +57,11 @@ pub struct KernelPlan {
     /// Each shape's kernels timed and the fastest taken (`VKDIFF_TUNE`).
     pub tune: bool,
     /// Whether the subgroup-register kernels read their operands as 64-bit words (WD = 1 in
-    /// kernels/src/spec.rs): on Mesa 22's lavapipe, whose every storage-buffer component is a
-    /// loop of branches over the lanes, so wider components make fewer loops (f16 linear 1.3×
-    /// faster on Mesa 22.3; 0.7× on Mesa 26.1, which loads each lane without a loop).
+    /// kernels/src/spec.rs): on lavapipe that `loads_lane_by_lane`, whose every storage-buffer
+    /// component is a loop of branches over the lanes, so wider components make fewer loops.
     pub word_loads: bool,
-    /// Whether the subgroup-register kernels read B through a texel view (TB = 1): on Mesa 22's
-    /// lavapipe, which fetches texels for all lanes at once but loads storage in loops over them.
+    /// Whether the subgroup-register kernels read B through a texel view (TB = 1): on lavapipe
+    /// that [`loads_lane_by_lane`], which fetches texels for all lanes at once.
     pub texel_b: bool,
     /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen).
     pub wider_vectors: bool,
@@ -113,12 +112,8 @@ impl KernelPlan {
                 && settings.quick_compile.unwrap_or(info.lavapipe_mesa.is_some_and(|(major, _)| major > 22)),
             compiled_at_first_use: info.lavapipe_mesa.is_some(),
             tune: settings.tune,
-            word_loads: subgroup_width.is_some()
-                && info.lavapipe_mesa.is_some_and(|(major, _)| major < 23)
-                && info.can_read_words(),
-            texel_b: subgroup_width.is_some()
-                && info.lavapipe_mesa.is_some_and(|(major, _)| major < 23)
-                && info.reads_texel_b(),
+            word_loads: subgroup_width.is_some() && loads_lane_by_lane(info) && info.can_read_words(),
+            texel_b: subgroup_width.is_some() && loads_lane_by_lane(info) && info.reads_texel_b(),
             wider_vectors: info.lavapipe_mesa.is_some()
                 && crate::kernel_choice::cpu_vectors::wider_lavapipe_vectors_available(settings),
         }
@@ -212,6 +207,14 @@ impl fmt::Display for KernelPlan {
     }
 }
 
+/// Whether the device is lavapipe before Mesa 26, whose storage loads are loops of branches over
+/// the lanes: there the 64-bit words and B's texels ran the f16 linear rows 1.3× (Mesa 22.3) and
+/// 1.4× (Mesa 25.0) faster; Mesa 26.1 gathers each lane without a loop, and there they ran slower
+/// (docs/benchmark-log.md). Mesa 23, 24 and 25.1–25.3 were not measured.
+fn loads_lane_by_lane(info: &DeviceInfo) -> bool {
+    info.lavapipe_mesa.is_some_and(|(major, _)| major < 26)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -259,7 +262,7 @@ mod tests {
     }
 
     #[test]
-    fn only_mesa_22s_lavapipe_reads_words_and_only_with_the_integers_they_need() {
+    fn lavapipe_before_mesa_26_reads_words_and_only_with_the_integers_they_need() {
         let mut d = device(0, DeviceKind::Cpu, true);
         d.subgroup_size = 8;
         let words = |d: &DeviceInfo| KernelPlan::for_device(d, &Settings::default()).word_loads;
@@ -267,6 +270,8 @@ mod tests {
         assert!(words(&d));
         let plan = KernelPlan::for_device(&d, &Settings::default()).to_string();
         assert!(plan.contains("8 lanes (CPU), operands in 64-bit words"), "{plan}");
+        d.lavapipe_mesa = Some((25, 0));
+        assert!(words(&d), "Mesa 25.0 loads lane by lane too");
         d.lavapipe_mesa = Some((26, 1));
         assert!(!words(&d), "Mesa 26.1 gathers 32-bit words faster than 64-bit ones");
         let plan = KernelPlan::for_device(&d, &Settings::default()).to_string();
@@ -285,7 +290,7 @@ mod tests {
     }
 
     #[test]
-    fn only_mesa_22s_lavapipe_reads_b_from_texels_and_only_where_it_fetches_them() {
+    fn lavapipe_before_mesa_26_reads_b_from_texels_and_only_where_it_fetches_them() {
         let mut d = device(0, DeviceKind::Cpu, true);
         d.subgroup_size = 8;
         d.texel_fetch = Some(crate::texel_views::TexelLimits { max_elements: 1 << 27, offset_alignment: 16 });
@@ -296,6 +301,8 @@ mod tests {
         assert!(plan.contains("8 lanes (CPU), operands in 64-bit words, B from texels"), "{plan}");
         d.subgroup_size = 16;
         assert!(texels(&d), "every width fetches texels");
+        d.lavapipe_mesa = Some((25, 0));
+        assert!(texels(&d), "Mesa 25.0 loads storage lane by lane too");
         d.lavapipe_mesa = Some((26, 1));
         assert!(!texels(&d), "Mesa 26.1 ran f16 products slower from texels");
         d.lavapipe_mesa = None;

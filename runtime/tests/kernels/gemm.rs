@@ -252,7 +252,7 @@ fn batched_strided_alpha_accumulate() {
 }
 
 /// The subgroup kernels reading their operands as 32- and as 64-bit words (WD), and B from
-/// storage and from texels (TB), as Mesa 22's lavapipe takes both, in both dtypes against f64:
+/// storage and from texels (TB), as lavapipe before Mesa 26 takes both, in both dtypes against f64:
 /// B stored K×N and N×K, batched and strided, as a view past the start of its buffer, and GEGLU
 /// fused. Up to 8 lanes a device without 64-bit integers must be refused the words, and one
 /// that fetches no texels the texels.
