@@ -61,7 +61,7 @@ pub struct KernelPlan {
     /// component is a loop of branches over the lanes, so wider components make fewer loops.
     pub word_loads: bool,
     /// Whether the subgroup-register kernels read B through a texel view (TB = 1): on lavapipe
-    /// that [`loads_lane_by_lane`], which fetches texels for all lanes at once.
+    /// that `loads_lane_by_lane`, which fetches texels for all lanes at once.
     pub texel_b: bool,
     /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen).
     pub wider_vectors: bool,
