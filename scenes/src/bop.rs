@@ -27,7 +27,7 @@
 use crate::bop_geometry::{models_info_path, read_models_info, world_from_camera};
 use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::{read_categories, CategoryGuide, RawScene};
-use crate::SceneError;
+use crate::{bad, SceneError};
 use rayon::prelude::*;
 use serde::Deserialize;
 use serde_json::{json, Map};
@@ -167,12 +167,6 @@ fn scene_name(scene: &Path) -> String {
 /// `why`, about the file `file` (relative to its scene folder) of scene `scene`.
 fn refuse(scene: &Path, file: &str, why: impl std::fmt::Display) -> SceneError {
     SceneError::new(format!("scene {}: {file}: {why}", scene_name(scene)))
-}
-
-/// `why`, about the file `file` (relative to its scene folder) of the image being read (which
-/// the refusal names).
-fn bad(file: &str, why: impl std::fmt::Display) -> SceneError {
-    SceneError::new(format!("{file}: {why}"))
 }
 
 /// A scene's images, from its scene_camera.json (which lists them) and scene_gt.json.

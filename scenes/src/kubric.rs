@@ -36,7 +36,7 @@ use crate::format::{SceneFormat, SceneIndex};
 use crate::kubric_geometry::{decode_normal, planar_from_distance};
 use crate::kubric_metadata::{name_of, parse_sequence, Sequence, METADATA};
 use crate::labels::{read_categories, CategoryGuide, RawScene};
-use crate::SceneError;
+use crate::{bad, SceneError};
 use rayon::prelude::*;
 use serde_json::{json, Map};
 use std::collections::{BTreeMap, BTreeSet};
@@ -176,11 +176,6 @@ impl KubricSequences {
             .ok_or_else(|| SceneError::new(format!("{} is not a listed Kubric frame", key.display())))?;
         Ok((&self.sequences[s], f))
     }
-}
-
-/// `why`, about `file` of the scene being read (the refusal names the scene).
-fn bad(file: &str, why: impl std::fmt::Display) -> SceneError {
-    SceneError::new(format!("{file}: {why}"))
 }
 
 fn open(folder: &Path, name: &str) -> Result<BufReader<std::fs::File>, SceneError> {

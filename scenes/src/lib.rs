@@ -142,6 +142,24 @@ impl SceneError {
     }
 }
 
+/// `why`, about the file `file` of the scene being read, named as its scene folder names it (the
+/// refusal around it names the scene).
+pub(crate) fn bad(file: &str, why: impl std::fmt::Display) -> SceneError {
+    SceneError::new(format!("{file}: {why}"))
+}
+
+/// A reader's error about the file `name`, as [`bad`] words it ("missing" where it is not there).
+pub(crate) fn file_error(name: &str) -> impl Fn(vkdiff_formats::Error) -> SceneError + '_ {
+    move |e| match e {
+        vkdiff_formats::Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
+            bad(name, "missing")
+        }
+        vkdiff_formats::Error::Io { source, .. } => bad(name, source),
+        vkdiff_formats::Error::Format { why, .. } => bad(name, why),
+        vkdiff_formats::Error::Tensor(why) => bad(name, why),
+    }
+}
+
 /// Background depth the renderers write as a far value (BlenderProc: 1e10) rather than ∞: depth
 /// at or past this many metres (or units) is background, unless `--far` says otherwise.
 pub const DEFAULT_FAR: f32 = 1e4;

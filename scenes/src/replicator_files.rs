@@ -1,14 +1,9 @@
 //! Reading Replicator BasicWriter's files: the refusals that name them, their JSON, and the
 //! headers of the depth and the instance image, checked before any pixel is read.
 
-use crate::SceneError;
+use crate::{bad, SceneError};
 use std::io::BufReader;
 use std::path::Path;
-
-/// `why`, about `file` (of the frame being read, which the refusal names).
-pub(crate) fn bad(file: &str, why: impl std::fmt::Display) -> SceneError {
-    SceneError::new(format!("{file}: {why}"))
-}
 
 /// `why`, about `file` of frame `frame`, before the frames are listed.
 pub(crate) fn refuse(frame: &str, file: &str, why: impl std::fmt::Display) -> SceneError {
@@ -22,18 +17,6 @@ pub(crate) fn read_json<T: serde::de::DeserializeOwned>(dir: &Path, frame: &str,
         _ => refuse(frame, name, e),
     })?;
     serde_json::from_str(&text).map_err(|e| refuse(frame, name, format!("not BasicWriter's format: {e}")))
-}
-
-/// A file's error, naming it.
-pub(crate) fn file_error(name: &str) -> impl Fn(vkdiff_formats::Error) -> SceneError + '_ {
-    move |e| match e {
-        vkdiff_formats::Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
-            bad(name, "missing")
-        }
-        vkdiff_formats::Error::Io { source, .. } => bad(name, source),
-        vkdiff_formats::Error::Format { why, .. } => bad(name, why),
-        vkdiff_formats::Error::Tensor(why) => bad(name, why),
-    }
 }
 
 fn open_file(dir: &Path, name: &str) -> Result<BufReader<std::fs::File>, SceneError> {

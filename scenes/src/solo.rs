@@ -40,7 +40,7 @@ use crate::format::{SceneFormat, SceneIndex};
 use crate::labels::{read_categories, CategoryGuide, RawScene};
 use crate::solo_geometry::{decode_normal, planar_from_range};
 use crate::solo_step::{parse_step, SoloScene, BACKGROUND, FRAME_DATA, INSTANCES};
-use crate::SceneError;
+use crate::{bad, file_error, SceneError};
 use rayon::prelude::*;
 use serde_json::{json, Map};
 use std::collections::{BTreeMap, BTreeSet};
@@ -60,11 +60,6 @@ fn sequence_number(name: &str) -> Option<u64> {
 fn step_of(name: &str) -> Option<(u64, &str)> {
     let (step, rest) = name.strip_prefix("step")?.split_once('.')?;
     (!step.is_empty() && step.bytes().all(|b| b.is_ascii_digit())).then(|| Some((step.parse().ok()?, rest)))?
-}
-
-/// `why`, about `file` of the scene being read (the refusal names the scene).
-fn bad(file: &str, why: impl std::fmt::Display) -> SceneError {
-    SceneError::new(format!("{file}: {why}"))
 }
 
 /// A SOLO dataset's scenes, every frame_data.json parsed.
@@ -233,18 +228,6 @@ fn categories_from_labels(scenes: &[&SoloScene]) -> Result<BTreeMap<String, Cate
         .into_iter()
         .map(|(name, (id, _))| (name.to_string(), Category::new(id as u32, name, "object")))
         .collect())
-}
-
-/// A file's error, naming it.
-fn file_error(name: &str) -> impl Fn(vkdiff_formats::Error) -> SceneError + '_ {
-    move |e| match e {
-        vkdiff_formats::Error::Io { source, .. } if source.kind() == std::io::ErrorKind::NotFound => {
-            bad(name, "missing")
-        }
-        vkdiff_formats::Error::Io { source, .. } => bad(name, source),
-        vkdiff_formats::Error::Format { why, .. } => bad(name, why),
-        vkdiff_formats::Error::Tensor(why) => bad(name, why),
-    }
 }
 
 /// The instance image's header: 8-bit RGBA.
