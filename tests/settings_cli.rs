@@ -8,7 +8,7 @@ mod cli;
 use cli::{scratch, vkdiff_with};
 
 /// Each runtime variable with a value it refuses, and a word of what it takes.
-const REFUSED: [(&str, &str, &str); 19] = [
+const REFUSED: [(&str, &str, &str); 20] = [
     ("VKDIFF_VULKAN_API", "1.1", "1.2 or 1.3"),
     ("VKDIFF_VALIDATE", "please", "1 or 0"),
     ("VKDIFF_GPU_PATHS", "gpu", "1 or 0"),
@@ -26,6 +26,7 @@ const REFUSED: [(&str, &str, &str); 19] = [
     ("VKDIFF_SUBMIT_MERGE", "-1", "zero or a positive number of seconds"),
     ("VKDIFF_MEMORY_BUDGET", "lots", "a size such as 8G"),
     ("VKDIFF_BUFFER_CACHE", "maybe", "1 or 0"),
+    ("VKDIFF_WINOGRAD", "maybe", "1 or 0"),
     ("VKDIFF_DEVICE", "the-fast-one", "an index, a UUID or a PCI address"),
     ("VKDIFF_REQUIRE_GPU", "2", "1 or 0"),
 ];

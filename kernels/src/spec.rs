@@ -223,6 +223,10 @@ pub const KERNELS: &[KernelSpec] = &[
         files: &["grid.wgsl", "heads_from_f32.wgsl", "copy_heads.wgsl"],
         params: NONE,
     },
+    // Winograd F(2×2, 3×3)'s transforms of the input tiles, the filters and the products.
+    KernelSpec { name: "winograd_input", files: &["grid.wgsl", "unit_4.wgsl", "winograd_tiles.wgsl", "winograd_input.wgsl"], params: NONE },
+    KernelSpec { name: "winograd_weights", files: &["grid.wgsl", "unit_4.wgsl", "winograd_weights.wgsl"], params: NONE },
+    KernelSpec { name: "winograd_output", files: &["grid.wgsl", "unit_4.wgsl", "winograd_tiles.wgsl", "winograd_output.wgsl"], params: NONE },
     KernelSpec { name: "copy_channels", files: &["grid.wgsl", "copy_channels.wgsl"], params: NONE },
     // Inception's pooling (0 max, 1 average of the taps inside) and its TensorFlow-style resize.
     KernelSpec { name: "pool2d", files: &["grid.wgsl", "pool2d.wgsl"], params: &[&[("OP", 0)], &[("OP", 1)]] },

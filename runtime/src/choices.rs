@@ -36,6 +36,9 @@ pub struct Choices {
     /// Whether the subgroup-register kernels read B through a texel view (their TB = 1
     /// variants; [`KernelPlan`]'s `texel_b` says where). Tests run both.
     pub texel_b: bool,
+    /// Whether 3×3 convolutions of stride 1 run as Winograd's F(2×2, 3×3) (ops/winograd.rs;
+    /// [`KernelPlan`]'s `winograd` says where). Tests run both.
+    pub winograd: bool,
     /// Where recordings split into submissions and how long a wait for one may last.
     pub submit_budget: SubmitBudget,
     /// The most bytes one kernel binding may span; ops split larger tensors into bands below
@@ -63,6 +66,7 @@ impl Choices {
             quick_compile: plan.quick_compile,
             word_loads: plan.word_loads,
             texel_b: plan.texel_b,
+            winograd: plan.winograd,
             submit_budget: SubmitBudget::for_device(info, settings),
             binding_limit: info.max_storage_buffer_range,
             allocation_limit: info.max_allocation,

@@ -1,6 +1,7 @@
 //! Records many dispatches into one command buffer, with barriers only where a dispatch touches
 //! a buffer an earlier one wrote (or writes one an earlier one read), and replays it.
 
+use crate::arena::Arena;
 use crate::context::Context;
 use crate::error::{ensure, Result, VkContext};
 use crate::memory::Buffer;
@@ -38,6 +39,8 @@ pub struct Recorder {
     chunk_dispatches: u32,
     /// When recording began (see [`crate::HostStats::recording_seconds`]).
     started: Instant,
+    /// Temporaries of the ops recorded ([`Recorder::scratch`]).
+    scratch: Arena,
 }
 
 /// Vulkan objects owned by a recording, destroyed with it.
@@ -120,6 +123,7 @@ impl Recorder {
                 chunk_flops: 0.0,
                 chunk_dispatches: 0,
                 started: Instant::now(),
+                scratch: Arena::new(ctx),
             };
             rec.begin_chunk()?;
             Ok(rec)
@@ -168,6 +172,12 @@ impl Recorder {
 
     pub fn context(&self) -> &Context {
         &self.ctx
+    }
+
+    /// Buffers for an op's own temporaries: each goes back for reuse when the op drops its
+    /// tensor, and the hazard tracking orders the reuse.
+    pub fn scratch(&self) -> Arena {
+        self.scratch.clone()
     }
 
     /// Records one dispatch of `kernel` over `groups` workgroups. Bindings are `reads` then

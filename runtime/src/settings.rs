@@ -81,6 +81,9 @@ pub struct Settings {
     pub memory_budget: Option<u64>,
     /// `VKDIFF_BUFFER_CACHE`: keep freed device buffers for reuse.
     pub buffer_cache: bool,
+    /// `VKDIFF_WINOGRAD`: 3×3 convolutions of stride 1 on the CPU family as Winograd's
+    /// F(2×2, 3×3); 0 runs them as direct products.
+    pub winograd: bool,
     /// Whether `LP_NATIVE_VECTOR_WIDTH` chooses lavapipe's vector width (Mesa reads it itself).
     pub lavapipe_width_chosen: bool,
 }
@@ -105,6 +108,7 @@ impl Default for Settings {
             submit_merge: DEFAULT_MERGE_SECONDS,
             memory_budget: None,
             buffer_cache: true,
+            winograd: true,
             lavapipe_width_chosen: false,
         }
     }
@@ -168,6 +172,7 @@ impl Settings {
             submit_merge: seconds("VKDIFF_SUBMIT_MERGE", true)?.unwrap_or(d.submit_merge),
             memory_budget: env.parse("VKDIFF_MEMORY_BUDGET", "bytes, or a size such as 8G or 512M", parse_size)?,
             buffer_cache: switch("VKDIFF_BUFFER_CACHE", true)?,
+            winograd: switch("VKDIFF_WINOGRAD", true)?,
             lavapipe_width_chosen: env.get("LP_NATIVE_VECTOR_WIDTH").is_some(),
         })
     }
@@ -224,6 +229,7 @@ pub(crate) mod tests {
             ("VKDIFF_SUBMIT_MERGE", "0"),
             ("VKDIFF_MEMORY_BUDGET", "8G"),
             ("VKDIFF_BUFFER_CACHE", "no"),
+            ("VKDIFF_WINOGRAD", "0"),
             ("LP_NATIVE_VECTOR_WIDTH", "512"),
         ])
         .unwrap();
@@ -245,6 +251,7 @@ pub(crate) mod tests {
             submit_merge: 0.0,
             memory_budget: Some(8 << 30),
             buffer_cache: false,
+            winograd: false,
             lavapipe_width_chosen: true,
         };
         assert_eq!(s, expected);

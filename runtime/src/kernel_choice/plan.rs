@@ -63,6 +63,10 @@ pub struct KernelPlan {
     /// Whether the subgroup-register kernels read B through a texel view (TB = 1): on lavapipe
     /// that `loads_lane_by_lane`, which fetches texels for all lanes at once.
     pub texel_b: bool,
+    /// Whether 3×3 convolutions of stride 1 run as Winograd's F(2×2, 3×3): the CPU family
+    /// (2.25× less matrix work; `VKDIFF_WINOGRAD=0` runs them direct). GPUs keep the direct
+    /// convolution, measured on none.
+    pub winograd: bool,
     /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen).
     pub wider_vectors: bool,
 }
@@ -114,6 +118,7 @@ impl KernelPlan {
             tune: settings.tune,
             word_loads: subgroup_width.is_some() && loads_lane_by_lane(info) && info.can_read_words(),
             texel_b: subgroup_width.is_some() && loads_lane_by_lane(info) && info.reads_texel_b(),
+            winograd: gemm == GemmFamily::Subgroup && settings.winograd,
             wider_vectors: info.lavapipe_mesa.is_some()
                 && crate::kernel_choice::cpu_vectors::wider_lavapipe_vectors_available(settings),
         }
@@ -127,7 +132,9 @@ impl KernelPlan {
                     && self.subgroup_width.is_some_and(|lanes| lanes <= vkdiff_kernels::WIDEST_64_BIT_WORDS);
                 let words = if wide { ", operands in 64-bit words" } else { ", operands in 32-bit words" };
                 let texels = if self.texel_b { ", B from texels" } else { "" };
-                format!("subgroup-register, {} lanes (CPU){words}{texels}", self.subgroup_width.unwrap_or_default())
+                let winograd = if self.winograd { ", 3×3 convolutions by Winograd F(2×2, 3×3)" } else { "" };
+                let lanes = self.subgroup_width.unwrap_or_default();
+                format!("subgroup-register, {lanes} lanes (CPU){words}{texels}{winograd}")
             }
             (GemmFamily::Cooperative, Some(f)) => {
                 let trial = match self.trial {
@@ -312,5 +319,20 @@ mod tests {
         assert!(!KernelPlan::for_device(&d, &gpu_paths).texel_b);
         d.texel_fetch = None;
         assert!(!texels(&d), "a device that cannot fetch both formats reads storage");
+    }
+
+    #[test]
+    fn the_cpu_family_takes_winograd_convolutions_unless_told_not_to() {
+        let mut d = device(0, DeviceKind::Cpu, true);
+        d.subgroup_size = 8;
+        d.lavapipe_mesa = Some((22, 3));
+        let plan = KernelPlan::for_device(&d, &Settings::default());
+        assert!(plan.winograd);
+        assert!(plan.to_string().contains("3×3 convolutions by Winograd F(2×2, 3×3)"), "{plan}");
+        let direct = Settings { winograd: false, ..Settings::default() };
+        assert!(!KernelPlan::for_device(&d, &direct).winograd);
+        let gpu_paths = Settings { gpu_paths: true, ..Settings::default() };
+        assert!(!KernelPlan::for_device(&d, &gpu_paths).winograd, "the GPU kernels convolve direct");
+        assert!(!KernelPlan::for_device(&device(0, DeviceKind::Discrete, true), &Settings::default()).winograd);
     }
 }

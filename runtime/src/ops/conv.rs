@@ -90,8 +90,10 @@ pub fn conv2d(
     ];
     ensure(out.shape() == expect, || format!("conv2d: output {:?}, expected {expect:?}", out.shape()))?;
     let ctx = rec.context().clone();
-    let by_out = rows_per_band(&ctx, "conv2d", &[wo * cout * elem(out)], 0, 1)?;
-    let by_in = (rows_per_band(&ctx, "conv2d", &[wd * cin * elem(x)], kh, 1)? - 1) / s + 1;
+    // Bands of an even number of rows where the binding alignment allows, so Winograd's 2×2 tiles
+    // (winograd.rs) fall where the whole image's would.
+    let by_out = rows_per_band(&ctx, "conv2d", &[wo * cout * elem(out)], 0, 2)?;
+    let by_in = (rows_per_band(&ctx, "conv2d", &[wd * cin * elem(x)], kh, 2)? - 1) / s + 1;
     for image in 0..b {
         for rows in bands(ho, by_out.min(by_in)) {
             // Input rows this band reads, before clipping to the image: the clipped part is padding.
@@ -115,6 +117,9 @@ fn conv2d_whole(
     p: &ConvParams,
 ) -> Result<()> {
     let c = checked(rec, "conv2d", [x, w, out], bias, p)?;
+    if super::winograd::applies(rec, w, p) && super::winograd::conv2d_winograd(rec, x, w, bias, out, p)? {
+        return Ok(());
+    }
     let record = |rec: &mut Recorder, pick: KernelPick, reads: &[&Tensor], out: &Tensor| {
         // Without a bias the kernel never reads binding 2; the output stands in for it.
         let operands = [reads[0], reads[1], reads.get(2).copied().unwrap_or(out)];

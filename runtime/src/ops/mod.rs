@@ -17,6 +17,7 @@ mod linear_cm2;
 mod matrix2_probes;
 mod norm;
 mod pool;
+mod winograd;
 
 pub use attention::{attention, AttentionLayout};
 pub use attention_cm2::attention_cm2;

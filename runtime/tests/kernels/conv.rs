@@ -31,8 +31,23 @@ impl Case {
     }
 }
 
+/// The direct convolution's kernels of `family`.
 fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static Variant> {
-    check_on(&ctx_with(family), dtype, c, seed)
+    check_on(&direct(family), dtype, c, seed)
+}
+
+/// A context of `family` whose 3×3 convolutions run direct, not as Winograd's.
+fn direct(family: GemmFamily) -> Context {
+    let ctx = ctx_with(family);
+    ctx.choose(|c| c.winograd = false);
+    ctx
+}
+
+/// A CPU-family context whose 3×3 convolutions of stride 1 run as Winograd's F(2×2, 3×3).
+fn winograd() -> Context {
+    let ctx = ctx_with(GemmFamily::Subgroup);
+    ctx.choose(|c| c.winograd = true);
+    ctx
 }
 
 /// Runs the convolution on `ctx` against the reference, asserts the family it ran on, and
@@ -62,7 +77,12 @@ fn check_on(ctx: &Context, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static Va
         c.b, c.h, c.w, c.cin, c.cout, c.k, c.stride, c.pad, c.accumulate, c.relu
     );
     // Same bound as GEMM: 1e-5 of Σ|x·w| for f32 accumulation, plus output storage rounding.
-    assert_within(&what, &out.download().unwrap(), &want, |i| 1e-6 + 1e-5 * mag[i] + rtol * want[i].abs());
+    // Winograd stores its transformed tiles and products in the dtype too: their rounding is
+    // bounded by the storage's relative error of Σ|x·w|.
+    let transformed = if variants.iter().any(|v| v.kernel == "winograd_input") { rtol } else { 0.0 };
+    assert_within(&what, &out.download().unwrap(), &want, |i| {
+        1e-6 + (1e-5 + transformed) * mag[i] + rtol * want[i].abs()
+    });
     assert_product_family(ctx, dtype, &variants, &what, false)
 }
 
@@ -103,12 +123,18 @@ pub(super) fn reference(c: &Case, x: &[f32], w_oihw: &[f32], bias: &[f32], prior
     (want, mag)
 }
 
-/// Every family and dtype (the matrix units in both workgroup tiles); returns each run's variants.
+/// Every family and dtype (the matrix units in both workgroup tiles), and Winograd's F(2×2, 3×3)
+/// where the case is a 3×3 convolution of stride 1; returns each direct run's variants.
 fn all(c: Case, seed: u64) -> Vec<(GemmFamily, Vec<&'static Variant>)> {
     let mut ran = Vec::new();
     for family in [GemmFamily::Subgroup, GemmFamily::Tiled] {
         for dtype in DTYPES {
             ran.push((family, check(family, dtype, &c, seed)));
+        }
+    }
+    if c.k == [3, 3] && c.stride == 1 {
+        for dtype in DTYPES {
+            check_on(&winograd(), dtype, &c, seed);
         }
     }
     // On the matrix units, in both workgroup tiles.
@@ -132,7 +158,7 @@ fn params_of(ran: &[(GemmFamily, Vec<&'static Variant>)], family: GemmFamily, ke
 /// padding and a residual, both dtypes against f64.
 #[test]
 fn subgroup_kernels_read_32_or_64_bit_words_from_storage_or_texels() {
-    let ctx = ctx_with(GemmFamily::Subgroup);
+    let ctx = direct(GemmFamily::Subgroup);
     let c = padded_residual();
     for (words, texels) in [(false, false), (true, false), (false, true), (true, true)] {
         ctx.choose(|c| (c.word_loads, c.texel_b) = (words, texels));
@@ -408,4 +434,46 @@ fn conv_asymmetric_kernels_with_relu() {
         },
         30,
     );
+}
+
+/// 3×3 convolutions of stride 1 as Winograd's F(2×2, 3×3) on the CPU family, beside [`all`]'s
+/// cases: odd and even sizes (tiles past the output's edge), one-sided padding (a band of a
+/// large image), none, a residual with ReLU; the 16 products run on the GEMM, in one band of
+/// tiles and, under a binding limit that just holds the transformed filters (the planes of
+/// min(Cin, Cout) tiles: fewer than each case has), in several.
+#[test]
+fn winograd_matches_the_reference_whole_and_in_bands_of_tiles() {
+    let case = |b, h, w, cin, cout, pad, residual| Case {
+        b,
+        h,
+        w,
+        cin,
+        cout,
+        k: [3, 3],
+        stride: 1,
+        pad,
+        accumulate: residual,
+        relu: residual,
+    };
+    let band = Padding { top: 1, left: 1, bottom: 0, right: 1 };
+    let cases = [
+        case(1, 8, 8, 12, 8, Padding::same(1), false),
+        case(1, 7, 10, 8, 4, band, false),
+        case(2, 6, 5, 4, 12, Padding::same(0), true),
+    ];
+    for (seed, c) in cases.into_iter().enumerate() {
+        for dtype in DTYPES {
+            let ctx = winograd();
+            let filters = (16 * c.cin * c.cout) as u64 * if dtype == Dtype::F16 { 2 } else { 4 };
+            for limit in [ctx.choices().binding_limit, filters] {
+                ctx.choose(|choices| choices.binding_limit = limit);
+                let ran = check_on(&ctx, dtype, &c, 40 + seed as u64);
+                assert!(
+                    ran.iter().all(|v| v.kernel == "gemm_sg"),
+                    "{:?}",
+                    ran.iter().map(|v| v.kernel).collect::<Vec<_>>()
+                );
+            }
+        }
+    }
 }
