@@ -39,11 +39,16 @@ impl VaeConfig {
     /// channels, and a tenth more. Measured on lavapipe (peak less weights, linear in pixels):
     /// SDXL's VAE [128, 256, …] 1,547 values per pixel (f32 at 128² and 256², f16 at 256²), the
     /// tiny test VAE [32, 32, …] 289 (64² to 256², batch 1 and 2); this gives 1,830 and 317.
+    /// Those were measured with direct convolutions; CPU devices run Winograd's, whose scratch
+    /// (bounded by `winograd_scratch_bytes` for the widest channels) comes on top.
     pub fn decode_bytes(&self, dtype: Dtype, batch: usize, height: usize, width: usize) -> u64 {
         let ch = &self.block_out_channels;
         let (c0, c1) = (ch[0], *ch.get(1).unwrap_or(&ch[0]));
         let values = (4 * (c0 + c1) + c0) as f64 * 1.1;
+        let tiles = batch * height.div_ceil(2) * width.div_ceil(2);
+        let widest = ch.iter().copied().max().unwrap_or(c0);
         (values * (batch * height * width * vkdiff_runtime::dtype_size(dtype)) as f64) as u64
+            + vkdiff_runtime::ops::winograd_scratch_bytes(widest, tiles, dtype)
     }
 
     /// The largest single activation of a decode (one buffer, held to `maxMemoryAllocationSize`):

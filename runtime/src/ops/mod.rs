@@ -33,6 +33,7 @@ pub use gemm::{linear, linear_geglu, matmul, Matmul, GEGLU_COLUMNS};
 pub use linear_cm2::linear_cm2;
 pub use norm::{group_norm, layer_norm, softmax};
 pub use pool::{pool2d, resize_tf1, upload_image_bytes, Pool, PoolOp};
+pub use winograd::winograd_scratch_bytes;
 
 use crate::context::Context;
 use crate::error::{ensure, Error, Result};

@@ -16,7 +16,22 @@ use super::{dispatch_flat, element_groups, kernel, u};
 use crate::error::Result;
 use crate::kernel_choice::probe::ProbeChoice;
 use crate::recorder::Recorder;
-use crate::tensor::Tensor;
+use crate::tensor::{dtype_size, Dtype, Tensor};
+
+/// The most bytes a band's planes (and its products) take: bands of a large image's tiles
+/// rather than one binding's worth, so the scratch stays small beside the activations.
+const BAND_BYTES: u64 = 32 << 20;
+
+/// The most scratch memory Winograd's convolutions of at most `channels` channels in and out,
+/// over at most `tiles` tiles (2×2 outputs each), hold at once in one recording: the filters,
+/// a band's planes and its products, each twice over, as its arena keeps the buffers of the
+/// smaller convolutions before the largest. Memory plans add it on every device.
+pub fn winograd_scratch_bytes(channels: usize, tiles: usize, dtype: Dtype) -> u64 {
+    let e = dtype_size(dtype) as u64;
+    let (channels, tiles) = (channels as u64, tiles as u64);
+    let planes = (16 * tiles * channels * e).min(BAND_BYTES);
+    2 * (16 * channels * channels * e + 2 * planes)
+}
 
 /// Whether `conv2d` takes this path for filter `w` [Cout, KH, KW, Cin] with `p`: the CPU family
 /// (`Choices::winograd`) where VK_NV_cooperative_matrix2's convolution is not asked for, 3×3
@@ -34,7 +49,8 @@ pub(super) fn applies(rec: &Recorder, w: &Tensor, p: &ConvParams) -> bool {
 }
 
 /// out[B, Ho, Wo, Cout] (+)= conv3×3(x[B, H, W, Cin], w[Cout, 3, 3, Cin]) (+ bias) (ReLU), x and
-/// out each within one binding. The tiles run in bands whose 16 planes fit one binding; each
+/// out each within one binding. The tiles run in bands whose 16 planes fit one binding and
+/// [`BAND_BYTES`]; each
 /// tile's sums are the same in any band, so banded and whole runs agree exactly. Returns false,
 /// having recorded nothing, where the transformed filters or one tile's planes would pass the
 /// binding limit.
@@ -49,9 +65,12 @@ pub(super) fn conv2d_winograd(
     let [b, h, wd, cin] = [x.shape()[0], x.shape()[1], x.shape()[2], x.shape()[3]];
     let [ho, wo, cout] = [out.shape()[1], out.shape()[2], out.shape()[3]];
     let (tiles_h, tiles_w) = (ho.div_ceil(2), wo.div_ceil(2));
-    let limit = rec.context().choices().binding_limit as usize;
-    let per = limit / (16 * cin.max(cout) * elem(x));
-    if per == 0 || 16 * cout * cin * elem(w) > limit {
+    let limit = rec.context().choices().binding_limit;
+    if 16 * cout * cin * elem(w) > limit as usize {
+        return Ok(false);
+    }
+    let per = limit.min(BAND_BYTES) as usize / (16 * cin.max(cout) * elem(x));
+    if per == 0 {
         return Ok(false);
     }
     let tiles = b * tiles_h * tiles_w;
