@@ -36,6 +36,29 @@ fn run_ok(args: &[&str]) -> String {
     text
 }
 
+/// A set made with `--render-only` from the `format` fixture, each mask held to what `scene`
+/// (the fixture's folder, an image's name) reads from the format's own files.
+struct RenderedFixture {
+    /// The fixture's folder.
+    scenes: PathBuf,
+    /// How many annotations the masks were checked against.
+    checked: usize,
+    /// The set's annotations.json.
+    coco: Value,
+    /// What the run printed.
+    note: String,
+}
+
+fn render_fixture(format: &str, scene: fn(&Path, &str) -> SourceScene) -> RenderedFixture {
+    let dir = scratch(&format!("scenes-{format}")).join("set");
+    let scenes = scenes(format);
+    let note =
+        run_ok(&["dataset", "--render-only", "--scenes", scenes.to_str().unwrap(), "--out", dir.to_str().unwrap()]);
+    let checked = assert_masks_are_the_scenes(&dir, &|name| scene(&scenes, name));
+    let coco = read_json(&dir.join("annotations.json"));
+    RenderedFixture { scenes, checked, coco, note }
+}
+
 fn read_json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }

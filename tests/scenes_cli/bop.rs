@@ -30,11 +30,7 @@ fn bop_scene(split: &Path, name: &str) -> SourceScene {
 
 #[test]
 fn bop_scenes_make_a_set_whose_masks_are_the_visible_masks() {
-    let dir = scratch("scenes-bop").join("set");
-    let split = scenes("bop");
-    run_ok(&["dataset", "--render-only", "--scenes", split.to_str().unwrap(), "--out", dir.to_str().unwrap()]);
-    let checked = assert_masks_are_the_scenes(&dir, &|name| bop_scene(&split, name));
-    let coco = read_json(&dir.join("annotations.json"));
+    let RenderedFixture { scenes: split, checked, coco, .. } = render_fixture("bop", bop_scene);
     let images = coco["images"].as_array().unwrap();
     // Every image of every scene_camera.json, each annotation carrying its gt's obj_id and pose.
     let mut listed = 0;

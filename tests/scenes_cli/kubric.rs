@@ -39,11 +39,7 @@ fn kubric_scene(dir: &Path, scene: &str) -> SourceScene {
 
 #[test]
 fn kubric_frames_make_a_set_whose_masks_are_the_segmentation_indices() {
-    let dir = scratch("scenes-kubric").join("set");
-    let sequences = scenes("kubric");
-    run_ok(&["dataset", "--render-only", "--scenes", sequences.to_str().unwrap(), "--out", dir.to_str().unwrap()]);
-    let checked = assert_masks_are_the_scenes(&dir, &|scene| kubric_scene(&sequences, scene));
-    let coco = read_json(&dir.join("annotations.json"));
+    let RenderedFixture { scenes: sequences, checked, coco, .. } = render_fixture("kubric", kubric_scene);
     let images = coco["images"].as_array().unwrap();
     let named: Vec<&str> = images.iter().map(|i| i["scene"].as_str().unwrap()).collect();
     assert_eq!(named, ["video_0/00000", "video_0/00001", "video_0/00002", "video_1/00000", "video_1/00001"]);

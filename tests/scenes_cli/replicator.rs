@@ -62,12 +62,7 @@ fn same_numbers(a: &Value, b: &Value) -> bool {
 
 #[test]
 fn replicator_frames_make_a_set_whose_masks_are_the_colour_maps() {
-    let dir = scratch("scenes-replicator").join("set");
-    let frames = scenes("replicator");
-    let note =
-        run_ok(&["dataset", "--render-only", "--scenes", frames.to_str().unwrap(), "--out", dir.to_str().unwrap()]);
-    let checked = assert_masks_are_the_scenes(&dir, &|frame| replicator_scene(&frames, frame));
-    let coco = read_json(&dir.join("annotations.json"));
+    let RenderedFixture { scenes: frames, checked, coco, note } = render_fixture("replicator", replicator_scene);
     // The whole frames, in order; the last one, without its semantics mapping, skipped with a note.
     let mut whole: Vec<String> = std::fs::read_dir(&frames)
         .unwrap()

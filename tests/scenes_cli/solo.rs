@@ -47,11 +47,7 @@ fn solo_scene(dir: &Path, scene: &str) -> SourceScene {
 
 #[test]
 fn solo_steps_make_a_set_whose_masks_are_the_colour_maps() {
-    let dir = scratch("scenes-solo").join("set");
-    let dataset = scenes("solo");
-    run_ok(&["dataset", "--render-only", "--scenes", dataset.to_str().unwrap(), "--out", dir.to_str().unwrap()]);
-    let checked = assert_masks_are_the_scenes(&dir, &|scene| solo_scene(&dataset, scene));
-    let coco = read_json(&dir.join("annotations.json"));
+    let RenderedFixture { scenes: dataset, checked, coco, .. } = render_fixture("solo", solo_scene);
     let images = coco["images"].as_array().unwrap();
     let named: Vec<&str> = images.iter().map(|i| i["scene"].as_str().unwrap()).collect();
     let want = [
