@@ -36,9 +36,11 @@ pub struct Choices {
     /// Whether the subgroup-register kernels read B through a texel view (their TB = 1
     /// variants; [`KernelPlan`]'s `texel_b` says where). Tests run both.
     pub texel_b: bool,
-    /// Whether 3×3 convolutions of stride 1 run as Winograd's F(2×2, 3×3) (ops/winograd.rs;
-    /// [`KernelPlan`]'s `winograd` says where). Tests run both.
-    pub winograd: bool,
+    /// The fewest filter weights from which 3×3 convolutions of stride 1 run as Winograd's
+    /// F(2×2, 3×3) (ops/winograd.rs), None for none ([`KernelPlan`]'s `winograd` says where:
+    /// every convolution of SDXL's networks but the first and last, none of the tiny test
+    /// models', whose scratch would outweigh their activations). Tests run both, and from 0.
+    pub winograd_from: Option<usize>,
     /// Where recordings split into submissions and how long a wait for one may last.
     pub submit_budget: SubmitBudget,
     /// The most bytes one kernel binding may span; ops split larger tensors into bands below
@@ -66,7 +68,7 @@ impl Choices {
             quick_compile: plan.quick_compile,
             word_loads: plan.word_loads,
             texel_b: plan.texel_b,
-            winograd: plan.winograd,
+            winograd_from: plan.winograd.then_some(crate::ops::SMALL_WEIGHTS),
             submit_budget: SubmitBudget::for_device(info, settings),
             binding_limit: info.max_storage_buffer_range,
             allocation_limit: info.max_allocation,

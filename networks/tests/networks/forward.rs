@@ -7,7 +7,7 @@ use vkdiff_networks::{
     UNetInputs,
 };
 use vkdiff_networks::{single_file_unet_checkpoint, unet_checkpoint};
-use vkdiff_runtime::{listing_variants, Context, Dtype, Tensor};
+use vkdiff_runtime::{listing_variants, Context, Dtype, Tensor, Variant};
 use vkdiff_testkit::fixture;
 use vkdiff_testkit::{assert_network_kernels, ctx};
 
@@ -77,22 +77,28 @@ pub fn errors(got: &[f32], want: &[f32]) -> (f64, f64) {
 /// tensor) and the error compounds over ~150 stored tensors along the deepest path; measured
 /// relative L2 errors are ~2e-3, and 1e-2 is the bound.
 fn check(fixture_name: &str, model: &Path, dtype: Dtype) {
-    check_loaded(fixture_name, model, dtype, unet_checkpoint(&ctx(), model, dtype).unwrap());
+    check_loaded(&ctx(), fixture_name, model, dtype, unet_checkpoint(&ctx(), model, dtype).unwrap());
 }
 
-fn check_loaded(fixture_name: &str, model: &Path, dtype: Dtype, (config, ckpt): (UNetConfig, Checkpoint)) {
-    let ctx = ctx();
+fn check_loaded(
+    ctx: &Context,
+    fixture_name: &str,
+    model: &Path,
+    dtype: Dtype,
+    (config, ckpt): (UNetConfig, Checkpoint),
+) -> Vec<&'static Variant> {
     let io = SafeTensors::open(&fixture("unet").join(format!("{fixture_name}/io.safetensors"))).unwrap();
     let unet = UNet::load(&config, &ckpt).unwrap();
     assert_eq!(ckpt.unused(), Vec::<String>::new(), "{}: tensors the UNet never read", model.display());
-    let inputs = Inputs::read(&ctx, &io, dtype);
+    let inputs = Inputs::read(ctx, &io, dtype);
     let (down_shapes, _) = unet.residual_shapes(0, 0, 0);
     let control = ControlResiduals {
-        down: (0..down_shapes.len()).map(|i| upload_nhwc(&ctx, &io, &format!("control_down.{i}"), dtype)).collect(),
-        mid: upload_nhwc(&ctx, &io, "control_mid", dtype),
+        down: (0..down_shapes.len()).map(|i| upload_nhwc(ctx, &io, &format!("control_down.{i}"), dtype)).collect(),
+        mid: upload_nhwc(ctx, &io, "control_mid", dtype),
     };
-    let ip = [ip_adapter(&ctx, &unet, &io, fixture_name, dtype)];
+    let ip = [ip_adapter(ctx, &unet, &io, fixture_name, dtype)];
     let tolerance = if dtype == Dtype::F32 { 1e-4 } else { 1e-2 };
+    let mut kernels = Vec::new();
     for (variant, control, ip) in [
         ("out_plain", None, &[][..]),
         ("out_control", Some(&control), &[][..]),
@@ -101,7 +107,8 @@ fn check_loaded(fixture_name: &str, model: &Path, dtype: Dtype, (config, ckpt): 
     ] {
         let (pass, ran) = listing_variants(|| unet.record(&inputs.unet(control, ip)).unwrap());
         // The fixtures' heads are of 64 values at most.
-        assert_network_kernels(&ctx, dtype, &ran, 64, &format!("{fixture_name} {dtype:?} {variant}"));
+        assert_network_kernels(ctx, dtype, &ran, 64, &format!("{fixture_name} {dtype:?} {variant}"));
+        kernels.extend(ran);
         pass.project_conditioning().unwrap();
         pass.run().unwrap();
         let s = pass.output.shape().to_vec();
@@ -118,6 +125,7 @@ fn check_loaded(fixture_name: &str, model: &Path, dtype: Dtype, (config, ckpt): 
             {rel:.3e}, worst element {worst:.3e} of the RMS (bound {tolerance:.0e})"
         );
     }
+    kernels
 }
 
 /// The fixture's IP-Adapter: random image tokens and per-layer weights keyed `ip_adapter.N`,
@@ -160,6 +168,17 @@ fn sdxl_layout_diffusers_sharded_fp16_variant_f16() {
     check("sdxl3", &fixture("unet").join("sdxl3"), Dtype::F16);
 }
 
+/// The tiny models' convolutions are too small to take Winograd's F(2×2, 3×3) where the plan
+/// runs it (CPU devices); here all of them do, against the same diffusers outputs.
+#[test]
+fn sdxl_layout_f16_with_every_convolution_by_winograd() {
+    let ctx = vkdiff_testkit::private_ctx();
+    ctx.choose(|c| c.winograd_from = Some(0));
+    let model = fixture("unet").join("sdxl3");
+    let ran = check_loaded(&ctx, "sdxl3", &model, Dtype::F16, unet_checkpoint(&ctx, &model, Dtype::F16).unwrap());
+    assert!(ran.iter().any(|v| v.kernel == "winograd_input"), "Winograd's transforms ran");
+}
+
 #[test]
 fn sdxl_layout_single_file_f32() {
     check("sdxl3", &fixture("unet").join("sdxl3/sd_xl_single_file.safetensors"), Dtype::F32);
@@ -185,7 +204,7 @@ fn other_head_counts_bf16_weights_f16() {
 fn heads_single_file(dtype: Dtype) {
     let path = fixture("unet").join("heads/sd_xl_single_file.safetensors");
     let config = UNetConfig::from_file(&fixture("unet").join("heads/unet/config.json")).unwrap();
-    check_loaded("heads", &path, dtype, single_file_unet_checkpoint(&ctx(), &path, config, dtype).unwrap());
+    check_loaded(&ctx(), "heads", &path, dtype, single_file_unet_checkpoint(&ctx(), &path, config, dtype).unwrap());
 }
 
 #[test]

@@ -63,9 +63,9 @@ pub struct KernelPlan {
     /// Whether the subgroup-register kernels read B through a texel view (TB = 1): on lavapipe
     /// that `loads_lane_by_lane`, which fetches texels for all lanes at once.
     pub texel_b: bool,
-    /// Whether 3×3 convolutions of stride 1 run as Winograd's F(2×2, 3×3): the CPU family
-    /// (2.25× less matrix work; `VKDIFF_WINOGRAD=0` runs them direct). GPUs keep the direct
-    /// convolution, measured on none.
+    /// Whether 3×3 convolutions of stride 1 (of 2¹⁷ weights or more, `Choices::winograd_from`)
+    /// run as Winograd's F(2×2, 3×3): the CPU family (2.25× less matrix work;
+    /// `VKDIFF_WINOGRAD=0` runs them direct). GPUs keep the direct convolution, measured on none.
     pub winograd: bool,
     /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen).
     pub wider_vectors: bool,

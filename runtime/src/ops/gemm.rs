@@ -364,7 +364,7 @@ fn small(m: usize, n: usize, k: usize) -> bool {
 /// Products with fewer weights than this (2¹⁷: none of SDXL's, CLIP's or the VAE's layers but
 /// the first and last convolutions; every layer of the tiny test models) are small enough to
 /// take the quickly compiled kernels.
-const SMALL_WEIGHTS: usize = 1 << 17;
+pub(crate) const SMALL_WEIGHTS: usize = 1 << 17;
 
 /// A PyTorch `Linear` followed by GEGLU (diffusers' `GEGLU`: value first, gate second):
 /// out[.., N/2] = value · GELU_erf(gate) of x[.., K] · wᵀ (+ bias), w stored [N, K]. Fused into

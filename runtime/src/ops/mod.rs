@@ -29,6 +29,7 @@ pub use elementwise::{
     add, binary, concat_channels, copy_into_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x,
     BinaryOp, TimestepEmbedding, UnaryOp,
 };
+pub(crate) use gemm::SMALL_WEIGHTS;
 pub use gemm::{linear, linear_geglu, matmul, Matmul, GEGLU_COLUMNS};
 pub use linear_cm2::linear_cm2;
 pub use norm::{group_norm, layer_norm, softmax};

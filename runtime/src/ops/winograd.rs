@@ -25,8 +25,12 @@ const BAND_BYTES: u64 = 32 << 20;
 /// The most scratch memory Winograd's convolutions of at most `channels` channels in and out,
 /// over at most `tiles` tiles (2×2 outputs each), hold at once in one recording: the filters,
 /// a band's planes and its products, each twice over, as its arena keeps the buffers of the
-/// smaller convolutions before the largest. Memory plans add it on every device.
+/// smaller convolutions before the largest: none where such filters are too small to take it.
+/// Memory plans add it on every device.
 pub fn winograd_scratch_bytes(channels: usize, tiles: usize, dtype: Dtype) -> u64 {
+    if 9 * channels * channels < super::SMALL_WEIGHTS {
+        return 0;
+    }
     let e = dtype_size(dtype) as u64;
     let (channels, tiles) = (channels as u64, tiles as u64);
     let planes = (16 * tiles * channels * e).min(BAND_BYTES);
@@ -34,11 +38,11 @@ pub fn winograd_scratch_bytes(channels: usize, tiles: usize, dtype: Dtype) -> u6
 }
 
 /// Whether `conv2d` takes this path for filter `w` [Cout, KH, KW, Cin] with `p`: the CPU family
-/// (`Choices::winograd`) where VK_NV_cooperative_matrix2's convolution is not asked for, 3×3
-/// filters of stride 1, channels on the vec4 grid.
+/// (`Choices::winograd_from`) where VK_NV_cooperative_matrix2's convolution is not asked for,
+/// filters of that many weights or more, 3×3 of stride 1, channels on the vec4 grid.
 pub(super) fn applies(rec: &Recorder, w: &Tensor, p: &ConvParams) -> bool {
     let (s, choices) = (w.shape(), rec.context().choices());
-    choices.winograd
+    choices.winograd_from.is_some_and(|from| w.numel() >= from)
         && choices.conv != ProbeChoice::Matrix2
         && s.len() == 4
         && s[1] == 3

@@ -39,14 +39,15 @@ fn check(family: GemmFamily, dtype: Dtype, c: &Case, seed: u64) -> Vec<&'static 
 /// A context of `family` whose 3×3 convolutions run direct, not as Winograd's.
 fn direct(family: GemmFamily) -> Context {
     let ctx = ctx_with(family);
-    ctx.choose(|c| c.winograd = false);
+    ctx.choose(|c| c.winograd_from = None);
     ctx
 }
 
-/// A CPU-family context whose 3×3 convolutions of stride 1 run as Winograd's F(2×2, 3×3).
+/// A CPU-family context whose 3×3 convolutions of stride 1 run as Winograd's F(2×2, 3×3),
+/// however small.
 fn winograd() -> Context {
     let ctx = ctx_with(GemmFamily::Subgroup);
-    ctx.choose(|c| c.winograd = true);
+    ctx.choose(|c| c.winograd_from = Some(0));
     ctx
 }
 

@@ -121,7 +121,7 @@ fn conv2d_takes_the_probe_where_the_context_asks_and_the_tile_fits() {
     // Direct where the probe is not taken, so the bound is the direct kernels' (Winograd's
     // F(2×2, 3×3) rounds its transformed tiles too).
     let ctx = private_ctx();
-    ctx.choose(|c| c.winograd = false);
+    ctx.choose(|c| c.winograd_from = None);
     let offered = ctx.info().matrix2_tiles().into_iter().find(|t| t.probe == Matrix2Probe::Conv);
     let (m, n, k) = offered.map_or((16, 16, 16), |t| (t.m as usize, t.n as usize, t.k as usize));
     // The first fits the tile; the second's 12 input channels do not.
