@@ -45,7 +45,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
             let y = y0 + r;
             let xx = x0 + s;
             var value = vec4<f32>(0.0);
-            if y >= 0 && y < i32(p.h) && xx >= 0 && xx < i32(p.w) {
+            if (y >= 0) & (y < i32(p.h)) & (xx >= 0) & (xx < i32(p.w)) {
                 value = widen(x[((image * p.h + u32(y)) * p.w + u32(xx)) * p.c + ch]);
             }
             d[4 * r + s] = value;

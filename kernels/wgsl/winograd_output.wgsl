@@ -58,7 +58,7 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
         for (var s = 0u; s < 2u; s++) {
             let y = y0 + r;
             let x = x0 + s;
-            if y < p.h && x < p.w {
+            if (y < p.h) & (x < p.w) {
                 let at = ((image * p.h + y) * p.w + x) * p.c + ch;
                 var value = pair[s] + add;
                 if (p.flags & FLAG_ACCUMULATE) != 0u {
