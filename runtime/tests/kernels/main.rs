@@ -15,6 +15,7 @@ mod norm;
 mod pool;
 mod runtime;
 mod tuning;
+mod winograd;
 
 /// The tallest subgroup GEMM tile the shared context takes: 64 rows, or 32 at 16 lanes (for code
 /// size) and where small products take the quickly compiled variants (lavapipe after Mesa 22,
