@@ -22,6 +22,7 @@ mod preview;
 mod preview_flagged;
 mod preview_geometry;
 mod preview_page;
+mod preview_pictures;
 mod regenerate;
 mod regions;
 mod render_only;
@@ -45,7 +46,8 @@ pub use folder::{Dataset, ImageRecord, Pending, VersionChange, ANNOTATIONS, MANI
 pub use job::{DatasetEvent, DatasetJob, Finish, ShardRequest};
 pub use merge::{merge, Merged};
 pub use plan::{choose, image_seed, Choice, ImageFiles, Shard};
-pub use preview::{escape as html_escape, preview, Preview};
+pub use preview::{preview, Preview};
+pub use preview_pictures::escape as html_escape;
 pub use regenerate::RESAMPLES;
 pub use regions::{RegionFlags, RegionSettings};
 pub use run::{generate, Progress, Report, RunOptions, StageTimes};
