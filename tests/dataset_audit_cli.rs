@@ -12,6 +12,7 @@ use cli::{layer_pngs, render_set_of, rgba, scratch, vkdiff};
 use serde_json::{json, Value};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use std::process::Output;
 use vkdiff_render::rle::{PixelBox, Rle};
 
 fn read_json(path: &Path) -> Value {
@@ -284,6 +285,12 @@ fn run_ok(args: &[&str]) {
     assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
 }
 
+/// `vkdiff dataset export SET --format FORMAT --out OUT`, then `extra`.
+fn export(set: &Path, out: &Path, format: &str, extra: &[&str]) -> Output {
+    let args = ["dataset", "export", set.to_str().unwrap(), "--format", format, "--out", out.to_str().unwrap()];
+    vkdiff(&[&args[..], extra].concat())
+}
+
 /// `v` with `key` set to `value`.
 fn with(v: &Value, key: &str, value: Value) -> Value {
     let mut v = v.clone();
@@ -326,16 +333,7 @@ fn bad_predictions_are_refused_in_one_line_before_any_work() {
         ("--min-boundary-score=2", "--min-boundary-score 2: it takes a number from 0 to 1"),
     ] {
         let out_dir = root.join("export");
-        let out = vkdiff(&[
-            "dataset",
-            "export",
-            set.to_str().unwrap(),
-            "--format",
-            "coco",
-            "--out",
-            out_dir.to_str().unwrap(),
-            flag,
-        ]);
+        let out = export(&set, &out_dir, "coco", &[flag]);
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{flag}: {err}");
         assert!(err.contains(message) && err.trim().lines().count() == 1 && !out_dir.exists(), "{flag}: {err}");

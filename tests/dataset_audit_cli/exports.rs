@@ -2,16 +2,15 @@
 //! format (dataset_audit_cli.rs plants the faults).
 
 use super::cli::{scratch, tree, vkdiff};
-use super::{as_result, planted, read_json, run_ok, Planted};
+use super::{as_result, export, planted, read_json, run_ok, Planted};
 use serde_json::{json, Value};
 use std::collections::BTreeSet;
 use std::path::Path;
 
 /// Exports `set` to `out` as `format`, leaving out the images the audit flagged `missing`.
 fn export_without_missing(set: &Path, out: &Path, format: &str, val_fraction: &str) {
-    let (set, out) = (set.to_str().unwrap(), out.to_str().unwrap());
-    let args = ["--format", format, "--out", out, "--exclude-flagged=missing", "--val-fraction", val_fraction];
-    run_ok(&[&["dataset", "export", set][..], &args].concat());
+    let out = export(set, out, format, &["--exclude-flagged=missing", "--val-fraction", val_fraction]);
+    assert!(out.status.success(), "export to {format}: {}", String::from_utf8_lossy(&out.stderr));
 }
 
 /// The stems of the images an export holds, however its format lists them.
@@ -88,16 +87,7 @@ fn exports_leave_out_exactly_the_flagged_images() {
     assert_eq!(stats["audit"]["covers_every_image"], true);
     // Only the invented detections' images.
     let out_dir = root.join("out-invented");
-    let out = vkdiff(&[
-        "dataset",
-        "export",
-        set.to_str().unwrap(),
-        "--format",
-        "coco",
-        "--out",
-        out_dir.to_str().unwrap(),
-        "--exclude-flagged=invented",
-    ]);
+    let out = export(&set, &out_dir, "coco", &["--exclude-flagged=invented"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let dropped: BTreeSet<u64> = read_json(&out_dir.join("excluded.json"))["dropped"]
         .as_array()
@@ -107,16 +97,7 @@ fn exports_leave_out_exactly_the_flagged_images() {
         .collect();
     assert_eq!(dropped, invented);
     // Every kind: nothing left, refused in one line.
-    let out = vkdiff(&[
-        "dataset",
-        "export",
-        set.to_str().unwrap(),
-        "--format",
-        "coco",
-        "--out",
-        root.join("none").to_str().unwrap(),
-        "--exclude-flagged",
-    ]);
+    let out = export(&set, &root.join("none"), "coco", &["--exclude-flagged"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("is excluded: nothing to export") && !root.join("none").exists(), "{err}");
