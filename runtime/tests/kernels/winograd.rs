@@ -7,8 +7,7 @@ use vkdiff_runtime::Dtype;
 use vkdiff_testkit::*;
 
 /// 3×3 convolutions of stride 1 as Winograd's F(2×2, 3×3) on the CPU family, beside the cases of
-/// conv.rs's `all`:
-/// cases: odd and even sizes (tiles past the output's edge), one-sided padding (a band of a
+/// conv.rs's `all`: odd and even sizes (tiles past the output's edge), one-sided padding (a band of a
 /// large image), none, a residual with ReLU; the 16 products run on the GEMM, in one band of
 /// tiles and, under a binding limit that just holds the transformed filters (the planes of
 /// min(Cin, Cout) tiles: fewer than each case has), in several.
