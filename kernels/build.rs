@@ -26,17 +26,33 @@ fn read_files(spec: &KernelSpec) -> Vec<(String, String)> {
         .collect()
 }
 
-/// `files` with B read from texels (b_texels.wgsl) where they read it from storage.
-fn texel_b_files(files: &[(String, String)]) -> Vec<(String, String)> {
-    let texels = fs::read_to_string(Path::new("wgsl").join("b_texels.wgsl"))
-        .unwrap_or_else(|e| fail(&format!("wgsl/b_texels.wgsl: {e}")));
-    files
+/// What a TB = 1 variant reads from texels, and its files: B always (b_texels.wgsl in place of
+/// b_units.wgsl). A too (TA = 1) where the kernel reads A as a plain matrix (a_matrix_v4.wgsl):
+/// in f32 as four-value texels (a_texels.wgsl), in f16 where B is stored N×K and a turn has
+/// pairs of steps as eight-half texels of both (gemm_sg_pairs.wgsl); other f16 variants read B
+/// only.
+fn texel_files(files: &[(String, String)], f16: bool, params: &[(&str, u32)]) -> (Vec<(String, String)>, bool) {
+    let read = |name: &str| {
+        let path = Path::new("wgsl").join(name);
+        (name.to_string(), fs::read_to_string(&path).unwrap_or_else(|e| fail(&format!("{}: {e}", path.display()))))
+    };
+    let plain_a = files.iter().any(|(name, _)| name == "a_matrix_v4.wgsl");
+    let steps_in_pairs = params.iter().any(|&(p, v)| p == "KS" && v % 2 == 0);
+    let pairs = f16 && plain_a && params.contains(&("BT", 1)) && steps_in_pairs;
+    let texel_a = plain_a && (pairs || !f16);
+    let texels: Vec<(String, String)> = files
         .iter()
-        .map(|(name, body)| match name.as_str() {
-            "b_units.wgsl" => ("b_texels.wgsl".to_string(), texels.clone()),
-            _ => (name.clone(), body.clone()),
+        .filter_map(|(name, body)| match name.as_str() {
+            "a_as_f32.wgsl" if texel_a => None,
+            "a_matrix_v4.wgsl" if pairs => None,
+            "a_matrix_v4.wgsl" if texel_a => Some(read("a_texels.wgsl")),
+            "b_units.wgsl" if pairs => None,
+            "b_units.wgsl" => Some(read("b_texels.wgsl")),
+            "gemm_sg_steps.wgsl" if pairs => Some(read("gemm_sg_pairs.wgsl")),
+            _ => Some((name.clone(), body.clone())),
         })
-        .collect()
+        .collect();
+    (texels, texel_a)
 }
 
 fn main() {
@@ -54,7 +70,7 @@ fn main() {
         let target = if cooperative || GPU_KERNELS.contains(&spec.name) { Target::Gpu } else { Target::Any };
         let files = read_files(spec);
         // Each reading of the operands a kernel is built for: as 32- and 64-bit words (WD), B
-        // from storage and from texels (TB).
+        // (and where it can, A: TA) from storage and from texels (TB).
         let words: &[u32] = if WORD_LOADS.contains(&spec.name) { &[0, 1] } else { &[] };
         let texels: &[u32] = if TEXEL_B.contains(&spec.name) { &[0, 1] } else { &[] };
         let all = spec.params.iter().flat_map(|params| {
@@ -64,10 +80,15 @@ fn main() {
             };
             with("TB", texels, with("WD", words, vec![params.to_vec()]))
         });
-        let texel_files = if texels.is_empty() { Vec::new() } else { texel_b_files(&files) };
         for (i, params) in all.enumerate() {
-            let params = &params[..];
-            let files = if params.contains(&("TB", 1)) { &texel_files } else { &files };
+            let (files, params) = match params.contains(&("TB", 1)) {
+                true => match texel_files(&files, dtype == Dtype::F16, &params) {
+                    (texels, true) => (texels, [&params[..], &[("TA", 1)]].concat()),
+                    (texels, false) => (texels, params),
+                },
+                false => (files.clone(), params),
+            };
+            let (files, params) = (&files, &params[..]);
             let src = Source::new(&prelude(dtype == Dtype::F16, params, cooperative), files);
             let what = format!("kernel `{}` ({dtype:?}, {params:?})", spec.name);
             let words = compile(src, params, (cooperative, target), &what).unwrap_or_else(|e| fail(&e));

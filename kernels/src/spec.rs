@@ -48,7 +48,7 @@ pub const KERNELS: &[KernelSpec] = &[
     // epilogue (matrix products with B stored N×K only), 0 is the plain product.
     KernelSpec {
         name: "gemm_sg",
-        files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "b_units.wgsl", "gemm_sg.wgsl"],
+        files: &["activations.wgsl", "gemm_common.wgsl", "a_matrix_rows.wgsl", "a_matrix_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "b_units.wgsl", "gemm_sg_steps.wgsl", "gemm_sg.wgsl"],
         params: &[
             &subgroup_tile(4, 8, 0, 0),
             &subgroup_tile(4, 8, 1, 0),
@@ -87,7 +87,7 @@ pub const KERNELS: &[KernelSpec] = &[
     },
     KernelSpec {
         name: "conv_sg",
-        files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "b_units.wgsl", "gemm_sg.wgsl"],
+        files: &["activations.wgsl", "gemm_common.wgsl", "conv_taps.wgsl", "a_conv_v4.wgsl", "a_as_f32.wgsl", "gemm_store4.wgsl", "b_units.wgsl", "gemm_sg_steps.wgsl", "gemm_sg.wgsl"],
         params: &[
             &subgroup_tile(4, 8, 1, 0),
             &subgroup_tile(4, 16, 1, 0),

@@ -4,34 +4,16 @@
 // hand to the others, so no shared memory and few loads per product. Lavapipe splits every fma
 // into a multiply and an add, so a step adds its four products to a row's sums at once, not by
 // four fmas (1.1× in f32).
-// Needs N, K and every stride to be multiples of 4. B is K×N (BT = 0) or N×K (BT = 1), read by
-// `b_at` (b_units.wgsl, or b_texels.wgsl where TB = 1).
+// Needs N, K and every stride to be multiples of 4. B is K×N (BT = 0) or N×K (BT = 1); each turn's
+// A and B come from `load_turn` (gemm_sg_steps.wgsl, or gemm_sg_pairs.wgsl).
 
 const GB: u32 = 4u; // GEGLU blocks (gemm_common.wgsl): a lane's 8 columns are 4 values, 4 gates
 
-// Rows k..k+3 of B at columns n..n+7, as [2·row + half]. Rows past K are clamped to real
-// ones: the A values they meet are zero.
-fn load_b(boff: u32, k_in: u32, n: u32) -> array<vec4<f32>, 8> {
-    let k = min(k_in, p.g.k - 4u);
-    var r: array<vec4<f32>, 8>;
-    if BT == 0u {
-        let n0 = min(n, p.g.n - 4u);
-        let n1 = min(n + 4u, p.g.n - 4u);
-        // #unroll I 4
-        r[2u * I] = b_at((boff + (k + I) * p.g.ldb + n0) / 4u);
-        r[2u * I + 1u] = b_at((boff + (k + I) * p.g.ldb + n1) / 4u);
-        // #end
-    } else {
-        var col: array<vec4<f32>, 8>;
-        // #unroll J 8
-        col[J] = b_at((boff + b_row(min(n + J, p.g.n - 1u)) * p.g.ldb + k) / 4u);
-        // #end
-        // #unroll I 4
-        r[2u * I] = vec4<f32>(col[0][I], col[1][I], col[2][I], col[3][I]);
-        r[2u * I + 1u] = vec4<f32>(col[4][I], col[5][I], col[6][I], col[7][I]);
-        // #end
-    }
-    return r;
+// A and B of one turn: KS steps of 4 along K, as [step][A row slot or B half-row] (load_turn:
+// gemm_sg_steps.wgsl a step at a time, gemm_sg_pairs.wgsl two steps a texel).
+struct Turn {
+    a: array<array<vec4<f32>, AU>, KS>,
+    b: array<array<vec4<f32>, 8>, KS>,
 }
 
 @compute @workgroup_size(SG)
@@ -49,29 +31,18 @@ fn main(@builtin(workgroup_id) wg: vec3<u32>, @builtin(local_invocation_index) l
     // KS steps of 4 along K a turn: every B and A value of the turn first, then each row's sums
     // over them, kept in registers while the values are read back from the stack (LLVM spills
     // them once). Four steps ran fastest: one stores the sums 4× as often; eight ran slower too
-    // (docs/benchmark-log.md); the 8-row variants take one, for short compiles. Steps past K read
-    // clamped B against zero A.
+    // (docs/benchmark-log.md); the 8-row variants take one, for short compiles.
     for (var k = 0u; k < p.g.k; k += 4u * KS) {
-        var av: array<array<vec4<f32>, AU>, KS>;
-        var bv: array<array<vec4<f32>, 8>, KS>;
-        // #unroll S KS
-        {
-            let kc = k_ctx(min(k + 4u * S, p.g.k - 4u));
-            // #unroll J AU
-            av[S][J] = select(vec4<f32>(0.0), load_a(rows[J], kc), k + 4u * S < p.g.k);
-            // #end
-            bv[S] = load_b(boff, k + 4u * S, n);
-        }
-        // #end
+        let t = load_turn(rows, boff, k, n);
         // #unroll R TM
         {
             var s0 = acc[2u * R];
             var s1 = acc[2u * R + 1u];
             // #unroll S KS
             {
-                let x = subgroupBroadcast(av[S][R / SG], R % SG);
-                s0 += (x.x * bv[S][0] + x.y * bv[S][2]) + (x.z * bv[S][4] + x.w * bv[S][6]);
-                s1 += (x.x * bv[S][1] + x.y * bv[S][3]) + (x.z * bv[S][5] + x.w * bv[S][7]);
+                let x = subgroupBroadcast(t.a[S][R / SG], R % SG);
+                s0 += (x.x * t.b[S][0] + x.y * t.b[S][2]) + (x.z * t.b[S][4] + x.w * t.b[S][6]);
+                s1 += (x.x * t.b[S][1] + x.y * t.b[S][3]) + (x.z * t.b[S][5] + x.w * t.b[S][7]);
             }
             // #end
             acc[2u * R] = s0;

@@ -33,9 +33,9 @@ pub struct Choices {
     /// Whether the subgroup-register kernels read their operands as 64-bit words (their WD = 1
     /// variants; [`KernelPlan`]'s `word_loads` says where), not as 32-bit words. Tests run both.
     pub word_loads: bool,
-    /// Whether the subgroup-register kernels read B through a texel view (their TB = 1
-    /// variants; [`KernelPlan`]'s `texel_b` says where). Tests run both.
-    pub texel_b: bool,
+    /// Whether the subgroup-register kernels read B, and A of the plain products, through texel
+    /// views (their TB = 1 variants; [`KernelPlan`]'s `texel_reads` says where). Tests run both.
+    pub texel_reads: bool,
     /// The fewest filter weights from which 3×3 convolutions of stride 1 run as Winograd's
     /// F(2×2, 3×3) (ops/winograd.rs), None for none ([`KernelPlan`]'s `winograd` says where:
     /// every convolution of SDXL's networks but the first and last, none of the tiny test
@@ -67,7 +67,7 @@ impl Choices {
             gpu_paths: plan.gpu_paths,
             quick_compile: plan.quick_compile,
             word_loads: plan.word_loads,
-            texel_b: plan.texel_b,
+            texel_reads: plan.texel_reads,
             winograd_from: plan.winograd.then_some(crate::ops::SMALL_WEIGHTS),
             submit_budget: SubmitBudget::for_device(info, settings),
             binding_limit: info.max_storage_buffer_range,
@@ -85,7 +85,7 @@ impl Choices {
         }
         self.workgroup_limit = [0, 1, 2].map(|i| self.workgroup_limit[i].clamp(1, info.max_workgroup_count[i]));
         self.word_loads &= info.can_read_words();
-        self.texel_b &= info.reads_texel_b();
+        self.texel_reads &= info.reads_texels();
         self
     }
 }

@@ -166,8 +166,8 @@ impl Drop for Buffer {
 fn allocate(shared: &Shared, size: u64, use_: BufferUse, name: &str) -> Result<(vk::Buffer, Allocation)> {
     let mut usage =
         vk::BufferUsageFlags::STORAGE_BUFFER | vk::BufferUsageFlags::TRANSFER_SRC | vk::BufferUsageFlags::TRANSFER_DST;
-    // The CPU GEMM may read B through a texel view of any buffer (KernelPlan::texel_b).
-    if shared.info.reads_texel_b() {
+    // The CPU GEMM may read A and B through texel views of any buffer (KernelPlan::texel_reads).
+    if shared.info.reads_texels() {
         usage |= vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
     }
     let info = vk::BufferCreateInfo::default().size(size).usage(usage).sharing_mode(vk::SharingMode::EXCLUSIVE);

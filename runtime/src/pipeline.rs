@@ -73,12 +73,19 @@ impl PipelineCache {
 
 type StatisticsLoader = ash::khr::pipeline_executable_properties::Device;
 
-/// What `variant` reads at `binding`: a storage buffer, or B's uniform texel buffer where the
-/// variant reads B from texels (TB = 1, binding 1).
+/// What `variant` reads at `binding`: a storage buffer, or a uniform texel buffer for B where the
+/// variant reads B from texels (TB = 1, binding 1) and for A where it reads A so too (TA = 1,
+/// binding 0).
 pub(crate) fn descriptor_type(variant: &Variant, binding: u32) -> vk::DescriptorType {
-    match (variant.param("TB"), binding) {
-        (Some(1), 1) => vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
-        _ => vk::DescriptorType::STORAGE_BUFFER,
+    let texels = match binding {
+        0 => variant.param("TA") == Some(1),
+        1 => variant.param("TB") == Some(1),
+        _ => false,
+    };
+    if texels {
+        vk::DescriptorType::UNIFORM_TEXEL_BUFFER
+    } else {
+        vk::DescriptorType::STORAGE_BUFFER
     }
 }
 

@@ -227,7 +227,7 @@ impl Recorder {
         let mut views = Vec::new();
         for &(t, ty) in &operands {
             if ty == vk::DescriptorType::UNIFORM_TEXEL_BUFFER {
-                let view = crate::texel_views::create(&ctx, t)?;
+                let view = crate::texel_views::create(&ctx, t, crate::texel_views::Texels::of(kernel.variant))?;
                 self.res.views.push(view);
                 views.push([view]);
             }
@@ -337,9 +337,10 @@ impl Recorder {
                         ty: vk::DescriptorType::STORAGE_BUFFER,
                         descriptor_count: SETS_PER_POOL * MAX_BINDINGS,
                     },
+                    // A and B of the CPU products (pipeline::descriptor_type).
                     vk::DescriptorPoolSize {
                         ty: vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
-                        descriptor_count: SETS_PER_POOL,
+                        descriptor_count: 2 * SETS_PER_POOL,
                     },
                 ];
                 let pool = device

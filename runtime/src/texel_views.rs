@@ -1,12 +1,13 @@
-//! Uniform texel views of a tensor, as the CPU family's subgroup kernels read B where the device
-//! fetches texels faster than it loads storage (`texel_b` in the plan): what the device allows,
-//! whether a tensor fits it, and the view itself.
+//! Uniform texel views of a tensor, as the CPU family's subgroup kernels read B (and A in the
+//! plain products) where the device fetches texels faster than it loads storage (`texel_reads` in
+//! the plan): what the device allows, whether a tensor fits it, and the view itself.
 
 use crate::context::Context;
 use crate::device::DeviceInfo;
 use crate::error::{Result, VkContext};
 use crate::tensor::{dtype_size, Dtype, Tensor};
 use ash::vk;
+use vkdiff_kernels::Variant;
 
 /// What a device allows of a uniform texel buffer's view.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -15,14 +16,15 @@ pub struct TexelLimits {
     pub offset_alignment: u64,
 }
 
-/// The texel views the device allows, where it fetches RGBA texels in f32 and f16 from uniform
-/// texel buffers.
+/// The texel views the device allows, where it fetches every [`Texels`] format from uniform texel
+/// buffers.
 pub(crate) fn limits(
     instance: &ash::Instance,
     pd: vk::PhysicalDevice,
     limits: &vk::PhysicalDeviceLimits,
 ) -> Option<TexelLimits> {
-    let fetched = [format(Dtype::F32), format(Dtype::F16)].iter().all(|&format| {
+    let formats = [Texels::Values(Dtype::F32), Texels::Values(Dtype::F16), Texels::Halves8].map(Texels::format);
+    let fetched = formats.iter().all(|&format| {
         // SAFETY: pd comes from this instance.
         let props = unsafe { instance.get_physical_device_format_properties(pd, format) };
         props.buffer_features.contains(vk::FormatFeatureFlags::UNIFORM_TEXEL_BUFFER)
@@ -33,10 +35,44 @@ pub(crate) fn limits(
     })
 }
 
-/// Whether the device allows a texel view of all of `b` (four values a texel, from its offset).
-pub(crate) fn fits(info: &DeviceInfo, b: &Tensor) -> bool {
-    let texel = texel_bytes(b.dtype());
-    info.texel_fetch.is_some_and(|limits| texels_fit(limits, b.offset, b.bytes(), texel))
+/// What a texel holds, as a kernel variant reads its texel operands (all of them alike).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Texels {
+    /// Four values in their dtype (RGBA32F, RGBA16F), which the fetch widens to f32.
+    Values(Dtype),
+    /// Eight halves as four 32-bit words (RGBA32UI), which the kernel unpacks: f16 A and B of
+    /// the products that read both from texels (TA = 1, kernels/wgsl/gemm_sg_pairs.wgsl).
+    Halves8,
+}
+
+impl Texels {
+    /// How `variant` reads its texel operands.
+    pub(crate) fn of(variant: &Variant) -> Texels {
+        match (variant.dtype, variant.param("TA")) {
+            (Dtype::F16, Some(1)) => Texels::Halves8,
+            (dtype, _) => Texels::Values(dtype),
+        }
+    }
+
+    fn format(self) -> vk::Format {
+        match self {
+            Texels::Values(Dtype::F32) => vk::Format::R32G32B32A32_SFLOAT,
+            Texels::Values(Dtype::F16) => vk::Format::R16G16B16A16_SFLOAT,
+            Texels::Halves8 => vk::Format::R32G32B32A32_UINT,
+        }
+    }
+
+    fn bytes(self) -> u64 {
+        match self {
+            Texels::Values(dtype) => 4 * dtype_size(dtype) as u64,
+            Texels::Halves8 => 16,
+        }
+    }
+}
+
+/// Whether the device allows a texel view of all of `t` (from its offset) in `texels`.
+pub(crate) fn fits(info: &DeviceInfo, t: &Tensor, texels: Texels) -> bool {
+    info.texel_fetch.is_some_and(|limits| texels_fit(limits, t.offset, t.bytes(), texels.bytes()))
 }
 
 /// Whether `bytes` from `offset` make a texel view of `texel`-byte texels within `limits`.
@@ -44,30 +80,17 @@ fn texels_fit(limits: TexelLimits, offset: u64, bytes: u64, texel: u64) -> bool 
     offset.is_multiple_of(limits.offset_alignment) && bytes >= texel && bytes / texel <= u64::from(limits.max_elements)
 }
 
-/// A view of `t` as four-value texels (RGBA in its dtype); the caller checked [`fits`]. The
-/// recording that binds it destroys it.
-pub(crate) fn create(ctx: &Context, t: &Tensor) -> Result<vk::BufferView> {
-    let texel = texel_bytes(t.dtype());
+/// A view of `t` in `texels`; the caller checked [`fits`]. The recording that binds it destroys
+/// it.
+pub(crate) fn create(ctx: &Context, t: &Tensor, texels: Texels) -> Result<vk::BufferView> {
+    let texel = texels.bytes();
     let info = vk::BufferViewCreateInfo::default()
         .buffer(t.buf.raw)
-        .format(format(t.dtype()))
+        .format(texels.format())
         .offset(t.offset)
         .range(t.bytes() / texel * texel);
     // SAFETY: the buffer lives as long as the recording, which destroys the view.
     unsafe { ctx.shared.device.create_buffer_view(&info, None) }.vk("vkCreateBufferView")
-}
-
-/// The RGBA format of a texel of a storage dtype, which the fetch widens to f32.
-fn format(dtype: Dtype) -> vk::Format {
-    match dtype {
-        Dtype::F32 => vk::Format::R32G32B32A32_SFLOAT,
-        Dtype::F16 => vk::Format::R16G16B16A16_SFLOAT,
-    }
-}
-
-/// Bytes of a four-value texel of a storage dtype.
-fn texel_bytes(dtype: Dtype) -> u64 {
-    4 * dtype_size(dtype) as u64
 }
 
 #[cfg(test)]

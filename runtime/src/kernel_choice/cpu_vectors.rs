@@ -39,10 +39,10 @@ impl DeviceInfo {
         self.gemm_subgroup_width().is_some_and(|lanes| lanes > vkdiff_kernels::WIDEST_64_BIT_WORDS) || self.shader_int64
     }
 
-    /// Whether the subgroup kernels may read B through texel views (TB = 1 in
-    /// kernels/src/spec.rs): a device that runs them and fetches both texel formats. Its buffers
-    /// are then made for texel views too.
-    pub fn reads_texel_b(&self) -> bool {
+    /// Whether the subgroup kernels may read their operands through texel views (TB = 1 in
+    /// kernels/src/spec.rs): a device that runs them and fetches every texel format they read.
+    /// Its buffers are then made for texel views too.
+    pub fn reads_texels(&self) -> bool {
         self.gemm_subgroup_width().is_some() && self.texel_fetch.is_some()
     }
 }

@@ -60,9 +60,10 @@ pub struct KernelPlan {
     /// kernels/src/spec.rs): on lavapipe that `loads_lane_by_lane`, whose every storage-buffer
     /// component is a loop of branches over the lanes, so wider components make fewer loops.
     pub word_loads: bool,
-    /// Whether the subgroup-register kernels read B through a texel view (TB = 1): on lavapipe
-    /// that `loads_lane_by_lane`, which fetches texels for all lanes at once.
-    pub texel_b: bool,
+    /// Whether the subgroup-register kernels read B, and A of the plain products (TA), through
+    /// texel views (TB = 1): on lavapipe that `loads_lane_by_lane`, which fetches texels for all
+    /// lanes at once.
+    pub texel_reads: bool,
     /// Whether 3×3 convolutions of stride 1 (of 2¹⁷ weights or more, `Choices::winograd_from`)
     /// run as Winograd's F(2×2, 3×3): the CPU family (2.25× less matrix work;
     /// `VKDIFF_WINOGRAD=0` runs them direct). GPUs keep the direct convolution, measured on none.
@@ -117,7 +118,7 @@ impl KernelPlan {
             compiled_at_first_use: info.lavapipe_mesa.is_some(),
             tune: settings.tune,
             word_loads: subgroup_width.is_some() && loads_lane_by_lane(info) && info.can_read_words(),
-            texel_b: subgroup_width.is_some() && loads_lane_by_lane(info) && info.reads_texel_b(),
+            texel_reads: subgroup_width.is_some() && loads_lane_by_lane(info) && info.reads_texels(),
             winograd: gemm == GemmFamily::Subgroup && settings.winograd,
             wider_vectors: info.lavapipe_mesa.is_some()
                 && crate::kernel_choice::cpu_vectors::wider_lavapipe_vectors_available(settings),
@@ -131,7 +132,7 @@ impl KernelPlan {
                 let wide = self.word_loads
                     && self.subgroup_width.is_some_and(|lanes| lanes <= vkdiff_kernels::WIDEST_64_BIT_WORDS);
                 let words = if wide { ", operands in 64-bit words" } else { ", operands in 32-bit words" };
-                let texels = if self.texel_b { ", B from texels" } else { "" };
+                let texels = if self.texel_reads { ", operands from texels" } else { "" };
                 let winograd = if self.winograd { ", 3×3 convolutions by Winograd F(2×2, 3×3)" } else { "" };
                 let lanes = self.subgroup_width.unwrap_or_default();
                 format!("subgroup-register, {lanes} lanes (CPU){words}{texels}{winograd}")
@@ -297,15 +298,15 @@ mod tests {
     }
 
     #[test]
-    fn lavapipe_before_mesa_26_reads_b_from_texels_and_only_where_it_fetches_them() {
+    fn lavapipe_before_mesa_26_reads_operands_from_texels_and_only_where_it_fetches_them() {
         let mut d = device(0, DeviceKind::Cpu, true);
         d.subgroup_size = 8;
         d.texel_fetch = Some(crate::texel_views::TexelLimits { max_elements: 1 << 27, offset_alignment: 16 });
-        let texels = |d: &DeviceInfo| KernelPlan::for_device(d, &Settings::default()).texel_b;
+        let texels = |d: &DeviceInfo| KernelPlan::for_device(d, &Settings::default()).texel_reads;
         d.lavapipe_mesa = Some((22, 3));
         assert!(texels(&d));
         let plan = KernelPlan::for_device(&d, &Settings::default()).to_string();
-        assert!(plan.contains("8 lanes (CPU), operands in 64-bit words, B from texels"), "{plan}");
+        assert!(plan.contains("8 lanes (CPU), operands in 64-bit words, operands from texels"), "{plan}");
         d.subgroup_size = 16;
         assert!(texels(&d), "every width fetches texels");
         d.lavapipe_mesa = Some((25, 0));
@@ -316,7 +317,7 @@ mod tests {
         assert!(!texels(&d), "another CPU driver reads storage");
         d.lavapipe_mesa = Some((22, 3));
         let gpu_paths = Settings { gpu_paths: true, ..Settings::default() };
-        assert!(!KernelPlan::for_device(&d, &gpu_paths).texel_b);
+        assert!(!KernelPlan::for_device(&d, &gpu_paths).texel_reads);
         d.texel_fetch = None;
         assert!(!texels(&d), "a device that cannot fetch both formats reads storage");
     }

@@ -11,6 +11,8 @@ use crate::kernel_choice::tuned::KernelPick;
 use crate::kernel_choice::tuning::{name_parts, pick, Tunable};
 use crate::recorder::Recorder;
 use crate::tensor::{Dtype, Tensor};
+use crate::texel_views::{fits, Texels};
+use vkdiff_kernels::Variant;
 
 /// C[i] = alpha · A[i]·B[i] (+ bias) (+ C[i] if `accumulate`) for i < batch, row-major with the
 /// given leading dimensions and batch strides (0 shares an operand across the batch). With
@@ -290,10 +292,15 @@ pub(super) fn dispatch_gemm_family(
     if let Some(sg) = width {
         let tm = subgroup_rows(s, sg, ctx.choices().quick_compile);
         let words = ("WD", u32::from(ctx.choices().word_loads));
-        let texels = ("TB", u32::from(ctx.choices().texel_b && crate::texel_views::fits(ctx.info(), reads[1])));
-        let want: Vec<(&str, u32)> =
-            [("SG", sg), ("TM", tm), words, texels].into_iter().chain(params.iter().copied()).collect();
-        let k = kernel(&ctx, names.subgroup, dtype, &want, 4)?;
+        let want = |texels: u32| -> Vec<(&str, u32)> {
+            [("SG", sg), ("TM", tm), words, ("TB", texels)].into_iter().chain(params.iter().copied()).collect()
+        };
+        let from_texels = vkdiff_kernels::find(names.subgroup, dtype, &want(1))
+            .filter(|v| ctx.choices().texel_reads && texel_operands_fit(ctx.info(), v, reads, s));
+        let k = match from_texels {
+            Some(variant) => ctx.kernel(variant, 4)?,
+            None => kernel(&ctx, names.subgroup, dtype, &want(0), 4)?,
+        };
         let columns = u(s.n.div_ceil(8 * sg as usize));
         return rec.dispatch(&k, reads, &[out], push, [columns, u(s.m.div_ceil(tm as usize)), u(s.batch)]);
     }
@@ -311,6 +318,15 @@ pub(super) fn dispatch_gemm_family(
     })?;
     let k = kernel(&ctx, tiled, dtype, params, 4)?;
     rec.dispatch(&k, reads, &[out], push, [u(s.n.div_ceil(64)), u(s.m.div_ceil(64)), u(s.batch)])
+}
+
+/// Whether the device allows texel views of what `variant` reads from texels: B, and A where it
+/// reads A so too (TA = 1), whose eight-half texels (f16) also need K and every stride of A and
+/// B on multiples of 8 (`s.vec8`).
+fn texel_operands_fit(device: &DeviceInfo, variant: &Variant, reads: &[&Tensor], s: &GemmShape) -> bool {
+    let texels = Texels::of(variant);
+    let a_fits = || fits(device, reads[0], texels) && (texels != Texels::Halves8 || s.vec8);
+    fits(device, reads[1], texels) && (variant.param("TA") != Some(1) || a_fits())
 }
 
 /// Row halves of the vec4 tiled kernel's 64·RH × 128 tiles: 2 (8×8 outputs an invocation, each

@@ -162,8 +162,8 @@ fn subgroup_kernels_read_32_or_64_bit_words_from_storage_or_texels() {
     let ctx = direct(GemmFamily::Subgroup);
     let c = padded_residual();
     for (words, texels) in [(false, false), (true, false), (false, true), (true, true)] {
-        ctx.choose(|c| (c.word_loads, c.texel_b) = (words, texels));
-        let (wd, tb) = (u32::from(ctx.choices().word_loads), u32::from(ctx.choices().texel_b));
+        ctx.choose(|c| (c.word_loads, c.texel_reads) = (words, texels));
+        let (wd, tb) = (u32::from(ctx.choices().word_loads), u32::from(ctx.choices().texel_reads));
         for dtype in DTYPES {
             let ran = check_on(&ctx, dtype, &c, 31);
             let read = |v: &&Variant| v.kernel == "conv_sg" && v.param("WD") == Some(wd) && v.param("TB") == Some(tb);

@@ -47,16 +47,16 @@ fn check(family: GemmFamily, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u6
 /// Runs the product on `ctx` against the reference, asserts the family it ran on (a shape off
 /// the vec4 grid may fall back to the tiled kernel), and returns the product's variants.
 fn check_on(ctx: &Context, dtype: Dtype, s: &Matmul, with_bias: bool, seed: u64) -> Vec<&'static Variant> {
-    check_with_b_at(ctx, dtype, s, (with_bias, seed), 0)
+    check_with_operands_at(ctx, dtype, s, (with_bias, seed), 0)
 }
 
-/// As [`check_on`], with B a view that starts `b_start` elements into its buffer.
-fn check_with_b_at(
+/// As [`check_on`], with A and B views that start `start` elements into their buffers.
+fn check_with_operands_at(
     ctx: &Context,
     dtype: Dtype,
     s: &Matmul,
     (with_bias, seed): (bool, u64),
-    b_start: usize,
+    start: usize,
 ) -> Vec<&'static Variant> {
     let family = (ctx.choices().gemm_family, if ctx.choices().quick_compile { "quick" } else { "" });
     let (b_rows, b_cols) = if s.b_transposed { (s.n, s.k) } else { (s.k, s.n) };
@@ -67,9 +67,11 @@ fn check_with_b_at(
     let b = stored(&random(b_len, seed + 1), dtype);
     let bias = stored(&random(s.n, seed + 2), dtype);
     let c0 = stored(&random(c_len, seed + 3), dtype);
-    let ta = ctx.upload(&[a_len], dtype, &a).unwrap();
-    let padded: Vec<f32> = std::iter::repeat_n(f32::NAN, b_start).chain(b.iter().copied()).collect();
-    let tb = ctx.upload(&[b_start + b_len], dtype, &padded).unwrap().narrow(b_start, b_len).unwrap();
+    let view = |values: &[f32]| {
+        let padded: Vec<f32> = std::iter::repeat_n(f32::NAN, start).chain(values.iter().copied()).collect();
+        ctx.upload(&[start + values.len()], dtype, &padded).unwrap().narrow(start, values.len()).unwrap()
+    };
+    let (ta, tb) = (view(&a), view(&b));
     let tbias = ctx.upload(&[s.n], dtype, &bias).unwrap();
     let tc = ctx.upload(&[c_len], dtype, &c0).unwrap();
     let variants = ctx.run_listing(|rec| matmul(rec, &ta, &tb, with_bias.then_some(&tbias), &tc, s)).unwrap();
@@ -251,39 +253,55 @@ fn batched_strided_alpha_accumulate() {
     assert!(tiled.iter().all(|&k| k == "gemm_tiled") && !tiled.is_empty(), "{tiled:?}");
 }
 
-/// The subgroup kernels reading their operands as 32- and as 64-bit words (WD), and B from
-/// storage and from texels (TB), as lavapipe before Mesa 26 takes both, in both dtypes against f64:
-/// B stored K×N and N×K, batched and strided, as a view past the start of its buffer, and GEGLU
-/// fused. Up to 8 lanes a device without 64-bit integers must be refused the words, and one
-/// that fetches no texels the texels.
+/// The subgroup kernels reading their operands as 32- and as 64-bit words (WD), and from storage
+/// and from texels (TB), as lavapipe before Mesa 26 takes both, in both dtypes against f64: B
+/// stored K×N and N×K, batched and strided, A and B as views past the start of their buffers,
+/// and GEGLU fused. From texels f32 products read A and B (TA); f16 ones read both as eight-half
+/// texels where B is stored N×K and K and the strides are multiples of 8, else from storage,
+/// and B alone where B is stored K×N. Up to 8 lanes a device without 64-bit integers must be
+/// refused the words, and one that fetches no texels the texels.
 #[test]
 fn subgroup_kernels_read_32_or_64_bit_words_from_storage_or_texels() {
     let ctx = ctx_with(GemmFamily::Subgroup);
     let info = ctx.info().clone();
     assert!(info.gemm_subgroup_width().is_some(), "{} runs no subgroup-register kernel", info.name);
-    // B a whole binding alignment into its buffer (the texel views' start).
-    let b_start = |dtype: Dtype| info.binding_alignment() as usize / if dtype == Dtype::F16 { 2 } else { 4 };
+    // A and B a whole binding alignment into their buffers (the texel views' start).
+    let start = |dtype: Dtype| info.binding_alignment() as usize / if dtype == Dtype::F16 { 2 } else { 4 };
+    // Each product, and what its f16 variant reads from texels: (TB, TA).
+    let (b_only, both, none) = ((Some(1), None), (Some(1), Some(1)), (Some(0), None));
+    let products = [
+        (Matmul::dense(70, 96, 40, false), b_only),
+        (Matmul::dense(37, 64, 56, true), both),
+        (Matmul::dense(37, 64, 52, true), none),
+        (batched_strided(), b_only),
+    ];
     for (words, texels) in [(false, false), (true, false), (false, true), (true, true)] {
-        ctx.choose(|c| (c.word_loads, c.texel_b) = (words, texels));
+        // The 16-row variants, whose turns have pairs of steps.
+        ctx.choose(|c| (c.word_loads, c.texel_reads, c.quick_compile) = (words, texels, false));
         if words && !info.can_read_words() {
             assert!(!ctx.choices().word_loads, "word loads without shaderInt64 on {}", info.name);
             continue;
         }
-        if texels && !info.reads_texel_b() {
-            assert!(!ctx.choices().texel_b, "texels where {} fetches none", info.name);
+        if texels && !info.reads_texels() {
+            assert!(!ctx.choices().texel_reads, "texels where {} fetches none", info.name);
             continue;
         }
         for dtype in DTYPES {
-            for s in [Matmul::dense(70, 96, 40, false), Matmul::dense(37, 64, 52, true), batched_strided()] {
-                let ran = check_with_b_at(&ctx, dtype, &s, (true, 41), b_start(dtype));
+            for (s, f16_reads) in &products {
+                let ran = check_with_operands_at(&ctx, dtype, s, (true, 41), start(dtype));
+                let reads = match (texels, dtype) {
+                    (false, _) => none,
+                    (true, Dtype::F32) => both,
+                    (true, Dtype::F16) => *f16_reads,
+                };
                 let read = |v: &&Variant| {
                     v.kernel == "gemm_sg"
                         && v.param("WD") == Some(u32::from(words))
-                        && v.param("TB") == Some(u32::from(texels))
+                        && (v.param("TB"), v.param("TA")) == reads
                 };
                 assert!(
                     !ran.is_empty() && ran.iter().all(read),
-                    "{:?}",
+                    "{dtype:?} {s:?}: {:?}",
                     ran.iter().map(|v| (v.kernel, v.params)).collect::<Vec<_>>()
                 );
             }
