@@ -245,7 +245,8 @@ pub const WORD_LOADS: &[&str] = &["gemm_sg", "conv_sg", "attention"];
 pub const WIDEST_64_BIT_WORDS: u32 = 8;
 
 /// The kernels also built with B read from a uniform texel buffer (TB = 1: b_texels.wgsl in
-/// place of b_units.wgsl), which lavapipe before Mesa 26 fetches without a loop over the lanes.
+/// place of b_units.wgsl), which lavapipe before Mesa 26 fetches without a loop over the lanes;
+/// the plain products read A so too where they can (TA = 1: `texel_files` in build.rs).
 pub const TEXEL_B: &[&str] = &["gemm_sg", "conv_sg"];
 
 /// The kernels above written for GPUs only (lavapipe runs them where tests ask for the GPU paths,
