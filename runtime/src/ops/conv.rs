@@ -2,7 +2,7 @@
 
 use super::bands::{bands, elem, fit, image_rows, rows_per_band};
 use super::conv_padded::conv2d_padded;
-use super::gemm::{dispatch_gemm_family, GemmKernels, GemmShape};
+use super::gemm_family::{dispatch_gemm_family, GemmKernels, GemmShape};
 use super::{f, same_dtype, u};
 use crate::error::{ensure, Result};
 use crate::kernel_choice::tuned::KernelPick;

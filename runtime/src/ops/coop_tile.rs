@@ -2,7 +2,7 @@
 //! subgroups share it and how many fragments each holds, per device, product and
 //! `VKDIFF_MATRIX_TILE`.
 
-use super::gemm::GemmShape;
+use super::gemm_family::GemmShape;
 use crate::context::Context;
 use crate::device::DeviceKind;
 use crate::kernel_choice::matrix_tile::MatrixTile;

@@ -13,6 +13,7 @@ mod coop_tile;
 mod copy_heads;
 mod elementwise;
 mod gemm;
+mod gemm_family;
 mod linear_cm2;
 mod matrix2_probes;
 mod norm;
@@ -29,8 +30,8 @@ pub use elementwise::{
     add, binary, concat_channels, copy_into_channels, geglu, mul, timestep_embedding, unary, upsample_nearest2x,
     BinaryOp, TimestepEmbedding, UnaryOp,
 };
-pub(crate) use gemm::SMALL_WEIGHTS;
 pub use gemm::{linear, linear_geglu, matmul, Matmul, GEGLU_COLUMNS};
+pub(crate) use gemm_family::SMALL_WEIGHTS;
 pub use linear_cm2::linear_cm2;
 pub use norm::{group_norm, layer_norm, softmax};
 pub use pool::{pool2d, resize_tf1, upload_image_bytes, Pool, PoolOp};
