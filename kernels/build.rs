@@ -14,28 +14,27 @@ fn fail(message: &str) -> ! {
     exit(1)
 }
 
-/// The kernel's files, read from `wgsl/`.
-fn read_files(spec: &KernelSpec) -> Vec<(String, String)> {
-    spec.files
-        .iter()
-        .map(|file| {
-            let path = Path::new("wgsl").join(file);
-            let body = fs::read_to_string(&path).unwrap_or_else(|e| fail(&format!("{}: {e}", path.display())));
-            (file.to_string(), body)
-        })
-        .collect()
+/// `wgsl/name`, as (name, text).
+fn read(name: &str) -> (String, String) {
+    let path = Path::new("wgsl").join(name);
+    (name.to_string(), fs::read_to_string(&path).unwrap_or_else(|e| fail(&format!("{}: {e}", path.display()))))
 }
+
+/// The files a TB = 1 variant reads in place of others (see [`texel_files`]), read once.
+const TEXEL_FILES: [&str; 3] = ["a_texels.wgsl", "b_texels.wgsl", "gemm_sg_pairs.wgsl"];
 
 /// What a TB = 1 variant reads from texels, and its files: B always (b_texels.wgsl in place of
 /// b_units.wgsl). A too (TA = 1) where the kernel reads A as a plain matrix (a_matrix_v4.wgsl):
 /// in f32 as four-value texels (a_texels.wgsl), in f16 where B is stored N×K and a turn has
 /// pairs of steps as eight-half texels of both (gemm_sg_pairs.wgsl); other f16 variants read B
 /// only.
-fn texel_files(files: &[(String, String)], f16: bool, params: &[(&str, u32)]) -> (Vec<(String, String)>, bool) {
-    let read = |name: &str| {
-        let path = Path::new("wgsl").join(name);
-        (name.to_string(), fs::read_to_string(&path).unwrap_or_else(|e| fail(&format!("{}: {e}", path.display()))))
-    };
+fn texel_files(
+    files: &[(String, String)],
+    texel_sources: &[(String, String)],
+    f16: bool,
+    params: &[(&str, u32)],
+) -> (Vec<(String, String)>, bool) {
+    let read = |name: &str| texel_sources.iter().find(|(n, _)| n == name).expect("in TEXEL_FILES").clone();
     let plain_a = files.iter().any(|(name, _)| name == "a_matrix_v4.wgsl");
     let steps_in_pairs = params.iter().any(|&(p, v)| p == "KS" && v % 2 == 0);
     let pairs = f16 && plain_a && params.contains(&("BT", 1)) && steps_in_pairs;
@@ -64,11 +63,12 @@ fn main() {
     println!("cargo::rerun-if-changed=wgsl");
     let out = env::var("OUT_DIR").unwrap();
     let mut table = String::from("pub static VARIANTS: &[Variant] = &[\n");
+    let texel_sources = TEXEL_FILES.map(read);
     let scalar = KERNELS.iter().flat_map(|spec| [(spec, Dtype::F32, false), (spec, Dtype::F16, false)]);
     let cooperative = COOPERATIVE_KERNELS.iter().map(|spec| (spec, Dtype::F16, true));
     for (spec, dtype, cooperative) in scalar.chain(cooperative) {
         let target = if cooperative || GPU_KERNELS.contains(&spec.name) { Target::Gpu } else { Target::Any };
-        let files = read_files(spec);
+        let files: Vec<(String, String)> = spec.files.iter().map(|file| read(file)).collect();
         // Each reading of the operands a kernel is built for: as 32- and 64-bit words (WD), B
         // (and where it can, A: TA) from storage and from texels (TB).
         let words: &[u32] = if WORD_LOADS.contains(&spec.name) { &[0, 1] } else { &[] };
@@ -82,7 +82,7 @@ fn main() {
         });
         for (i, params) in all.enumerate() {
             let (files, params) = match params.contains(&("TB", 1)) {
-                true => match texel_files(&files, dtype == Dtype::F16, &params) {
+                true => match texel_files(&files, &texel_sources, dtype == Dtype::F16, &params) {
                     (texels, true) => (texels, [&params[..], &[("TA", 1)]].concat()),
                     (texels, false) => (texels, params),
                 },

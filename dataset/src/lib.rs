@@ -14,6 +14,7 @@ mod controls;
 mod disk;
 mod error;
 mod export;
+mod finish;
 mod folder;
 mod job;
 mod merge;

@@ -1,9 +1,10 @@
 //! The dataset loop: scenes from the renderer thread, batched through one recorded denoiser,
-//! decoded, and handed to a writer thread that encodes and writes each image's files and then
-//! its record. Prompts and style-image sets are encoded once each and reused; a template's
-//! expansions are encoded as images bring them, cached by their text.
+//! decoded, and handed to the writer thread (`finish.rs`), which encodes and writes each image's
+//! files and then its record. Prompts and style-image sets are encoded once each and reused; a
+//! template's expansions are encoded as images bring them, cached by their text.
 
 use super::disk::DiskGuard;
+use super::finish::{finish, start_writer, Finished, Item};
 use super::folder::{Dataset, Pending, VersionChange};
 use super::plan::{choose, image_seed, resampled_seed, Choice};
 use super::regenerate::read_rounds;
@@ -11,21 +12,13 @@ use super::scenes::{render_scenes, SceneImage};
 use super::settings::DatasetSettings;
 use super::stop::{interrupted, stop_requested};
 use crate::error::{Error, Result};
-use serde_json::{json, Value};
 use std::collections::{HashMap, VecDeque};
-use std::path::PathBuf;
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError};
-use std::thread::JoinHandle;
+use std::sync::mpsc::{Receiver, SyncSender, TryRecvError};
 use std::time::{Duration, Instant};
-use vkdiff_pipeline::files::png_bytes;
 use vkdiff_pipeline::Conditioning;
-use vkdiff_pipeline::Expansion;
-use vkdiff_pipeline::GenSettings;
 use vkdiff_pipeline::RgbImage;
-use vkdiff_pipeline::TextToImage;
 use vkdiff_pipeline::WorkflowModels;
 use vkdiff_pipeline::{Denoiser, ItemInputs, Regions};
-use vkdiff_render::control::ControlKind;
 
 pub struct RunOptions {
     /// Images per UNet pass.
@@ -84,31 +77,11 @@ pub struct Report {
     pub recordings: usize,
 }
 
-/// An image to write: everything the writer thread needs, nothing it must compute on the GPU.
-struct Finished {
-    index: u64,
-    scene: SceneImage,
-    image: RgbImage,
-    text: std::collections::BTreeMap<String, String>,
-    entry: Value,
-}
-
 /// How many batches' worth of rendered images a batch may be chosen from.
 const LOOKAHEAD: usize = 4;
 
 /// How many encoded expansions of templates are kept beyond those the queued images use.
 const CACHED_EXPANSIONS: usize = 64;
-
-/// One image on its way through the denoiser.
-struct Item {
-    scene: SceneImage,
-    seed: u64,
-    /// Which of the settings' prompts (templates) it takes.
-    template: usize,
-    /// Its prompt: the template expanded, with the choices that made it.
-    prompt: Expansion,
-    style: Option<usize>,
-}
 
 /// Makes the `pending` images of `dataset` with `models` (whose text encoders it releases once
 /// the prompts are encoded, unless a prompt is a template); `styles` are the loaded images of
@@ -393,89 +366,8 @@ impl<'a> Loop<'a> {
             let start = Instant::now();
             let image = self.models.sdxl.decode(&latents, shape)?;
             self.times.vae += start.elapsed();
-            finished.push(self.finish(item, image));
+            finished.push(finish(self.settings, self.models, self.round(item.scene.index), item, image));
         }
         Ok(finished)
     }
-
-    /// The image's PNG text (as `vkdiff gen` would write it for the same settings) and its COCO
-    /// entry.
-    fn finish(&self, item: Item, image: RgbImage) -> Finished {
-        let s = self.settings;
-        let index = item.scene.index;
-        let files = super::plan::ImageFiles::new(index, s.images());
-        let ip_images: Vec<PathBuf> = item.style.map(|k| s.ip_sets[k].clone()).unwrap_or_default();
-        let uses_depth = self.models.settings.control_kinds().contains(&ControlKind::Depth);
-        let gen = GenSettings {
-            models: self.models.settings.clone(),
-            job: TextToImage {
-                prompt: item.prompt.prompt.clone(),
-                negative_prompt: s.negative_prompt.clone(),
-                seed: item.seed,
-                sampling: s.sampling.clone(),
-            },
-            depth: uses_depth.then(|| PathBuf::from(&files.depth)),
-            control_images: (item.scene.controls.iter())
-                .filter(|c| self.models.settings.control_kinds().contains(&c.kind))
-                .map(|c| (c.kind, PathBuf::from(&c.file)))
-                .collect(),
-            ip_images: ip_images.clone(),
-            init_image: item.scene.init.as_ref().map(|_| PathBuf::from(&files.init)),
-        };
-        let mut entry = item.scene.entry(&files);
-        entry["seed"] = json!(item.seed);
-        if self.round(item.scene.index) > 0 {
-            entry["resample"] = json!(self.round(item.scene.index));
-        }
-        entry["prompt"] = json!(gen.job.prompt);
-        entry["negative_prompt"] = json!(s.negative_prompt);
-        if s.templates[item.template].is_template() {
-            entry["prompt_template"] = json!(s.prompts[item.template]);
-            let choices = item.prompt.choices.iter().map(|c| json!({"at": c.at, "choice": c.choice}));
-            entry["prompt_choices"] = Value::Array(choices.collect());
-        }
-        if let (Some(_), Some(strength)) = (&item.scene.init, s.sampling.strength) {
-            entry["init_file"] = json!(files.init);
-            entry["strength"] = json!(strength);
-        }
-        if s.regions.has_prompts() {
-            let prompts: serde_json::Map<String, Value> =
-                s.regions.prompts.iter().map(|(_, name, prompt)| (name.clone(), json!(prompt))).collect();
-            entry["region_prompts"] = Value::Object(prompts);
-        }
-        if item.style.is_some() {
-            entry["ip_images"] = json!(ip_images.iter().map(|p| p.display().to_string()).collect::<Vec<_>>());
-        }
-        let mut text = gen.png_text();
-        text.extend(s.regions.png_text());
-        if let Some(tiling) = self.models.sdxl.vae_tiling() {
-            text.insert("vae_tile".into(), tiling.tile.to_string());
-        }
-        Finished { index, text, scene: item.scene, image, entry }
-    }
-}
-
-/// The writer thread: PNG encoding and every file write happen here, off the denoiser's path.
-fn start_writer(
-    dataset: Dataset,
-    disk: DiskGuard,
-    batch: usize,
-) -> (SyncSender<Finished>, JoinHandle<Result<Duration>>) {
-    let (send, receive) = sync_channel::<Finished>(2 * batch);
-    let thread = std::thread::spawn(move || {
-        let mut busy = Duration::ZERO;
-        for f in receive {
-            let start = Instant::now();
-            let files = dataset.files(f.index);
-            let png = png_bytes(&f.image, &f.text)?;
-            let annotations = f.scene.dataset_annotations();
-            let mut outputs = f.scene.scene_files(&files);
-            outputs.extend(f.scene.init.as_ref().map(|(_, png)| (files.init.as_str(), png.as_slice())));
-            outputs.push((&files.image, &png));
-            disk.written.add(dataset.write_image(f.index, &outputs, f.entry, annotations)?);
-            busy += start.elapsed();
-        }
-        Ok(busy)
-    });
-    (send, thread)
 }
