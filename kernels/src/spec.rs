@@ -25,11 +25,16 @@ const BINARY: &[&[(&str, u32)]] = &[&[("OP", 0)], &[("OP", 1)]];
 
 /// A subgroup GEMM variant (kernels/wgsl/gemm_sg.wgsl) of SG lanes and TM rows, B K×N or N×K
 /// (BT), GEGLU fused or not (GE), with what follows from them: AU, the rows of A each lane
-/// reads (TM / SG, at least 1), and KS, the steps of 4 along K a turn (one in the 8-row variants,
-/// which compile quickly, else four).
+/// reads (TM / SG, at least 1), and KS, the steps of 4 along K a turn: one in the 8-row variants,
+/// which compile quickly; two in the 128-row ones, which 16 lanes take for tall products (at
+/// four steps their turn's code ran 0.8× as fast); else four.
 const fn subgroup_tile(sg: u32, tm: u32, bt: u32, ge: u32) -> [(&'static str, u32); 6] {
     let au = if tm > sg { tm / sg } else { 1 };
-    let ks = if tm == 8 { 1 } else { 4 };
+    let ks = match tm {
+        8 => 1,
+        128 => 2,
+        _ => 4,
+    };
     [("SG", sg), ("TM", tm), ("BT", bt), ("AU", au), ("KS", ks), ("GE", ge)]
 }
 
@@ -83,6 +88,9 @@ pub const KERNELS: &[KernelSpec] = &[
             &subgroup_tile(16, 32, 0, 0),
             &subgroup_tile(16, 32, 1, 0),
             &subgroup_tile(16, 32, 1, 1),
+            &subgroup_tile(16, 128, 0, 0),
+            &subgroup_tile(16, 128, 1, 0),
+            &subgroup_tile(16, 128, 1, 1),
         ],
     },
     KernelSpec {
@@ -100,6 +108,7 @@ pub const KERNELS: &[KernelSpec] = &[
             &subgroup_tile(16, 8, 1, 0),
             &subgroup_tile(16, 16, 1, 0),
             &subgroup_tile(16, 32, 1, 0),
+            &subgroup_tile(16, 128, 1, 0),
         ],
     },
     // Shared-memory tiled GEMM: any shape; GPUs without matrix units, and f32 products on any GPU.

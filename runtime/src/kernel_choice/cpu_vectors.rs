@@ -1,9 +1,10 @@
 //! lavapipe's vector width: the CPU family's subgroup width, and on CPUs with AVX-512 the choice
 //! of 512 bits. Mesa picks 256 bits (8-lane subgroups) unless `LP_NATIVE_VECTOR_WIDTH` says
-//! otherwise, and vkdiff leaves it so: 512 bits (16 lanes) ran the SDXL UNet 4.9× slower on an
-//! Intel Xeon and 1.04× faster on an AMD EPYC (1.14× since the CPU kernels read 64-bit words,
-//! 2026-12-05), and made the README's demo 1.4× (Mesa 22.3) to 3× (Mesa 25) slower from a cold
-//! shader cache on that EPYC, as the 16-lane kernels take 2–3× longer to compile (BENCHMARKS.md).
+//! otherwise, and vkdiff leaves it so, as Mesa reads it before vkdiff can know the driver's
+//! release: on an AMD EPYC (Zen 4) 512 bits (16 lanes, 128-row tiles) ran the SDXL UNet 1.35×
+//! faster on Mesa 22.3 (2026-12-06), but the linear rows 0.4× as fast on Mesa 26.1, and on an
+//! Intel Xeon the UNet 4.9× slower (2026-11-26); and the 16-lane kernels take 2–3× longer to
+//! compile, minutes from a cold shader cache (BENCHMARKS.md).
 
 use crate::device::DeviceInfo;
 

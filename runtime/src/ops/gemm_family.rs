@@ -133,13 +133,14 @@ fn tiled_v4_workgroup_bytes(rh: u32) -> u32 {
     16 * (16 * rh + 1 + 33) * 16
 }
 
-/// Rows per workgroup of the subgroup kernels: more rows load each B value fewer times (64 ran
-/// fastest on Mesa 22.3's lavapipe, from 512 rows: SDXL's 16² level at 512², batch 2; 16 lanes
-/// stop at 32, for code size, and 64 ran their linear rows 0.9× as fast), but the JIT time grows
-/// about with the square of the rows (measured, 8 lanes: Mesa 25 8 rows 5 s, 16 14 s, 32 57 s, 64
-/// minutes; Mesa 22.3 16 rows 2.5 s, 32 6 s, 64 14–18 s). So [`small`] products (tiny models,
-/// whose products take milliseconds) take 16 rows, or 8 where compiles are `quick`; with `quick`
-/// compiles no product takes 64.
+/// Rows per workgroup of the subgroup kernels: more rows load each B value fewer times. From 512
+/// rows (SDXL's 16² level at 512², batch 2) 8 lanes take 64 (fastest on Mesa 22.3's lavapipe) and
+/// 16 lanes 128, at two steps a turn (since B and A come from texels: linear rows 1.1–1.2× the
+/// 32-row ones; 64 rows ran between). But the JIT time grows about with the square of the rows
+/// (measured, 8 lanes: Mesa 25 8 rows 5 s, 16 14 s, 32 57 s, 64 minutes; Mesa 22.3 16 rows 2.5 s,
+/// 32 6 s, 64 14–18 s; 16 lanes 32 rows 5 s, 128 about 55 s). So [`small`] products (tiny
+/// models, whose products take milliseconds) take 16 rows, or 8 where compiles are `quick`; with
+/// `quick` compiles no product takes more than 32.
 fn subgroup_rows(s: &GemmShape, sg: u32, quick: bool) -> u32 {
     if small(s.m, s.n, s.k) {
         if quick {
@@ -147,8 +148,12 @@ fn subgroup_rows(s: &GemmShape, sg: u32, quick: bool) -> u32 {
         } else {
             16
         }
-    } else if s.m >= 512 && sg < 16 && !quick {
-        64
+    } else if s.m >= 512 && !quick {
+        if sg < 16 {
+            64
+        } else {
+            128
+        }
     } else if s.m >= 256 {
         32
     } else {

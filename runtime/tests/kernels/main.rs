@@ -17,14 +17,14 @@ mod runtime;
 mod tuning;
 mod winograd;
 
-/// The tallest subgroup GEMM tile the shared context takes: 64 rows, or 32 at 16 lanes (for code
-/// size) and where small products take the quickly compiled variants (lavapipe after Mesa 22,
-/// whose JIT takes minutes at 64 rows).
+/// The tallest subgroup GEMM tile the shared context takes: 32 rows where small products take the
+/// quickly compiled variants (lavapipe after Mesa 22, whose JIT takes minutes at 64 rows), else
+/// 128 at 16 lanes and 64 at fewer.
 fn tallest_subgroup_rows() -> u32 {
     let ctx = vkdiff_testkit::ctx();
-    if ctx.info().gemm_subgroup_width() == Some(16) || ctx.choices().quick_compile {
-        32
-    } else {
-        64
+    match (ctx.choices().quick_compile, ctx.info().gemm_subgroup_width()) {
+        (true, _) => 32,
+        (false, Some(16)) => 128,
+        (false, _) => 64,
     }
 }
