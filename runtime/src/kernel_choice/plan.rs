@@ -208,9 +208,8 @@ impl fmt::Display for KernelPlan {
         if self.wider_vectors {
             write!(
                 f,
-                "\nthis CPU has AVX-512: LP_NATIVE_VECTOR_WIDTH=512 gives lavapipe 16-lane kernels (SDXL's UNet \
-                 1.35× faster on an AMD EPYC after a first run that compiles them for minutes, slower on an Intel \
-                 Xeon: BENCHMARKS.md)"
+                "\nthis CPU has AVX-512: LP_NATIVE_VECTOR_WIDTH=512 gives lavapipe 16-lane kernels (faster on an AMD \
+                 EPYC once a first run has compiled them, for minutes; slower on an Intel Xeon: BENCHMARKS.md)"
             )?;
         }
         Ok(())

@@ -148,8 +148,8 @@ fn eight_subgroup_tiles_of_two_by_two_fragments() {
 fn tall_shapes_take_the_large_row_tiles() {
     // M ≥ 256 and ≥ 512 select the 32-row and the tallest subgroup variants for products of at
     // least 2¹⁷ weights (smaller ones take 16 rows); M off their multiples. The tallest, with B
-    // stored N×K as linear layers store it, at a K that ends half-way through a four-step turn (8
-    // lanes: 64 rows) and on a two-step one (16 lanes: 128 rows).
+    // stored N×K as linear layers store it, at a K that ends half-way through a turn of four steps
+    // (8 lanes: 64 rows) and at the end of one of two (16 lanes: 128 rows).
     let ran = both(Matmul::dense(300, 516, 256, true), true, 8);
     assert_eq!(params_of(&ran, GemmFamily::Subgroup, "gemm_sg", "TM"), [32, 32], "M ≥ 256: 32 rows");
     let tallest = crate::tallest_subgroup_rows();
