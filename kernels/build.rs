@@ -34,7 +34,7 @@ fn texel_files(
     f16: bool,
     params: &[(&str, u32)],
 ) -> (Vec<(String, String)>, bool) {
-    let read = |name: &str| texel_sources.iter().find(|(n, _)| n == name).expect("in TEXEL_FILES").clone();
+    let texel_file = |name: &str| texel_sources.iter().find(|(n, _)| n == name).expect("in TEXEL_FILES").clone();
     let plain_a = files.iter().any(|(name, _)| name == "a_matrix_v4.wgsl");
     let steps_in_pairs = params.iter().any(|&(p, v)| p == "KS" && v % 2 == 0);
     let pairs = f16 && plain_a && params.contains(&("BT", 1)) && steps_in_pairs;
@@ -44,10 +44,10 @@ fn texel_files(
         .filter_map(|(name, body)| match name.as_str() {
             "a_as_f32.wgsl" if texel_a => None,
             "a_matrix_v4.wgsl" if pairs => None,
-            "a_matrix_v4.wgsl" if texel_a => Some(read("a_texels.wgsl")),
+            "a_matrix_v4.wgsl" if texel_a => Some(texel_file("a_texels.wgsl")),
             "b_units.wgsl" if pairs => None,
-            "b_units.wgsl" => Some(read("b_texels.wgsl")),
-            "gemm_sg_steps.wgsl" if pairs => Some(read("gemm_sg_pairs.wgsl")),
+            "b_units.wgsl" => Some(texel_file("b_texels.wgsl")),
+            "gemm_sg_steps.wgsl" if pairs => Some(texel_file("gemm_sg_pairs.wgsl")),
             _ => Some((name.clone(), body.clone())),
         })
         .collect();
