@@ -47,9 +47,10 @@ impl GemmKernels {
 
 /// Records a GEMM-shaped kernel: the cooperative variant (its tile as `tile` asks) where the
 /// context uses the matrix units, the storage is f16 and the shape fits vec4 loads (in units of
-/// 8 where it fits those); the subgroup variant where the device prefers it and the shape fits, with more rows per workgroup for taller products; else the tiled one, in vec4 units
-/// where the shape fits them and GEGLU is not fused. `params` are the variant parameters all
-/// share; bindings are `reads` then `out`.
+/// 8 where it fits those); the subgroup variant where the device prefers it and the shape fits,
+/// with more rows per workgroup for taller products; else the tiled one, in vec4 units where
+/// the shape fits them and GEGLU is not fused. `params` are the variant parameters all share;
+/// bindings are `reads` then `out`.
 pub(super) fn dispatch_gemm_family(
     rec: &mut Recorder,
     (names, dtype, params): (GemmKernels, Dtype, &[(&str, u32)]),
