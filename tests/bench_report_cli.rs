@@ -15,8 +15,9 @@ use vkdiff_testkit::fixture;
 /// A stand-in for `$VKDIFF_REFERENCE_PYTHON`, run as `STUB -c SCRIPT ARGS…`: it knows each reference
 /// by the usage line its script carries, checks the arguments the quick suite gives it (the
 /// image's: 128², 2 steps timed, 1 run, no warm-up image, and the UNet's: no warm-up evaluation,
-/// as vkdiff's quick suite makes neither; a model's config, first, is not checked), that
-/// `tools/reference_timing.py` came with each timed reference, and prints fixed JSON.
+/// as vkdiff's quick suite makes neither; the kernels' 10 runs; a model's config, first, is not
+/// checked), that `tools/reference_timing.py` came with each timed reference, and prints fixed
+/// JSON.
 fn stub_python() -> PathBuf {
     let path = scratch("bench-report-stub").join("python");
     let diffusers = r#""torch": "9.1", "diffusers": "9.2", "where": "stub CPU float32", "settings": ["channels_last"], "sdpa": "math", "host": "stub host", "clocks": null"#;
@@ -35,7 +36,7 @@ case "$script" in
     answer='{{"ms": 240.0, "times_ms": [240.0], "peak_mib": 1.0, {unet_compiled}, {diffusers}}}' ;;
   *"Usage: vae_reference.py"*) shift; want="128 1 cpu f32"
     answer='{{"seconds": 0.5, "times": [0.5], "peak_mib": 1.0, {vae_compiled}, {diffusers}}}' ;;
-  *"Usage: kernels_reference.py"*) want="1"
+  *"Usage: kernels_reference.py"*) want="10"
     answer='{{"linear": [0.5], "conv": [0.25], "attention": [0.125], "torch": "9.1", "where": "stub CPU", "settings": ["channels_last", "wall-clock"], "sdpa": "math", "host": "stub host", "clocks": null}}' ;;
   *"sdcpp_reference.py MODEL"*) shift; want="64 2"
     answer='{{"load_s": 4.2, "steps": [9.0, 3.0], "total_s": 12.5, "what": "stub sd.cpp"}}' ;;
@@ -250,6 +251,8 @@ fn torch_kernels_and_sd_cpp_beside_vkdiff_give_rates_by_product_and_a_step() {
     assert_eq!(ids, ["kernels.linear", "kernels.conv", "kernels.attention", "peer.sdcpp"]);
     for (figure, rate) in figures.iter().zip([0.5, 0.25, 0.125]) {
         assert_eq!(figure["higher_is_better"], true, "{figure}");
+        // Ten runs a kernel row on both sides, in the quick suite too (the stub checks torch's).
+        assert_eq!(figure["runs"]["count"], 10, "{figure}");
         assert_reference(
             &table,
             figure,

@@ -74,7 +74,8 @@ pub struct ReportArgs {
     /// 512 with --quick): a multiple of 64. Reports of other sizes do not compare.
     #[arg(long, value_name = "PIXELS")]
     size: Option<usize>,
-    /// Timed runs of each figure after its warm-up [default: 3; 1 with --quick].
+    /// Timed runs of each figure after its warm-up [default: 3; 1 with --quick; the kernels'
+    /// rows 10 in both suites, half a second each].
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     runs: Option<u32>,
     /// Only these groups (comma-separated): image, ablation, unet, vae, kernels, peer [default:
@@ -128,6 +129,10 @@ pub struct Plan {
     pub steps_timed: usize,
     pub network_size: usize,
     pub runs: usize,
+    /// Timed runs of each kernel row, on both sides: one run is about half a second of
+    /// repetitions, so ten cost little and give a median and a spread where one would give a
+    /// single sample of a shared machine's noise.
+    pub kernel_runs: usize,
     /// Whether each figure runs once untimed first, and the paper's image's reference with it
     /// (the quick suite warms up neither side: on CPU devices vkdiff's kernels compile as they
     /// are recorded, which the set's setup holds, not as they first run).
@@ -148,6 +153,7 @@ impl Plan {
             steps_timed: if quick { 2 } else { 30 },
             network_size: size,
             runs: args.runs.map_or(if quick { 1 } else { 3 }, |r| r as usize),
+            kernel_runs: args.runs.map_or(10, |r| r as usize),
             warm_up: !quick,
             reference: args.reference_device,
             peer_timeout: std::time::Duration::from_secs(args.peer_timeout),

@@ -189,7 +189,7 @@ pub fn kernels(ctx: &Context, plan: &Plan) -> Result<Vec<(Figure, Job)>> {
     eprintln!("report: kernels in {}", dtype_name(dtype));
     ctx.reset_peak();
     let peak = crate::peaks::matrix_peak(ctx);
-    Ok(headline(ctx, dtype, plan.runs)?
+    Ok(headline(ctx, dtype, plan.kernel_runs)?
         .into_iter()
         .map(|h| {
             let runs = Runs::of(&h.tflops).expect("runs");

@@ -128,7 +128,7 @@ pub fn references(plan: &Plan, jobs: Vec<(Figure, Job)>, env: &Environment) -> V
             (Some(d), Job::Kernel { id, dtype }) => {
                 let all = kernels.get_or_insert_with(|| {
                     eprintln!("report: torch's kernels");
-                    let mut args = vec![plan.runs.to_string()];
+                    let mut args = vec![plan.kernel_runs.to_string()];
                     if d == ReferenceDevice::Cuda {
                         args.extend(["cuda".into(), dtype_name(dtype).into()]);
                     }
