@@ -2,9 +2,10 @@
 //! of 512 bits. Mesa picks 256 bits (8-lane subgroups) unless `LP_NATIVE_VECTOR_WIDTH` says
 //! otherwise, and vkdiff leaves it so, as Mesa reads it before vkdiff can know the driver's
 //! release: on an AMD EPYC (Zen 4) 512 bits (16 lanes, 128-row tiles) ran the SDXL UNet 1.35×
-//! faster on Mesa 22.3 (2026-12-06), but the linear rows 0.4× as fast on Mesa 26.1, and on an
-//! Intel Xeon the UNet 4.9× slower (2026-11-26); and the 16-lane kernels take 2–3× longer to
-//! compile, minutes from a cold shader cache (BENCHMARKS.md).
+//! faster on Mesa 22.3 (2026-12-06), but the linear rows 0.4× as fast on Mesa 25.0 and 26.1
+//! (whose subgroup broadcasts are loops over 16 lanes), and on an Intel Xeon the UNet 4.9× slower
+//! (2026-11-26); and the 16-lane kernels take 2–3× longer to compile, minutes from a cold shader
+//! cache (BENCHMARKS.md).
 
 use crate::device::DeviceInfo;
 

@@ -69,7 +69,7 @@ pub struct KernelPlan {
     /// `VKDIFF_WINOGRAD=0` runs them direct). GPUs keep the direct convolution, measured on none.
     pub winograd: bool,
     /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen,
-    /// Mesa 22, where 16 lanes were measured faster; Mesa 26.1 ran them 0.4× as fast).
+    /// Mesa 22, where 16 lanes were measured faster; Mesa 25.0 and 26.1 ran them 0.4× as fast).
     pub wider_vectors: bool,
 }
 
