@@ -3,6 +3,7 @@
 
 include!("spec.rs");
 include!("spec_cooperative.rs");
+include!("broadcasts.rs");
 
 /// One compiled variant of a kernel.
 pub struct Variant {

@@ -290,9 +290,10 @@ impl Context {
 
     /// The pipeline for `variant`, created on first use and kept for the context's lifetime.
     pub fn kernel(&self, variant: &'static Variant, bindings: u32) -> Result<Arc<Kernel>> {
-        let pinned_subgroups = self.shared.info.subgroup_size_range.is_some();
-        let statistics = self.shared.statistics.as_ref();
-        self.shared.pipelines.kernel(&self.shared.device, (pinned_subgroups, statistics), variant, bindings)
+        let info = &self.shared.info;
+        let options =
+            (info.subgroup_size_range.is_some(), info.shuffles_loop_over_lanes(), self.shared.statistics.as_ref());
+        self.shared.pipelines.kernel(&self.shared.device, options, variant, bindings)
     }
 
     /// Bytes of device memory held by live tensors now.

@@ -40,12 +40,13 @@ impl PipelineCache {
 
 impl PipelineCache {
     /// The pipeline for `variant` on `device`, created on first use; `pinned_subgroups`: the
-    /// device can require a subgroup size (`VK_EXT_subgroup_size_control`); `statistics`: print
-    /// the compiled kernel's statistics (`VKDIFF_PIPELINE_STATS=1`).
+    /// device can require a subgroup size (`VK_EXT_subgroup_size_control`); `broadcasts`: write
+    /// shuffles from constant lanes as broadcasts ([`vkdiff_kernels::constant_broadcasts`]);
+    /// `statistics`: print the compiled kernel's statistics (`VKDIFF_PIPELINE_STATS=1`).
     pub(crate) fn kernel(
         &self,
         device: &ash::Device,
-        options: (bool, Option<&StatisticsLoader>),
+        options: (bool, bool, Option<&StatisticsLoader>),
         variant: &'static Variant,
         bindings: u32,
     ) -> Result<Arc<Kernel>> {
@@ -97,7 +98,7 @@ pub(crate) type Reported = std::result::Result<Vec<Statistics>, String>;
 /// executables (or why it reports nothing).
 pub(crate) fn create_kernel(
     device: &ash::Device,
-    (pinned_subgroups, statistics): (bool, Option<&StatisticsLoader>),
+    (pinned_subgroups, broadcasts, statistics): (bool, bool, Option<&StatisticsLoader>),
     variant: &'static Variant,
     bindings: u32,
 ) -> Result<(Kernel, Option<Reported>)> {
@@ -110,7 +111,7 @@ pub(crate) fn create_kernel(
                 .stage_flags(vk::ShaderStageFlags::COMPUTE)
         })
         .collect();
-    let words = variant.words();
+    let words = if broadcasts { vkdiff_kernels::constant_broadcasts(&variant.words()) } else { variant.words() };
     // SAFETY: all create infos point at locals that outlive the calls; handles are destroyed
     // with the cache or right here when pipeline creation fails.
     unsafe {

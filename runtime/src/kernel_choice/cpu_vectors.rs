@@ -2,10 +2,11 @@
 //! of 512 bits. Mesa picks 256 bits (8-lane subgroups) unless `LP_NATIVE_VECTOR_WIDTH` says
 //! otherwise, and vkdiff leaves it so, as Mesa reads it before vkdiff can know the driver's
 //! release: on an AMD EPYC (Zen 4) 512 bits (16 lanes, 128-row tiles) ran the SDXL UNet 1.35×
-//! faster on Mesa 22.3 (2026-12-06), but the linear rows 0.4× as fast on Mesa 25.0 and 26.1
-//! (whose subgroup broadcasts are loops over 16 lanes), and on an Intel Xeon the UNet 4.9× slower
-//! (2026-11-26); and the 16-lane kernels take 2–3× longer to compile, minutes from a cold shader
-//! cache (BENCHMARKS.md).
+//! faster on Mesa 22.3 (2026-12-06), and on an Intel Xeon the UNet 4.9× slower (2026-11-26); on
+//! Mesa 26.1 the products ran 1.5–1.9× faster at 16 lanes once their broadcasts were written as
+//! such (`shuffles_loop_over_lanes`), on Mesa 25.0 slower, and the UNet is measured on neither;
+//! and the 16-lane kernels take 2–3× longer to compile, minutes from a cold shader cache
+//! (BENCHMARKS.md).
 
 use crate::device::DeviceInfo;
 
@@ -39,6 +40,13 @@ impl DeviceInfo {
     /// 64-bit ones (`shaderInt64`) up to `WIDEST_64_BIT_WORDS` lanes, 32-bit ones past it.
     pub fn can_read_words(&self) -> bool {
         self.gemm_subgroup_width().is_some_and(|lanes| lanes > vkdiff_kernels::WIDEST_64_BIT_WORDS) || self.shader_int64
+    }
+
+    /// Whether the driver builds a subgroup shuffle as a loop over the lanes even where the lane
+    /// is a constant (lavapipe after Mesa 22 at 16 lanes: at 8 it is one `vpermd`), so that the
+    /// kernels' broadcasts, which naga writes as shuffles, are better written as broadcasts.
+    pub fn shuffles_loop_over_lanes(&self) -> bool {
+        self.lavapipe_mesa.is_some_and(|(major, _)| major > 22) && self.subgroup_size > 8
     }
 
     /// Whether the subgroup kernels may read their operands through texel views (TB = 1 in

@@ -69,8 +69,12 @@ pub struct KernelPlan {
     /// `VKDIFF_WINOGRAD=0` runs them direct). GPUs keep the direct convolution, measured on none.
     pub winograd: bool,
     /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen,
-    /// Mesa 22, where 16 lanes were measured faster; Mesa 25.0 and 26.1 ran them 0.4× as fast).
+    /// Mesa 22, where the UNet ran 1.35× faster at 16 lanes; on 25.0 and 26.1 only the products
+    /// are measured there).
     pub wider_vectors: bool,
+    /// Whether the kernels' shuffles from constant lanes are written as broadcasts
+    /// ([`DeviceInfo::shuffles_loop_over_lanes`]).
+    pub broadcasts: bool,
 }
 
 impl KernelPlan {
@@ -119,8 +123,12 @@ impl KernelPlan {
             compiled_at_first_use: info.lavapipe_mesa.is_some(),
             tune: settings.tune,
             word_loads: subgroup_width.is_some() && loads_lane_by_lane(info) && info.can_read_words(),
-            texel_reads: subgroup_width.is_some() && loads_lane_by_lane(info) && info.reads_texels(),
+            texel_reads: subgroup_width.is_some()
+                && loads_lane_by_lane(info)
+                && info.reads_texels()
+                && !wrong_texels_at_16_lanes(info),
             winograd: gemm == GemmFamily::Subgroup && settings.winograd,
+            broadcasts: info.shuffles_loop_over_lanes(),
             wider_vectors: info.lavapipe_mesa.is_some_and(|(major, _)| major <= 22)
                 && crate::kernel_choice::cpu_vectors::wider_lavapipe_vectors_available(settings),
         }
@@ -135,8 +143,9 @@ impl KernelPlan {
                 let words = if wide { ", operands in 64-bit words" } else { ", operands in 32-bit words" };
                 let texels = if self.texel_reads { ", operands from texels" } else { "" };
                 let winograd = if self.winograd { ", 3×3 convolutions by Winograd F(2×2, 3×3)" } else { "" };
+                let broadcasts = if self.broadcasts { ", broadcasts (not shuffles)" } else { "" };
                 let lanes = self.subgroup_width.unwrap_or_default();
-                format!("subgroup-register, {lanes} lanes (CPU){words}{texels}{winograd}")
+                format!("subgroup-register, {lanes} lanes (CPU){words}{texels}{broadcasts}{winograd}")
             }
             (GemmFamily::Cooperative, Some(f)) => {
                 let trial = match self.trial {
@@ -224,6 +233,12 @@ fn loads_lane_by_lane(info: &DeviceInfo) -> bool {
     info.lavapipe_mesa.is_some_and(|(major, _)| major < 26)
 }
 
+/// Mesa 25.0 at 16 lanes returned wrong products from texels (the GEMM's tests failed against
+/// f64; from storage they pass, 2026-12-06), so at 16 lanes only Mesa 22 reads texels.
+fn wrong_texels_at_16_lanes(info: &DeviceInfo) -> bool {
+    info.subgroup_size > 8 && info.lavapipe_mesa.is_some_and(|(major, _)| major > 22)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -271,6 +286,28 @@ mod tests {
     }
 
     #[test]
+    fn lavapipe_after_mesa_22_at_16_lanes_takes_broadcasts() {
+        let mut d = device(0, DeviceKind::Cpu, true);
+        let takes = |d: &DeviceInfo| {
+            let plan = KernelPlan::for_device(d, &Settings::default());
+            assert_eq!(plan.broadcasts, plan.to_string().contains("broadcasts (not shuffles)"), "{plan}");
+            plan.broadcasts
+        };
+        d.subgroup_size = 16;
+        d.lavapipe_mesa = Some((22, 3));
+        assert!(!takes(&d), "Mesa 22's shuffle from a constant lane is one vector shuffle");
+        for release in [(25, 0), (26, 1)] {
+            d.lavapipe_mesa = Some(release);
+            assert!(takes(&d), "Mesa {release:?} builds a 16-lane shuffle as a loop");
+        }
+        d.subgroup_size = 8;
+        assert!(!takes(&d), "8 lanes' shuffle is one vpermd");
+        d.subgroup_size = 16;
+        d.lavapipe_mesa = None;
+        assert!(!takes(&d), "other drivers keep naga's shuffles");
+    }
+
+    #[test]
     fn lavapipe_before_mesa_26_reads_words_and_only_with_the_integers_they_need() {
         let mut d = device(0, DeviceKind::Cpu, true);
         d.subgroup_size = 8;
@@ -311,6 +348,8 @@ mod tests {
         d.subgroup_size = 16;
         assert!(texels(&d), "every width fetches texels");
         d.lavapipe_mesa = Some((25, 0));
+        assert!(!texels(&d), "Mesa 25.0 returned wrong products from texels at 16 lanes");
+        d.subgroup_size = 8;
         assert!(texels(&d), "Mesa 25.0 loads storage lane by lane too");
         d.lavapipe_mesa = Some((26, 1));
         assert!(!texels(&d), "Mesa 26.1 ran f16 products slower from texels");
