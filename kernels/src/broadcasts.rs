@@ -1,9 +1,10 @@
 /// `words` (a kernel's SPIR-V) with each subgroup shuffle from a constant lane, which is how naga
 /// writes WGSL's `subgroupBroadcast`, written as the broadcast it is, and the capability a
-/// broadcast needs. Mesa's lavapipe after 22 builds a shuffle as one `vpermd` at 8 lanes of 32 bits
-/// and as a loop over the lanes at 16, which ran Mesa 26.1's 16-lane products at about a third of the
-/// speed the broadcast's extract and splat reach (docs/benchmark-log.md, 2026-12-06); Mesa 22 has
-/// it the other way round (its shuffle from a constant lane is one vector shuffle).
+/// broadcast needs. Mesa's lavapipe after 22 builds a shuffle as one `vpermd` at 8 lanes of 32
+/// bits and as a loop over the lanes at 16, which ran Mesa 26.1's 16-lane products at about a
+/// third of the speed the broadcast's extract and splat reach (docs/benchmark-log.md,
+/// 2026-12-06); Mesa 22 has it the other way round (its shuffle from a constant lane is one
+/// vector shuffle).
 pub fn constant_broadcasts(words: &[u32]) -> Vec<u32> {
     const OP_CAPABILITY: u32 = 17;
     const OP_CONSTANT: u32 = 43;
