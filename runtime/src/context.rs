@@ -290,10 +290,15 @@ impl Context {
 
     /// The pipeline for `variant`, created on first use and kept for the context's lifetime.
     pub fn kernel(&self, variant: &'static Variant, bindings: u32) -> Result<Arc<Kernel>> {
+        self.shared.pipelines.kernel(&self.shared.device, self.compile_options(), variant, bindings)
+    }
+
+    /// How this device's pipelines are created: subgroup sizes pinned where it can, constant-lane
+    /// shuffles as broadcasts where it builds shuffles as loops, and statistics where asked for
+    /// (`pipeline::create_kernel`).
+    pub(crate) fn compile_options(&self) -> (bool, bool, Option<&ash::khr::pipeline_executable_properties::Device>) {
         let info = &self.shared.info;
-        let options =
-            (info.subgroup_size_range.is_some(), info.shuffles_loop_over_lanes(), self.shared.statistics.as_ref());
-        self.shared.pipelines.kernel(&self.shared.device, options, variant, bindings)
+        (info.subgroup_size_range.is_some(), info.shuffles_loop_over_lanes(), self.shared.statistics.as_ref())
     }
 
     /// Bytes of device memory held by live tensors now.

@@ -64,11 +64,8 @@ impl Context {
     /// Compiles `variant` for this device and reads what the driver reports of it; the
     /// pipeline is not kept. An error is the driver's refusal.
     pub fn compile_for_census(&self, variant: &'static Variant) -> Result<CompiledKernel> {
-        let info = self.info();
-        let options =
-            (info.subgroup_size_range.is_some(), info.shuffles_loop_over_lanes(), self.shared.statistics.as_ref());
         let start = Instant::now();
-        let (kernel, reported) = create_kernel(&self.shared.device, options, variant, BINDINGS)?;
+        let (kernel, reported) = create_kernel(&self.shared.device, self.compile_options(), variant, BINDINGS)?;
         let seconds = start.elapsed().as_secs_f64();
         // SAFETY: the pipeline was never used.
         unsafe { kernel.destroy(&self.shared.device) };
