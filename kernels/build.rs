@@ -5,6 +5,7 @@ use std::{env, fmt::Write as _, fs, path::Path, process::exit};
 
 include!("src/spec.rs");
 include!("src/spec_cooperative.rs");
+include!("src/spirv_words.rs");
 include!("compile.rs");
 
 fn fail(message: &str) -> ! {

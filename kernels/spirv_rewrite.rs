@@ -114,17 +114,6 @@ fn workgroup_barriers(words: &[u32]) -> Result<Vec<u32>, String> {
     Ok(out)
 }
 
-/// The instructions of a module, after its header.
-fn instructions(words: &[u32]) -> Result<Vec<&[u32]>, String> {
-    let (mut out, mut at) = (Vec::new(), 5);
-    while at < words.len() {
-        let count = (words[at] >> 16) as usize;
-        out.push(words.get(at..at + count).filter(|_| count > 0).ok_or("truncated SPIR-V instruction")?);
-        at += count;
-    }
-    Ok(out)
-}
-
 /// A SPIR-V literal string: its UTF-8 bytes and a NUL, in little-endian words.
 fn literal(name: &str) -> Vec<u32> {
     let mut bytes = name.as_bytes().to_vec();

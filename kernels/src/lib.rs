@@ -3,6 +3,7 @@
 
 include!("spec.rs");
 include!("spec_cooperative.rs");
+include!("spirv_words.rs");
 include!("broadcasts.rs");
 
 /// One compiled variant of a kernel.
@@ -42,7 +43,7 @@ pub fn find(kernel: &str, dtype: Dtype, want: &[(&str, u32)]) -> Option<&'static
 /// The build-time compiler, tested on sources written to fail.
 #[cfg(test)]
 mod compile_tests {
-    use super::WIDEST_64_BIT_WORDS;
+    use super::{instructions, WIDEST_64_BIT_WORDS};
     include!("../compile.rs");
 
     fn one_file(body: &str) -> Source {
