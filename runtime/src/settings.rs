@@ -55,7 +55,7 @@ pub struct Settings {
     /// `VKDIFF_GPU_PATHS`: run as a discrete GPU would (see [`crate::Context::gpu_paths`]).
     pub gpu_paths: bool,
     /// `VKDIFF_QUICK_COMPILE`: small products on the quickly compiled kernels; None leaves it to
-    /// the device ([`crate::DeviceInfo::quick_compile`]).
+    /// the device's plan ([`crate::KernelPlan`]).
     pub quick_compile: Option<bool>,
     /// `VKDIFF_PIPELINE_STATS`: print each kernel's driver statistics as it is compiled.
     pub pipeline_stats: bool,

@@ -1,14 +1,21 @@
-//! lavapipe's vector width: the CPU family's subgroup width, and on CPUs with AVX-512 the choice
-//! of 512 bits. Mesa picks 256 bits (8-lane subgroups) unless `LP_NATIVE_VECTOR_WIDTH` says
-//! otherwise, and vkdiff leaves it so, as Mesa reads it before vkdiff can know the driver's
-//! release: on an AMD EPYC (Zen 4) 512 bits (16 lanes, 128-row tiles) ran the SDXL UNet 1.35×
-//! faster on Mesa 22.3 (2026-12-06), and on an Intel Xeon the UNet 4.9× slower (2026-11-26); on
-//! Mesa 26.1 the products ran 1.5–1.9× faster at 16 lanes once their broadcasts were written as
-//! such (`shuffles_loop_over_lanes`), on Mesa 25.0 slower, and the UNet is measured on neither;
-//! and the 16-lane kernels take 2–3× longer to compile, minutes from a cold shader cache
-//! (BENCHMARKS.md).
+//! lavapipe's vector width: the CPU family's subgroup width, and on CPUs with AVX-512 the
+//! choice of 512 bits. Mesa picks 256 bits (8-lane subgroups) unless `LP_NATIVE_VECTOR_WIDTH`
+//! says otherwise, and vkdiff leaves it so, as Mesa reads it before vkdiff can know the
+//! driver's release: on an AMD EPYC (Zen 4) 512 bits (16 lanes, 128-row tiles) ran the SDXL
+//! UNet 1.35× faster on Mesa 22.3 (2026-12-06), and on an Intel Xeon the UNet 4.9× slower
+//! (2026-11-26); on Mesa 26.1, once the broadcasts were written as such
+//! (`shuffles_loop_over_lanes`) and 16 lanes took the fast-running variants, the UNet ran
+//! 1.4–1.8× faster, on Mesa 25.0 the products ran slower; and the 16-lane kernels take 2–3×
+//! longer to compile, minutes from a cold shader cache (BENCHMARKS.md).
 
 use crate::device::DeviceInfo;
+
+/// Whether lavapipe of this release (major, minor) ran the SDXL UNet faster at 16 lanes than at
+/// 8 on the AVX-512 CPU measured: Mesa 22 and 26. Mesa 25.0 ran the products slower there, and
+/// 23, 24 and 27 are unmeasured.
+pub(crate) fn wider_vectors_ran_faster(mesa: Option<(u32, u32)>) -> bool {
+    matches!(mesa, Some((..=22 | 26, _)))
+}
 
 /// Whether to point the user at the wider vectors: the CPU has AVX-512 and `settings` say no
 /// width is chosen.
@@ -54,5 +61,21 @@ impl DeviceInfo {
     /// Its buffers are then made for texel views too.
     pub fn reads_texels(&self) -> bool {
         self.gemm_subgroup_width().is_some() && self.texel_fetch.is_some()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wider_vectors_ran_faster;
+
+    #[test]
+    fn wider_vectors_are_suggested_on_the_releases_where_they_ran_faster() {
+        for release in [(22, 3), (26, 1), (26, 0)] {
+            assert!(wider_vectors_ran_faster(Some(release)), "{release:?}");
+        }
+        for release in [(25, 0), (24, 2), (23, 3), (27, 0)] {
+            assert!(!wider_vectors_ran_faster(Some(release)), "{release:?}: slower or unmeasured at 16 lanes");
+        }
+        assert!(!wider_vectors_ran_faster(None), "other CPU drivers");
     }
 }

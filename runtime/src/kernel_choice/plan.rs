@@ -69,8 +69,7 @@ pub struct KernelPlan {
     /// `VKDIFF_WINOGRAD=0` runs them direct). GPUs keep the direct convolution, measured on none.
     pub winograd: bool,
     /// Whether the CPU could give lavapipe wider vectors than it has (AVX-512, no width chosen,
-    /// Mesa 22, where the UNet ran 1.35× faster at 16 lanes; on 25.0 and 26.1 only the products
-    /// are measured there).
+    /// a release whose UNet ran faster at 16 lanes: `wider_vectors_ran_faster`).
     pub wider_vectors: bool,
     /// Whether the kernels' shuffles from constant lanes are written as broadcasts
     /// ([`DeviceInfo::shuffles_loop_over_lanes`]).
@@ -118,8 +117,7 @@ impl KernelPlan {
             subgroup_attention: info.subgroup_attention(gpu_paths),
             tiled_attention: info.holds_tiled_attention(),
             probes: [settings.attention, settings.linear, settings.conv],
-            quick_compile: !gpu_paths
-                && settings.quick_compile.unwrap_or(info.lavapipe_mesa.is_some_and(|(major, _)| major > 22)),
+            quick_compile: !gpu_paths && settings.quick_compile.unwrap_or(compiles_slowly(info)),
             compiled_at_first_use: info.lavapipe_mesa.is_some(),
             tune: settings.tune,
             word_loads: subgroup_width.is_some() && loads_lane_by_lane(info) && info.can_read_words(),
@@ -129,7 +127,7 @@ impl KernelPlan {
                 && !wrong_texels_at_16_lanes(info),
             winograd: gemm == GemmFamily::Subgroup && settings.winograd,
             broadcasts: info.shuffles_loop_over_lanes(),
-            wider_vectors: info.lavapipe_mesa.is_some_and(|(major, _)| major <= 22)
+            wider_vectors: crate::kernel_choice::cpu_vectors::wider_vectors_ran_faster(info.lavapipe_mesa)
                 && crate::kernel_choice::cpu_vectors::wider_lavapipe_vectors_available(settings),
         }
     }
@@ -225,6 +223,16 @@ impl fmt::Display for KernelPlan {
     }
 }
 
+/// Whether small products should take the quickly compiled variants (and large ones no 64-row
+/// tile nor fused GEGLU): lavapipe after Mesa 22, whose JIT takes minutes for the larger ones;
+/// but not Mesa 26 at 16 lanes, a width the user chose for speed, where the fast variants ran
+/// the SDXL UNet 1.2× faster for about 9 minutes more of JIT, once (Mesa's shader cache keeps
+/// it; docs/benchmark-log.md). Mesa 25 at 16 lanes keeps them: its 128-row tiles took longer to
+/// compile than that for the linear rows alone.
+fn compiles_slowly(info: &DeviceInfo) -> bool {
+    info.lavapipe_mesa.is_some_and(|(major, _)| major > 22 && !(major >= 26 && info.subgroup_size == 16))
+}
+
 /// Whether the device is lavapipe before Mesa 26, whose storage loads are loops of branches over
 /// the lanes: there the 64-bit words and B's texels ran the f16 linear rows 1.3× (Mesa 22.3) and
 /// 1.4× (Mesa 25.0) faster; Mesa 26.1 gathers each lane without a loop, and there they ran slower
@@ -280,6 +288,17 @@ mod tests {
         assert!(plan.quick_compile, "lavapipe after Mesa 22 compiles slowly");
         let slow = Settings { quick_compile: Some(false), ..Settings::default() };
         assert!(!KernelPlan::for_device(&d, &slow).quick_compile);
+        // Mesa 26 at 16 lanes takes the fast variants, compiled once; Mesa 22 compiles quickly.
+        for (release, lanes, quick) in
+            [((25, 0), 16, true), ((26, 1), 16, false), ((26, 1), 8, true), ((22, 3), 16, false)]
+        {
+            let at = DeviceInfo { lavapipe_mesa: Some(release), subgroup_size: lanes, ..d.clone() };
+            assert_eq!(
+                KernelPlan::for_device(&at, &Settings::default()).quick_compile,
+                quick,
+                "{release:?}, {lanes} lanes"
+            );
+        }
         let gpu = KernelPlan::for_device(&d, &Settings { gpu_paths: true, ..Settings::default() });
         assert_eq!((gpu.gemm, gpu.subgroup_attention, gpu.quick_compile), (GemmFamily::Tiled, false, false));
         assert!(gpu.to_string().contains("VKDIFF_GPU_PATHS=1"), "{gpu}");
