@@ -4,8 +4,8 @@
 //! driver's release: on an AMD EPYC (Zen 4) 512 bits (16 lanes, 128-row tiles) ran the SDXL
 //! UNet 1.35× faster on Mesa 22.3 (2026-12-06), and on an Intel Xeon the UNet 4.9× slower
 //! (2026-11-26); on Mesa 26.1, once the broadcasts were written as such
-//! (`shuffles_loop_over_lanes`) and 16 lanes took the fast-running variants, the UNet ran
-//! 1.4–1.8× faster, on Mesa 25.0 the products ran slower; and the 16-lane kernels take 2–3×
+//! (`shuffles_loop_over_lanes`) and 16 lanes took the fast-running variants, the UNet ran 1.5×
+//! faster, on Mesa 25.0 the products ran slower; and the 16-lane kernels take 2–3×
 //! longer to compile, minutes from a cold shader cache (BENCHMARKS.md).
 
 use crate::device::DeviceInfo;

@@ -117,7 +117,7 @@ impl KernelPlan {
             subgroup_attention: info.subgroup_attention(gpu_paths),
             tiled_attention: info.holds_tiled_attention(),
             probes: [settings.attention, settings.linear, settings.conv],
-            quick_compile: !gpu_paths && settings.quick_compile.unwrap_or(compiles_slowly(info)),
+            quick_compile: !gpu_paths && settings.quick_compile.unwrap_or(prefers_quick_compiles(info)),
             compiled_at_first_use: info.lavapipe_mesa.is_some(),
             tune: settings.tune,
             word_loads: subgroup_width.is_some() && loads_lane_by_lane(info) && info.can_read_words(),
@@ -225,11 +225,11 @@ impl fmt::Display for KernelPlan {
 
 /// Whether small products should take the quickly compiled variants (and large ones no 64-row
 /// tile nor fused GEGLU): lavapipe after Mesa 22, whose JIT takes minutes for the larger ones;
-/// but not Mesa 26 at 16 lanes, a width the user chose for speed, where the fast variants ran
-/// the SDXL UNet 1.2× faster for about 9 minutes more of JIT, once (Mesa's shader cache keeps
-/// it; docs/benchmark-log.md). Mesa 25 at 16 lanes keeps them: its 128-row tiles took longer to
-/// compile than that for the linear rows alone.
-fn compiles_slowly(info: &DeviceInfo) -> bool {
+/// but not from Mesa 26 at 16 lanes, a width the user chose for speed, where the fast variants
+/// ran the SDXL UNet 1.2× faster for about 9 minutes more of JIT, once (Mesa's shader cache
+/// keeps it; docs/benchmark-log.md). Mesa 25 at 16 lanes keeps them: its 128-row tiles took
+/// longer to compile than that for the linear rows alone.
+fn prefers_quick_compiles(info: &DeviceInfo) -> bool {
     info.lavapipe_mesa.is_some_and(|(major, _)| major > 22 && !(major >= 26 && info.subgroup_size == 16))
 }
 
