@@ -10,7 +10,7 @@ else.";
 const DEVICE_ENV: &str = "  VKDIFF_DEVICE          the device, as --device takes it
   VKDIFF_REQUIRE_GPU=1   refuse a CPU device (lavapipe), as --require-gpu
   VKDIFF_MEMORY_BUDGET   device memory vkdiff may use, e.g. 8G (plans the VAE, refuses past it)
-  VKDIFF_SUBMIT_TIMEOUT  seconds a submission may run before the device counts as hung [60; CPU 600]
+  VKDIFF_SUBMIT_TIMEOUT  seconds a submission may run before the device counts as hung [60; CPU 600, lavapipe +1200 a kernel it compiles]
   VKDIFF_SUBMIT_GFLOP    matrix work per submission, lower for GPUs with a short watchdog
   VKDIFF_VALIDATE=1      run under the Khronos validation layer (for bug reports)";
 

@@ -47,7 +47,7 @@ impl Recording {
     /// Runs the recording and returns about how long each submission ran: from the end of the
     /// one before (the first: from its submission) to its own end, as the host saw them.
     pub fn run_submissions(&self) -> Result<Vec<std::time::Duration>> {
-        self.tell_compiles();
+        let compiles = self.tell_compiles();
         let budget = self.ctx.choices().submit_budget;
         let mut merged = self.merged.lock().unwrap();
         let sizes = merged.clone().unwrap_or_else(|| vec![1; self.res.chunks.len()]);
@@ -60,7 +60,7 @@ impl Recording {
                 group
             })
             .collect();
-        let times = submit_groups_and_wait(&self.ctx, &groups)?;
+        let times = submit_groups_and_wait(&self.ctx, &groups, budget.compile_allowance * compiles)?;
         *merged = match merged.take() {
             None => Some(budget.merged(&times)),
             // A merged submission twice as slow as its chunks were timed (clocks, a GPU shared
@@ -78,16 +78,18 @@ impl Recording {
     }
 
     /// Tells the context's compile notice how many of this recording's kernels lavapipe will
-    /// compile in this submission: those no earlier submission in this process dispatched.
-    fn tell_compiles(&self) {
+    /// compile in this submission (those no earlier submission in this process dispatched), and
+    /// returns that number.
+    fn tell_compiles(&self) -> u32 {
         if self.ctx.info().lavapipe_mesa.is_none() {
-            return;
+            return 0;
         }
         let fresh = self.res.kernels.iter().filter(|k| !k.dispatched.swap(true, Ordering::SeqCst)).count();
         let notice = self.ctx.shared.compile_notice.lock().unwrap().clone();
         if let (Some(notice), true) = (notice, fresh > 0) {
             notice(fresh);
         }
+        fresh as u32
     }
 
     /// Runs the recording and returns each dispatch's device time (recorded with `profile`).

@@ -72,16 +72,21 @@ pub(crate) fn submit_once(ctx: &Context, f: impl FnOnce(&ash::Device, vk::Comman
 
 /// Submits one recorded command buffer and blocks until the device has finished it.
 pub(crate) fn submit_and_wait(ctx: &Context, cmd: vk::CommandBuffer) -> Result<()> {
-    submit_groups_and_wait(ctx, &[&[cmd]]).map(drop)
+    submit_groups_and_wait(ctx, &[&[cmd]], Duration::ZERO).map(drop)
 }
 
 /// Submits `groups` of chunks in order, one `vkQueueSubmit` each (a GPU watchdog times each
-/// alone), then waits for each in turn, at most the context's submission timeout apiece.
+/// alone), then waits for each in turn, at most the context's submission timeout apiece, and
+/// `compiling` longer while the driver compiles kernels among them.
 /// Returns the time between one submission's end and the next's (the first's from its
 /// submission): queued back to back, about each submission's run time.
-pub(crate) fn submit_groups_and_wait(ctx: &Context, groups: &[&[vk::CommandBuffer]]) -> Result<Vec<Duration>> {
+pub(crate) fn submit_groups_and_wait(
+    ctx: &Context,
+    groups: &[&[vk::CommandBuffer]],
+    compiling: Duration,
+) -> Result<Vec<Duration>> {
     let device = &ctx.shared.device;
-    let timeout = ctx.choices().submit_budget.timeout;
+    let timeout = ctx.choices().submit_budget.timeout + compiling;
     let mut fences = Vec::with_capacity(groups.len());
     let mut times = Vec::with_capacity(groups.len());
     // SAFETY: each chunk is fully recorded; the queue is externally synchronised by its mutex;

@@ -21,6 +21,10 @@ pub struct SubmitBudget {
     pub dispatches: u32,
     /// The longest wait for one submission before the device is taken as hung.
     pub timeout: Duration,
+    /// The longer wait a run may take for each kernel the driver compiles in it (lavapipe, at
+    /// its first dispatch), unless `VKDIFF_SUBMIT_TIMEOUT` sets the limit: one 128-row variant
+    /// took Mesa 25 past 10 minutes at 16 lanes, Mesa 26.1 about 2 (docs/benchmark-log.md).
+    pub compile_allowance: Duration,
     /// The longest run time, as the chunks' first run measured it, of a submission of several
     /// chunks; zero submits every chunk alone.
     pub merge: Duration,
@@ -29,14 +33,18 @@ pub struct SubmitBudget {
 impl SubmitBudget {
     /// The budget for `info` under `settings` (`VKDIFF_SUBMIT_GFLOP`, `VKDIFF_SUBMIT_TIMEOUT`,
     /// `VKDIFF_SUBMIT_MERGE`). Unless set, a CPU device (lavapipe, about 10–70 GFLOP/s) waits 10
-    /// minutes per submission, a GPU one minute: both far past a healthy chunk, so only a hang
-    /// ends a run.
+    /// minutes per submission, and lavapipe 20 more for each kernel a run compiles; a GPU one
+    /// minute: all far past a healthy chunk, so only a hang ends a run.
     pub fn for_device(info: &DeviceInfo, settings: &Settings) -> SubmitBudget {
         let seconds = if info.kind == DeviceKind::Cpu { 600.0 } else { 60.0 };
         SubmitBudget {
             flops: settings.submit_gflop * 1e9,
             dispatches: DISPATCHES_PER_SUBMIT,
             timeout: Duration::from_secs_f64(settings.submit_timeout.unwrap_or(seconds)),
+            compile_allowance: match (info.lavapipe_mesa, settings.submit_timeout) {
+                (Some(_), None) => Duration::from_secs(1200),
+                _ => Duration::ZERO,
+            },
             merge: Duration::from_secs_f64(settings.submit_merge),
         }
     }
@@ -78,6 +86,16 @@ mod tests {
         let set = Settings { submit_gflop: 2.5, submit_timeout: Some(0.5), submit_merge: 0.0, ..Settings::default() };
         let budget = SubmitBudget::for_device(&gpu, &set);
         assert_eq!((budget.flops, budget.timeout, budget.merge), (2.5e9, Duration::from_millis(500), Duration::ZERO));
+        // Only lavapipe compiles at dispatch, and a set timeout is the limit itself.
+        let mut lavapipe = cpu.clone();
+        lavapipe.lavapipe_mesa = Some((25, 0));
+        let allowance = |d: &DeviceInfo, s: &Settings| SubmitBudget::for_device(d, s).compile_allowance;
+        assert_eq!(allowance(&lavapipe, &Settings::default()), Duration::from_secs(1200));
+        assert_eq!(allowance(&lavapipe, &set), Duration::ZERO);
+        assert_eq!(
+            (allowance(&cpu, &Settings::default()), allowance(&gpu, &Settings::default())),
+            (Duration::ZERO, Duration::ZERO)
+        );
     }
 
     #[test]
@@ -87,6 +105,7 @@ mod tests {
             flops: 1e11,
             dispatches: 256,
             timeout: Duration::from_secs(60),
+            compile_allowance: Duration::ZERO,
             merge: Duration::from_millis(merge),
         };
         assert_eq!(budget(100).merged(&ms(&[30, 30, 30, 30, 30])), [3, 2]);

@@ -255,6 +255,7 @@ fn recordings_split_into_submissions_give_the_same_bits() {
         flops: 1e12,
         dispatches: 1,
         timeout: std::time::Duration::from_secs(600),
+        compile_allowance: std::time::Duration::ZERO,
         merge: std::time::Duration::ZERO,
     };
     let split = chain_under(Some(alone));
@@ -287,7 +288,8 @@ fn a_wait_past_the_timeout_is_one_clear_error() {
     let a = ctx.upload(&[n, n], Dtype::F32, &random(n * n, 83)).unwrap();
     let y = ctx.zeros(&[n, n], Dtype::F32).unwrap();
     // After the uploads, which on the GPU paths are submissions too.
-    ctx.choose(|c| c.submit_budget = SubmitBudget { timeout: std::time::Duration::ZERO, ..c.submit_budget });
+    let zero = std::time::Duration::ZERO;
+    ctx.choose(|c| c.submit_budget = SubmitBudget { timeout: zero, compile_allowance: zero, ..c.submit_budget });
     let err = ctx
         .run(|rec| {
             for _ in 0..8 {
@@ -298,4 +300,30 @@ fn a_wait_past_the_timeout_is_one_clear_error() {
         .expect_err("eight 256³ products take longer than no time");
     assert!(matches!(err, Error::SubmitTimeout { .. }), "{err}");
     assert!(err.to_string().contains("VKDIFF_SUBMIT_TIMEOUT"), "{err}");
+}
+
+#[test]
+fn a_run_that_compiles_kernels_on_lavapipe_may_wait_longer() {
+    // No time for the work itself, but the allowance for each kernel lavapipe compiles at its
+    // first dispatch: the first run, which compiles the product, finishes; the second, with
+    // nothing to compile, is over time at once.
+    let ctx = Context::new(&Default::default(), vkdiff_testkit::settings()).unwrap();
+    if ctx.info().lavapipe_mesa.is_none() {
+        eprintln!("a_run_that_compiles_kernels_on_lavapipe_may_wait_longer: held on lavapipe only");
+        return;
+    }
+    let n = 256;
+    let a = ctx.upload(&[n, n], Dtype::F32, &random(n * n, 84)).unwrap();
+    let y = ctx.zeros(&[n, n], Dtype::F32).unwrap();
+    let (zero, allowance) = (std::time::Duration::ZERO, std::time::Duration::from_secs(600));
+    ctx.choose(|c| c.submit_budget = SubmitBudget { timeout: zero, compile_allowance: allowance, ..c.submit_budget });
+    let products = |rec: &mut Recorder| -> vkdiff_runtime::Result<()> {
+        for _ in 0..8 {
+            ops::linear(rec, &a, &a, None, &y)?;
+        }
+        Ok(())
+    };
+    ctx.run(products).expect("the run that compiles the product has its allowance");
+    let err = ctx.run(products).expect_err("eight 256³ products, nothing to compile, take longer than no time");
+    assert!(matches!(err, Error::SubmitTimeout { .. }), "{err}");
 }
